@@ -541,3 +541,16 @@ class AuditEntry:
     action: str
     subject: str
     detail: dict[str, object] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True, eq=False)
+class AirspaceSnapshot:
+    """One consistent view of the airspace at ``t_s``: what Monitoring checks and what EM/TD
+    decide on. ``tracks`` and ``operations`` are keyed by id; ``prediction`` covers the tracks
+    (cooperative and intruders) at the same ``t_s``."""
+
+    t_s: float
+    operations: dict[OperationId, Operation]
+    tracks: dict[TrackId, Track]
+    geofences: tuple[Geofence, ...]
+    prediction: PredictedTrajectories | None = None
