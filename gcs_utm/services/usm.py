@@ -1,0 +1,555 @@
+"""U-space Service Manager (paper §4.1): the only door between the UTM core and the world.
+
+In: measurements, vehicle status, hazards and new vehicles from the MAVLink hub (and ADS-B,
+tlog, MQTT through the same methods); threats from Monitoring; decisions from Emergency
+Management; pilot answers from the dashboard or MQTT.
+Out: recommendations to the operator(s); accepted plans uploaded to the vehicle as a MAVLink
+mission (verified by readback) and then installed as a new plan version; commands; new
+geofences into the airspace; everything recorded.
+
+Invariants:
+- a recommendation is marked APPLIED only after the vehicle's readback matched;
+- an answer names the exact recommendation id and version; duplicates are idempotent,
+  answers to a recommendation that is no longer proposed are refused with the reason;
+- nothing is dropped silently: every outcome goes to the record callback and the event log.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import itertools
+import logging
+from collections import deque
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Protocol
+
+from gcs_utm.clock import Clock
+from gcs_utm.messages import (
+    FlightMode,
+    HazardReport,
+    LinkHealth,
+    PilotAnswer,
+    PilotDecision,
+    VehicleStatus,
+)
+from gcs_utm.model import (
+    RECOMMENDATION_TRANSITIONS,
+    AuditEntry,
+    Autopilot,
+    Command,
+    CommandKind,
+    FlightPlan,
+    Geofence,
+    Measurement,
+    OperationState,
+    Recommendation,
+    RecommendationId,
+    RecommendationState,
+    SysId,
+    Threat,
+    ThreatId,
+    ThreatKind,
+    ThreatStatus,
+)
+from gcs_utm.services.airspace import Airspace, AirspaceError
+
+_log = logging.getLogger(__name__)
+
+
+# ---- ports the USM talks to (implemented by adapters and services; fakes in tests) ---------
+
+
+class UploadOutcome(Protocol):
+    @property
+    def ok(self) -> bool: ...
+    @property
+    def verified(self) -> bool: ...
+    @property
+    def error(self) -> str: ...
+
+
+class CommandOutcome(Protocol):
+    @property
+    def ok(self) -> bool: ...
+    @property
+    def error(self) -> str: ...
+
+
+class VehiclePort(Protocol):
+    """What the USM needs from the MAVLink side (adapters.mavlink.MavlinkHub)."""
+
+    async def upload_plan(
+        self,
+        sys_id: SysId,
+        plan: FlightPlan,
+        *,
+        autopilot: Autopilot | None = None,
+        deadline_t_s: float | None = None,
+    ) -> UploadOutcome: ...
+
+    async def send_command(self, sys_id: SysId, command: Command) -> CommandOutcome: ...
+
+
+class OperatorPort(Protocol):
+    """Where recommendations are shown and from where answers come (dashboard, MQTT, auto)."""
+
+    async def present(self, rec: Recommendation) -> None: ...
+
+    async def update(self, rec: Recommendation) -> None: ...
+
+
+class AnswerStatus(Enum):
+    ACCEPTED = "accepted"
+    DUPLICATE = "duplicate"
+    REFUSED = "refused"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class AnswerOutcome:
+    status: AnswerStatus
+    reason: str = ""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class UsmConfig:
+    """USM behaviour (composed into the ``[usm]`` settings section by the app)."""
+
+    hazard_cooldown_s: float = 30.0
+    """A hazard of the same kind for the same UAS within this time updates, not re-raises."""
+    event_log_size: int = 500
+    upload_attempts: int = 2
+    """Whole-upload attempts (each with the hub's own per-item retries) before FAILED."""
+
+
+@dataclass(slots=True, kw_only=True)
+class RecommendationRecord:
+    """Bookkeeping the report and the dashboard read."""
+
+    rec: Recommendation
+    threat_detected_at_s: float
+    latency_ms: float
+    decision: str = ""
+    uploaded: bool = False
+    verified: bool = False
+    error: str = ""
+    history: list[tuple[float, str]] = field(default_factory=list)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class UsmEvent:
+    t_s: float
+    kind: str
+    text: str
+
+
+class Usm:
+    """The U-space Service Manager. Construct it, then ``attach_*`` the parts."""
+
+    def __init__(
+        self,
+        airspace: Airspace,
+        clock: Clock,
+        *,
+        config: UsmConfig | None = None,
+        record: Callable[[object], None] | None = None,
+    ) -> None:
+        self.airspace = airspace
+        self.clock = clock
+        self.config = config or UsmConfig()
+        self._record = record or (lambda _obj: None)
+        self._vehicles: VehiclePort | None = None
+        self._measurement_sinks: list[Callable[[Measurement], None]] = []
+        self._threat_sinks: list[Callable[[list[Threat]], Awaitable[None]]] = []
+        self._answer_sinks: list[Callable[[Recommendation, bool], Awaitable[None]]] = []
+        self._operators: list[OperatorPort] = []
+        self._geofence_listeners: list[Callable[[Sequence[Geofence]], Awaitable[None]]] = []
+        self.statuses: dict[SysId, VehicleStatus] = {}
+        self.health: dict[SysId, LinkHealth] = {}
+        self.threats: dict[ThreatId, Threat] = {}
+        self.threat_log: list[Threat] = []
+        self.recommendations: dict[RecommendationId, RecommendationRecord] = {}
+        self.events: deque[UsmEvent] = deque(maxlen=self.config.event_log_size)
+        self._hazard_seen: dict[tuple[ThreatKind, str], float] = {}
+        self._hazard_seq = itertools.count(1)
+        self._tasks: set[asyncio.Task[None]] = set()
+        self.counters: dict[str, int] = {
+            "measurements": 0,
+            "unknown_vehicle_measurements": 0,
+            "hazards": 0,
+            "hazards_coalesced": 0,
+            "answers_refused": 0,
+            "uploads_ok": 0,
+            "uploads_failed": 0,
+        }
+
+    # ---- wiring ---------------------------------------------------------------------------
+    def attach_vehicles(self, port: VehiclePort) -> None:
+        self._vehicles = port
+
+    def attach_measurement_sink(self, sink: Callable[[Measurement], None]) -> None:
+        self._measurement_sinks.append(sink)
+
+    def attach_threat_sink(self, sink: Callable[[list[Threat]], Awaitable[None]]) -> None:
+        """Emergency Management's input."""
+        self._threat_sinks.append(sink)
+
+    def attach_answer_sink(self, sink: Callable[[Recommendation, bool], Awaitable[None]]) -> None:
+        """Emergency Management hears every accept/reject (it re-plans on reject)."""
+        self._answer_sinks.append(sink)
+
+    def attach_operator(self, port: OperatorPort) -> None:
+        self._operators.append(port)
+
+    def attach_geofence_listener(
+        self, listener: Callable[[Sequence[Geofence]], Awaitable[None]]
+    ) -> None:
+        self._geofence_listeners.append(listener)
+
+    def log_event(self, kind: str, text: str) -> None:
+        t_s = self.clock.now_s()
+        self.events.append(UsmEvent(t_s=t_s, kind=kind, text=text))
+        _log.info("%s: %s", kind, text)
+
+    # ---- telemetry side (adapters.mavlink TelemetrySink, ADS-B, tlog, MQTT) ---------------
+    def on_measurement(self, m: Measurement) -> None:
+        self.counters["measurements"] += 1
+        if m.operation_id is None and m.sys_id is not None:
+            op = self.airspace.by_sys_id(m.sys_id)
+            if op is not None:
+                m = dataclasses.replace(m, operation_id=op.id)
+            else:
+                self.counters["unknown_vehicle_measurements"] += 1
+        for sink in self._measurement_sinks:
+            sink(m)
+
+    def on_status(self, s: VehicleStatus) -> None:
+        self.statuses[s.sys_id] = s
+        op = self.airspace.by_sys_id(s.sys_id)
+        if op is None:
+            return
+        state = op.state
+        if s.armed and s.mode in (FlightMode.MISSION, FlightMode.TAKEOFF, FlightMode.GUIDED):
+            state = OperationState.ACTIVE
+        elif s.armed and s.mode is FlightMode.HOLD and op.state is OperationState.ACTIVE:
+            # a hold the UTM did not ask for is still an active flight
+            state = OperationState.ACTIVE
+        elif not s.armed and op.state is OperationState.ACTIVE and s.landed:
+            state = OperationState.LANDED
+        if state is not op.state and op.state is not OperationState.SUSPENDED:
+            self.airspace.set_state(op.id, state)
+
+    def on_link_health(self, h: LinkHealth) -> None:
+        self.health[h.sys_id] = h
+
+    def on_vehicle(self, v: object) -> None:
+        self.log_event("vehicle", f"vehicle discovered: {v}")
+
+    def on_hazard(self, h: HazardReport) -> None:
+        """A hazard from outside Monitoring becomes a threat for EM, coalesced per
+        (kind, UAS) within the cooldown so a flapping GNSS does not storm the operator."""
+        self.counters["hazards"] += 1
+        op_id = h.operation_id
+        if op_id is None and h.sys_id is not None:
+            op = self.airspace.by_sys_id(h.sys_id)
+            op_id = op.id if op is not None else None
+        key = (h.kind, op_id or (h.source or "airspace") + ":" + (h.area.id if h.area else ""))
+        last = self._hazard_seen.get(key)
+        if last is not None and h.t_s - last < self.config.hazard_cooldown_s:
+            self.counters["hazards_coalesced"] += 1
+            return
+        self._hazard_seen[key] = h.t_s
+        threat = Threat(
+            id=ThreatId(f"{h.kind.value.lower()}-{next(self._hazard_seq)}"),
+            kind=h.kind,
+            uas_ids=(op_id,) if op_id is not None else (),
+            detected_at_s=h.t_s,
+            predicted_event_at_s=h.t_s,
+            position=h.position,
+            area=h.area,
+            message=h.message,
+        )
+        self._spawn(self.on_threats([threat]))
+
+    async def on_threats(self, threats: list[Threat]) -> None:
+        """From Monitoring (and hazards): record, then hand to EM."""
+        if not threats:
+            return
+        for t in threats:
+            first = t.id not in self.threats
+            if t.status is ThreatStatus.CLOSED:
+                self.threats.pop(t.id, None)
+            else:
+                self.threats[t.id] = t
+            if first or t.status is ThreatStatus.CLOSED:
+                self.threat_log.append(t)
+                self._record(t)
+                uas = ",".join(t.uas_ids) or "-"
+                self.log_event(
+                    "threat",
+                    f"{t.kind.value} {uas} {t.status.value}"
+                    + (f" {t.message}" if t.message else ""),
+                )
+        for sink in self._threat_sinks:
+            await sink(threats)
+
+    # ---- decisions from EM ----------------------------------------------------------------
+    async def on_recommendation(self, rec: Recommendation) -> None:
+        threat = self.threats.get(rec.threat_id)
+        detected = threat.detected_at_s if threat is not None else rec.created_t_s
+        now = self.clock.now_s()
+        old = self.recommendations.get(rec.id)
+        record = RecommendationRecord(
+            rec=rec,
+            threat_detected_at_s=detected,
+            latency_ms=max(0.0, (rec.created_t_s - detected) * 1000.0 / self.clock.speed)
+            if self.clock.speed != float("inf")
+            else 0.0,
+        )
+        if old is not None:
+            record.history = old.history
+        record.history.append((now, f"proposed v{rec.version}"))
+        self.recommendations[rec.id] = record
+        self._record(rec)
+        what = (
+            rec.selected.maneuver.value
+            if rec.selected
+            else (rec.command.kind.value if rec.command else "none")
+        )
+        self.log_event(
+            "recommendation",
+            f"{rec.id} v{rec.version} for {rec.operation_id}: {what} "
+            f"({rec.threat_kind.value}), deadline in {rec.deadline_t_s - now:.0f} s",
+        )
+        for op in self._operators:
+            await op.present(rec)
+
+    async def on_superseded(self, rec_id: RecommendationId) -> None:
+        record = self.recommendations.get(rec_id)
+        if record is None or record.rec.state is not RecommendationState.PROPOSED:
+            return
+        await self._set_state(record, RecommendationState.SUPERSEDED, "superseded by EM")
+
+    async def on_expired(self, rec_id: RecommendationId) -> None:
+        record = self.recommendations.get(rec_id)
+        if record is None or record.rec.state is not RecommendationState.PROPOSED:
+            return
+        record.decision = "expired"
+        await self._set_state(record, RecommendationState.EXPIRED, "deadline passed")
+
+    async def add_geofences(self, geofences: Sequence[Geofence]) -> None:
+        changed = [g for g in geofences if self.airspace.add_geofence(g)]
+        for g in changed:
+            self.log_event("geofence", f"geofence {g.id} created ({g.reason or g.kind.value})")
+        if changed:
+            for listener in self._geofence_listeners:
+                await listener(self.airspace.geofences())
+
+    async def escalate(self, text: str) -> None:
+        self.log_event("escalation", text)
+        self._record(
+            AuditEntry(
+                t_s=self.clock.now_s(),
+                actor="em",
+                action="escalate",
+                subject=text[:80],
+                detail={"text": text},
+            )
+        )
+
+    async def execute_command(self, command: Command, *, reason: str = "") -> bool:
+        """Send a command (autonomous mode or an accepted recommendation)."""
+        op = self.airspace.operation(command.operation_id)
+        if self._vehicles is None or op.sys_id is None:
+            self.log_event("command", f"{command.kind.value} for {op.id}: no vehicle link")
+            return False
+        result = await self._vehicles.send_command(op.sys_id, command)
+        self._record(
+            AuditEntry(
+                t_s=self.clock.now_s(),
+                actor="usm",
+                action=f"command_{command.kind.value}",
+                subject=op.id,
+                detail={"ok": result.ok, "error": result.error, "reason": reason},
+            )
+        )
+        self.log_event(
+            "command",
+            f"{command.kind.value} for {op.id}: "
+            + ("acknowledged" if result.ok else f"failed ({result.error})"),
+        )
+        if result.ok and command.kind in (CommandKind.HOLD, CommandKind.LAND):
+            self.airspace.set_state(op.id, OperationState.SUSPENDED)
+        if result.ok and command.kind is CommandKind.RESUME:
+            self.airspace.set_state(op.id, OperationState.ACTIVE)
+        return result.ok
+
+    # ---- pilot answers --------------------------------------------------------------------
+    async def answer(self, a: PilotAnswer) -> AnswerOutcome:
+        """An operator's answer (dashboard or MQTT): matched to the exact id and version."""
+        record = self.recommendations.get(a.recommendation_id)
+        outcome = self._check_answer(record, a)
+        self._record(
+            AuditEntry(
+                t_s=a.t_s,
+                actor=f"operator:{a.operator}",
+                action=f"answer_{a.decision.value}",
+                subject=a.recommendation_id,
+                detail={
+                    "version": a.version,
+                    "source": a.source,
+                    "outcome": outcome.status.value,
+                    "reason": outcome.reason,
+                },
+            )
+        )
+        if outcome.status is not AnswerStatus.ACCEPTED or record is None:
+            if outcome.status is AnswerStatus.REFUSED:
+                self.counters["answers_refused"] += 1
+                self.log_event("answer", f"{a.recommendation_id}: refused ({outcome.reason})")
+            return outcome
+        if a.decision is PilotDecision.REJECT:
+            record.decision = "rejected"
+            await self._set_state(record, RecommendationState.REJECTED, f"by {a.operator}")
+            for sink in self._answer_sinks:
+                await sink(record.rec, False)
+            return outcome
+        record.decision = "accepted"
+        await self._set_state(record, RecommendationState.ACCEPTED, f"by {a.operator}")
+        for sink in self._answer_sinks:
+            await sink(record.rec, True)
+        self._spawn(self._apply(record))
+        return outcome
+
+    def _check_answer(self, record: RecommendationRecord | None, a: PilotAnswer) -> AnswerOutcome:
+        if record is None:
+            return AnswerOutcome(status=AnswerStatus.REFUSED, reason="unknown recommendation")
+        rec = record.rec
+        if a.version != rec.version:
+            return AnswerOutcome(
+                status=AnswerStatus.REFUSED,
+                reason=f"version {a.version} is not the current version {rec.version}",
+            )
+        op = self.airspace.operations.get(rec.operation_id)
+        if op is not None and a.source == "mqtt" and a.operator not in (op.operator, "admin"):
+            return AnswerOutcome(
+                status=AnswerStatus.REFUSED,
+                reason=f"operator {a.operator!r} does not fly {rec.operation_id}",
+            )
+        if rec.state is not RecommendationState.PROPOSED:
+            same = (record.decision == "accepted" and a.decision is PilotDecision.ACCEPT) or (
+                record.decision == "rejected" and a.decision is PilotDecision.REJECT
+            )
+            if same:
+                return AnswerOutcome(status=AnswerStatus.DUPLICATE, reason="already answered")
+            return AnswerOutcome(
+                status=AnswerStatus.REFUSED, reason=f"recommendation is {rec.state.value}"
+            )
+        if a.t_s > rec.deadline_t_s:
+            return AnswerOutcome(status=AnswerStatus.REFUSED, reason="deadline passed")
+        return AnswerOutcome(status=AnswerStatus.ACCEPTED)
+
+    async def _apply(self, record: RecommendationRecord) -> None:
+        """Carry out an accepted recommendation: command, or upload + readback + new plan."""
+        rec = record.rec
+        try:
+            op = self.airspace.operation(rec.operation_id)
+        except AirspaceError as exc:
+            await self._fail(record, str(exc))
+            return
+        if rec.command is not None and (rec.selected is None or rec.selected.plan is None):
+            await self._set_state(record, RecommendationState.UPLOADING, "sending command")
+            ok = await self.execute_command(rec.command, reason=f"recommendation {rec.id}")
+            if ok:
+                record.verified = True
+                await self._set_state(record, RecommendationState.APPLIED, "command acknowledged")
+            else:
+                await self._fail(record, "command not acknowledged")
+            return
+        plan = rec.selected.plan if rec.selected is not None else None
+        if plan is None:
+            # advisory only (e.g. keep plan / warn): nothing to send
+            await self._set_state(record, RecommendationState.APPLIED, "advisory")
+            return
+        if self._vehicles is None or op.sys_id is None:
+            await self._fail(record, "no MAVLink link to this vehicle")
+            return
+        maneuver = rec.selected.maneuver.value if rec.selected is not None else ""
+        new_plan = dataclasses.replace(
+            plan,
+            operation_id=op.id,
+            version=op.plan.version + 1,
+            created_t_s=self.clock.now_s(),
+            reason=f"{rec.threat_kind.value}: {maneuver}",
+        )
+        await self._set_state(record, RecommendationState.UPLOADING, "uploading mission")
+        error = ""
+        for attempt in range(1, self.config.upload_attempts + 1):
+            result = await self._vehicles.upload_plan(
+                op.sys_id, new_plan, autopilot=op.autopilot, deadline_t_s=None
+            )
+            record.uploaded = record.uploaded or result.ok
+            if result.ok and result.verified:
+                record.verified = True
+                break
+            error = result.error or "readback did not match"
+            self.log_event("upload", f"{rec.id} attempt {attempt} failed: {error}")
+        if not record.verified:
+            self.counters["uploads_failed"] += 1
+            await self._fail(record, error)
+            return
+        self.counters["uploads_ok"] += 1
+        try:
+            self.airspace.replace_plan(new_plan)
+        except AirspaceError as exc:  # a newer plan landed meanwhile: keep the newer one
+            _log.warning("plan of %s not installed: %s", op.id, exc)
+        await self._set_state(record, RecommendationState.APPLIED, "mission verified")
+
+    async def _fail(self, record: RecommendationRecord, error: str) -> None:
+        record.error = error
+        await self._set_state(record, RecommendationState.FAILED, error)
+
+    async def _set_state(
+        self, record: RecommendationRecord, state: RecommendationState, reason: str
+    ) -> None:
+        now = self.clock.now_s()
+        rec = record.rec
+        if state not in RECOMMENDATION_TRANSITIONS.get(rec.state, frozenset()):
+            # e.g. ACCEPTED -> APPLIED directly is allowed by the model; anything else is a bug
+            _log.error("recommendation %s: %s -> %s refused", rec.id, rec.state, state)
+            return
+        record.rec = rec.transition(state, now, reason)
+        record.history.append((now, f"{state.value}: {reason}"))
+        self._record(record.rec)
+        self.log_event("recommendation", f"{rec.id} v{rec.version} {state.value}: {reason}")
+        for op in self._operators:
+            await op.update(record.rec)
+
+    def pending(self) -> list[Recommendation]:
+        return [
+            r.rec
+            for r in self.recommendations.values()
+            if r.rec.state is RecommendationState.PROPOSED
+        ]
+
+    def _spawn(self, coro: Awaitable[None]) -> None:
+        task = asyncio.ensure_future(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._task_done)
+
+    def _task_done(self, task: asyncio.Task[None]) -> None:
+        self._tasks.discard(task)
+        if not task.cancelled() and task.exception() is not None:
+            _log.error("USM task failed", exc_info=task.exception())
+
+    async def drain(self) -> None:
+        """Wait for spawned work (uploads, hazard forwarding) to finish."""
+        while self._tasks:
+            await asyncio.gather(*list(self._tasks), return_exceptions=True)
+
+    async def close(self) -> None:
+        for t in list(self._tasks):
+            t.cancel()
+        await asyncio.gather(*list(self._tasks), return_exceptions=True)

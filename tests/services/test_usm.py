@@ -1,0 +1,216 @@
+"""USM: answers matched to id+version, upload only marked applied after readback, hazards
+coalesced, nothing dropped."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import pytest
+
+from gcs_utm.clock import ManualClock
+from gcs_utm.messages import HazardReport, PilotAnswer, PilotDecision
+from gcs_utm.model import (
+    Alternative,
+    Autopilot,
+    Command,
+    CommandKind,
+    FlightPlan,
+    Maneuver,
+    Operation,
+    OperationId,
+    OperationState,
+    Recommendation,
+    RecommendationId,
+    RecommendationState,
+    SysId,
+    Threat,
+    ThreatId,
+    ThreatKind,
+    VehicleKind,
+    Waypoint4D,
+)
+from gcs_utm.services.airspace import Airspace
+from gcs_utm.services.usm import AnswerStatus, Usm
+
+OP = OperationId("UAS1")
+
+
+def _plan(version: int, t0: float = 100.0) -> FlightPlan:
+    return FlightPlan(
+        operation_id=OP,
+        version=version,
+        waypoints=(
+            Waypoint4D(lat_deg=40.0, lon_deg=-3.0, alt_amsl_m=700.0, t_s=t0),
+            Waypoint4D(lat_deg=40.001, lon_deg=-3.0, alt_amsl_m=700.0, t_s=t0 + 30),
+        ),
+    )
+
+
+def _op() -> Operation:
+    return Operation(
+        id=OP,
+        icao24=None,
+        sys_id=SysId(1),
+        priority=1,
+        plan=_plan(1),
+        vehicle_kind=VehicleKind.MULTIROTOR,
+        cruise_speed_mps=5.0,
+        flight_geometry_m=5.0,
+        operational_volume_m=15.0,
+    )
+
+
+@dataclass
+class _Result:
+    ok: bool
+    verified: bool
+    error: str = ""
+
+
+class FakeVehicles:
+    def __init__(self, *, verified: bool = True, command_ok: bool = True) -> None:
+        self.uploads: list[FlightPlan] = []
+        self.commands: list[Command] = []
+        self.verified = verified
+        self.command_ok = command_ok
+
+    async def upload_plan(
+        self,
+        sys_id: SysId,
+        plan: FlightPlan,
+        *,
+        autopilot: Autopilot | None = None,
+        deadline_t_s: float | None = None,
+    ) -> _Result:
+        self.uploads.append(plan)
+        return _Result(ok=True, verified=self.verified, error="" if self.verified else "mismatch")
+
+    async def send_command(self, sys_id: SysId, command: Command) -> _Result:
+        self.commands.append(command)
+        return _Result(ok=self.command_ok, verified=True)
+
+
+def _rec(version: int = 1, deadline: float = 200.0) -> Recommendation:
+    return Recommendation(
+        id=RecommendationId("r1"),
+        version=version,
+        threat_id=ThreatId("t1"),
+        threat_kind=ThreatKind.LOSS_OF_SEPARATION,
+        operation_id=OP,
+        created_t_s=110.0,
+        deadline_t_s=deadline,
+        selected=Alternative(
+            operation_id=OP, maneuver=Maneuver.GO_DOWN, plan=_plan(1, 120.0), cost=1.0, risk=0.1
+        ),
+    )
+
+
+def _usm(vehicles: FakeVehicles) -> tuple[Usm, ManualClock, list[object]]:
+    clock = ManualClock(110.0)
+    airspace = Airspace()
+    airspace.load([_op()], [])
+    recorded: list[object] = []
+    usm = Usm(airspace, clock, record=recorded.append)
+    usm.attach_vehicles(vehicles)
+    return usm, clock, recorded
+
+
+def _answer(decision: PilotDecision, version: int = 1, t_s: float = 111.0) -> PilotAnswer:
+    return PilotAnswer(
+        recommendation_id=RecommendationId("r1"), version=version, decision=decision, t_s=t_s
+    )
+
+
+async def test_accept_uploads_and_installs_new_plan_version_after_readback() -> None:
+    vehicles = FakeVehicles()
+    usm, _clock, recorded = _usm(vehicles)
+    await usm.on_recommendation(_rec())
+    out = await usm.answer(_answer(PilotDecision.ACCEPT))
+    assert out.status is AnswerStatus.ACCEPTED
+    await usm.drain()
+    record = usm.recommendations[RecommendationId("r1")]
+    assert record.rec.state is RecommendationState.APPLIED
+    assert record.verified
+    assert len(vehicles.uploads) == 1
+    assert usm.airspace.operation(OP).plan.version == 2
+    assert any(
+        isinstance(r, Recommendation) and r.state is RecommendationState.APPLIED for r in recorded
+    )
+
+
+async def test_unverified_upload_is_failed_never_applied() -> None:
+    vehicles = FakeVehicles(verified=False)
+    usm, _clock, _ = _usm(vehicles)
+    await usm.on_recommendation(_rec())
+    await usm.answer(_answer(PilotDecision.ACCEPT))
+    await usm.drain()
+    record = usm.recommendations[RecommendationId("r1")]
+    assert record.rec.state is RecommendationState.FAILED
+    assert "mismatch" in record.error
+    assert usm.airspace.operation(OP).plan.version == 1
+    assert len(vehicles.uploads) == usm.config.upload_attempts
+
+
+async def test_answer_matching_version_duplicate_and_expiry() -> None:
+    usm, _clock, _ = _usm(FakeVehicles())
+    rejected: list[tuple[str, bool]] = []
+
+    async def em_sink(rec: Recommendation, accepted: bool) -> None:
+        rejected.append((rec.id, accepted))
+
+    usm.attach_answer_sink(em_sink)
+    await usm.on_recommendation(_rec())
+    wrong = await usm.answer(_answer(PilotDecision.ACCEPT, version=2))
+    assert wrong.status is AnswerStatus.REFUSED and "version" in wrong.reason
+    first = await usm.answer(_answer(PilotDecision.REJECT))
+    assert first.status is AnswerStatus.ACCEPTED
+    dup = await usm.answer(_answer(PilotDecision.REJECT))
+    assert dup.status is AnswerStatus.DUPLICATE
+    flip = await usm.answer(_answer(PilotDecision.ACCEPT))
+    assert flip.status is AnswerStatus.REFUSED
+    assert rejected == [("r1", False)]
+    unknown = await usm.answer(
+        dataclasses.replace(
+            _answer(PilotDecision.ACCEPT), recommendation_id=RecommendationId("nope")
+        )
+    )
+    assert unknown.status is AnswerStatus.REFUSED
+
+
+async def test_late_answer_refused() -> None:
+    usm, _clock, _ = _usm(FakeVehicles())
+    await usm.on_recommendation(_rec(deadline=150.0))
+    out = await usm.answer(_answer(PilotDecision.ACCEPT, t_s=151.0))
+    assert out.status is AnswerStatus.REFUSED
+    assert "deadline" in out.reason
+
+
+async def test_command_recommendation_suspends_operation() -> None:
+    vehicles = FakeVehicles()
+    usm, _clock, _ = _usm(vehicles)
+    rec = dataclasses.replace(
+        _rec(), selected=None, command=Command(kind=CommandKind.HOLD, operation_id=OP)
+    )
+    await usm.on_recommendation(rec)
+    await usm.answer(_answer(PilotDecision.ACCEPT))
+    await usm.drain()
+    assert vehicles.commands[0].kind is CommandKind.HOLD
+    assert usm.airspace.operation(OP).state is OperationState.SUSPENDED
+    assert usm.recommendations[RecommendationId("r1")].rec.state is RecommendationState.APPLIED
+
+
+@pytest.mark.parametrize("gap_s, expected", [(5.0, 1), (60.0, 2)])
+async def test_hazards_coalesce_within_cooldown(gap_s: float, expected: int) -> None:
+    usm, _clock, _ = _usm(FakeVehicles())
+    seen: list[Threat] = []
+
+    async def sink(threats: list[Threat]) -> None:
+        seen.extend(threats)
+
+    usm.attach_threat_sink(sink)
+    for t in (100.0, 100.0 + gap_s):
+        usm.on_hazard(HazardReport(kind=ThreatKind.JAMMING_ATTACK, t_s=t, sys_id=SysId(1)))
+    await usm.drain()
+    assert len(seen) == expected
+    assert seen[0].uas_ids == (OP,)
