@@ -11,8 +11,16 @@ Errors are :class:`ConfigError` naming the file, the key (dotted path) and what 
 from __future__ import annotations
 
 import dataclasses
+import enum
+import json
 import math
+import re
+import tomllib
+import types
+import typing
+from collections.abc import Mapping
 from dataclasses import MISSING, field
+from pathlib import Path
 from typing import Any, TypeVar
 
 T = TypeVar("T")
@@ -64,3 +72,253 @@ def field_docs(cls: type[Any]) -> dict[str, str]:
 
 def has_default(f: dataclasses.Field[Any]) -> bool:
     return f.default is not MISSING or f.default_factory is not MISSING
+
+
+# --------------------------------------------------------------------------------------------
+# Loading: TOML file -> mapping -> frozen settings dataclass
+
+_TOML_POS = re.compile(r"\(at line (\d+), column (\d+)\)")
+
+
+def load_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file. A missing or malformed file raises :class:`ConfigError` naming the
+    file and, for syntax errors, the line (tomllib only reports it inside its message)."""
+    source = str(path)
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError as exc:
+        raise ConfigError(source, "(file)", "the file does not exist") from exc
+    except OSError as exc:
+        raise ConfigError(source, "(file)", f"cannot be read: {exc.strerror}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(source, "(file)", f"is not UTF-8 text: {exc.reason}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        text = str(exc)
+        m = _TOML_POS.search(text)
+        where = f"line {m.group(1)}" if m else "(syntax)"
+        raise ConfigError(source, where, f"malformed TOML: {text}") from exc
+
+
+def _type_name(tp: Any) -> str:
+    if isinstance(tp, type):
+        if issubclass(tp, enum.Enum):
+            return "one of " + ", ".join(repr(m.value) for m in tp)
+        if dataclasses.is_dataclass(tp):
+            return "a table"
+        return {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}.get(
+            tp, tp.__name__
+        )
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (types.UnionType, typing.Union):
+        return " or ".join(_type_name(a) for a in args if a is not type(None))
+    if origin in (tuple, list):
+        inner = args[0] if args else Any
+        return f"an array of {_type_name(inner)}"
+    if origin is dict:
+        return f"a table of {_type_name(args[1])}"
+    return str(tp)
+
+
+def _describe(value: Any) -> str:
+    kind = {bool: "boolean", int: "integer", float: "number", str: "string"}.get(
+        type(value), "array" if isinstance(value, list) else "table"
+    )
+    text = repr(value)
+    return f"{kind} {text if len(text) <= 40 else text[:37] + '...'}"
+
+
+def _convert(tp: Any, value: Any, source: str, key: str, meta: Mapping[str, Any]) -> Any:
+    """Check ``value`` (as parsed from TOML) against the annotation ``tp`` and convert it."""
+
+    def bad() -> ConfigError:
+        return ConfigError(source, key, f"expected {_type_name(tp)}, got {_describe(value)}")
+
+    if tp is Any:
+        return value
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (types.UnionType, typing.Union):
+        # TOML has no null: a present value must match one of the non-None members.
+        errors: list[ConfigError] = []
+        for member in args:
+            if member is type(None):
+                continue
+            try:
+                return _convert(member, value, source, key, meta)
+            except ConfigError as exc:
+                errors.append(exc)
+        if len(errors) == 1:
+            raise errors[0]
+        raise bad()
+    if origin in (tuple, list):
+        if not isinstance(value, list):
+            raise bad()
+        if origin is tuple and args and (len(args) != 2 or args[1] is not Ellipsis):
+            if len(value) != len(args):
+                raise ConfigError(
+                    source, key, f"expected an array of {len(args)} items, got {len(value)}"
+                )
+            items = [
+                _convert(a, v, source, f"{key}[{i}]", meta)
+                for i, (a, v) in enumerate(zip(args, value, strict=True))
+            ]
+        else:
+            inner = args[0] if args else Any
+            items = [_convert(inner, v, source, f"{key}[{i}]", meta) for i, v in enumerate(value)]
+        return tuple(items) if origin is tuple else items
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise bad()
+        return {str(k): _convert(args[1], v, source, f"{key}.{k}", meta) for k, v in value.items()}
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise bad()
+        return build(tp, value, source=source, section=key)
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        for member in tp:
+            if member.value == value and type(member.value) is type(value):
+                return member
+        raise bad()
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise bad()
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad()
+        check_range(source, key, value, dict(meta))
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise bad()
+        check_range(source, key, float(value), dict(meta))
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise bad()
+        return value
+    raise ConfigError(source, key, f"unsupported setting type {tp!r} (a bug in the settings)")
+
+
+def build(cls: type[T], mapping: Mapping[str, Any], *, source: str, section: str) -> T:
+    """Turn a TOML table into the frozen settings dataclass ``cls``.
+
+    Absent keys take their declared default; unknown keys, wrong types and out-of-range values
+    raise :class:`ConfigError` naming ``source``, the dotted key (``section.key``) and what was
+    expected. Nested settings dataclasses are nested tables.
+    """
+    if not dataclasses.is_dataclass(cls):
+        raise TypeError(f"{cls!r} is not a dataclass")
+    if not isinstance(mapping, Mapping):
+        raise ConfigError(source, section, f"expected a table, got {_describe(mapping)}")
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    hints = typing.get_type_hints(cls)
+    unknown = sorted(set(mapping) - set(fields))
+    if unknown:
+        prefix = f"{section}." if section else ""
+        raise ConfigError(
+            source,
+            prefix + unknown[0],
+            "unknown key; valid keys are: " + ", ".join(sorted(fields)),
+        )
+    kwargs: dict[str, Any] = {}
+    for name, f in fields.items():
+        key = f"{section}.{name}" if section else name
+        if name in mapping:
+            kwargs[name] = _convert(hints[name], mapping[name], source, key, f.metadata)
+        elif not has_default(f):
+            raise ConfigError(source, key, f"missing; expected {_type_name(hints[name])}")
+    try:
+        return cls(**kwargs)
+    except (ValueError, TypeError) as exc:
+        # The dataclass's own cross-field checks (e.g. min < max) name no file: add it.
+        raise ConfigError(source, section or cls.__name__, str(exc)) from exc
+
+
+# --------------------------------------------------------------------------------------------
+# Rendering: settings dataclasses -> commented default TOML
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, enum.Enum):
+        return _toml_value(value.value)
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        # JSON string escapes are a subset of TOML basic-string escapes.
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + " }"
+    raise TypeError(f"cannot render {value!r} as TOML")
+
+
+def _default_of(f: dataclasses.Field[Any]) -> Any:
+    if f.default is not MISSING:
+        return f.default
+    if f.default_factory is not MISSING:
+        return f.default_factory()
+    return MISSING
+
+
+def _comment(f: dataclasses.Field[Any], tp: Any) -> str:
+    doc = str(f.metadata.get("doc", "")) or f.name
+    extras: list[str] = []
+    if f.metadata.get("unit"):
+        extras.append(str(f.metadata["unit"]))
+    lo, hi = f.metadata.get("min"), f.metadata.get("max")
+    if lo is not None or hi is not None:
+        extras.append(f"{'' if lo is None else lo}..{'' if hi is None else hi}")
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        extras.append("|".join(str(m.value) for m in tp))
+    return f"# {doc}" + (f" ({', '.join(extras)})" if extras else "")
+
+
+def _render_table(cls: type[Any], name: str, lines: list[str]) -> None:
+    hints = typing.get_type_hints(cls)
+    doc = (cls.__doc__ or "").strip().splitlines()
+    if lines:
+        lines.append("")
+    if doc and not doc[0].startswith(cls.__name__ + "("):
+        lines.append(f"# {doc[0]}")
+    lines.append(f"[{name}]")
+    nested: list[tuple[str, type[Any]]] = []
+    for f in dataclasses.fields(cls):
+        if not f.init:
+            continue
+        tp = hints[f.name]
+        if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+            nested.append((f.name, tp))
+            continue
+        lines.append(_comment(f, tp))
+        default = _default_of(f)
+        if default is MISSING or default is None:
+            # TOML has no null: leave the key commented out; uncomment to set it.
+            lines.append(f"# {f.name} = (unset; {_type_name(tp)})")
+        else:
+            lines.append(f"{f.name} = {_toml_value(default)}")
+    for sub_name, sub_cls in nested:
+        _render_table(sub_cls, f"{name}.{sub_name}", lines)
+
+
+def render_toml(sections: Mapping[str, type[Any]]) -> str:
+    """A commented TOML document of every section's defaults: a ``# doc (unit, range)`` line
+    above every key. Loading it back with :func:`build` yields the defaults."""
+    lines: list[str] = [
+        "# gcs-utm configuration: every key with its default.",
+        "# Generated by `gcs-utm config default`; do not edit by hand.",
+    ]
+    for name, cls in sections.items():
+        _render_table(cls, name, lines)
+    return "\n".join(lines) + "\n"
