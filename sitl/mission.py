@@ -1,0 +1,407 @@
+"""Vehicle side of the MAVLink mission protocol, as PX4 implements it (sans-IO).
+
+Upload: MISSION_COUNT -> MISSION_REQUEST_INT(seq) ... MISSION_ITEM(_INT) -> MISSION_ACK.
+The vehicle re-requests the expected item every 250 ms and gives up after 5 s with a
+STATUSTEXT (both wall-clock: the ground station runs on the wall clock whatever the sim speed).
+The new mission replaces the old one atomically when the last item arrives; a repeated last
+item (the ground missed our ACK) is answered with the same ACK. Download: MISSION_REQUEST_LIST
+-> MISSION_COUNT -> MISSION_REQUEST(_INT) -> MISSION_ITEM(_INT) (MISSION_ITEM answers the old
+MISSION_REQUEST) -> MISSION_ACK. Fence and rally transfers answer MAV_MISSION_UNSUPPORTED.
+
+The server never touches sockets: it calls `MissionHost.send(peer, name, **fields)`; `peer`
+is opaque (the vehicle's link object) and `now_s` is passed in.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any, Protocol
+
+from sitl._mav import Inbound, const
+
+REREQUEST_S = 0.25  # PX4 MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT
+PROTOCOL_TIMEOUT_S = 5.0  # PX4 MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT
+REPEAT_ACK_WINDOW_S = 5.0  # how long a repeated last item is still answered
+
+ACCEPTED = const("MAV_MISSION_ACCEPTED")
+ERROR = const("MAV_MISSION_ERROR")
+UNSUPPORTED_FRAME = const("MAV_MISSION_UNSUPPORTED_FRAME")
+UNSUPPORTED = const("MAV_MISSION_UNSUPPORTED")
+NO_SPACE = const("MAV_MISSION_NO_SPACE")
+INVALID = const("MAV_MISSION_INVALID")
+INVALID_PARAM5_X = const("MAV_MISSION_INVALID_PARAM5_X")
+INVALID_PARAM6_Y = const("MAV_MISSION_INVALID_PARAM6_Y")
+INVALID_SEQUENCE = const("MAV_MISSION_INVALID_SEQUENCE")
+TYPE_MISSION = const("MAV_MISSION_TYPE_MISSION")
+
+FRAME_GLOBAL = const("MAV_FRAME_GLOBAL")
+FRAME_MISSION = const("MAV_FRAME_MISSION")
+FRAME_GLOBAL_REL = const("MAV_FRAME_GLOBAL_RELATIVE_ALT")
+FRAME_GLOBAL_INT = const("MAV_FRAME_GLOBAL_INT")
+FRAME_GLOBAL_REL_INT = const("MAV_FRAME_GLOBAL_RELATIVE_ALT_INT")
+GLOBAL_FRAMES = frozenset({FRAME_GLOBAL, FRAME_GLOBAL_REL, FRAME_GLOBAL_INT, FRAME_GLOBAL_REL_INT})
+RELATIVE_FRAMES = frozenset({FRAME_GLOBAL_REL, FRAME_GLOBAL_REL_INT})
+
+CMD_WAYPOINT = const("MAV_CMD_NAV_WAYPOINT")
+CMD_LOITER_UNLIM = const("MAV_CMD_NAV_LOITER_UNLIM")
+CMD_LOITER_TIME = const("MAV_CMD_NAV_LOITER_TIME")
+CMD_RTL = const("MAV_CMD_NAV_RETURN_TO_LAUNCH")
+CMD_LAND = const("MAV_CMD_NAV_LAND")
+CMD_TAKEOFF = const("MAV_CMD_NAV_TAKEOFF")
+CMD_CHANGE_SPEED = const("MAV_CMD_DO_CHANGE_SPEED")
+CMD_JUMP = const("MAV_CMD_DO_JUMP")
+NAV_COMMANDS = frozenset(
+    {CMD_WAYPOINT, CMD_LOITER_UNLIM, CMD_LOITER_TIME, CMD_RTL, CMD_LAND, CMD_TAKEOFF}
+)
+POSITIONAL = frozenset({CMD_WAYPOINT, CMD_LOITER_UNLIM, CMD_LOITER_TIME, CMD_LAND, CMD_TAKEOFF})
+SUPPORTED_COMMANDS = NAV_COMMANDS | {CMD_CHANGE_SPEED}
+
+
+@dataclass(frozen=True, slots=True)
+class RawItem:
+    """A mission item as MISSION_ITEM_INT carries it (x/y in degE7 for global frames)."""
+
+    seq: int
+    frame: int
+    command: int
+    current: int
+    autocontinue: int
+    param1: float
+    param2: float
+    param3: float
+    param4: float
+    x: int
+    y: int
+    z: float
+
+    @property
+    def lat_deg(self) -> float:
+        return self.x / 1e7
+
+    @property
+    def lon_deg(self) -> float:
+        return self.y / 1e7
+
+
+def item_from_message(msg: Inbound) -> RawItem:
+    """Build a RawItem from MISSION_ITEM_INT or the float MISSION_ITEM."""
+    if msg.type == "MISSION_ITEM":
+        frame = msg.i("frame")
+        x_f, y_f = msg.f("x"), msg.f("y")
+        # Float MISSION_ITEM carries degrees in global frames; keep non-global values as is.
+        if frame in GLOBAL_FRAMES:
+            x, y = round(x_f * 1e7), round(y_f * 1e7)
+        else:
+            x, y = round(x_f), round(y_f)
+        frame = {FRAME_GLOBAL: FRAME_GLOBAL_INT, FRAME_GLOBAL_REL: FRAME_GLOBAL_REL_INT}.get(
+            frame, frame
+        )
+    else:
+        frame, x, y = msg.i("frame"), msg.i("x"), msg.i("y")
+    return RawItem(
+        seq=msg.i("seq"),
+        frame=frame,
+        command=msg.i("command"),
+        current=msg.i("current"),
+        autocontinue=msg.i("autocontinue"),
+        param1=msg.f("param1"),
+        param2=msg.f("param2"),
+        param3=msg.f("param3"),
+        param4=msg.f("param4"),
+        x=x,
+        y=y,
+        z=msg.f("z"),
+    )
+
+
+def validate_item(item: RawItem) -> int:
+    """MAV_MISSION_RESULT for one item, as PX4's mission feasibility checks would answer."""
+    if item.command not in SUPPORTED_COMMANDS:
+        return UNSUPPORTED
+    if item.command in POSITIONAL or (item.command == CMD_RTL and item.frame != FRAME_MISSION):
+        if item.command in POSITIONAL and item.frame not in GLOBAL_FRAMES:
+            return UNSUPPORTED_FRAME
+        if item.command in POSITIONAL:
+            if not -90e7 <= item.x <= 90e7:
+                return INVALID_PARAM5_X
+            if not -180e7 <= item.y <= 180e7:
+                return INVALID_PARAM6_Y
+            if not math.isfinite(item.z) and item.command != CMD_TAKEOFF:
+                return INVALID
+    for p in (item.param1, item.param2, item.param3):
+        if math.isinf(p):
+            return INVALID
+    return ACCEPTED
+
+
+class MissionHost(Protocol):
+    def mission_items(self) -> list[RawItem]: ...
+    def accept_mission(self, items: list[RawItem], flagged_current: int | None) -> None: ...
+    def clear_mission(self) -> None: ...
+    def set_current(self, seq: int) -> bool: ...
+    def statustext(self, severity: int, text: str) -> None: ...
+    def send(self, peer: object, name: str, **fields: Any) -> None: ...
+    def count(self, counter: str) -> None: ...
+
+
+@dataclass(slots=True)
+class _Upload:
+    peer: object
+    sys_id: int
+    comp_id: int
+    count: int
+    expected: int
+    items: list[RawItem]
+    last_rx_s: float
+    last_req_s: float
+    use_int: bool
+
+
+@dataclass(slots=True)
+class _Download:
+    peer: object
+    sys_id: int
+    comp_id: int
+    count: int
+    last_rx_s: float
+
+
+class MissionServer:
+    """One transfer at a time, as PX4's MavlinkMissionManager."""
+
+    def __init__(
+        self,
+        host: MissionHost,
+        *,
+        max_items: int,
+        validator: Callable[[RawItem], int] = validate_item,
+    ) -> None:
+        self._host = host
+        self._max_items = max_items
+        self._validate = validator
+        self._up: _Upload | None = None
+        self._down: _Download | None = None
+        # (peer, sys, comp, count, t) of the last finished upload, for repeated last items
+        self._last_done: tuple[int, int, int, float] | None = None
+
+    @property
+    def busy(self) -> bool:
+        return self._up is not None
+
+    def handle(self, peer: object, msg: Inbound, now_s: float) -> bool:
+        """Process one mission-protocol message; False if it is not one."""
+        t = msg.type
+        if t == "MISSION_COUNT":
+            self._on_count(peer, msg, now_s)
+        elif t in ("MISSION_ITEM_INT", "MISSION_ITEM"):
+            self._on_item(peer, msg, now_s)
+        elif t == "MISSION_REQUEST_LIST":
+            self._on_request_list(peer, msg, now_s)
+        elif t in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+            self._on_request(peer, msg, now_s)
+        elif t == "MISSION_ACK":
+            if self._down is not None and self._down.sys_id == msg.src_system:
+                self._down = None
+        elif t == "MISSION_CLEAR_ALL":
+            mtype = msg.i("mission_type")
+            if mtype != TYPE_MISSION:
+                self._ack(peer, msg.src_system, msg.src_component, UNSUPPORTED, mtype)
+            elif self._up is not None:
+                self._ack(peer, msg.src_system, msg.src_component, ERROR)
+            else:
+                self._host.clear_mission()
+                self._ack(peer, msg.src_system, msg.src_component, ACCEPTED)
+        elif t == "MISSION_SET_CURRENT":
+            seq = msg.i("seq")
+            if not self._host.set_current(seq):
+                self._host.statustext(
+                    const("MAV_SEVERITY_ERROR"), f"WPM: MISSION_SET_CURRENT seq {seq} out of bounds"
+                )
+                self._host.count("mission_bad_seq")
+        else:
+            return False
+        return True
+
+    def tick(self, now_s: float) -> None:
+        up = self._up
+        if up is not None:
+            if now_s - up.last_rx_s > PROTOCOL_TIMEOUT_S:
+                self._up = None
+                self._host.count("uploads_failed")
+                self._host.statustext(
+                    const("MAV_SEVERITY_CRITICAL"), "Mission upload: operation timeout"
+                )
+            elif now_s - up.last_req_s >= REREQUEST_S:
+                up.last_req_s = now_s
+                self._host.count("mission_rerequests")
+                self._request(up)
+        down = self._down
+        if down is not None and now_s - down.last_rx_s > PROTOCOL_TIMEOUT_S:
+            self._down = None
+
+    # -- upload ---------------------------------------------------------------------------
+    def _on_count(self, peer: object, msg: Inbound, now_s: float) -> None:
+        mtype = msg.i("mission_type")
+        src, comp = msg.src_system, msg.src_component
+        if mtype != TYPE_MISSION:
+            self._ack(peer, src, comp, UNSUPPORTED, mtype)
+            return
+        if self._up is not None and self._up.sys_id != src:
+            self._ack(peer, src, comp, ERROR)  # busy with another ground station
+            return
+        count = msg.i("count")
+        if count > self._max_items:
+            self._host.count("uploads_failed")
+            self._ack(peer, src, comp, NO_SPACE)
+            return
+        if count == 0:
+            self._up = None
+            self._host.clear_mission()
+            self._host.count("uploads_ok")
+            self._ack(peer, src, comp, ACCEPTED)
+            return
+        self._up = _Upload(peer, src, comp, count, 0, [], now_s, now_s, True)
+        self._request(self._up)
+
+    def _request(self, up: _Upload) -> None:
+        name = "MISSION_REQUEST_INT" if up.use_int else "MISSION_REQUEST"
+        self._host.send(
+            up.peer,
+            name,
+            target_system=up.sys_id,
+            target_component=up.comp_id,
+            seq=up.expected,
+            mission_type=TYPE_MISSION,
+        )
+
+    def _on_item(self, peer: object, msg: Inbound, now_s: float) -> None:
+        src, comp = msg.src_system, msg.src_component
+        mtype = msg.i("mission_type")
+        seq = msg.i("seq")
+        up = self._up
+        if up is None or up.sys_id != src:
+            done = self._last_done
+            if (
+                done is not None
+                and done[0] == src
+                and seq == done[2] - 1
+                and now_s - done[3] < REPEAT_ACK_WINDOW_S
+            ):
+                self._host.count("mission_repeated_ack")
+                self._ack(peer, src, comp, ACCEPTED)
+            else:
+                self._host.count("mission_unexpected_item")
+            return
+        if mtype != TYPE_MISSION:
+            self._fail(up, UNSUPPORTED)
+            return
+        up.last_rx_s = now_s
+        up.peer = peer
+        if seq < up.expected:
+            self._host.count("mission_duplicate_item")  # an answer to a re-request: harmless
+            return
+        if seq != up.expected:
+            self._host.count("mission_bad_seq")
+            self._fail(up, ERROR if seq >= up.count else INVALID_SEQUENCE)
+            return
+        item = item_from_message(msg)
+        result = self._validate(item)
+        if result != ACCEPTED:
+            self._fail(up, result)
+            return
+        up.items.append(item)
+        up.expected += 1
+        if up.expected < up.count:
+            up.last_req_s = now_s
+            self._request(up)
+            return
+        self._up = None
+        flagged = next((it.seq for it in up.items if it.current), None)
+        self._host.accept_mission([replace(it, current=0) for it in up.items], flagged)
+        self._host.count("uploads_ok")
+        self._last_done = (src, comp, up.count, now_s)
+        self._ack(peer, src, comp, ACCEPTED)
+
+    def _fail(self, up: _Upload, result: int) -> None:
+        self._up = None
+        self._host.count("uploads_failed")
+        self._ack(up.peer, up.sys_id, up.comp_id, result)
+
+    def _ack(
+        self, peer: object, sys_id: int, comp_id: int, result: int, mission_type: int = TYPE_MISSION
+    ) -> None:
+        self._host.send(
+            peer,
+            "MISSION_ACK",
+            target_system=sys_id,
+            target_component=comp_id,
+            type=result,
+            mission_type=mission_type,
+        )
+
+    # -- download -------------------------------------------------------------------------
+    def _on_request_list(self, peer: object, msg: Inbound, now_s: float) -> None:
+        src, comp = msg.src_system, msg.src_component
+        mtype = msg.i("mission_type")
+        if mtype != TYPE_MISSION:
+            # PX4 would send an empty fence/rally list; we have none either.
+            self._host.send(
+                peer,
+                "MISSION_COUNT",
+                target_system=src,
+                target_component=comp,
+                count=0,
+                mission_type=mtype,
+            )
+            return
+        items = self._host.mission_items()
+        self._down = _Download(peer, src, comp, len(items), now_s) if items else None
+        self._host.send(
+            peer,
+            "MISSION_COUNT",
+            target_system=src,
+            target_component=comp,
+            count=len(items),
+            mission_type=TYPE_MISSION,
+        )
+
+    def _on_request(self, peer: object, msg: Inbound, now_s: float) -> None:
+        src, comp = msg.src_system, msg.src_component
+        seq = msg.i("seq")
+        if self._up is not None and self._up.sys_id == src:
+            return  # requests are ours to send during an upload
+        items = self._host.mission_items()
+        if msg.i("mission_type") != TYPE_MISSION or not 0 <= seq < len(items):
+            self._host.count("mission_bad_seq")
+            self._ack(peer, src, comp, ERROR if seq >= len(items) else INVALID_SEQUENCE)
+            self._down = None
+            return
+        if self._down is not None:
+            self._down.last_rx_s = now_s
+        it = items[seq]
+        common = dict(
+            target_system=src,
+            target_component=comp,
+            seq=seq,
+            command=it.command,
+            current=it.current,
+            autocontinue=it.autocontinue,
+            param1=it.param1,
+            param2=it.param2,
+            param3=it.param3,
+            param4=it.param4,
+            z=it.z,
+            mission_type=TYPE_MISSION,
+        )
+        if msg.type == "MISSION_REQUEST_INT":
+            self._host.send(peer, "MISSION_ITEM_INT", frame=it.frame, x=it.x, y=it.y, **common)
+        else:
+            frame = {FRAME_GLOBAL_INT: FRAME_GLOBAL, FRAME_GLOBAL_REL_INT: FRAME_GLOBAL_REL}.get(
+                it.frame, it.frame
+            )
+            scale = 1e-7 if it.frame in GLOBAL_FRAMES else 1.0
+            self._host.send(
+                peer, "MISSION_ITEM", frame=frame, x=it.x * scale, y=it.y * scale, **common
+            )

@@ -1,0 +1,158 @@
+"""Point-mass kinematics for a multirotor and a fixed-wing aircraft (pure, no I/O, no clock).
+
+Frame: local tangent plane at home, `north_m`/`east_m` metres, `alt_amsl_m` metres AMSL; ground
+is flat at the home altitude. Velocities are ground-relative (`vn_mps`, `ve_mps`, `vup_mps`).
+A `Goal` is what the flight mode asks for: a point to fly to (or through), a speed, and whether
+to stop there (multirotor hovers; fixed wing loiters on a circle around it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from sitl.spec import Limits
+
+G_MPS2 = 9.80665
+_WGS84_A_M = 6378137.0
+_WGS84_E2 = 6.69437999014e-3
+
+
+class LocalTangent:
+    """Flat-earth conversion around an origin using the WGS84 radii of curvature there.
+
+    Error grows as d²/R (about 1 m at 3.5 km): fine for a simulated vehicle whose reported
+    lat/lon *is* the truth the ground side must reproduce.
+    """
+
+    def __init__(self, lat0_deg: float, lon0_deg: float) -> None:
+        self.lat0_deg = lat0_deg
+        self.lon0_deg = lon0_deg
+        s = math.sin(math.radians(lat0_deg))
+        denom = math.sqrt(1.0 - _WGS84_E2 * s * s)
+        r_meridian = _WGS84_A_M * (1.0 - _WGS84_E2) / denom**3
+        r_normal = _WGS84_A_M / denom
+        self._m_per_deg_lat = math.radians(1.0) * r_meridian
+        self._m_per_deg_lon = math.radians(1.0) * r_normal * math.cos(math.radians(lat0_deg))
+
+    def to_ne(self, lat_deg: float, lon_deg: float) -> tuple[float, float]:
+        return (
+            (lat_deg - self.lat0_deg) * self._m_per_deg_lat,
+            (lon_deg - self.lon0_deg) * self._m_per_deg_lon,
+        )
+
+    def to_latlon(self, north_m: float, east_m: float) -> tuple[float, float]:
+        return (
+            self.lat0_deg + north_m / self._m_per_deg_lat,
+            self.lon0_deg + east_m / self._m_per_deg_lon,
+        )
+
+
+@dataclass(slots=True)
+class KinState:
+    north_m: float = 0.0
+    east_m: float = 0.0
+    alt_amsl_m: float = 0.0
+    vn_mps: float = 0.0
+    ve_mps: float = 0.0
+    vup_mps: float = 0.0
+    yaw_rad: float = 0.0
+    roll_rad: float = 0.0
+    pitch_rad: float = 0.0
+    airspeed_mps: float = 0.0
+
+
+@dataclass(slots=True)
+class Goal:
+    north_m: float
+    east_m: float
+    alt_amsl_m: float
+    speed_mps: float
+    stop: bool  # hover (multirotor) / loiter (fixed wing) at the point
+    descent_rate_mps: float | None = None  # override (forced descent)
+
+
+def _clamp(x: float, lo: float, hi: float) -> float:
+    return lo if x < lo else hi if x > hi else x
+
+
+def _wrap_pi(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _vertical(s: KinState, goal: Goal, lim: Limits, dt: float) -> None:
+    descent = goal.descent_rate_mps if goal.descent_rate_mps is not None else lim.descent_rate_mps
+    dz = goal.alt_amsl_m - s.alt_amsl_m
+    want = _clamp(1.0 * dz, -descent, lim.climb_rate_mps)  # P gain 1/s: ~1 s to settle
+    dv = _clamp(want - s.vup_mps, -lim.accel_mps2 * dt, lim.accel_mps2 * dt)
+    s.vup_mps += dv
+    s.alt_amsl_m += s.vup_mps * dt
+
+
+def step_multirotor(s: KinState, goal: Goal, lim: Limits, dt: float) -> None:
+    """Position controller: accelerate toward the goal, brake to stop (or pass through)."""
+    dn = goal.north_m - s.north_m
+    de = goal.east_m - s.east_m
+    dist = math.hypot(dn, de)
+    speed = min(goal.speed_mps, lim.max_speed_mps)
+    if goal.stop:
+        # v = sqrt(2 a d) brakes to a standstill at the point; 0.8 keeps a margin.
+        speed = min(speed, math.sqrt(2.0 * lim.accel_mps2 * 0.8 * dist), 1.5 * dist)
+    if dist > 1e-3:
+        wn, we = dn / dist * speed, de / dist * speed
+    else:
+        wn = we = 0.0
+    an = wn - s.vn_mps
+    ae = we - s.ve_mps
+    amag = math.hypot(an, ae)
+    amax = lim.accel_mps2 * dt
+    if amag > amax:
+        an, ae = an / amag * amax, ae / amag * amax
+    s.vn_mps += an
+    s.ve_mps += ae
+    s.north_m += s.vn_mps * dt
+    s.east_m += s.ve_mps * dt
+    _vertical(s, goal, lim, dt)
+    gs = math.hypot(s.vn_mps, s.ve_mps)
+    if gs > 0.5:
+        s.yaw_rad = math.atan2(s.ve_mps, s.vn_mps)
+    # tilt from the horizontal acceleration (small-angle attitude for ATTITUDE telemetry)
+    acc_n, acc_e = an / dt, ae / dt
+    c, sn = math.cos(s.yaw_rad), math.sin(s.yaw_rad)
+    s.pitch_rad = -math.atan2(acc_n * c + acc_e * sn, G_MPS2)
+    s.roll_rad = math.atan2(-acc_n * sn + acc_e * c, G_MPS2)
+    s.airspeed_mps = gs
+
+
+def step_fixed_wing(
+    s: KinState, goal: Goal, lim: Limits, dt: float, wind_ne_mps: tuple[float, float]
+) -> None:
+    """Coordinated-turn point mass: airspeed within limits, bank-limited turn rate, climb limits,
+    and a circle of `loiter_radius_m` around the goal when it asks to stop."""
+    v_cmd = _clamp(goal.speed_mps, lim.min_airspeed_mps, lim.max_speed_mps)
+    dv = _clamp(v_cmd - s.airspeed_mps, -lim.accel_mps2 * dt, lim.accel_mps2 * dt)
+    s.airspeed_mps = max(lim.min_airspeed_mps, s.airspeed_mps + dv)
+    v = s.airspeed_mps
+    dn = goal.north_m - s.north_m
+    de = goal.east_m - s.east_m
+    dist = math.hypot(dn, de)
+    r = lim.loiter_radius_m
+    if goal.stop and dist < 3.0 * r:
+        # Loiter clockwise: tangent course plus a radial correction proportional to the error.
+        radial = math.atan2(-de, -dn)  # bearing from centre to aircraft
+        tangent = radial + math.pi / 2.0
+        err = _clamp((dist - r) / r, -1.0, 1.0)
+        want = tangent + err * (math.pi / 3.0)
+    else:
+        want = math.atan2(de, dn)
+    turn = _wrap_pi(want - s.yaw_rad)
+    max_rate = G_MPS2 * math.tan(math.radians(lim.max_bank_deg)) / max(v, 1.0)
+    rate = _clamp(2.0 * turn, -max_rate, max_rate)  # P gain 2/s on heading error
+    s.yaw_rad = _wrap_pi(s.yaw_rad + rate * dt)
+    s.roll_rad = math.atan2(rate * v, G_MPS2)
+    s.vn_mps = v * math.cos(s.yaw_rad) + wind_ne_mps[0]
+    s.ve_mps = v * math.sin(s.yaw_rad) + wind_ne_mps[1]
+    s.north_m += s.vn_mps * dt
+    s.east_m += s.ve_mps * dt
+    _vertical(s, goal, lim, dt)
+    s.pitch_rad = math.atan2(s.vup_mps, max(v, 1.0))
