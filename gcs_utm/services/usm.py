@@ -138,6 +138,40 @@ class RecommendationRecord:
     history: list[tuple[float, str]] = field(default_factory=list)
 
 
+@dataclass(slots=True)
+class TelemetryStats:
+    """Per-source counts and delays (receipt minus capture, in clock seconds)."""
+
+    count: int = 0
+    first_capture_t_s: float = 0.0
+    last_capture_t_s: float = 0.0
+    delay_sum_s: float = 0.0
+    delay_max_s: float = 0.0
+
+    def add(self, m: Measurement) -> None:
+        if self.count == 0:
+            self.first_capture_t_s = m.capture_t_s
+        self.count += 1
+        self.last_capture_t_s = max(self.last_capture_t_s, m.capture_t_s)
+        delay = max(0.0, m.receipt_t_s - m.capture_t_s)
+        self.delay_sum_s += delay
+        self.delay_max_s = max(self.delay_max_s, delay)
+
+    def as_dict(self, speed: float) -> dict[str, float | int]:
+        span = self.last_capture_t_s - self.first_capture_t_s
+        # delays are measured on the (possibly sped-up) clock: divide by the speed to get
+        # wall-clock seconds, which is what a link's latency really is
+        scale = 1.0 / speed if speed not in (0.0, float("inf")) else 1.0
+        return {
+            "messages": self.count,
+            "rate_hz": round((self.count - 1) / span, 3) if span > 0 else 0.0,
+            "mean_delay_ms": round(1000.0 * scale * self.delay_sum_s / self.count, 3)
+            if self.count
+            else 0.0,
+            "max_delay_ms": round(1000.0 * scale * self.delay_max_s, 3),
+        }
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class UsmEvent:
     t_s: float
@@ -171,6 +205,7 @@ class Usm:
         self.threats: dict[ThreatId, Threat] = {}
         self.threat_log: list[Threat] = []
         self.recommendations: dict[RecommendationId, RecommendationRecord] = {}
+        self.telemetry: dict[str, TelemetryStats] = {}
         self.events: deque[UsmEvent] = deque(maxlen=self.config.event_log_size)
         self._hazard_seen: dict[tuple[ThreatKind, str], float] = {}
         self._hazard_seq = itertools.count(1)
@@ -216,6 +251,13 @@ class Usm:
     # ---- telemetry side (adapters.mavlink TelemetrySink, ADS-B, tlog, MQTT) ---------------
     def on_measurement(self, m: Measurement) -> None:
         self.counters["measurements"] += 1
+        key = f"{m.source.value}:" + (
+            str(m.sys_id) if m.sys_id is not None else (m.icao24 or m.operation_id or "?")
+        )
+        stats = self.telemetry.get(key)
+        if stats is None:
+            stats = self.telemetry[key] = TelemetryStats()
+        stats.add(m)
         if m.operation_id is None and m.sys_id is not None:
             op = self.airspace.by_sys_id(m.sys_id)
             if op is not None:
