@@ -1,0 +1,10 @@
+"""MQTT door of the U-space Service Manager: JSON messages over an MQTT broker (paper §5.2).
+
+- :mod:`adapters.mqtt.codec`: sans-IO JSON <-> typed messages, validated by the JSON Schemas in
+  ``adapters/mqtt/schemas``; topic layout.
+- :mod:`adapters.mqtt.answers`: :class:`AnswerBook`, the id+version matching rules of pilot
+  answers (pure, reusable by the USM).
+- :mod:`adapters.mqtt.paper`: conversion of the paper's original message templates.
+- :mod:`adapters.mqtt.bridge`: the aiomqtt client with reconnect, bounded outgoing queue and
+  error reporting.
+"""
