@@ -1,0 +1,122 @@
+"""What a loaded scenario is: the airspace frame, the filed operations, geofences, scripted
+events and the simulated vehicles to start.
+
+Invariants: every time here is absolute POSIX seconds (``t0_s`` + the file's relative time),
+except :attr:`ScenarioEvent.at_s` and :attr:`VehicleSetup.start_delay_s`, which keep the
+file's relative seconds for readability in logs; positions are WGS84 degrees and metres AMSL.
+A :class:`Scenario` is only ever returned complete: loaders raise :class:`ScenarioError`
+before building anything half-valid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+from gcs_utm.geo import LocalFrame
+from gcs_utm.model import (
+    Autopilot,
+    FlightPlan,
+    Geofence,
+    Icao24,
+    Operation,
+    OperationId,
+    Position,
+    SysId,
+    VehicleKind,
+)
+
+
+class ScenarioError(ValueError):
+    """A bad scenario file: ``file``, the ``item`` (e.g. ``operations[1] (UAS2)``), the
+    ``field`` (e.g. ``waypoints[3].t_s``) and what is wrong."""
+
+    def __init__(self, file: str, item: str, field: str, message: str) -> None:
+        super().__init__(f"{file}: {item}: {field}: {message}")
+        self.file = file
+        self.item = item
+        self.field = field
+        self.message = message
+
+
+class EventKind(Enum):
+    """Scripted faults and alerts a scenario injects (the paper's threat sources)."""
+
+    GNSS_JAMMING = "gnss_jamming"
+    SPOOFING = "spoofing"
+    BATTERY_DROP = "battery_drop"
+    BATTERY_DRAIN = "battery_drain"
+    LINK_LOSS = "link_loss"
+    PACKET_LOSS = "packet_loss"
+    MOTOR_FAILURE = "motor_failure"
+    ALERT_AREA = "alert_area"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ScenarioEvent:
+    """One scripted event at ``t_s`` (= t0 + ``at_s``).
+
+    ``uas`` is the operation it hits (``None`` for an alert area not tied to one UAS).
+    ``value`` is kind-specific: jamming/spoofing strength 0..1, battery drop in percent,
+    battery drain in percent per second, packet-loss ratio 0..1, spoofing offset in metres.
+    ``area`` is the no-fly volume an ``alert_area`` asks to create (a dynamic geofence).
+    """
+
+    at_s: float
+    t_s: float
+    kind: EventKind
+    uas: OperationId | None = None
+    duration_s: float | None = None
+    value: float | None = None
+    area: Geofence | None = None
+    reason: str = ""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class VehicleSetup:
+    """Everything needed to start one simulated vehicle for an operation.
+
+    ``start_delay_s``: the vehicle starts its mission this many seconds after the filed plan
+    says (a late start is how use case 1 creates its loss of separation).
+    """
+
+    operation_id: OperationId
+    sys_id: SysId | None
+    icao24: Icao24 | None
+    autopilot: Autopilot
+    vehicle_kind: VehicleKind
+    home: Position
+    plan: FlightPlan
+    cruise_speed_mps: float
+    max_climb_rate_mps: float
+    start_delay_s: float = 0.0
+    endurance_s: float | None = None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Scenario:
+    """A complete, validated scenario. ``t0_s`` is the absolute time of relative second 0."""
+
+    name: str
+    description: str
+    duration_s: float
+    t0_s: float
+    frame: LocalFrame
+    operations: tuple[Operation, ...]
+    geofences: tuple[Geofence, ...]
+    events: tuple[ScenarioEvent, ...]
+    vehicles: tuple[VehicleSetup, ...]
+    source: str = ""
+
+    def operation(self, op_id: str) -> Operation:
+        """The operation with id ``op_id`` (KeyError if none)."""
+        for op in self.operations:
+            if op.id == op_id:
+                return op
+        raise KeyError(op_id)
+
+    def vehicle(self, op_id: str) -> VehicleSetup:
+        for v in self.vehicles:
+            if v.operation_id == op_id:
+                return v
+        raise KeyError(op_id)
