@@ -1,0 +1,130 @@
+"""Batched 3D constant-velocity Kalman filter in closed form, one row per track.
+
+Why closed form: the model (constant velocity, white acceleration per axis, position and
+optional velocity measured per axis with a diagonal noise) is separable by axis. When the
+initial covariance is block-diagonal per axis -- which is how tracks are born -- it stays so
+forever, and the 6-state filter is exactly three independent 2-state filters (position,
+velocity). Each 2x2 step is a few array expressions over all tracks at once; no per-track
+Python, no matrix inversion. The tests check every step against ``filterpy.kalman.KalmanFilter``
+with the full 6x6 matrices and ``filterpy.common.Q_discrete_white_noise`` to 1e-9.
+
+Layout (struct of arrays, N rows):
+- ``x``: (N, 3, 2) per axis (east, north, up) the pair (position_m, velocity_mps);
+- ``p``: (N, 3, 3) per axis the unique covariance entries (pp [m^2], pv [m^2/s], vv [m^2/s^2]).
+Symmetry of the covariance holds by construction (one pv entry); positive semi-definiteness
+is kept by the update formulas below (see :func:`update_position`).
+
+Process noise: ``q`` (3,) white-acceleration variances [m^2/s^4]; for a step ``dt`` it is
+``q * [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]`` -- filterpy's ``Q_discrete_white_noise(dim=2)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+PP, PV, VV = 0, 1, 2
+POS, VEL = 0, 1
+
+
+def predict(x: FloatArray, p: FloatArray, dt_s: FloatArray, q: FloatArray) -> None:
+    """Propagate rows in place by ``dt_s`` (N,) seconds. ``q``: (3,) or (N, 3) variances."""
+    dt = dt_s[:, None]
+    a = p[:, :, PP]
+    b = p[:, :, PV]
+    c = p[:, :, VV]
+    dt2 = dt * dt
+    a_new = a + 2.0 * dt * b + dt2 * c + q * (dt2 * dt2 / 4.0)
+    b_new = b + dt * c + q * (dt2 * dt / 2.0)
+    c_new = c + q * dt2
+    x[:, :, POS] += x[:, :, VEL] * dt
+    p[:, :, PP] = a_new
+    p[:, :, PV] = b_new
+    p[:, :, VV] = c_new
+
+
+def predicted_position_var(p: FloatArray, tau_s: FloatArray, q: FloatArray) -> FloatArray:
+    """Position variance per axis after ``tau_s`` without updates.
+
+    ``p``: (N, 3, 3); ``tau_s``: (N, K); returns (N, K, 3) [m^2]. Same formula as
+    :func:`predict` (a zero-noise velocity would give exactly ``a + 2 tau b + tau^2 c``)."""
+    tau = tau_s[:, :, None]
+    a = p[:, None, :, PP]
+    b = p[:, None, :, PV]
+    c = p[:, None, :, VV]
+    tau2 = tau * tau
+    out: FloatArray = a + 2.0 * tau * b + tau2 * c + q * (tau2 * tau2 / 4.0)
+    return out
+
+
+def update_position(x: FloatArray, p: FloatArray, z_m: FloatArray, r_m2: FloatArray) -> None:
+    """Measurement update in place with positions ``z_m`` (N, 3) of variance ``r_m2`` (N, 3).
+
+    Per axis S = pp + r, K = (pp, pv) / S. The posterior entries are written as
+    pp' = pp r / S, pv' = pv r / S, vv' = vv - pv^2 / S, whose determinant is
+    (r / S) (pp vv - pv^2) >= 0: positive semi-definite whenever the prior is."""
+    a = p[:, :, PP]
+    b = p[:, :, PV]
+    c = p[:, :, VV]
+    s = a + r_m2
+    y = z_m - x[:, :, POS]
+    k_pos = a / s
+    k_vel = b / s
+    x[:, :, POS] += k_pos * y
+    x[:, :, VEL] += k_vel * y
+    rs = r_m2 / s
+    vv = c - b * k_vel
+    p[:, :, PP] = a * rs
+    p[:, :, PV] = b * rs
+    p[:, :, VV] = vv
+
+
+def update_position_velocity(
+    x: FloatArray,
+    p: FloatArray,
+    z_m: FloatArray,
+    zv_mps: FloatArray,
+    *,
+    r_m2: FloatArray,
+    rv_m2ps2: FloatArray,
+) -> None:
+    """Update in place with positions (N, 3) and velocities (N, 3) measured together.
+
+    Per axis S = P + diag(r, rv) (2x2), K = P S^-1, P' = P - K P; written out with the
+    determinant of S, which is positive because r, rv > 0."""
+    a = p[:, :, PP]
+    b = p[:, :, PV]
+    c = p[:, :, VV]
+    s11 = a + r_m2
+    s22 = c + rv_m2ps2
+    det = s11 * s22 - b * b
+    # K = P S^-1 with S^-1 = [[s22, -b], [-b, s11]] / det
+    k11 = (a * s22 - b * b) / det
+    k12 = (b * s11 - a * b) / det
+    k21 = (b * s22 - c * b) / det
+    k22 = (c * s11 - b * b) / det
+    y1 = z_m - x[:, :, POS]
+    y2 = zv_mps - x[:, :, VEL]
+    x[:, :, POS] += k11 * y1 + k12 * y2
+    x[:, :, VEL] += k21 * y1 + k22 * y2
+    a_new = a - (k11 * a + k12 * b)
+    b_new = b - (k11 * b + k12 * c)
+    c_new = c - (k21 * b + k22 * c)
+    p[:, :, PP] = a_new
+    p[:, :, PV] = b_new
+    p[:, :, VV] = c_new
+
+
+def to_full(x: FloatArray, p: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Rows as filterpy's layout: state (N, 6) (e, n, u, ve, vn, vu) and covariance (N, 6, 6)."""
+    n = x.shape[0]
+    state = np.concatenate([x[:, :, POS], x[:, :, VEL]], axis=1)
+    cov = np.zeros((n, 6, 6))
+    for axis in range(3):
+        cov[:, axis, axis] = p[:, axis, PP]
+        cov[:, axis, axis + 3] = p[:, axis, PV]
+        cov[:, axis + 3, axis] = p[:, axis, PV]
+        cov[:, axis + 3, axis + 3] = p[:, axis, VV]
+    return state, cov

@@ -1,0 +1,631 @@
+"""The Tracking module's state: one constant-velocity Kalman track per UAS and per intruder.
+
+Role (paper §4.3, Figure 5): fuse every position source of a UAS (MAVLink telemetry, ADS-B,
+MQTT) into one track, keep non-cooperative traffic as intruder tracks, find each UAS's current
+waypoint and predict all tracks over a horizon. Pure: time is always passed in.
+
+Association (:meth:`Tracker.set_operations`): a measurement's ``operation_id`` if known, else
+its MAVLink ``sys_id``, else its ICAO address, mapped to the operation. Anything else with an
+ICAO address is the intruder ``"icao:<hex>"``; an unassigned MAVLink vehicle is the intruder
+``"sysid:<n>"``. Intruders are ``cooperative=False`` and carry no operation id, so they are
+never confused with an operation.
+
+Ingest (:meth:`Tracker.ingest`), per batch:
+1. scalar checks (finite, in range, identity, capture time not after receipt + max_future_s,
+   measured speed <= max_speed_mps) -> ``invalid`` / ``gate`` / ``unassociated``;
+2. the batch is sorted by capture time, and split into rounds in which each track appears at
+   most once; each round is one vectorised predict + update (:mod:`.kalman`). So reordering
+   *within* a batch is repaired (the service drains a batch per period: that is the reorder
+   window);
+3. against its track a measurement is ``out_of_order`` if older than the track's state time,
+   a ``duplicate`` if a measurement of the same source with the same capture time was already
+   used, ``gate`` if farther from the prediction than
+   ``min(max_jump_m, gate_margin_m + max_speed_mps * dt)``. Rejections never touch the state.
+   A stale track that rejected ``gate_reset_count`` measurements in a row restarts from the
+   next valid one (a wrong first fix must not lock a track out forever).
+
+Units: positions in the airspace's local UTM grid (east_m, north_m) and alt_amsl_m; velocities
+east/north/up in m/s on the same grid (measured NED velocities are rotated by the grid
+convergence at the origin); times in POSIX seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from gcs_utm.core.tracking import kalman
+from gcs_utm.core.tracking.config import TrackingConfig
+from gcs_utm.core.tracking.plans import PlanTable
+from gcs_utm.geo import LocalFrame
+from gcs_utm.model import (
+    Icao24,
+    Measurement,
+    MeasurementSource,
+    Operation,
+    OperationId,
+    PredictedTrajectories,
+    SysId,
+    Track,
+    TrackId,
+)
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.intp]
+
+_SOURCE_INDEX = {
+    MeasurementSource.TELEMETRY: 0,
+    MeasurementSource.ADSB: 1,
+    MeasurementSource.MQTT: 2,
+}
+# Altitudes outside this band are not an aircraft: below the Dead Sea shore (-430 m) with
+# margin, above any airspace a UTM serves (the stratosphere, 30 km) with margin.
+_MIN_ALT_AMSL_M = -1_000.0
+_MAX_ALT_AMSL_M = 50_000.0
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class IngestStats:
+    """What one :meth:`Tracker.ingest` call did. Every measurement is counted exactly once:
+    ``accepted + rejected == len(measurements)``."""
+
+    accepted: int = 0
+    out_of_order: int = 0
+    duplicate: int = 0
+    invalid: int = 0
+    gate: int = 0
+    unassociated: int = 0
+    reinitialised: int = 0
+    new_tracks: tuple[TrackId, ...] = ()
+    new_intruders: tuple[TrackId, ...] = ()
+
+    @property
+    def rejected(self) -> int:
+        return self.out_of_order + self.duplicate + self.invalid + self.gate + self.unassociated
+
+
+@dataclass(slots=True)
+class _Identity:
+    track_id: TrackId
+    cooperative: bool
+    operation_id: OperationId | None
+    icao24: Icao24 | None
+
+
+@dataclass(slots=True)
+class _Batch:
+    rows: list[int] = field(default_factory=list)
+    t: list[float] = field(default_factory=list)
+    lat: list[float] = field(default_factory=list)
+    lon: list[float] = field(default_factory=list)
+    alt: list[float] = field(default_factory=list)
+    vel: list[tuple[float, float, float]] = field(default_factory=list)
+    has_vel: list[bool] = field(default_factory=list)
+    eph: list[float] = field(default_factory=list)
+    epv: list[float] = field(default_factory=list)
+    vsig: list[float] = field(default_factory=list)
+    src: list[int] = field(default_factory=list)
+
+
+class Tracker:
+    """All tracks of one airspace as arrays (struct of arrays), row ``i`` = ``ids[i]``."""
+
+    def __init__(self, frame: LocalFrame, config: TrackingConfig) -> None:
+        self.frame = frame
+        self.config = config
+        self._q = np.array(
+            [
+                config.accel_sigma_h_mps2**2,
+                config.accel_sigma_h_mps2**2,
+                config.accel_sigma_v_mps2**2,
+            ]
+        )
+        # Grid convergence: true north expressed on the UTM grid at the origin, used to turn
+        # measured NED velocities into grid velocities.
+        d_east, d_north = frame.point_to_local(frame.origin_lat_deg + 1e-3, frame.origin_lon_deg)
+        norm = math.hypot(d_east, d_north)
+        self._north_dir = (d_east / norm, d_north / norm)
+        self._default_sigma = {
+            0: (config.telemetry_eph_m, config.telemetry_epv_m, config.telemetry_vel_sigma_mps),
+            1: (config.adsb_eph_m, config.adsb_epv_m, config.adsb_vel_sigma_mps),
+            2: (config.mqtt_eph_m, config.mqtt_epv_m, config.telemetry_vel_sigma_mps),
+        }
+        self._n = 0
+        self._cap = 0
+        self._x = np.zeros((0, 3, 2))
+        self._p = np.zeros((0, 3, 3))
+        self._t = np.zeros(0)
+        self._src_t = np.zeros((0, 3))
+        self._updates = np.zeros(0, dtype=np.int64)
+        self._gate_fails = np.zeros(0, dtype=np.int64)
+        self._coop = np.zeros(0, dtype=bool)
+        self._stale = np.zeros(0, dtype=bool)
+        self._plan_row = np.zeros(0, dtype=np.intp)
+        self._geom_m = np.zeros(0)
+        self._ids: list[TrackId] = []
+        self._op_ids: list[OperationId | None] = []
+        self._icao: list[Icao24 | None] = []
+        self._row: dict[TrackId, int] = {}
+        self._dirty: set[TrackId] = set()
+        self._ops: dict[OperationId, Operation] = {}
+        self._by_sys: dict[SysId, OperationId] = {}
+        self._by_icao: dict[Icao24, OperationId] = {}
+        self._plans = PlanTable([], frame)
+        self._plan_of_op: dict[OperationId, int] = {}
+        self._counters: dict[str, int] = dict.fromkeys(
+            (
+                "accepted",
+                "out_of_order",
+                "duplicate",
+                "invalid",
+                "gate",
+                "unassociated",
+                "reinitialised",
+                "tracks_created",
+                "intruders_created",
+                "intruders_dropped",
+                "stale_raised",
+            ),
+            0,
+        )
+
+    # ---- operations and association -------------------------------------------------------
+    def set_operations(self, operations: Iterable[Operation]) -> None:
+        """Replace the known operations (association maps and plans). Call again whenever a
+        plan or an assignment changes. Intruder tracks whose ICAO address or system id now
+        belongs to an operation are removed, so one aircraft never shows up twice."""
+        ops = list(operations)
+        self._ops = {op.id: op for op in ops}
+        self._by_sys = {op.sys_id: op.id for op in ops if op.sys_id is not None}
+        self._by_icao = {op.icao24: op.id for op in ops if op.icao24 is not None}
+        self._plans = PlanTable([op.plan for op in ops], self.frame)
+        self._plan_of_op = {op.id: j for j, op in enumerate(ops)}
+        for row in range(self._n):
+            op_id = self._op_ids[row]
+            j = self._plan_of_op.get(op_id, -1) if op_id is not None else -1
+            self._plan_row[row] = j
+            self._geom_m[row] = ops[j].flight_geometry_m if j >= 0 else 0.0
+        claimed = {TrackId(f"icao:{icao}") for icao in self._by_icao}
+        claimed |= {TrackId(f"sysid:{sys_id}") for sys_id in self._by_sys}
+        keep = np.array([tid not in claimed for tid in self._ids[: self._n]], dtype=bool)
+        if not keep.all():
+            self._counters["intruders_dropped"] += int((~keep).sum())
+            self._compact(keep)
+
+    def _resolve(self, m: Measurement) -> _Identity | None:
+        op_id: OperationId | None = None
+        if m.operation_id is not None and m.operation_id in self._ops:
+            op_id = m.operation_id
+        elif m.sys_id is not None and m.sys_id in self._by_sys:
+            op_id = self._by_sys[m.sys_id]
+        elif m.icao24 is not None and m.icao24 in self._by_icao:
+            op_id = self._by_icao[m.icao24]
+        if op_id is not None:
+            return _Identity(TrackId(op_id), True, op_id, self._ops[op_id].icao24)
+        if m.icao24 is not None:
+            return _Identity(TrackId(f"icao:{m.icao24}"), False, None, m.icao24)
+        if m.sys_id is not None:
+            return _Identity(TrackId(f"sysid:{m.sys_id}"), False, None, None)
+        return None
+
+    # ---- storage ----------------------------------------------------------------------------
+    def _grow(self, need: int) -> None:
+        if need <= self._cap:
+            return
+        cap = max(need, 2 * self._cap, 64)
+
+        def grown(a: npt.NDArray[Any], fill: float = 0.0) -> npt.NDArray[Any]:
+            out = np.full((cap, *a.shape[1:]), fill, dtype=a.dtype)
+            out[: self._n] = a[: self._n]
+            return out
+
+        self._x = grown(self._x)
+        self._p = grown(self._p)
+        self._t = grown(self._t)
+        self._src_t = grown(self._src_t, -np.inf)
+        self._updates = grown(self._updates)
+        self._gate_fails = grown(self._gate_fails)
+        self._coop = grown(self._coop)
+        self._stale = grown(self._stale)
+        self._plan_row = grown(self._plan_row, -1)
+        self._geom_m = grown(self._geom_m)
+        self._cap = cap
+
+    def _new_row(self, ident: _Identity) -> int:
+        self._grow(self._n + 1)
+        row = self._n
+        self._n += 1
+        self._ids.append(ident.track_id)
+        self._op_ids.append(ident.operation_id)
+        self._icao.append(ident.icao24)
+        self._row[ident.track_id] = row
+        self._coop[row] = ident.cooperative
+        self._stale[row] = False
+        self._src_t[row] = -np.inf
+        self._updates[row] = 0
+        self._gate_fails[row] = 0
+        op = self._ops.get(ident.operation_id) if ident.operation_id is not None else None
+        self._plan_row[row] = self._plan_of_op[op.id] if op is not None else -1
+        self._geom_m[row] = op.flight_geometry_m if op is not None else 0.0
+        return row
+
+    def _compact(self, keep: npt.NDArray[np.bool_]) -> None:
+        idx = np.flatnonzero(keep)
+        for name in (
+            "_x", "_p", "_t", "_src_t", "_updates", "_gate_fails", "_coop", "_stale",
+            "_plan_row", "_geom_m",
+        ):  # fmt: skip
+            arr = getattr(self, name)
+            arr[: len(idx)] = arr[idx]
+        removed = [self._ids[i] for i in np.flatnonzero(~keep)]
+        self._ids = [self._ids[i] for i in idx]
+        self._op_ids = [self._op_ids[i] for i in idx]
+        self._icao = [self._icao[i] for i in idx]
+        self._n = len(idx)
+        self._row = {tid: i for i, tid in enumerate(self._ids)}
+        self._dirty.difference_update(removed)
+
+    # ---- ingest -----------------------------------------------------------------------------
+    def ingest(self, measurements: Sequence[Measurement]) -> IngestStats:
+        """Fuse a batch of measurements into the tracks; see the module docstring."""
+        cfg = self.config
+        c = dict.fromkeys(("invalid", "gate", "unassociated", "out_of_order", "duplicate"), 0)
+        accepted = 0
+        reinit = 0
+        new_tracks: list[TrackId] = []
+        new_intruders: list[TrackId] = []
+        b = _Batch()
+        isfinite = math.isfinite
+        for m in measurements:
+            t = m.capture_t_s
+            lat = m.lat_deg
+            lon = m.lon_deg
+            alt = m.alt_amsl_m
+            if not (
+                isfinite(t)
+                and isfinite(lat)
+                and isfinite(lon)
+                and isfinite(alt)
+                and -90.0 <= lat <= 90.0
+                and -180.0 <= lon <= 180.0
+                and _MIN_ALT_AMSL_M <= alt <= _MAX_ALT_AMSL_M
+                and not (isfinite(m.receipt_t_s) and t - m.receipt_t_s > cfg.max_future_s)
+            ):
+                c["invalid"] += 1
+                continue
+            src = _SOURCE_INDEX[m.source]
+            eph_d, epv_d, vsig = self._default_sigma[src]
+            eph = eph_d if m.eph_m is None else m.eph_m
+            epv = epv_d if m.epv_m is None else m.epv_m
+            if not (isfinite(eph) and isfinite(epv) and eph >= 0.0 and epv >= 0.0):
+                c["invalid"] += 1
+                continue
+            vel = m.vel_ned_mps
+            if vel is not None:
+                vn, ve, vd = vel
+                if not (isfinite(vn) and isfinite(ve) and isfinite(vd)):
+                    c["invalid"] += 1
+                    continue
+                if vn * vn + ve * ve + vd * vd > cfg.max_speed_mps**2:
+                    c["gate"] += 1
+                    continue
+            ident = self._resolve(m)
+            if ident is None:
+                c["unassociated" if m.operation_id is not None else "invalid"] += 1
+                continue
+            row = self._row.get(ident.track_id)
+            if row is None:
+                row = self._new_row(ident)
+                (new_tracks if ident.cooperative else new_intruders).append(ident.track_id)
+            b.rows.append(row)
+            b.t.append(t)
+            b.lat.append(lat)
+            b.lon.append(lon)
+            b.alt.append(alt)
+            b.has_vel.append(vel is not None)
+            b.vel.append(vel if vel is not None else (0.0, 0.0, 0.0))
+            b.eph.append(max(eph, cfg.min_sigma_m))
+            b.epv.append(max(epv, cfg.min_sigma_m))
+            b.vsig.append(vsig)
+            b.src.append(src)
+
+        if b.rows:
+            acc, rein, rej = self._apply(b, {*new_tracks, *new_intruders})
+            accepted += acc
+            reinit += rein
+            for key, value in rej.items():
+                c[key] += value
+        stats = IngestStats(
+            accepted=accepted,
+            reinitialised=reinit,
+            new_tracks=tuple(new_tracks),
+            new_intruders=tuple(new_intruders),
+            **c,
+        )
+        for key, value in c.items():
+            self._counters[key] += value
+        self._counters["accepted"] += accepted
+        self._counters["reinitialised"] += reinit
+        self._counters["tracks_created"] += len(new_tracks)
+        self._counters["intruders_created"] += len(new_intruders)
+        return stats
+
+    def _apply(self, b: _Batch, new_ids: set[TrackId]) -> tuple[int, int, dict[str, int]]:
+        cfg = self.config
+        n = len(b.rows)
+        rows = np.array(b.rows, dtype=np.intp)
+        t = np.array(b.t)
+        east, north = self.frame.to_local(np.array(b.lat), np.array(b.lon))
+        z = np.stack([east, north, np.array(b.alt)], axis=1)
+        vned = np.array(b.vel).reshape(n, 3)
+        nd_e, nd_n = self._north_dir
+        # NED (true north/east) -> grid east/north: north along north_dir, east 90 deg right.
+        zv = np.stack(
+            [
+                vned[:, 0] * nd_e + vned[:, 1] * nd_n,
+                vned[:, 0] * nd_n - vned[:, 1] * nd_e,
+                -vned[:, 2],
+            ],
+            axis=1,
+        )
+        has_vel = np.array(b.has_vel)
+        eph = np.array(b.eph)
+        epv = np.array(b.epv)
+        r = np.stack([eph * eph, eph * eph, epv * epv], axis=1)
+        vsig2 = np.array(b.vsig) ** 2
+        rv = np.repeat(vsig2[:, None], 3, axis=1)
+        src = np.array(b.src, dtype=np.intp)
+        # Rounds: sort by capture time, then rank each measurement among those of its track.
+        order = np.argsort(t, kind="stable")
+        rs = rows[order]
+        by_row = np.argsort(rs, kind="stable")
+        grouped = rs[by_row]
+        pos = np.arange(n)
+        first = np.ones(n, dtype=bool)
+        first[1:] = grouped[1:] != grouped[:-1]
+        rank_grouped = pos - np.maximum.accumulate(np.where(first, pos, 0))
+        rank = np.empty(n, dtype=np.intp)
+        rank[by_row] = rank_grouped
+        # Rows created by this batch start uninitialised: their earliest measurement is rank 0.
+        fresh = np.zeros(self._cap, dtype=bool)
+        fresh[[self._row[tid] for tid in new_ids]] = True
+        accepted = 0
+        reinit = 0
+        rej = {"out_of_order": 0, "duplicate": 0, "gate": 0}
+        touched: list[npt.NDArray[np.intp]] = []
+        for k in range(int(rank.max()) + 1):
+            sel = order[rank == k]
+            rw = rows[sel]
+            init = fresh[rw]
+            fresh[rw] = False
+            if k > 0:
+                init[:] = False
+            dt = t[sel] - self._t[rw]
+            tsrc = self._src_t[rw, src[sel]]
+            ooo = ~init & (dt < 0.0)
+            dup = ~init & ~ooo & (t[sel] == tsrc)
+            pred = self._x[rw, :, kalman.POS] + self._x[rw, :, kalman.VEL] * dt[:, None]
+            miss = np.sqrt(((z[sel] - pred) ** 2).sum(axis=1))
+            allowed = np.minimum(cfg.max_jump_m, cfg.gate_margin_m + cfg.max_speed_mps * dt)
+            gate = ~init & ~ooo & ~dup & (miss > allowed)
+            # A stale track that keeps rejecting restarts from this measurement.
+            restart = (
+                gate & (dt > cfg.stale_after_s) & (self._gate_fails[rw] >= cfg.gate_reset_count)
+            )
+            gate &= ~restart
+            init |= restart
+            rej["out_of_order"] += int(ooo.sum())
+            rej["duplicate"] += int(dup.sum())
+            rej["gate"] += int(gate.sum())
+            reinit += int(restart.sum())
+            np.add.at(self._gate_fails, rw[gate], 1)
+            upd = ~init & ~ooo & ~dup & ~gate
+            # New and restarted tracks: state = the measurement, velocity unknown unless measured.
+            if init.any():
+                ri = rw[init]
+                si = sel[init]
+                hv = has_vel[si][:, None]
+                self._x[ri, :, kalman.POS] = z[si]
+                self._x[ri, :, kalman.VEL] = np.where(hv, zv[si], 0.0)
+                self._p[ri, :, kalman.PP] = r[si]
+                self._p[ri, :, kalman.PV] = 0.0
+                self._p[ri, :, kalman.VV] = np.where(hv, rv[si], cfg.initial_vel_sigma_mps**2)
+            if upd.any():
+                for with_vel in (False, True):
+                    m_sel = upd & (has_vel[sel] == with_vel)
+                    if not m_sel.any():
+                        continue
+                    ru = rw[m_sel]
+                    su = sel[m_sel]
+                    xs = self._x[ru]
+                    ps = self._p[ru]
+                    kalman.predict(xs, ps, dt[m_sel], self._q)
+                    if with_vel:
+                        kalman.update_position_velocity(
+                            xs, ps, z[su], zv[su], r_m2=r[su], rv_m2ps2=rv[su]
+                        )
+                    else:
+                        kalman.update_position(xs, ps, z[su], r[su])
+                    self._x[ru] = xs
+                    self._p[ru] = ps
+            ok = init | upd
+            ro = rw[ok]
+            so = sel[ok]
+            self._t[ro] = t[so]
+            self._src_t[ro] = np.where(init[ok][:, None], -np.inf, self._src_t[ro])
+            self._src_t[ro, src[so]] = t[so]
+            self._updates[ro] += 1
+            self._gate_fails[ro] = 0
+            self._stale[ro] = False
+            accepted += int(ok.sum())
+            touched.append(ro)
+        if touched:
+            for row in np.unique(np.concatenate(touched)):
+                self._dirty.add(self._ids[row])
+        return accepted, reinit, rej
+
+    # ---- reading ----------------------------------------------------------------------------
+    @property
+    def counters(self) -> dict[str, int]:
+        """Totals since construction (a copy)."""
+        return dict(self._counters)
+
+    def __len__(self) -> int:
+        return self._n
+
+    def covariance(self, track_id: TrackId) -> FloatArray:
+        """The 6x6 covariance of a track over (east, north, up, v_east, v_north, v_up)."""
+        row = self._row[track_id]
+        _, cov = kalman.to_full(self._x[row : row + 1], self._p[row : row + 1])
+        out: FloatArray = cov[0]
+        return out
+
+    def _plan_state(
+        self, pos: FloatArray, t_s: FloatArray
+    ) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
+        """For tracks with a plan: (rows, current waypoint, distance to plan, plan time)."""
+        rows = np.flatnonzero(self._plan_row[: self._n] >= 0)
+        if len(rows) == 0:
+            empty = np.zeros(0)
+            return rows, np.zeros(0, dtype=np.intp), empty, empty
+        wp, dist, tau = self._plans.locate(
+            self._plan_row[rows],
+            pos[rows],
+            t_s[rows],
+            self._geom_m[rows] * self.config.plan_ambiguity_factor,
+        )
+        return rows, wp, dist, tau
+
+    def _make_tracks(
+        self, rows_t: FloatArray, pos: FloatArray, vel: FloatArray, pos_var: FloatArray
+    ) -> dict[TrackId, Track]:
+        n = self._n
+        plan_rows, wp, _, _ = self._plan_state(pos, rows_t)
+        next_wp: list[int | None] = [None] * n
+        for row, w in zip(plan_rows.tolist(), wp.tolist(), strict=True):
+            next_wp[row] = w
+        lat, lon = self.frame.to_wgs84(pos[:, 0], pos[:, 1])
+        sigma = np.sqrt(pos_var.sum(axis=1))
+        out: dict[TrackId, Track] = {}
+        for i in range(n):
+            tid = self._ids[i]
+            out[tid] = Track(
+                id=tid,
+                t_s=float(rows_t[i]),
+                lat_deg=float(lat[i]),
+                lon_deg=float(lon[i]),
+                alt_amsl_m=float(pos[i, 2]),
+                east_m=float(pos[i, 0]),
+                north_m=float(pos[i, 1]),
+                vel_enu_mps=(float(vel[i, 0]), float(vel[i, 1]), float(vel[i, 2])),
+                position_sigma_m=float(sigma[i]),
+                cooperative=bool(self._coop[i]),
+                operation_id=self._op_ids[i],
+                icao24=self._icao[i],
+                stale=bool(self._stale[i]),
+                updates=int(self._updates[i]),
+                next_waypoint=next_wp[i],
+            )
+        return out
+
+    def tracks(self) -> dict[TrackId, Track]:
+        """Every track at its own state time (the last accepted measurement)."""
+        n = self._n
+        return self._make_tracks(
+            self._t[:n].copy(),
+            self._x[:n, :, kalman.POS].copy(),
+            self._x[:n, :, kalman.VEL].copy(),
+            self._p[:n, :, kalman.PP].copy(),
+        )
+
+    def take_updated(self) -> list[Track]:
+        """Tracks changed since the previous call (for batched store writes)."""
+        if not self._dirty:
+            return []
+        dirty = self._dirty
+        self._dirty = set()
+        all_tracks = self.tracks()
+        return [all_tracks[tid] for tid in dirty if tid in all_tracks]
+
+    def predict(self, t_s: float) -> PredictedTrajectories:
+        """Predicted trajectories of all tracks (cooperative and intruders) from ``t_s``.
+
+        Points are at ``t_s + k * step_s`` for k = 0 .. horizon_s / step_s. A UAS within
+        ``plan_follow_factor * flight_geometry_m`` of its plan follows the 4D plan from the
+        plan time of its current position (the cross-track offset decays with
+        ``plan_offset_decay_s``), its radius grows by ``plan_sigma_growth_mps``; every other
+        track is extrapolated with its filtered velocity and its radius is the filter's
+        position covariance propagated (root of the trace). Time is counted from each
+        track's state time, so a stale track's radius keeps growing."""
+        n = self._n
+        cfg = self.config
+        k = cfg.n_points
+        times = t_s + np.arange(k) * cfg.step_s
+        x = self._x[:n]
+        tau = times[None, :] - self._t[:n, None]
+        pos = x[:, None, :, kalman.POS] + x[:, None, :, kalman.VEL] * tau[:, :, None]
+        var = kalman.predicted_position_var(self._p[:n], tau, self._q)
+        sigma = np.sqrt(var.sum(axis=2))
+        rows, _, dist, tau0 = self._plan_state(x[:, :, kalman.POS], self._t[:n])
+        if len(rows):
+            follow = dist <= self._geom_m[rows] * cfg.plan_follow_factor
+            fr = rows[follow]
+            if len(fr):
+                plan_rows = self._plan_row[fr]
+                ahead = tau[fr]
+                on_plan = self._plans.follow(plan_rows, tau0[follow], np.zeros((len(fr), 1)))
+                offset = x[fr, :, kalman.POS] - on_plan[:, 0, :]
+                decay = np.exp(-np.maximum(ahead, 0.0) / cfg.plan_offset_decay_s)
+                pos[fr] = self._plans.follow(plan_rows, tau0[follow], ahead) + (
+                    offset[:, None, :] * decay[:, :, None]
+                )
+                sigma0_2 = self._p[fr, :, kalman.PP].sum(axis=1)
+                sigma[fr] = np.sqrt(
+                    sigma0_2[:, None] + (cfg.plan_sigma_growth_mps * np.abs(ahead)) ** 2
+                )
+        points = np.empty((n, k, 4))
+        points[:, :, :3] = pos
+        points[:, :, 3] = times[None, :]
+        return PredictedTrajectories(
+            t_s=t_s, track_ids=tuple(self._ids[:n]), points=points, sigma_m=sigma
+        )
+
+    def snapshot(self, t_s: float) -> tuple[dict[TrackId, Track], PredictedTrajectories]:
+        """All tracks propagated to ``t_s`` (``Track.t_s == t_s``) and their prediction from
+        ``t_s``: one consistent view; the filter state itself is not changed."""
+        n = self._n
+        dt = t_s - self._t[:n]
+        x = self._x[:n]
+        pos = x[:, :, kalman.POS] + x[:, :, kalman.VEL] * dt[:, None]
+        pos_var = kalman.predicted_position_var(self._p[:n], dt[:, None], self._q)[:, 0, :]
+        tracks = self._make_tracks(np.full(n, t_s), pos, x[:, :, kalman.VEL].copy(), pos_var)
+        return tracks, self.predict(t_s)
+
+    def check_stale(self, t_s: float) -> list[TrackId]:
+        """Mark tracks silent for more than ``stale_after_s`` as stale and return the newly
+        stale ones (each once until a new measurement revives it). Intruders silent for more
+        than ``intruder_drop_after_s`` are removed."""
+        n = self._n
+        age = t_s - self._t[:n]
+        newly = (age > self.config.stale_after_s) & ~self._stale[:n]
+        self._stale[:n] |= newly
+        out = [self._ids[i] for i in np.flatnonzero(newly)]
+        for tid in out:
+            self._dirty.add(tid)
+        self._counters["stale_raised"] += len(out)
+        drop = ~self._coop[:n] & (age > self.config.intruder_drop_after_s)
+        if drop.any():
+            self._counters["intruders_dropped"] += int(drop.sum())
+            self._compact(~drop)
+        return out
+
+    def track_operation(self, track_id: TrackId) -> Operation | None:
+        """The operation a cooperative track belongs to, if still known."""
+        row = self._row.get(track_id)
+        op_id = self._op_ids[row] if row is not None else None
+        return self._ops.get(op_id) if op_id is not None else None
