@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import time
 from collections.abc import AsyncIterator, Callable
@@ -11,9 +12,9 @@ from typing import Any
 import pytest
 
 os.environ["MAVLINK20"] = "1"
-from pymavlink.dialects.v20 import ardupilotmega as mav  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mav
 
-import sitl  # noqa: E402
+import sitl
 
 
 class RawGcs(asyncio.DatagramProtocol):
@@ -65,12 +66,12 @@ class RawGcs(asyncio.DatagramProtocol):
             if left <= 0:
                 raise TimeoutError("no matching message")
             self.new.clear()
-            try:
+            with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.new.wait(), left)
-            except TimeoutError:
-                pass
 
-    async def wait_type(self, kind: str, timeout: float = 3.0, start: int | None = None, **eq: Any) -> Any:
+    async def wait_type(
+        self, kind: str, timeout: float = 3.0, start: int | None = None, **eq: Any
+    ) -> Any:
         return await self.wait(
             lambda m: m.get_type() == kind and all(getattr(m, k) == v for k, v in eq.items()),
             timeout,

@@ -12,9 +12,26 @@ from sitl import mission as mp
 from tests.sitl.conftest import WP, RawGcs, mav, px4_spec
 
 
-def item(seq: int, lat: float, lon: float, alt: float, *, cmd: int = 16, frame: int = 5, current: int = 0) -> Any:
-    return mav.MAVLink_mission_item_int_message(1, 1, seq, frame, cmd, current, 1, 0, 0, 0, float("nan"),
-                                                round(lat * 1e7), round(lon * 1e7), alt, 0)
+def item(
+    seq: int, lat: float, lon: float, alt: float, *, cmd: int = 16, frame: int = 5, current: int = 0
+) -> Any:
+    return mav.MAVLink_mission_item_int_message(
+        1,
+        1,
+        seq,
+        frame,
+        cmd,
+        current,
+        1,
+        0,
+        0,
+        0,
+        float("nan"),
+        round(lat * 1e7),
+        round(lon * 1e7),
+        alt,
+        0,
+    )
 
 
 def square(n: int = 3) -> list[Any]:
@@ -25,7 +42,9 @@ async def upload(gcs: RawGcs, port: int, items: list[Any]) -> Any:
     start = len(gcs.msgs)
     gcs.send(port, mav.MAVLink_mission_count_message(1, 1, len(items), 0))
     while True:
-        m = await gcs.wait(lambda m: m.get_type() in ("MISSION_REQUEST_INT", "MISSION_ACK"), start=start)
+        m = await gcs.wait(
+            lambda m: m.get_type() in ("MISSION_REQUEST_INT", "MISSION_ACK"), start=start
+        )
         start = gcs.last_index
         if m.get_type() == "MISSION_ACK":
             return m
@@ -62,7 +81,11 @@ async def test_upload_result_codes(gcs: RawGcs) -> None:
         s = len(gcs.msgs)
         gcs.send(port, mav.MAVLink_mission_count_message(1, 1, 2, mav.MAV_MISSION_TYPE_FENCE))
         assert (await gcs.wait_type("MISSION_ACK", start=s)).type == mav.MAV_MISSION_UNSUPPORTED
-        ack = await upload(gcs, port, [square(1)[0], item(1, 47.4, 8.5, 500, cmd=mav.MAV_CMD_DO_SET_SERVO, frame=2)])
+        ack = await upload(
+            gcs,
+            port,
+            [square(1)[0], item(1, 47.4, 8.5, 500, cmd=mav.MAV_CMD_DO_SET_SERVO, frame=2)],
+        )
         assert ack.type == mav.MAV_MISSION_UNSUPPORTED
         ack = await upload(gcs, port, [item(0, 47.4, 8.5, 500, frame=mav.MAV_FRAME_LOCAL_NED)])
         assert ack.type == mav.MAV_MISSION_UNSUPPORTED_FRAME
@@ -78,7 +101,9 @@ async def test_upload_result_codes(gcs: RawGcs) -> None:
         assert fleet.vehicles[0].counters["uploads_failed"] >= 5
 
 
-async def test_rerequest_timeout_and_repeated_ack(gcs: RawGcs, monkeypatch: pytest.MonkeyPatch) -> None:
+async def test_rerequest_timeout_and_repeated_ack(
+    gcs: RawGcs, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(mp, "PROTOCOL_TIMEOUT_S", 0.8)
     async with sitl.Fleet([px4_spec(gcs.port)], sitl.SimTime()) as fleet:
         v = fleet.vehicles[0]
@@ -87,7 +112,11 @@ async def test_rerequest_timeout_and_repeated_ack(gcs: RawGcs, monkeypatch: pyte
         await asyncio.sleep(0.6)
         reqs = [m for m in gcs.msgs[s:] if m.get_type() == "MISSION_REQUEST_INT"]
         assert 2 <= len(reqs) <= 4 and all(r.seq == 0 for r in reqs)  # every 250 ms
-        txt = await gcs.wait(lambda m: m.get_type() == "STATUSTEXT" and "timeout" in str(m.text), start=s, timeout=2.0)
+        txt = await gcs.wait(
+            lambda m: m.get_type() == "STATUSTEXT" and "timeout" in str(m.text),
+            start=s,
+            timeout=2.0,
+        )
         assert txt.severity == mav.MAV_SEVERITY_CRITICAL
         assert v.mission == () and v.counters["uploads_failed"] == 1
         items = square(2)
@@ -120,7 +149,9 @@ async def test_clear_set_current_and_inflight_upload_keeps_index(gcs: RawGcs) ->
         await upload(gcs, port, items)
         assert v.mission_current_seq == 1
         gcs.send(port, mav.MAVLink_mission_set_current_message(1, 1, 42))
-        await gcs.wait(lambda m: m.get_type() == "STATUSTEXT" and "out of bounds" in str(m.text), start=s)
+        await gcs.wait(
+            lambda m: m.get_type() == "STATUSTEXT" and "out of bounds" in str(m.text), start=s
+        )
         s = len(gcs.msgs)
         gcs.send(port, mav.MAVLink_mission_clear_all_message(1, 1, 0))
         assert (await gcs.wait_type("MISSION_ACK", start=s)).type == 0

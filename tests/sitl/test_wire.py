@@ -19,9 +19,18 @@ async def test_heartbeat_streams_and_identity(gcs: RawGcs) -> None:
         assert not hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
         # sent from the bound port to our port before we ever spoke
         assert ("127.0.0.1", v.local_port) in gcs.senders
-        for kind in ("GLOBAL_POSITION_INT", "GPS_RAW_INT", "SYS_STATUS", "BATTERY_STATUS",
-                     "EXTENDED_SYS_STATE", "HOME_POSITION", "MISSION_CURRENT", "ATTITUDE",
-                     "SYSTEM_TIME", "STATUSTEXT"):
+        for kind in (
+            "GLOBAL_POSITION_INT",
+            "GPS_RAW_INT",
+            "SYS_STATUS",
+            "BATTERY_STATUS",
+            "EXTENDED_SYS_STATE",
+            "HOME_POSITION",
+            "MISSION_CURRENT",
+            "ATTITUDE",
+            "SYSTEM_TIME",
+            "STATUSTEXT",
+        ):
             await gcs.wait_type(kind, start=0)
         gps = await gcs.wait_type("GPS_RAW_INT", start=0)
         assert gps.fix_type == 3 and gps.satellites_visible > 6
@@ -46,12 +55,16 @@ async def test_reply_address_learned_and_other_sysid_dropped(gcs: RawGcs) -> Non
         v = fleet.vehicles[0]
         gcs.send(v.local_port, mav.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3))
         await gcs.wait_type("HEARTBEAT", start=0)  # now it answers to us
-        cmd = mav.MAVLink_command_long_message(7, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        cmd = mav.MAVLink_command_long_message(
+            7, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0
+        )
         gcs.send(v.local_port, cmd)
         await asyncio.sleep(0.2)
         assert v.counters["dropped_other_sysid"] == 1 and not v.armed
         with_ack = len(gcs.msgs)
-        gcs.send(v.local_port, mav.MAVLink_command_long_message(1, 1, 31000, 0, 0, 0, 0, 0, 0, 0, 0))
+        gcs.send(
+            v.local_port, mav.MAVLink_command_long_message(1, 1, 31000, 0, 0, 0, 0, 0, 0, 0, 0)
+        )
         ack = await gcs.wait_type("COMMAND_ACK", start=with_ack)
         assert ack.command == 31000 and ack.result == mav.MAV_RESULT_UNSUPPORTED
         assert v.counters["unsupported_cmd"] == 1
@@ -61,7 +74,9 @@ async def test_bad_input_is_counted_and_vehicle_survives(gcs: RawGcs) -> None:
     async with sitl.Fleet([px4_spec(gcs.port)], sitl.SimTime(speed=2.0)) as fleet:
         v = fleet.vehicles[0]
         port = v.local_port
-        good = mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(gcs.enc)
+        good = mav.MAVLink_command_long_message(
+            1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0
+        ).pack(gcs.enc)
         gcs.raw(port, b"\x00\x01garbage bytes\x02" * 3)
         bad_crc = bytearray(good)
         bad_crc[-1] ^= 0xFF
@@ -79,6 +94,11 @@ async def test_bad_input_is_counted_and_vehicle_survives(gcs: RawGcs) -> None:
         assert c["handler_errors"] == 0
         # still alive and answering after all that
         start = len(gcs.msgs)
-        gcs.send(port, mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
+        gcs.send(
+            port,
+            mav.MAVLink_command_long_message(
+                1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0
+            ),
+        )
         ack = await gcs.wait_type("COMMAND_ACK", start=start)
         assert ack.result == mav.MAV_RESULT_ACCEPTED and v.armed
