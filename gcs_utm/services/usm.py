@@ -27,6 +27,7 @@ from enum import Enum
 from typing import Protocol
 
 from gcs_utm.clock import Clock
+from gcs_utm.config import setting
 from gcs_utm.messages import (
     FlightMode,
     HazardReport,
@@ -115,13 +116,38 @@ class AnswerOutcome:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class UsmConfig:
-    """USM behaviour (composed into the ``[usm]`` settings section by the app)."""
+    """USM behaviour (section ``[usm]``)."""
 
-    hazard_cooldown_s: float = 30.0
-    """A hazard of the same kind for the same UAS within this time updates, not re-raises."""
-    event_log_size: int = 500
-    upload_attempts: int = 2
-    """Whole-upload attempts (each with the hub's own per-item retries) before FAILED."""
+    hazard_cooldown_s: float = setting(
+        30.0,
+        "a hazard of the same kind for the same UAS within this time is coalesced, not re-raised",
+        min=0.0,
+        unit="s",
+    )
+    event_log_size: int = setting(500, "events kept for the dashboard", min=10)
+    upload_attempts: int = setting(
+        2,
+        "whole-mission upload attempts (each with the link's own per-item retries) before a "
+        "recommendation is marked failed",
+        min=1,
+        max=10,
+    )
+    default_priority: int = setting(1, "priority of an operation created from a vehicle")
+    default_flight_geometry_m: float = setting(
+        10.0, "flight-geometry radius of an operation created from a vehicle", min=0.1, unit="m"
+    )
+    default_operational_volume_m: float = setting(
+        30.0,
+        "operational-volume radius of an operation created from a vehicle",
+        min=0.1,
+        unit="m",
+    )
+    default_cruise_speed_mps: float = setting(
+        5.0,
+        "cruise speed assumed for a vehicle's downloaded mission without speed items",
+        min=0.1,
+        unit="m/s",
+    )
 
 
 @dataclass(slots=True, kw_only=True)
