@@ -1,0 +1,57 @@
+"""Settings of the ADS-B adapter (section ``[adsb]``).
+
+The receiver position is the reference for single-frame CPR decoding (pyModeS ``reference=``):
+it must lie within 180 NM of every aircraft it decodes, so positions farther than
+``max_range_m`` from the receiver are dropped and counted, never emitted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gcs_utm.config import setting
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class AdsbConfig:
+    receiver_position_known: bool = setting(
+        False,
+        "true: decode each airborne position frame at once against the receiver position; "
+        "false: wait for even/odd CPR pairs (pyModeS PipeDecoder)",
+    )
+    receiver_lat_deg: float = setting(
+        0.0, "receiver latitude (WGS84)", min=-90.0, max=90.0, unit="deg"
+    )
+    receiver_lon_deg: float = setting(
+        0.0, "receiver longitude (WGS84)", min=-180.0, max=180.0, unit="deg"
+    )
+    max_range_m: float = setting(
+        333_360.0,
+        "positions farther than this from the receiver are dropped and counted "
+        "(180 NM: the limit of reference-based CPR decoding)",
+        min=1.0,
+        max=1_000_000.0,
+        unit="m",
+    )
+    velocity_max_age_s: float = setting(
+        10.0,
+        "a velocity report older than this is not attached to a new position",
+        min=0.0,
+        max=120.0,
+        unit="s",
+    )
+    host: str = setting("127.0.0.1", "host of the dump1090-style receiver feeds")
+    sbs_port: int = setting(30003, "SBS-1 BaseStation text port (0: off)", min=0, max=65535)
+    avr_port: int = setting(30002, "AVR raw text port (0: off)", min=0, max=65535)
+    beast_port: int = setting(30005, "Beast binary port (0: off)", min=0, max=65535)
+    reconnect_initial_s: float = setting(
+        0.5, "first reconnect delay; doubles after each failure", min=0.01, max=60.0, unit="s"
+    )
+    reconnect_max_s: float = setting(
+        30.0, "longest reconnect delay", min=0.01, max=3600.0, unit="s"
+    )
+    sbs_times_are_utc: bool = setting(
+        True,
+        "SBS 'message generated' date/time fields are UTC (dump1090-fa, readsb); "
+        "false: use the receipt time as capture time",
+    )
