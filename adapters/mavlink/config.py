@@ -1,0 +1,102 @@
+"""Settings of the MAVLink adapter (``[mavlink]``): links, buffers, mission and command retries,
+hazard thresholds and per-vehicle signing keys. Frozen; validated by the shared loader."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gcs_utm.config import setting
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MavlinkConfig:
+    links: tuple[str, ...] = setting(
+        ("udpin:127.0.0.1:14550",),
+        "connection strings as in pymavlink/MAVProxy: udpin:HOST:PORT, udpout:HOST:PORT, "
+        "tcp:HOST:PORT, /dev/ttyX:BAUD",
+    )
+    gcs_sys_id: int = setting(255, "our MAVLink system id (GCS convention)", min=1, max=255)
+    gcs_comp_id: int = setting(
+        190, "our MAVLink component id (MAV_COMP_ID_MISSIONPLANNER)", min=1, max=255
+    )
+    udp_rcvbuf_bytes: int = setting(
+        4 * 1024 * 1024,
+        "UDP receive buffer; the 208 KiB default drops a third of a 10,000-datagram burst",
+        min=65536,
+        unit="bytes",
+    )
+    heartbeat_period_s: float = setting(
+        1.0, "period of our GCS HEARTBEAT on every link", min=0.05, unit="s"
+    )
+    health_period_s: float = setting(
+        1.0, "period of LinkHealth reports to the sink", min=0.05, unit="s"
+    )
+    item_timeout_s: float = setting(
+        0.25, "mission item timeout (PX4 re-requests every 250 ms)", min=0.01, unit="s"
+    )
+    min_retry_s: float = setting(
+        0.02,
+        "first retransmission timeout of a mission step (doubles per silent retry up "
+        "to item_timeout_s): loopback and LAN answer in milliseconds",
+        min=0.001,
+        unit="s",
+    )
+    max_retries: int = setting(
+        10, "retries of one mission protocol step before the transfer fails", min=0
+    )
+    transfer_timeout_s: float = setting(
+        20.0, "hard bound of one upload or download when no deadline is given", min=0.1, unit="s"
+    )
+    command_timeout_s: float = setting(
+        0.5, "wait for COMMAND_ACK before resending", min=0.01, unit="s"
+    )
+    command_retries: int = setting(3, "COMMAND_LONG resends (confirmation incremented)", min=0)
+    battery_reserve_pct: float = setting(
+        25.0, "LACK_OF_BATTERY below this remaining charge", min=0.0, max=100.0, unit="%"
+    )
+    battery_hysteresis_pct: float = setting(
+        3.0, "charge above the reserve that re-arms the battery hazard", min=0.0, unit="%"
+    )
+    eph_jump_m: float = setting(
+        5.0,
+        "horizontal accuracy worsening in one GPS_RAW_INT sample that signals jamming",
+        min=0.1,
+        unit="m",
+    )
+    eph_degraded_m: float = setting(
+        10.0, "horizontal accuracy above which GNSS is degraded", min=0.1, unit="m"
+    )
+    hdop_uere_m: float = setting(
+        4.0,
+        "user range error that turns HDOP into metres when h_acc is not sent",
+        min=0.1,
+        unit="m",
+    )
+    reboot_tolerance_ms: int = setting(
+        2000,
+        "time_boot_ms going back more than this is a reboot (less: reordering)",
+        min=0,
+        unit="ms",
+    )
+    address_move_s: float = setting(
+        3.0,
+        "a sysid heard from a new address after this silence has moved (else: a 2nd "
+        "vehicle with the same sysid)",
+        min=0.0,
+        unit="s",
+    )
+    ardupilot_stream_hz: float = setting(
+        5.0,
+        "telemetry rate requested from ArduPilot (it sends nothing unasked)",
+        min=0.1,
+        max=50.0,
+        unit="Hz",
+    )
+    max_speed_mps: float = setting(
+        25.0, "clamp of the DO_CHANGE_SPEED derived from plan timing", min=0.1, unit="m/s"
+    )
+    signing_keys: dict[str, str] = setting(  # noqa: RUF009 (setting() makes a default_factory)
+        {},
+        'MAVLink 2 signing keys by sysid: {"1" = "<64 hex digits>"}; outgoing commands '
+        "and uploads to that vehicle are signed",
+    )

@@ -1,0 +1,946 @@
+"""MavlinkHub: links, vehicle discovery, telemetry routing, mission upload/download, commands.
+
+Threading model: everything runs on the asyncio loop; receive callbacks parse and dispatch
+synchronously (no per-frame task), protocol exchanges (upload, download, commands) are
+coroutines that wait on a per-vehicle mailbox with timeouts. A bad frame is counted in
+:attr:`MavlinkHub.counters` and logged at debug level; nothing from the wire raises into the
+loop.
+
+Identity: a vehicle is (link, source address, sysid, compid) = :class:`VehicleKey`; API calls
+take a ``SysId`` (resolved to the most recently heard vehicle with it) or a ``VehicleKey``.
+Replies are unicast to the address the vehicle was last heard from.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from adapters.mavlink import wire
+from adapters.mavlink.config import MavlinkConfig
+from adapters.mavlink.endpoint import parse_endpoint
+from adapters.mavlink.mission import MissionItem, current_seq, plan_to_mission_items, same_item
+from adapters.mavlink.modes import set_mode_params
+from adapters.mavlink.transport import Address, Transport
+from adapters.mavlink.vehicle import VehicleInfo, VehicleState
+from gcs_utm.clock import Clock
+from gcs_utm.messages import FlightMode, HazardReport, LinkHealth, VehicleKey, VehicleStatus
+from gcs_utm.model import (
+    Autopilot,
+    Command,
+    CommandKind,
+    FlightPlan,
+    Measurement,
+    Position,
+    SysId,
+    VehicleKind,
+)
+
+_log = logging.getLogger(__name__)
+
+RawTap = Callable[[str, bytes, float], None]
+
+MAV_MISSION_ACCEPTED = 0
+MAV_MISSION_OPERATION_CANCELLED = 15
+MAV_CMD_NAV_LAND = 21
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_DO_LAND_START = 189
+MAV_CMD_DO_REPOSITION = 192
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_RESULT_ACCEPTED = 0
+MAV_RESULT_IN_PROGRESS = 5
+MAV_FRAME_GLOBAL = 0
+MAV_DATA_STREAM_ALL = 0
+_NAN = math.nan
+_PROTOCOL_IDS = frozenset(
+    {
+        wire.MISSION_REQUEST,
+        wire.MISSION_REQUEST_INT,
+        wire.MISSION_ACK,
+        wire.MISSION_COUNT,
+        wire.MISSION_ITEM_INT,
+        wire.MISSION_ITEM,
+        wire.MISSION_CURRENT,
+        wire.COMMAND_ACK,
+    }
+)
+_ARDUPILOT_STREAM_MSGS = (
+    wire.GLOBAL_POSITION_INT,
+    wire.GPS_RAW_INT,
+    wire.SYS_STATUS,
+    wire.SYSTEM_TIME,
+    wire.MISSION_CURRENT,
+    wire.EXTENDED_SYS_STATE,
+)
+
+
+class MavlinkError(RuntimeError):
+    """A MAVLink operation that cannot start (unknown vehicle, hub closed)."""
+
+
+class TelemetrySink(Protocol):
+    def on_measurement(self, m: Measurement) -> None: ...
+    def on_status(self, s: VehicleStatus) -> None: ...
+    def on_hazard(self, h: HazardReport) -> None: ...
+    def on_vehicle(self, v: VehicleInfo) -> None: ...
+    def on_link_health(self, h: LinkHealth) -> None: ...
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class UploadResult:
+    """``verified`` only when the vehicle's copy, downloaded back, matched item by item."""
+
+    ok: bool
+    verified: bool
+    attempts: int
+    items: int
+    duration_s: float
+    error: str = ""
+    current_set: bool = False
+    mode_set: bool = False
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CommandResult:
+    ok: bool
+    result: int | None
+    attempts: int
+    error: str = ""
+
+
+@dataclass(slots=True)
+class HubCounters:
+    datagrams: int = 0
+    bytes: int = 0
+    frames: int = 0
+    bad_crc: int = 0
+    garbage: int = 0
+    unknown_msg: int = 0
+    truncated: int = 0
+    bad_signature: int = 0
+    not_for_us: int = 0
+    address_changes: int = 0
+    sysid_collisions: int = 0
+    handler_errors: int = 0
+    send_errors: int = 0
+    uploads_failed: int = 0
+    uploads_verified: int = 0
+
+    def snapshot(self) -> dict[str, int]:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+@dataclass(slots=True)
+class _Link:
+    name: str
+    transport: Transport
+    parsers: dict[Address | None, wire.Parser] = field(default_factory=dict)
+    counters: wire.ParseCounters = field(default_factory=wire.ParseCounters)
+    encoder: wire.Encoder | None = None
+    peers: dict[Address, float] = field(default_factory=dict)
+
+
+class _Step:
+    """Adaptive retransmission timeout of one transfer: starts at ``min_retry_s``, doubles on
+    every silent retry up to ``item_timeout_s``, back to the smoothed RTT on progress."""
+
+    def __init__(self, cfg: MavlinkConfig) -> None:
+        self.lo = cfg.min_retry_s
+        self.hi = max(cfg.item_timeout_s, cfg.min_retry_s)
+        self.rto = self.lo
+        self.srtt: float | None = None
+
+    def progress(self, rtt_s: float) -> None:
+        self.srtt = rtt_s if self.srtt is None else 0.875 * self.srtt + 0.125 * rtt_s
+        self.rto = min(self.hi, max(self.lo, 3.0 * self.srtt))
+
+    def backoff(self) -> None:
+        self.rto = min(self.hi, self.rto * 2.0)
+
+
+class _TransferError(Exception):
+    pass
+
+
+class MavlinkHub:
+    """See the module docstring. Use ``async with MavlinkHub(...)`` or start()/close()."""
+
+    def __init__(
+        self,
+        config: MavlinkConfig,
+        clock: Clock,
+        sink: TelemetrySink,
+        raw_tap: RawTap | None = None,
+    ) -> None:
+        self.config = config
+        self.clock = clock
+        self.sink = sink
+        self.raw_tap = raw_tap
+        self.counters = HubCounters()
+        self._links: dict[str, _Link] = {}
+        self._states: dict[tuple[str, Address | None, int, int], VehicleState] = {}
+        self._by_sysid: dict[int, VehicleState] = {}
+        self._addr: dict[int, Address | None] = {}  # id(state) -> last source address
+        self._mailbox: dict[int, asyncio.Queue[wire.MavMsg]] = {}
+        self._locks: dict[int, asyncio.Lock] = {}
+        self._signers: dict[int, wire.Encoder] = {}
+        self._keys: dict[int, bytes] = {}
+        for sid, hexkey in config.signing_keys.items():
+            try:
+                self._keys[int(sid)] = wire.parse_key(hexkey)
+            except ValueError as exc:
+                raise MavlinkError(f"[mavlink] signing_keys.{sid}: {exc}") from exc
+        self._tasks: list[asyncio.Task[None]] = []
+        self._handlers = {
+            wire.HEARTBEAT: VehicleState.on_heartbeat,
+            wire.GLOBAL_POSITION_INT: VehicleState.on_global_position,
+            wire.GPS_RAW_INT: VehicleState.on_gps_raw,
+            wire.SYS_STATUS: VehicleState.on_sys_status,
+            wire.BATTERY_STATUS: VehicleState.on_battery_status,
+            wire.MISSION_CURRENT: VehicleState.on_mission_current,
+            wire.EXTENDED_SYS_STATE: VehicleState.on_extended_sys_state,
+            wire.STATUSTEXT: VehicleState.on_statustext,
+            wire.SYSTEM_TIME: VehicleState.on_system_time,
+        }
+
+    # --- lifecycle ------------------------------------------------------------------------
+    async def __aenter__(self) -> MavlinkHub:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def start(self) -> None:
+        """Open every configured link and start the heartbeat and health tasks."""
+        for text in self.config.links:
+            await self.add_link(text)
+        self._ensure_tasks()
+
+    def _ensure_tasks(self) -> None:
+        if not self._tasks:
+            self._tasks = [
+                asyncio.create_task(self._heartbeat_loop(), name="mavlink-heartbeat"),
+                asyncio.create_task(self._health_loop(), name="mavlink-health"),
+            ]
+
+    async def add_link(self, endpoint: str) -> str:
+        """Open one link; returns its name once bound (see :meth:`local_port`)."""
+        ep = parse_endpoint(endpoint)
+        transport = Transport(ep)
+        name = str(ep)
+        base, n = name, 1
+        while name in self._links:
+            n += 1
+            name = f"{base}#{n}"
+        link = _Link(name=name, transport=transport)
+        link.encoder = wire.Encoder(self.config.gcs_sys_id, self.config.gcs_comp_id)
+        self._links[name] = link
+        try:
+            await transport.open(
+                lambda data, addr: self._on_chunk(link, data, addr), self.config.udp_rcvbuf_bytes
+            )
+        except BaseException:
+            del self._links[name]
+            raise
+        if ep.kind.value != "udpin":
+            self._send(link, link.encoder.heartbeat(), None)  # make the far end talk to us
+        self._ensure_tasks()
+        _log.info("link %s open (local port %d)", name, transport.local_port)
+        return name
+
+    def local_port(self, link: str) -> int:
+        return self._links[link].transport.local_port
+
+    async def close(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        self._tasks = []
+        for link in self._links.values():
+            link.transport.close()
+        self._links.clear()
+
+    # --- queries --------------------------------------------------------------------------
+    def vehicles(self) -> list[VehicleInfo]:
+        return [s.info for s in self._states.values() if s.info is not None]
+
+    def health(self) -> list[LinkHealth]:
+        t = self.clock.now_s()
+        return [
+            s.health(t, self._links[s.key.link].counters.bad_frames)
+            for s in self._states.values()
+            if s.key.link in self._links
+        ]
+
+    def state(self, vehicle: SysId | VehicleKey) -> VehicleState:
+        """The vehicle state for a sysid (most recently heard) or an exact key."""
+        if isinstance(vehicle, VehicleKey):
+            addr = _parse_addr(vehicle.address)
+            st = self._states.get((vehicle.link, addr, vehicle.sys_id, vehicle.comp_id))
+        else:
+            st = self._by_sysid.get(int(vehicle))
+        if st is None:
+            raise MavlinkError(f"no vehicle {vehicle} heard on any link")
+        return st
+
+    # --- receive path ---------------------------------------------------------------------
+    def _on_chunk(self, link: _Link, data: bytes, addr: Address | None) -> None:
+        t = self.clock.now_s()
+        c = self.counters
+        c.datagrams += 1
+        c.bytes += len(data)
+        if self.raw_tap is not None:
+            self.raw_tap(link.name, data, t)
+        parser = link.parsers.get(addr)
+        if parser is None:
+            parser = link.parsers[addr] = wire.Parser(link.counters)
+        before = link.counters.bad_frames
+        msgs = parser.feed(data, datagram=link.transport.datagram)
+        if link.counters.bad_frames != before:
+            self._sync_bad(link)
+            _log.debug("bad frame on %s from %s: %s", link.name, addr, link.counters.last_error)
+        for m in msgs:
+            try:
+                self._dispatch(link, addr, m, t)
+            except Exception:  # a handler bug must not kill the link
+                c.handler_errors += 1
+                _log.exception("handler failed on %s", m.get_type())
+
+    def _sync_bad(self, link: _Link) -> None:
+        c = self.counters
+        c.bad_crc = c.garbage = c.unknown_msg = c.truncated = c.bad_signature = 0
+        for lk in self._links.values():
+            p = lk.counters
+            c.bad_crc += p.bad_crc
+            c.garbage += p.garbage
+            c.unknown_msg += p.unknown_msg
+            c.truncated += p.truncated
+            c.bad_signature += p.bad_signature
+
+    def _dispatch(self, link: _Link, addr: Address | None, m: wire.MavMsg, t: float) -> None:
+        self.counters.frames += 1
+        h = m._header
+        sys_id = h.srcSystem
+        comp_id = h.srcComponent
+        key = (link.name, addr, sys_id, comp_id)
+        st = self._states.get(key)
+        mid = m.id
+        if st is None:
+            if mid == wire.HEARTBEAT and m.autopilot == 8:
+                return  # another GCS or a non-autopilot component: not a vehicle
+            st = self._new_state(link, addr, sys_id, comp_id, t)
+        st.count_frame(h.seq, t)
+        if addr is not None:
+            link.peers[addr] = t
+        self._by_sysid[sys_id] = st
+        self._addr[id(st)] = addr
+        handler = self._handlers.get(mid)
+        reboots = st.reboots
+        if handler is not None:
+            if mid == wire.HEARTBEAT:
+                if m.autopilot == 8:
+                    return
+                if handler(st, m, t, self.sink) and st.autopilot is Autopilot.ARDUPILOT:
+                    self._request_streams(st)
+            else:
+                handler(st, m, t, self.sink)
+            if st.reboots != reboots:
+                self._on_reboot(st)
+        if mid in _PROTOCOL_IDS:
+            target = getattr(m, "target_system", 0)
+            if target not in (0, self.config.gcs_sys_id):
+                self.counters.not_for_us += 1
+                return
+            box = self._mailbox.get(id(st))
+            if box is not None:
+                box.put_nowait(m)
+
+    def _new_state(
+        self, link: _Link, addr: Address | None, sys_id: int, comp_id: int, t: float
+    ) -> VehicleState:
+        address = "" if addr is None else f"{addr[0]}:{addr[1]}"
+        key = VehicleKey(link=link.name, address=address, sys_id=SysId(sys_id), comp_id=comp_id)
+        old = self._by_sysid.get(sys_id)
+        if (
+            old is not None
+            and old.key.link == link.name
+            and old.key.comp_id == comp_id
+            and t - old.last_heard_t_s >= self.config.address_move_s
+        ):
+            # the same vehicle, now at another address (NAT rebinding, restarted bridge)
+            self.counters.address_changes += 1
+            _log.warning(
+                "sysid %d moved on %s: %s -> %s", sys_id, link.name, old.key.address, address
+            )
+            old_addr = _parse_addr(old.key.address)
+            del self._states[(link.name, old_addr, sys_id, comp_id)]
+            old.key = key
+            if old.info is not None:
+                old.info = VehicleInfo(
+                    key=key,
+                    autopilot=old.info.autopilot,
+                    vehicle_kind=old.info.vehicle_kind,
+                    mav_type=old.info.mav_type,
+                    first_heard_t_s=old.info.first_heard_t_s,
+                )
+                self.sink.on_vehicle(old.info)
+            self._states[(link.name, addr, sys_id, comp_id)] = old
+            return old
+        if old is not None and old.key.comp_id == comp_id:
+            self.counters.sysid_collisions += 1
+            _log.info("sysid %d also at %s on %s (another vehicle)", sys_id, address, link.name)
+        st = VehicleState(key, self.config, t)
+        self._states[(link.name, addr, sys_id, comp_id)] = st
+        return st
+
+    def _on_reboot(self, st: VehicleState) -> None:
+        box = self._mailbox.get(id(st))
+        if box is not None:
+            box.put_nowait(None)  # wake a transfer: it checks st.reboots and fails
+        if st.autopilot is Autopilot.ARDUPILOT:
+            self._request_streams(st)
+
+    # --- send path ------------------------------------------------------------------------
+    def _send(self, link: _Link, frame: bytes, addr: Address | None) -> None:
+        link.transport.send(frame, addr)
+        if self.raw_tap is not None:
+            self.raw_tap(link.name, frame, self.clock.now_s())
+
+    def _encoder(self, st: VehicleState) -> wire.Encoder:
+        key = self._keys.get(st.sys_id)
+        if key is None:
+            enc = self._links[st.key.link].encoder
+            assert enc is not None
+            return enc
+        enc2 = self._signers.get(st.sys_id)
+        if enc2 is None:
+            enc2 = self._signers[st.sys_id] = wire.Encoder(
+                self.config.gcs_sys_id, self.config.gcs_comp_id, key=key
+            )
+        return enc2
+
+    def _to(self, st: VehicleState, frame: bytes) -> None:
+        link = self._links.get(st.key.link)
+        if link is None:
+            raise _TransferError(f"link {st.key.link} closed")
+        self._send(link, frame, self._addr.get(id(st)))
+
+    def _request_streams(self, st: VehicleState) -> None:
+        """ArduPilot sends no telemetry until asked: REQUEST_DATA_STREAM (old) and
+        SET_MESSAGE_INTERVAL (new) for the messages we use."""
+        enc = self._encoder(st)
+        ts, tc = st.sys_id, st.key.comp_id
+        hz = self.config.ardupilot_stream_hz
+        self._to(st, enc.request_data_stream(ts, tc, MAV_DATA_STREAM_ALL, max(1, round(hz))))
+        for mid in _ARDUPILOT_STREAM_MSGS:
+            params = (float(mid), 1e6 / hz, 0.0, 0.0, 0.0, 0.0, 0.0)
+            self._to(st, enc.command_long(ts, tc, MAV_CMD_SET_MESSAGE_INTERVAL, 0, params))
+
+    async def _heartbeat_loop(self) -> None:
+        while True:
+            for link in list(self._links.values()):
+                enc = link.encoder
+                assert enc is not None
+                frame = enc.heartbeat()
+                if link.transport.endpoint.kind.value == "udpin":
+                    for peer in list(link.peers):
+                        self._send(link, frame, peer)
+                else:
+                    self._send(link, frame, None)
+            await asyncio.sleep(self.config.heartbeat_period_s)
+
+    async def _health_loop(self) -> None:
+        while True:
+            await asyncio.sleep(self.config.health_period_s)
+            for h in self.health():
+                self.sink.on_link_health(h)
+
+    # --- protocol exchanges -----------------------------------------------------------------
+    def _budget_s(self, deadline_t_s: float | None) -> float:
+        """Real (loop) seconds left for a transfer."""
+        budget = self.config.transfer_timeout_s
+        if deadline_t_s is not None:
+            left = deadline_t_s - self.clock.now_s()
+            speed = self.clock.speed
+            if left <= 0.0:
+                return 0.0
+            if math.isfinite(speed):
+                budget = min(budget, left / speed)
+        return budget
+
+    @contextlib.asynccontextmanager
+    async def _exchange(self, st: VehicleState) -> AsyncIterator[asyncio.Queue[wire.MavMsg]]:
+        lock = self._locks.setdefault(id(st), asyncio.Lock())
+        async with lock:
+            box: asyncio.Queue[wire.MavMsg] = asyncio.Queue()
+            self._mailbox[id(st)] = box
+            try:
+                yield box
+            finally:
+                self._mailbox.pop(id(st), None)
+
+    @staticmethod
+    async def _get(box: asyncio.Queue[wire.MavMsg], timeout_s: float) -> wire.MavMsg | None:
+        try:
+            return await asyncio.wait_for(box.get(), max(0.0, timeout_s))
+        except TimeoutError:
+            return None
+
+    async def upload_plan(
+        self,
+        sys_id: SysId | VehicleKey,
+        plan: FlightPlan,
+        *,
+        autopilot: Autopilot | None = None,
+        start_index: int = 0,
+        home: Position | None = None,
+        deadline_t_s: float | None = None,
+        set_mission_mode: bool = True,
+    ) -> UploadResult:
+        """Upload ``plan`` as a mission, read it back, set the current item and mission mode.
+        Never raises for vehicle behaviour: failures are in the result."""
+        t0 = time.monotonic()
+        try:
+            st = self.state(sys_id)
+        except MavlinkError as exc:
+            return UploadResult(
+                ok=False, verified=False, attempts=0, items=0, duration_s=0.0, error=str(exc)
+            )
+        ap = autopilot or st.autopilot
+        items = plan_to_mission_items(
+            plan, ap, home, start_index=start_index, max_speed_mps=self.config.max_speed_mps
+        )
+        return await self.upload_items(
+            st.key, items, deadline_t_s=deadline_t_s, set_mission_mode=set_mission_mode, _t0=t0
+        )
+
+    async def upload_items(
+        self,
+        vehicle: SysId | VehicleKey,
+        items: list[MissionItem],
+        *,
+        deadline_t_s: float | None = None,
+        set_mission_mode: bool = True,
+        _t0: float | None = None,
+    ) -> UploadResult:
+        """Upload raw mission items (see :meth:`upload_plan`)."""
+        t0 = time.monotonic() if _t0 is None else _t0
+        attempts = 0
+        try:
+            st = self.state(vehicle)
+            end = t0 + self._budget_s(deadline_t_s)
+            async with self._exchange(st) as box:
+                reboots = st.reboots
+                attempts = await self._upload(st, box, items, end, reboots)
+                got = await self._download(st, box, end, reboots)
+                for sent, back in zip(items, got, strict=False):
+                    diff = same_item(sent, back)
+                    if diff:
+                        raise _TransferError(f"readback item {sent.seq} differs: {diff}")
+                if len(got) != len(items):
+                    raise _TransferError(f"readback has {len(got)} items, sent {len(items)}")
+                cur = current_seq(items)
+                current_set = await self._set_current(st, box, cur, end, reboots)
+            mode_set = True
+            if set_mission_mode and st.mode is not FlightMode.MISSION:
+                res = await self.send_mode(st.key, FlightMode.MISSION, deadline_t_s=deadline_t_s)
+                mode_set = res.ok
+        except _TransferError as exc:
+            self.counters.uploads_failed += 1
+            _log.warning("upload to %s failed: %s", vehicle, exc)
+            return UploadResult(
+                ok=False,
+                verified=False,
+                attempts=attempts,
+                items=len(items),
+                duration_s=time.monotonic() - t0,
+                error=str(exc),
+            )
+        except MavlinkError as exc:
+            return UploadResult(
+                ok=False,
+                verified=False,
+                attempts=attempts,
+                items=len(items),
+                duration_s=time.monotonic() - t0,
+                error=str(exc),
+            )
+        self.counters.uploads_verified += 1
+        err = (
+            ""
+            if current_set and mode_set
+            else ("current item not confirmed" if not current_set else "mission mode not confirmed")
+        )
+        return UploadResult(
+            ok=True,
+            verified=True,
+            attempts=attempts,
+            items=len(items),
+            duration_s=time.monotonic() - t0,
+            error=err,
+            current_set=current_set,
+            mode_set=mode_set,
+        )
+
+    def _check(self, st: VehicleState, reboots: int, end: float) -> None:
+        if st.reboots != reboots:
+            raise _TransferError("vehicle rebooted during the transfer")
+        if time.monotonic() >= end:
+            raise _TransferError("deadline passed")
+
+    def _cancel(self, st: VehicleState) -> None:
+        with contextlib.suppress(_TransferError):
+            self._to(
+                st,
+                self._encoder(st).mission_ack(
+                    st.sys_id, st.key.comp_id, MAV_MISSION_OPERATION_CANCELLED
+                ),
+            )
+
+    async def _upload(
+        self,
+        st: VehicleState,
+        box: asyncio.Queue[wire.MavMsg],
+        items: list[MissionItem],
+        end: float,
+        reboots: int,
+    ) -> int:
+        enc = self._encoder(st)
+        ts, tc = st.sys_id, st.key.comp_id
+        n = len(items)
+        step = _Step(self.config)
+        attempts = 1
+        self._to(st, enc.mission_count(ts, tc, n))
+        sent_t = time.monotonic()
+        last: int | None = None  # last item sent
+        highest = -1
+        silent = 0
+        try:
+            while True:
+                self._check(st, reboots, end)
+                m = await self._get(box, min(step.rto, end - time.monotonic()))
+                self._check(st, reboots, end)
+                if m is None:
+                    silent += 1
+                    if silent > self.config.max_retries:
+                        raise _TransferError(
+                            f"no answer after {silent - 1} retries (last item {last})"
+                        )
+                    step.backoff()
+                    attempts += 1
+                    if last is None:
+                        self._to(st, enc.mission_count(ts, tc, n))
+                    else:
+                        self._to(st, enc.mission_item_int(ts, tc, items[last]))
+                    sent_t = time.monotonic()
+                    continue
+                mid = m.id
+                if mid in (wire.MISSION_REQUEST_INT, wire.MISSION_REQUEST):
+                    if getattr(m, "mission_type", 0) != 0:
+                        continue
+                    seq = int(m.seq)
+                    if not 0 <= seq < n:
+                        _log.debug("vehicle asked for item %d of %d", seq, n)
+                        continue
+                    if seq > highest:
+                        step.progress(time.monotonic() - sent_t)
+                        highest = seq
+                        silent = 0
+                    last = seq
+                    self._to(st, enc.mission_item_int(ts, tc, items[seq]))
+                    sent_t = time.monotonic()
+                elif mid == wire.MISSION_ACK:
+                    if getattr(m, "mission_type", 0) != 0:
+                        continue
+                    if m.type == MAV_MISSION_ACCEPTED:
+                        if highest >= n - 1:
+                            return attempts
+                        continue  # a stale ACK of an earlier transfer
+                    raise _TransferError(f"vehicle rejected the mission: {_mission_result(m.type)}")
+        except _TransferError:
+            self._cancel(st)
+            raise
+
+    async def download_mission(
+        self, sys_id: SysId | VehicleKey, *, deadline_t_s: float | None = None
+    ) -> list[MissionItem]:
+        """The vehicle's mission (MISSION_REQUEST_LIST). Raises :class:`MavlinkError`."""
+        st = self.state(sys_id)
+        end = time.monotonic() + self._budget_s(deadline_t_s)
+        async with self._exchange(st) as box:
+            try:
+                return await self._download(st, box, end, st.reboots)
+            except _TransferError as exc:
+                raise MavlinkError(f"download from {sys_id} failed: {exc}") from exc
+
+    async def _download(
+        self, st: VehicleState, box: asyncio.Queue[wire.MavMsg], end: float, reboots: int
+    ) -> list[MissionItem]:
+        enc = self._encoder(st)
+        ts, tc = st.sys_id, st.key.comp_id
+        step = _Step(self.config)
+        # drain protocol leftovers of the upload (late re-requests, duplicate ACKs)
+        while not box.empty():
+            box.get_nowait()
+        count: int | None = None
+        got: list[MissionItem] = []
+        silent = 0
+
+        def request() -> bytes:
+            if count is None:
+                return enc.mission_request_list(ts, tc)
+            return enc.mission_request_int(ts, tc, len(got))
+
+        self._to(st, request())
+        sent_t = time.monotonic()
+        try:
+            while True:
+                self._check(st, reboots, end)
+                m = await self._get(box, min(step.rto, end - time.monotonic()))
+                self._check(st, reboots, end)
+                if m is None:
+                    silent += 1
+                    if silent > self.config.max_retries:
+                        raise _TransferError(f"no answer to download after {silent - 1} retries")
+                    step.backoff()
+                    self._to(st, request())
+                    sent_t = time.monotonic()
+                    continue
+                mid = m.id
+                if getattr(m, "mission_type", 0) != 0:
+                    continue
+                if mid == wire.MISSION_COUNT and count is None:
+                    count = int(m.count)
+                elif mid == wire.MISSION_ITEM_INT and count is not None and m.seq == len(got):
+                    got.append(_item_from(m))
+                elif mid == wire.MISSION_ACK and m.type != MAV_MISSION_ACCEPTED:
+                    raise _TransferError(f"vehicle refused the download: {_mission_result(m.type)}")
+                else:
+                    continue
+                step.progress(time.monotonic() - sent_t)
+                silent = 0
+                if count is not None and len(got) >= count:
+                    self._to(st, enc.mission_ack(ts, tc, MAV_MISSION_ACCEPTED))
+                    return got
+                self._to(st, request())
+                sent_t = time.monotonic()
+        except _TransferError:
+            self._cancel(st)
+            raise
+
+    async def _set_current(
+        self,
+        st: VehicleState,
+        box: asyncio.Queue[wire.MavMsg],
+        seq: int,
+        end: float,
+        reboots: int,
+    ) -> bool:
+        """MISSION_SET_CURRENT until MISSION_CURRENT reports ``seq``."""
+        enc = self._encoder(st)
+        for _ in range(self.config.command_retries + 1):
+            self._to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seq))
+            wait_end = min(end, time.monotonic() + self.config.command_timeout_s)
+            while time.monotonic() < wait_end:
+                self._check(st, reboots, end)
+                m = await self._get(box, wait_end - time.monotonic())
+                if m is not None and m.id == wire.MISSION_CURRENT and m.seq == seq:
+                    return True
+        return False
+
+    # --- commands -------------------------------------------------------------------------
+    async def send_command(
+        self,
+        sys_id: SysId | VehicleKey,
+        command: Command,
+        *,
+        deadline_t_s: float | None = None,
+    ) -> CommandResult:
+        """HOLD / RESUME / RTL / LAND / GOTO mapped to the vehicle's autopilot."""
+        try:
+            st = self.state(sys_id)
+        except MavlinkError as exc:
+            return CommandResult(ok=False, result=None, attempts=0, error=str(exc))
+        kind = command.kind
+        mode = {
+            CommandKind.HOLD: FlightMode.HOLD,
+            CommandKind.RESUME: FlightMode.MISSION,
+            CommandKind.RTL: FlightMode.RTL,
+        }.get(kind)
+        if mode is not None:
+            return await self.send_mode(st.key, mode, deadline_t_s=deadline_t_s)
+        if kind is CommandKind.LAND:
+            if st.autopilot is Autopilot.ARDUPILOT and st.kind is VehicleKind.FIXED_WING:
+                params = (0.0,) * 7
+                return await self._command_long(st, MAV_CMD_DO_LAND_START, params, deadline_t_s)
+            if st.autopilot is Autopilot.ARDUPILOT:
+                return await self.send_mode(st.key, FlightMode.LAND, deadline_t_s=deadline_t_s)
+            params = (0.0, 0.0, 0.0, _NAN, _NAN, _NAN, _NAN)
+            return await self._command_long(st, MAV_CMD_NAV_LAND, params, deadline_t_s)
+        target = command.target
+        if target is None:
+            return CommandResult(ok=False, result=None, attempts=0, error="GOTO needs a target")
+        return await self._command_int(st, MAV_CMD_DO_REPOSITION, target, deadline_t_s)
+
+    async def send_mode(
+        self, sys_id: SysId | VehicleKey, mode: FlightMode, *, deadline_t_s: float | None = None
+    ) -> CommandResult:
+        st = self.state(sys_id)
+        p = set_mode_params(st.autopilot, st.kind, mode)
+        if p is None:
+            return CommandResult(
+                ok=False,
+                result=None,
+                attempts=0,
+                error=f"{st.autopilot.value} has no mode {mode.value}",
+            )
+        params = (p[0], p[1], p[2], 0.0, 0.0, 0.0, 0.0)
+        return await self._command_long(st, MAV_CMD_DO_SET_MODE, params, deadline_t_s)
+
+    async def _command_long(
+        self,
+        st: VehicleState,
+        cmd: int,
+        params: tuple[float, float, float, float, float, float, float],
+        deadline_t_s: float | None,
+    ) -> CommandResult:
+        enc = self._encoder(st)
+        return await self._command(
+            st,
+            cmd,
+            lambda conf: enc.command_long(st.sys_id, st.key.comp_id, cmd, conf, params),
+            deadline_t_s,
+        )
+
+    async def _command_int(
+        self, st: VehicleState, cmd: int, target: Position, deadline_t_s: float | None
+    ) -> CommandResult:
+        enc = self._encoder(st)
+        # DO_REPOSITION: speed -1 (default), flag CHANGE_MODE (switch to guided/hold), yaw NaN
+        frame = enc.command_int(
+            st.sys_id,
+            st.key.comp_id,
+            MAV_FRAME_GLOBAL,
+            cmd,
+            (-1.0, 1.0, 0.0, _NAN),
+            round(target.lat_deg * 1e7),
+            round(target.lon_deg * 1e7),
+            target.alt_amsl_m,
+        )
+        return await self._command(st, cmd, lambda _conf: frame, deadline_t_s)
+
+    async def _command(
+        self,
+        st: VehicleState,
+        cmd: int,
+        build: Callable[[int], bytes],
+        deadline_t_s: float | None,
+    ) -> CommandResult:
+        end = time.monotonic() + self._budget_s(deadline_t_s)
+        attempts = 0
+        result: int | None = None
+        async with self._exchange(st) as box:
+            reboots = st.reboots
+            try:
+                for conf in range(self.config.command_retries + 1):
+                    if time.monotonic() >= end:
+                        break
+                    attempts += 1
+                    self._to(st, build(min(conf, 255)))
+                    wait_end = min(end, time.monotonic() + self.config.command_timeout_s)
+                    while (left := wait_end - time.monotonic()) > 0:
+                        self._check(st, reboots, end + 1.0)
+                        m = await self._get(box, left)
+                        if m is None or m.id != wire.COMMAND_ACK or m.command != cmd:
+                            continue
+                        result = int(m.result)
+                        if result == MAV_RESULT_IN_PROGRESS:
+                            wait_end = min(end, time.monotonic() + self.config.command_timeout_s)
+                            continue
+                        ok = result == MAV_RESULT_ACCEPTED
+                        return CommandResult(
+                            ok=ok,
+                            result=result,
+                            attempts=attempts,
+                            error="" if ok else _command_result(result),
+                        )
+            except _TransferError as exc:
+                return CommandResult(ok=False, result=result, attempts=attempts, error=str(exc))
+        return CommandResult(
+            ok=False,
+            result=result,
+            attempts=attempts,
+            error=f"no COMMAND_ACK after {attempts} attempts",
+        )
+
+
+def _parse_addr(text: str) -> Address | None:
+    if not text:
+        return None
+    host, _, port = text.rpartition(":")
+    try:
+        return (host, int(port))
+    except ValueError:
+        return (host, 0)
+
+
+def _item_from(m: wire.MavMsg) -> MissionItem:
+    return MissionItem(
+        seq=int(m.seq),
+        command=int(m.command),
+        frame=int(m.frame),
+        current=int(m.current),
+        autocontinue=int(m.autocontinue),
+        param1=float(m.param1),
+        param2=float(m.param2),
+        param3=float(m.param3),
+        param4=float(m.param4),
+        x=int(m.x),
+        y=int(m.y),
+        z=float(m.z),
+        mission_type=int(getattr(m, "mission_type", 0)),
+    )
+
+
+_MISSION_RESULTS = {
+    1: "ERROR",
+    2: "UNSUPPORTED_FRAME",
+    3: "UNSUPPORTED",
+    4: "NO_SPACE",
+    5: "INVALID",
+    6: "INVALID_PARAM1",
+    7: "INVALID_PARAM2",
+    8: "INVALID_PARAM3",
+    9: "INVALID_PARAM4",
+    10: "INVALID_PARAM5_X",
+    11: "INVALID_PARAM6_Y",
+    12: "INVALID_PARAM7",
+    13: "INVALID_SEQUENCE",
+    14: "DENIED",
+    15: "OPERATION_CANCELLED",
+}
+_COMMAND_RESULTS = {
+    1: "TEMPORARILY_REJECTED",
+    2: "DENIED",
+    3: "UNSUPPORTED",
+    4: "FAILED",
+    5: "IN_PROGRESS",
+    6: "CANCELLED",
+}
+
+
+def _mission_result(code: int) -> str:
+    return f"MAV_MISSION_{_MISSION_RESULTS.get(code, str(code))}"
+
+
+def _command_result(code: int) -> str:
+    return f"MAV_RESULT_{_COMMAND_RESULTS.get(code, str(code))}"

@@ -1,0 +1,153 @@
+"""Plan <-> MAVLink mission (pure): :class:`MissionItem`, :func:`plan_to_mission_items`,
+:func:`same_item`.
+
+Encoding of a 4D :class:`FlightPlan` (MAVLink waypoints carry no time):
+- every plan waypoint k becomes a NAV_WAYPOINT (MISSION_ITEM_INT, frame MAV_FRAME_GLOBAL,
+  so ``z`` is metres AMSL, ``x``/``y`` are degrees * 1e7);
+- before waypoint k (k >= 1) a DO_CHANGE_SPEED sets the ground speed of segment k-1 -> k to
+  horizontal length / duration, so the vehicle keeps the plan's timing; a segment with no
+  horizontal length but a duration becomes a hold time (NAV_WAYPOINT param1) at its start;
+- the first item of plan waypoint ``start_index`` (its speed item, if any) has current=1:
+  PX4 otherwise keeps the old index when a mission is replaced in flight;
+- ArduPilot: seq 0 is home (``home`` or the first waypoint), so items shift by one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from gcs_utm.geo import haversine_m
+from gcs_utm.model import Autopilot, FlightPlan, Position
+
+MAV_FRAME_GLOBAL = 0
+MAV_CMD_NAV_WAYPOINT = 16
+MAV_CMD_DO_CHANGE_SPEED = 178
+SPEED_TYPE_GROUND = 1.0
+_MIN_SEGMENT_M = 0.5  # below this a segment is "no horizontal motion": GNSS noise scale
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MissionItem:
+    """One MISSION_ITEM_INT. ``x``/``y`` are degrees * 1e7 for global frames; ``z`` metres."""
+
+    seq: int
+    command: int
+    frame: int = MAV_FRAME_GLOBAL
+    current: int = 0
+    autocontinue: int = 1
+    param1: float = 0.0
+    param2: float = 0.0
+    param3: float = 0.0
+    param4: float = 0.0
+    x: int = 0
+    y: int = 0
+    z: float = 0.0
+    mission_type: int = 0
+
+    @property
+    def lat_deg(self) -> float:
+        return self.x / 1e7
+
+    @property
+    def lon_deg(self) -> float:
+        return self.y / 1e7
+
+
+def _e7(deg: float) -> int:
+    return round(deg * 1e7)
+
+
+def _waypoint(lat: float, lon: float, alt: float) -> MissionItem:
+    return MissionItem(
+        seq=0,
+        command=MAV_CMD_NAV_WAYPOINT,
+        param4=math.nan,
+        x=_e7(lat),
+        y=_e7(lon),
+        z=float(alt),
+    )
+
+
+def plan_to_mission_items(
+    plan: FlightPlan,
+    autopilot: Autopilot = Autopilot.PX4,
+    home: Position | None = None,
+    *,
+    start_index: int = 0,
+    max_speed_mps: float = 25.0,
+) -> list[MissionItem]:
+    """The MAVLink mission that flies ``plan`` (see the module docstring for the encoding).
+
+    Speeds are clamped to ``max_speed_mps`` (a zero-duration segment would ask for infinity).
+    """
+    wps = plan.waypoints
+    if not 0 <= start_index < len(wps):
+        raise ValueError(f"start_index {start_index} outside the plan's {len(wps)} waypoints")
+    items: list[MissionItem] = []
+    if autopilot is Autopilot.ARDUPILOT:
+        h = home or wps[0].position
+        items.append(_waypoint(h.lat_deg, h.lon_deg, h.alt_amsl_m))
+    current = -1
+    last_wp = -1  # index in items of the last NAV_WAYPOINT
+    for k, wp in enumerate(wps):
+        first_of_wp = len(items)
+        if k >= 1:
+            prev = wps[k - 1]
+            dt = wp.t_s - prev.t_s
+            dist = haversine_m(prev.lat_deg, prev.lon_deg, wp.lat_deg, wp.lon_deg)
+            if dist < _MIN_SEGMENT_M:
+                if dt > 0.0:  # a wait (or a slow climb) at the previous point: hold there
+                    held = items[last_wp]
+                    items[last_wp] = replace(held, param1=round(held.param1 + dt, 3))
+                if abs(wp.alt_amsl_m - prev.alt_amsl_m) < 0.01:
+                    if k == start_index:
+                        current = last_wp
+                    continue
+            else:
+                speed = dist / dt if dt > 0.0 else max_speed_mps
+                items.append(
+                    MissionItem(
+                        seq=0,
+                        command=MAV_CMD_DO_CHANGE_SPEED,
+                        param1=SPEED_TYPE_GROUND,
+                        param2=round(min(speed, max_speed_mps), 3),
+                        param3=-1.0,
+                    )
+                )
+        last_wp = len(items)
+        items.append(_waypoint(wp.lat_deg, wp.lon_deg, wp.alt_amsl_m))
+        if k == start_index:
+            current = first_of_wp
+    out = [replace(it, seq=i, current=int(i == current)) for i, it in enumerate(items)]
+    return out
+
+
+def current_seq(items: list[MissionItem]) -> int:
+    """The seq flagged current=1 (0 if none)."""
+    for it in items:
+        if it.current:
+            return it.seq
+    return 0
+
+
+def _same_float(a: float, b: float, tol: float) -> bool:
+    if math.isnan(a) or math.isnan(b):
+        return math.isnan(a) and math.isnan(b)
+    return abs(a - b) <= tol
+
+
+def same_item(sent: MissionItem, got: MissionItem) -> str:
+    """'' when the vehicle's copy ``got`` matches ``sent``, else what differs. The current
+    flag is not compared (vehicles report their own), floats to their float32 precision."""
+    diffs: list[str] = []
+    for name in ("seq", "command", "frame", "autocontinue", "x", "y", "mission_type"):
+        if getattr(sent, name) != getattr(got, name):
+            diffs.append(f"{name} {getattr(sent, name)} != {getattr(got, name)}")
+    for name in ("param1", "param2", "param3", "param4"):
+        a, b = getattr(sent, name), getattr(got, name)
+        if not _same_float(a, b, 1e-3 * max(1.0, abs(a))):
+            diffs.append(f"{name} {a} != {b}")
+    if not _same_float(sent.z, got.z, 0.01):
+        diffs.append(f"z {sent.z} != {got.z}")
+    return "; ".join(diffs)

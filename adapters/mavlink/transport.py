@@ -1,0 +1,160 @@
+"""asyncio transports for MAVLink links: UDP (in/out), TCP client and serial (termios, no
+pyserial). Each delivers ``(bytes, address)`` chunks to a callback and offers ``send``.
+Nothing here blocks the loop; OS errors are translated to :class:`LinkError` ``from exc``."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import socket
+import termios
+import tty
+from collections.abc import Callable
+
+from adapters.mavlink.endpoint import Endpoint, EndpointKind
+
+_log = logging.getLogger(__name__)
+
+Address = tuple[str, int]
+OnChunk = Callable[[bytes, Address | None], None]
+
+
+class LinkError(OSError):
+    """A link that cannot be opened or written; ``endpoint`` says which."""
+
+    def __init__(self, endpoint: str, message: str) -> None:
+        super().__init__(f"{endpoint}: {message}")
+        self.endpoint = endpoint
+        self.message = message
+
+
+class _Udp(asyncio.DatagramProtocol):
+    def __init__(self, on_chunk: OnChunk, errors: list[int]) -> None:
+        self.on_chunk = on_chunk
+        self.errors = errors
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        self.on_chunk(data, (addr[0], addr[1]))
+
+    def error_received(self, exc: Exception) -> None:
+        # ICMP port unreachable after sending to a vehicle that went away: count, go on.
+        self.errors[0] += 1
+        _log.debug("udp error: %s", exc)
+
+
+class _Stream(asyncio.Protocol):
+    def __init__(self, on_chunk: OnChunk, peer: Address) -> None:
+        self.on_chunk = on_chunk
+        self.peer = peer
+        self.closed = asyncio.get_running_loop().create_future()
+
+    def data_received(self, data: bytes) -> None:
+        self.on_chunk(data, self.peer)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if not self.closed.done():
+            self.closed.set_result(None)
+
+
+class Transport:
+    """One open link. ``datagram`` links parse each chunk on its own."""
+
+    def __init__(self, endpoint: Endpoint) -> None:
+        self.endpoint = endpoint
+        self.datagram = endpoint.kind in (EndpointKind.UDPIN, EndpointKind.UDPOUT)
+        self.local_port = 0
+        self.default_peer: Address | None = None
+        self.errors = [0]
+        self._udp: asyncio.DatagramTransport | None = None
+        self._tcp: asyncio.Transport | None = None
+        self._fd = -1
+
+    async def open(self, on_chunk: OnChunk, rcvbuf: int) -> None:
+        ep = self.endpoint
+        loop = asyncio.get_running_loop()
+        try:
+            if self.datagram:
+                sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+                sock.setblocking(False)
+                if ep.kind is EndpointKind.UDPIN:
+                    sock.bind((ep.host, ep.port))
+                else:
+                    sock.bind(("0.0.0.0", 0))
+                    self.default_peer = (socket.gethostbyname(ep.host), ep.port)
+                self.local_port = int(sock.getsockname()[1])
+                tr, _ = await loop.create_datagram_endpoint(
+                    lambda: _Udp(on_chunk, self.errors), sock=sock
+                )
+                self._udp = tr
+            elif ep.kind is EndpointKind.TCP:
+                peer = (ep.host, ep.port)
+                tr2, _ = await loop.create_connection(
+                    lambda: _Stream(on_chunk, peer), ep.host, ep.port
+                )
+                self._tcp = tr2
+                self.default_peer = peer
+                self.local_port = int(tr2.get_extra_info("sockname")[1])
+            else:
+                self._open_serial(on_chunk)
+        except OSError as exc:
+            raise LinkError(str(ep), f"cannot open: {exc}") from exc
+
+    def _open_serial(self, on_chunk: OnChunk) -> None:
+        ep = self.endpoint
+        fd = os.open(ep.device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            tty.setraw(fd)
+            attrs = termios.tcgetattr(fd)
+            speed = getattr(termios, f"B{ep.baud}")
+            attrs[4] = attrs[5] = speed
+            termios.tcsetattr(fd, termios.TCSANOW, attrs)
+        except (termios.error, AttributeError) as exc:
+            os.close(fd)
+            raise OSError(f"cannot configure {ep.device} at {ep.baud}: {exc}") from exc
+        self._fd = fd
+        peer = (ep.device, ep.baud)
+        self.default_peer = peer
+
+        def readable() -> None:
+            try:
+                data = os.read(fd, 65536)
+            except BlockingIOError:
+                return
+            except OSError as exc:
+                _log.warning("serial %s read failed: %s", ep.device, exc)
+                asyncio.get_running_loop().remove_reader(fd)
+                return
+            if data:
+                on_chunk(data, peer)
+
+        asyncio.get_running_loop().add_reader(fd, readable)
+
+    def send(self, data: bytes, addr: Address | None) -> None:
+        """Send one frame; to ``addr`` on UDP (or the udpout peer). Never raises: a failed
+        send is counted (the protocol layers retry)."""
+        try:
+            if self._udp is not None:
+                dest = addr or self.default_peer
+                if dest is not None:
+                    self._udp.sendto(data, dest)
+            elif self._tcp is not None:
+                self._tcp.write(data)
+            elif self._fd >= 0:
+                os.write(self._fd, data)
+        except OSError as exc:
+            self.errors[0] += 1
+            _log.debug("send on %s failed: %s", self.endpoint, exc)
+
+    def close(self) -> None:
+        if self._udp is not None:
+            self._udp.close()
+        if self._tcp is not None:
+            self._tcp.close()
+        if self._fd >= 0:
+            with contextlib.suppress(RuntimeError):
+                asyncio.get_running_loop().remove_reader(self._fd)
+            os.close(self._fd)
+            self._fd = -1

@@ -1,0 +1,346 @@
+"""Per-vehicle telemetry state (sans-IO): decoded messages in, typed events out.
+
+One :class:`VehicleState` per :class:`VehicleKey` (link, source address, sysid, compid). It
+keeps link statistics (sequence-number loss, duplicates, reboots from ``time_boot_ms``), the
+vehicle clock -> UTC mapping, and the hazard debouncing, and turns messages into
+:class:`Measurement`, :class:`VehicleStatus` and :class:`HazardReport` through an
+:class:`Events` sink.
+
+Vehicle clock -> UTC: SYSTEM_TIME gives ``unix - boot`` directly once the vehicle has GNSS
+time; until then the offset is learned as the minimum of ``receipt - boot`` over samples (the
+least-delayed sample is closest to the truth), reset on reboot.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import dataclass
+from typing import Protocol
+
+from adapters.mavlink import modes, wire
+from adapters.mavlink.config import MavlinkConfig
+from gcs_utm.messages import FlightMode, HazardReport, LinkHealth, VehicleKey, VehicleStatus
+from gcs_utm.model import (
+    Autopilot,
+    Measurement,
+    MeasurementSource,
+    Position,
+    ThreatKind,
+    VehicleKind,
+)
+
+_log = logging.getLogger(__name__)
+
+_MIN_UNIX_S = 1.5e9  # SYSTEM_TIME before 2017 means "no GNSS time yet"
+_JAM_RE = re.compile(r"jam", re.IGNORECASE)
+_SPOOF_RE = re.compile(r"spoof", re.IGNORECASE)
+_GNSS_BAD_RE = re.compile(
+    r"(gps|gnss).*(lost|fail|degrad|glitch|bad|no fix)|(lost|no).*(gps|gnss)", re.IGNORECASE
+)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class VehicleInfo:
+    """A discovered vehicle (from its autopilot HEARTBEAT)."""
+
+    key: VehicleKey
+    autopilot: Autopilot
+    vehicle_kind: VehicleKind | None
+    mav_type: int
+    first_heard_t_s: float
+
+
+class Events(Protocol):
+    def on_measurement(self, m: Measurement) -> None: ...
+    def on_status(self, s: VehicleStatus) -> None: ...
+    def on_hazard(self, h: HazardReport) -> None: ...
+    def on_vehicle(self, v: VehicleInfo) -> None: ...
+    def on_link_health(self, h: LinkHealth) -> None: ...
+
+
+class VehicleState:
+    """Everything we know about one vehicle component on one link."""
+
+    def __init__(self, key: VehicleKey, cfg: MavlinkConfig, t_s: float) -> None:
+        self.key = key
+        self.cfg = cfg
+        self.sys_id = key.sys_id
+        self.info: VehicleInfo | None = None
+        self.autopilot = Autopilot.UNKNOWN
+        self.kind: VehicleKind | None = None
+        self.mode = FlightMode.UNKNOWN
+        self.custom_mode = 0
+        self.armed = False
+        self.landed: bool | None = None
+        # link statistics
+        self.first_t_s = t_s
+        self.last_heard_t_s = t_s
+        self.received = 0
+        self.lost = 0
+        self.duplicates = 0
+        self.reboots = 0
+        self._last_seq = -1
+        self._rate_mark = (t_s, 0)
+        self.rate_hz = 0.0
+        # clock
+        self.last_boot_ms = -1
+        self.offset_s: float | None = None  # UTC - boot time
+        self.offset_from_system_time = False
+        # GNSS / battery / mission
+        self.fix_type: int | None = None
+        self.satellites: int | None = None
+        self.eph_m: float | None = None
+        self.epv_m: float | None = None
+        self.battery_pct: float | None = None
+        self.battery_v: float | None = None
+        self.mission_seq: int | None = None
+        self.mission_total: int | None = None
+        self._battery_low = False
+        self._fix_lost = False
+        self._eph_bad = False
+        self.last_position: Position | None = None
+
+    # --- link statistics ------------------------------------------------------------------
+    def count_frame(self, seq: int, t_s: float) -> None:
+        self.received += 1
+        self.last_heard_t_s = t_s
+        last = self._last_seq
+        if last >= 0:
+            gap = (seq - last - 1) & 0xFF
+            if gap >= 128:  # behind the last one: a duplicate or a reordered datagram
+                self.duplicates += 1
+                return
+            self.lost += gap
+        self._last_seq = seq
+
+    def health(self, t_s: float, bad_frames: int) -> LinkHealth:
+        t0, n0 = self._rate_mark
+        if t_s > t0:
+            self.rate_hz = (self.received - n0) / (t_s - t0)
+        self._rate_mark = (t_s, self.received)
+        return LinkHealth(
+            sys_id=self.sys_id,
+            link=self.key.link,
+            last_heard_t_s=self.last_heard_t_s,
+            rate_hz=self.rate_hz,
+            received=self.received,
+            lost=self.lost,
+            bad_frames=bad_frames,
+            reboots=self.reboots,
+        )
+
+    # --- clock ----------------------------------------------------------------------------
+    def boot_time(self, boot_ms: int, receipt_t_s: float) -> bool:
+        """Track time_boot_ms; True when it shows a reboot."""
+        rebooted = False
+        last = self.last_boot_ms
+        if last >= 0 and boot_ms + self.cfg.reboot_tolerance_ms < last:
+            self.reboots += 1
+            self.offset_s = None
+            self.offset_from_system_time = False
+            self._last_seq = -1
+            rebooted = True
+            _log.warning("%s rebooted (time_boot_ms %d -> %d)", self.key, last, boot_ms)
+        if boot_ms > last or rebooted:
+            self.last_boot_ms = boot_ms
+        if not self.offset_from_system_time:
+            sample = receipt_t_s - boot_ms / 1000.0
+            if self.offset_s is None or sample < self.offset_s:
+                self.offset_s = sample
+        return rebooted
+
+    def system_time(self, unix_us: int, boot_ms: int) -> None:
+        unix_s = unix_us / 1e6
+        if unix_s > _MIN_UNIX_S:
+            self.offset_s = unix_s - boot_ms / 1000.0
+            self.offset_from_system_time = True
+
+    def capture_t_s(self, boot_ms: int, receipt_t_s: float) -> float:
+        if self.offset_s is None:
+            return receipt_t_s
+        return self.offset_s + boot_ms / 1000.0
+
+    # --- status ---------------------------------------------------------------------------
+    def status(self, t_s: float) -> VehicleStatus:
+        return VehicleStatus(
+            sys_id=self.sys_id,
+            t_s=t_s,
+            link=self.key.link,
+            autopilot=self.autopilot,
+            vehicle_kind=self.kind,
+            mode=self.mode,
+            armed=self.armed,
+            landed=self.landed,
+            battery_pct=self.battery_pct,
+            battery_v=self.battery_v,
+            gnss_fix_type=self.fix_type,
+            gnss_satellites=self.satellites,
+            eph_m=self.eph_m,
+            epv_m=self.epv_m,
+            mission_seq=self.mission_seq,
+            mission_total=self.mission_total,
+        )
+
+    def hazard(self, kind: ThreatKind, t_s: float, message: str) -> HazardReport:
+        _log.info("hazard %s sys %d: %s", kind.value, self.sys_id, message)
+        return HazardReport(
+            kind=kind,
+            t_s=t_s,
+            sys_id=self.sys_id,
+            position=self.last_position,
+            message=message,
+            source=f"mavlink:{self.key.link}",
+        )
+
+    # --- message handlers (each returns nothing; events go to ``ev``) -----------------------
+    def on_heartbeat(self, m: wire.MavMsg, t_s: float, ev: Events) -> bool:
+        """Returns True when this heartbeat discovered the vehicle."""
+        autopilot = modes.autopilot_from(m.autopilot)
+        new = self.info is None
+        if new:
+            self.autopilot = autopilot
+            self.kind = modes.kind_from(m.type)
+            self.info = VehicleInfo(
+                key=self.key,
+                autopilot=autopilot,
+                vehicle_kind=self.kind,
+                mav_type=m.type,
+                first_heard_t_s=t_s,
+            )
+            _log.info("discovered %s %s %s", self.key, autopilot.value, self.kind)
+            ev.on_vehicle(self.info)
+        self.custom_mode = int(m.custom_mode)
+        self.mode = modes.mode_from(self.autopilot, self.kind, self.custom_mode)
+        self.armed = bool(m.base_mode & 128)  # MAV_MODE_FLAG_SAFETY_ARMED
+        ev.on_status(self.status(t_s))
+        return new
+
+    def on_global_position(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        if m.lat == 0 and m.lon == 0:
+            return  # no estimate yet
+        boot_ms = int(m.time_boot_ms)
+        self.boot_time(boot_ms, t_s)
+        lat = m.lat / 1e7
+        lon = m.lon / 1e7
+        alt = m.alt / 1000.0
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            return
+        self.last_position = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=alt)
+        ev.on_measurement(
+            Measurement(
+                source=MeasurementSource.TELEMETRY,
+                capture_t_s=self.capture_t_s(boot_ms, t_s),
+                receipt_t_s=t_s,
+                lat_deg=lat,
+                lon_deg=lon,
+                alt_amsl_m=alt,
+                vel_ned_mps=(m.vx / 100.0, m.vy / 100.0, m.vz / 100.0),
+                eph_m=self.eph_m,
+                epv_m=self.epv_m,
+                sys_id=self.sys_id,
+                link=self.key.link,
+            )
+        )
+
+    def on_gps_raw(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        cfg = self.cfg
+        fix = int(m.fix_type)
+        self.satellites = None if m.satellites_visible == 255 else int(m.satellites_visible)
+        h_acc = int(getattr(m, "h_acc", 0) or 0)
+        v_acc = int(getattr(m, "v_acc", 0) or 0)
+        prev_eph = self.eph_m
+        if h_acc > 0:
+            self.eph_m = h_acc / 1000.0
+        elif m.eph != 0xFFFF:
+            self.eph_m = m.eph / 100.0 * cfg.hdop_uere_m
+        if v_acc > 0:
+            self.epv_m = v_acc / 1000.0
+        elif m.epv != 0xFFFF:
+            self.epv_m = m.epv / 100.0 * cfg.hdop_uere_m
+        had_fix = self.fix_type is not None and self.fix_type >= 3
+        self.fix_type = fix
+        if fix < 3 and had_fix and not self._fix_lost:
+            self._fix_lost = True
+            ev.on_hazard(
+                self.hazard(ThreatKind.GNSS_DEGRADATION, t_s, f"GNSS fix lost (fix_type {fix})")
+            )
+        elif fix >= 3:
+            self._fix_lost = False
+        eph = self.eph_m
+        if eph is None:
+            return
+        if (
+            prev_eph is not None
+            and eph - prev_eph >= cfg.eph_jump_m
+            and fix >= 2
+            and not self._eph_bad
+        ):
+            self._eph_bad = True
+            ev.on_hazard(
+                self.hazard(
+                    ThreatKind.JAMMING_ATTACK,
+                    t_s,
+                    f"GNSS accuracy jumped {prev_eph:.1f} -> {eph:.1f} m (jamming sign)",
+                )
+            )
+        elif eph >= cfg.eph_degraded_m and not self._eph_bad:
+            self._eph_bad = True
+            ev.on_hazard(
+                self.hazard(ThreatKind.GNSS_DEGRADATION, t_s, f"GNSS accuracy {eph:.1f} m")
+            )
+        elif eph < cfg.eph_degraded_m / 2 and self._eph_bad:
+            self._eph_bad = False  # recovered: re-arm
+
+    def _battery(self, pct: float | None, t_s: float, ev: Events) -> None:
+        if pct is None:
+            return
+        self.battery_pct = pct
+        reserve = self.cfg.battery_reserve_pct
+        if pct < reserve and not self._battery_low:
+            self._battery_low = True
+            ev.on_hazard(
+                self.hazard(
+                    ThreatKind.LACK_OF_BATTERY,
+                    t_s,
+                    f"battery {pct:.0f} % below the reserve {reserve:.0f} %",
+                )
+            )
+        elif pct >= reserve + self.cfg.battery_hysteresis_pct:
+            self._battery_low = False
+
+    def on_sys_status(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        if m.voltage_battery != 0xFFFF:
+            self.battery_v = m.voltage_battery / 1000.0
+        self._battery(None if m.battery_remaining < 0 else float(m.battery_remaining), t_s, ev)
+
+    def on_battery_status(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        self._battery(None if m.battery_remaining < 0 else float(m.battery_remaining), t_s, ev)
+
+    def on_mission_current(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        seq = int(m.seq)
+        total = int(getattr(m, "total", 0) or 0)
+        changed = seq != self.mission_seq
+        self.mission_seq = seq
+        if total and total != 0xFFFF:
+            self.mission_total = total
+        if changed:
+            ev.on_status(self.status(t_s))
+
+    def on_extended_sys_state(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        state = int(m.landed_state)
+        self.landed = None if state == 0 else state == 1  # MAV_LANDED_STATE_ON_GROUND
+
+    def on_statustext(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        text = str(m.text).rstrip("\x00")
+        if _JAM_RE.search(text):
+            ev.on_hazard(self.hazard(ThreatKind.JAMMING_ATTACK, t_s, f"vehicle says: {text}"))
+        elif _SPOOF_RE.search(text):
+            ev.on_hazard(self.hazard(ThreatKind.SPOOFING_ATTACK, t_s, f"vehicle says: {text}"))
+        elif _GNSS_BAD_RE.search(text):
+            ev.on_hazard(self.hazard(ThreatKind.GNSS_DEGRADATION, t_s, f"vehicle says: {text}"))
+
+    def on_system_time(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        boot_ms = int(m.time_boot_ms)
+        self.boot_time(boot_ms, t_s)
+        self.system_time(int(m.time_unix_usec), boot_ms)

@@ -1,0 +1,268 @@
+"""The only module that touches pymavlink (untyped): sans-IO parsing and encoding behind small
+typed helpers.
+
+- :class:`Parser` turns received bytes into decoded messages and counts what it rejects (bad
+  CRC, garbage, unknown message ids, truncated frames, bad signatures). It never raises.
+  For datagram links each datagram is parsed on its own (MAVLink never splits a frame across
+  UDP datagrams), so a truncated frame cannot swallow the next datagram.
+- :class:`Encoder` packs outgoing messages with our system/component id and a per-encoder
+  sequence number, MAVLink 2, optionally signed (MAVLink 2 signing, SHA-256, 48-bit
+  timestamp in 10 µs units since 2015-01-01).
+
+Decoded messages are pymavlink objects (typed ``Any`` here): attribute access by MAVLink field
+name; :func:`msg_id`, :func:`src` give typed header access.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+os.environ["MAVLINK20"] = "1"
+
+from pymavlink.dialects.v20 import common as mav
+
+MavMsg = Any
+"""A decoded pymavlink message (untyped library object)."""
+
+MAVLINK_ERROR = mav.MAVError
+BAD_DATA_ID = mav.MAVLINK_MSG_ID_BAD_DATA
+UNKNOWN_ID = getattr(mav, "MAVLINK_MSG_ID_UNKNOWN", -2)
+
+# Message ids we use (from the common dialect, named here so the rest is pymavlink-free).
+HEARTBEAT = mav.MAVLINK_MSG_ID_HEARTBEAT
+SYS_STATUS = mav.MAVLINK_MSG_ID_SYS_STATUS
+SYSTEM_TIME = mav.MAVLINK_MSG_ID_SYSTEM_TIME
+GPS_RAW_INT = mav.MAVLINK_MSG_ID_GPS_RAW_INT
+GLOBAL_POSITION_INT = mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT
+MISSION_ITEM = mav.MAVLINK_MSG_ID_MISSION_ITEM
+MISSION_REQUEST = mav.MAVLINK_MSG_ID_MISSION_REQUEST
+MISSION_SET_CURRENT = mav.MAVLINK_MSG_ID_MISSION_SET_CURRENT
+MISSION_CURRENT = mav.MAVLINK_MSG_ID_MISSION_CURRENT
+MISSION_REQUEST_LIST = mav.MAVLINK_MSG_ID_MISSION_REQUEST_LIST
+MISSION_COUNT = mav.MAVLINK_MSG_ID_MISSION_COUNT
+MISSION_ITEM_REACHED = mav.MAVLINK_MSG_ID_MISSION_ITEM_REACHED
+MISSION_ACK = mav.MAVLINK_MSG_ID_MISSION_ACK
+MISSION_REQUEST_INT = mav.MAVLINK_MSG_ID_MISSION_REQUEST_INT
+MISSION_ITEM_INT = mav.MAVLINK_MSG_ID_MISSION_ITEM_INT
+COMMAND_LONG = mav.MAVLINK_MSG_ID_COMMAND_LONG
+COMMAND_INT = mav.MAVLINK_MSG_ID_COMMAND_INT
+COMMAND_ACK = mav.MAVLINK_MSG_ID_COMMAND_ACK
+BATTERY_STATUS = mav.MAVLINK_MSG_ID_BATTERY_STATUS
+EXTENDED_SYS_STATE = mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE
+STATUSTEXT = mav.MAVLINK_MSG_ID_STATUSTEXT
+
+SIGNING_EPOCH_S = 1420070400.0  # 2015-01-01T00:00:00Z, the MAVLink signing epoch
+
+
+def msg_id(m: MavMsg) -> int:
+    return int(m.id)
+
+
+def src(m: MavMsg) -> tuple[int, int, int]:
+    """(system id, component id, sequence number) of a decoded frame."""
+    h = m._header
+    return int(h.srcSystem), int(h.srcComponent), int(h.seq)
+
+
+@dataclass(slots=True)
+class ParseCounters:
+    frames: int = 0
+    bad_crc: int = 0
+    garbage: int = 0
+    unknown_msg: int = 0
+    truncated: int = 0
+    bad_signature: int = 0
+    last_error: str = ""
+
+    @property
+    def bad_frames(self) -> int:
+        return self.bad_crc + self.garbage + self.unknown_msg + self.truncated + self.bad_signature
+
+
+class Parser:
+    """Sans-IO MAVLink 1/2 parser for one byte stream (or one datagram source)."""
+
+    def __init__(self, counters: ParseCounters | None = None, *, key: bytes | None = None) -> None:
+        self.counters = counters if counters is not None else ParseCounters()
+        self._mav = mav.MAVLink(None)
+        self._mav.robust_parsing = True
+        if key is not None:
+            self._mav.signing.secret_key = key
+            self._mav.signing.allow_unsigned_callback = None
+
+    def _classify(self, reason: str) -> None:
+        c = self.counters
+        c.last_error = reason
+        r = reason.lower()
+        if "crc" in r:
+            c.bad_crc += 1
+        elif "unknown mavlink message" in r:
+            c.unknown_msg += 1
+        elif "signature" in r:
+            c.bad_signature += 1
+        else:
+            c.garbage += 1
+
+    def feed(self, data: bytes, *, datagram: bool) -> list[MavMsg]:
+        """Decode all complete frames in ``data``; count and drop what is not a frame."""
+        try:
+            msgs = self._mav.parse_buffer(data) or []
+        except Exception as exc:  # pymavlink raises bare Exceptions on odd input
+            self._classify(f"parser error: {exc}")
+            self.reset()
+            return []
+        out: list[MavMsg] = []
+        for m in msgs:
+            mid = m.id
+            if mid in (BAD_DATA_ID, UNKNOWN_ID):
+                self._classify(str(getattr(m, "reason", "unknown MAVLink message ID")))
+            else:
+                out.append(m)
+        if datagram and self._mav.buf_len() > 0:
+            self.counters.truncated += 1
+            self.counters.last_error = f"truncated frame ({self._mav.buf_len()} bytes left)"
+            self.reset()
+        self.counters.frames += len(out)
+        return out
+
+    def reset(self) -> None:
+        m = self._mav
+        m.buf = bytearray()
+        m.buf_index = 0
+        m.expected_length = mav.HEADER_LEN_V1 + 2
+        m.have_prefix_error = False
+
+
+def signing_timestamp(t_s: float) -> int:
+    return max(0, int((t_s - SIGNING_EPOCH_S) * 100_000))
+
+
+def parse_key(text: str) -> bytes:
+    """A 32-byte signing key from 64 hex digits; ValueError otherwise."""
+    key = bytes.fromhex(text.strip())
+    if len(key) != 32:
+        raise ValueError(f"a MAVLink signing key has 32 bytes, got {len(key)}")
+    return key
+
+
+@dataclass(slots=True)
+class _Sink:
+    last: bytes = b""
+
+    def write(self, data: bytes) -> None:
+        self.last = bytes(data)
+
+
+@dataclass(slots=True)
+class Encoder:
+    """Packs messages from (``sys_id``, ``comp_id``), signed when ``key`` is set."""
+
+    sys_id: int
+    comp_id: int
+    key: bytes | None = None
+    link_id: int = 0
+    _sink: _Sink = field(default_factory=_Sink)
+    _mav: Any = None
+
+    def __post_init__(self) -> None:
+        self._mav = mav.MAVLink(self._sink, srcSystem=self.sys_id, srcComponent=self.comp_id)
+        if self.key is not None:
+            s = self._mav.signing
+            s.secret_key = self.key
+            s.link_id = self.link_id
+            s.sign_outgoing = True
+            s.timestamp = signing_timestamp(time.time())
+
+    def _send(self, build: Callable[..., MavMsg], *args: Any) -> bytes:
+        msg = build(*args)
+        self._mav.send(msg)
+        return self._sink.last
+
+    @property
+    def signed(self) -> bool:
+        return self.key is not None
+
+    # --- builders: each returns the packed frame ----------------------------------------
+    def heartbeat(
+        self,
+        *,
+        type_: int = 6,
+        autopilot: int = 8,
+        base_mode: int = 0,
+        custom_mode: int = 0,
+        system_status: int = 4,
+    ) -> bytes:
+        return self._send(
+            self._mav.heartbeat_encode, type_, autopilot, base_mode, custom_mode, system_status, 3
+        )
+
+    def mission_count(self, ts: int, tc: int, count: int) -> bytes:
+        return self._send(self._mav.mission_count_encode, ts, tc, count, 0)
+
+    def mission_item_int(self, ts: int, tc: int, item: Any) -> bytes:
+        return self._send(
+            self._mav.mission_item_int_encode,
+            ts,
+            tc,
+            item.seq,
+            item.frame,
+            item.command,
+            item.current,
+            item.autocontinue,
+            item.param1,
+            item.param2,
+            item.param3,
+            item.param4,
+            item.x,
+            item.y,
+            item.z,
+            item.mission_type,
+        )
+
+    def mission_request_list(self, ts: int, tc: int) -> bytes:
+        return self._send(self._mav.mission_request_list_encode, ts, tc, 0)
+
+    def mission_request_int(self, ts: int, tc: int, seq: int) -> bytes:
+        return self._send(self._mav.mission_request_int_encode, ts, tc, seq, 0)
+
+    def mission_ack(self, ts: int, tc: int, result: int) -> bytes:
+        return self._send(self._mav.mission_ack_encode, ts, tc, result, 0)
+
+    def mission_set_current(self, ts: int, tc: int, seq: int) -> bytes:
+        return self._send(self._mav.mission_set_current_encode, ts, tc, seq)
+
+    def command_long(
+        self,
+        ts: int,
+        tc: int,
+        command: int,
+        confirmation: int,
+        params: tuple[float, float, float, float, float, float, float],
+    ) -> bytes:
+        return self._send(self._mav.command_long_encode, ts, tc, command, confirmation, *params)
+
+    def command_int(  # noqa: PLR0917
+        self,
+        ts: int,
+        tc: int,
+        frame: int,
+        command: int,
+        params: tuple[float, float, float, float],
+        x: int,
+        y: int,
+        z: float,
+    ) -> bytes:
+        return self._send(
+            self._mav.command_int_encode, ts, tc, frame, command, 0, 0, *params, x, y, z
+        )
+
+    def request_data_stream(self, ts: int, tc: int, stream_id: int, rate_hz: int) -> bytes:
+        return self._send(self._mav.request_data_stream_encode, ts, tc, stream_id, rate_hz, 1)
+
+    def raw(self, name: str, *args: Any) -> bytes:
+        """Any other message by its pymavlink encoder name (e.g. ``global_position_int``)."""
+        return self._send(getattr(self._mav, f"{name}_encode"), *args)
