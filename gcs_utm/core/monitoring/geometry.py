@@ -96,6 +96,55 @@ class SegmentSeparation:
     min_v_m: FloatArray  # minimum vertical distance over the segment
 
 
+def _loss_interval(
+    d0: FloatArray, v: FloatArray, rh: FloatArray, rv: FloatArray, spherical: bool
+) -> tuple[FloatArray, FloatArray]:
+    """Parameter interval [lo, hi] (clipped to [0, 1]) of loss; lo >= hi means none."""
+    ah = v[..., 0] ** 2 + v[..., 1] ** 2  # m^2
+    bh = 2.0 * (d0[..., 0] * v[..., 0] + d0[..., 1] * v[..., 1])  # m^2
+    ch = d0[..., 0] ** 2 + d0[..., 1] ** 2  # m^2
+    if spherical:
+        lo, hi = _quad_interval(
+            ah + v[..., 2] ** 2,
+            bh + 2.0 * d0[..., 2] * v[..., 2],
+            ch + d0[..., 2] ** 2,
+            rh,
+        )
+    else:
+        lo_h, hi_h = _quad_interval(ah, bh, ch, rh)
+        vz = v[..., 2]  # m per segment
+        moving = np.abs(vz) > _EPS_V
+        safe = np.where(moving, vz, 1.0)
+        s1 = (-rv - d0[..., 2]) / safe
+        s2 = (rv - d0[..., 2]) / safe
+        inside_z = np.abs(d0[..., 2]) < rv
+        lo_v = np.where(moving, np.minimum(s1, s2), np.where(inside_z, -np.inf, 1.0))
+        hi_v = np.where(moving, np.maximum(s1, s2), np.where(inside_z, np.inf, 0.0))
+        lo = np.maximum(lo_h, lo_v)
+        hi = np.minimum(hi_h, hi_v)
+    return np.maximum(lo, 0.0), np.minimum(hi, 1.0)
+
+
+def segment_loss(
+    a0: FloatArray,
+    a1: FloatArray,
+    b0: FloatArray,
+    b1: FloatArray,
+    *,
+    min_h_m: FloatArray | float,
+    min_v_m: FloatArray | float,
+    spherical: bool = False,
+) -> BoolArray:
+    """Only the loss flag of :func:`segment_separation` (the cheaper screening pass)."""
+    d0 = a0[..., :3] - b0[..., :3]  # m
+    v = (a1[..., :3] - b1[..., :3]) - d0  # m per segment
+    lo, hi = _loss_interval(
+        d0, v, np.asarray(min_h_m, np.float64), np.asarray(min_v_m, np.float64), spherical
+    )
+    out: BoolArray = lo < hi
+    return out
+
+
 def segment_separation(
     a0: FloatArray,
     a1: FloatArray,
@@ -113,31 +162,16 @@ def segment_separation(
     """
     d0 = a0[..., :3] - b0[..., :3]  # m, relative position at s=0
     v = (a1[..., :3] - b1[..., :3]) - d0  # m per segment, relative motion
-    rh = np.asarray(min_h_m, np.float64)
-    rv = np.asarray(min_v_m, np.float64)
+    lo, hi = _loss_interval(
+        d0, v, np.asarray(min_h_m, np.float64), np.asarray(min_v_m, np.float64), spherical
+    )
+    loss = lo < hi
     ah = v[..., 0] ** 2 + v[..., 1] ** 2  # m^2
     bh = 2.0 * (d0[..., 0] * v[..., 0] + d0[..., 1] * v[..., 1])  # m^2
     ch = d0[..., 0] ** 2 + d0[..., 1] ** 2  # m^2
-    az = v[..., 2] ** 2
-    bz = 2.0 * d0[..., 2] * v[..., 2]
-    cz = d0[..., 2] ** 2
-    if spherical:
-        lo, hi = _quad_interval(ah + az, bh + bz, ch + cz, rh)
-    else:
-        lo_h, hi_h = _quad_interval(ah, bh, ch, rh)
-        vz = v[..., 2]
-        moving = np.abs(vz) > _EPS_V
-        safe = np.where(moving, vz, 1.0)
-        s1 = (-rv - d0[..., 2]) / safe
-        s2 = (rv - d0[..., 2]) / safe
-        inside_z = np.abs(d0[..., 2]) < rv
-        lo_v = np.where(moving, np.minimum(s1, s2), np.where(inside_z, -np.inf, 1.0))
-        hi_v = np.where(moving, np.maximum(s1, s2), np.where(inside_z, np.inf, 0.0))
-        lo = np.maximum(lo_h, lo_v)
-        hi = np.minimum(hi_h, hi_v)
-    lo = np.maximum(lo, 0.0)
-    hi = np.minimum(hi, 1.0)
-    loss = lo < hi
+    az = v[..., 2] ** 2  # m^2
+    bz = 2.0 * d0[..., 2] * v[..., 2]  # m^2
+    cz = d0[..., 2] ** 2  # m^2
     a3 = ah + az
     cpa_s = np.where(a3 > _EPS_A, np.clip(-(bh + bz) / np.where(a3 > _EPS_A, 2 * a3, 1), 0, 1), 0)
     cpa_m = np.sqrt(np.maximum(a3 * cpa_s**2 + (bh + bz) * cpa_s + ch + cz, 0.0))

@@ -109,7 +109,8 @@ def _pair_conflict(
     if not seg.loss.any():
         return None
     dt = np.diff(t)
-    k = int(np.argmin(np.where(seg.loss, t[:-1] + seg.first_loss_s * dt, np.inf)))
+    first_s = np.where(seg.loss, seg.first_loss_s, 0.0)  # avoids inf * 0 on still segments
+    k = int(np.argmin(np.where(seg.loss, t[:-1] + first_s * dt, np.inf)))
     first = float(t[k] + seg.first_loss_s[k] * dt[k])
     c = int(np.argmin(seg.cpa_m))
     return PlanConflict(
