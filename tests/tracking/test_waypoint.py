@@ -1,0 +1,93 @@
+"""Current waypoint from the closest plan *segment*, with the plan time breaking ties."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from tracking_helpers import FRAME, T0, plan_from_local
+
+from gcs_utm.core.tracking import current_waypoint
+from gcs_utm.model import FlightPlan
+
+
+def _plan(op_id: str, points: list[tuple[float, float, float, float]]) -> FlightPlan:
+    """Plan with times relative to T0."""
+    return plan_from_local(op_id, [(e, n, a, T0 + t) for e, n, a, t in points])
+
+
+def _wp(plan: FlightPlan, e: float, n: float, t: float, ambiguity_m: float = 5.0) -> int:
+    return current_waypoint(
+        plan, FRAME, east_m=e, north_m=n, alt_amsl_m=100.0, t_s=T0 + t, ambiguity_m=ambiguity_m
+    )
+
+
+# Lawn-mower: lanes 200 m long, 20 m apart, flown at 10 m/s.
+#  wp0 (0,0) -> wp1 (200,0) -> wp2 (200,20) -> wp3 (0,20) -> wp4 (0,40) -> wp5 (200,40)
+LAWN = _plan(
+    "lawn",
+    [
+        (0, 0, 100, 0),
+        (200, 0, 100, 20),
+        (200, 20, 100, 22),
+        (0, 20, 100, 42),
+        (0, 40, 100, 44),
+        (200, 40, 100, 64),
+    ],
+)
+
+
+def test_lawn_mower_uses_the_segment_not_the_closest_vertex() -> None:
+    # On lane 2 (flying west) near its east end: the closest *vertex* is wp1/wp2 (behind),
+    # the closest segment is lane 2, so the UAS is flying to wp3.
+    assert _wp(LAWN, 190, 21, 23) == 3
+    # Near the west end of lane 1 (flying east), the closest vertex is wp0, but the UAS flies
+    # to wp1; wp3 (0, 20) is as close as wp0 is to a point at (10, 10).
+    assert _wp(LAWN, 10, 9, 1) == 1
+    # In the middle of lane 3 (flying east) it flies to wp5.
+    assert _wp(LAWN, 100, 41, 54) == 5
+    # On the connector between lanes.
+    assert _wp(LAWN, 200, 10, 21) == 2
+
+
+def test_reaching_a_waypoint_hands_over_to_the_next() -> None:
+    assert _wp(LAWN, 200, 0, 20) == 2
+    assert _wp(LAWN, 205, -3, 20) == 2
+
+
+# A square loop flown twice: the same place is on two segments, 40 s apart in the plan.
+LOOP = _plan(
+    "loop",
+    [
+        (0, 0, 100, 0),
+        (100, 0, 100, 10),
+        (100, 100, 100, 20),
+        (0, 100, 100, 30),
+        (0, 0, 100, 40),
+        (100, 0, 100, 50),
+        (100, 100, 100, 60),
+        (0, 100, 100, 70),
+        (0, 0, 100, 80),
+    ],
+)
+
+
+def test_loop_plan_uses_the_plan_time_to_choose_the_lap() -> None:
+    assert _wp(LOOP, 50, 1, 5) == 1
+    assert _wp(LOOP, 50, 1, 45) == 5
+    # A UAS 8 s late on lap two is still on lap two.
+    assert _wp(LOOP, 50, 1, 53) == 5
+    assert _wp(LOOP, 100, 60, 16) == 2
+    assert _wp(LOOP, 100, 60, 57) == 6
+
+
+def test_geometry_beats_time_beyond_the_ambiguity() -> None:
+    # Far ahead of schedule on lane 3 of the lawn-mower, time says lane 1 but the geometry
+    # (20 m away, ambiguity 5 m) rules lane 1 out.
+    assert _wp(LAWN, 100, 40, 5) == 5
+
+
+def test_single_waypoint_plan() -> None:
+    plan = _plan("hover", [(0, 0, 100, 0)])
+    assert _wp(plan, 30, 30, 0) == 0
