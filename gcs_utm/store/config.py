@@ -1,0 +1,38 @@
+"""Settings of the store (section ``[store]``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gcs_utm.config import setting
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StoreConfig:
+    """The Data Base: one SQLite file in WAL mode, written by one writer thread."""
+
+    path: str = setting("gcs_utm.sqlite3", "SQLite database file (created if absent)")
+    queue_size: int = setting(
+        10_000, "writer queue capacity in write requests; track history drops when full", min=1
+    )
+    batch_max: int = setting(500, "most write requests committed in one transaction", min=1)
+    put_timeout_s: float = setting(
+        5.0,
+        "how long a must-keep write (decision, audit, plan) waits for queue space before raising",
+        min=0.0,
+        unit="s",
+    )
+    synchronous: str = setting(
+        "normal",
+        "SQLite synchronous mode: 'normal' survives a process crash (WAL), 'full' also a "
+        "power loss",
+    )
+    busy_timeout_s: float = setting(
+        5.0, "how long a connection waits for a lock held by another", min=0.0, unit="s"
+    )
+
+    def __post_init__(self) -> None:
+        if self.synchronous not in ("normal", "full"):
+            raise ValueError(
+                f"store.synchronous: expected 'normal' or 'full', got {self.synchronous!r}"
+            )

@@ -1,0 +1,85 @@
+"""Schema of the store as numbered migrations; ``PRAGMA user_version`` is the number applied.
+
+Never edit a released migration: append a new one. A database newer than this code is
+refused rather than written with a schema we do not know.
+"""
+
+from __future__ import annotations
+
+MIGRATIONS: tuple[str, ...] = (
+    # 1: the paper's Data Base (Tables 2 and 3) plus tracking history, decisions and audit.
+    """
+    CREATE TABLE operations (
+        id TEXT PRIMARY KEY,
+        state TEXT NOT NULL,
+        updated_t_s REAL NOT NULL,
+        doc TEXT NOT NULL
+    );
+    CREATE TABLE flight_plans (
+        operation_id TEXT NOT NULL,
+        version INTEGER NOT NULL,
+        created_t_s REAL NOT NULL,
+        reason TEXT NOT NULL,
+        start_t_s REAL NOT NULL,
+        end_t_s REAL NOT NULL,
+        waypoints TEXT NOT NULL,
+        PRIMARY KEY (operation_id, version)
+    );
+    CREATE TABLE geofences (
+        id TEXT PRIMARY KEY,
+        active INTEGER NOT NULL,
+        start_t_s REAL,
+        end_t_s REAL,
+        doc TEXT NOT NULL
+    );
+    CREATE TABLE tracks_latest (
+        id TEXT PRIMARY KEY,
+        t_s REAL NOT NULL,
+        doc TEXT NOT NULL
+    );
+    CREATE TABLE track_history (
+        seq INTEGER PRIMARY KEY AUTOINCREMENT,
+        track_id TEXT NOT NULL,
+        t_s REAL NOT NULL,
+        lat_deg REAL NOT NULL,
+        lon_deg REAL NOT NULL,
+        alt_amsl_m REAL NOT NULL,
+        doc TEXT NOT NULL
+    );
+    CREATE INDEX track_history_by_track ON track_history (track_id, t_s);
+    CREATE TABLE threats (
+        id TEXT PRIMARY KEY,
+        kind TEXT NOT NULL,
+        status TEXT NOT NULL,
+        detected_at_s REAL NOT NULL,
+        doc TEXT NOT NULL
+    );
+    CREATE TABLE recommendations (
+        id TEXT NOT NULL,
+        version INTEGER NOT NULL,
+        state TEXT NOT NULL,
+        threat_id TEXT NOT NULL,
+        operation_id TEXT NOT NULL,
+        created_t_s REAL NOT NULL,
+        doc TEXT NOT NULL,
+        PRIMARY KEY (id, version)
+    );
+    CREATE TABLE answers (
+        seq INTEGER PRIMARY KEY AUTOINCREMENT,
+        recommendation_id TEXT NOT NULL,
+        version INTEGER NOT NULL,
+        decision TEXT NOT NULL,
+        t_s REAL NOT NULL,
+        doc TEXT NOT NULL
+    );
+    CREATE TABLE audit (
+        seq INTEGER PRIMARY KEY AUTOINCREMENT,
+        t_s REAL NOT NULL,
+        actor TEXT NOT NULL,
+        action TEXT NOT NULL,
+        subject TEXT NOT NULL,
+        detail TEXT NOT NULL
+    );
+    CREATE INDEX audit_by_time ON audit (t_s);
+    """,
+)

@@ -1,0 +1,384 @@
+"""Store: faithful round trips, plan versions, restart survival, crash durability (SIGKILL),
+the writer's queue policy and the asyncio face."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import threading
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs_utm.messages import PilotAnswer, PilotDecision
+from gcs_utm.model import (
+    Alternative,
+    AuditEntry,
+    Command,
+    CommandKind,
+    Geofence,
+    GeofenceId,
+    GeofenceKind,
+    GeofenceShape,
+    LatLon,
+    Maneuver,
+    OperationId,
+    Position,
+    PredictedTrajectories,
+    Recommendation,
+    RecommendationId,
+    RecommendationState,
+    Threat,
+    ThreatId,
+    ThreatKind,
+    Track,
+    TrackId,
+)
+from gcs_utm.scenario import load_scenario
+from gcs_utm.store import AsyncStore, Store, StoreConfig, StoreError, StoreFullError, StoreWriter
+from gcs_utm.store.codec import encode
+from gcs_utm.store.schema import MIGRATIONS
+
+REPO = Path(__file__).resolve().parents[2]
+UC1 = REPO / "config/scenarios/use_case_1.toml"
+
+
+def _track(i: int, t_s: float, track_id: str = "UAS1") -> Track:
+    return Track(
+        id=TrackId(track_id),
+        t_s=t_s,
+        lat_deg=40.66 + i * 1e-5,
+        lon_deg=-3.597,
+        alt_amsl_m=715.0 + 0.1 * i,
+        east_m=1.5 * i,
+        north_m=-0.25 * i,
+        vel_enu_mps=(3.3, 0.0, 0.1),
+        position_sigma_m=1.2,
+        cooperative=True,
+        operation_id=OperationId(track_id),
+        next_waypoint=2,
+    )
+
+
+def _fence(gid: str = "GF1") -> Geofence:
+    return Geofence(
+        id=GeofenceId(gid),
+        shape=GeofenceShape.POLYGON,
+        min_alt_amsl_m=675.0,
+        max_alt_amsl_m=900.0,
+        vertices=(
+            LatLon(lat_deg=40.66, lon_deg=-3.60),
+            LatLon(lat_deg=40.661, lon_deg=-3.60),
+            LatLon(lat_deg=40.661, lon_deg=-3.59),
+        ),
+        start_t_s=10.0,
+        end_t_s=None,
+        kind=GeofenceKind.DYNAMIC,
+        reason="wildfire",
+    )
+
+
+def _threat() -> Threat:
+    snap = PredictedTrajectories(
+        t_s=5.0,
+        track_ids=(TrackId("UAS1"), TrackId("UAS2")),
+        points=np.arange(2 * 3 * 4, dtype=np.float64).reshape(2, 3, 4) / 7.0,
+        sigma_m=np.full((2, 3), 1.5),
+    )
+    return Threat(
+        id=ThreatId("T1"),
+        kind=ThreatKind.LOSS_OF_SEPARATION,
+        uas_ids=(OperationId("UAS1"), OperationId("UAS2")),
+        detected_at_s=5.0,
+        predicted_event_at_s=169.5,
+        closest_approach_m=45.9,
+        position=Position(lat_deg=40.66, lon_deg=-3.59, alt_amsl_m=775.0),
+        area=_fence("jam"),
+        snapshot=snap,
+    )
+
+
+def _rec() -> Recommendation:
+    sc = load_scenario(UC1)
+    plan = replace(sc.operations[0].plan, version=2, reason="avoid UAS2")
+    alt = Alternative(
+        operation_id=OperationId("UAS1"),
+        maneuver=Maneuver.GO_RIGHT,
+        plan=plan,
+        cost=0.2,
+        risk=0.1,
+        detail="right",
+    )
+    other = replace(alt, maneuver=Maneuver.HOLD, plan=None, cost=0.5)
+    return Recommendation(
+        id=RecommendationId("R1"),
+        version=1,
+        threat_id=ThreatId("T1"),
+        threat_kind=ThreatKind.LOSS_OF_SEPARATION,
+        operation_id=OperationId("UAS1"),
+        created_t_s=6.0,
+        deadline_t_s=36.0,
+        selected=alt,
+        command=Command(kind=CommandKind.HOLD, operation_id=OperationId("UAS1")),
+        alternatives=(alt, other),
+        new_geofence=_fence("new"),
+    )
+
+
+def _fill(store: Store) -> None:
+    sc = load_scenario(UC1)
+    for op in sc.operations:
+        store.save_operation(op)
+    store.save_geofence(_fence())
+    store.write_tracks([_track(i, float(i)) for i in range(5)])
+    store.save_threat(_threat())
+    store.save_recommendation(_rec())
+    store.record_answer(
+        PilotAnswer(
+            recommendation_id=RecommendationId("R1"),
+            version=1,
+            decision=PilotDecision.ACCEPT,
+            t_s=9.0,
+            alternative_index=0,
+        )
+    )
+    store.audit(AuditEntry(t_s=9.5, actor="em", action="select", subject="R1", detail={"a": 1}))
+
+
+def _snapshot(store: Store) -> dict[str, object]:
+    threats = store.load_threats()
+    return {
+        "ops": store.load_operations(),
+        "plans": store.load_plans("UAS1"),
+        "fences": store.load_geofences(active_only=False),
+        "latest": store.latest_tracks(),
+        "history": store.track_history("UAS1"),
+        "threat_ids": [t.id for t in threats],
+        "recs": store.load_recommendations(),
+        "answers": store.load_answers(),
+        "audit": store.load_audit(),
+    }
+
+
+def test_round_trip_of_every_model_object(tmp_path: Path) -> None:
+    with Store(tmp_path / "db.sqlite3") as store:
+        _fill(store)
+        sc = load_scenario(UC1)
+        assert store.load_operations() == list(sc.operations)
+        assert store.load_geofences() == [_fence()]
+        assert store.track_history("UAS1") == [_track(i, float(i)) for i in range(5)]
+        assert store.latest_tracks() == [_track(4, 4.0)]
+        (threat,) = store.load_threats()
+        orig = _threat()
+        assert threat.snapshot is not None and orig.snapshot is not None
+        assert np.array_equal(threat.snapshot.points, orig.snapshot.points)
+        # Threat compares by identity (eq=False): compare every field's stored form instead
+        assert encode(threat) == encode(orig)
+        assert threat.area == orig.area and threat.uas_ids == orig.uas_ids
+        (rec,) = store.load_recommendations()
+        assert rec == _rec()
+        assert store.load_answers("R1")[0].decision is PilotDecision.ACCEPT
+        assert store.load_audit() == [
+            AuditEntry(t_s=9.5, actor="em", action="select", subject="R1", detail={"a": 1})
+        ]
+
+
+def test_restart_loads_everything_back_equal(tmp_path: Path) -> None:
+    path = tmp_path / "db.sqlite3"
+    with Store(path) as store:
+        _fill(store)
+        before = _snapshot(store)
+    with Store(path) as store:
+        assert _snapshot(store) == before
+        assert store.integrity_check() == "ok"
+        assert store.schema_version == len(MIGRATIONS)
+    conn = sqlite3.connect(path)
+    assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    conn.close()
+
+
+def test_plan_versions_and_latest(tmp_path: Path) -> None:
+    with Store(tmp_path / "db.sqlite3") as store:
+        op = load_scenario(UC1).operations[0]
+        store.save_operation(op)
+        v2 = replace(op.plan, version=2, reason="accepted R1", created_t_s=50.0)
+        store.save_operation(replace(op, plan=v2))
+        assert [p.version for p in store.load_plans("UAS1")] == [1, 2]
+        assert store.latest_plan("UAS1") == v2
+        assert store.load_operations()[0].plan == v2
+        assert store.latest_plan("nope") is None
+        store.save_plan(v2)  # the same version again is fine
+        with pytest.raises(StoreError, match="other content"):
+            store.save_plan(replace(v2, reason="tampered"))
+        assert store.latest_plan("UAS1") == v2
+
+
+def test_geofence_deactivation_and_older_track_sample(tmp_path: Path) -> None:
+    with Store(tmp_path / "db.sqlite3") as store:
+        store.save_geofence(_fence("A"))
+        store.save_geofence(_fence("B"))
+        assert store.deactivate_geofence("A")
+        assert not store.deactivate_geofence("missing")
+        assert [g.id for g in store.load_geofences()] == ["B"]
+        assert [g.id for g in store.load_geofences(active_only=False)] == ["A", "B"]
+        store.write_tracks([_track(5, 5.0)])
+        store.write_tracks([_track(3, 3.0)])  # late sample: history only
+        assert store.latest_tracks()[0].t_s == 5.0
+        assert [t.t_s for t in store.track_history("UAS1", since_t_s=4.0)] == [5.0]
+        assert [t.t_s for t in store.track_history("UAS1")] == [3.0, 5.0]
+
+
+def test_recommendation_states_filter(tmp_path: Path) -> None:
+    with Store(tmp_path / "db.sqlite3") as store:
+        rec = _rec()
+        store.save_recommendation(rec)
+        accepted = rec.transition(RecommendationState.ACCEPTED, 10.0)
+        store.save_recommendation(accepted)
+        assert store.load_recommendations(state=RecommendationState.PROPOSED) == []
+        assert store.load_recommendations(state=RecommendationState.ACCEPTED) == [accepted]
+        v2 = replace(rec, version=2)
+        store.save_recommendation(v2)
+        assert store.load_recommendations() == [v2]
+        assert len(store.load_recommendations(latest_only=False)) == 2
+
+
+def test_newer_schema_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "db.sqlite3"
+    Store(path).close()
+    conn = sqlite3.connect(path)
+    conn.execute(f"PRAGMA user_version = {len(MIGRATIONS) + 1}")
+    conn.close()
+    with pytest.raises(StoreError, match="newer"):
+        Store(path)
+
+
+def test_failed_request_in_a_batch_rolls_back_alone(tmp_path: Path) -> None:
+    path = tmp_path / "db.sqlite3"
+    writer = StoreWriter(path)
+    gate = threading.Event()
+    writer.submit(lambda s: gate.wait(5))  # hold the writer so the next three share a batch
+    ok1 = writer.audit(AuditEntry(t_s=1.0, actor="a", action="x", subject="s"))
+
+    def bad(s: Store) -> None:
+        s.audit(AuditEntry(t_s=2.0, actor="a", action="bad", subject="s"))
+        raise ValueError("boom")
+
+    failed = writer.submit(bad)
+    ok2 = writer.audit(AuditEntry(t_s=3.0, actor="a", action="y", subject="s"))
+    gate.set()
+    assert failed is not None
+    with pytest.raises(ValueError, match="boom"):
+        failed.result(5)
+    assert ok1.result(5) > 0 and ok2.result(5) > 0
+    writer.close()
+    with Store(path) as store:
+        assert [e.action for e in store.load_audit()] == ["x", "y"]
+
+
+def test_full_queue_drops_tracks_but_raises_for_audit(tmp_path: Path) -> None:
+    writer = StoreWriter(tmp_path / "db.sqlite3", StoreConfig(queue_size=2, put_timeout_s=0.1))
+    gate = threading.Event()
+    blocker = writer.submit(lambda s: gate.wait(5))
+    # wait until the writer holds the blocker, so the queue itself is empty
+    while writer._queue.qsize():
+        pass
+    assert writer.write_tracks([_track(0, 0.0)]) is not None
+    assert writer.write_tracks([_track(1, 1.0)]) is not None
+    assert writer.write_tracks([_track(2, 2.0)]) is None
+    assert writer.dropped_tracks == 1
+    with pytest.raises(StoreFullError):
+        writer.audit(AuditEntry(t_s=1.0, actor="a", action="x", subject="s"))
+    gate.set()
+    assert blocker is not None
+    blocker.result(5)
+    writer.flush(5)
+    writer.close()
+    with Store(tmp_path / "db.sqlite3") as store:
+        assert [t.t_s for t in store.track_history("UAS1")] == [0.0, 1.0]
+
+
+async def test_async_store_durable_writes_and_reads(tmp_path: Path) -> None:
+    path = tmp_path / "db.sqlite3"
+    rec = _rec()
+    async with await AsyncStore.open(path) as store:
+        await store.save_recommendation(rec)
+        accepted = rec.transition(RecommendationState.ACCEPTED, 10.0)
+        await store.save_recommendation(accepted)
+        # durable: a separate connection sees it as soon as the await returns
+        with Store(path, readonly=True) as other:
+            assert other.load_recommendations(state=RecommendationState.ACCEPTED) == [accepted]
+        assert store.write_tracks([_track(0, 0.0)])
+        await store.flush()
+        seq = await store.audit(AuditEntry(t_s=1.0, actor="pilot", action="accept", subject="R1"))
+        assert seq == 1
+        assert [e.action for e in await store.load_audit()] == ["accept"]
+        assert await store.load_recommendations() == [accepted]
+        assert await store.read(lambda s: s.track_history("UAS1")) == [_track(0, 0.0)]
+        # the loop stays responsive while writes are in flight
+        ticks = 0
+
+        async def ticker() -> None:
+            nonlocal ticks
+            for _ in range(20):
+                ticks += 1
+                await asyncio.sleep(0)
+
+        await asyncio.gather(ticker(), *(store.save_geofence(_fence(f"G{i}")) for i in range(20)))
+        assert ticks == 20
+        assert len(await store.load_geofences()) == 20
+
+
+_CHILD = textwrap.dedent(
+    """
+    import sys
+    from gcs_utm.model import AuditEntry, Track, TrackId
+    from gcs_utm.store import StoreWriter, StoreConfig
+    w = StoreWriter(sys.argv[1], StoreConfig(batch_max=16))
+    i = 0
+    while True:
+        i += 1
+        w.write_tracks([Track(id=TrackId("T"), t_s=float(i), lat_deg=40.0, lon_deg=-3.0,
+            alt_amsl_m=700.0, east_m=0.0, north_m=0.0, vel_enu_mps=(0.0, 0.0, 0.0),
+            position_sigma_m=1.0, cooperative=True)])
+        fut = w.audit(AuditEntry(t_s=float(i), actor="child", action="row", subject=str(i)))
+        seq = fut.result()
+        print(seq, flush=True)
+    """
+)
+
+
+def test_sigkill_mid_stream_keeps_every_committed_row(tmp_path: Path) -> None:
+    path = tmp_path / "crash.sqlite3"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    child = subprocess.Popen(
+        [sys.executable, "-c", _CHILD, str(path)],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    assert child.stdout is not None
+    reported: list[int] = []
+    try:
+        for line in child.stdout:
+            reported.append(int(line))
+            if len(reported) >= 300:
+                break
+    finally:
+        child.send_signal(signal.SIGKILL)
+        child.wait(10)
+        child.stdout.close()
+    assert child.returncode == -signal.SIGKILL
+    assert len(reported) >= 300
+    with Store(path) as store:
+        assert store.integrity_check() == "ok"
+        seqs = {int(e.subject) for e in store.load_audit()}
+        assert set(reported) <= seqs
+        # tracks submitted before each reported audit row were committed with or before it
+        assert len(store.track_history("T")) >= len(reported)
