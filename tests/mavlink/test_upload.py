@@ -1,0 +1,147 @@
+"""Mission upload/download and commands against the scripted vehicle (conftest.FakeVehicle)."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+from adapters.mavlink import plan_to_mission_items
+from gcs_utm.messages import FlightMode
+from gcs_utm.model import (
+    Command,
+    CommandKind,
+    FlightPlan,
+    OperationId,
+    Position,
+    SysId,
+    Waypoint4D,
+)
+
+
+def _plan(n: int = 10) -> FlightPlan:
+    wps = tuple(
+        Waypoint4D(lat_deg=47.3977 + 0.0005 * i, lon_deg=8.5456, alt_amsl_m=500.0 + i, t_s=10.0 * i)
+        for i in range(n)
+    )
+    return FlightPlan(operation_id=OperationId("op1"), version=2, waypoints=wps)
+
+
+async def test_upload_verified_sets_current_and_mission_mode(env: Any) -> None:
+    v = await env.vehicle(1)
+    res = await env.hub.upload_plan(SysId(1), _plan(), start_index=3)
+    assert res.ok and res.verified, res
+    assert res.items == 19 and res.current_set and res.mode_set
+    items = plan_to_mission_items(_plan(), start_index=3)
+    assert [m.command for m in v.mission] == [i.command for i in items]
+    assert [m.x for m in v.mission] == [i.x for i in items]
+    assert v.current == 5  # DO_CHANGE_SPEED before waypoint 3
+    modes = [(c.param2, c.param3) for c in v.commands if c.command == 176]
+    assert modes == [(4.0, 4.0)]  # PX4 AUTO.MISSION
+    got = await env.hub.download_mission(SysId(1))
+    assert len(got) == 19 and got[6].z == 503.0
+    v.close()
+
+
+async def test_upload_answers_old_mission_request(env: Any) -> None:
+    v = await env.vehicle(2)
+    v.faults.old_request = True
+    res = await env.hub.upload_plan(SysId(2), _plan(4))
+    assert res.verified, res
+    v.close()
+
+
+async def test_upload_with_loss_retries_and_verifies(env: Any) -> None:
+    v = await env.vehicle(3, rerequest_s=0.05, seed=7)
+    v.faults.drop = 0.2
+    res = await env.hub.upload_plan(SysId(3), _plan())
+    assert res.ok and res.verified, res
+    assert res.attempts >= 1
+    v.close()
+
+
+async def test_nack_is_reported_not_verified(env: Any) -> None:
+    v = await env.vehicle(4)
+    v.faults.nack = 4  # MAV_MISSION_NO_SPACE
+    res = await env.hub.upload_plan(SysId(4), _plan())
+    assert not res.ok and not res.verified
+    assert "NO_SPACE" in res.error
+    assert env.hub.counters.uploads_failed == 1
+    v.close()
+
+
+async def test_silent_vehicle_fails_within_deadline(env: Any) -> None:
+    v = await env.vehicle(5)
+    v.faults.silent = True
+    t0 = asyncio.get_running_loop().time()
+    res = await env.hub.upload_plan(SysId(5), _plan(), deadline_t_s=env.hub.clock.now_s() + 0.6)
+    assert not res.verified and "deadline" in res.error
+    assert asyncio.get_running_loop().time() - t0 < 1.0
+    # the vehicle was told the transfer is cancelled
+    await asyncio.sleep(0.05)
+    assert any(m.get_type() == "MISSION_ACK" and m.type == 15 for m in v.received)
+    v.close()
+
+
+async def test_readback_mismatch_is_not_verified(env: Any) -> None:
+    v = await env.vehicle(6)
+    v.faults.corrupt_readback = True
+    res = await env.hub.upload_plan(SysId(6), _plan(3))
+    assert not res.verified and "readback" in res.error
+    v.close()
+
+
+async def test_reboot_mid_upload_fails(env: Any) -> None:
+    v = await env.vehicle(7)
+    v.position()
+    v.faults.reboot_after_items = 3
+    res = await env.hub.upload_plan(SysId(7), _plan())
+    assert not res.verified and "reboot" in res.error
+    v.close()
+
+
+async def test_unknown_vehicle_is_an_error_result(env: Any) -> None:
+    res = await env.hub.upload_plan(SysId(99), _plan())
+    assert not res.ok and "no vehicle" in res.error
+
+
+async def test_commands_px4_modes_land_reposition(env: Any) -> None:
+    v = await env.vehicle(8)
+    op = OperationId("op1")
+    for kind, expect in [(CommandKind.HOLD, (4.0, 3.0)), (CommandKind.RESUME, (4.0, 4.0)),
+                         (CommandKind.RTL, (4.0, 5.0))]:
+        r = await env.hub.send_command(SysId(8), Command(kind=kind, operation_id=op))
+        assert r.ok and r.attempts == 1, r
+        assert (v.commands[-1].param2, v.commands[-1].param3) == expect
+    r = await env.hub.send_command(SysId(8), Command(kind=CommandKind.LAND, operation_id=op))
+    assert r.ok and v.commands[-1].command == 21
+    target = Position(lat_deg=47.4, lon_deg=8.55, alt_amsl_m=520.0)
+    r = await env.hub.send_command(
+        SysId(8), Command(kind=CommandKind.GOTO, operation_id=op, target=target))
+    last = v.commands[-1]
+    assert r.ok and last.get_type() == "COMMAND_INT" and last.command == 192
+    assert (last.x, last.y, last.z) == (474000000, 85500000, 520.0)
+    v.close()
+
+
+async def test_command_retries_increment_confirmation_and_nack(env: Any) -> None:
+    v = await env.vehicle(9)
+    v.faults.drop_commands = 2
+    r = await env.hub.send_command(SysId(9), Command(kind=CommandKind.HOLD,
+                                                     operation_id=OperationId("o")))
+    assert r.ok and r.attempts == 3
+    assert [c.confirmation for c in v.commands if c.command == 176] == [0, 1, 2]
+    v.faults.command_result = 2  # DENIED
+    r = await env.hub.send_command(SysId(9), Command(kind=CommandKind.RTL,
+                                                     operation_id=OperationId("o")))
+    assert not r.ok and r.result == 2 and "DENIED" in r.error
+    v.close()
+
+
+async def test_heartbeat_mode_becomes_status(env: Any) -> None:
+    v = await env.vehicle(10)
+    v.custom_mode = (4 << 16) | (4 << 24)
+    v.heartbeat()
+    await asyncio.sleep(0.05)
+    last = [s for s in env.sink.statuses if s.sys_id == 10][-1]
+    assert last.mode is FlightMode.MISSION and last.armed
+    v.close()
