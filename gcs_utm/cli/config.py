@@ -1,0 +1,86 @@
+"""``gcs-utm config default`` prints every setting with its default and doc;
+``gcs-utm config check FILE`` validates a configuration file against the settings classes.
+
+Sections come from ``gcs_utm.settings.SECTIONS`` (composed by the lead) when that module
+exists, else from the known per-area settings classes that can be imported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Any
+
+from gcs_utm.config import ConfigError, build, load_toml, render_toml
+
+# Section -> (module, class), as agreed in docs/HELPERS.md; used only without gcs_utm.settings.
+_KNOWN: dict[str, tuple[str, str]] = {
+    "tracking": ("gcs_utm.core.tracking.config", "TrackingConfig"),
+    "monitoring": ("gcs_utm.core.monitoring.config", "MonitoringConfig"),
+    "deconfliction": ("gcs_utm.core.deconfliction.config", "DeconflictionConfig"),
+    "emergency": ("gcs_utm.core.emergency.config", "EmergencyConfig"),
+    "mavlink": ("adapters.mavlink.config", "MavlinkConfig"),
+    "adsb": ("adapters.adsb.config", "AdsbConfig"),
+    "mqtt": ("adapters.mqtt.config", "MqttConfig"),
+    "store": ("gcs_utm.store.config", "StoreConfig"),
+    "dashboard": ("gcs_utm.dashboard.config", "DashboardConfig"),
+}
+
+
+def sections() -> dict[str, type[Any]]:
+    """The configuration sections: name -> settings dataclass."""
+    try:
+        settings = importlib.import_module("gcs_utm.settings")
+    except ModuleNotFoundError as exc:
+        if exc.name != "gcs_utm.settings":
+            raise
+    else:
+        return dict(settings.SECTIONS)
+    out: dict[str, type[Any]] = {}
+    for name, (module, cls) in _KNOWN.items():
+        try:
+            out[name] = getattr(importlib.import_module(module), cls)
+        except (ModuleNotFoundError, AttributeError):
+            continue  # that area has not landed yet
+    return out
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser("config", help="print the default configuration or check a file")
+    cmds = p.add_subparsers(dest="config_command", metavar="ACTION", required=True)
+    d = cmds.add_parser("default", help="print every setting with its default, as TOML")
+    d.set_defaults(func=_default)
+    c = cmds.add_parser("check", help="validate a configuration TOML file")
+    c.add_argument("file", help="configuration file (TOML)")
+    c.set_defaults(func=_check)
+
+
+def _default(args: argparse.Namespace) -> int:
+    sys.stdout.write(render_toml(sections()))
+    return 0
+
+
+def check_file(path: str) -> dict[str, Any]:
+    """Load and validate every section of ``path``; returns section -> settings object."""
+    known = sections()
+    doc = load_toml(path)
+    out: dict[str, Any] = {}
+    for name, table in doc.items():
+        if name not in known:
+            raise ConfigError(
+                path, name, "unknown section; valid sections are: " + ", ".join(sorted(known))
+            )
+        out[name] = build(known[name], table, source=path, section=name)
+    return out
+
+
+def _check(args: argparse.Namespace) -> int:
+    try:
+        loaded = check_file(args.file)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    names = ", ".join(loaded) or "none (all defaults)"
+    print(f"{args.file}: ok; sections set: {names}")
+    return 0
