@@ -333,7 +333,7 @@ class MavlinkHub:
         comp_id = h.srcComponent
         key = (link.name, addr, sys_id, comp_id)
         st = self._states.get(key)
-        mid = m.id
+        mid = h.msgId
         if st is None:
             if mid == wire.HEARTBEAT and m.autopilot == 8:
                 return  # another GCS or a non-autopilot component: not a vehicle
@@ -643,7 +643,7 @@ class MavlinkHub:
                         self._to(st, enc.mission_item_int(ts, tc, items[last]))
                     sent_t = time.monotonic()
                     continue
-                mid = m.id
+                mid = m._header.msgId
                 if mid in (wire.MISSION_REQUEST_INT, wire.MISSION_REQUEST):
                     if getattr(m, "mission_type", 0) != 0:
                         continue
@@ -715,7 +715,7 @@ class MavlinkHub:
                     self._to(st, request())
                     sent_t = time.monotonic()
                     continue
-                mid = m.id
+                mid = m._header.msgId
                 if getattr(m, "mission_type", 0) != 0:
                     continue
                 if mid == wire.MISSION_COUNT and count is None:
@@ -753,7 +753,7 @@ class MavlinkHub:
             while time.monotonic() < wait_end:
                 self._check(st, reboots, end)
                 m = await self._get(box, wait_end - time.monotonic())
-                if m is not None and m.id == wire.MISSION_CURRENT and m.seq == seq:
+                if m is not None and m._header.msgId == wire.MISSION_CURRENT and m.seq == seq:
                     return True
         return False
 
@@ -860,7 +860,7 @@ class MavlinkHub:
                     while (left := wait_end - time.monotonic()) > 0:
                         self._check(st, reboots, end + 1.0)
                         m = await self._get(box, left)
-                        if m is None or m.id != wire.COMMAND_ACK or m.command != cmd:
+                        if m is None or m._header.msgId != wire.COMMAND_ACK or m.command != cmd:
                             continue
                         result = int(m.result)
                         if result == MAV_RESULT_IN_PROGRESS:

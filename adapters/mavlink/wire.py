@@ -55,11 +55,13 @@ BATTERY_STATUS = mav.MAVLINK_MSG_ID_BATTERY_STATUS
 EXTENDED_SYS_STATE = mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE
 STATUSTEXT = mav.MAVLINK_MSG_ID_STATUSTEXT
 
+_REJECTS = (mav.MAVLink_bad_data, mav.MAVLink_unknown)
+
 SIGNING_EPOCH_S = 1420070400.0  # 2015-01-01T00:00:00Z, the MAVLink signing epoch
 
 
 def msg_id(m: MavMsg) -> int:
-    return int(m.id)
+    return int(m._header.msgId)
 
 
 def src(m: MavMsg) -> tuple[int, int, int]:
@@ -117,8 +119,7 @@ class Parser:
             return []
         out: list[MavMsg] = []
         for m in msgs:
-            mid = m.id
-            if mid in (BAD_DATA_ID, UNKNOWN_ID):
+            if type(m) in _REJECTS:
                 self._classify(str(getattr(m, "reason", "unknown MAVLink message ID")))
             else:
                 out.append(m)

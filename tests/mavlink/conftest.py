@@ -58,8 +58,15 @@ class FakeVehicle(asyncio.DatagramProtocol):
     """A PX4-like vehicle: sysid, autopilot 12, quadrotor. Re-requests mission items on
     ``rerequest_s`` like PX4 (250 ms there)."""
 
-    def __init__(self, gcs_port: int, sys_id: int = 1, *, autopilot: int = 12,
-                 rerequest_s: float = 0.25, seed: int = 1) -> None:
+    def __init__(
+        self,
+        gcs_port: int,
+        sys_id: int = 1,
+        *,
+        autopilot: int = 12,
+        rerequest_s: float = 0.25,
+        seed: int = 1,
+    ) -> None:
         self.gcs = ("127.0.0.1", gcs_port)
         self.sys_id = sys_id
         self.autopilot = autopilot
@@ -108,15 +115,33 @@ class FakeVehicle(asyncio.DatagramProtocol):
         self.transport.sendto(data, self.gcs)
 
     def heartbeat(self) -> None:
-        self.send(self.mav.heartbeat_encode(2, self.autopilot, 1 | 128, self.custom_mode, 4, 3),
-                  lossy=False)
+        self.send(
+            self.mav.heartbeat_encode(2, self.autopilot, 1 | 128, self.custom_mode, 4, 3),
+            lossy=False,
+        )
 
-    def position(self, lat: float = 47.3977, lon: float = 8.5456, alt: float = 488.0,
-                 boot_ms: int | None = None) -> None:
+    def position(
+        self,
+        lat: float = 47.3977,
+        lon: float = 8.5456,
+        alt: float = 488.0,
+        boot_ms: int | None = None,
+    ) -> None:
         self.boot_ms = self.boot_ms + 100 if boot_ms is None else boot_ms
-        self.send(self.mav.global_position_int_encode(
-            self.boot_ms, round(lat * 1e7), round(lon * 1e7), round(alt * 1000), 10000,
-            100, -200, 50, 0), lossy=False)
+        self.send(
+            self.mav.global_position_int_encode(
+                self.boot_ms,
+                round(lat * 1e7),
+                round(lon * 1e7),
+                round(alt * 1000),
+                10000,
+                100,
+                -200,
+                50,
+                0,
+            ),
+            lossy=False,
+        )
 
     # --- receiving -------------------------------------------------------------------------
     def datagram_received(self, data: bytes, addr: Any) -> None:
@@ -177,9 +202,25 @@ class FakeVehicle(asyncio.DatagramProtocol):
             if m.seq < len(self.mission):
                 it = self.mission[m.seq]
                 z = it.z + (5.0 if self.faults.corrupt_readback else 0.0)
-                self.send(self.mav.mission_item_int_encode(
-                    255, 190, it.seq, it.frame, it.command, int(it.seq == self.current),
-                    it.autocontinue, it.param1, it.param2, it.param3, it.param4, it.x, it.y, z, 0))
+                self.send(
+                    self.mav.mission_item_int_encode(
+                        255,
+                        190,
+                        it.seq,
+                        it.frame,
+                        it.command,
+                        int(it.seq == self.current),
+                        it.autocontinue,
+                        it.param1,
+                        it.param2,
+                        it.param3,
+                        it.param4,
+                        it.x,
+                        it.y,
+                        z,
+                        0,
+                    )
+                )
         elif t == "MISSION_SET_CURRENT":
             if m.seq < len(self.mission):
                 self.current = m.seq
@@ -209,16 +250,22 @@ class Env:
         v.heartbeat()
         for _ in range(200):
             await asyncio.sleep(0.005)
-            if any(x.key.sys_id == sys_id and x.key.address.endswith(f":{v.port}")
-                   for x in self.sink.vehicles):
+            if any(
+                x.key.sys_id == sys_id and x.key.address.endswith(f":{v.port}")
+                for x in self.sink.vehicles
+            ):
                 return v
         raise AssertionError("hub did not discover the vehicle")
 
 
 @pytest.fixture
 async def env() -> Any:
-    cfg = MavlinkConfig(links=("udpin:127.0.0.1:0",), command_timeout_s=0.1,
-                        heartbeat_period_s=0.2, health_period_s=0.1)
+    cfg = MavlinkConfig(
+        links=("udpin:127.0.0.1:0",),
+        command_timeout_s=0.1,
+        heartbeat_period_s=0.2,
+        health_period_s=0.1,
+    )
     sink = Sink()
     taps: list[tuple[str, bytes, float]] = []
     hub = MavlinkHub(cfg, RealClock(), sink, raw_tap=lambda *a: taps.append(a))

@@ -107,8 +107,11 @@ async def test_unknown_vehicle_is_an_error_result(env: Any) -> None:
 async def test_commands_px4_modes_land_reposition(env: Any) -> None:
     v = await env.vehicle(8)
     op = OperationId("op1")
-    for kind, expect in [(CommandKind.HOLD, (4.0, 3.0)), (CommandKind.RESUME, (4.0, 4.0)),
-                         (CommandKind.RTL, (4.0, 5.0))]:
+    for kind, expect in [
+        (CommandKind.HOLD, (4.0, 3.0)),
+        (CommandKind.RESUME, (4.0, 4.0)),
+        (CommandKind.RTL, (4.0, 5.0)),
+    ]:
         r = await env.hub.send_command(SysId(8), Command(kind=kind, operation_id=op))
         assert r.ok and r.attempts == 1, r
         assert (v.commands[-1].param2, v.commands[-1].param3) == expect
@@ -116,7 +119,8 @@ async def test_commands_px4_modes_land_reposition(env: Any) -> None:
     assert r.ok and v.commands[-1].command == 21
     target = Position(lat_deg=47.4, lon_deg=8.55, alt_amsl_m=520.0)
     r = await env.hub.send_command(
-        SysId(8), Command(kind=CommandKind.GOTO, operation_id=op, target=target))
+        SysId(8), Command(kind=CommandKind.GOTO, operation_id=op, target=target)
+    )
     last = v.commands[-1]
     assert r.ok and last.get_type() == "COMMAND_INT" and last.command == 192
     assert (last.x, last.y, last.z) == (474000000, 85500000, 520.0)
@@ -126,13 +130,15 @@ async def test_commands_px4_modes_land_reposition(env: Any) -> None:
 async def test_command_retries_increment_confirmation_and_nack(env: Any) -> None:
     v = await env.vehicle(9)
     v.faults.drop_commands = 2
-    r = await env.hub.send_command(SysId(9), Command(kind=CommandKind.HOLD,
-                                                     operation_id=OperationId("o")))
+    r = await env.hub.send_command(
+        SysId(9), Command(kind=CommandKind.HOLD, operation_id=OperationId("o"))
+    )
     assert r.ok and r.attempts == 3
     assert [c.confirmation for c in v.commands if c.command == 176] == [0, 1, 2]
     v.faults.command_result = 2  # DENIED
-    r = await env.hub.send_command(SysId(9), Command(kind=CommandKind.RTL,
-                                                     operation_id=OperationId("o")))
+    r = await env.hub.send_command(
+        SysId(9), Command(kind=CommandKind.RTL, operation_id=OperationId("o"))
+    )
     assert not r.ok and r.result == 2 and "DENIED" in r.error
     v.close()
 
