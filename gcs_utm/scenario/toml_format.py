@@ -267,8 +267,14 @@ class _Reader:
 
 
 def _segment_m(frame: LocalFrame, a: Position, b: Position) -> float:
-    e, n = frame.to_local(np.array([a.lat_deg, b.lat_deg]), np.array([a.lon_deg, b.lon_deg]))
-    return math.sqrt((e[1] - e[0]) ** 2 + (n[1] - n[0]) ** 2 + (b.alt_amsl_m - a.alt_amsl_m) ** 2)
+    """True 3D length in metres: local ENU, not UTM grid metres (which carry the projection's
+    scale error of up to ~0.1 %, enough to shift a long plan's times by seconds)."""
+    e, n, u = frame.wgs84_to_enu(
+        np.array([a.lat_deg, b.lat_deg]),
+        np.array([a.lon_deg, b.lon_deg]),
+        np.array([a.alt_amsl_m, b.alt_amsl_m]),
+    )
+    return float(math.sqrt((e[1] - e[0]) ** 2 + (n[1] - n[0]) ** 2 + (u[1] - u[0]) ** 2))
 
 
 _VEHICLES = {k.value: k for k in VehicleKind}
