@@ -1,0 +1,382 @@
+"""The Monitoring cycle (paper §4.4, Figures 6-8) and the threat life cycle.
+
+``Monitor.cycle(snapshot)`` reads one consistent :class:`AirspaceSnapshot` and returns the
+threats OPENED, UPDATED or CLOSED in this cycle; ``active()`` lists the open ones.
+
+Conditions, each keyed so a persisting one stays ONE threat with a stable id:
+- conformance per operation (UAS_IN_CV / UAS_OUT_OV; the kind follows the worst state),
+  gated during take-off and landing near home (config);
+- geofence per (operation, fence) (GEOFENCE_CONFLICT with the predicted entry time, or
+  GEOFENCE_INTRUSION when inside now; the kind follows);
+- loss of separation per pair of operations (first loss, closest approach);
+- INTRUDER per (operation, non-cooperative track) with the intruder minima.
+
+Hysteresis: a condition opens after ``open_cycles`` consecutive fresh cycles; an open threat
+closes only after ``close_cycles`` consecutive fresh cycles in which it is clear by a margin.
+Stale or missing data (stale track, row absent from the prediction, no prediction) changes
+nothing: silence is not evidence. An operation that is LANDED/ENDED or gone from the snapshot
+closes its threats (the plan is over). UPDATED is emitted when the kind, the predicted event
+time (by more than one period) or the closest distance (by more than the separation margin)
+changes; ``active()`` always holds the latest figures.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from gcs_utm.core.monitoring.checks import check_geofences, pack_plans, plan_distance
+from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.core.monitoring.fences import LocalFence, localise
+from gcs_utm.core.monitoring.geometry import FloatArray
+from gcs_utm.core.monitoring.separation import detect_los, detect_pairs_between
+from gcs_utm.core.monitoring.strategic import plan_local
+from gcs_utm.geo import LocalFrame
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    FlightPlan,
+    Geofence,
+    GeofenceId,
+    OperationId,
+    OperationState,
+    PredictedTrajectories,
+    Threat,
+    ThreatId,
+    ThreatKind,
+    ThreatStatus,
+    Track,
+    TrackId,
+)
+
+Key = tuple[str, ...]
+
+
+@dataclass(slots=True)
+class _Observation:
+    kind: ThreatKind
+    uas_ids: tuple[OperationId, ...]
+    event_t_s: float | None = None
+    geofence_id: GeofenceId | None = None
+    intruder_id: TrackId | None = None
+    closest_t_s: float | None = None
+    closest_m: float | None = None
+    horizontal_m: float | None = None
+    vertical_m: float | None = None
+    message: str = ""
+
+
+@dataclass(slots=True)
+class _State:
+    present: int = 0
+    clear: int = 0
+    threat: Threat | None = None
+
+
+@dataclass(slots=True)
+class _Evaluation:
+    seen: dict[Key, _Observation] = field(default_factory=dict)
+    # Keys whose condition is not met but not clear by the margin either (no close count).
+    marginal: set[Key] = field(default_factory=set)
+    # Operations with a fresh track (conformance evidence) this cycle.
+    fresh: set[str] = field(default_factory=set)
+    # Operations and intruder track ids with a fresh prediction row (predictive evidence).
+    pred_fresh: set[str] = field(default_factory=set)
+
+
+class Monitor:
+    """Stateful threat detector over successive snapshots (pure: no clock, no I/O)."""
+
+    def __init__(self, frame: LocalFrame, config: MonitoringConfig) -> None:
+        self.frame = frame
+        self.config = config
+        self._states: dict[Key, _State] = {}
+        self._seq = 0
+        self._fence_cache: dict[GeofenceId, tuple[Geofence, LocalFence]] = {}
+        self._plan_cache: dict[OperationId, tuple[FlightPlan, FloatArray]] = {}
+
+    # ---- public -------------------------------------------------------------------------
+    def active(self) -> list[Threat]:
+        return [s.threat for s in self._states.values() if s.threat is not None]
+
+    def cycle(self, snapshot: AirspaceSnapshot) -> list[Threat]:
+        ev = self._evaluate(snapshot)
+        return self._update(snapshot, ev)
+
+    # ---- evaluation ---------------------------------------------------------------------
+    def _fence(self, g: Geofence) -> LocalFence:
+        hit = self._fence_cache.get(g.id)
+        if hit is None or hit[0] is not g:
+            hit = (g, localise(g, self.frame))
+            self._fence_cache[g.id] = hit
+        return hit[1]
+
+    def _plan(self, op_id: OperationId, snapshot: AirspaceSnapshot) -> FloatArray:
+        op = snapshot.operations[op_id]
+        hit = self._plan_cache.get(op_id)
+        # Keyed on the plan object (frozen): a replaced plan is re-projected even if a caller
+        # reuses a version number.
+        if hit is None or hit[0] is not op.plan:
+            hit = (op.plan, plan_local(op.plan, self.frame))
+            self._plan_cache[op_id] = hit
+        return hit[1]
+
+    def _evaluate(self, snapshot: AirspaceSnapshot) -> _Evaluation:
+        cfg = self.config
+        ev = _Evaluation()
+        ops = snapshot.operations
+        coop = [
+            tr
+            for tr in snapshot.tracks.values()
+            if tr.cooperative and tr.operation_id in ops and not tr.stale
+        ]
+        for c in coop:
+            ev.fresh.add(str(c.operation_id))
+        self._conformance(snapshot, coop, ev)
+        pred = snapshot.prediction
+        if pred is None or len(pred.track_ids) == 0:
+            return ev  # predictive conditions have no evidence this cycle
+        rows_coop: list[int] = []
+        rows_intr: list[int] = []
+        for i, tid in enumerate(pred.track_ids):
+            row = snapshot.tracks.get(tid)
+            if row is None or row.stale:
+                continue
+            if row.cooperative and row.operation_id in ops:
+                rows_coop.append(i)
+                ev.pred_fresh.add(str(row.operation_id))
+            elif not row.cooperative:
+                rows_intr.append(i)
+                ev.pred_fresh.add(str(tid))
+        op_of = {i: snapshot.tracks[pred.track_ids[i]].operation_id for i in rows_coop}
+        pts = pred.points[rows_coop] if rows_coop else np.empty((0, 1, 4))
+        ov = np.array(
+            [ops[op_of[i]].operational_volume_m for i in rows_coop]  # type: ignore[index]
+        )
+        # Geofences (4D, points and segments).
+        fences = [self._fence(g) for g in snapshot.geofences]
+        for h in check_geofences(pts, fences):
+            op_id = op_of[rows_coop[h.row]]
+            assert op_id is not None
+            kind = ThreatKind.GEOFENCE_INTRUSION if h.inside_now else ThreatKind.GEOFENCE_CONFLICT
+            ev.seen[("GEO", op_id, h.geofence_id)] = _Observation(
+                kind=kind, uas_ids=(op_id,), event_t_s=h.entry_t_s, geofence_id=h.geofence_id
+            )
+        # Loss of separation (grid or all-pairs by size), and the margin set for closing.
+        if len(rows_coop) >= 2:
+            for x in detect_los(pts, ov, cfg):
+                a, b = sorted((op_of[rows_coop[x.a]] or "", op_of[rows_coop[x.b]] or ""))
+                ev.seen[("LOS", a, b)] = _Observation(
+                    kind=ThreatKind.LOSS_OF_SEPARATION,
+                    uas_ids=(OperationId(a), OperationId(b)),
+                    event_t_s=x.first_loss_t_s,
+                    closest_t_s=x.closest_t_s,
+                    closest_m=x.min_distance_m,
+                    horizontal_m=x.min_horizontal_m,
+                    vertical_m=x.min_vertical_m,
+                )
+            self._separation_margin(pts, ov, rows_coop, op_of, ev)
+        # Intruders: every cooperative row against every non-cooperative row.
+        if rows_coop and rows_intr:
+            ipts = pred.points[rows_intr]
+            for i, j, st in detect_pairs_between(
+                pts,
+                ipts,
+                cfg.intruder_horizontal_m,
+                cfg.intruder_vertical_m,
+                spherical=False,
+            ):
+                op_id = op_of[rows_coop[i]]
+                assert op_id is not None
+                tid = pred.track_ids[rows_intr[j]]
+                ev.seen[("INTR", op_id, str(tid))] = _Observation(
+                    kind=ThreatKind.INTRUDER,
+                    uas_ids=(op_id,),
+                    intruder_id=tid,
+                    event_t_s=float(st[0]),
+                    closest_t_s=float(st[1]),
+                    closest_m=float(st[2]),
+                    horizontal_m=float(st[3]),
+                    vertical_m=float(st[4]),
+                )
+        return ev
+
+    def _separation_margin(
+        self,
+        pts: FloatArray,
+        ov: FloatArray,
+        rows: list[int],
+        op_of: dict[int, OperationId | None],
+        ev: _Evaluation,
+    ) -> None:
+        """Open separation threats not seen this cycle: still within minima + margin?"""
+        idx = {op_of[r]: k for k, r in enumerate(rows)}
+        m = self.config.separation_close_margin_m
+        for key, st in self._states.items():
+            if key[0] != "LOS" or st.threat is None or key in ev.seen:
+                continue
+            ka = idx.get(OperationId(key[1]))
+            kb = idx.get(OperationId(key[2]))
+            if ka is None or kb is None:
+                continue
+            mh, mv = self.config.effective_minima(float(ov[ka]), float(ov[kb]))
+            if detect_pairs_between(
+                pts[ka : ka + 1],
+                pts[kb : kb + 1],
+                mh + m,
+                mv + m,
+                spherical=self.config.spherical,
+            ):
+                ev.marginal.add(key)
+
+    def _conformance(
+        self, snapshot: AirspaceSnapshot, tracks: list[Track], ev: _Evaluation
+    ) -> None:
+        cfg = self.config
+        if not tracks:
+            return
+        op_ids = [t.operation_id for t in tracks]
+        plans = [self._plan(o, snapshot) for o in op_ids if o is not None]
+        table = pack_plans(plans)
+        pos = np.array([[t.east_m, t.north_m, t.alt_amsl_m] for t in tracks])  # m
+        ts = np.array([t.t_s for t in tracks])  # s
+        dist = plan_distance(table, pos, ts, cfg.conformance_time_tolerance_s)  # m
+        for k, tr in enumerate(tracks):
+            op = snapshot.operations[op_ids[k]]  # type: ignore[index]
+            d = float(dist[k])
+            key: Key = ("CONF", op.id)
+            if cfg.gate_takeoff_landing and self._near_home(op.id, snapshot, pos[k], plans[k]):
+                continue
+            if d > op.operational_volume_m:
+                kind = ThreatKind.UAS_OUT_OV
+            elif d > op.flight_geometry_m:
+                kind = ThreatKind.UAS_IN_CV
+            else:
+                if d > op.flight_geometry_m - cfg.conformance_close_margin_m:
+                    ev.marginal.add(key)
+                continue
+            ev.seen[key] = _Observation(
+                kind=kind,
+                uas_ids=(op.id,),
+                event_t_s=tr.t_s,
+                closest_m=d,
+                message=f"{d:.1f} m from plan",
+            )
+
+    def _near_home(
+        self, op_id: OperationId, snapshot: AirspaceSnapshot, pos: FloatArray, plan: FloatArray
+    ) -> bool:
+        cfg = self.config
+        op = snapshot.operations[op_id]
+        anchors = [plan[0, :3], plan[-1, :3]]
+        if op.home is not None:
+            he, hn = self.frame.point_to_local(op.home.lat_deg, op.home.lon_deg)
+            anchors.append(np.array([he, hn, op.home.alt_amsl_m]))
+        for a in anchors:
+            if (
+                math.hypot(pos[0] - a[0], pos[1] - a[1]) <= cfg.takeoff_landing_radius_m
+                and pos[2] - a[2] <= cfg.takeoff_landing_height_m
+            ):
+                return True
+        return False
+
+    # ---- life cycle ---------------------------------------------------------------------
+    def _fresh(self, key: Key, ev: _Evaluation) -> bool:
+        if key[0] == "CONF":
+            return key[1] in ev.fresh
+        if key[0] in ("INTR", "LOS"):
+            return key[1] in ev.pred_fresh and key[2] in ev.pred_fresh
+        return key[1] in ev.pred_fresh
+
+    def _update(self, snapshot: AirspaceSnapshot, ev: _Evaluation) -> list[Threat]:
+        cfg = self.config
+        t = snapshot.t_s
+        pred: PredictedTrajectories | None = snapshot.prediction
+        out: list[Threat] = []
+        for key, obs in ev.seen.items():
+            st = self._states.setdefault(key, _State())
+            st.present += 1
+            st.clear = 0
+            if st.threat is None:
+                if st.present >= cfg.open_cycles:
+                    self._seq += 1
+                    st.threat = self._make(ThreatId(f"T{self._seq}-{key[0]}"), obs, t, pred)
+                    out.append(st.threat)
+                continue
+            new = self._make(st.threat.id, obs, st.threat.detected_at_s, pred, updated=t)
+            if self._material_change(st.threat, new):
+                new = replace(new, status=ThreatStatus.UPDATED)
+                out.append(new)
+            else:
+                new = replace(new, status=st.threat.status)
+            st.threat = new
+        for key in list(self._states):
+            if key in ev.seen:
+                continue
+            st = self._states[key]
+            ended = any(
+                (o := snapshot.operations.get(OperationId(u))) is None
+                or o.state in (OperationState.LANDED, OperationState.ENDED)
+                for u in self._op_ids(key)
+            )
+            if not ended and (key in ev.marginal or not self._fresh(key, ev)):
+                st.clear = 0 if key in ev.marginal else st.clear
+                st.present = 0 if key in ev.marginal else st.present
+                continue  # no evidence either way (stale) or not clear by the margin
+            st.present = 0
+            st.clear += 1
+            if st.threat is None:
+                del self._states[key]
+            elif ended or st.clear >= cfg.close_cycles:
+                out.append(replace(st.threat, status=ThreatStatus.CLOSED, updated_at_s=t))
+                del self._states[key]
+        return out
+
+    @staticmethod
+    def _op_ids(key: Key) -> tuple[str, ...]:
+        return (key[1], key[2]) if key[0] == "LOS" else (key[1],)
+
+    def _material_change(self, old: Threat, new: Threat) -> bool:
+        if old.kind is not new.kind:
+            return True
+        if (old.predicted_event_at_s is None) != (new.predicted_event_at_s is None):
+            return True
+        if (
+            old.predicted_event_at_s is not None
+            and new.predicted_event_at_s is not None
+            and abs(old.predicted_event_at_s - new.predicted_event_at_s) > self.config.period_s
+            and old.kind not in (ThreatKind.UAS_IN_CV, ThreatKind.UAS_OUT_OV)
+        ):
+            return True
+        return (
+            old.closest_approach_m is not None
+            and new.closest_approach_m is not None
+            and abs(old.closest_approach_m - new.closest_approach_m)
+            > self.config.separation_close_margin_m
+        )
+
+    @staticmethod
+    def _make(
+        tid: ThreatId,
+        obs: _Observation,
+        detected: float,
+        pred: PredictedTrajectories | None,
+        updated: float | None = None,
+    ) -> Threat:
+        return Threat(
+            id=tid,
+            kind=obs.kind,
+            uas_ids=obs.uas_ids,
+            detected_at_s=detected,
+            predicted_event_at_s=obs.event_t_s,
+            geofence_id=obs.geofence_id,
+            intruder_id=obs.intruder_id,
+            closest_approach_t_s=obs.closest_t_s,
+            closest_approach_m=obs.closest_m,
+            horizontal_m=obs.horizontal_m,
+            vertical_m=obs.vertical_m,
+            message=obs.message,
+            snapshot=pred,
+            updated_at_s=updated if updated is not None else detected,
+        )
