@@ -125,7 +125,9 @@ def test_covariance_stays_symmetric_psd(
 
 def _fused_cov(sources: list[tuple[MeasurementSource, float]]) -> float:
     tr = new_tracker()
-    tr.set_operations([operation("op1", plan_from_local("op1", [(0, 0, 100, T0)]), icao24="abc123")])
+    tr.set_operations(
+        [operation("op1", plan_from_local("op1", [(0, 0, 100, T0)]), icao24="abc123")]
+    )
     for src, eph in sources:
         tr.ingest([meas(0, 0, 100, T0, source=src, eph_m=eph, epv_m=eph, icao24="abc123")])
     return float(np.trace(tr.covariance(TrackId("op1"))[:3, :3]))
@@ -175,7 +177,9 @@ def test_unknown_adsb_is_a_non_cooperative_intruder_until_claimed() -> None:
     tr.set_operations(
         [
             operation("op1", plan_from_local("op1", [(0, 0, 100, T0)]), sys_id=1),
-            operation("op2", plan_from_local("op2", [(500, 500, 900, T0)]), sys_id=2, icao24="4ca7b3"),
+            operation(
+                "op2", plan_from_local("op2", [(500, 500, 900, T0)]), sys_id=2, icao24="4ca7b3"
+            ),
         ]
     )
     assert TrackId("icao:4ca7b3") not in tr.tracks()
@@ -198,9 +202,7 @@ def test_unknown_adsb_is_a_non_cooperative_intruder_until_claimed() -> None:
         (lambda: meas(0, 0, 100, T0 + 600), "invalid"),  # captured after it was received
     ],
 )
-def test_bad_measurements_are_counted_and_never_move_the_track(
-    bad: object, reason: str
-) -> None:
+def test_bad_measurements_are_counted_and_never_move_the_track(bad: object, reason: str) -> None:
     tr = new_tracker()
     for k in range(6):
         tr.ingest([meas(0, 0, 100, T0 + k)])
@@ -308,7 +310,9 @@ def test_prediction_shapes_and_growing_uncertainty() -> None:
 
 def test_prediction_follows_the_4d_plan_when_close_and_extrapolates_when_not() -> None:
     # Plan: east 100 m in 10 s, then north 100 m in 10 s.
-    plan = plan_from_local("op1", [(0, 0, 100, T0), (100, 0, 100, T0 + 10), (100, 100, 100, T0 + 20)])
+    plan = plan_from_local(
+        "op1", [(0, 0, 100, T0), (100, 0, 100, T0 + 10), (100, 100, 100, T0 + 20)]
+    )
     tr = new_tracker()
     tr.set_operations([operation("op1", plan, sys_id=1, flight_geometry_m=10.0)])
     for k in range(6):
@@ -343,7 +347,7 @@ def test_snapshot_is_consistent_at_one_time() -> None:
 
 
 def test_config_ranges_are_enforced() -> None:
-    with pytest.raises(ValueError, match="tracking.step_s"):
+    with pytest.raises(ValueError, match=r"tracking\.step_s"):
         TrackingConfig(step_s=0.0)
     assert TrackingConfig().n_points == 61
 

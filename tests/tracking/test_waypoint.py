@@ -5,10 +5,14 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 sys.path.insert(0, str(Path(__file__).parent))
 from tracking_helpers import FRAME, T0, plan_from_local
 
-from gcs_utm.core.tracking import current_waypoint
+from gcs_utm.core.tracking import PlanTable, current_waypoint
 from gcs_utm.model import FlightPlan
 
 
@@ -91,3 +95,42 @@ def test_geometry_beats_time_beyond_the_ambiguity() -> None:
 def test_single_waypoint_plan() -> None:
     plan = _plan("hover", [(0, 0, 100, 0)])
     assert _wp(plan, 30, 30, 0) == 0
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n_wp=st.integers(1, 8),
+    seed=st.integers(0, 2**32 - 1),
+    first_ahead_s=st.floats(-30.0, 100.0),
+    step_s=st.sampled_from([0.25, 1.0, 3.0]),
+)
+def test_follow_matches_linear_interpolation_of_the_plan(
+    n_wp: int, seed: int, first_ahead_s: float, step_s: float
+) -> None:
+    rng = np.random.default_rng(seed)
+    plans = []
+    for j in range(3):  # several plans in one table: rows must not leak into each other
+        # Durations include zeros (two waypoints at the same time).
+        dts = rng.choice([0.0, 2.0, 5.0, 7.5], size=n_wp)
+        dts[0] = 0.0
+        t = T0 + 10.0 * j + np.cumsum(dts)
+        pts = rng.uniform(-500, 500, size=(n_wp, 3)) + np.array([0.0, 0.0, 600.0])
+        plans.append(_plan(f"p{j}", [(*p, tt - T0) for p, tt in zip(pts, t, strict=True)]))
+    table = PlanTable(plans, FRAME)
+    rows = np.array([2, 0, 1, 2], dtype=np.intp)
+    tau0 = np.array([T0 + 3.0, T0 - 5.0, T0 + 40.0, T0 + 25.0])
+    k = 25
+    east, north, alt = table.follow(rows, tau0, np.full(4, first_ahead_s), step_s, k)
+    for i, j in enumerate(rows):
+        o, m = int(table.wp_offset[j]), int(table.n_waypoints[j])
+        wt = table.wp_t[o : o + m]
+        wp = table.wp_pos[o : o + m]
+        raw = tau0[i] + first_ahead_s + np.arange(k) * step_s
+        tau = np.clip(raw, wt[0], wt[-1])
+        for axis, got in enumerate((east, north, alt)):
+            # At a repeated time the plan has moved on to the later point (as np.interp);
+            # before the plan starts the UAS waits at the first waypoint.
+            want = np.interp(tau, wt, wp[:, axis]) if m > 1 else np.full(k, wp[0, axis])
+            want = np.where(raw < wt[0], wp[0, axis], want)
+            # POSIX times carry ~2e-7 s of rounding; at <= 100 m/s that is < 1e-4 m.
+            np.testing.assert_allclose(got[i], want, atol=1e-4)

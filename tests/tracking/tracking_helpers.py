@@ -55,9 +55,7 @@ def meas(
     )
 
 
-def plan_from_local(
-    op_id: str, points: list[tuple[float, float, float, float]]
-) -> FlightPlan:
+def plan_from_local(op_id: str, points: list[tuple[float, float, float, float]]) -> FlightPlan:
     """(east_m, north_m, alt_amsl_m, t_s) -> FlightPlan."""
     wps = []
     for e, n, alt, t in points:

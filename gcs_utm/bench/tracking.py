@@ -1,0 +1,186 @@
+"""Tracking throughput: association + Kalman update of N UAS at 1 Hz, and their prediction.
+
+Records:
+- ``tracking.ingest``: one second of synthetic measurements (one per UAS; 80 % telemetry
+  associated by operation id, 20 % ADS-B associated by ICAO address) through
+  :meth:`Tracker.ingest`; ``per_s`` is measurements per second end to end (validation,
+  association, WGS84 -> UTM, predict, update). Building the ``Measurement`` objects is the
+  adapters' cost and is not timed.
+- ``tracking.predict``: :meth:`Tracker.predict` of all N tracks over the configured horizon
+  (default 61 points: 0..60 s), plan following included (every UAS is on a 10-waypoint plan).
+- ``tracking.snapshot``: :meth:`Tracker.snapshot` (N ``Track`` objects + prediction).
+- ``tracking.filterpy_update``: the reference, one filterpy ``KalmanFilter`` predict+update
+  per measurement in a Python loop, to show what the batched filter replaces.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from gcs_utm.bench.timing import summary, time_runs
+from gcs_utm.core.tracking import Tracker, TrackingConfig
+from gcs_utm.geo import LocalFrame
+from gcs_utm.model import (
+    FlightPlan,
+    Icao24,
+    Measurement,
+    MeasurementSource,
+    Operation,
+    OperationId,
+    VehicleKind,
+    Waypoint4D,
+)
+
+NAME = "tracking"
+_T0 = 1_700_000_000.0
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--uas", type=int, default=10_000, help="number of UAS (default 10000)")
+    p.add_argument("--runs", type=int, default=9, help="timed repetitions (default 9)")
+    p.add_argument("--seed", type=int, default=1, help="random seed of the synthetic fleet")
+
+
+def _fleet(
+    frame: LocalFrame, n: int, rng: np.random.Generator
+) -> tuple[list[Operation], np.ndarray, np.ndarray]:
+    """N operations on 10-waypoint plans at 10 m/s in a 20 km square; returns the operations,
+    the waypoint positions (N, 10, 3) and times (10,) relative to _T0."""
+    n_wp = 10
+    starts = rng.uniform(-10_000, 10_000, size=(n, 1, 2))
+    legs = rng.normal(size=(n, n_wp - 1, 2))
+    legs = legs / np.linalg.norm(legs, axis=2, keepdims=True) * 100.0  # 100 m legs, 10 s each
+    en = np.concatenate([starts, starts + np.cumsum(legs, axis=1)], axis=1)
+    alt = rng.uniform(60, 120, size=(n, 1, 1)).repeat(n_wp, axis=1)
+    pos = np.concatenate([en, alt], axis=2)
+    times = np.arange(n_wp) * 10.0
+    lat, lon = frame.to_wgs84(pos[:, :, 0], pos[:, :, 1])
+    ops = []
+    for i in range(n):
+        op_id = OperationId(f"op{i}")
+        plan = FlightPlan(
+            operation_id=op_id,
+            version=1,
+            waypoints=tuple(
+                Waypoint4D(
+                    lat_deg=float(lat[i, k]),
+                    lon_deg=float(lon[i, k]),
+                    alt_amsl_m=float(pos[i, k, 2]),
+                    t_s=_T0 + float(times[k]),
+                )
+                for k in range(n_wp)
+            ),
+        )
+        ops.append(
+            Operation(
+                id=op_id,
+                icao24=Icao24(f"{i:06x}"),
+                sys_id=None,
+                priority=1,
+                plan=plan,
+                vehicle_kind=VehicleKind.MULTIROTOR,
+                cruise_speed_mps=10.0,
+                flight_geometry_m=10.0,
+                operational_volume_m=50.0,
+            )
+        )
+    return ops, pos, times
+
+
+def _batches(
+    frame: LocalFrame, pos: np.ndarray, times: np.ndarray, seconds: int, rng: np.random.Generator
+) -> list[list[Measurement]]:
+    n = pos.shape[0]
+    out = []
+    adsb = rng.random(n) < 0.2
+    for s in range(seconds):
+        t = float(s)
+        k = min(int(t // 10.0), len(times) - 2)
+        frac = (t - times[k]) / (times[k + 1] - times[k])
+        p = pos[:, k] + frac * (pos[:, k + 1] - pos[:, k])
+        p = p + rng.normal(size=p.shape) * np.array([3.0, 3.0, 5.0])
+        lat, lon = frame.to_wgs84(p[:, 0], p[:, 1])
+        batch = []
+        for i in range(n):
+            common = {
+                "capture_t_s": _T0 + t + rng.uniform(0, 0.9),
+                "receipt_t_s": _T0 + t + 0.95,
+                "lat_deg": float(lat[i]),
+                "lon_deg": float(lon[i]),
+                "alt_amsl_m": float(p[i, 2]),
+            }
+            if adsb[i]:
+                batch.append(
+                    Measurement(source=MeasurementSource.ADSB, icao24=Icao24(f"{i:06x}"), **common)
+                )
+            else:
+                batch.append(
+                    Measurement(
+                        source=MeasurementSource.TELEMETRY,
+                        operation_id=OperationId(f"op{i}"),
+                        eph_m=2.0,
+                        epv_m=3.0,
+                        **common,
+                    )
+                )
+        out.append(batch)
+    return out
+
+
+def _filterpy_record(runs: int) -> dict[str, object]:
+    from filterpy.common import Q_discrete_white_noise
+    from filterpy.kalman import KalmanFilter
+
+    n_updates = 2_000
+    kf = KalmanFilter(dim_x=6, dim_z=3)
+    kf.P *= 10.0
+    h = np.hstack([np.eye(3), np.zeros((3, 3))])
+    r = np.diag([9.0, 9.0, 25.0])
+    z = np.zeros(3)
+
+    def loop() -> None:
+        for _ in range(n_updates):
+            f = np.eye(6)
+            f[0:3, 3:6] = np.eye(3)
+            q = Q_discrete_white_noise(dim=2, dt=1.0, var=4.0, block_size=3, order_by_dim=False)
+            kf.predict(F=f, Q=q)
+            kf.update(z, R=r, H=h)
+
+    durations = time_runs(loop, runs=runs, warmup=1)
+    return summary("tracking.filterpy_update", n_updates, durations, items_per_run=n_updates)
+
+
+def run(args: argparse.Namespace) -> list[dict[str, object]]:
+    n = int(args.uas)
+    runs = int(args.runs)
+    rng = np.random.default_rng(int(args.seed))
+    frame = LocalFrame(37.41, -6.0, 10.0)
+    ops, pos, times = _fleet(frame, n, rng)
+    warmup = 2
+    batches = _batches(frame, pos, times, warmup + runs, rng)
+    tracker = Tracker(frame, TrackingConfig())
+    tracker.set_operations(ops)
+    it = iter(batches)
+    # Each timed run ingests the next second of data, so every run updates existing tracks
+    # (the first warm-up creates them).
+    ingest_ms = time_runs(lambda: tracker.ingest(next(it)), runs=runs, warmup=warmup)
+    counters = tracker.counters
+    t_now = _T0 + warmup + runs
+    predict_ms = time_runs(lambda: tracker.predict(t_now), runs=runs, warmup=1)
+    snapshot_ms = time_runs(lambda: tracker.snapshot(t_now), runs=runs, warmup=1)
+    points = tracker.config.n_points
+    return [
+        summary(
+            "tracking.ingest",
+            n,
+            ingest_ms,
+            items_per_run=n,
+            accepted=counters["accepted"],
+            rejected=sum(counters[k] for k in ("out_of_order", "duplicate", "invalid", "gate")),
+        ),
+        summary("tracking.predict", n, predict_ms, items_per_run=n, points=points),
+        summary("tracking.snapshot", n, snapshot_ms, items_per_run=n, points=points),
+        _filterpy_record(runs),
+    ]
