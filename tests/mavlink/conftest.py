@@ -12,10 +12,10 @@ from typing import Any
 import pytest
 
 os.environ["MAVLINK20"] = "1"
-from pymavlink.dialects.v20 import common as mav  # noqa: E402
+from pymavlink.dialects.v20 import common as mav
 
-from adapters.mavlink import MavlinkConfig, MavlinkHub  # noqa: E402
-from gcs_utm.clock import RealClock  # noqa: E402
+from adapters.mavlink import MavlinkConfig, MavlinkHub
+from gcs_utm.clock import RealClock
 
 
 class Sink:

@@ -9,11 +9,10 @@ from typing import Any
 import pytest
 
 os.environ["MAVLINK20"] = "1"
-from pymavlink.dialects.v20 import common as mav  # noqa: E402
 
-from adapters.mavlink import EndpointError, EndpointKind, parse_endpoint  # noqa: E402
-from adapters.mavlink.wire import Encoder, Parser  # noqa: E402
-from gcs_utm.model import Autopilot, SysId, ThreatKind, VehicleKind  # noqa: E402
+from adapters.mavlink import EndpointError, EndpointKind, parse_endpoint
+from adapters.mavlink.wire import Encoder, Parser
+from gcs_utm.model import Autopilot, SysId, ThreatKind, VehicleKind
 
 
 async def _settle() -> None:
@@ -128,9 +127,9 @@ async def test_battery_and_gnss_hazards(env: Any) -> None:
     v.send(sys_status(60), lossy=False)
     v.send(sys_status(20), lossy=False)
     v.send(sys_status(19), lossy=False)  # still low: one hazard per episode
-    gps = lambda fix, hacc: v.mav.gps_raw_int_encode(
+    gps = lambda fix, hacc: v.mav.gps_raw_int_encode(  # noqa: E731
         0, fix, 0, 0, 0, 80, 120, 0, 0, 12, 0, hacc, 2000, 0, 0
-    )  # noqa: E731
+    )
     v.send(gps(3, 1000), lossy=False)
     v.send(gps(3, 9000), lossy=False)  # eph jump 1 -> 9 m
     v.send(gps(1, 9000), lossy=False)  # fix lost
