@@ -1,0 +1,6 @@
+"""Tactical Deconfliction (paper §4.5): alternatives with cost and riskiness for EM."""
+
+from gcs_utm.core.deconfliction.config import DeconflictionConfig
+from gcs_utm.core.deconfliction.td import Dropped, TacticalDeconfliction
+
+__all__ = ["DeconflictionConfig", "Dropped", "TacticalDeconfliction"]

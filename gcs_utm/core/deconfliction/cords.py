@@ -1,0 +1,201 @@
+"""Charged cords: multi-UAS loss-of-separation resolution by iterative repulsive deformation.
+
+Design (from the paper's text; its public code never implemented it): each plan is a *cord*,
+the positions it predicts on a common time grid ``t_k = now + k * dt``. Points of two cords at
+the same ``t_k`` that are closer than the separation minimum repel each other. Each cord may
+move along one *axis* (vertical, or lateral = along the left normal of its own track) in one
+*sign*; its displacement is a non-negative profile ``d_k`` along that signed axis.
+
+One iteration: for every pair (i, j) and every violating ``k``, the missing distance (the
+*deficit*) is split between the two cords in proportion to their mobility (``1/priority``,
+zero for rigid cords); each cord's *demand* at ``k`` is raised to its current displacement plus
+its share. The displacement is then the smallest slope-limited profile above the demand:
+``d_k = max_j(D_j - s * |k - j|)`` (two running maxima), capped by the ramp from the current
+position (``d_k <= s * k``: the UAS is where it is now) and by the altitude limits. The slope
+``s`` is the vehicle limit per step (a share of the max climb rate, or a lateral angle at the
+cruise speed), so deformations are trapezoids with feasible ramps: no spikes. Iterate until no
+pair violates ``minimum * (1 + margin)`` or give up after ``max_iterations``.
+
+Chains (the paper's Figure 9) are resolved because every cord in the problem is pushed by all
+its neighbours in the same iteration: moving B away from A into C makes C push back on B and C
+move in turn (if C is mobile).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from gcs_utm.core.deconfliction.geometry import LocalPlan
+from gcs_utm.model import FloatArray
+
+AXIS_VERTICAL = "vertical"
+AXIS_LATERAL = "lateral"
+AXIS_NONE = "none"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Cord:
+    """One plan in a cord problem. ``sign`` +1 is up/left, -1 down/right, 0 decided by the
+    first repulsion. ``mobility`` 0 makes the cord rigid."""
+
+    plan: LocalPlan
+    axis: str
+    sign: int
+    mobility: float
+    slope_m_per_step: float
+    max_offset_m: float
+    min_alt_amsl_m: float
+    max_alt_amsl_m: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CordResult:
+    displacement_m: FloatArray  # (U, K) >= 0 along each cord's signed axis
+    signs: tuple[int, ...]
+    iterations: int
+
+
+def left_normals(pos: FloatArray) -> FloatArray:
+    """(K, 2) unit left normals of the horizontal track through pos (K, 3); a hover keeps the
+    previous direction, a cord that never moves points east."""
+    k = pos.shape[0]
+    d = np.zeros((k, 2))
+    if k > 1:
+        step = np.diff(pos[:, :2], axis=0)
+        d[:-1] = step
+        d[-1] = step[-1]
+    norm = np.hypot(d[:, 0], d[:, 1])
+    good = norm > 1e-6
+    if not good.any():
+        return np.tile(np.array([0.0, 1.0]), (k, 1))
+    idx = np.where(good, np.arange(k), 0)
+    idx = np.maximum.accumulate(idx)
+    first = int(np.argmax(good))
+    idx[:first] = first
+    u = d[idx] / norm[idx, None]
+    return np.column_stack([-u[:, 1], u[:, 0]])
+
+
+def envelope(demand: FloatArray, slope: float) -> FloatArray:
+    """Smallest profile >= demand whose step-to-step change is at most ``slope``."""
+    idx = np.arange(demand.shape[0], dtype=np.float64)
+    fwd = np.maximum.accumulate(demand + slope * idx) - slope * idx
+    rev = fwd[::-1]
+    bwd = np.maximum.accumulate(rev + slope * idx) - slope * idx
+    return np.asarray(np.maximum(fwd, bwd[::-1]), dtype=np.float64)
+
+
+def apply(base: FloatArray, normals: FloatArray, axis: str, sign: int, d: FloatArray) -> FloatArray:
+    out = base.copy()
+    if axis == AXIS_VERTICAL:
+        out[:, 2] += sign * d
+    elif axis == AXIS_LATERAL:
+        out[:, :2] += (sign * d)[:, None] * normals
+    return out
+
+
+def resolve(
+    cords: Sequence[Cord],
+    grid_t: FloatArray,
+    minima: FloatArray,
+    *,
+    spherical: bool,
+    margin_fraction: float,
+    max_iterations: int,
+) -> CordResult | None:
+    """Deform ``cords`` on ``grid_t`` until every pair holds ``minima[i, j] = (h, v)``
+    (times 1 + margin); None when the scenario cannot be resolved."""
+    u = len(cords)
+    k = grid_t.shape[0]
+    base = np.zeros((u, k, 3))
+    valid = np.zeros((u, k), dtype=bool)
+    normals = np.zeros((u, k, 2))
+    for i, c in enumerate(cords):
+        base[i], valid[i] = c.plan.sample(grid_t)
+        normals[i] = left_normals(base[i])
+    signs = [c.sign for c in cords]
+    d = np.zeros((u, k))
+    demand = np.zeros((u, k))
+    ramp = np.arange(k, dtype=np.float64)
+    caps = np.zeros((u, k))
+    for i, c in enumerate(cords):
+        caps[i] = np.minimum(c.slope_m_per_step * ramp, c.max_offset_m)
+    both = valid[:, None, :] & valid[None, :, :]
+    # A pair of rigid cords is not this scenario's business (another threat covers it).
+    movable = np.array([c.mobility > 0.0 and c.axis != AXIS_NONE for c in cords])
+    both &= (movable[:, None] | movable[None, :])[:, :, None]
+    upper = np.triu(np.ones((u, u), dtype=bool), 1)[:, :, None]
+    scale = 1.0 + margin_fraction
+    h_min = minima[:, :, 0][:, :, None]
+    v_min = minima[:, :, 1][:, :, None]
+    for it in range(max_iterations + 1):
+        pos = np.stack(
+            [apply(base[i], normals[i], cords[i].axis, signs[i] or 1, d[i]) for i in range(u)]
+        )
+        dh = np.hypot(
+            pos[:, None, :, 0] - pos[None, :, :, 0], pos[:, None, :, 1] - pos[None, :, :, 1]
+        )
+        dv = np.abs(pos[:, None, :, 2] - pos[None, :, :, 2])
+        if spherical:
+            sep = np.hypot(dh, dv) / np.maximum(h_min, 1e-9)
+        else:
+            sep = np.maximum(dh / np.maximum(h_min, 1e-9), dv / np.maximum(v_min, 1e-9))
+        viol = both & upper & (sep < scale)
+        if not viol.any():
+            return CordResult(displacement_m=d, signs=tuple(s or 1 for s in signs), iterations=it)
+        if it == max_iterations:
+            return None
+        for i, j in zip(*np.nonzero(viol.any(axis=2)), strict=True):
+            ks = np.flatnonzero(viol[i, j])
+            mi, mj = cords[i].mobility, cords[j].mobility
+            for c, o, m in ((i, j, mi), (j, i, mj)):
+                if m <= 0.0 or cords[c].axis == AXIS_NONE:
+                    continue
+                share = m / (mi + mj) if (cords[o].mobility > 0 and _opposed(cords, c, o)) else 1.0
+                rel = pos[c, ks] - pos[o, ks]
+                if cords[c].axis == AXIS_VERTICAL:
+                    along = rel[:, 2]
+                    need = v_min[c, o, 0] * scale
+                else:
+                    along = np.einsum("kj,kj->k", rel[:, :2], normals[c, ks])
+                    need = h_min[c, o, 0] * scale
+                if spherical:
+                    need = h_min[c, o, 0] * scale
+                if signs[c] == 0:
+                    mean = float(np.mean(along))
+                    if abs(mean) > 1e-3:
+                        signs[c] = 1 if mean > 0 else -1
+                    elif cords[c].axis == AXIS_LATERAL:
+                        signs[c] = -1  # head-on: both turn right, as the rules of the air say
+                    else:
+                        signs[c] = 1 if c < o else -1
+                deficit = need - signs[c] * along
+                deficit = np.maximum(deficit, 0.0)
+                demand[c, ks] = np.maximum(demand[c, ks], d[c, ks] + share * deficit + 0.5)
+        for i, c in enumerate(cords):
+            if c.axis == AXIS_NONE or c.mobility <= 0.0:
+                continue
+            cap = caps[i]
+            if c.axis == AXIS_VERTICAL:
+                room = (
+                    c.max_alt_amsl_m - base[i, :, 2]
+                    if (signs[i] or 1) > 0
+                    else base[i, :, 2] - c.min_alt_amsl_m
+                )
+                cap = np.minimum(cap, np.maximum(room, 0.0))
+            d[i] = np.minimum(envelope(demand[i], c.slope_m_per_step), cap)
+    return None
+
+
+def _opposed(cords: Sequence[Cord], c: int, o: int) -> bool:
+    """Two mobile cords share a deficit only when moving one helps the other, i.e. both use
+    the same axis (an up-mover and a left-mover cannot split a vertical deficit)."""
+    return cords[c].axis == cords[o].axis
+
+
+def lateral_slope(speed_mps: float, dt_s: float, angle_deg: float) -> float:
+    return speed_mps * dt_s * math.tan(math.radians(angle_deg))

@@ -1,0 +1,268 @@
+"""Plan and geofence geometry in the airspace's local frame, shared by cords, A* and scoring.
+
+Conventions: ``e``/``n`` are metres east/north in :class:`gcs_utm.geo.LocalFrame`, ``z`` is
+``alt_amsl_m``, ``t`` is POSIX seconds. A :class:`LocalPlan` is the piecewise-linear 4D
+trajectory through its waypoints; before its first and after its last time it does not exist
+(sampling returns ``valid = False`` there), as Monitoring treats plans.
+
+Obstacles are geofences inflated by a clearance (the operation's operational-volume radius
+plus a margin) as *circumscribing* polygons: a cylinder becomes a regular polygon whose edges
+are tangent-or-outside the inflated circle, a polygon is buffered with mitred joins (mitre
+corners lie outside the round buffer). So a path outside an obstacle polygon is at least the
+clearance away from the geofence; the A* graph nodes sit a further ``NODE_EPS_M`` outside.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import shapely
+from shapely.geometry import MultiPolygon, Point, Polygon
+from shapely.ops import unary_union
+
+from gcs_utm.geo import LocalFrame
+from gcs_utm.model import FlightPlan, FloatArray, Geofence, GeofenceId, GeofenceShape, Waypoint4D
+
+NODE_EPS_M = 0.5
+"""Graph nodes lie this far outside the obstacle polygons, so that an edge along an obstacle
+border does not touch it (numerical safety, well below any clearance)."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LocalPlan:
+    """Waypoints of one plan in the local frame: four equal-length float arrays."""
+
+    e: FloatArray
+    n: FloatArray
+    z: FloatArray
+    t: FloatArray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def xyz(self) -> FloatArray:
+        return np.stack([self.e, self.n, self.z], axis=1)
+
+    def sample(self, times: FloatArray) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+        """Positions (len(times), 3) and a validity mask at ``times``."""
+        if len(self) == 1:
+            pos = np.repeat(self.xyz(), times.shape[0], axis=0)
+            return pos, np.isclose(times, self.t[0])
+        pos = np.stack(
+            [
+                np.interp(times, self.t, self.e),
+                np.interp(times, self.t, self.n),
+                np.interp(times, self.t, self.z),
+            ],
+            axis=1,
+        )
+        valid = (times >= self.t[0] - 1e-9) & (times <= self.t[-1] + 1e-9)
+        return pos, valid
+
+    def position_at(self, t_s: float) -> FloatArray:
+        pos, _ = self.sample(np.array([t_s]))
+        return np.asarray(pos[0], dtype=np.float64)
+
+    def length_m(self, from_t_s: float | None = None) -> float:
+        """3D path length, from ``from_t_s`` when given."""
+        lp = self if from_t_s is None else self.after(from_t_s)
+        d = np.diff(lp.xyz(), axis=0)
+        return float(np.sum(np.linalg.norm(d, axis=1)))
+
+    def after(self, t_s: float) -> LocalPlan:
+        """The part of the plan from ``t_s`` on (starting with the interpolated point)."""
+        if t_s <= self.t[0]:
+            return self
+        if t_s >= self.t[-1]:
+            p = self.xyz()[-1]
+            return LocalPlan(*(np.array([v]) for v in (p[0], p[1], p[2], self.t[-1])))
+        keep = self.t > t_s
+        p = self.position_at(t_s)
+        return LocalPlan(
+            np.concatenate([[p[0]], self.e[keep]]),
+            np.concatenate([[p[1]], self.n[keep]]),
+            np.concatenate([[p[2]], self.z[keep]]),
+            np.concatenate([[t_s], self.t[keep]]),
+        )
+
+
+def plan_to_local(plan: FlightPlan, frame: LocalFrame) -> LocalPlan:
+    lat = np.array([w.lat_deg for w in plan.waypoints])
+    lon = np.array([w.lon_deg for w in plan.waypoints])
+    e, n = frame.to_local(lat, lon)
+    z = np.array([w.alt_amsl_m for w in plan.waypoints], dtype=np.float64)
+    t = np.array([w.t_s for w in plan.waypoints], dtype=np.float64)
+    return LocalPlan(np.atleast_1d(e), np.atleast_1d(n), z, t)
+
+
+def local_to_plan(
+    lp: LocalPlan, base: FlightPlan, frame: LocalFrame, *, created_t_s: float, reason: str
+) -> FlightPlan:
+    """A new version of ``base`` through the points of ``lp``."""
+    lat, lon = frame.to_wgs84(lp.e, lp.n)
+    lat = np.atleast_1d(lat)
+    lon = np.atleast_1d(lon)
+    wps = tuple(
+        Waypoint4D(
+            lat_deg=float(lat[i]),
+            lon_deg=float(lon[i]),
+            alt_amsl_m=float(lp.z[i]),
+            t_s=float(lp.t[i]),
+        )
+        for i in range(len(lp))
+    )
+    return FlightPlan(
+        operation_id=base.operation_id,
+        version=base.version + 1,
+        waypoints=wps,
+        created_t_s=created_t_s,
+        reason=reason,
+    )
+
+
+def retime(
+    xyz: FloatArray, t0_s: float, speed_mps: float, climb_mps: float, min_dt: FloatArray | None
+) -> FloatArray:
+    """Times through ``xyz`` from ``t0_s``: each segment takes the longer of its horizontal
+    length at ``speed_mps`` and its climb at ``climb_mps``, and at least ``min_dt`` (the
+    original timing, so a plan is never sped up beyond what it asked for)."""
+    d = np.diff(xyz, axis=0)
+    h = np.hypot(d[:, 0], d[:, 1])
+    need = np.maximum(h / speed_mps, np.abs(d[:, 2]) / climb_mps)
+    if min_dt is not None:
+        need = np.maximum(need, min_dt)
+    return np.concatenate([[t0_s], t0_s + np.cumsum(need)])
+
+
+def simplify(lp: LocalPlan, tolerance_m: float) -> LocalPlan:
+    """Ramer-Douglas-Peucker on the 4D points (time scaled by the mean speed, so a hover or a
+    change of pace is a corner too)."""
+    if len(lp) <= 2:
+        return lp
+    xyz = lp.xyz()
+    span_t = float(lp.t[-1] - lp.t[0])
+    speed = lp.length_m() / span_t if span_t > 0 else 1.0
+    pts = np.column_stack([xyz, (lp.t - lp.t[0]) * max(speed, 1e-3)])
+    keep = np.zeros(len(lp), dtype=bool)
+    keep[0] = keep[-1] = True
+    stack = [(0, len(lp) - 1)]
+    while stack:
+        a, b = stack.pop()
+        if b <= a + 1:
+            continue
+        seg = pts[b] - pts[a]
+        rel = pts[a + 1 : b] - pts[a]
+        ll = float(seg @ seg)
+        if ll > 0:
+            u = np.clip(rel @ seg / ll, 0.0, 1.0)
+            dist = np.linalg.norm(rel - np.outer(u, seg), axis=1)
+        else:
+            dist = np.linalg.norm(rel, axis=1)
+        i = int(np.argmax(dist))
+        if dist[i] > tolerance_m:
+            k = a + 1 + i
+            keep[k] = True
+            stack.append((a, k))
+            stack.append((k, b))
+    return LocalPlan(lp.e[keep], lp.n[keep], lp.z[keep], lp.t[keep])
+
+
+# ---- geofences -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LocalFence:
+    """A geofence in the local frame: its exact 2D shape and its altitude/time window."""
+
+    id: GeofenceId
+    shape: Polygon
+    cylinder: tuple[float, float, float] | None  # (e, n, radius_m) when a cylinder
+    min_alt_amsl_m: float
+    max_alt_amsl_m: float
+    start_t_s: float | None
+    end_t_s: float | None
+
+    def active_between(self, t0_s: float, t1_s: float) -> bool:
+        if self.start_t_s is not None and t1_s < self.start_t_s:
+            return False
+        return not (self.end_t_s is not None and t0_s > self.end_t_s)
+
+    def active_mask(self, t: FloatArray) -> npt.NDArray[np.bool_]:
+        m = np.ones(t.shape, dtype=bool)
+        if self.start_t_s is not None:
+            m &= t >= self.start_t_s
+        if self.end_t_s is not None:
+            m &= t <= self.end_t_s
+        return m
+
+    def horizontal_distance(self, e: FloatArray, n: FloatArray) -> FloatArray:
+        """Signed horizontal distance to the border: negative inside."""
+        if self.cylinder is not None:
+            ce, cn, r = self.cylinder
+            return np.asarray(np.hypot(e - ce, n - cn) - r, dtype=np.float64)
+        pts = shapely.points(e, n)
+        d = shapely.distance(self.shape.exterior, pts)
+        inside = shapely.contains_xy(self.shape, e, n)
+        return np.asarray(np.where(inside, -d, d), dtype=np.float64)
+
+    def inflated(self, clearance_m: float, sides: int) -> Polygon:
+        """The obstacle polygon: every point outside it is >= clearance_m from the fence."""
+        if self.cylinder is not None:
+            ce, cn, r = self.cylinder
+            rc = (r + clearance_m) / math.cos(math.pi / sides)
+            a = np.arange(sides) * 2.0 * math.pi / sides
+            return Polygon(np.column_stack([ce + rc * np.cos(a), cn + rc * np.sin(a)]))
+        if clearance_m <= 0.0:
+            return self.shape
+        return self.shape.buffer(clearance_m, join_style="mitre", mitre_limit=2.0)
+
+
+def fence_to_local(g: Geofence, frame: LocalFrame) -> LocalFence:
+    if g.shape is GeofenceShape.CYLINDER:
+        assert g.center is not None and g.radius_m is not None  # checked by Geofence
+        ce, cn = frame.point_to_local(g.center.lat_deg, g.center.lon_deg)
+        shape = Point(ce, cn).buffer(g.radius_m, quad_segs=16)
+        cyl: tuple[float, float, float] | None = (ce, cn, g.radius_m)
+    else:
+        lat = np.array([v.lat_deg for v in g.vertices])
+        lon = np.array([v.lon_deg for v in g.vertices])
+        e, n = frame.to_local(lat, lon)
+        shape = Polygon(np.column_stack([e, n]))
+        if not shape.is_valid:
+            shape = shapely.make_valid(shape).convex_hull
+        cyl = None
+    return LocalFence(
+        id=g.id,
+        shape=shape,
+        cylinder=cyl,
+        min_alt_amsl_m=g.min_alt_amsl_m,
+        max_alt_amsl_m=g.max_alt_amsl_m,
+        start_t_s=g.start_t_s,
+        end_t_s=g.end_t_s,
+    )
+
+
+def relevant_fences(
+    fences: Iterable[LocalFence], t0_s: float, t1_s: float, z_lo: float, z_hi: float
+) -> list[LocalFence]:
+    """Fences active some time in [t0, t1] whose band overlaps [z_lo, z_hi]."""
+    return [
+        f
+        for f in fences
+        if f.active_between(t0_s, t1_s) and f.min_alt_amsl_m <= z_hi and f.max_alt_amsl_m >= z_lo
+    ]
+
+
+def merged_obstacles(fences: Sequence[LocalFence], clearance_m: float, sides: int) -> list[Polygon]:
+    """Inflated fences, overlapping ones merged, holes filled (an enclosed pocket is not a
+    place to route through)."""
+    if not fences:
+        return []
+    polys = [f.inflated(clearance_m, sides) for f in fences]
+    merged = unary_union(polys) if len(polys) > 1 else polys[0]
+    parts = list(merged.geoms) if isinstance(merged, MultiPolygon) else [merged]
+    return [Polygon(p.exterior) for p in parts if isinstance(p, Polygon) and not p.is_empty]

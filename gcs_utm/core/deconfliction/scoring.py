@@ -1,0 +1,153 @@
+"""Cost and riskiness of an alternative (paper §4.5), made unit-free so they can be summed.
+
+For a new plan P' replacing the remaining plan P of operation i (both from now on):
+
+    cost = w_prio * ( max(0, L(P') - L(P)) / cost_distance_scale_m
+                    + max(0, T_end(P') - T_end(P)) / cost_time_scale_s )
+           + abandon_cost * [P' abandons the mission]
+    w_prio = 1 + priority_cost_weight * (priority_i - lowest priority in the conflict)
+
+    risk = inside_m / risk_length_scale_m            (length inside active geofences)
+         + outside_ov_m / risk_outside_ov_scale_m    (length farther than the OV radius from
+                                                       the whole filed plan, flown part too)
+         + prox(d_fence / OV radius)                 (closest approach to an active geofence)
+         + prox(s_uas)                               (closest normalised separation to others)
+    prox(x) = clip((F - x) / (F - 1), 0, 1), F = risk_proximity_factor
+
+``s_uas`` is min over time of max(h / h_min, v / v_min) (or 3D / minimum in sphere mode):
+1 at the separation minimum. Every term is dimensionless: a unit of cost is the configured
+scale of extra distance or time, a unit of risk is the scale length in forbidden airspace or a
+closest approach at the minimum distance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from shapely.geometry import LineString
+
+from gcs_utm.core.deconfliction.config import DeconflictionConfig
+from gcs_utm.core.deconfliction.geometry import LocalFence, LocalPlan
+from gcs_utm.model import FloatArray
+
+SAMPLE_DT_S = 1.0
+"""Sampling step of the risk terms: 1 s is below a metre-scale error at UAS speeds."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Neighbour:
+    plan: LocalPlan
+    h_min_m: float
+    v_min_m: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Score:
+    cost: float
+    risk: float
+    extra_distance_m: float
+    extra_time_s: float
+    inside_fences_m: float
+    outside_ov_m: float
+    min_fence_distance_m: float
+    min_separation_ratio: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {
+            "cost": round(self.cost, 6),
+            "risk": round(self.risk, 6),
+            "extra_distance_m": round(self.extra_distance_m, 3),
+            "extra_time_s": round(self.extra_time_s, 3),
+            "inside_fences_m": round(self.inside_fences_m, 3),
+            "outside_ov_m": round(self.outside_ov_m, 3),
+            "min_fence_distance_m": round(self.min_fence_distance_m, 3),
+            "min_separation_ratio": round(self.min_separation_ratio, 4),
+        }
+
+
+def _prox(x: float, factor: float) -> float:
+    return float(np.clip((factor - x) / (factor - 1.0), 0.0, 1.0))
+
+
+def score(
+    new: LocalPlan,
+    old: LocalPlan,
+    *,
+    filed: LocalPlan,
+    ov_radius_m: float,
+    fences: Sequence[LocalFence],
+    neighbours: Sequence[Neighbour],
+    priority_weight: float,
+    abandons: bool,
+    spherical: bool,
+    config: DeconflictionConfig,
+) -> Score:
+    extra_d = max(0.0, new.length_m() - old.length_m())
+    extra_t = max(0.0, float(new.t[-1] - old.t[-1]))
+    cost = priority_weight * (
+        extra_d / config.cost_distance_scale_m + extra_t / config.cost_time_scale_s
+    )
+    if abandons:
+        cost += config.abandon_cost
+
+    span = float(new.t[-1] - new.t[0])
+    steps = max(2, int(span / SAMPLE_DT_S) + 1)
+    times = np.linspace(float(new.t[0]), float(new.t[-1]), steps)
+    pos, _ = new.sample(times)
+    seg = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+    mid = 0.5 * (pos[1:] + pos[:-1])
+    tmid = 0.5 * (times[1:] + times[:-1])
+
+    inside_m = 0.0
+    min_fence = float("inf")
+    for f in fences:
+        active = np.asarray(f.active_mask(tmid), dtype=bool) & (
+            mid[:, 2] >= f.min_alt_amsl_m - ov_radius_m
+        )
+        active &= mid[:, 2] <= f.max_alt_amsl_m + ov_radius_m
+        if not active.any():
+            continue
+        dist = f.horizontal_distance(mid[active, 0], mid[active, 1])
+        inside_m += float(np.sum(seg[active][dist < 0.0]))
+        min_fence = min(min_fence, float(dist.min()))
+
+    outside_m = 0.0
+    if len(filed) >= 2:
+        line = LineString(filed.xyz()[:, :2])
+        dist_plan: FloatArray = np.asarray(
+            shapely.distance(line, shapely.points(mid[:, 0], mid[:, 1])), dtype=np.float64
+        )
+        outside_m = float(np.sum(seg[dist_plan > ov_radius_m]))
+
+    min_ratio = float("inf")
+    for nb in neighbours:
+        other, ok = nb.plan.sample(times)
+        if not ok.any():
+            continue
+        dh = np.hypot(pos[ok, 0] - other[ok, 0], pos[ok, 1] - other[ok, 1])
+        dv = np.abs(pos[ok, 2] - other[ok, 2])
+        if spherical:
+            ratio = np.hypot(dh, dv) / nb.h_min_m
+        else:
+            ratio = np.maximum(dh / nb.h_min_m, dv / nb.v_min_m)
+        min_ratio = min(min_ratio, float(ratio.min()))
+
+    factor = config.risk_proximity_factor
+    risk = inside_m / config.risk_length_scale_m + outside_m / config.risk_outside_ov_scale_m
+    if np.isfinite(min_fence):
+        risk += _prox(min_fence / max(ov_radius_m, 1e-6), factor)
+    if np.isfinite(min_ratio):
+        risk += _prox(min_ratio, factor)
+    return Score(
+        cost=cost,
+        risk=risk,
+        extra_distance_m=extra_d,
+        extra_time_s=extra_t,
+        inside_fences_m=inside_m,
+        outside_ov_m=outside_m,
+        min_fence_distance_m=min_fence,
+        min_separation_ratio=min_ratio,
+    )

@@ -1,0 +1,953 @@
+"""Tactical Deconfliction: alternatives, each with cost and riskiness, for EM to choose from.
+
+Two families (paper §4.5):
+
+- multi-UAS loss of separation: charged cords (:mod:`.cords`) in several scenarios: a joint
+  vertical and a joint lateral repulsion where every mobile UAS moves in inverse proportion to
+  its priority (neighbours that the deformation pushes into are part of the problem, which
+  resolves chains), and per involved UAS a single-mover go up / go down / go left / go right;
+  plus a delay and a speed change found by search, and keep-plan (cost 0) for every UAS;
+- single UAS: A* on a visibility graph of inflated geofences (:mod:`.astar`): reroute around a
+  crossing, escape from inside, direct to goal, back to plan, next waypoint, return home,
+  nearest reachable landing site.
+
+Every new plan starts at the UAS now, has times from its cruise speed and climb rate (never
+faster than it asked for originally), and is verified by the Monitoring core
+(``plan_vs_geofences`` and ``plan_vs_plans`` against every operation outside the problem)
+before it is returned; dropped candidates are listed in :attr:`TacticalDeconfliction.dropped`.
+Compatibility between alternatives of UAS in the same problem is checked with the same
+Monitoring function by :meth:`TacticalDeconfliction.compatible` during EM's joint selection.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Collection, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from shapely.geometry import LineString, Point
+
+from gcs_utm.core.deconfliction import cords as cd
+from gcs_utm.core.deconfliction.astar import VisibilityPlanner
+from gcs_utm.core.deconfliction.config import DeconflictionConfig
+from gcs_utm.core.deconfliction.geometry import (
+    LocalFence,
+    LocalPlan,
+    fence_to_local,
+    local_to_plan,
+    merged_obstacles,
+    plan_to_local,
+    relevant_fences,
+    simplify,
+)
+from gcs_utm.core.deconfliction.scoring import Neighbour, Score, score
+from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.core.monitoring.strategic import plan_vs_geofences, plan_vs_plans
+from gcs_utm.geo import LocalFrame
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    Alternative,
+    FlightPlan,
+    FloatArray,
+    Geofence,
+    Maneuver,
+    Operation,
+    OperationId,
+    OperationState,
+    Threat,
+)
+
+SIMPLIFY_TOLERANCE_M = 1.0
+"""Cord points closer than this to the simplified plan are dropped; the cords are pushed to
+(1 + margin) times the minimum, far more than this."""
+
+_INACTIVE = (OperationState.LANDED, OperationState.ENDED)
+_ABANDON = (Maneuver.RETURN_HOME, Maneuver.LANDING_SITE)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Dropped:
+    """A candidate that was generated but not offered, and why."""
+
+    operation_id: OperationId
+    maneuver: Maneuver
+    reason: str
+
+
+class TacticalDeconfliction:
+    """Generates verified alternatives; pure apart from the :attr:`dropped` diagnostics of
+    the last call."""
+
+    def __init__(
+        self, frame: LocalFrame, config: DeconflictionConfig, monitoring: MonitoringConfig
+    ) -> None:
+        self.frame = frame
+        self.config = config
+        self.monitoring = monitoring
+        self.dropped: list[Dropped] = []
+
+    # ---- helpers on the snapshot -------------------------------------------------------------
+    def _others(
+        self, snapshot: AirspaceSnapshot, exclude: Collection[OperationId]
+    ) -> list[Operation]:
+        return [
+            op
+            for op in snapshot.operations.values()
+            if op.id not in exclude
+            and op.state not in _INACTIVE
+            and op.plan.end_t_s >= snapshot.t_s
+        ]
+
+    def current_xyz(self, op: Operation, snapshot: AirspaceSnapshot) -> FloatArray:
+        """Where the UAS is now: its track if tracked, else its plan at the snapshot time."""
+        for tr in snapshot.tracks.values():
+            if tr.operation_id == op.id and not tr.stale:
+                e, n = self.frame.point_to_local(tr.lat_deg, tr.lon_deg)
+                return np.array([e, n, tr.alt_amsl_m])
+        return plan_to_local(op.plan, self.frame).position_at(snapshot.t_s)
+
+    def _alt_limits(self, op: Operation) -> tuple[float, float]:
+        lo = op.min_alt_amsl_m if op.min_alt_amsl_m is not None else self.config.min_alt_amsl_m
+        hi = op.max_alt_amsl_m if op.max_alt_amsl_m is not None else self.config.max_alt_amsl_m
+        return lo, hi
+
+    def _mobility(self, op: Operation) -> float:
+        if op.priority >= self.config.immovable_priority:
+            return 0.0
+        return 1.0 / max(op.priority, 1)
+
+    def verify(
+        self,
+        plan: FlightPlan,
+        op: Operation,
+        others: Sequence[Operation],
+        geofences: Sequence[Geofence],
+    ) -> list[str]:
+        """What Monitoring would flag on ``plan`` (empty list = clean)."""
+        flags = [
+            f"geofence {c.geofence_id} at t={c.entry_t_s:.1f}"
+            for c in plan_vs_geofences(plan, op, geofences, self.frame, self.monitoring)
+        ]
+        flags += [
+            f"separation with {c.b} at t={c.first_loss_t_s:.1f} ({c.min_distance_m:.1f} m)"
+            for c in plan_vs_plans(plan, op, others, self.frame, self.monitoring)
+        ]
+        return flags
+
+    def compatible(self, a: Alternative, b: Alternative, snapshot: AirspaceSnapshot) -> bool:
+        """True when the plans of two alternatives (of different UAS) keep separation, as
+        Monitoring checks it. An alternative without a plan (a command) is compatible."""
+        if a.plan is None or b.plan is None:
+            return True
+        op_a = snapshot.operations[a.operation_id]
+        op_b = replace(snapshot.operations[b.operation_id], plan=b.plan)
+        return not plan_vs_plans(a.plan, op_a, [op_b], self.frame, self.monitoring)
+
+    def _score(  # noqa: PLR0917 - private helper, called positionally
+        self,
+        new: LocalPlan,
+        old: LocalPlan,
+        op: Operation,
+        fences: Sequence[LocalFence],
+        neighbours: Sequence[Operation],
+        lowest_priority: int,
+        abandons: bool,
+    ) -> Score:
+        nbs = []
+        for o in neighbours:
+            h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
+            nbs.append(Neighbour(plan=plan_to_local(o.plan, self.frame), h_min_m=h, v_min_m=v))
+        weight = 1.0 + self.config.priority_cost_weight * max(0, op.priority - lowest_priority)
+        return score(
+            new,
+            old,
+            filed=plan_to_local(op.plan, self.frame),
+            ov_radius_m=op.operational_volume_m,
+            fences=fences,
+            neighbours=nbs,
+            priority_weight=weight,
+            abandons=abandons,
+            spherical=self.monitoring.spherical,
+            config=self.config,
+        )
+
+    def _finish(
+        self,
+        op: Operation,
+        maneuver: Maneuver,
+        new: LocalPlan,
+        old: LocalPlan,
+        snapshot: AirspaceSnapshot,
+        *,
+        geofences: Sequence[Geofence],
+        fences: Sequence[LocalFence],
+        outsiders: Sequence[Operation],
+        lowest_priority: int,
+        detail: str,
+        verify_from: int = 0,
+    ) -> Alternative | None:
+        """Verify ``new`` with Monitoring, score it and wrap it, or record why it was dropped.
+        ``verify_from`` skips leading waypoints (an escape leg that starts inside a fence)."""
+        plan = local_to_plan(
+            new, op.plan, self.frame, created_t_s=snapshot.t_s, reason=f"TD {maneuver.value}"
+        )
+        checked = plan
+        if verify_from > 0:
+            checked = replace(plan, waypoints=plan.waypoints[verify_from:])
+        # Monitoring's check is exact but costs a buffer per fence: hand it only the fences
+        # whose box comes within the OV radius of the new plan's box (the others cannot be
+        # crossed), and score only those within the proximity range.
+        ov = op.operational_volume_m
+        near_g = _near(geofences, fences, new, ov + 1.0)
+        flags = self.verify(checked, op, outsiders, [g for g, _ in near_g])
+        if flags:
+            self.dropped.append(
+                Dropped(operation_id=op.id, maneuver=maneuver, reason="; ".join(flags))
+            )
+            return None
+        reach = ov * self.config.risk_proximity_factor + 1.0
+        near_f = [f for _, f in _near(geofences, fences, new, reach)]
+        sc = self._score(
+            new, old, op, near_f, outsiders, lowest_priority, abandons=maneuver in _ABANDON
+        )
+        return Alternative(
+            operation_id=op.id,
+            maneuver=maneuver,
+            plan=plan,
+            cost=sc.cost,
+            risk=sc.risk,
+            detail=f"{detail}; " + ", ".join(f"{k}={v}" for k, v in sc.as_dict().items()),
+        )
+
+    def _local_fences(self, geofences: Sequence[Geofence]) -> list[LocalFence]:
+        return [fence_to_local(g, self.frame) for g in geofences]
+
+    # ---- multi-UAS --------------------------------------------------------------------------
+    def resolve_loss_of_separation(
+        self, threat: Threat, snapshot: AirspaceSnapshot
+    ) -> dict[OperationId, list[Alternative]]:
+        """Alternatives per UAS of the conflict and of the neighbours drawn into it. Every UAS
+        gets ``KEEP_PLAN`` (if Monitoring does not flag its plan against outsiders) so that
+        EM's joint selection can leave the higher-priority UAS alone."""
+        self.dropped = []
+        now = snapshot.t_s
+        cfg = self.config
+        involved = [snapshot.operations[i] for i in threat.uas_ids if i in snapshot.operations]
+        if not involved:
+            return {}
+        local = {op.id: plan_to_local(op.plan, self.frame).after(now) for op in involved}
+        end = min(now + cfg.horizon_s, max(float(lp.t[-1]) for lp in local.values()))
+        steps = max(2, math.ceil((end - now) / cfg.cord_dt_s) + 1)
+        grid: FloatArray = now + np.arange(steps, dtype=np.float64) * cfg.cord_dt_s
+        members = list(involved) + self._neighbours(involved, snapshot, grid)
+        for op in members:
+            local.setdefault(op.id, plan_to_local(op.plan, self.frame).after(now))
+        ids = {op.id for op in members}
+        outsiders = self._others(snapshot, ids)
+        geofences = snapshot.geofences
+        fences = self._local_fences(geofences)
+        u = len(members)
+        minima = np.zeros((u, u, 2))
+        for i, a in enumerate(members):
+            for j, b in enumerate(members):
+                minima[i, j] = self.monitoring.effective_minima(
+                    a.operational_volume_m, b.operational_volume_m
+                )
+        lowest = min(op.priority for op in members)
+        out: dict[OperationId, list[Alternative]] = {op.id: [] for op in members}
+        for op in members:
+            keep = self._keep(op, local[op.id], snapshot, geofences, fences, outsiders, lowest)
+            if keep is not None:
+                out[op.id].append(keep)
+
+        def run(axes: list[str], signs: list[int], mobile: list[bool], label: str) -> None:
+            cords = []
+            for k, op in enumerate(members):
+                lo, hi = self._alt_limits(op)
+                vertical = axes[k] == cd.AXIS_VERTICAL
+                slope = (
+                    op.max_climb_rate_mps * cfg.climb_fraction * cfg.cord_dt_s
+                    if vertical
+                    else cd.lateral_slope(
+                        op.cruise_speed_mps, cfg.cord_dt_s, cfg.max_lateral_angle_deg
+                    )
+                )
+                cords.append(
+                    cd.Cord(
+                        plan=local[op.id],
+                        axis=axes[k] if mobile[k] else cd.AXIS_NONE,
+                        sign=signs[k],
+                        mobility=self._mobility(op) if mobile[k] else 0.0,
+                        slope_m_per_step=slope,
+                        max_offset_m=cfg.max_vertical_offset_m
+                        if vertical
+                        else cfg.max_lateral_offset_m,
+                        min_alt_amsl_m=lo,
+                        max_alt_amsl_m=hi,
+                    )
+                )
+            res = cd.resolve(
+                cords,
+                grid,
+                minima,
+                spherical=self.monitoring.spherical,
+                margin_fraction=cfg.separation_margin_fraction,
+                max_iterations=cfg.max_iterations,
+            )
+            if res is None:
+                for k, op in enumerate(members):
+                    if mobile[k] and op in involved:
+                        self.dropped.append(
+                            Dropped(
+                                operation_id=op.id,
+                                maneuver=Maneuver.KEEP_PLAN,
+                                reason=f"{label}: no convergence",
+                            )
+                        )
+                return
+            for k, op in enumerate(members):
+                dk = res.displacement_m[k]
+                if cords[k].axis == cd.AXIS_NONE or float(dk.max()) < 0.5:
+                    continue
+                sign = res.signs[k]
+                man = _maneuver(cords[k].axis, sign)
+                new = self._deformed(op, local[op.id], grid, dk, cords[k].axis, sign)
+                alt = self._finish(
+                    op,
+                    man,
+                    new,
+                    local[op.id],
+                    snapshot,
+                    geofences=geofences,
+                    fences=fences,
+                    outsiders=outsiders,
+                    lowest_priority=lowest,
+                    detail=f"{label}: {man.value} up to {float(dk.max()):.0f} m",
+                )
+                if alt is not None:
+                    out[op.id].append(alt)
+
+        mobile_all = [self._mobility(op) > 0 for op in members]
+        run([cd.AXIS_VERTICAL] * u, [0] * u, mobile_all, "joint vertical repulsion")
+        run([cd.AXIS_LATERAL] * u, [0] * u, mobile_all, "joint lateral repulsion")
+        for k, op in enumerate(members):
+            if op not in involved or not mobile_all[k]:
+                continue
+            only = [j == k for j in range(u)]
+            for axis, sign in (
+                (cd.AXIS_VERTICAL, 1),
+                (cd.AXIS_VERTICAL, -1),
+                (cd.AXIS_LATERAL, 1),
+                (cd.AXIS_LATERAL, -1),
+            ):
+                signs = [sign if j == k else 0 for j in range(u)]
+                run([axis] * u, signs, only, f"{op.id} alone")
+            rigid = [o for o in members if o.id != op.id]
+            for alt in self._timing(
+                op, local[op.id], snapshot, geofences, fences, outsiders, rigid, lowest
+            ):
+                out[op.id].append(alt)
+        return {k: _dedupe(v) for k, v in out.items() if v or k in threat.uas_ids}
+
+    def _neighbours(
+        self, involved: Sequence[Operation], snapshot: AirspaceSnapshot, grid: FloatArray
+    ) -> list[Operation]:
+        """Operations whose plans come within 3x the minima of an involved plan inside the
+        horizon: the ones a deformation can push into (nearest first, at most
+        ``max_neighbours``)."""
+        ids = {op.id for op in involved}
+        pos = [plan_to_local(op.plan, self.frame).sample(grid) for op in involved]
+        found: list[tuple[float, Operation]] = []
+        for other in self._others(snapshot, ids):
+            p, ok = plan_to_local(other.plan, self.frame).sample(grid)
+            best = math.inf
+            for op, (q, ok2) in zip(involved, pos, strict=True):
+                m = ok & ok2
+                if not m.any():
+                    continue
+                h, v = self.monitoring.effective_minima(
+                    op.operational_volume_m, other.operational_volume_m
+                )
+                dh = np.hypot(p[m, 0] - q[m, 0], p[m, 1] - q[m, 1]) / h
+                dv = np.abs(p[m, 2] - q[m, 2]) / v
+                best = min(best, float(np.maximum(dh, dv).min()))
+            if best < 3.0:
+                found.append((best, other))
+        found.sort(key=lambda x: x[0])
+        return [op for _, op in found[: self.config.max_neighbours]]
+
+    def _keep(  # noqa: PLR0917 - private helper, called positionally
+        self,
+        op: Operation,
+        lp: LocalPlan,
+        snapshot: AirspaceSnapshot,
+        geofences: Sequence[Geofence],
+        fences: Sequence[LocalFence],
+        outsiders: Sequence[Operation],
+        lowest: int,
+    ) -> Alternative | None:
+        flags = self.verify(op.plan, op, outsiders, geofences)
+        if flags:
+            self.dropped.append(
+                Dropped(operation_id=op.id, maneuver=Maneuver.KEEP_PLAN, reason="; ".join(flags))
+            )
+            return None
+        sc = self._score(lp, lp, op, fences, outsiders, lowest, abandons=False)
+        return Alternative(
+            operation_id=op.id,
+            maneuver=Maneuver.KEEP_PLAN,
+            plan=op.plan,
+            cost=0.0,
+            risk=sc.risk,
+            detail="keep the current plan; "
+            + ", ".join(f"{k}={v}" for k, v in sc.as_dict().items()),
+        )
+
+    def _deformed(  # noqa: PLR0917 - private helper, called positionally
+        self,
+        op: Operation,
+        lp: LocalPlan,
+        grid: FloatArray,
+        d: FloatArray,
+        axis: str,
+        sign: int,
+    ) -> LocalPlan:
+        """The plan through the displaced cord, simplified and re-timed so that no segment is
+        faster than allowed (its original pace, or the cruise speed, times max_speed_factor)."""
+        times = np.union1d(grid[(grid >= lp.t[0]) & (grid <= lp.t[-1])], lp.t)
+        base, _ = lp.sample(times)
+        disp = np.interp(times, grid, d)
+        new = cd.apply(base, cd.left_normals(base), axis, sign, disp)
+        cand = simplify(LocalPlan(new[:, 0], new[:, 1], new[:, 2], times), SIMPLIFY_TOLERANCE_M)
+        # Original pace between the kept times, from the undeformed plan.
+        ob, _ = lp.sample(cand.t)
+        dt = np.diff(cand.t)
+        orig_h = np.hypot(np.diff(ob[:, 0]), np.diff(ob[:, 1]))
+        orig_v = np.abs(np.diff(ob[:, 2]))
+        safe_dt = np.maximum(dt, 1e-9)
+        f = self.config.max_speed_factor
+        speed = np.maximum(op.cruise_speed_mps, orig_h / safe_dt) * f
+        climb = np.maximum(op.max_climb_rate_mps, orig_v / safe_dt) * f
+        xyz = cand.xyz()
+        dd = np.diff(xyz, axis=0)
+        need = np.maximum.reduce(
+            [dt, np.hypot(dd[:, 0], dd[:, 1]) / speed, np.abs(dd[:, 2]) / climb]
+        )
+        t = np.concatenate([[cand.t[0]], cand.t[0] + np.cumsum(need)])
+        return LocalPlan(cand.e, cand.n, cand.z, t)
+
+    def _timing(  # noqa: PLR0917 - private helper, called positionally
+        self,
+        op: Operation,
+        lp: LocalPlan,
+        snapshot: AirspaceSnapshot,
+        geofences: Sequence[Geofence],
+        fences: Sequence[LocalFence],
+        outsiders: Sequence[Operation],
+        rigid: Sequence[Operation],
+        lowest: int,
+    ) -> list[Alternative]:
+        """The smallest delay (hold at the current point, then the same plan later) and the
+        mildest slow-down that separate ``op`` from every other plan, if any."""
+        now = snapshot.t_s
+        cfg = self.config
+        others = list(rigid) + list(outsiders)
+        out: list[Alternative] = []
+        delay = cfg.delay_step_s
+        while delay <= cfg.max_delay_s + 1e-9:
+            t = np.concatenate([[now, now + delay], lp.t[1:] + delay])
+            e = np.concatenate([[lp.e[0]], lp.e])
+            n = np.concatenate([[lp.n[0]], lp.n])
+            z = np.concatenate([[lp.z[0]], lp.z])
+            cand = LocalPlan(e, n, z, t)
+            if self._clear(op, cand, others):
+                alt = self._finish(
+                    op,
+                    Maneuver.DELAY,
+                    cand,
+                    lp,
+                    snapshot,
+                    geofences=geofences,
+                    fences=fences,
+                    outsiders=others,
+                    lowest_priority=lowest,
+                    detail=f"hold {delay:.0f} s here, then the plan",
+                )
+                if alt is not None:
+                    out.append(replace(alt, plan=alt.plan))
+                break
+            delay += cfg.delay_step_s
+        for factor in cfg.slowdown_factors:
+            if not 0.0 < factor < 1.0:
+                continue
+            cand = LocalPlan(lp.e, lp.n, lp.z, now + (lp.t - now) / factor)
+            if self._clear(op, cand, others):
+                alt = self._finish(
+                    op,
+                    Maneuver.SPEED_CHANGE,
+                    cand,
+                    lp,
+                    snapshot,
+                    geofences=geofences,
+                    fences=fences,
+                    outsiders=others,
+                    lowest_priority=lowest,
+                    detail=f"fly the plan at {factor:.0%} of its speed",
+                )
+                if alt is not None:
+                    out.append(alt)
+                break
+        return out
+
+    def _clear(self, op: Operation, cand: LocalPlan, others: Sequence[Operation]) -> bool:
+        """Fast screen of a timing candidate on a 1 s grid (Monitoring verifies the one that
+        passes): every other plan at least (1 + margin) times the pair's minima away."""
+        t = np.arange(float(cand.t[0]), float(cand.t[-1]) + 1.0, 1.0)
+        pos, _ = cand.sample(t)
+        scale = 1.0 + self.config.separation_margin_fraction
+        for o in others:
+            q, ok = plan_to_local(o.plan, self.frame).sample(t)
+            if not ok.any():
+                continue
+            h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
+            dh = np.hypot(pos[ok, 0] - q[ok, 0], pos[ok, 1] - q[ok, 1])
+            dv = np.abs(pos[ok, 2] - q[ok, 2])
+            if self.monitoring.spherical:
+                ratio = np.hypot(dh, dv) / h
+            else:
+                ratio = np.maximum(dh / h, dv / v)
+            if float(ratio.min()) < scale:
+                return False
+        return True
+
+    # ---- intruder ---------------------------------------------------------------------------
+    def intruder_plan(self, threat: Threat, snapshot: AirspaceSnapshot) -> LocalPlan | None:
+        """The intruder's predicted path: its row of the snapshot's prediction, else its track
+        extrapolated at constant velocity over the horizon."""
+        tid = threat.intruder_id
+        if tid is None:
+            return None
+        pred = snapshot.prediction
+        if pred is not None and tid in pred.track_ids:
+            pts = pred.points[pred.track_ids.index(tid)]
+            return LocalPlan(pts[:, 0].copy(), pts[:, 1].copy(), pts[:, 2].copy(), pts[:, 3].copy())
+        tr = snapshot.tracks.get(tid)
+        if tr is None:
+            return None
+        h = self.config.horizon_s
+        ve, vn, vu = tr.vel_enu_mps
+        return LocalPlan(
+            np.array([tr.east_m, tr.east_m + ve * h]),
+            np.array([tr.north_m, tr.north_m + vn * h]),
+            np.array([tr.alt_amsl_m, tr.alt_amsl_m + vu * h]),
+            np.array([tr.t_s, tr.t_s + h]),
+        )
+
+    def resolve_intruder(
+        self, threat: Threat, operation_id: OperationId, snapshot: AirspaceSnapshot
+    ) -> list[Alternative]:
+        """Vertical avoidance of a non-cooperative intruder: the UAS's cord alone climbs or
+        descends (the intruder is a rigid cord) until the intruder minima hold."""
+        self.dropped = []
+        op = snapshot.operations.get(operation_id)
+        intruder = self.intruder_plan(threat, snapshot)
+        if op is None or intruder is None:
+            return []
+        now = snapshot.t_s
+        cfg = self.config
+        lp = plan_to_local(op.plan, self.frame).after(now)
+        end = min(now + cfg.horizon_s, float(lp.t[-1]))
+        steps = max(2, math.ceil((end - now) / cfg.cord_dt_s) + 1)
+        grid: FloatArray = now + np.arange(steps, dtype=np.float64) * cfg.cord_dt_s
+        mon = self.monitoring
+        h_min = max(mon.intruder_horizontal_m, op.operational_volume_m)
+        v_min = max(mon.intruder_vertical_m, op.operational_volume_m)
+        minima = np.array([[[h_min, v_min]] * 2] * 2)
+        lo, hi = self._alt_limits(op)
+        outsiders = self._others(snapshot, {op.id})
+        fences = self._local_fences(snapshot.geofences)
+        out: list[Alternative] = []
+        for sign in (1, -1):
+            cords = [
+                cd.Cord(
+                    plan=lp,
+                    axis=cd.AXIS_VERTICAL,
+                    sign=sign,
+                    mobility=1.0,
+                    slope_m_per_step=op.max_climb_rate_mps * cfg.climb_fraction * cfg.cord_dt_s,
+                    max_offset_m=cfg.max_vertical_offset_m,
+                    min_alt_amsl_m=lo,
+                    max_alt_amsl_m=hi,
+                ),
+                cd.Cord(
+                    plan=intruder,
+                    axis=cd.AXIS_NONE,
+                    sign=0,
+                    mobility=0.0,
+                    slope_m_per_step=0.0,
+                    max_offset_m=0.0,
+                    min_alt_amsl_m=lo,
+                    max_alt_amsl_m=hi,
+                ),
+            ]
+            res = cd.resolve(
+                cords,
+                grid,
+                minima,
+                spherical=False,
+                margin_fraction=cfg.separation_margin_fraction,
+                max_iterations=cfg.max_iterations,
+            )
+            man = Maneuver.GO_UP if sign > 0 else Maneuver.GO_DOWN
+            if res is None:
+                self.dropped.append(
+                    Dropped(operation_id=op.id, maneuver=man, reason="no convergence")
+                )
+                continue
+            dk = res.displacement_m[0]
+            new = self._deformed(op, lp, grid, dk, cd.AXIS_VERTICAL, sign)
+            alt = self._finish(
+                op,
+                man,
+                new,
+                lp,
+                snapshot,
+                geofences=snapshot.geofences,
+                fences=fences,
+                outsiders=outsiders,
+                lowest_priority=op.priority,
+                detail=f"vertical avoidance of intruder {threat.intruder_id}: "
+                f"{man.value} {float(dk.max()):.0f} m",
+            )
+            if alt is not None:
+                out.append(alt)
+        return out
+
+    # ---- single UAS -------------------------------------------------------------------------
+    def resolve_single(
+        self,
+        threat: Threat,
+        operation_id: OperationId,
+        snapshot: AirspaceSnapshot,
+        maneuvers: Collection[Maneuver] | None = None,
+        extra_geofences: Sequence[Geofence] = (),
+    ) -> list[Alternative]:
+        """Single-UAS alternatives (A*), verified; ``maneuvers`` limits which are generated
+        (None = all that apply), ``extra_geofences`` are fences not yet in the snapshot (an
+        alert area EM is about to create)."""
+        self.dropped = []
+        op = snapshot.operations.get(operation_id)
+        if op is None:
+            return []
+        want = set(maneuvers) if maneuvers is not None else set(Maneuver)
+        now = snapshot.t_s
+        cfg = self.config
+        geofences = tuple(snapshot.geofences) + tuple(
+            g for g in extra_geofences if g.id not in {f.id for f in snapshot.geofences}
+        )
+        if threat.area is not None and threat.area.id not in {g.id for g in geofences}:
+            geofences += (threat.area,)
+        fences = self._local_fences(geofences)
+        lp = plan_to_local(op.plan, self.frame).after(now)
+        cur = self.current_xyz(op, snapshot)
+        zs = np.concatenate([lp.z, [cur[2]]])
+        ov = op.operational_volume_m
+        active = relevant_fences(
+            fences,
+            now,
+            max(now + cfg.horizon_s, float(lp.t[-1])),
+            float(zs.min()) - ov,
+            float(zs.max()) + ov,
+        )
+        planner = VisibilityPlanner(
+            merged_obstacles(active, ov + cfg.clearance_margin_m, cfg.cylinder_sides)
+        )
+        outsiders = self._others(snapshot, {op.id})
+        lowest = op.priority
+        router = _Router(op, planner, now, cur, lp)
+        out: list[Alternative] = []
+
+        def add(man: Maneuver, route: tuple[LocalPlan, int] | None, detail: str) -> None:
+            if route is None:
+                self.dropped.append(Dropped(operation_id=op.id, maneuver=man, reason="no path"))
+                return
+            new, verify_from = route
+            alt = self._finish(
+                op,
+                man,
+                new,
+                lp,
+                snapshot,
+                geofences=geofences,
+                fences=fences,
+                outsiders=outsiders,
+                lowest_priority=lowest,
+                detail=detail,
+                verify_from=verify_from,
+            )
+            if alt is not None:
+                out.append(alt)
+
+        inside = not planner.free(cur[:2])
+        if inside and Maneuver.ESCAPE in want:
+            add(
+                Maneuver.ESCAPE,
+                router.escape(cfg.escape_distance_m),
+                "leave by the closest border point, then rejoin the plan",
+            )
+        if not inside:
+            if Maneuver.REROUTE in want:
+                add(Maneuver.REROUTE, router.reroute(), "replace the crossing part of the plan")
+            if Maneuver.DIRECT_TO_GOAL in want:
+                add(
+                    Maneuver.DIRECT_TO_GOAL,
+                    router.to_point(lp.xyz()[-1], keep_rest=False),
+                    "direct to the final waypoint",
+                )
+            off_plan = router.distance_to_plan() > op.flight_geometry_m
+            if Maneuver.BACK_TO_PLAN in want and off_plan:
+                add(
+                    Maneuver.BACK_TO_PLAN,
+                    router.back_to_plan(),
+                    "back to the closest point of the plan",
+                )
+            if Maneuver.NEXT_WAYPOINT in want and len(lp) > 1:
+                add(Maneuver.NEXT_WAYPOINT, router.next_waypoint(), "straight to the next waypoint")
+            if Maneuver.RETURN_HOME in want:
+                home = self._home(op)
+                add(Maneuver.RETURN_HOME, router.land_at(home), "return home and land")
+            if Maneuver.LANDING_SITE in want and op.landing_sites:
+                best = self._landing(op, router, now)
+                if best is None:
+                    self.dropped.append(
+                        Dropped(
+                            operation_id=op.id,
+                            maneuver=Maneuver.LANDING_SITE,
+                            reason="no landing site reachable",
+                        )
+                    )
+                else:
+                    add(Maneuver.LANDING_SITE, best[0], best[1])
+        return out
+
+    def _home(self, op: Operation) -> FloatArray:
+        if op.home is not None:
+            e, n = self.frame.point_to_local(op.home.lat_deg, op.home.lon_deg)
+            return np.array([e, n, op.home.alt_amsl_m])
+        return np.asarray(plan_to_local(op.plan, self.frame).xyz()[0], dtype=np.float64)
+
+    def _landing(
+        self, op: Operation, router: _Router, now: float
+    ) -> tuple[tuple[LocalPlan, int], str] | None:
+        """The landing site reached soonest that the remaining endurance covers (with the
+        reserve), when the endurance is known (``Operation.endurance_s`` counted from the
+        plan start)."""
+        remaining = None
+        if op.endurance_s is not None:
+            remaining = (op.endurance_s - max(0.0, now - op.plan.start_t_s)) * (
+                1.0 - self.config.landing_reserve_fraction
+            )
+        best: tuple[tuple[LocalPlan, int], str] | None = None
+        best_t = math.inf
+        for k, site in enumerate(op.landing_sites):
+            e, n = self.frame.point_to_local(site.lat_deg, site.lon_deg)
+            route = router.land_at(np.array([e, n, site.alt_amsl_m]))
+            if route is None:
+                continue
+            dur = float(route[0].t[-1] - now)
+            if remaining is not None and dur > remaining:
+                continue
+            if dur < best_t:
+                best_t = dur
+                best = (route, f"land at site {k} in {dur:.0f} s")
+        return best
+
+
+class _Router:
+    """Builds 4D local plans for one UAS from A* paths: horizontal path at the cruise speed,
+    altitude blended linearly along it, then the rest of the plan shifted to the arrival."""
+
+    def __init__(
+        self, op: Operation, planner: VisibilityPlanner, now: float, cur: FloatArray, lp: LocalPlan
+    ) -> None:
+        self.op = op
+        self.planner = planner
+        self.now = now
+        self.cur = cur
+        self.lp = lp
+
+    def _fly(self, pts: Sequence[FloatArray], t0: float) -> LocalPlan:
+        xyz = np.array([np.asarray(p, dtype=np.float64) for p in pts])
+        d = np.diff(xyz, axis=0)
+        need = np.maximum(
+            np.hypot(d[:, 0], d[:, 1]) / self.op.cruise_speed_mps,
+            np.abs(d[:, 2]) / self.op.max_climb_rate_mps,
+        )
+        t = np.concatenate([[t0], t0 + np.cumsum(need)])
+        return LocalPlan(xyz[:, 0], xyz[:, 1], xyz[:, 2], t)
+
+    def _path3d(self, a: FloatArray, b: FloatArray) -> list[FloatArray] | None:
+        path = self.planner.path(a[:2], b[:2])
+        if path is None:
+            return None
+        lengths = np.concatenate(
+            [
+                [0.0],
+                np.cumsum([np.hypot(*(q - p)) for p, q in itertools.pairwise(path)]),
+            ]
+        )
+        total = lengths[-1] if lengths[-1] > 0 else 1.0
+        return [
+            np.array([p[0], p[1], a[2] + (b[2] - a[2]) * s / total])
+            for p, s in zip(path, lengths, strict=True)
+        ]
+
+    def _join(self, head: LocalPlan, rest_from: int) -> LocalPlan:
+        """``head`` then the plan's waypoints from ``rest_from`` on, shifted in time so that
+        the first of them is reached when ``head`` ends."""
+        if rest_from >= len(self.lp):
+            return head
+        shift = float(head.t[-1]) - float(self.lp.t[rest_from])
+        # ``head`` ends at waypoint rest_from, so the rest starts after it.
+        sl = slice(rest_from + 1, None)
+        return LocalPlan(
+            np.concatenate([head.e, self.lp.e[sl]]),
+            np.concatenate([head.n, self.lp.n[sl]]),
+            np.concatenate([head.z, self.lp.z[sl]]),
+            np.concatenate([head.t, self.lp.t[sl] + shift]),
+        )
+
+    def _route_via(
+        self, start: FloatArray, t0: float, prefix: list[FloatArray], first: int
+    ) -> LocalPlan | None:
+        """From ``start`` through the plan's waypoints from index ``first``, replacing every
+        blocked stretch by an A* path from the last free waypoint before it to the first free
+        one after it."""
+        pts: list[FloatArray] = [*prefix, start]
+        wps = self.lp.xyz()
+        free = [self.planner.free(w[:2]) for w in wps]
+        i = first
+        last = start
+        while i < len(wps):
+            if not free[i]:
+                i += 1
+                continue
+            if self.planner.segment_free(last[:2], wps[i][:2]):
+                pts.append(wps[i])
+            else:
+                seg = self._path3d(last, wps[i])
+                if seg is None:
+                    return None
+                pts.extend(seg[1:])
+            last = wps[i]
+            i += 1
+        if not free[-1]:
+            return None  # the destination itself is blocked
+        return self._fly(pts, t0)
+
+    def reroute(self) -> tuple[LocalPlan, int] | None:
+        plan = self._route_via(self.cur, self.now, [], 1)
+        return None if plan is None else (plan, 0)
+
+    def escape(self, extra_m: float) -> tuple[LocalPlan, int] | None:
+        out2 = self.planner.exit_point(self.cur[:2], extra_m)
+        out = np.array([out2[0], out2[1], self.cur[2]])
+        # Rejoin at the first plan waypoint ahead that is outside every obstacle.
+        plan = self._route_via(out, self.now, [self.cur], 1)
+        if plan is None:
+            return None
+        t1 = self._fly([self.cur, out], self.now).t[-1]
+        shifted = LocalPlan(
+            plan.e, plan.n, plan.z, plan.t + (t1 - self.now) - (plan.t[1] - plan.t[0])
+        )
+        return shifted, 1
+
+    def to_point(self, target: FloatArray, *, keep_rest: bool) -> tuple[LocalPlan, int] | None:
+        path = self._path3d(self.cur, target)
+        if path is None:
+            return None
+        return self._fly(path, self.now), 0
+
+    def distance_to_plan(self) -> float:
+        if len(self.lp) < 2:
+            return float(np.hypot(*(self.cur[:2] - self.lp.xyz()[0, :2])))
+        return float(LineString(self.lp.xyz()[:, :2]).distance(Point(self.cur[0], self.cur[1])))
+
+    def back_to_plan(self) -> tuple[LocalPlan, int] | None:
+        """To the closest point of the remaining plan, then on along the plan."""
+        if len(self.lp) < 2:
+            return self.to_point(self.lp.xyz()[0], keep_rest=False)
+        line = LineString(self.lp.xyz()[:, :2])
+        s = line.project(Point(self.cur[0], self.cur[1]))
+        cum = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(self.lp.e), np.diff(self.lp.n)))])
+        k = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(self.lp) - 2))
+        frac = 0.0 if cum[k + 1] == cum[k] else (s - cum[k]) / (cum[k + 1] - cum[k])
+        xyz = self.lp.xyz()
+        q = xyz[k] + frac * (xyz[k + 1] - xyz[k])
+        path = self._path3d(self.cur, q)
+        if path is None:
+            return None
+        head = self._fly(path, self.now)
+        tq = float(self.lp.t[k] + frac * (self.lp.t[k + 1] - self.lp.t[k]))
+        shift = float(head.t[-1]) - tq
+        sl = slice(k + 1, None)
+        return (
+            LocalPlan(
+                np.concatenate([head.e, self.lp.e[sl]]),
+                np.concatenate([head.n, self.lp.n[sl]]),
+                np.concatenate([head.z, self.lp.z[sl]]),
+                np.concatenate([head.t, self.lp.t[sl] + shift]),
+            ),
+            0,
+        )
+
+    def next_waypoint(self) -> tuple[LocalPlan, int] | None:
+        target = self.lp.xyz()[1]
+        path = self._path3d(self.cur, target)
+        if path is None:
+            return None
+        return self._join(self._fly(path, self.now), 1), 0
+
+    def land_at(self, site: FloatArray) -> tuple[LocalPlan, int] | None:
+        """Cruise at the current altitude to above ``site``, then descend onto it."""
+        above = np.array([site[0], site[1], self.cur[2]])
+        path = self._path3d(self.cur, above)
+        if path is None:
+            return None
+        return self._fly([*path, site], self.now), 0
+
+
+def _near(
+    geofences: Sequence[Geofence], fences: Sequence[LocalFence], lp: LocalPlan, margin_m: float
+) -> list[tuple[Geofence, LocalFence]]:
+    """The (geofence, local fence) pairs whose bounding box comes within ``margin_m`` of the
+    plan's bounding box (both lists are in the same order)."""
+    e0, e1 = float(lp.e.min()) - margin_m, float(lp.e.max()) + margin_m
+    n0, n1 = float(lp.n.min()) - margin_m, float(lp.n.max()) + margin_m
+    out = []
+    for g, f in zip(geofences, fences, strict=True):
+        b0, b1, b2, b3 = f.shape.bounds
+        if b0 <= e1 and b2 >= e0 and b1 <= n1 and b3 >= n0:
+            out.append((g, f))
+    return out
+
+
+def _dedupe(alts: list[Alternative]) -> list[Alternative]:
+    """Drop alternatives that repeat a maneuver with the same cost and risk (two scenarios
+    that deformed one UAS the same way)."""
+    seen: set[tuple[Maneuver, float, float]] = set()
+    out = []
+    for a in alts:
+        key = (a.maneuver, round(a.cost, 6), round(a.risk, 6))
+        if key not in seen:
+            seen.add(key)
+            out.append(a)
+    return out
+
+
+def _maneuver(axis: str, sign: int) -> Maneuver:
+    if axis == cd.AXIS_VERTICAL:
+        return Maneuver.GO_UP if sign > 0 else Maneuver.GO_DOWN
+    return Maneuver.GO_LEFT if sign > 0 else Maneuver.GO_RIGHT

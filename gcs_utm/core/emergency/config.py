@@ -1,0 +1,131 @@
+"""Settings of Emergency Management (section ``[emergency]``).
+
+``policy`` maps a :class:`gcs_utm.model.ThreatKind` name to an action (one of
+:data:`ACTIONS`); the table and what each action does are in ``docs/emergency.md``. ``alpha``
+weighs cost and ``beta`` riskiness in the joint selection ``min sum(alpha*c + beta*r)`` (paper
+eq. 1); safety is favoured by default (beta > alpha).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gcs_utm.config import setting
+from gcs_utm.model import ThreatKind
+
+ACTIONS = (
+    "alternative_plans",  # multi-UAS charged cords + joint selection
+    "reroute",  # single-UAS A*: reroute, escape, direct to goal, back to plan, next wp, ...
+    "back_to_plan",  # back to the closest plan point or straight to the next waypoint
+    "warn",  # operator warning only
+    "suspend_and_geofence",  # hold/land the UAS, dynamic geofence around it, reroute others
+    "land_or_home",  # nearest reachable landing site or home; land now if none
+    "alert_and_geofence",  # operator alert, temporary geofence around the predicted position
+    "geofence_from_area",  # the alert's area becomes a geofence, affected UAS rerouted
+    "vertical_avoidance",  # climb or descend away from an intruder
+)
+
+DEFAULT_POLICY: dict[str, str] = {
+    ThreatKind.LOSS_OF_SEPARATION.value: "alternative_plans",
+    ThreatKind.GEOFENCE_CONFLICT.value: "reroute",
+    ThreatKind.GEOFENCE_INTRUSION.value: "reroute",
+    ThreatKind.UAS_OUT_OV.value: "back_to_plan",
+    ThreatKind.UAS_IN_CV.value: "warn",
+    ThreatKind.JAMMING_ATTACK.value: "suspend_and_geofence",
+    ThreatKind.SPOOFING_ATTACK.value: "suspend_and_geofence",
+    ThreatKind.GNSS_DEGRADATION.value: "land_or_home",
+    ThreatKind.LACK_OF_BATTERY.value: "land_or_home",
+    ThreatKind.TECHNICAL_FAILURE.value: "land_or_home",
+    ThreatKind.COMMUNICATION_FAILURE.value: "alert_and_geofence",
+    ThreatKind.ALERT_WARNING.value: "geofence_from_area",
+    ThreatKind.INTRUDER.value: "vertical_avoidance",
+}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class EmergencyConfig:
+    alpha: float = setting(1.0, "weight of cost in the joint selection (paper eq. 1)", min=0.0)
+    beta: float = setting(
+        3.0, "weight of riskiness in the joint selection; > alpha favours safety", min=0.0
+    )
+    # setting() turns a dict default into a default_factory copy, so this is not shared state.
+    policy: dict[str, str] = setting(  # noqa: RUF009
+        DEFAULT_POLICY, "action per threat kind (see docs/emergency.md for the actions)"
+    )
+    autonomous: bool = setting(
+        False, "apply decisions without operator confirmation (recommendations born accepted)"
+    )
+    max_combinations: int = setting(
+        20000,
+        "joint selection explores at most this many partial combinations (branch and bound); "
+        "when exceeded the best found so far is used and the audit says so",
+        min=1,
+    )
+    deadline_margin_s: float = setting(
+        10.0,
+        "a recommendation's deadline is the predicted event time minus this",
+        min=0.0,
+        unit="s",
+    )
+    min_response_s: float = setting(
+        5.0, "the shortest time an operator is given to answer", min=0.0, unit="s"
+    )
+    default_event_horizon_s: float = setting(
+        60.0, "assumed time to the event when a threat does not predict one", min=1.0, unit="s"
+    )
+    max_replans: int = setting(
+        3, "re-plans per threat and UAS after rejection or expiry before escalating", min=0
+    )
+    suspend_command: str = setting(
+        "hold", "command for a suspended operation (jamming/spoofing): 'hold' or 'land'"
+    )
+    jamming_radius_m: float = setting(
+        500.0, "radius of the dynamic geofence around a jammed/spoofed UAS", min=1.0, unit="m"
+    )
+    jamming_band_m: float = setting(
+        150.0, "half height of that geofence around the UAS altitude", min=1.0, unit="m"
+    )
+    jamming_duration_s: float = setting(
+        1800.0, "how long that geofence stays active", min=1.0, unit="s"
+    )
+    link_loss_radius_m: float = setting(
+        200.0,
+        "radius of the temporary geofence around a lost UAS's predicted position",
+        min=1.0,
+        unit="m",
+    )
+    link_loss_band_m: float = setting(
+        100.0, "half height of the link-loss geofence", min=1.0, unit="m"
+    )
+    link_loss_duration_s: float = setting(
+        600.0, "how long the link-loss geofence stays active", min=1.0, unit="s"
+    )
+    link_loss_predict_s: float = setting(
+        10.0,
+        "the lost UAS's position is taken from its plan this far after the loss",
+        min=0.0,
+        unit="s",
+    )
+    alert_duration_s: float = setting(
+        3600.0,
+        "duration of a geofence from an alert area without its own end time",
+        min=1.0,
+        unit="s",
+    )
+
+    def __post_init__(self) -> None:
+        for kind, action in self.policy.items():
+            if kind not in ThreatKind.__members__:
+                raise ValueError(f"emergency.policy: unknown threat kind {kind!r}")
+            if action not in ACTIONS:
+                raise ValueError(
+                    f"emergency.policy.{kind}: expected one of {ACTIONS}, got {action!r}"
+                )
+        if self.suspend_command not in ("hold", "land"):
+            raise ValueError(
+                f"emergency.suspend_command: expected 'hold' or 'land', got "
+                f"{self.suspend_command!r}"
+            )
+
+    def action_for(self, kind: ThreatKind) -> str:
+        return self.policy.get(kind.value, DEFAULT_POLICY[kind.value])

@@ -1,0 +1,728 @@
+"""Emergency Management: threat -> policy -> TD alternatives -> joint selection -> actions.
+
+Pure (no I/O, no clock): time comes from the snapshot (``AirspaceSnapshot.t_s``). State is
+the open cases (one per threat id: the threat, the action taken, per-UAS excluded maneuvers and
+re-plan counts, extra dynamic geofences) and the current version of every recommendation.
+
+Guarantees:
+- every plan change or command leaves as a :class:`Recommendation` with a deadline
+  (predicted event time minus ``deadline_margin_s``, never less than ``min_response_s`` from
+  now); in autonomous mode it is born ACCEPTED and commands are also returned to execute;
+- a rejection or an expiry re-plans without the refused maneuver (a new version of the same
+  recommendation id) up to ``max_replans`` times, then escalates to the operator; when no
+  feasible alternative exists EM escalates: nothing is dropped silently;
+- every decision yields an :class:`AuditEntry` with all alternatives, their cost and risk, the
+  weights, the selection and the reason.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+from gcs_utm.core.deconfliction import TacticalDeconfliction
+from gcs_utm.core.emergency.config import EmergencyConfig
+from gcs_utm.core.emergency.selection import Selection, select_joint, weighted
+from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.core.monitoring.strategic import plan_vs_geofences
+from gcs_utm.geo import LocalFrame
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    Alternative,
+    AuditEntry,
+    Command,
+    CommandKind,
+    Geofence,
+    GeofenceId,
+    GeofenceKind,
+    GeofenceShape,
+    LatLon,
+    Maneuver,
+    OperationId,
+    Recommendation,
+    RecommendationId,
+    RecommendationState,
+    Threat,
+    ThreatId,
+    ThreatKind,
+    ThreatStatus,
+)
+
+ACTOR = "EM"
+
+REROUTE_MANEUVERS = frozenset(
+    {
+        Maneuver.REROUTE,
+        Maneuver.ESCAPE,
+        Maneuver.DIRECT_TO_GOAL,
+        Maneuver.BACK_TO_PLAN,
+        Maneuver.NEXT_WAYPOINT,
+        Maneuver.RETURN_HOME,
+        Maneuver.LANDING_SITE,
+    }
+)
+SINGLE_MANEUVERS: dict[str, frozenset[Maneuver]] = {
+    "reroute": REROUTE_MANEUVERS,
+    "back_to_plan": frozenset({Maneuver.BACK_TO_PLAN, Maneuver.NEXT_WAYPOINT}),
+    "land_or_home": frozenset({Maneuver.LANDING_SITE, Maneuver.RETURN_HOME}),
+}
+_MODE_MULTI = "multi"
+_MODE_INTRUDER = "intruder"
+_MODE_COMMAND = "command"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Decision:
+    """What one EM step asks the rest of the system to do."""
+
+    recommendations: tuple[Recommendation, ...] = ()
+    geofences: tuple[Geofence, ...] = ()
+    commands: tuple[Command, ...] = ()
+    escalations: tuple[str, ...] = ()
+    superseded: tuple[RecommendationId, ...] = ()
+    audit: tuple[AuditEntry, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+    def merge(self, other: Decision) -> Decision:
+        return Decision(
+            recommendations=self.recommendations + other.recommendations,
+            geofences=self.geofences + other.geofences,
+            commands=self.commands + other.commands,
+            escalations=self.escalations + other.escalations,
+            superseded=self.superseded + other.superseded,
+            audit=self.audit + other.audit,
+            warnings=self.warnings + other.warnings,
+        )
+
+
+@dataclass(slots=True)
+class _Case:
+    threat: Threat
+    action: str
+    modes: dict[OperationId, str] = field(default_factory=dict)
+    excluded: dict[OperationId, set[Maneuver]] = field(default_factory=dict)
+    replans: dict[OperationId, int] = field(default_factory=dict)
+    geofences: list[Geofence] = field(default_factory=list)
+    rec_ids: set[RecommendationId] = field(default_factory=set)
+
+
+def _alt_record(alt: Alternative, alpha: float, beta: float) -> dict[str, object]:
+    return {
+        "operation_id": alt.operation_id,
+        "maneuver": alt.maneuver.value,
+        "cost": round(alt.cost, 6),
+        "risk": round(alt.risk, 6),
+        "score": round(weighted(alt, alpha, beta), 6),
+        "detail": alt.detail,
+        "waypoints": 0 if alt.plan is None else len(alt.plan.waypoints),
+    }
+
+
+class EmergencyManager:
+    def __init__(
+        self,
+        frame: LocalFrame,
+        config: EmergencyConfig,
+        td: TacticalDeconfliction,
+        monitoring: MonitoringConfig,
+    ) -> None:
+        self.frame = frame
+        self.config = config
+        self.td = td
+        self.monitoring = monitoring
+        self._cases: dict[ThreatId, _Case] = {}
+        self._recs: dict[RecommendationId, Recommendation] = {}
+
+    # ---- queries ----------------------------------------------------------------------------
+    def pending(self) -> list[Recommendation]:
+        """Recommendations waiting for an answer, earliest deadline first."""
+        recs = [r for r in self._recs.values() if r.state is RecommendationState.PROPOSED]
+        return sorted(recs, key=lambda r: r.deadline_t_s)
+
+    def recommendation(self, rec_id: RecommendationId) -> Recommendation | None:
+        return self._recs.get(rec_id)
+
+    def open_threats(self) -> list[ThreatId]:
+        return list(self._cases)
+
+    # ---- entry points -----------------------------------------------------------------------
+    def on_threat(self, threat: Threat, snapshot: AirspaceSnapshot) -> Decision:
+        if threat.status is ThreatStatus.CLOSED:
+            return self.on_threat_closed(threat)
+        case = self._cases.get(threat.id)
+        if case is not None and self._live(case):
+            # The threat persists and is being handled: a pending or accepted recommendation
+            # stands until answered, expired or the threat closes (no churn every cycle).
+            case.threat = threat
+            return Decision()
+        action = self.config.action_for(threat.kind)
+        case = _Case(threat=threat, action=action)
+        self._cases[threat.id] = case
+        return self._handle(case, snapshot)
+
+    def on_answer(
+        self, rec: Recommendation, accepted: bool, snapshot: AirspaceSnapshot
+    ) -> Decision:
+        now = snapshot.t_s
+        cur = self._recs.get(rec.id)
+        if (
+            cur is None
+            or cur.version != rec.version
+            or cur.state is not RecommendationState.PROPOSED
+        ):
+            state = "unknown" if cur is None else f"v{cur.version} {cur.state.value}"
+            msg = f"answer to {rec.id} v{rec.version} ignored: current is {state}"
+            return Decision(
+                warnings=(msg,),
+                audit=(self._audit(now, "answer_ignored", rec.id, {"reason": msg}),),
+            )
+        if accepted:
+            new = cur.transition(RecommendationState.ACCEPTED, now, "accepted by the operator")
+            self._recs[new.id] = new
+            return Decision(
+                recommendations=(new,),
+                audit=(self._audit(now, "accepted", rec.id, {"version": rec.version}),),
+            )
+        new = cur.transition(RecommendationState.REJECTED, now, "rejected by the operator")
+        self._recs[new.id] = new
+        d = Decision(
+            recommendations=(new,),
+            audit=(self._audit(now, "rejected", rec.id, {"version": rec.version}),),
+        )
+        return d.merge(self._replan(new, snapshot, "rejected"))
+
+    def on_expired(self, rec: Recommendation, snapshot: AirspaceSnapshot) -> Decision:
+        now = snapshot.t_s
+        cur = self._recs.get(rec.id)
+        if (
+            cur is None
+            or cur.version != rec.version
+            or cur.state is not RecommendationState.PROPOSED
+        ):
+            return Decision()
+        new = cur.transition(RecommendationState.EXPIRED, now, "no answer before the deadline")
+        self._recs[new.id] = new
+        msg = f"{rec.id} v{rec.version} ({rec.operation_id}) expired without an answer"
+        d = Decision(
+            recommendations=(new,),
+            escalations=(msg,),
+            audit=(self._audit(now, "expired", rec.id, {"version": rec.version}),),
+        )
+        return d.merge(self._replan(new, snapshot, "expired"))
+
+    def on_threat_closed(self, threat: Threat) -> Decision:
+        case = self._cases.pop(threat.id, None)
+        if case is None:
+            return Decision()
+        t = threat.updated_at_s if threat.updated_at_s is not None else threat.detected_at_s
+        recs: list[Recommendation] = []
+        for rid in sorted(case.rec_ids):
+            cur = self._recs[rid]
+            if cur.state is RecommendationState.PROPOSED:
+                new = cur.transition(RecommendationState.SUPERSEDED, t, "threat closed")
+                self._recs[rid] = new
+                recs.append(new)
+        return Decision(
+            recommendations=tuple(recs),
+            superseded=tuple(r.id for r in recs),
+            audit=(
+                self._audit(t, "threat_closed", threat.id, {"superseded": [r.id for r in recs]}),
+            ),
+        )
+
+    # ---- internals --------------------------------------------------------------------------
+    def _live(self, case: _Case) -> bool:
+        live = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED)
+        return any(self._recs[r].state in live for r in case.rec_ids) or not case.rec_ids
+
+    def _audit(
+        self, t_s: float, action: str, subject: str, detail: dict[str, object]
+    ) -> AuditEntry:
+        return AuditEntry(t_s=t_s, actor=ACTOR, action=action, subject=str(subject), detail=detail)
+
+    def _deadline(self, threat: Threat, now: float) -> float:
+        event = threat.predicted_event_at_s
+        if event is None:
+            event = now + self.config.default_event_horizon_s
+        return max(now + self.config.min_response_s, event - self.config.deadline_margin_s)
+
+    def _issue(
+        self,
+        case: _Case,
+        op_id: OperationId,
+        now: float,
+        *,
+        selected: Alternative | None = None,
+        command: Command | None = None,
+        alternatives: Sequence[Alternative] = (),
+        reason: str,
+        geofence: Geofence | None = None,
+    ) -> Decision:
+        """A new recommendation (or a new version replacing a pending one)."""
+        rid = RecommendationId(f"{case.threat.id}/{op_id}")
+        prev = self._recs.get(rid)
+        superseded: list[RecommendationId] = []
+        recs: list[Recommendation] = []
+        if prev is not None and prev.state is RecommendationState.PROPOSED:
+            old = prev.transition(RecommendationState.SUPERSEDED, now, "replaced by a new version")
+            recs.append(old)
+            superseded.append(rid)
+        rec = Recommendation(
+            id=rid,
+            version=1 if prev is None else prev.version + 1,
+            threat_id=case.threat.id,
+            threat_kind=case.threat.kind,
+            operation_id=op_id,
+            created_t_s=now,
+            deadline_t_s=self._deadline(case.threat, now),
+            selected=selected,
+            command=command,
+            alternatives=tuple(alternatives),
+            reason=reason,
+            new_geofence=geofence,
+            state_t_s=now,
+        )
+        commands: tuple[Command, ...] = ()
+        if self.config.autonomous:
+            rec = rec.transition(RecommendationState.ACCEPTED, now, "autonomous mode")
+            if command is not None:
+                commands = (command,)
+        self._recs[rid] = rec
+        case.rec_ids.add(rid)
+        recs.append(rec)
+        return Decision(
+            recommendations=tuple(recs), superseded=tuple(superseded), commands=commands
+        )
+
+    def _handle(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
+        t = case.threat
+        now = snapshot.t_s
+        a = case.action
+        if a == "alternative_plans":
+            return self._multi(case, snapshot)
+        if a in SINGLE_MANEUVERS:
+            d = Decision()
+            for op_id in t.uas_ids:
+                d = d.merge(self._single(case, op_id, snapshot, SINGLE_MANEUVERS[a]))
+            return d
+        if a == "warn":
+            msg = f"{t.kind.value}: {', '.join(t.uas_ids)} {t.message}".strip()
+            return Decision(
+                warnings=(msg,), audit=(self._audit(now, "warn", t.id, {"message": msg}),)
+            )
+        if a == "vertical_avoidance":
+            d = Decision()
+            for op_id in t.uas_ids:
+                d = d.merge(self._intruder(case, op_id, snapshot))
+            return d
+        if a == "suspend_and_geofence":
+            return self._suspend(case, snapshot)
+        if a == "alert_and_geofence":
+            return self._link_loss(case, snapshot)
+        if a == "geofence_from_area":
+            return self._area(case, snapshot)
+        raise AssertionError(f"unhandled action {a!r}")  # EmergencyConfig validates actions
+
+    # -- multi-UAS
+    def _multi(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
+        now = snapshot.t_s
+        cfg = self.config
+        t = case.threat
+        options = self.td.resolve_loss_of_separation(t, snapshot)
+        for op_id, alts in options.items():
+            banned = case.excluded.get(op_id, set())
+            options[op_id] = [x for x in alts if x.maneuver not in banned]
+        sel = select_joint(
+            options,
+            alpha=cfg.alpha,
+            beta=cfg.beta,
+            compatible=lambda x, y: self.td.compatible(x, y, snapshot),
+            max_nodes=cfg.max_combinations,
+        )
+        detail = self._detail(options, sel, "loss of separation: charged cords + joint selection")
+        if sel is None:
+            msg = (
+                f"{t.id}: no conflict-free combination of alternatives for "
+                f"{', '.join(t.uas_ids)}; operator action needed"
+            )
+            return Decision(
+                escalations=(msg,), audit=(self._audit(now, "escalation", t.id, detail),)
+            )
+        d = Decision(audit=(self._audit(now, "decision", t.id, detail),))
+        for op_id, alt in sel.chosen.items():
+            case.modes[op_id] = _MODE_MULTI
+            rid = RecommendationId(f"{t.id}/{op_id}")
+            prev = self._recs.get(rid)
+            if alt.maneuver is Maneuver.KEEP_PLAN:
+                if prev is not None and prev.state is RecommendationState.PROPOSED:
+                    old = prev.transition(RecommendationState.SUPERSEDED, now, "no longer needed")
+                    self._recs[rid] = old
+                    d = d.merge(Decision(recommendations=(old,), superseded=(rid,)))
+                continue
+            if (
+                prev is not None
+                and prev.state in (RecommendationState.PROPOSED, RecommendationState.ACCEPTED)
+                and prev.selected is not None
+                and prev.selected.plan == alt.plan
+            ):
+                continue  # unchanged for this UAS: keep the standing version
+            others = [c for k, c in sel.chosen.items() if k != op_id]
+            shown = [
+                x
+                for x in options[op_id]
+                if x is not alt and all(self.td.compatible(x, c, snapshot) for c in others)
+            ]
+            d = d.merge(
+                self._issue(
+                    case,
+                    op_id,
+                    now,
+                    selected=alt,
+                    alternatives=shown,
+                    reason=f"{t.kind.value}: {alt.maneuver.value} (joint selection, "
+                    f"score {sel.total:.3f})",
+                )
+            )
+        return d
+
+    def _detail(
+        self,
+        options: dict[OperationId, list[Alternative]],
+        sel: Selection | None,
+        reason: str,
+    ) -> dict[str, object]:
+        cfg = self.config
+        return {
+            "reason": reason,
+            "alpha": cfg.alpha,
+            "beta": cfg.beta,
+            "alternatives": [
+                _alt_record(x, cfg.alpha, cfg.beta) for alts in options.values() for x in alts
+            ],
+            "selected": None
+            if sel is None
+            else {k: v.maneuver.value for k, v in sel.chosen.items()},
+            "total": None if sel is None else round(sel.total, 6),
+            "explored": None if sel is None else sel.explored,
+            "truncated": None if sel is None else sel.truncated,
+            "dropped": [
+                {"operation_id": x.operation_id, "maneuver": x.maneuver.value, "reason": x.reason}
+                for x in self.td.dropped
+            ],
+        }
+
+    # -- single UAS
+    def _single(
+        self,
+        case: _Case,
+        op_id: OperationId,
+        snapshot: AirspaceSnapshot,
+        maneuvers: frozenset[Maneuver],
+        threat: Threat | None = None,
+    ) -> Decision:
+        now = snapshot.t_s
+        t = threat or case.threat
+        case.modes[op_id] = f"single:{','.join(sorted(m.value for m in maneuvers))}"
+        allowed = maneuvers - case.excluded.get(op_id, set())
+        alts = self.td.resolve_single(
+            t, op_id, snapshot, maneuvers=allowed, extra_geofences=tuple(case.geofences)
+        )
+        cfg = self.config
+        alts.sort(key=lambda x: weighted(x, cfg.alpha, cfg.beta))
+        options = {op_id: alts}
+        best = alts[0] if alts else None
+        sel = (
+            None
+            if best is None
+            else Selection(
+                chosen={op_id: best},
+                total=weighted(best, cfg.alpha, cfg.beta),
+                explored=len(alts),
+                truncated=False,
+            )
+        )
+        detail = self._detail(options, sel, f"{t.kind.value}: {case.action}")
+        if best is None:
+            audit = (self._audit(now, "escalation", case.threat.id, detail),)
+            if case.action == "land_or_home":
+                # Low battery or failure and no reachable site: land where it is, and say so.
+                cmd = Command(kind=CommandKind.LAND, operation_id=op_id)
+                case.modes[op_id] = _MODE_COMMAND
+                msg = f"{case.threat.id}: no reachable landing site or home for {op_id}: land now"
+                d = self._issue(case, op_id, now, command=cmd, reason=msg)
+                return d.merge(Decision(escalations=(msg,), audit=audit))
+            msg = f"{case.threat.id}: no feasible alternative for {op_id} ({t.kind.value})"
+            return Decision(escalations=(msg,), audit=audit)
+        d = Decision(audit=(self._audit(now, "decision", case.threat.id, detail),))
+        return d.merge(
+            self._issue(
+                case,
+                op_id,
+                now,
+                selected=best,
+                alternatives=alts[1:],
+                reason=f"{t.kind.value}: {best.maneuver.value}",
+            )
+        )
+
+    def _intruder(self, case: _Case, op_id: OperationId, snapshot: AirspaceSnapshot) -> Decision:
+        now = snapshot.t_s
+        cfg = self.config
+        case.modes[op_id] = _MODE_INTRUDER
+        banned = case.excluded.get(op_id, set())
+        alts = [
+            x
+            for x in self.td.resolve_intruder(case.threat, op_id, snapshot)
+            if x.maneuver not in banned
+        ]
+        alts.sort(key=lambda x: weighted(x, cfg.alpha, cfg.beta))
+        sel = (
+            None
+            if not alts
+            else Selection(
+                chosen={op_id: alts[0]},
+                total=weighted(alts[0], cfg.alpha, cfg.beta),
+                explored=len(alts),
+                truncated=False,
+            )
+        )
+        detail = self._detail({op_id: alts}, sel, "intruder: vertical avoidance")
+        if not alts:
+            msg = (
+                f"{case.threat.id}: no vertical avoidance for {op_id} "
+                f"from intruder {case.threat.intruder_id}"
+            )
+            return Decision(
+                escalations=(msg,), audit=(self._audit(now, "escalation", case.threat.id, detail),)
+            )
+        d = Decision(audit=(self._audit(now, "decision", case.threat.id, detail),))
+        return d.merge(
+            self._issue(
+                case,
+                op_id,
+                now,
+                selected=alts[0],
+                alternatives=alts[1:],
+                reason=f"intruder {case.threat.intruder_id}: {alts[0].maneuver.value}",
+            )
+        )
+
+    # -- geofence-creating actions
+    def _cylinder(  # noqa: PLR0917 - private helper, one call per geofence kind
+        self,
+        gid: str,
+        east_m: float,
+        north_m: float,
+        alt_amsl_m: float,
+        radius_m: float,
+        band_m: float,
+        now: float,
+        duration_s: float,
+        reason: str,
+    ) -> Geofence:
+        lat, lon = self.frame.point_to_wgs84(east_m, north_m)
+        return Geofence(
+            id=GeofenceId(gid),
+            shape=GeofenceShape.CYLINDER,
+            min_alt_amsl_m=alt_amsl_m - band_m,
+            max_alt_amsl_m=alt_amsl_m + band_m,
+            center=LatLon(lat_deg=lat, lon_deg=lon),
+            radius_m=radius_m,
+            start_t_s=now,
+            end_t_s=now + duration_s,
+            kind=GeofenceKind.DYNAMIC,
+            reason=reason,
+            source=ACTOR,
+        )
+
+    def _reroute_affected(
+        self,
+        case: _Case,
+        fence: Geofence,
+        snapshot: AirspaceSnapshot,
+        exclude: set[OperationId],
+    ) -> Decision:
+        """Reroute every other operation whose plan the new fence now blocks (use case 2)."""
+        d = Decision()
+        for op in snapshot.operations.values():
+            if op.id in exclude or op.plan.end_t_s < snapshot.t_s:
+                continue
+            if not plan_vs_geofences(op.plan, op, [fence], self.frame, self.monitoring):
+                continue
+            sub = replace(
+                case.threat,
+                kind=ThreatKind.GEOFENCE_CONFLICT,
+                uas_ids=(op.id,),
+                geofence_id=fence.id,
+                area=fence,
+            )
+            d = d.merge(self._single(case, op.id, snapshot, REROUTE_MANEUVERS, threat=sub))
+        return d
+
+    def _suspend(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
+        now = snapshot.t_s
+        cfg = self.config
+        t = case.threat
+        kind = CommandKind.HOLD if cfg.suspend_command == "hold" else CommandKind.LAND
+        d = Decision()
+        for op_id in t.uas_ids:
+            op = snapshot.operations.get(op_id)
+            if t.position is not None:
+                e, n = self.frame.point_to_local(t.position.lat_deg, t.position.lon_deg)
+                z = t.position.alt_amsl_m
+            elif op is not None:
+                e, n, z = (float(v) for v in self.td.current_xyz(op, snapshot))
+            else:
+                d = d.merge(Decision(escalations=(f"{t.id}: {t.kind.value} for unknown {op_id}",)))
+                continue
+            fence = self._cylinder(
+                f"em-{t.id}-{op_id}",
+                e,
+                n,
+                z,
+                cfg.jamming_radius_m,
+                cfg.jamming_band_m,
+                now,
+                cfg.jamming_duration_s,
+                f"{t.kind.value} around {op_id}",
+            )
+            case.geofences.append(fence)
+            case.modes[op_id] = _MODE_COMMAND
+            cmd = Command(kind=kind, operation_id=op_id)
+            d = d.merge(
+                self._issue(
+                    case,
+                    op_id,
+                    now,
+                    command=cmd,
+                    geofence=fence,
+                    reason=f"{t.kind.value}: suspend ({kind.value}) and keep others out",
+                )
+            )
+            d = d.merge(
+                Decision(
+                    geofences=(fence,),
+                    audit=(
+                        self._audit(
+                            now,
+                            "decision",
+                            t.id,
+                            {
+                                "reason": f"{t.kind.value}: suspend + dynamic geofence",
+                                "command": kind.value,
+                                "geofence": fence.id,
+                                "radius_m": cfg.jamming_radius_m,
+                                "band_m": cfg.jamming_band_m,
+                                "duration_s": cfg.jamming_duration_s,
+                            },
+                        ),
+                    ),
+                )
+            )
+            d = d.merge(self._reroute_affected(case, fence, snapshot, set(t.uas_ids)))
+        return d
+
+    def _link_loss(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
+        now = snapshot.t_s
+        cfg = self.config
+        t = case.threat
+        d = Decision()
+        for op_id in t.uas_ids:
+            op = snapshot.operations.get(op_id)
+            msg = (
+                f"{t.id}: link lost with {op_id}; temporary geofence around its predicted position"
+            )
+            if t.position is not None:
+                e, n = self.frame.point_to_local(t.position.lat_deg, t.position.lon_deg)
+                z = t.position.alt_amsl_m
+            elif op is not None:
+                from gcs_utm.core.deconfliction.geometry import plan_to_local
+
+                p = plan_to_local(op.plan, self.frame).position_at(now + cfg.link_loss_predict_s)
+                e, n, z = float(p[0]), float(p[1]), float(p[2])
+            else:
+                d = d.merge(Decision(escalations=(f"{t.id}: link lost with unknown {op_id}",)))
+                continue
+            fence = self._cylinder(
+                f"em-{t.id}-{op_id}",
+                e,
+                n,
+                z,
+                cfg.link_loss_radius_m,
+                cfg.link_loss_band_m,
+                now,
+                cfg.link_loss_duration_s,
+                f"link loss of {op_id}",
+            )
+            case.geofences.append(fence)
+            d = d.merge(
+                Decision(
+                    geofences=(fence,),
+                    escalations=(msg,),
+                    audit=(
+                        self._audit(now, "decision", t.id, {"reason": msg, "geofence": fence.id}),
+                    ),
+                )
+            )
+            d = d.merge(self._reroute_affected(case, fence, snapshot, set(t.uas_ids)))
+        return d
+
+    def _area(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
+        now = snapshot.t_s
+        t = case.threat
+        if t.area is None:
+            msg = f"{t.id}: {t.kind.value} without an area: {t.message}"
+            return Decision(
+                escalations=(msg,), audit=(self._audit(now, "escalation", t.id, {"reason": msg}),)
+            )
+        fence = replace(
+            t.area,
+            kind=GeofenceKind.DYNAMIC,
+            start_t_s=t.area.start_t_s if t.area.start_t_s is not None else now,
+            end_t_s=t.area.end_t_s
+            if t.area.end_t_s is not None
+            else now + self.config.alert_duration_s,
+            reason=t.area.reason or t.message or t.kind.value,
+            source=t.area.source or ACTOR,
+        )
+        case.geofences.append(fence)
+        d = Decision(
+            geofences=(fence,),
+            audit=(
+                self._audit(
+                    now, "decision", t.id, {"reason": f"alert area -> geofence {fence.id}"}
+                ),
+            ),
+        )
+        return d.merge(self._reroute_affected(case, fence, snapshot, set()))
+
+    # -- re-planning after a refusal
+    def _replan(self, rec: Recommendation, snapshot: AirspaceSnapshot, why: str) -> Decision:
+        now = snapshot.t_s
+        case = self._cases.get(rec.threat_id)
+        op_id = rec.operation_id
+        if case is None:
+            return Decision()
+        n = case.replans.get(op_id, 0) + 1
+        case.replans[op_id] = n
+        if rec.selected is not None:
+            case.excluded.setdefault(op_id, set()).add(rec.selected.maneuver)
+        mode = case.modes.get(op_id, "")
+        if mode == _MODE_COMMAND or n > self.config.max_replans:
+            what = "a command" if mode == _MODE_COMMAND else f"{n - 1} re-plans"
+            msg = f"{rec.threat_id}: {op_id} {why} {what}; operator action needed"
+            return Decision(
+                escalations=(msg,),
+                audit=(self._audit(now, "escalation", rec.threat_id, {"reason": msg}),),
+            )
+        if mode == _MODE_MULTI:
+            return self._multi(case, snapshot)
+        if mode == _MODE_INTRUDER:
+            return self._intruder(case, op_id, snapshot)
+        maneuvers = frozenset(Maneuver(v) for v in mode.removeprefix("single:").split(",") if v)
+        threat = case.threat
+        if op_id not in threat.uas_ids and case.geofences:
+            threat = replace(
+                threat, kind=ThreatKind.GEOFENCE_CONFLICT, uas_ids=(op_id,), area=case.geofences[-1]
+            )
+        return self._single(case, op_id, snapshot, maneuvers, threat=threat)
