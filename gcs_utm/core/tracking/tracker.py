@@ -568,12 +568,12 @@ class Tracker:
         times = t_s + np.arange(k) * cfg.step_s
         x = self._x[:n]
         p = self._p[:n]
-        points = np.empty((n, k, 4))
-        points[:, :, 3] = times[None, :]
-        # (N, K) arrays per axis: much faster than broadcasting over a trailing axis of 3.
+        # (N, K) arrays per axis, stacked once at the end: much faster than writing through
+        # an (N, K, 4) array or broadcasting over a trailing axis of 3.
         tau = times[None, :] - self._t[:n, None]
-        for axis in range(3):
-            points[:, :, axis] = x[:, axis, kalman.POS, None] + x[:, axis, kalman.VEL, None] * tau
+        axes = [
+            x[:, axis, kalman.POS, None] + x[:, axis, kalman.VEL, None] * tau for axis in range(3)
+        ]
         # Root of the trace of the propagated position covariance, summed over axes first.
         pp = p[:, :, kalman.PP].sum(axis=1)[:, None]
         pv = p[:, :, kalman.PV].sum(axis=1)[:, None]
@@ -587,14 +587,32 @@ class Tracker:
             fr = rows[follow]
             if len(fr):
                 plan_rows = self._plan_row[fr]
-                ahead = tau[fr]
+                ahead0 = tau[fr, 0]
                 now = self._plans.follow(plan_rows, tau0[follow], np.zeros(len(fr)), 1.0, 1)
-                ahead_pos = self._plans.follow(plan_rows, tau0[follow], ahead[:, 0], cfg.step_s, k)
-                decay = np.exp(-np.maximum(ahead, 0.0) / cfg.plan_offset_decay_s)
+                ahead_pos = self._plans.follow(plan_rows, tau0[follow], ahead0, cfg.step_s, k)
+                # exp(-(ahead0 + k step) / T) as an outer product of two vectors (no (N, K)
+                # exp); capped at 1 so a snapshot older than the track does not amplify.
+                steps = np.arange(k) * cfg.step_s
+                decay = np.minimum(
+                    np.exp(-ahead0 / cfg.plan_offset_decay_s)[:, None]
+                    * np.exp(-steps / cfg.plan_offset_decay_s)[None, :],
+                    1.0,
+                )
+                all_rows = len(fr) == n
                 for axis in range(3):
                     offset = x[fr, axis, kalman.POS] - now[axis][:, 0]
-                    points[fr, :, axis] = ahead_pos[axis] + offset[:, None] * decay
-                sigma[fr] = np.sqrt(pp[fr] + (cfg.plan_sigma_growth_mps * ahead) ** 2)
+                    value = ahead_pos[axis] + offset[:, None] * decay
+                    if all_rows:
+                        axes[axis] = value
+                    else:
+                        axes[axis][fr] = value
+                growth = cfg.plan_sigma_growth_mps * tau[fr]
+                sigma_f = np.sqrt(pp[fr] + growth * growth)
+                if all_rows:
+                    sigma = sigma_f
+                else:
+                    sigma[fr] = sigma_f
+        points = np.stack([*axes, np.broadcast_to(times, (n, k))], axis=2)
         return PredictedTrajectories(
             t_s=t_s, track_ids=tuple(self._ids[:n]), points=points, sigma_m=sigma
         )
