@@ -35,11 +35,11 @@ class Outer:
     period_s: float = setting(1.0, "cycle period", min=0.01, unit="s")
     count: int = setting(3, "how many", min=1, max=10)
     name: str = setting("x", "a name")
-    mode: Mode = setting(Mode.SAFE, "mode")  # noqa: RUF009
+    mode: Mode = setting(Mode.SAFE, "mode")
     limit_m: float | None = setting(None, "optional limit", min=0.0, unit="m")
     weights: tuple[float, float] = setting((1.0, 2.0), "alpha, beta")
-    ports: list[int] = setting([1, 2], "ports", min=0, max=65535)  # noqa: RUF009
-    inner: Inner = setting(Inner(), "nested")  # noqa: RUF009
+    ports: list[int] = setting([1, 2], "ports", min=0, max=65535)
+    inner: Inner = setting(Inner(), "nested")
 
     def __post_init__(self) -> None:
         if self.weights[0] > self.weights[1]:
