@@ -1,0 +1,180 @@
+"""Tracking service: the asyncio side of the paper's Tracking module.
+
+Role: take measurements from the USM without blocking (:meth:`TrackingService.submit`),
+ingest them in batches on the loop, mark silent tracks stale (one COMMUNICATION_FAILURE
+:class:`HazardReport` per cooperative track each time it goes silent), and hand changed tracks
+to a sink (the app wires it to the store's ``write_tracks``) every ``flush_period_s``.
+
+Buffer policy (bounded, written down): up to ``max_pending`` measurements wait for the next
+batch. When full, a new measurement *replaces* the pending one of the same vehicle and source
+(latest wins per vehicle; the replaced one is counted in ``replaced``); if that vehicle has
+nothing pending the new one is dropped and counted in ``dropped``. Nothing blocks.
+
+Reorder window: a batch is sorted by capture time before it is filtered, so measurements
+that arrive out of order within one ``batch_period_s`` are used in the right order; older
+ones are rejected by the tracker and counted (see :mod:`gcs_utm.core.tracking.tracker`).
+
+Time: all decisions use the injected :class:`Clock`; the core sees only ``t_s``.
+Cancel-safe: on cancellation the pending batch is ingested and flushed, then the
+cancellation propagates.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable, Iterable
+
+from gcs_utm.clock import Clock
+from gcs_utm.core.tracking import IngestStats, Tracker
+from gcs_utm.messages import HazardReport
+from gcs_utm.model import (
+    Measurement,
+    Operation,
+    Position,
+    PredictedTrajectories,
+    ThreatKind,
+    Track,
+    TrackId,
+)
+
+_log = logging.getLogger(__name__)
+
+_VehicleKey = tuple[str, object, object, object]
+
+
+def _vehicle_key(m: Measurement) -> _VehicleKey:
+    return (m.source.value, m.operation_id, m.sys_id, m.icao24)
+
+
+class TrackingService:
+    def __init__(
+        self,
+        tracker: Tracker,
+        clock: Clock,
+        *,
+        on_hazard: Callable[[HazardReport], Awaitable[None]] | None = None,
+        track_sink: Callable[[list[Track]], None] | None = None,
+        flush_period_s: float = 1.0,
+        batch_period_s: float = 0.1,
+        max_pending: int = 20_000,
+    ) -> None:
+        if flush_period_s <= 0 or batch_period_s <= 0 or max_pending < 1:
+            raise ValueError("flush_period_s, batch_period_s and max_pending must be positive")
+        self.tracker = tracker
+        self.clock = clock
+        self._on_hazard = on_hazard
+        self._track_sink = track_sink
+        self._flush_period_s = flush_period_s
+        self._batch_period_s = batch_period_s
+        self._max_pending = max_pending
+        self._pending: list[Measurement] = []
+        self._slot: dict[_VehicleKey, int] = {}
+        self._last_flush_s: float | None = None
+        self.stats: dict[str, int] = {
+            "submitted": 0,
+            "replaced": 0,
+            "dropped": 0,
+            "batches": 0,
+            "hazards": 0,
+            "sink_errors": 0,
+            "hazard_errors": 0,
+        }
+        self.last_ingest: IngestStats | None = None
+
+    def submit(self, m: Measurement) -> None:
+        """Queue one measurement; never blocks (see the buffer policy in the module doc)."""
+        self.stats["submitted"] += 1
+        key = _vehicle_key(m)
+        if len(self._pending) >= self._max_pending:
+            slot = self._slot.get(key)
+            if slot is None:
+                self.stats["dropped"] += 1
+                if self.stats["dropped"] % 1000 == 1:
+                    _log.warning("tracking buffer full: dropped %d so far", self.stats["dropped"])
+                return
+            self._pending[slot] = m
+            self.stats["replaced"] += 1
+            return
+        self._slot[key] = len(self._pending)
+        self._pending.append(m)
+
+    def set_operations(self, operations: Iterable[Operation]) -> None:
+        self.tracker.set_operations(operations)
+
+    def snapshot(self) -> tuple[dict[TrackId, Track], PredictedTrajectories]:
+        """All tracks and their predictions at the clock's current time (one consistent view)."""
+        return self.tracker.snapshot(self.clock.now_s())
+
+    async def step(self) -> None:
+        """One cycle: ingest the pending batch, check staleness, flush if due."""
+        batch = self._pending
+        self._pending = []
+        self._slot = {}
+        if batch:
+            self.last_ingest = self.tracker.ingest(batch)
+            self.stats["batches"] += 1
+        now_s = self.clock.now_s()
+        for tid in self.tracker.check_stale(now_s):
+            await self._raise_stale(tid, now_s)
+        if self._last_flush_s is None or now_s - self._last_flush_s >= self._flush_period_s:
+            self._flush(now_s)
+
+    async def _raise_stale(self, tid: TrackId, now_s: float) -> None:
+        op = self.tracker.track_operation(tid)
+        # Intruders going silent are not a failure of our links: only UAS raise a hazard.
+        if op is None or self._on_hazard is None:
+            return
+        track = self.tracker.tracks().get(tid)
+        report = HazardReport(
+            kind=ThreatKind.COMMUNICATION_FAILURE,
+            t_s=now_s,
+            operation_id=op.id,
+            sys_id=op.sys_id,
+            icao24=op.icao24,
+            position=(
+                Position(lat_deg=track.lat_deg, lon_deg=track.lon_deg, alt_amsl_m=track.alt_amsl_m)
+                if track is not None
+                else None
+            ),
+            message=(
+                f"no position for {now_s - track.t_s:.1f} s" if track is not None else "no position"
+            ),
+            source="tracking",
+        )
+        self.stats["hazards"] += 1
+        try:
+            await self._on_hazard(report)
+        except Exception:
+            self.stats["hazard_errors"] += 1
+            _log.exception("hazard callback failed for %s", tid)
+
+    def _flush(self, now_s: float) -> None:
+        self._last_flush_s = now_s
+        if self._track_sink is None:
+            return
+        updated = self.tracker.take_updated()
+        if not updated:
+            return
+        try:
+            self._track_sink(updated)
+        except Exception:
+            # A failing store must not stop tracking; the tracks are newer next time anyway.
+            self.stats["sink_errors"] += 1
+            _log.exception("track sink failed (%d tracks)", len(updated))
+
+    async def run(self) -> None:
+        """Cycle every ``batch_period_s`` of clock time until cancelled."""
+        try:
+            while True:
+                await self.step()
+                await self.clock.sleep(self._batch_period_s)
+        except asyncio.CancelledError:
+            # Land what was already received before the task ends.
+            batch = self._pending
+            self._pending = []
+            self._slot = {}
+            if batch:
+                self.last_ingest = self.tracker.ingest(batch)
+            self._flush(self.clock.now_s())
+            raise

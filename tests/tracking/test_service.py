@@ -1,0 +1,100 @@
+"""TrackingService on a manual clock: batching, staleness hazards, sink flushes, buffer
+policy and cancellation."""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from tracking_helpers import T0, meas, new_tracker, operation, plan_from_local
+
+from gcs_utm.clock import ManualClock
+from gcs_utm.messages import HazardReport
+from gcs_utm.model import OperationId, ThreatKind, Track, TrackId
+from gcs_utm.services.tracking import TrackingService
+
+
+def _service(
+    max_pending: int = 100,
+) -> tuple[TrackingService, ManualClock, list[HazardReport], list[list[Track]]]:
+    clock = ManualClock(T0)
+    hazards: list[HazardReport] = []
+    flushed: list[list[Track]] = []
+
+    async def on_hazard(h: HazardReport) -> None:
+        hazards.append(h)
+
+    tracker = new_tracker(stale_after_s=5.0)
+    tracker.set_operations([operation("op1", plan_from_local("op1", [(0, 0, 100, T0)]), sys_id=1)])
+    svc = TrackingService(
+        tracker,
+        clock,
+        on_hazard=on_hazard,
+        track_sink=flushed.append,
+        flush_period_s=1.0,
+        max_pending=max_pending,
+    )
+    return svc, clock, hazards, flushed
+
+
+async def test_silence_raises_one_communication_failure_and_tracks_are_flushed() -> None:
+    svc, clock, hazards, flushed = _service()
+    for k in range(3):
+        svc.submit(meas(k, 0, 100, T0 + k))
+    await svc.step()
+    assert [t.id for t in flushed[0]] == [TrackId("op1")]
+    assert flushed[0][0].updates == 3
+    clock.set(T0 + 10.0)
+    await svc.step()
+    clock.set(T0 + 12.0)
+    await svc.step()
+    assert len(hazards) == 1
+    assert hazards[0].kind is ThreatKind.COMMUNICATION_FAILURE
+    assert hazards[0].operation_id == OperationId("op1")
+    # The stale flag reaches the store too.
+    assert flushed[-1][0].stale
+    tracks, pred = svc.snapshot()
+    assert tracks[TrackId("op1")].t_s == T0 + 12.0
+    assert pred.points.shape[0] == 1
+
+
+async def test_full_buffer_keeps_the_latest_per_vehicle_and_counts_drops() -> None:
+    svc, _, _, _ = _service(max_pending=2)
+    svc.submit(meas(0, 0, 100, T0, sys_id=1))
+    svc.submit(meas(0, 0, 100, T0, sys_id=2))
+    svc.submit(meas(5, 0, 100, T0 + 1, sys_id=1))  # replaces the pending one of vehicle 1
+    svc.submit(meas(0, 0, 100, T0, sys_id=3))  # no slot for vehicle 3: dropped
+    assert (svc.stats["replaced"], svc.stats["dropped"]) == (1, 1)
+    await svc.step()
+    tracks = svc.tracker.tracks()
+    assert set(tracks) == {TrackId("op1"), TrackId("sysid:2")}
+    assert tracks[TrackId("op1")].t_s == T0 + 1
+
+
+async def test_run_is_cancel_safe_and_lands_the_pending_batch() -> None:
+    svc, _clock, _, flushed = _service()
+    task = asyncio.create_task(svc.run())
+    await asyncio.sleep(0)
+    svc.submit(meas(0, 0, 100, T0 + 0.05))
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    assert svc.tracker.tracks()[TrackId("op1")].updates == 1
+    assert flushed and flushed[-1][0].id == TrackId("op1")
+
+
+async def test_a_failing_sink_does_not_stop_tracking() -> None:
+    svc, _clock, _, _ = _service()
+
+    def broken(_: list[Track]) -> None:
+        raise OSError("disk full")
+
+    svc._track_sink = broken
+    svc.submit(meas(0, 0, 100, T0))
+    await svc.step()
+    assert svc.stats["sink_errors"] == 1
+    assert svc.tracker.tracks()[TrackId("op1")].updates == 1
