@@ -144,7 +144,12 @@ def resolve(
             sep = np.hypot(dh, dv) / np.maximum(h_min, 1e-9)
         else:
             sep = np.maximum(dh / np.maximum(h_min, 1e-9), dv / np.maximum(v_min, 1e-9))
-        viol = both & upper & (sep < scale)
+        if it == 0:
+            # Pairs already separated but inside the margin (e.g. a stack at the minimum) only
+            # have to stay as they are: demanding the margin there could never be met at the
+            # current position (k = 0), where no cord may move.
+            target = np.where(sep >= 1.0, np.minimum(scale, sep) - 1e-6, scale)
+        viol = both & upper & (sep < target)
         if not viol.any():
             return CordResult(displacement_m=d, signs=tuple(s or 1 for s in signs), iterations=it)
         if it == max_iterations:

@@ -716,8 +716,18 @@ class TacticalDeconfliction:
             if Maneuver.NEXT_WAYPOINT in want and len(lp) > 1:
                 add(Maneuver.NEXT_WAYPOINT, router.next_waypoint(), "straight to the next waypoint")
             if Maneuver.RETURN_HOME in want:
-                home = self._home(op)
-                add(Maneuver.RETURN_HOME, router.land_at(home), "return home and land")
+                route = router.land_at(self._home(op))
+                left = self._endurance_left(op, now)
+                if route is not None and left is not None and route[0].t[-1] - now > left:
+                    self.dropped.append(
+                        Dropped(
+                            operation_id=op.id,
+                            maneuver=Maneuver.RETURN_HOME,
+                            reason=f"home not reachable with {left:.0f} s of endurance left",
+                        )
+                    )
+                else:
+                    add(Maneuver.RETURN_HOME, route, "return home and land")
             if Maneuver.LANDING_SITE in want and op.landing_sites:
                 best = self._landing(op, router, now)
                 if best is None:
@@ -738,17 +748,21 @@ class TacticalDeconfliction:
             return np.array([e, n, op.home.alt_amsl_m])
         return np.asarray(plan_to_local(op.plan, self.frame).xyz()[0], dtype=np.float64)
 
+    def _endurance_left(self, op: Operation, now: float) -> float | None:
+        """Usable flight time left (endurance counted from the plan start, minus the
+        reserve), or None when the endurance is unknown."""
+        if op.endurance_s is None:
+            return None
+        left = op.endurance_s - max(0.0, now - op.plan.start_t_s)
+        return left * (1.0 - self.config.landing_reserve_fraction)
+
     def _landing(
         self, op: Operation, router: _Router, now: float
     ) -> tuple[tuple[LocalPlan, int], str] | None:
         """The landing site reached soonest that the remaining endurance covers (with the
         reserve), when the endurance is known (``Operation.endurance_s`` counted from the
         plan start)."""
-        remaining = None
-        if op.endurance_s is not None:
-            remaining = (op.endurance_s - max(0.0, now - op.plan.start_t_s)) * (
-                1.0 - self.config.landing_reserve_fraction
-            )
+        remaining = self._endurance_left(op, now)
         best: tuple[tuple[LocalPlan, int], str] | None = None
         best_t = math.inf
         for k, site in enumerate(op.landing_sites):

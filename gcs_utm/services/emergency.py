@@ -1,0 +1,130 @@
+"""EmergencyService: the asyncio side of Emergency Management.
+
+One task (:meth:`EmergencyService.run`) takes threats and pilot answers from one bounded queue
+in arrival order, asks the pure :class:`EmergencyManager` on a fresh snapshot (from the
+injected provider, at the injected clock's time) and hands every :class:`Decision` to
+``on_decision``. Between items it enforces recommendation deadlines on the clock: a pending
+recommendation past its deadline goes to ``EmergencyManager.on_expired``.
+
+Queue policy: bounded (``queue_size``); submitters wait when it is full (threats and answers
+are never dropped). A failure while deciding is logged and turned into an escalation
+Decision, so the operator hears about it and the loop keeps going. Cancelling ``run`` cancels
+its helper tasks and returns nothing half-done (a Decision is delivered whole or not at all).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, replace
+
+from gcs_utm.clock import Clock
+from gcs_utm.core.emergency import Decision, EmergencyManager
+from gcs_utm.model import AirspaceSnapshot, Recommendation, RecommendationId, Threat
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class _Answer:
+    rec_id: RecommendationId
+    version: int
+    accepted: bool
+
+
+class EmergencyService:
+    def __init__(
+        self,
+        em: EmergencyManager,
+        snapshot_provider: Callable[[float], AirspaceSnapshot],
+        clock: Clock,
+        on_decision: Callable[[Decision], Awaitable[None]],
+        *,
+        idle_s: float = 1.0,
+        queue_size: int = 1000,
+    ) -> None:
+        self.em = em
+        self._snapshot = snapshot_provider
+        self._clock = clock
+        self._on_decision = on_decision
+        self._idle_s = idle_s
+        self._queue: asyncio.Queue[Threat | _Answer] = asyncio.Queue(maxsize=queue_size)
+        self.processed = 0
+        self.failures = 0
+
+    async def submit_threats(self, threats: list[Threat]) -> None:
+        for t in threats:
+            await self._queue.put(t)
+
+    async def submit_answer(self, rec_id: RecommendationId, version: int, accepted: bool) -> None:
+        await self._queue.put(_Answer(rec_id, version, accepted))
+
+    def pending(self) -> list[Recommendation]:
+        return self.em.pending()
+
+    async def run(self) -> None:
+        getter: asyncio.Future[Threat | _Answer] | None = None
+        sleeper: asyncio.Future[None] | None = None
+        try:
+            while True:
+                await self._expire_due()
+                if getter is None:
+                    getter = asyncio.ensure_future(self._queue.get())
+                now = self._clock.now_s()
+                deadlines = [r.deadline_t_s for r in self.em.pending()]
+                wait_s = self._idle_s
+                if deadlines:
+                    wait_s = max(0.0, min(wait_s, min(deadlines) - now))
+                sleeper = asyncio.ensure_future(self._clock.sleep(wait_s))
+                waiters: set[asyncio.Future[object]] = {getter, sleeper}  # type: ignore[arg-type]
+                await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
+                if not sleeper.done():
+                    sleeper.cancel()
+                sleeper = None
+                if getter.done():
+                    item = getter.result()
+                    getter = None
+                    await self._process(item)
+        finally:
+            for fut in (getter, sleeper):
+                if fut is not None and not fut.done():
+                    fut.cancel()
+                    with contextlib.suppress(asyncio.CancelledError):
+                        await fut
+
+    async def _expire_due(self) -> None:
+        now = self._clock.now_s()
+        due = [r for r in self.em.pending() if r.deadline_t_s <= now]
+        for rec in due:
+
+            def expire(rec: Recommendation = rec) -> Decision:
+                return self.em.on_expired(rec, self._snapshot(now))
+
+            await self._decide(expire, rec.id)
+
+    async def _process(self, item: Threat | _Answer) -> None:
+        now = self._clock.now_s()
+        if isinstance(item, _Answer):
+            rec = self.em.recommendation(item.rec_id)
+            if rec is None:
+                _log.warning("answer to unknown recommendation %s ignored", item.rec_id)
+                return
+            asked = replace(rec, version=item.version)
+            await self._decide(
+                lambda: self.em.on_answer(asked, item.accepted, self._snapshot(now)), item.rec_id
+            )
+        else:
+            await self._decide(lambda: self.em.on_threat(item, self._snapshot(now)), item.id)
+        self.processed += 1
+
+    async def _decide(self, step: Callable[[], Decision], subject: str) -> None:
+        try:
+            decision = step()
+        except Exception as exc:  # a bug must reach the operator, not stop the service
+            self.failures += 1
+            _log.exception("emergency decision on %s failed", subject)
+            decision = Decision(escalations=(f"EM failed on {subject}: {exc!r}",))
+        if decision != Decision():
+            await self._on_decision(decision)

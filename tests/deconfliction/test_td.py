@@ -1,0 +1,309 @@
+"""Tactical Deconfliction: every offered plan is clean for Monitoring, priorities hold,
+deformations are smooth, A* keeps the clearance, escape and landing behave."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import Polygon
+
+from gcs_utm.bench import deconfliction as sc
+from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
+from gcs_utm.core.deconfliction import cords as cd
+from gcs_utm.core.deconfliction.astar import VisibilityPlanner
+from gcs_utm.core.deconfliction.geometry import LocalPlan, fence_to_local, plan_to_local
+from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.core.monitoring.strategic import plan_vs_geofences, plan_vs_plans, strategic_check
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    Alternative,
+    GeofenceId,
+    Maneuver,
+    OperationId,
+    ThreatKind,
+    Track,
+    TrackId,
+)
+
+MON = MonitoringConfig()
+
+
+def make_td(**cfg: object) -> TacticalDeconfliction:
+    return TacticalDeconfliction(sc.FRAME, DeconflictionConfig(**cfg), MON)  # type: ignore[arg-type]
+
+
+def with_plans(snap: AirspaceSnapshot, alts: list[Alternative]) -> AirspaceSnapshot:
+    ops = dict(snap.operations)
+    for a in alts:
+        assert a.plan is not None
+        ops[a.operation_id] = replace(ops[a.operation_id], plan=a.plan)
+    return AirspaceSnapshot(t_s=snap.t_s, operations=ops, tracks={}, geofences=snap.geofences)
+
+
+def assert_clean_single(td: TacticalDeconfliction, snap: AirspaceSnapshot, alt: Alternative) -> None:
+    op = snap.operations[alt.operation_id]
+    assert alt.plan is not None
+    others = [o for o in snap.operations.values() if o.id != op.id]
+    assert plan_vs_plans(alt.plan, op, others, sc.FRAME, MON) == []
+    assert plan_vs_geofences(alt.plan, op, snap.geofences, sc.FRAME, MON) == []
+
+
+# ---- multi-UAS -------------------------------------------------------------------------------
+
+
+def test_two_uas_alternatives_each_resolve_the_conflict_with_the_other_keeping_its_plan() -> None:
+    snap, threat = sc.scenario_los_2uas()
+    td = make_td()
+    assert strategic_check(list(snap.operations.values()), (), sc.FRAME, MON).conflicts
+    alts = td.resolve_loss_of_separation(threat, snap)
+    assert set(alts) == {"A", "B"}
+    for op_id, options in alts.items():
+        maneuvers = {a.maneuver for a in options}
+        # At least up, down, left, right and keep for each UAS, plus a timing option.
+        assert {Maneuver.GO_UP, Maneuver.GO_DOWN, Maneuver.GO_LEFT, Maneuver.GO_RIGHT} <= maneuvers
+        assert Maneuver.KEEP_PLAN in maneuvers
+        # Head-on on one line: waiting never separates them, so no timing option is offered.
+        assert not maneuvers & {Maneuver.DELAY, Maneuver.SPEED_CHANGE}
+        for a in options:
+            if "alone" in a.detail or a.maneuver in (Maneuver.DELAY, Maneuver.SPEED_CHANGE):
+                # A single-mover alternative is clean against the other UAS's filed plan.
+                assert_clean_single(td, snap, a), (op_id, a.maneuver)
+
+
+def test_crossing_conflict_offers_a_delay_and_a_slow_down_that_monitoring_accepts() -> None:
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)])
+    b = sc.make_operation("B", [(0, -1000, 100), (0, 1000, 100)])
+    snap = sc.snapshot([a, b])
+    td = make_td()
+    alts = td.resolve_loss_of_separation(sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"]), snap)
+    timing = [x for x in alts[OperationId("A")] if x.maneuver in (Maneuver.DELAY, Maneuver.SPEED_CHANGE)]
+    assert {x.maneuver for x in timing} == {Maneuver.DELAY, Maneuver.SPEED_CHANGE}
+    for x in timing:
+        assert_clean_single(td, snap, x)
+        assert x.cost > 0.0  # it arrives later
+
+
+def test_joint_repulsion_moves_the_higher_priority_uas_less() -> None:
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], priority=1)
+    b = sc.make_operation("B", [(1000, 0, 100), (-1000, 0, 100)], priority=4)
+    lp = [plan_to_local(o.plan, sc.FRAME) for o in (a, b)]
+    grid = sc.T0_S + np.arange(0, 200, 2.0)
+    cords = [
+        cd.Cord(plan=p, axis=cd.AXIS_VERTICAL, sign=0, mobility=1.0 / o.priority,
+                slope_m_per_step=3.6, max_offset_m=200, min_alt_amsl_m=0, max_alt_amsl_m=1000)
+        for p, o in zip(lp, (a, b), strict=True)
+    ]
+    minima = np.full((2, 2, 2), [50.0, 20.0])
+    res = cd.resolve(cords, grid, minima, spherical=False, margin_fraction=0.1, max_iterations=60)
+    assert res is not None
+    moved = res.displacement_m.max(axis=1)
+    assert res.signs[0] == -res.signs[1]  # they repel: one up, one down
+    assert moved[0] > 2.5 * moved[1] > 0.0  # mobility ratio 4:1
+    assert moved[0] + moved[1] >= 20.0 * 1.1 - 1e-6
+
+
+def test_immovable_priority_uas_only_keeps_its_plan() -> None:
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], priority=1)
+    b = sc.make_operation("B", [(1000, 0, 100), (-1000, 0, 100)], priority=5000)
+    snap = sc.snapshot([a, b])
+    alts = make_td().resolve_loss_of_separation(
+        sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"]), snap
+    )
+    assert [x.maneuver for x in alts[OperationId("B")]] == [Maneuver.KEEP_PLAN]
+    assert len(alts[OperationId("A")]) > 1
+
+
+def test_deformations_are_smooth_and_within_vehicle_limits() -> None:
+    snap, threat = sc.scenario_los_2uas()
+    cfg = DeconflictionConfig()
+    alts = make_td().resolve_loss_of_separation(threat, snap)
+    for options in alts.values():
+        for a in options:
+            if a.maneuver not in (Maneuver.GO_UP, Maneuver.GO_DOWN, Maneuver.GO_LEFT, Maneuver.GO_RIGHT):
+                continue
+            op = snap.operations[a.operation_id]
+            assert a.plan is not None
+            lp = plan_to_local(a.plan, sc.FRAME)
+            dt = np.diff(lp.t)
+            assert (dt > 0).all()
+            climb = np.abs(np.diff(lp.z)) / dt
+            speed = np.hypot(np.diff(lp.e), np.diff(lp.n)) / dt
+            assert climb.max() <= op.max_climb_rate_mps * cfg.max_speed_factor + 1e-6
+            assert speed.max() <= op.cruise_speed_mps * cfg.max_speed_factor + 1e-6
+            # Starts where the UAS is now (no jump), ends on the filed plan's destination.
+            start = plan_to_local(op.plan, sc.FRAME).position_at(snap.t_s)
+            assert np.allclose(lp.xyz()[0], start, atol=0.5)
+            assert np.allclose(lp.xyz()[-1], plan_to_local(op.plan, sc.FRAME).xyz()[-1], atol=1.0)
+
+
+def test_envelope_is_the_smallest_slope_limited_profile_above_the_demand() -> None:
+    demand = np.zeros(50)
+    demand[20] = 10.0
+    demand[30] = 4.0
+    d = cd.envelope(demand, 2.0)
+    assert (d >= demand - 1e-12).all()
+    assert np.abs(np.diff(d)).max() <= 2.0 + 1e-12
+    assert d[20] == 10.0 and d[15] == 0.0 and d[25] == 0.0  # ramps of 5 steps, no more
+
+
+def test_five_uas_chain_every_plan_clean_after_the_joint_resolution() -> None:
+    from gcs_utm.core.emergency import EmergencyConfig, EmergencyManager
+
+    snap, threat = sc.scenario_chain_5uas()
+    td = make_td()
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
+    d = em.on_threat(threat, snap)
+    assert d.recommendations and not d.escalations
+    chosen = [r.selected for r in d.recommendations if r.selected is not None]
+    after = with_plans(snap, chosen)
+    report = strategic_check(list(after.operations.values()), (), sc.FRAME, MON)
+    assert report.conflicts == ()
+
+
+def test_chain_where_the_neighbour_must_move_too() -> None:
+    """A and B head-on; C flies just above A's level the whole way and D just below B: the
+    only vertical room for A or B is taken, so a lateral deformation or a neighbour moves."""
+    from gcs_utm.core.emergency import EmergencyConfig, EmergencyManager
+
+    ops = [
+        sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], priority=1),
+        sc.make_operation("B", [(1000, 0, 100), (-1000, 0, 100)], priority=1),
+        sc.make_operation("C", [(-1000, 0, 122), (1000, 0, 122)], priority=1),
+        sc.make_operation("D", [(1000, 0, 78), (-1000, 0, 78)], priority=1),
+    ]
+    snap = sc.snapshot(ops)
+    threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], event_in_s=100)
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), make_td(), MON)
+    d = em.on_threat(threat, snap)
+    chosen = [r.selected for r in d.recommendations if r.selected is not None]
+    assert chosen
+    after = with_plans(snap, chosen)
+    assert strategic_check(list(after.operations.values()), (), sc.FRAME, MON).conflicts == ()
+
+
+# ---- single UAS ------------------------------------------------------------------------------
+
+
+def test_astar_path_avoids_obstacles_and_reports_no_path_when_enclosed() -> None:
+    obs = [Polygon([(-50, -200), (50, -200), (50, 200), (-50, 200)])]
+    planner = VisibilityPlanner(obs)
+    path = planner.path(np.array([-300.0, 0.0]), np.array([300.0, 0.0]))
+    assert path is not None
+    line = shapely.LineString(np.array(path))
+    assert not line.crosses(obs[0]) and not line.within(obs[0])
+    assert line.distance(obs[0]) >= 0.0
+    assert line.length == pytest.approx(2 * np.hypot(250, 200) + 100, rel=0.01)  # over the top
+    ring = Polygon([(-400, -400), (400, -400), (400, 400), (-400, 400)], [[(-300, -300), (300, -300), (300, 300), (-300, 300)]])
+    enclosed = VisibilityPlanner([ring])
+    assert enclosed.path(np.array([0.0, 0.0]), np.array([600.0, 0.0])) is None
+
+
+def test_geofence_reroute_keeps_the_operational_volume_from_every_geofence() -> None:
+    snap, threat = sc.scenario_geofence_reroute(20)
+    td = make_td()
+    alts = td.resolve_single(threat, OperationId("A"), snap)
+    byman = {a.maneuver: a for a in alts}
+    assert Maneuver.REROUTE in byman and Maneuver.RETURN_HOME in byman
+    op = snap.operations[OperationId("A")]
+    for a in alts:
+        assert_clean_single(td, snap, a)
+        lp = plan_to_local(a.plan, sc.FRAME)  # type: ignore[arg-type]
+        t = np.arange(lp.t[0], lp.t[-1], 0.5)
+        pos, _ = lp.sample(t)
+        for g in snap.geofences:
+            f = fence_to_local(g, sc.FRAME)
+            assert f.horizontal_distance(pos[:, 0], pos[:, 1]).min() >= op.operational_volume_m
+    # The reroute reaches the filed destination.
+    reroute = plan_to_local(byman[Maneuver.REROUTE].plan, sc.FRAME)  # type: ignore[arg-type]
+    assert np.allclose(reroute.xyz()[-1], plan_to_local(op.plan, sc.FRAME).xyz()[-1], atol=1.0)
+
+
+def _track_at(op_id: str, e: float, n: float, z: float, t_s: float) -> Track:
+    lat, lon = sc.FRAME.point_to_wgs84(e, n)
+    return Track(
+        id=TrackId(op_id), t_s=t_s, lat_deg=lat, lon_deg=lon, alt_amsl_m=z, east_m=e,
+        north_m=n, vel_enu_mps=(0.0, 0.0, 0.0), position_sigma_m=1.0, cooperative=True,
+        operation_id=OperationId(op_id),
+    )
+
+
+def test_escape_from_inside_a_concave_geofence_leaves_by_the_nearest_border() -> None:
+    # A U open to the north; the UAS is inside the west arm, 15 m from its west edge.
+    u_shape = sc.polygon(
+        "U", [(-300, -300), (300, -300), (300, 300), (200, 300), (200, -200), (-200, -200), (-200, 300), (-300, 300)]
+    )
+    op = sc.make_operation("A", [(-600, -250, 100), (600, 400, 100)], ov_m=10.0)
+    t = sc.T0_S + 30.0
+    snap = AirspaceSnapshot(
+        t_s=t, operations={op.id: op}, tracks={TrackId("A"): _track_at("A", -285, 0, 100, t)},
+        geofences=(u_shape,),
+    )
+    threat = sc.threat(ThreatKind.GEOFENCE_INTRUSION, ["A"], t_s=t, geofence_id=GeofenceId("U"))
+    td = make_td()
+    alts = td.resolve_single(threat, OperationId("A"), snap)
+    esc = [a for a in alts if a.maneuver is Maneuver.ESCAPE]
+    assert esc, td.dropped
+    assert esc[0].plan is not None
+    lp = plan_to_local(esc[0].plan, sc.FRAME)
+    exit_pt = lp.xyz()[1]
+    # Out through the west edge (15 m away), not the far open side of the U.
+    assert exit_pt[0] < -300 - op.operational_volume_m
+    assert abs(exit_pt[1]) < 30.0
+    rejoin = replace(esc[0].plan, waypoints=esc[0].plan.waypoints[1:])
+    assert plan_vs_geofences(rejoin, op, snap.geofences, sc.FRAME, MON) == []
+    # Every escape leg after the exit keeps the clearance from the U.
+    pos, _ = LocalPlan(lp.e[1:], lp.n[1:], lp.z[1:], lp.t[1:]).sample(np.arange(lp.t[1], lp.t[-1], 0.5))
+    assert fence_to_local(u_shape, sc.FRAME).horizontal_distance(pos[:, 0], pos[:, 1]).min() >= 10.0
+
+
+def test_out_of_volume_back_to_plan_and_next_waypoint() -> None:
+    op = sc.make_operation("A", [(0, 0, 100), (1000, 0, 100), (1000, 1000, 100)])
+    t = sc.T0_S + 50.0  # plan position (500, 0); the UAS is 120 m north of it
+    snap = AirspaceSnapshot(
+        t_s=t, operations={op.id: op}, tracks={TrackId("A"): _track_at("A", 500, 120, 100, t)},
+        geofences=(),
+    )
+    threat = sc.threat(ThreatKind.UAS_OUT_OV, ["A"], t_s=t)
+    alts = make_td().resolve_single(threat, OperationId("A"), snap, maneuvers={Maneuver.BACK_TO_PLAN, Maneuver.NEXT_WAYPOINT})
+    byman = {a.maneuver: plan_to_local(a.plan, sc.FRAME) for a in alts if a.plan is not None}
+    back = byman[Maneuver.BACK_TO_PLAN]
+    assert np.allclose(back.xyz()[1], [500, 0, 100], atol=1.0)  # closest point of the plan
+    nxt = byman[Maneuver.NEXT_WAYPOINT]
+    assert np.allclose(nxt.xyz()[1], [1000, 0, 100], atol=1.0)
+    assert np.allclose(nxt.xyz()[-1], [1000, 1000, 100], atol=1.0)
+    # Times come from the cruise speed: 10 m/s over the first leg.
+    leg = float(np.hypot(*(nxt.xyz()[1][:2] - nxt.xyz()[0][:2])))
+    assert nxt.t[1] - nxt.t[0] == pytest.approx(leg / op.cruise_speed_mps, rel=1e-6)
+
+
+def test_landing_site_is_the_nearest_reachable_with_the_endurance_left() -> None:
+    sites = [(2000, 0, 0), (-300, 0, 0)]
+    op = sc.make_operation(
+        "A", [(0, 0, 100), (3000, 0, 100)], landing_sites=sites, endurance_s=120.0,
+        home_enz=(-2000, 0, 0),
+    )
+    snap = sc.snapshot([op])
+    threat = sc.threat(ThreatKind.LACK_OF_BATTERY, ["A"])
+    td = make_td()
+    alts = td.resolve_single(threat, OperationId("A"), snap, maneuvers={Maneuver.LANDING_SITE, Maneuver.RETURN_HOME})
+    assert [a.maneuver for a in alts] == [Maneuver.LANDING_SITE]  # home is 200 s away: out of reach
+    lp = plan_to_local(alts[0].plan, sc.FRAME)  # type: ignore[arg-type]
+    assert np.allclose(lp.xyz()[-1], [-300, 0, 0], atol=1.0)
+    short = replace(op, endurance_s=20.0)
+    none = td.resolve_single(threat, OperationId("A"), sc.snapshot([short]), maneuvers={Maneuver.LANDING_SITE})
+    assert none == [] and any("reachable" in d.reason for d in td.dropped)
+
+
+def test_cost_and_risk_are_normalised_and_grow_with_the_detour() -> None:
+    snap, threat = sc.scenario_los_2uas()
+    alts = make_td().resolve_loss_of_separation(threat, snap)[OperationId("A")]
+    keep = next(a for a in alts if a.maneuver is Maneuver.KEEP_PLAN)
+    assert keep.cost == 0.0
+    up = [a for a in alts if a.maneuver is Maneuver.GO_UP]
+    side = [a for a in alts if a.maneuver in (Maneuver.GO_LEFT, Maneuver.GO_RIGHT)]
+    # A 20-odd metre climb costs less than a 60-odd metre sidestep at 30 degrees.
+    assert min(a.cost for a in up) < min(a.cost for a in side)
+    assert all(a.cost >= 0 and a.risk >= 0 for a in alts)
