@@ -95,7 +95,7 @@ class MavlinkConfig:
     max_speed_mps: float = setting(
         25.0, "clamp of the DO_CHANGE_SPEED derived from plan timing", min=0.1, unit="m/s"
     )
-    signing_keys: dict[str, str] = setting(  # noqa: RUF009 (setting() makes a default_factory)
+    signing_keys: dict[str, str] = setting(
         {},
         'MAVLink 2 signing keys by sysid: {"1" = "<64 hex digits>"}; outgoing commands '
         "and uploads to that vehicle are signed",
