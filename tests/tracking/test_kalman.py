@@ -73,8 +73,9 @@ def test_batched_filter_equals_filterpy(
         r = np.array(sig_l) ** 2
         zv = np.array(zv_l)
         rv = r / 10.0
-        # Rounding differences scale with the inputs: 1e-9 relative to the largest seen.
-        scale = max(scale, float(np.abs(z).max()), float(np.abs(zv).max()))
+        # Rounding differences scale with the inputs (positions, velocities and sigmas):
+        # 1e-9 relative to the largest magnitude seen so far.
+        scale = max(scale, float(np.abs(z).max()), float(np.abs(zv).max()), *sig_l)
         kalman.predict(x, p, np.array([dt]), q)
         if with_vel:
             kalman.update_position_velocity(

@@ -571,47 +571,57 @@ class Tracker:
         # (N, K) arrays per axis, stacked once at the end: much faster than writing through
         # an (N, K, 4) array or broadcasting over a trailing axis of 3.
         tau = times[None, :] - self._t[:n, None]
-        axes = [
-            x[:, axis, kalman.POS, None] + x[:, axis, kalman.VEL, None] * tau for axis in range(3)
-        ]
-        # Root of the trace of the propagated position covariance, summed over axes first.
         pp = p[:, :, kalman.PP].sum(axis=1)[:, None]
-        pv = p[:, :, kalman.PV].sum(axis=1)[:, None]
-        vv = p[:, :, kalman.VV].sum(axis=1)[:, None]
-        tau2 = tau * tau
-        var = pp + 2.0 * pv * tau + vv * tau2 + (float(self._q.sum()) / 4.0) * (tau2 * tau2)
-        sigma = np.sqrt(var)
         rows, _, dist, tau0 = self._plan_state(x[:, :, kalman.POS], self._t[:n])
-        if len(rows):
-            follow = dist <= self._geom_m[rows] * cfg.plan_follow_factor
-            fr = rows[follow]
-            if len(fr):
-                plan_rows = self._plan_row[fr]
-                ahead0 = tau[fr, 0]
-                now = self._plans.follow(plan_rows, tau0[follow], np.zeros(len(fr)), 1.0, 1)
-                ahead_pos = self._plans.follow(plan_rows, tau0[follow], ahead0, cfg.step_s, k)
-                # exp(-(ahead0 + k step) / T) as an outer product of two vectors (no (N, K)
-                # exp); capped at 1 so a snapshot older than the track does not amplify.
-                steps = np.arange(k) * cfg.step_s
-                decay = np.minimum(
-                    np.exp(-ahead0 / cfg.plan_offset_decay_s)[:, None]
-                    * np.exp(-steps / cfg.plan_offset_decay_s)[None, :],
-                    1.0,
+        follow = dist <= self._geom_m[rows] * cfg.plan_follow_factor
+        fr = rows[follow]
+        extrap = np.ones(n, dtype=bool)
+        extrap[fr] = False
+        ex = np.flatnonzero(extrap)
+        axes = [np.empty((n, k)) for _ in range(3)]
+        sigma = np.empty((n, k))
+        if len(ex):
+            # Extrapolation only for the tracks that do not follow their plan.
+            tau_x = tau[ex]
+            for axis in range(3):
+                axes[axis][ex] = (
+                    x[ex, axis, kalman.POS, None] + x[ex, axis, kalman.VEL, None] * tau_x
                 )
-                all_rows = len(fr) == n
-                for axis in range(3):
-                    offset = x[fr, axis, kalman.POS] - now[axis][:, 0]
-                    value = ahead_pos[axis] + offset[:, None] * decay
-                    if all_rows:
-                        axes[axis] = value
-                    else:
-                        axes[axis][fr] = value
-                growth = cfg.plan_sigma_growth_mps * tau[fr]
-                sigma_f = np.sqrt(pp[fr] + growth * growth)
+            # Root of the trace of the propagated position covariance, summed over axes.
+            pv = p[ex, :, kalman.PV].sum(axis=1)[:, None]
+            vv = p[ex, :, kalman.VV].sum(axis=1)[:, None]
+            tau2 = tau_x * tau_x
+            var = (
+                pp[ex] + 2.0 * pv * tau_x + vv * tau2 + (float(self._q.sum()) / 4.0) * (tau2 * tau2)
+            )
+            sigma[ex] = np.sqrt(var)
+        if len(rows) and len(fr):
+            plan_rows = self._plan_row[fr]
+            ahead0 = tau[fr, 0]
+            now = self._plans.follow(plan_rows, tau0[follow], np.zeros(len(fr)), 1.0, 1)
+            ahead_pos = self._plans.follow(plan_rows, tau0[follow], ahead0, cfg.step_s, k)
+            # exp(-(ahead0 + k step) / T) as an outer product of two vectors (no (N, K)
+            # exp); capped at 1 so a snapshot older than the track does not amplify.
+            steps = np.arange(k) * cfg.step_s
+            decay = np.minimum(
+                np.exp(-ahead0 / cfg.plan_offset_decay_s)[:, None]
+                * np.exp(-steps / cfg.plan_offset_decay_s)[None, :],
+                1.0,
+            )
+            all_rows = len(fr) == n
+            for axis in range(3):
+                offset = x[fr, axis, kalman.POS] - now[axis][:, 0]
+                value = ahead_pos[axis] + offset[:, None] * decay
                 if all_rows:
-                    sigma = sigma_f
+                    axes[axis] = value
                 else:
-                    sigma[fr] = sigma_f
+                    axes[axis][fr] = value
+            growth = cfg.plan_sigma_growth_mps * tau[fr]
+            sigma_f = np.sqrt(pp[fr] + growth * growth)
+            if all_rows:
+                sigma = sigma_f
+            else:
+                sigma[fr] = sigma_f
         points = np.stack([*axes, np.broadcast_to(times, (n, k))], axis=2)
         return PredictedTrajectories(
             t_s=t_s, track_ids=tuple(self._ids[:n]), points=points, sigma_m=sigma
