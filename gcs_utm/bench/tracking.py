@@ -103,28 +103,23 @@ def _batches(
         p = p + rng.normal(size=p.shape) * np.array([3.0, 3.0, 5.0])
         lat, lon = frame.to_wgs84(p[:, 0], p[:, 1])
         batch = []
+        adsb_list = adsb.tolist()
         for i in range(n):
-            common = {
-                "capture_t_s": _T0 + t + rng.uniform(0, 0.9),
-                "receipt_t_s": _T0 + t + 0.95,
-                "lat_deg": float(lat[i]),
-                "lon_deg": float(lon[i]),
-                "alt_amsl_m": float(p[i, 2]),
-            }
-            if adsb[i]:
-                batch.append(
-                    Measurement(source=MeasurementSource.ADSB, icao24=Icao24(f"{i:06x}"), **common)
+            is_adsb = bool(adsb_list[i])
+            batch.append(
+                Measurement(
+                    source=MeasurementSource.ADSB if is_adsb else MeasurementSource.TELEMETRY,
+                    capture_t_s=_T0 + t + float(rng.uniform(0, 0.9)),
+                    receipt_t_s=_T0 + t + 0.95,
+                    lat_deg=float(lat[i]),
+                    lon_deg=float(lon[i]),
+                    alt_amsl_m=float(p[i, 2]),
+                    icao24=Icao24(f"{i:06x}") if is_adsb else None,
+                    operation_id=None if is_adsb else OperationId(f"op{i}"),
+                    eph_m=None if is_adsb else 2.0,
+                    epv_m=None if is_adsb else 3.0,
                 )
-            else:
-                batch.append(
-                    Measurement(
-                        source=MeasurementSource.TELEMETRY,
-                        operation_id=OperationId(f"op{i}"),
-                        eph_m=2.0,
-                        epv_m=3.0,
-                        **common,
-                    )
-                )
+            )
         out.append(batch)
     return out
 
