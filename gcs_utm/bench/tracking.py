@@ -94,7 +94,7 @@ def _batches(
 ) -> list[list[Measurement]]:
     n = pos.shape[0]
     out = []
-    adsb = rng.random(n) < 0.2
+    adsb = np.asarray(rng.random(n) < 0.2, dtype=bool)
     for s in range(seconds):
         t = float(s)
         k = min(int(t // 10.0), len(times) - 2)
