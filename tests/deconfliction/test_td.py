@@ -43,7 +43,9 @@ def with_plans(snap: AirspaceSnapshot, alts: list[Alternative]) -> AirspaceSnaps
     return AirspaceSnapshot(t_s=snap.t_s, operations=ops, tracks={}, geofences=snap.geofences)
 
 
-def assert_clean_single(td: TacticalDeconfliction, snap: AirspaceSnapshot, alt: Alternative) -> None:
+def assert_clean_single(
+    td: TacticalDeconfliction, snap: AirspaceSnapshot, alt: Alternative
+) -> None:
     op = snap.operations[alt.operation_id]
     assert alt.plan is not None
     others = [o for o in snap.operations.values() if o.id != op.id]
@@ -79,7 +81,9 @@ def test_crossing_conflict_offers_a_delay_and_a_slow_down_that_monitoring_accept
     snap = sc.snapshot([a, b])
     td = make_td()
     alts = td.resolve_loss_of_separation(sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"]), snap)
-    timing = [x for x in alts[OperationId("A")] if x.maneuver in (Maneuver.DELAY, Maneuver.SPEED_CHANGE)]
+    timing = [
+        x for x in alts[OperationId("A")] if x.maneuver in (Maneuver.DELAY, Maneuver.SPEED_CHANGE)
+    ]
     assert {x.maneuver for x in timing} == {Maneuver.DELAY, Maneuver.SPEED_CHANGE}
     for x in timing:
         assert_clean_single(td, snap, x)
@@ -92,8 +96,16 @@ def test_joint_repulsion_moves_the_higher_priority_uas_less() -> None:
     lp = [plan_to_local(o.plan, sc.FRAME) for o in (a, b)]
     grid = sc.T0_S + np.arange(0, 200, 2.0)
     cords = [
-        cd.Cord(plan=p, axis=cd.AXIS_VERTICAL, sign=0, mobility=1.0 / o.priority,
-                slope_m_per_step=3.6, max_offset_m=200, min_alt_amsl_m=0, max_alt_amsl_m=1000)
+        cd.Cord(
+            plan=p,
+            axis=cd.AXIS_VERTICAL,
+            sign=0,
+            mobility=1.0 / o.priority,
+            slope_m_per_step=3.6,
+            max_offset_m=200,
+            min_alt_amsl_m=0,
+            max_alt_amsl_m=1000,
+        )
         for p, o in zip(lp, (a, b), strict=True)
     ]
     minima = np.full((2, 2, 2), [50.0, 20.0])
@@ -122,7 +134,12 @@ def test_deformations_are_smooth_and_within_vehicle_limits() -> None:
     alts = make_td().resolve_loss_of_separation(threat, snap)
     for options in alts.values():
         for a in options:
-            if a.maneuver not in (Maneuver.GO_UP, Maneuver.GO_DOWN, Maneuver.GO_LEFT, Maneuver.GO_RIGHT):
+            if a.maneuver not in (
+                Maneuver.GO_UP,
+                Maneuver.GO_DOWN,
+                Maneuver.GO_LEFT,
+                Maneuver.GO_RIGHT,
+            ):
                 continue
             op = snap.operations[a.operation_id]
             assert a.plan is not None
@@ -196,7 +213,10 @@ def test_astar_path_avoids_obstacles_and_reports_no_path_when_enclosed() -> None
     assert not line.crosses(obs[0]) and not line.within(obs[0])
     assert line.distance(obs[0]) >= 0.0
     assert line.length == pytest.approx(2 * np.hypot(250, 200) + 100, rel=0.01)  # over the top
-    ring = Polygon([(-400, -400), (400, -400), (400, 400), (-400, 400)], [[(-300, -300), (300, -300), (300, 300), (-300, 300)]])
+    ring = Polygon(
+        [(-400, -400), (400, -400), (400, 400), (-400, 400)],
+        [[(-300, -300), (300, -300), (300, 300), (-300, 300)]],
+    )
     enclosed = VisibilityPlanner([ring])
     assert enclosed.path(np.array([0.0, 0.0]), np.array([600.0, 0.0])) is None
 
@@ -224,8 +244,16 @@ def test_geofence_reroute_keeps_the_operational_volume_from_every_geofence() -> 
 def _track_at(op_id: str, e: float, n: float, z: float, t_s: float) -> Track:
     lat, lon = sc.FRAME.point_to_wgs84(e, n)
     return Track(
-        id=TrackId(op_id), t_s=t_s, lat_deg=lat, lon_deg=lon, alt_amsl_m=z, east_m=e,
-        north_m=n, vel_enu_mps=(0.0, 0.0, 0.0), position_sigma_m=1.0, cooperative=True,
+        id=TrackId(op_id),
+        t_s=t_s,
+        lat_deg=lat,
+        lon_deg=lon,
+        alt_amsl_m=z,
+        east_m=e,
+        north_m=n,
+        vel_enu_mps=(0.0, 0.0, 0.0),
+        position_sigma_m=1.0,
+        cooperative=True,
         operation_id=OperationId(op_id),
     )
 
@@ -233,12 +261,24 @@ def _track_at(op_id: str, e: float, n: float, z: float, t_s: float) -> Track:
 def test_escape_from_inside_a_concave_geofence_leaves_by_the_nearest_border() -> None:
     # A U open to the north; the UAS is inside the west arm, 15 m from its west edge.
     u_shape = sc.polygon(
-        "U", [(-300, -300), (300, -300), (300, 300), (200, 300), (200, -200), (-200, -200), (-200, 300), (-300, 300)]
+        "U",
+        [
+            (-300, -300),
+            (300, -300),
+            (300, 300),
+            (200, 300),
+            (200, -200),
+            (-200, -200),
+            (-200, 300),
+            (-300, 300),
+        ],
     )
     op = sc.make_operation("A", [(-600, -250, 100), (600, 400, 100)], ov_m=10.0)
     t = sc.T0_S + 30.0
     snap = AirspaceSnapshot(
-        t_s=t, operations={op.id: op}, tracks={TrackId("A"): _track_at("A", -285, 0, 100, t)},
+        t_s=t,
+        operations={op.id: op},
+        tracks={TrackId("A"): _track_at("A", -285, 0, 100, t)},
         geofences=(u_shape,),
     )
     threat = sc.threat(ThreatKind.GEOFENCE_INTRUSION, ["A"], t_s=t, geofence_id=GeofenceId("U"))
@@ -255,7 +295,9 @@ def test_escape_from_inside_a_concave_geofence_leaves_by_the_nearest_border() ->
     rejoin = replace(esc[0].plan, waypoints=esc[0].plan.waypoints[1:])
     assert plan_vs_geofences(rejoin, op, snap.geofences, sc.FRAME, MON) == []
     # Every escape leg after the exit keeps the clearance from the U.
-    pos, _ = LocalPlan(lp.e[1:], lp.n[1:], lp.z[1:], lp.t[1:]).sample(np.arange(lp.t[1], lp.t[-1], 0.5))
+    pos, _ = LocalPlan(lp.e[1:], lp.n[1:], lp.z[1:], lp.t[1:]).sample(
+        np.arange(lp.t[1], lp.t[-1], 0.5)
+    )
     assert fence_to_local(u_shape, sc.FRAME).horizontal_distance(pos[:, 0], pos[:, 1]).min() >= 10.0
 
 
@@ -263,11 +305,15 @@ def test_out_of_volume_back_to_plan_and_next_waypoint() -> None:
     op = sc.make_operation("A", [(0, 0, 100), (1000, 0, 100), (1000, 1000, 100)])
     t = sc.T0_S + 50.0  # plan position (500, 0); the UAS is 120 m north of it
     snap = AirspaceSnapshot(
-        t_s=t, operations={op.id: op}, tracks={TrackId("A"): _track_at("A", 500, 120, 100, t)},
+        t_s=t,
+        operations={op.id: op},
+        tracks={TrackId("A"): _track_at("A", 500, 120, 100, t)},
         geofences=(),
     )
     threat = sc.threat(ThreatKind.UAS_OUT_OV, ["A"], t_s=t)
-    alts = make_td().resolve_single(threat, OperationId("A"), snap, maneuvers={Maneuver.BACK_TO_PLAN, Maneuver.NEXT_WAYPOINT})
+    alts = make_td().resolve_single(
+        threat, OperationId("A"), snap, maneuvers={Maneuver.BACK_TO_PLAN, Maneuver.NEXT_WAYPOINT}
+    )
     byman = {a.maneuver: plan_to_local(a.plan, sc.FRAME) for a in alts if a.plan is not None}
     back = byman[Maneuver.BACK_TO_PLAN]
     assert np.allclose(back.xyz()[1], [500, 0, 100], atol=1.0)  # closest point of the plan
@@ -282,18 +328,25 @@ def test_out_of_volume_back_to_plan_and_next_waypoint() -> None:
 def test_landing_site_is_the_nearest_reachable_with_the_endurance_left() -> None:
     sites = [(2000, 0, 0), (-300, 0, 0)]
     op = sc.make_operation(
-        "A", [(0, 0, 100), (3000, 0, 100)], landing_sites=sites, endurance_s=120.0,
+        "A",
+        [(0, 0, 100), (3000, 0, 100)],
+        landing_sites=sites,
+        endurance_s=120.0,
         home_enz=(-2000, 0, 0),
     )
     snap = sc.snapshot([op])
     threat = sc.threat(ThreatKind.LACK_OF_BATTERY, ["A"])
     td = make_td()
-    alts = td.resolve_single(threat, OperationId("A"), snap, maneuvers={Maneuver.LANDING_SITE, Maneuver.RETURN_HOME})
+    alts = td.resolve_single(
+        threat, OperationId("A"), snap, maneuvers={Maneuver.LANDING_SITE, Maneuver.RETURN_HOME}
+    )
     assert [a.maneuver for a in alts] == [Maneuver.LANDING_SITE]  # home is 200 s away: out of reach
     lp = plan_to_local(alts[0].plan, sc.FRAME)  # type: ignore[arg-type]
     assert np.allclose(lp.xyz()[-1], [-300, 0, 0], atol=1.0)
     short = replace(op, endurance_s=20.0)
-    none = td.resolve_single(threat, OperationId("A"), sc.snapshot([short]), maneuvers={Maneuver.LANDING_SITE})
+    none = td.resolve_single(
+        threat, OperationId("A"), sc.snapshot([short]), maneuvers={Maneuver.LANDING_SITE}
+    )
     assert none == [] and any("reachable" in d.reason for d in td.dropped)
 
 

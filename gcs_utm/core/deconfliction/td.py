@@ -27,6 +27,7 @@ from collections.abc import Collection, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+import numpy.typing as npt
 from shapely.geometry import LineString, Point
 
 from gcs_utm.core.deconfliction import cords as cd
@@ -40,7 +41,6 @@ from gcs_utm.core.deconfliction.geometry import (
     merged_obstacles,
     plan_to_local,
     relevant_fences,
-    simplify,
 )
 from gcs_utm.core.deconfliction.scoring import Neighbour, Score, score
 from gcs_utm.core.monitoring.config import MonitoringConfig
@@ -58,10 +58,6 @@ from gcs_utm.model import (
     OperationState,
     Threat,
 )
-
-SIMPLIFY_TOLERANCE_M = 1.0
-"""Cord points closer than this to the simplified plan are dropped; the cords are pushed to
-(1 + margin) times the minimum, far more than this."""
 
 _INACTIVE = (OperationState.LANDED, OperationState.ENDED)
 _ABANDON = (Maneuver.RETURN_HOME, Maneuver.LANDING_SITE)
@@ -87,6 +83,18 @@ class TacticalDeconfliction:
         self.config = config
         self.monitoring = monitoring
         self.dropped: list[Dropped] = []
+        # Local conversions of the plans in the current snapshot, keyed by object identity
+        # (the plan is kept in the value so its id cannot be reused while cached).
+        self._local: dict[int, tuple[FlightPlan, LocalPlan]] = {}
+
+    def _lp(self, plan: FlightPlan) -> LocalPlan:
+        hit = self._local.get(id(plan))
+        if hit is None or hit[0] is not plan:
+            if len(self._local) > 4096:
+                self._local.clear()
+            hit = (plan, plan_to_local(plan, self.frame))
+            self._local[id(plan)] = hit
+        return hit[1]
 
     # ---- helpers on the snapshot -------------------------------------------------------------
     def _others(
@@ -106,7 +114,7 @@ class TacticalDeconfliction:
             if tr.operation_id == op.id and not tr.stale:
                 e, n = self.frame.point_to_local(tr.lat_deg, tr.lon_deg)
                 return np.array([e, n, tr.alt_amsl_m])
-        return plan_to_local(op.plan, self.frame).position_at(snapshot.t_s)
+        return self._lp(op.plan).position_at(snapshot.t_s)
 
     def _alt_limits(self, op: Operation) -> tuple[float, float]:
         lo = op.min_alt_amsl_m if op.min_alt_amsl_m is not None else self.config.min_alt_amsl_m
@@ -158,12 +166,12 @@ class TacticalDeconfliction:
         nbs = []
         for o in neighbours:
             h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
-            nbs.append(Neighbour(plan=plan_to_local(o.plan, self.frame), h_min_m=h, v_min_m=v))
+            nbs.append(Neighbour(plan=self._lp(o.plan), h_min_m=h, v_min_m=v))
         weight = 1.0 + self.config.priority_cost_weight * max(0, op.priority - lowest_priority)
         return score(
             new,
             old,
-            filed=plan_to_local(op.plan, self.frame),
+            filed=self._lp(op.plan),
             ov_radius_m=op.operational_volume_m,
             fences=fences,
             neighbours=nbs,
@@ -237,13 +245,13 @@ class TacticalDeconfliction:
         involved = [snapshot.operations[i] for i in threat.uas_ids if i in snapshot.operations]
         if not involved:
             return {}
-        local = {op.id: plan_to_local(op.plan, self.frame).after(now) for op in involved}
+        local = {op.id: self._lp(op.plan).after(now) for op in involved}
         end = min(now + cfg.horizon_s, max(float(lp.t[-1]) for lp in local.values()))
         steps = max(2, math.ceil((end - now) / cfg.cord_dt_s) + 1)
         grid: FloatArray = now + np.arange(steps, dtype=np.float64) * cfg.cord_dt_s
         members = list(involved) + self._neighbours(involved, snapshot, grid)
         for op in members:
-            local.setdefault(op.id, plan_to_local(op.plan, self.frame).after(now))
+            local.setdefault(op.id, self._lp(op.plan).after(now))
         ids = {op.id for op in members}
         outsiders = self._others(snapshot, ids)
         geofences = snapshot.geofences
@@ -358,10 +366,10 @@ class TacticalDeconfliction:
         horizon: the ones a deformation can push into (nearest first, at most
         ``max_neighbours``)."""
         ids = {op.id for op in involved}
-        pos = [plan_to_local(op.plan, self.frame).sample(grid) for op in involved]
+        pos = [self._lp(op.plan).sample(grid) for op in involved]
         found: list[tuple[float, Operation]] = []
         for other in self._others(snapshot, ids):
-            p, ok = plan_to_local(other.plan, self.frame).sample(grid)
+            p, ok = self._lp(other.plan).sample(grid)
             best = math.inf
             for op, (q, ok2) in zip(involved, pos, strict=True):
                 m = ok & ok2
@@ -414,13 +422,19 @@ class TacticalDeconfliction:
         axis: str,
         sign: int,
     ) -> LocalPlan:
-        """The plan through the displaced cord, simplified and re-timed so that no segment is
-        faster than allowed (its original pace, or the cruise speed, times max_speed_factor)."""
-        times = np.union1d(grid[(grid >= lp.t[0]) & (grid <= lp.t[-1])], lp.t)
+        """The plan through the displaced cord, re-timed so that no segment is faster than
+        allowed (its original pace, or the cruise speed, times max_speed_factor).
+
+        The displacement is piecewise linear on the grid (an envelope of cones, capped), so
+        the new plan needs points only at the filed waypoints and at the grid times where the
+        displacement's slope changes: between those it is exactly the cord."""
+        kinks = grid[1:-1][np.abs(np.diff(d, 2)) > 1e-9]
+        inside = (kinks >= lp.t[0]) & (kinks <= lp.t[-1])
+        times = np.union1d(kinks[inside], lp.t)
         base, _ = lp.sample(times)
         disp = np.interp(times, grid, d)
         new = cd.apply(base, cd.left_normals(base), axis, sign, disp)
-        cand = simplify(LocalPlan(new[:, 0], new[:, 1], new[:, 2], times), SIMPLIFY_TOLERANCE_M)
+        cand = LocalPlan(new[:, 0], new[:, 1], new[:, 2], times)
         # Original pace between the kept times, from the undeformed plan.
         ob, _ = lp.sample(cand.t)
         dt = np.diff(cand.t)
@@ -454,6 +468,14 @@ class TacticalDeconfliction:
         now = snapshot.t_s
         cfg = self.config
         others = list(rigid) + list(outsiders)
+        slowest = min([f for f in cfg.slowdown_factors if 0.0 < f < 1.0] or [1.0])
+        span = float(lp.t[-1] - now)
+        grid_t = np.arange(now, now + max(span / slowest, span + cfg.max_delay_s) + 1.0, 1.0)
+        screens = []
+        for o in others:
+            q, ok = self._lp(o.plan).sample(grid_t)
+            h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
+            screens.append((q, ok, h, v))
         out: list[Alternative] = []
         delay = cfg.delay_step_s
         while delay <= cfg.max_delay_s + 1e-9:
@@ -462,7 +484,7 @@ class TacticalDeconfliction:
             n = np.concatenate([[lp.n[0]], lp.n])
             z = np.concatenate([[lp.z[0]], lp.z])
             cand = LocalPlan(e, n, z, t)
-            if self._clear(op, cand, others):
+            if self._clear(cand, grid_t, screens):
                 alt = self._finish(
                     op,
                     Maneuver.DELAY,
@@ -483,7 +505,7 @@ class TacticalDeconfliction:
             if not 0.0 < factor < 1.0:
                 continue
             cand = LocalPlan(lp.e, lp.n, lp.z, now + (lp.t - now) / factor)
-            if self._clear(op, cand, others):
+            if self._clear(cand, grid_t, screens):
                 alt = self._finish(
                     op,
                     Maneuver.SPEED_CHANGE,
@@ -501,19 +523,22 @@ class TacticalDeconfliction:
                 break
         return out
 
-    def _clear(self, op: Operation, cand: LocalPlan, others: Sequence[Operation]) -> bool:
+    def _clear(
+        self,
+        cand: LocalPlan,
+        grid_t: FloatArray,
+        screens: Sequence[tuple[FloatArray, npt.NDArray[np.bool_], float, float]],
+    ) -> bool:
         """Fast screen of a timing candidate on a 1 s grid (Monitoring verifies the one that
         passes): every other plan at least (1 + margin) times the pair's minima away."""
-        t = np.arange(float(cand.t[0]), float(cand.t[-1]) + 1.0, 1.0)
-        pos, _ = cand.sample(t)
+        pos, mine = cand.sample(grid_t)
         scale = 1.0 + self.config.separation_margin_fraction
-        for o in others:
-            q, ok = plan_to_local(o.plan, self.frame).sample(t)
-            if not ok.any():
+        for q, ok, h, v in screens:
+            m = ok & mine
+            if not m.any():
                 continue
-            h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
-            dh = np.hypot(pos[ok, 0] - q[ok, 0], pos[ok, 1] - q[ok, 1])
-            dv = np.abs(pos[ok, 2] - q[ok, 2])
+            dh = np.hypot(pos[m, 0] - q[m, 0], pos[m, 1] - q[m, 1])
+            dv = np.abs(pos[m, 2] - q[m, 2])
             if self.monitoring.spherical:
                 ratio = np.hypot(dh, dv) / h
             else:
@@ -557,7 +582,7 @@ class TacticalDeconfliction:
             return []
         now = snapshot.t_s
         cfg = self.config
-        lp = plan_to_local(op.plan, self.frame).after(now)
+        lp = self._lp(op.plan).after(now)
         end = min(now + cfg.horizon_s, float(lp.t[-1]))
         steps = max(2, math.ceil((end - now) / cfg.cord_dt_s) + 1)
         grid: FloatArray = now + np.arange(steps, dtype=np.float64) * cfg.cord_dt_s
@@ -650,7 +675,7 @@ class TacticalDeconfliction:
         if threat.area is not None and threat.area.id not in {g.id for g in geofences}:
             geofences += (threat.area,)
         fences = self._local_fences(geofences)
-        lp = plan_to_local(op.plan, self.frame).after(now)
+        lp = self._lp(op.plan).after(now)
         cur = self.current_xyz(op, snapshot)
         zs = np.concatenate([lp.z, [cur[2]]])
         ov = op.operational_volume_m
@@ -746,7 +771,7 @@ class TacticalDeconfliction:
         if op.home is not None:
             e, n = self.frame.point_to_local(op.home.lat_deg, op.home.lon_deg)
             return np.array([e, n, op.home.alt_amsl_m])
-        return np.asarray(plan_to_local(op.plan, self.frame).xyz()[0], dtype=np.float64)
+        return np.asarray(self._lp(op.plan).xyz()[0], dtype=np.float64)
 
     def _endurance_left(self, op: Operation, now: float) -> float | None:
         """Usable flight time left (endurance counted from the plan start, minus the

@@ -49,7 +49,7 @@ class EmergencyConfig:
         3.0, "weight of riskiness in the joint selection; > alpha favours safety", min=0.0
     )
     # setting() turns a dict default into a default_factory copy, so this is not shared state.
-    policy: dict[str, str] = setting(  # noqa: RUF009
+    policy: dict[str, str] = setting(
         DEFAULT_POLICY, "action per threat kind (see docs/emergency.md for the actions)"
     )
     autonomous: bool = setting(

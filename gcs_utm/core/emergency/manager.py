@@ -332,11 +332,19 @@ class EmergencyManager:
         for op_id, alts in options.items():
             banned = case.excluded.get(op_id, set())
             options[op_id] = [x for x in alts if x.maneuver not in banned]
+        memo: dict[tuple[int, int], bool] = {}
+
+        def compatible(x: Alternative, y: Alternative) -> bool:
+            key = (id(x), id(y)) if id(x) < id(y) else (id(y), id(x))
+            if key not in memo:
+                memo[key] = self.td.compatible(x, y, snapshot)
+            return memo[key]
+
         sel = select_joint(
             options,
             alpha=cfg.alpha,
             beta=cfg.beta,
-            compatible=lambda x, y: self.td.compatible(x, y, snapshot),
+            compatible=compatible,
             max_nodes=cfg.max_combinations,
         )
         detail = self._detail(options, sel, "loss of separation: charged cords + joint selection")
@@ -368,9 +376,7 @@ class EmergencyManager:
                 continue  # unchanged for this UAS: keep the standing version
             others = [c for k, c in sel.chosen.items() if k != op_id]
             shown = [
-                x
-                for x in options[op_id]
-                if x is not alt and all(self.td.compatible(x, c, snapshot) for c in others)
+                x for x in options[op_id] if x is not alt and all(compatible(x, c) for c in others)
             ]
             d = d.merge(
                 self._issue(
@@ -428,7 +434,17 @@ class EmergencyManager:
             t, op_id, snapshot, maneuvers=allowed, extra_geofences=tuple(case.geofences)
         )
         cfg = self.config
-        alts.sort(key=lambda x: weighted(x, cfg.alpha, cfg.beta))
+        if case.action == "land_or_home":
+            # Energy first: with the battery or the vehicle failing, the option that is on the
+            # ground soonest wins; the weighted score only breaks ties.
+            alts.sort(
+                key=lambda x: (
+                    x.plan.end_t_s if x.plan is not None else now,
+                    weighted(x, cfg.alpha, cfg.beta),
+                )
+            )
+        else:
+            alts.sort(key=lambda x: weighted(x, cfg.alpha, cfg.beta))
         options = {op_id: alts}
         best = alts[0] if alts else None
         sel = (
