@@ -28,6 +28,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
 from gcs_utm.model import FloatArray
@@ -57,6 +58,26 @@ class CordResult:
     displacement_m: FloatArray  # (U, K) >= 0 along each cord's signed axis
     signs: tuple[int, ...]
     iterations: int
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Samples:
+    """Undeformed cords on the grid: positions (U, K, 3), validity (U, K), normals (U, K, 2)."""
+
+    base: FloatArray
+    valid: npt.NDArray[np.bool_]
+    normals: FloatArray
+
+
+def sample_cords(plans: Sequence[LocalPlan], grid_t: FloatArray) -> Samples:
+    u, k = len(plans), grid_t.shape[0]
+    base = np.zeros((u, k, 3))
+    valid = np.zeros((u, k), dtype=bool)
+    normals = np.zeros((u, k, 2))
+    for i, p in enumerate(plans):
+        base[i], valid[i] = p.sample(grid_t)
+        normals[i] = left_normals(base[i])
+    return Samples(base=base, valid=valid, normals=normals)
 
 
 def left_normals(pos: FloatArray) -> FloatArray:
@@ -106,17 +127,17 @@ def resolve(
     spherical: bool,
     margin_fraction: float,
     max_iterations: int,
+    samples: Samples | None = None,
 ) -> CordResult | None:
     """Deform ``cords`` on ``grid_t`` until every pair holds ``minima[i, j] = (h, v)``
-    (times 1 + margin); None when the scenario cannot be resolved."""
+    (times 1 + margin); None when the scenario cannot be resolved. ``samples`` are the cords'
+    undeformed positions on the grid when the caller already has them (several scenarios on
+    the same cords)."""
     u = len(cords)
     k = grid_t.shape[0]
-    base = np.zeros((u, k, 3))
-    valid = np.zeros((u, k), dtype=bool)
-    normals = np.zeros((u, k, 2))
-    for i, c in enumerate(cords):
-        base[i], valid[i] = c.plan.sample(grid_t)
-        normals[i] = left_normals(base[i])
+    if samples is None:
+        samples = sample_cords([c.plan for c in cords], grid_t)
+    base, valid, normals = samples.base, samples.valid, samples.normals
     signs = [c.sign for c in cords]
     d = np.zeros((u, k))
     demand = np.zeros((u, k))

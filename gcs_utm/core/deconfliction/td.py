@@ -151,6 +151,23 @@ class TacticalDeconfliction:
             return True
         op_a = snapshot.operations[a.operation_id]
         op_b = replace(snapshot.operations[b.operation_id], plan=b.plan)
+        # Sound shortcut: if two sampled instants of the plans already break the minima,
+        # Monitoring (which finds the exact closest approach) would flag the pair too.
+        pa, pb = self._lp(a.plan), self._lp(b.plan)
+        t0, t1 = max(pa.t[0], pb.t[0]), min(pa.t[-1], pb.t[-1])
+        if t1 > t0:
+            t = np.linspace(t0, t1, max(2, int((t1 - t0) / 2.0) + 1))
+            qa, _ = pa.sample(t)
+            qb, _ = pb.sample(t)
+            h, v = self.monitoring.effective_minima(
+                op_a.operational_volume_m, op_b.operational_volume_m
+            )
+            dh = np.hypot(qa[:, 0] - qb[:, 0], qa[:, 1] - qb[:, 1])
+            dv = np.abs(qa[:, 2] - qb[:, 2])
+            sphere = self.monitoring.spherical
+            broken = np.hypot(dh, dv) < h if sphere else (dh < h) & (dv < v)
+            if bool(broken.any()):
+                return False
         return not plan_vs_plans(a.plan, op_a, [op_b], self.frame, self.monitoring)
 
     def _score(  # noqa: PLR0917 - private helper, called positionally
@@ -303,6 +320,7 @@ class TacticalDeconfliction:
                 spherical=self.monitoring.spherical,
                 margin_fraction=cfg.separation_margin_fraction,
                 max_iterations=cfg.max_iterations,
+                samples=samples,
             )
             if res is None:
                 for k, op in enumerate(members):
@@ -337,6 +355,7 @@ class TacticalDeconfliction:
                 if alt is not None:
                     out[op.id].append(alt)
 
+        samples = cd.sample_cords([local[op.id] for op in members], grid)
         mobile_all = [self._mobility(op) > 0 for op in members]
         run([cd.AXIS_VERTICAL] * u, [0] * u, mobile_all, "joint vertical repulsion")
         run([cd.AXIS_LATERAL] * u, [0] * u, mobile_all, "joint lateral repulsion")
@@ -477,30 +496,26 @@ class TacticalDeconfliction:
             h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
             screens.append((q, ok, h, v))
         out: list[Alternative] = []
-        delay = cfg.delay_step_s
-        while delay <= cfg.max_delay_s + 1e-9:
+        delay = self._first_clear_delay(lp, now, grid_t, screens)
+        if delay is not None:
             t = np.concatenate([[now, now + delay], lp.t[1:] + delay])
             e = np.concatenate([[lp.e[0]], lp.e])
             n = np.concatenate([[lp.n[0]], lp.n])
             z = np.concatenate([[lp.z[0]], lp.z])
-            cand = LocalPlan(e, n, z, t)
-            if self._clear(cand, grid_t, screens):
-                alt = self._finish(
-                    op,
-                    Maneuver.DELAY,
-                    cand,
-                    lp,
-                    snapshot,
-                    geofences=geofences,
-                    fences=fences,
-                    outsiders=others,
-                    lowest_priority=lowest,
-                    detail=f"hold {delay:.0f} s here, then the plan",
-                )
-                if alt is not None:
-                    out.append(replace(alt, plan=alt.plan))
-                break
-            delay += cfg.delay_step_s
+            alt = self._finish(
+                op,
+                Maneuver.DELAY,
+                LocalPlan(e, n, z, t),
+                lp,
+                snapshot,
+                geofences=geofences,
+                fences=fences,
+                outsiders=others,
+                lowest_priority=lowest,
+                detail=f"hold {delay:.0f} s here, then the plan",
+            )
+            if alt is not None:
+                out.append(alt)
         for factor in cfg.slowdown_factors:
             if not 0.0 < factor < 1.0:
                 continue
@@ -522,6 +537,37 @@ class TacticalDeconfliction:
                     out.append(alt)
                 break
         return out
+
+    def _first_clear_delay(
+        self,
+        lp: LocalPlan,
+        now: float,
+        grid_t: FloatArray,
+        screens: Sequence[tuple[FloatArray, npt.NDArray[np.bool_], float, float]],
+    ) -> float | None:
+        """The smallest delay step after which holding here and then flying the plan keeps
+        (1 + margin) times the minima from every screened plan; all delays at once."""
+        cfg = self.config
+        steps = int(cfg.max_delay_s // cfg.delay_step_s)
+        if steps < 1:
+            return None
+        delays = cfg.delay_step_s * np.arange(1, steps + 1, dtype=np.float64)
+        tt = np.maximum(grid_t[None, :] - delays[:, None], now)  # (D, T): plan time flown
+        valid = tt <= lp.t[-1]
+        pos = np.stack([np.interp(tt, lp.t, c) for c in (lp.e, lp.n, lp.z)], axis=-1)
+        scale = 1.0 + cfg.separation_margin_fraction
+        clear = np.ones(delays.shape[0], dtype=bool)
+        for q, ok, h, v in screens:
+            m = valid & ok[None, :]
+            dh = np.hypot(pos[..., 0] - q[None, :, 0], pos[..., 1] - q[None, :, 1])
+            dv = np.abs(pos[..., 2] - q[None, :, 2])
+            if self.monitoring.spherical:
+                ratio = np.hypot(dh, dv) / h
+            else:
+                ratio = np.maximum(dh / h, dv / v)
+            clear &= ~((ratio < scale) & m).any(axis=1)
+        idx = np.flatnonzero(clear)
+        return float(delays[idx[0]]) if idx.size else None
 
     def _clear(
         self,
