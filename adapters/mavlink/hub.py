@@ -747,16 +747,21 @@ class MavlinkHub:
         end: float,
         reboots: int,
     ) -> bool:
-        """MISSION_SET_CURRENT until MISSION_CURRENT reports ``seq``."""
+        """MISSION_SET_CURRENT until MISSION_CURRENT reports ``seq``; resent on the same
+        adaptive timeout as mission items (not the 0.5 s command timeout: on a lossy link
+        that one wait would cost more than the whole transfer)."""
         enc = self._encoder(st)
-        for _ in range(self.config.command_retries + 1):
+        step = _Step(self.config)
+        for _ in range(self.config.max_retries + 1):
             self._to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seq))
-            wait_end = min(end, time.monotonic() + self.config.command_timeout_s)
-            while time.monotonic() < wait_end:
+            wait_end = min(end, time.monotonic() + step.rto)
+            while (left := wait_end - time.monotonic()) > 0:
                 self._check(st, reboots, end)
-                m = await self._get(box, wait_end - time.monotonic())
+                m = await self._get(box, left)
                 if m is not None and m._header.msgId == wire.MISSION_CURRENT and m.seq == seq:
                     return True
+            self._check(st, reboots, end)
+            step.backoff()
         return False
 
     # --- commands -------------------------------------------------------------------------
