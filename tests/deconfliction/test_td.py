@@ -8,6 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from shapely.geometry import Polygon
 
 from gcs_utm.bench import deconfliction as sc
@@ -360,3 +362,93 @@ def test_cost_and_risk_are_normalised_and_grow_with_the_detour() -> None:
     # A 20-odd metre climb costs less than a 60-odd metre sidestep at 30 degrees.
     assert min(a.cost for a in up) < min(a.cost for a in side)
     assert all(a.cost >= 0 and a.risk >= 0 for a in alts)
+
+
+def test_candidates_that_monitoring_flags_are_dropped_not_offered() -> None:
+    """A geofence sits above the conflict point and a third UAS flies 130 m to the south:
+    candidates that would meet them are dropped, every offered one is clean."""
+    from gcs_utm.core.emergency import EmergencyConfig, EmergencyManager
+
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], priority=1)
+    b = sc.make_operation("B", [(1000, 0, 100), (-1000, 0, 100)], priority=2)
+    c = sc.make_operation("C", [(-1000, -130, 100), (1000, -130, 100)], priority=3)
+    lid = sc.cylinder("lid", 0.0, 0.0, 300.0, min_alt_m=112.0, max_alt_m=400.0)
+    snap = sc.snapshot([a, b, c], [lid])
+    threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"])
+    td = make_td()
+    alts = td.resolve_loss_of_separation(threat, snap)
+    assert td.dropped, "some candidates must have been rejected by Monitoring"
+    assert any("geofence lid" in d.reason for d in td.dropped)
+    members = set(alts)
+    for options in alts.values():
+        for alt in options:
+            op = snap.operations[alt.operation_id]
+            outsiders = [o for o in snap.operations.values() if o.id not in members]
+            assert plan_vs_geofences(alt.plan, op, snap.geofences, sc.FRAME, MON) == []  # type: ignore[arg-type]
+            assert plan_vs_plans(alt.plan, op, outsiders, sc.FRAME, MON) == []  # type: ignore[arg-type]
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
+    d = em.on_threat(threat, snap)
+    chosen = [r.selected for r in d.recommendations if r.selected is not None]
+    assert chosen
+    after = with_plans(snap, chosen)
+    report = strategic_check(list(after.operations.values()), after.geofences, sc.FRAME, MON)
+    assert report.conflicts == () and report.crossings == ()
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    angle_deg=st.floats(min_value=20.0, max_value=180.0),
+    dz_m=st.floats(min_value=-10.0, max_value=10.0),
+    prio_a=st.integers(min_value=1, max_value=5),
+    prio_b=st.integers(min_value=1, max_value=5),
+    axis=st.sampled_from([cd.AXIS_VERTICAL, cd.AXIS_LATERAL]),
+)
+def test_cords_separate_any_crossing_and_move_in_inverse_priority(
+    angle_deg: float, dz_m: float, prio_a: int, prio_b: int, axis: str
+) -> None:
+    a = np.deg2rad(angle_deg)
+    pa = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)])
+    pb = sc.make_operation(
+        "B",
+        [
+            (-1000 * np.cos(a), -1000 * np.sin(a), 100 + dz_m),
+            (1000 * np.cos(a), 1000 * np.sin(a), 100 + dz_m),
+        ],
+    )
+    lps = [plan_to_local(o.plan, sc.FRAME) for o in (pa, pb)]
+    grid = sc.T0_S + np.arange(0, 201, 2.0)
+    slope = 3.6 if axis == cd.AXIS_VERTICAL else cd.lateral_slope(10.0, 2.0, 30.0)
+    cords = [
+        cd.Cord(
+            plan=p,
+            axis=axis,
+            sign=0,
+            mobility=1.0 / pr,
+            slope_m_per_step=slope,
+            max_offset_m=1000,
+            min_alt_amsl_m=-1000,
+            max_alt_amsl_m=5000,
+        )
+        for p, pr in zip(lps, (prio_a, prio_b), strict=True)
+    ]
+    minima = np.full((2, 2, 2), [50.0, 20.0])
+    res = cd.resolve(cords, grid, minima, spherical=False, margin_fraction=0.15, max_iterations=60)
+    assert res is not None
+    base = cd.sample_cords(lps, grid)
+    pos = [
+        cd.apply(base.base[i], base.normals[i], axis, res.signs[i], res.displacement_m[i])
+        for i in range(2)
+    ]
+    dh = np.hypot(pos[0][:, 0] - pos[1][:, 0], pos[0][:, 1] - pos[1][:, 1])
+    dv = np.abs(pos[0][:, 2] - pos[1][:, 2])
+    assert (np.maximum(dh / 50.0, dv / 20.0) >= 1.0).all()
+    moved = res.displacement_m.max(axis=1)
+    if axis == cd.AXIS_LATERAL and angle_deg < 45.0:
+        # Shallow crossings resolved sideways need long, geometry-driven sidesteps; the
+        # mobility split is not a guarantee there (vertical is the cheap option and wins).
+        return
+    if prio_a > prio_b:
+        assert moved[0] <= moved[1] + 1.0
+    elif prio_b > prio_a:
+        assert moved[1] <= moved[0] + 1.0
+    assert np.abs(np.diff(res.displacement_m, axis=1)).max() <= slope + 1e-9

@@ -33,6 +33,8 @@ import numpy.typing as npt
 from gcs_utm.core.deconfliction.geometry import LocalPlan
 from gcs_utm.model import FloatArray
 
+IntArray = npt.NDArray[np.intp]
+
 AXIS_VERTICAL = "vertical"
 AXIS_LATERAL = "lateral"
 AXIS_NONE = "none"
@@ -178,6 +180,7 @@ def resolve(
         for i, j in zip(*np.nonzero(viol.any(axis=2)), strict=True):
             ks = np.flatnonzero(viol[i, j])
             mi, mj = cords[i].mobility, cords[j].mobility
+            _choose_signs(cords, signs, pos, normals, i, j, ks)
             for c, o, m in ((i, j, mi), (j, i, mj)):
                 if m <= 0.0 or cords[c].axis == AXIS_NONE:
                     continue
@@ -191,14 +194,6 @@ def resolve(
                     need = h_min[c, o, 0] * scale
                 if spherical:
                     need = h_min[c, o, 0] * scale
-                if signs[c] == 0:
-                    mean = float(np.mean(along))
-                    if abs(mean) > 1e-3:
-                        signs[c] = 1 if mean > 0 else -1
-                    elif cords[c].axis == AXIS_LATERAL:
-                        signs[c] = -1  # head-on: both turn right, as the rules of the air say
-                    else:
-                        signs[c] = 1 if c < o else -1
                 deficit = need - signs[c] * along
                 deficit = np.maximum(deficit, 0.0)
                 demand[c, ks] = np.maximum(demand[c, ks], d[c, ks] + share * deficit + 0.5)
@@ -215,6 +210,55 @@ def resolve(
                 cap = np.minimum(cap, np.maximum(room, 0.0))
             d[i] = np.minimum(envelope(demand[i], c.slope_m_per_step), cap)
     return None
+
+
+def _own_sign(  # noqa: PLR0917 - private helper
+    cords: Sequence[Cord], pos: FloatArray, normals: FloatArray, c: int, o: int, ks: IntArray
+) -> int:
+    """Away from ``o`` over the violating steps. Laterally, when ``o`` is on both sides of
+    ``c`` during the violation (the tracks cross), there is no side to move away to: turn
+    right, as the rules of the air say (both right also resolves head-on and converging
+    traffic: each passes behind the other)."""
+    rel = pos[c, ks] - pos[o, ks]
+    if cords[c].axis == AXIS_VERTICAL:
+        mean = float(np.mean(rel[:, 2]))
+        return (1 if mean > 0 else -1) if abs(mean) > 1e-3 else (1 if c < o else -1)
+    along = np.einsum("kj,kj->k", rel[:, :2], normals[c, ks])
+    tol = 1.0  # metres: a side is a side only if clearly so
+    if float(along.min()) < -tol and float(along.max()) > tol:
+        return -1
+    mean = float(np.mean(along))
+    return (1 if mean > 0 else -1) if abs(mean) > 1e-3 else -1
+
+
+def _choose_signs(  # noqa: PLR0917 - private helper
+    cords: Sequence[Cord],
+    signs: list[int],
+    pos: FloatArray,
+    normals: FloatArray,
+    i: int,
+    j: int,
+    ks: IntArray,
+) -> None:
+    """Fix the free signs of a violating pair, once. Two mobile vertical cords split: one up,
+    one down. Lateral cords each take their own side (:func:`_own_sign`)."""
+    free = [
+        c for c in (i, j) if signs[c] == 0 and cords[c].axis != AXIS_NONE and cords[c].mobility > 0
+    ]
+    if not free:
+        return
+    mobile = all(cords[c].axis == AXIS_VERTICAL and cords[c].mobility > 0 for c in (i, j))
+    if mobile:
+        if len(free) == 2:
+            signs[i] = _own_sign(cords, pos, normals, i, j, ks)
+            signs[j] = -signs[i]
+        elif free == [i]:
+            signs[i] = -signs[j]
+        else:
+            signs[j] = -signs[i]
+        return
+    for c in free:
+        signs[c] = _own_sign(cords, pos, normals, c, j if c == i else i, ks)
 
 
 def _opposed(cords: Sequence[Cord], c: int, o: int) -> bool:
