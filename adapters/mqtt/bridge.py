@@ -37,7 +37,7 @@ from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
-from typing import Protocol
+from typing import Protocol, cast
 
 import aiomqtt
 
@@ -147,8 +147,13 @@ class MqttBridge:
         self.stats = BridgeStats()
         self._queue: deque[_Outgoing] = deque()
         self._wakeup = asyncio.Event()
+        # one inbox for the bridge's life, handed to every aiomqtt client as its message
+        # queue: a message paho has acknowledged to the broker but we have not handled yet
+        # survives the connection that received it (else a disconnect would lose an answer)
+        self._inbox: asyncio.Queue[aiomqtt.Message] = asyncio.Queue(maxsize=config.queue_max)
         self._connected = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
+        self._abandoned: set[asyncio.Task[None]] = set()
         self._rec_operator: dict[RecommendationId, str] = {}
         self._published_geofences: dict[GeofenceId, Geofence] = {}
         self._last_traffic_t_s: float | None = None
@@ -212,6 +217,7 @@ class MqttBridge:
             tls_params=tls_params,
             tls_insecure=cfg.tls.insecure if cfg.tls.enabled else None,
             max_queued_incoming_messages=cfg.queue_max,
+            queue_type=self._inbox_factory(),
             will=aiomqtt.Will(
                 self.topics.bridge,
                 encode_bridge_status(False, None),
@@ -219,6 +225,19 @@ class MqttBridge:
                 retain=True,
             ),
         )
+
+    def _inbox_factory(self) -> type[asyncio.Queue[aiomqtt.Message]]:
+        inbox = self._inbox
+
+        def factory(maxsize: int = 0) -> asyncio.Queue[aiomqtt.Message]:
+            return inbox
+
+        return cast("type[asyncio.Queue[aiomqtt.Message]]", factory)
+
+    async def _drain_inbox(self) -> None:
+        """Handle messages received by a connection that has ended."""
+        while not self._inbox.empty():
+            await self._handle_message(self._inbox.get_nowait())
 
     def backoff_s(self, failures: int) -> float:
         """Delay before reconnect attempt after ``failures`` consecutive failures (>= 1)."""
@@ -233,8 +252,9 @@ class MqttBridge:
             connects_before = self.stats.connects
             try:
                 await self._serve_once()
-            except aiomqtt.MqttError as exc:
+            except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
                 self._connected.clear()
+                await self._drain_inbox()
                 if self.stats.connects > connects_before:
                     self.stats.connection_losses += 1
                     failures = 0
@@ -251,40 +271,62 @@ class MqttBridge:
                 await asyncio.sleep(delay)
 
     async def _serve_once(self) -> None:
-        async with self._client() as client:
+        client = self._client()
+        try:
+            # paho's connect can stall when the broker vanishes mid-handshake: bound it
+            async with asyncio.timeout(self._config.connect_timeout_s):
+                await client.__aenter__()
+        except TimeoutError as exc:
+            raise aiomqtt.MqttError("connect timed out") from exc
+        try:
+            await self._serve_connected(client)
+        finally:
+            with contextlib.suppress(Exception):
+                async with asyncio.timeout(self._config.connect_timeout_s):
+                    await client.__aexit__(None, None, None)
+
+    async def _serve_connected(self, client: aiomqtt.Client) -> None:
+        async with asyncio.timeout(self._config.connect_timeout_s):
             await client.subscribe([(f, QOS_AT_LEAST_ONCE) for f in self.topics.subscriptions()])
-            self._enqueue(
-                self.topics.bridge,
-                encode_bridge_status(True, self._clock.now_s()),
-                qos=QOS_AT_LEAST_ONCE,
-                retain=True,
-                latest_wins=True,
-            )
-            self.stats.connects += 1
-            self._connected.set()
-            _log.info("mqtt connected to %s:%d", self._config.host, self._config.port)
-            sender = asyncio.create_task(self._sender(client), name="mqtt-sender")
-            receiver = asyncio.create_task(self._receiver(client), name="mqtt-receiver")
-            try:
-                done, _ = await asyncio.wait(
-                    {sender, receiver}, return_when=asyncio.FIRST_COMPLETED
-                )
-            finally:
-                self._connected.clear()
-                for task in (sender, receiver):
-                    task.cancel()
-                await asyncio.gather(sender, receiver, return_exceptions=True)
-            for task in done:
+        self._enqueue(
+            self.topics.bridge,
+            encode_bridge_status(True, self._clock.now_s()),
+            qos=QOS_AT_LEAST_ONCE,
+            retain=True,
+            latest_wins=True,
+        )
+        self.stats.connects += 1
+        self._connected.set()
+        _log.info("mqtt connected to %s:%d", self._config.host, self._config.port)
+        sender = asyncio.create_task(self._sender(client), name="mqtt-sender")
+        receiver = asyncio.create_task(self._receiver(client), name="mqtt-receiver")
+        try:
+            done, _ = await asyncio.wait({sender, receiver}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            self._connected.clear()
+            for task in (sender, receiver):
+                task.cancel()
+            # aiomqtt's publish can swallow a cancellation (asyncio.wait_for race on 3.11)
+            # and then wait on a dead client: never wait for it unboundedly
+            _, stuck = await asyncio.wait({sender, receiver}, timeout=1.0)
+            for task in stuck:
+                _log.warning("mqtt: %s did not stop; abandoned", task.get_name())
+                self._abandoned.add(task)
+                task.add_done_callback(self._abandoned.discard)
+        for task in done:
+            if not task.cancelled():
                 task.result()  # raises the MqttError that ended the connection
-            raise aiomqtt.MqttError("connection tasks ended")
+        raise aiomqtt.MqttError("connection tasks ended")
 
     # ------------------------------------------------------------------------------ sending
 
     async def _sender(self, client: aiomqtt.Client) -> None:
-        while True:
+        while self._connected.is_set():
             while not self._queue:
                 self._wakeup.clear()
                 await self._wakeup.wait()
+            if not self._connected.is_set():
+                return  # an abandoned sender of an ended connection
             item = self._queue[0]
             await client.publish(
                 item.topic,
@@ -297,6 +339,7 @@ class MqttBridge:
             if self._queue and self._queue[0] is item:
                 self._queue.popleft()
             self.stats.published += 1
+            _log.debug("mqtt: published %s (%d pending)", item.topic, len(self._queue))
 
     def _enqueue(
         self,
@@ -433,13 +476,19 @@ class MqttBridge:
 
     async def _receiver(self, client: aiomqtt.Client) -> None:
         async for message in client.messages:
-            payload = message.payload
-            if not isinstance(payload, bytes | bytearray | str):
-                payload = b"" if payload is None else str(payload).encode()
-            await self.handle(str(message.topic), payload)
+            # shielded: a connection loss must not cancel an answer half-handled
+            await asyncio.shield(self._handle_message(message))
+
+    async def _handle_message(self, message: aiomqtt.Message) -> None:
+        payload = message.payload
+        if not isinstance(payload, bytes | bytearray | str):
+            payload = b"" if payload is None else str(payload).encode()
+        await self.handle(str(message.topic), payload)
 
     async def handle(self, topic: str, payload: bytes | bytearray | str) -> None:
         """Decode and dispatch one inbound message; report, never raise."""
+        if self.topics.is_own_output(topic):
+            return  # our own output echoed by the operators/+/+ subscription
         self.stats.received += 1
         try:
             msg = decode(self.topics, topic, payload, self._clock.now_s())

@@ -125,6 +125,11 @@ class InboundKind(Enum):
     AIRSPACE_ALERT = "airspace_alert"
 
 
+OUTBOUND_OPERATOR_LEAVES = frozenset({"alerts", "recommendations", "status", "errors"})
+"""Leaves the UTM itself publishes under ``operators/<op>/``: the ``operators/+/+``
+subscription sees them come back, and they are ignored (never answered with an error, which
+would loop)."""
+
 _OPERATOR_SUFFIX = {
     "state": InboundKind.RPA_STATE,
     "flight_plans": InboundKind.FLIGHT_PLAN,
@@ -213,6 +218,11 @@ class Topics:
             f"{self.prefix}/surveillance/+",
             f"{self.prefix}/authority/+",
         )
+
+    def is_own_output(self, topic: str) -> bool:
+        """True for an operator topic the UTM publishes on (echo of its own output)."""
+        parts = topic.split("/")
+        return self.operator_of(topic) is not None and parts[-1] in OUTBOUND_OPERATOR_LEAVES
 
     def classify(self, topic: str) -> tuple[InboundKind, str | None]:
         """Map an inbound topic to its kind and operator (None for non-operator topics);

@@ -59,6 +59,9 @@ class MqttConfig:
     traffic_rate_hz: float = setting(
         1.0, "maximum rate of traffic-information messages", min=0.01, max=50.0, unit="Hz"
     )
+    connect_timeout_s: float = setting(
+        10.0, "time allowed for connect + subscribe before retrying", min=0.1, unit="s"
+    )
     publish_timeout_s: float = setting(
         10.0, "time to wait for the broker's acknowledgement of one publish", min=0.1, unit="s"
     )
