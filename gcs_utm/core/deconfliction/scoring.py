@@ -26,8 +26,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import shapely
-from shapely.geometry import LineString
 
 from gcs_utm.core.deconfliction.config import DeconflictionConfig
 from gcs_utm.core.deconfliction.geometry import LocalFence, LocalPlan
@@ -66,6 +64,18 @@ class Score:
             "min_fence_distance_m": round(self.min_fence_distance_m, 3),
             "min_separation_ratio": round(self.min_separation_ratio, 4),
         }
+
+
+def distance_to_polyline(points: FloatArray, vertices: FloatArray) -> FloatArray:
+    """Horizontal distance of each point (N, 2) to the polyline through ``vertices`` (M, 2),
+    vectorised over points x segments (plans have few segments)."""
+    a = vertices[:-1]
+    ab = vertices[1:] - a  # (S, 2)
+    ll = np.maximum(np.einsum("sj,sj->s", ab, ab), 1e-12)
+    ap = points[:, None, :] - a[None, :, :]  # (N, S, 2)
+    u = np.clip(np.einsum("nsj,sj->ns", ap, ab) / ll, 0.0, 1.0)
+    d = ap - u[:, :, None] * ab[None, :, :]
+    return np.asarray(np.sqrt(np.einsum("nsj,nsj->ns", d, d).min(axis=1)), dtype=np.float64)
 
 
 def _prox(x: float, factor: float) -> float:
@@ -116,10 +126,7 @@ def score(
 
     outside_m = 0.0
     if len(filed) >= 2:
-        line = LineString(filed.xyz()[:, :2])
-        dist_plan: FloatArray = np.asarray(
-            shapely.distance(line, shapely.points(mid[:, 0], mid[:, 1])), dtype=np.float64
-        )
+        dist_plan = distance_to_polyline(mid[:, :2], filed.xyz()[:, :2])
         outside_m = float(np.sum(seg[dist_plan > ov_radius_m]))
 
     min_ratio = float("inf")
