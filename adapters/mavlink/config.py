@@ -25,6 +25,17 @@ class MavlinkConfig:
         min=65536,
         unit="bytes",
     )
+    fast_decode: bool = setting(
+        True,
+        "decode hot telemetry (position, heartbeat, GPS, status) with struct instead of "
+        "pymavlink on datagram links; false = pymavlink for everything",
+    )
+    udp_batch: int = setting(
+        64,
+        "datagrams read per socket wake-up (bounds the time one busy link holds the loop)",
+        min=1,
+        max=4096,
+    )
     heartbeat_period_s: float = setting(
         1.0, "period of our GCS HEARTBEAT on every link", min=0.05, unit="s"
     )

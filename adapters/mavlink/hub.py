@@ -70,6 +70,8 @@ _PROTOCOL_IDS = frozenset(
         wire.COMMAND_ACK,
     }
 )
+# Mailbox consumers read ``m._header``: protocol messages must stay pymavlink objects.
+assert not _PROTOCOL_IDS.intersection(wire.FAST_IDS), "protocol messages on the fast path"
 _ARDUPILOT_STREAM_MSGS = (
     wire.GLOBAL_POSITION_INT,
     wire.GPS_RAW_INT,
@@ -244,7 +246,9 @@ class MavlinkHub:
         self._links[name] = link
         try:
             await transport.open(
-                lambda data, addr: self._on_chunk(link, data, addr), self.config.udp_rcvbuf_bytes
+                lambda data, addr: self._on_chunk(link, data, addr),
+                self.config.udp_rcvbuf_bytes,
+                self.config.udp_batch,
             )
         except BaseException:
             del self._links[name]
@@ -302,18 +306,21 @@ class MavlinkHub:
             self.raw_tap(link.name, data, t)
         parser = link.parsers.get(addr)
         if parser is None:
-            parser = link.parsers[addr] = wire.Parser(link.counters)
+            parser = link.parsers[addr] = wire.Parser(link.counters, fast=self.config.fast_decode)
         before = link.counters.bad_frames
-        msgs = parser.feed(data, datagram=link.transport.datagram)
+        if link.transport.datagram:
+            frames = parser.feed_frames(data)
+        else:
+            frames = parser.frames(data, datagram=False)
         if link.counters.bad_frames != before:
             self._sync_bad(link)
             _log.debug("bad frame on %s from %s: %s", link.name, addr, link.counters.last_error)
-        for m in msgs:
+        for f in frames:
             try:
-                self._dispatch(link, addr, m, t)
+                self._dispatch(link, addr, f, t)
             except Exception:  # a handler bug must not kill the link
                 c.handler_errors += 1
-                _log.exception("handler failed on %s", m.get_type())
+                _log.exception("handler failed on %s", wire.msg_name(f.msg_id))
 
     def _sync_bad(self, link: _Link) -> None:
         c = self.counters
@@ -326,19 +333,16 @@ class MavlinkHub:
             c.truncated += p.truncated
             c.bad_signature += p.bad_signature
 
-    def _dispatch(self, link: _Link, addr: Address | None, m: wire.MavMsg, t: float) -> None:
+    def _dispatch(self, link: _Link, addr: Address | None, f: wire.Frame, t: float) -> None:
         self.counters.frames += 1
-        h = m._header
-        sys_id = h.srcSystem
-        comp_id = h.srcComponent
+        mid, sys_id, comp_id, seq, m = f
         key = (link.name, addr, sys_id, comp_id)
         st = self._states.get(key)
-        mid = h.msgId
         if st is None:
             if mid == wire.HEARTBEAT and m.autopilot == 8:
                 return  # another GCS or a non-autopilot component: not a vehicle
             st = self._new_state(link, addr, sys_id, comp_id, t)
-        st.count_frame(h.seq, t)
+        st.count_frame(seq, t)
         if addr is not None:
             link.peers[addr] = t
         self._by_sysid[sys_id] = st

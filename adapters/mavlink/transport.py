@@ -20,6 +20,8 @@ _log = logging.getLogger(__name__)
 Address = tuple[str, int]
 OnChunk = Callable[[bytes, Address | None], None]
 
+_MAX_DATAGRAM = 65535  # never truncate: PX4 packs several frames into one datagram
+
 
 class LinkError(OSError):
     """A link that cannot be opened or written; ``endpoint`` says which."""
@@ -28,20 +30,6 @@ class LinkError(OSError):
         super().__init__(f"{endpoint}: {message}")
         self.endpoint = endpoint
         self.message = message
-
-
-class _Udp(asyncio.DatagramProtocol):
-    def __init__(self, on_chunk: OnChunk, errors: list[int]) -> None:
-        self.on_chunk = on_chunk
-        self.errors = errors
-
-    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
-        self.on_chunk(data, (addr[0], addr[1]))
-
-    def error_received(self, exc: Exception) -> None:
-        # ICMP port unreachable after sending to a vehicle that went away: count, go on.
-        self.errors[0] += 1
-        _log.debug("udp error: %s", exc)
 
 
 class _Stream(asyncio.Protocol):
@@ -67,28 +55,30 @@ class Transport:
         self.local_port = 0
         self.default_peer: Address | None = None
         self.errors = [0]
-        self._udp: asyncio.DatagramTransport | None = None
+        self._sock: socket.socket | None = None
         self._tcp: asyncio.Transport | None = None
         self._fd = -1
 
-    async def open(self, on_chunk: OnChunk, rcvbuf: int) -> None:
+    async def open(self, on_chunk: OnChunk, rcvbuf: int, batch: int = 64) -> None:
         ep = self.endpoint
         loop = asyncio.get_running_loop()
         try:
             if self.datagram:
                 sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
-                sock.setblocking(False)
-                if ep.kind is EndpointKind.UDPIN:
-                    sock.bind((ep.host, ep.port))
-                else:
-                    sock.bind(("0.0.0.0", 0))
-                    self.default_peer = (socket.gethostbyname(ep.host), ep.port)
+                try:
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+                    sock.setblocking(False)
+                    if ep.kind is EndpointKind.UDPIN:
+                        sock.bind((ep.host, ep.port))
+                    else:
+                        sock.bind(("0.0.0.0", 0))
+                        self.default_peer = (socket.gethostbyname(ep.host), ep.port)
+                except OSError:
+                    sock.close()
+                    raise
                 self.local_port = int(sock.getsockname()[1])
-                tr, _ = await loop.create_datagram_endpoint(
-                    lambda: _Udp(on_chunk, self.errors), sock=sock
-                )
-                self._udp = tr
+                self._sock = sock
+                loop.add_reader(sock.fileno(), self._read_udp, sock, on_chunk, max(1, batch))
             elif ep.kind is EndpointKind.TCP:
                 peer = (ep.host, ep.port)
                 tr2, _ = await loop.create_connection(
@@ -101,6 +91,20 @@ class Transport:
                 self._open_serial(on_chunk)
         except OSError as exc:
             raise LinkError(str(ep), f"cannot open: {exc}") from exc
+
+    def _read_udp(self, sock: socket.socket, on_chunk: OnChunk, batch: int) -> None:
+        recvfrom = sock.recvfrom
+        for _ in range(batch):
+            try:
+                data, addr = recvfrom(_MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:
+                # ICMP port unreachable after sending to a vehicle that went away: count, go on
+                self.errors[0] += 1
+                _log.debug("udp receive on %s: %s", self.endpoint, exc)
+                return
+            on_chunk(data, (addr[0], addr[1]))
 
     def _open_serial(self, on_chunk: OnChunk) -> None:
         ep = self.endpoint
@@ -136,10 +140,10 @@ class Transport:
         """Send one frame; to ``addr`` on UDP (or the udpout peer). Never raises: a failed
         send is counted (the protocol layers retry)."""
         try:
-            if self._udp is not None:
+            if self._sock is not None:
                 dest = addr or self.default_peer
                 if dest is not None:
-                    self._udp.sendto(data, dest)
+                    self._sock.sendto(data, dest)
             elif self._tcp is not None:
                 self._tcp.write(data)
             elif self._fd >= 0:
@@ -149,8 +153,11 @@ class Transport:
             _log.debug("send on %s failed: %s", self.endpoint, exc)
 
     def close(self) -> None:
-        if self._udp is not None:
-            self._udp.close()
+        if self._sock is not None:
+            with contextlib.suppress(RuntimeError):  # the loop is already closed
+                asyncio.get_running_loop().remove_reader(self._sock.fileno())
+            self._sock.close()
+            self._sock = None
         if self._tcp is not None:
             self._tcp.close()
         if self._fd >= 0:

@@ -11,15 +11,29 @@ typed helpers.
 
 Decoded messages are pymavlink objects (typed ``Any`` here): attribute access by MAVLink field
 name; :func:`msg_id`, :func:`src` give typed header access.
+
+Fast path (:meth:`Parser.feed_frames` on datagram links): the hot telemetry messages in
+:data:`FAST_TYPES` (HEARTBEAT, SYS_STATUS, SYSTEM_TIME, GPS_RAW_INT, ATTITUDE,
+GLOBAL_POSITION_INT, VFR_HUD, EXTENDED_SYS_STATE) are framed and checked here (MAVLink 2
+header 0xFD len incompat compat seq sysid compid msgid[3]; MAVLink 1 0xFE len seq sysid compid
+msgid; X.25 CRC-16/MCRF4XX over header+payload then CRC_EXTRA, via fastcrc) and unpacked with
+``struct`` into named tuples with pymavlink's field names, after padding the payload that
+MAVLink 2 trims of trailing zeros. Anything else — other messages, signed frames, a bad CRC,
+garbage, a frame cut short — goes to pymavlink from that byte on, so rejects are classified and
+counted exactly as before. pymavlink decode + parse_char was ~60 % of the ingest time.
 """
 
 from __future__ import annotations
 
 import os
+import struct
 import time
+from collections import namedtuple
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
+
+from fastcrc import crc16
 
 os.environ["MAVLINK20"] = "1"
 
@@ -55,7 +69,72 @@ BATTERY_STATUS = mav.MAVLINK_MSG_ID_BATTERY_STATUS
 EXTENDED_SYS_STATE = mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE
 STATUSTEXT = mav.MAVLINK_MSG_ID_STATUSTEXT
 
+ATTITUDE = mav.MAVLINK_MSG_ID_ATTITUDE
+VFR_HUD = mav.MAVLINK_MSG_ID_VFR_HUD
+
 _REJECTS = (mav.MAVLink_bad_data, mav.MAVLink_unknown)
+
+
+class Frame(NamedTuple):
+    """One decoded frame: header fields and the message (pymavlink object or fast tuple)."""
+
+    msg_id: int
+    sys_id: int
+    comp_id: int
+    seq: int
+    msg: MavMsg
+
+
+@dataclass(frozen=True, slots=True)
+class FastType:
+    """What the fast path needs of one message type (taken from pymavlink's dialect)."""
+
+    name: str
+    crc_extra: bytes  # one byte, appended to the CRC input
+    size: int  # full payload length (with extensions)
+    unpack: Callable[[bytes], tuple[Any, ...]]
+    make: Callable[[tuple[Any, ...]], Any]
+
+
+FAST_IDS = (
+    HEARTBEAT,
+    SYS_STATUS,
+    SYSTEM_TIME,
+    GPS_RAW_INT,
+    ATTITUDE,
+    GLOBAL_POSITION_INT,
+    VFR_HUD,
+    EXTENDED_SYS_STATE,
+)
+
+
+def _fast_type(mid: int) -> FastType:
+    cls = mav.mavlink_map[mid]
+    if any(n > 0 for n in cls.array_lengths):
+        raise ValueError(f"{cls.msgname}: array fields are not on the fast path")
+    unpacker: struct.Struct = cls.unpacker
+    # ordered_fieldnames is the wire order, which is the order struct unpacks in
+    tup = namedtuple(cls.msgname, cls.ordered_fieldnames)  # type: ignore[misc]
+    return FastType(
+        name=cls.msgname,
+        crc_extra=bytes([cls.crc_extra]),
+        size=unpacker.size,
+        unpack=unpacker.unpack,
+        make=tup._make,
+    )
+
+
+FAST_TYPES: dict[int, FastType] = {mid: _fast_type(mid) for mid in FAST_IDS}
+_MCRF4XX = crc16.mcrf4xx
+_V2 = 0xFD
+_V1 = 0xFE
+_IFLAG_SIGNED = 0x01
+
+
+def msg_name(mid: int) -> str:
+    cls = mav.mavlink_map.get(mid)
+    return str(cls.msgname) if cls is not None else f"MSG_{mid}"
+
 
 SIGNING_EPOCH_S = 1420070400.0  # 2015-01-01T00:00:00Z, the MAVLink signing epoch
 
@@ -88,8 +167,16 @@ class ParseCounters:
 class Parser:
     """Sans-IO MAVLink 1/2 parser for one byte stream (or one datagram source)."""
 
-    def __init__(self, counters: ParseCounters | None = None, *, key: bytes | None = None) -> None:
+    def __init__(
+        self,
+        counters: ParseCounters | None = None,
+        *,
+        key: bytes | None = None,
+        fast: bool = True,
+    ) -> None:
         self.counters = counters if counters is not None else ParseCounters()
+        # signed links go through pymavlink, which checks the signature
+        self.fast = fast and key is None
         self._mav = mav.MAVLink(None)
         self._mav.robust_parsing = True
         if key is not None:
@@ -128,6 +215,76 @@ class Parser:
             self.counters.last_error = f"truncated frame ({self._mav.buf_len()} bytes left)"
             self.reset()
         self.counters.frames += len(out)
+        return out
+
+    def frames(self, data: bytes, *, datagram: bool) -> list[Frame]:
+        """Like :meth:`feed` with the header split out; no fast path."""
+        out: list[Frame] = []
+        for m in self.feed(data, datagram=datagram):
+            h = m._header
+            out.append(Frame(h.msgId, h.srcSystem, h.srcComponent, h.seq, m))
+        return out
+
+    def feed_frames(self, data: bytes) -> list[Frame]:
+        """Decode one datagram: hot telemetry on the fast path (see the module docstring),
+        everything else through pymavlink. Never raises; rejects are counted."""
+        if not self.fast:
+            return self.frames(data, datagram=True)
+        out: list[Frame] = []
+        fast = FAST_TYPES
+        crc16_ = _MCRF4XX
+        n = len(data)
+        i = 0
+        while i < n:
+            magic = data[i]
+            if magic == _V2:
+                if i + 12 > n:
+                    break
+                plen = data[i + 1]
+                incompat = data[i + 2]
+                end = i + 12 + plen
+                if incompat & _IFLAG_SIGNED:
+                    end += 13
+                if end > n:
+                    break
+                mid = data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
+                ft = fast.get(mid)
+                if ft is None or incompat:
+                    out.extend(self.frames(data[i:end], datagram=True))
+                    i = end
+                    continue
+                hdr = 10
+                sys_id, comp_id, seq = data[i + 5], data[i + 6], data[i + 4]
+            elif magic == _V1:
+                if i + 8 > n:
+                    break
+                plen = data[i + 1]
+                end = i + 8 + plen
+                if end > n:
+                    break
+                mid = data[i + 5]
+                ft = fast.get(mid)
+                if ft is None:
+                    out.extend(self.frames(data[i:end], datagram=True))
+                    i = end
+                    continue
+                hdr = 6
+                sys_id, comp_id, seq = data[i + 3], data[i + 4], data[i + 2]
+            else:
+                break
+            crc = data[end - 2] | (data[end - 1] << 8)
+            if crc16_(ft.crc_extra, crc16_(data[i + 1 : end - 2])) != crc:
+                break  # pymavlink classifies and resynchronises from here
+            payload = data[i + hdr : end - 2]
+            if plen < ft.size:
+                payload += bytes(ft.size - plen)  # MAVLink 2 trims trailing zero bytes
+            elif plen > ft.size:
+                payload = payload[: ft.size]  # fields of a newer dialect we do not know
+            out.append(Frame(mid, sys_id, comp_id, seq, ft.make(ft.unpack(payload))))
+            self.counters.frames += 1
+            i = end
+        if i < n:
+            out.extend(self.frames(data[i:], datagram=True))
         return out
 
     def reset(self) -> None:
