@@ -167,6 +167,9 @@ class Geofence:
     kind: GeofenceKind = GeofenceKind.STATIC
     reason: str = ""
     source: str = ""
+    exempt: tuple[OperationId, ...] = ()
+    """Operations this geofence does not apply to: the jammed or lost UAS a dynamic geofence
+    was drawn around is inside it by construction (it is suspended, not intruding)."""
 
     def __post_init__(self) -> None:
         item = f"geofence {self.id}"
@@ -193,6 +196,9 @@ class Geofence:
                 raise ModelError(item, "radius_m", "a cylinder needs a positive radius")
         elif len(self.vertices) < 3:
             raise ModelError(item, "vertices", "a polygon needs at least 3 vertices")
+
+    def applies_to(self, op_id: str) -> bool:
+        return op_id not in self.exempt
 
     def active_at(self, t_s: float) -> bool:
         """True when the geofence is active at ``t_s`` (window bounds inclusive)."""

@@ -104,6 +104,10 @@ class VehicleSpec:
     rtl_alt_rel_m: float = 30.0  # PX4 RTL_RETURN_ALT-like
     mission: tuple[MissionItemSpec, ...] = ()
     auto_start_at_s: float | None = None
+    # Scenario runs: at auto start, appear in flight at the first mission waypoint already
+    # moving towards the next one (instead of taking off from home), so a vehicle follows a 4D
+    # plan from its first waypoint at a precise time. Not PX4 behaviour; off by default.
+    start_airborne: bool = False
     boot_at_s: float = 0.0  # power-on time: nothing is sent before it (start delay)
     gcs_host: str = "127.0.0.1"
     gcs_port: int = 14550

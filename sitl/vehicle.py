@@ -1104,11 +1104,42 @@ class Vehicle:
         self._auto_started = True
         if self.arm() != R_ACCEPTED:
             return
+        if self._items and self.spec.start_airborne:
+            self._place_airborne()
         if self._items:
             self._enter_mode(MISSION)
         else:
             self._takeoff_alt = self.ground_alt_m + self.takeoff_alt_rel_m
             self._enter_mode(TAKEOFF)
+
+    def _place_airborne(self) -> None:
+        """Scenario start in flight: put the vehicle at its first mission waypoint, at its
+        altitude, already moving towards the next one at the mission speed (see
+        VehicleSpec.start_airborne)."""
+        items = self._items
+        first = 1 if self.is_ardupilot else 0
+        navs = [i for i in range(first, len(items)) if items[i].command in mp.NAV_COMMANDS]
+        if not navs:
+            return
+        i0 = navs[0]
+        n0, e0, alt0 = self._item_target(items[i0])
+        self.k.north_m, self.k.east_m, self.k.alt_amsl_m = n0, e0, alt0
+        self._landed = False
+        self._seq = i0
+        speed = self.cruise_mps
+        if len(navs) > 1:
+            for it in items[i0 + 1 : navs[1]]:
+                if it.command == mp.CMD_CHANGE_SPEED and it.param2 > 0:
+                    speed = it.param2
+            n1, e1, _alt1 = self._item_target(items[navs[1]])
+            dist = math.hypot(n1 - n0, e1 - e0)
+            if dist > 0.0:
+                speed = min(speed, self.lim.max_speed_mps)
+                self.k.yaw_rad = math.atan2(e1 - e0, n1 - n0)
+                self.k.vn_mps = speed * (n1 - n0) / dist
+                self.k.ve_mps = speed * (e1 - e0) / dist
+                self.k.airspeed_mps = speed
+        self.statustext(SEV_INFO, "Scenario start in flight")
 
     def _speed(self) -> float:
         v = self._speed_override or self._mission_speed or self.cruise_mps

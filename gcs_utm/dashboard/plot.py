@@ -110,16 +110,9 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
             style = "-" if j == 0 else "--"
             label = f"{op['id']} plan v{plan['version']}"
             ax.plot(xs, ys, style, color=colour, lw=1.5, label=label)
-            if ov > 0:
-                # the operational volume drawn as a wide translucent stroke of width 2*OV
-                ax.plot(
-                    xs,
-                    ys,
-                    color=colour,
-                    alpha=0.12,
-                    solid_capstyle="round",
-                    lw=max(1.0, 2 * ov * _points_per_metre(ax, xs, ys)),
-                )
+            if ov > 0 and j == 0:
+                # the operational volume: the filed plan's path grown by its radius
+                _fill_volume(ax, xs, ys, ov, colour)
             ax3.plot(xs, ys, zs, style, color=colour, lw=1.5)
             summary.plans += 1
         track = report.get("tracks", {}).get(op["id"], [])
@@ -195,11 +188,15 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
     return summary
 
 
-def _points_per_metre(ax: Any, xs: list[float], ys: list[float]) -> float:
-    """Approximate line-width scale so a stroke of N points is N metres wide on the figure."""
-    span = max(max(xs) - min(xs), max(ys) - min(ys), 1.0)
-    width_pt = ax.figure.get_figwidth() * 72.0 * 0.75
-    return float(width_pt / (span * 1.3))
+def _fill_volume(ax: Any, xs: list[float], ys: list[float], radius_m: float, colour: str) -> None:
+    from shapely.geometry import LineString, Point
+
+    geom = LineString(list(zip(xs, ys, strict=True))) if len(xs) > 1 else Point(xs[0], ys[0])
+    area = geom.buffer(radius_m)
+    polys = list(getattr(area, "geoms", [area]))
+    for poly in polys:
+        bx, by = poly.exterior.xy
+        ax.fill(list(bx), list(by), color=colour, alpha=0.15, lw=0)
 
 
 # ---- GeoJSON and KML --------------------------------------------------------------------------

@@ -369,6 +369,9 @@ class Usm:
         detected = threat.detected_at_s if threat is not None else rec.created_t_s
         now = self.clock.now_s()
         old = self.recommendations.get(rec.id)
+        if old is not None and rec.version <= old.rec.version:
+            # EM repeats a proposal it already made (e.g. after an accept): nothing new
+            return
         record = RecommendationRecord(
             rec=rec,
             threat_detected_at_s=detected,
@@ -594,6 +597,21 @@ class Usm:
         self.log_event("recommendation", f"{rec.id} v{rec.version} {state.value}: {reason}")
         for op in self._operators:
             await op.update(record.rec)
+
+    async def expire_due(self) -> None:
+        """Mark proposals whose deadline has passed as EXPIRED (EM re-plans on its side)."""
+        now = self.clock.now_s()
+        for record in list(self.recommendations.values()):
+            rec = record.rec
+            if rec.state is RecommendationState.PROPOSED and rec.deadline_t_s <= now:
+                record.decision = "expired"
+                await self._set_state(record, RecommendationState.EXPIRED, "deadline passed")
+
+    async def run(self, period_s: float = 0.5) -> None:
+        """Housekeeping: enforce recommendation deadlines (clock seconds)."""
+        while True:
+            await self.expire_due()
+            await self.clock.sleep(period_s)
 
     def pending(self) -> list[Recommendation]:
         return [

@@ -68,7 +68,7 @@ class EmergencyConfig:
         unit="s",
     )
     min_response_s: float = setting(
-        5.0, "the shortest time an operator is given to answer", min=0.0, unit="s"
+        15.0, "the shortest time an operator is given to answer", min=0.0, unit="s"
     )
     default_event_horizon_s: float = setting(
         60.0, "assumed time to the event when a threat does not predict one", min=1.0, unit="s"
@@ -80,7 +80,11 @@ class EmergencyConfig:
         "hold", "command for a suspended operation (jamming/spoofing): 'hold' or 'land'"
     )
     jamming_radius_m: float = setting(
-        500.0, "radius of the dynamic geofence around a jammed/spoofed UAS", min=1.0, unit="m"
+        50.0,
+        "radius of the dynamic geofence around a jammed/spoofed UAS (its position is "
+        "unreliable; the paper's use case 2)",
+        min=1.0,
+        unit="m",
     )
     jamming_band_m: float = setting(
         150.0, "half height of that geofence around the UAS altitude", min=1.0, unit="m"

@@ -535,6 +535,7 @@ class EmergencyManager:
         now: float,
         duration_s: float,
         reason: str,
+        exempt: tuple[OperationId, ...] = (),
     ) -> Geofence:
         lat, lon = self.frame.point_to_wgs84(east_m, north_m)
         return Geofence(
@@ -549,6 +550,7 @@ class EmergencyManager:
             kind=GeofenceKind.DYNAMIC,
             reason=reason,
             source=ACTOR,
+            exempt=exempt,
         )
 
     def _reroute_affected(
@@ -601,6 +603,7 @@ class EmergencyManager:
                 now,
                 cfg.jamming_duration_s,
                 f"{t.kind.value} around {op_id}",
+                exempt=(op_id,),
             )
             case.geofences.append(fence)
             case.modes[op_id] = _MODE_COMMAND
@@ -669,6 +672,7 @@ class EmergencyManager:
                 now,
                 cfg.link_loss_duration_s,
                 f"link loss of {op_id}",
+                exempt=(op_id,),
             )
             case.geofences.append(fence)
             d = d.merge(

@@ -65,6 +65,12 @@ class MonitoringConfig:
     gate_takeoff_landing: bool = setting(
         True, "do not raise conformance threats during take-off/landing near home"
     )
+    gate_outside_plan_time: bool = setting(
+        True,
+        "do not raise conformance threats before the plan's first or after its last waypoint "
+        "time (pre-departure, and the loiter/landing after the plan; a fixed wing cannot "
+        "stop on its last waypoint)",
+    )
     takeoff_landing_radius_m: float = setting(
         30.0,
         "horizontal radius around home (or first/last waypoint) gated as take-off/landing",

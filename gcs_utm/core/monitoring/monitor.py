@@ -156,9 +156,12 @@ class Monitor:
         )
         # Geofences (4D, points and segments).
         fences = [self._fence(g) for g in snapshot.geofences]
+        exempt = {g.id: g.exempt for g in snapshot.geofences if g.exempt}
         for h in check_geofences(pts, fences):
             op_id = op_of[rows_coop[h.row]]
             assert op_id is not None
+            if op_id in exempt.get(h.geofence_id, ()):
+                continue
             kind = ThreatKind.GEOFENCE_INTRUSION if h.inside_now else ThreatKind.GEOFENCE_CONFLICT
             ev.seen[("GEO", op_id, h.geofence_id)] = _Observation(
                 kind=kind, uas_ids=(op_id,), event_t_s=h.entry_t_s, geofence_id=h.geofence_id
@@ -247,6 +250,8 @@ class Monitor:
             d = float(dist[k])
             key: Key = ("CONF", op.id)
             if cfg.gate_takeoff_landing and self._near_home(op.id, snapshot, pos[k], plans[k]):
+                continue
+            if cfg.gate_outside_plan_time and not (op.plan.start_t_s <= tr.t_s <= op.plan.end_t_s):
                 continue
             if d > op.operational_volume_m:
                 kind = ThreatKind.UAS_OUT_OV

@@ -187,6 +187,8 @@ def plan_vs_geofences(
     pts = plan_local(plan, frame)
     out: list[PlanGeofenceCrossing] = []
     for g in geofences:
+        if not g.applies_to(op.id):
+            continue
         t = _fence_crossing(pts, localise(g, frame, op.operational_volume_m))
         if t is not None:
             out.append(PlanGeofenceCrossing(operation_id=op.id, geofence_id=g.id, entry_t_s=t))

@@ -1,0 +1,208 @@
+"""``gcs-utm run SCENARIO``, ``gcs-utm demo`` and ``gcs-utm serve``: the main jobs."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import sys
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+DEMO_SCENARIOS = ("use_case_1.toml", "use_case_2.toml")
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    run = sub.add_parser(
+        "run",
+        help="run a scenario end to end (vehicles, UTM services, dashboard) and write a report",
+    )
+    run.add_argument("scenario", type=Path, help="scenario TOML, or a GAUSS JSON file")
+    _common(run)
+    run.add_argument(
+        "--external",
+        action="store_true",
+        help="the vehicles are real PX4/ArduPilot SITL already running: start none "
+        "and listen on --link (default: the first link of the config)",
+    )
+    run.add_argument(
+        "--link",
+        default=None,
+        help="MAVLink connection string to listen on (default: an ephemeral "
+        "loopback port the built-in vehicles are pointed at)",
+    )
+    run.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="simulated seconds to run (default: the scenario's duration_s)",
+    )
+    run.add_argument(
+        "--reject-first",
+        type=int,
+        default=0,
+        help="with --auto-accept: reject this many recommendations first",
+    )
+    run.set_defaults(func=_run)
+
+    demo = sub.add_parser("demo", help="the paper's use cases 1 and 2 with built-in vehicles")
+    _common(demo)
+    demo.set_defaults(func=_demo, reject_first=0, external=False, link=None, duration=None)
+
+    serve = sub.add_parser("serve", help="the long-running UTM service (links from config)")
+    serve.add_argument("--config", type=Path, default=None, help="settings TOML")
+    serve.add_argument(
+        "--db",
+        type=Path,
+        default=Path("gcs_utm.sqlite"),
+        help="SQLite store (kept across restarts; default ./gcs_utm.sqlite)",
+    )
+    serve.add_argument("--headless", action="store_true", help="no TUI; log lines")
+    group = serve.add_mutually_exclusive_group()
+    group.add_argument("--auto-accept", action="store_true")
+    group.add_argument("--auto-reject", action="store_true")
+    serve.set_defaults(func=_serve)
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", type=Path, default=None, help="settings TOML")
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help="run N times faster than real time (vehicles and UTM share the factor)",
+    )
+    p.add_argument("--headless", action="store_true", help="no TUI; rich log lines on stderr")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--auto-accept", action="store_true", help="accept every recommendation")
+    group.add_argument("--auto-reject", action="store_true", help="reject every recommendation")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("runs"),
+        help="folder for the report, store and figures (default ./runs)",
+    )
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG/GeoJSON/KML output")
+    p.add_argument("--mqtt", action="store_true", help="start the MQTT bridge of the config")
+
+
+def _operator(args: argparse.Namespace) -> str:
+    from gcs_utm.app import OperatorMode
+
+    if args.auto_accept:
+        return OperatorMode.AUTO_ACCEPT
+    if args.auto_reject:
+        return OperatorMode.AUTO_REJECT
+    if args.headless or not sys.stdin.isatty() or not sys.stdout.isatty():
+        # no terminal to answer in: show everything, answer nothing (the USM lets
+        # recommendations expire and records that)
+        return OperatorMode.NONE
+    return OperatorMode.DASHBOARD
+
+
+def _options(args: argparse.Namespace) -> Any:
+    from gcs_utm.app import RunOptions
+
+    operator = _operator(args)
+    return RunOptions(
+        speed=args.speed,
+        headless=args.headless or operator != "dashboard",
+        operator=operator,
+        reject_first=args.reject_first,
+        external=args.external,
+        link=args.link,
+        mqtt=args.mqtt,
+        out_dir=args.out,
+        duration_s=args.duration,
+        figures=not args.no_figures,
+    )
+
+
+def _settings(args: argparse.Namespace) -> Any:
+    from gcs_utm.config import ConfigError
+    from gcs_utm.settings import load_settings
+
+    try:
+        return load_settings(args.config)
+    except ConfigError as exc:
+        print(f"gcs-utm: {exc}", file=sys.stderr)
+        return None
+
+
+def _summary(report: dict[str, Any]) -> str:
+    recs = report.get("recommendations", [])
+    lines = [
+        f"scenario {report['scenario']}: {len(report.get('threats', []))} threats, "
+        f"{len(recs)} recommendations, report {report.get('report_path')}",
+    ]
+    for r in recs:
+        lines.append(
+            f"  {r['uas']}: {r['threat_kind']} -> {r['maneuver']} "
+            f"(cost {r['cost']}, risk {r['risk']}), {r['decision']}, "
+            f"uploaded={r['uploaded']} verified={r['verified']}"
+        )
+    for s in report.get("separation", []):
+        lines.append(
+            f"  separation {s['pair'][0]}-{s['pair'][1]}: min {s['min_distance_m']} m"
+            + (" LOSS" if s["loss_of_separation"] else "")
+        )
+    for g in report.get("geofence_intrusions", []):
+        lines.append(f"  INTRUSION {g['uas']} into {g['geofence']} at {g['first_at_s']} s")
+    return "\n".join(lines)
+
+
+def _run_one(path: Path, args: argparse.Namespace) -> int:
+    from gcs_utm.app import run_scenario
+    from gcs_utm.scenario import ScenarioError
+
+    settings = _settings(args)
+    if settings is None:
+        return 2
+    try:
+        report = asyncio.run(run_scenario(path, settings, _options(args)))
+    except ScenarioError as exc:
+        print(f"gcs-utm: {exc}", file=sys.stderr)
+        return 2
+    print(_summary(report))
+    return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    return _run_one(args.scenario, args)
+
+
+def demo_scenario(name: str) -> Path:
+    """An embedded scenario file (shipped in the package as gcs_utm/data/scenarios)."""
+    ref = resources.files("gcs_utm") / "data" / "scenarios" / name
+    return Path(str(ref))
+
+
+def _demo(args: argparse.Namespace) -> int:
+    for name in DEMO_SCENARIOS:
+        code = _run_one(demo_scenario(name), args)
+        if code != 0:
+            return code
+    return 0
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from gcs_utm.app import OperatorMode, serve
+
+    settings = _settings(args)
+    if settings is None:
+        return 2
+    operator = (
+        OperatorMode.AUTO_ACCEPT
+        if args.auto_accept
+        else OperatorMode.AUTO_REJECT
+        if args.auto_reject
+        else OperatorMode.DASHBOARD
+        if sys.stdout.isatty() and not args.headless
+        else OperatorMode.NONE
+    )
+    headless = args.headless or operator != OperatorMode.DASHBOARD
+    return asyncio.run(serve(settings, db_path=args.db, operator=operator, headless=headless))
+
+
+_ = json
