@@ -133,6 +133,8 @@ def make_broker(tmp_path: Path) -> Broker:
                 f"password_file {pwfile}",
                 f"acl_file {acl}",
                 "persistence true",
+                # default 1000 per client: the 1000-malformed test answers with 1001 errors
+                "max_queued_messages 10000",
                 f"persistence_location {tmp_path / 'persist'}/",
                 "log_type error",
                 "log_type warning",
