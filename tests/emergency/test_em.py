@@ -152,9 +152,9 @@ def test_no_feasible_alternative_is_an_explicit_escalation() -> None:
 
 
 def test_jamming_suspends_creates_a_geofence_and_reroutes_the_neighbour() -> None:
-    """The paper's use case 2: A is jammed at (0, 0); B's plan passes 200 m from it."""
+    """The paper's use case 2: A is jammed at (0, 0); B's plan passes 30 m from it."""
     a = sc.make_operation("A", [(-500, 0, 100), (500, 0, 100)])
-    b = sc.make_operation("B", [(-1500, 200, 110), (1500, 200, 110)], priority=2)
+    b = sc.make_operation("B", [(-1500, 30, 130), (1500, 30, 130)], priority=2)
     t = sc.T0_S + 50.0
     snap = sc.snapshot([a, b], t_s=t)
     la, lo = sc.FRAME.point_to_wgs84(0.0, 0.0)
@@ -170,14 +170,15 @@ def test_jamming_suspends_creates_a_geofence_and_reroutes_the_neighbour() -> Non
     hold = next(r for r in d.recommendations if r.operation_id == "A")
     assert hold.command is not None and hold.command.kind is CommandKind.HOLD
     assert d.commands == ()
-    # A dynamic geofence of the configured radius and band around A, active from now.
+    # A dynamic geofence of the configured radius and band around A, active from now; it
+    # does not apply to A itself (A is suspended inside it, not intruding).
     (fence,) = d.geofences
-    assert fence.kind is GeofenceKind.DYNAMIC and fence.radius_m == 500.0
-    assert fence.min_alt_amsl_m == pytest.approx(-50.0) and fence.max_alt_amsl_m == pytest.approx(
-        250.0
-    )
-    assert fence.start_t_s == t and fence.end_t_s == t + 1800.0
-    assert hold.new_geofence == fence
+    cfg = EmergencyConfig()
+    assert fence.kind is GeofenceKind.DYNAMIC and fence.radius_m == cfg.jamming_radius_m
+    assert fence.min_alt_amsl_m == pytest.approx(100.0 - cfg.jamming_band_m)
+    assert fence.max_alt_amsl_m == pytest.approx(100.0 + cfg.jamming_band_m)
+    assert fence.start_t_s == t and fence.end_t_s == t + cfg.jamming_duration_s
+    assert hold.new_geofence == fence and fence.exempt == ("A",)
     # B is rerouted around it, and the new plan is clean for Monitoring.
     reroute = next(r for r in d.recommendations if r.operation_id == "B")
     assert reroute.selected is not None and reroute.selected.plan is not None

@@ -225,7 +225,7 @@ class TacticalDeconfliction:
         # whose box comes within the OV radius of the new plan's box (the others cannot be
         # crossed), and score only those within the proximity range.
         ov = op.operational_volume_m
-        near_g = _near(geofences, fences, new, ov + 1.0)
+        near_g = [(g, f) for g, f in _near(geofences, fences, new, ov + 1.0) if g.applies_to(op.id)]
         flags = self.verify(checked, op, outsiders, [g for g, _ in near_g])
         if flags:
             self.dropped.append(
@@ -233,7 +233,7 @@ class TacticalDeconfliction:
             )
             return None
         reach = ov * self.config.risk_proximity_factor + 1.0
-        near_f = [f for _, f in _near(geofences, fences, new, reach)]
+        near_f = [f for g, f in _near(geofences, fences, new, reach) if g.applies_to(op.id)]
         sc = self._score(
             new, old, op, near_f, outsiders, lowest_priority, abandons=maneuver in _ABANDON
         )
@@ -720,6 +720,8 @@ class TacticalDeconfliction:
         )
         if threat.area is not None and threat.area.id not in {g.id for g in geofences}:
             geofences += (threat.area,)
+        # A dynamic geofence drawn around this UAS (jamming, link loss) does not apply to it.
+        geofences = tuple(g for g in geofences if g.applies_to(op.id))
         fences = self._local_fences(geofences)
         lp = self._lp(op.plan).after(now)
         cur = self.current_xyz(op, snapshot)
