@@ -1,0 +1,248 @@
+"""Sans-IO tests: AnswerBook rules, paper template conversion, schema errors, queue policy."""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from mqtt_helpers import T0
+
+from adapters.mqtt import paper
+from adapters.mqtt.answers import AnswerBook, AnswerStatus
+from adapters.mqtt.bridge import MqttBridge
+from adapters.mqtt.codec import MqttMessageError, RpaState, Topics, decode, validate
+from adapters.mqtt.config import MqttConfig
+from gcs_utm.clock import ManualClock
+from gcs_utm.messages import HazardReport, PilotAnswer, PilotDecision
+from gcs_utm.model import (
+    Alternative,
+    Maneuver,
+    OperationId,
+    Recommendation,
+    RecommendationId,
+    RecommendationState,
+    ThreatId,
+    ThreatKind,
+)
+
+TEMPLATES = Path(__file__).resolve().parents[3] / "shared/data/gauss/mqtt_messages"
+T = Topics()
+REC = Recommendation(
+    id=RecommendationId("r"),
+    version=3,
+    threat_id=ThreatId("t"),
+    threat_kind=ThreatKind.INTRUDER,
+    operation_id=OperationId("op"),
+    created_t_s=0.0,
+    deadline_t_s=100.0,
+    alternatives=(
+        Alternative(
+            operation_id=OperationId("op"), maneuver=Maneuver.HOLD, plan=None, cost=0, risk=0
+        ),
+    ),
+)
+
+
+def _ans(
+    version: int,
+    decision: PilotDecision,
+    op: str = "alice",
+    t_s: float = 1.0,
+    idx: int | None = None,
+) -> PilotAnswer:
+    return PilotAnswer(
+        recommendation_id=RecommendationId("r"),
+        version=version,
+        decision=decision,
+        t_s=t_s,
+        operator=op,
+        alternative_index=idx,
+    )
+
+
+def test_answer_book_matches_exact_id_and_version() -> None:
+    book = AnswerBook()
+    book.register(replace(REC, version=2), "alice")
+    book.register(REC, "alice")  # version 3 supersedes 2
+    old = book.answer(_ans(2, PilotDecision.REJECT), 1.0)
+    assert old.status is AnswerStatus.REFUSED and "superseded" in old.reason
+    future = book.answer(_ans(4, PilotDecision.ACCEPT), 1.0)
+    assert future.status is AnswerStatus.REFUSED and "unknown version" in future.reason
+    other = book.answer(_ans(3, PilotDecision.ACCEPT, op="bob"), 1.0)
+    assert other.status is AnswerStatus.REFUSED and "bob" in other.reason
+    bad_idx = book.answer(_ans(3, PilotDecision.ACCEPT, idx=5), 1.0)
+    assert bad_idx.status is AnswerStatus.REFUSED and "out of range" in bad_idx.reason
+    ok = book.answer(_ans(3, PilotDecision.REJECT), 1.0)
+    assert ok.status is AnswerStatus.ACCEPTED and ok.state is RecommendationState.REJECTED
+    assert book.answer(_ans(3, PilotDecision.REJECT), 2.0).status is AnswerStatus.DUPLICATE
+    flip = book.answer(_ans(3, PilotDecision.ACCEPT), 2.0)
+    assert flip.status is AnswerStatus.REFUSED and "already answered: reject" in flip.reason
+    assert book.get(RecommendationId("r")).state is RecommendationState.REJECTED  # type: ignore[union-attr]
+    unknown = book.answer(replace(_ans(1, PilotDecision.ACCEPT), recommendation_id="x"), 1.0)
+    assert unknown.status is AnswerStatus.REFUSED and unknown.state is None
+
+
+def test_answer_book_deadline_is_inclusive_and_uses_the_later_time() -> None:
+    book = AnswerBook()
+    book.register(REC)
+    assert (
+        book.answer(_ans(3, PilotDecision.ACCEPT, t_s=0.0), 100.0).status is AnswerStatus.ACCEPTED
+    )
+    book2 = AnswerBook()
+    book2.register(REC)
+    # a pilot clock running behind cannot extend the deadline
+    late = book2.answer(_ans(3, PilotDecision.ACCEPT, t_s=50.0), 100.5)
+    assert late.status is AnswerStatus.REFUSED and late.state is RecommendationState.EXPIRED
+    again = book2.answer(_ans(3, PilotDecision.ACCEPT, t_s=50.0), 100.6)
+    assert again.status is AnswerStatus.REFUSED and "expired" in again.reason
+
+
+def _template_keys(name: str) -> set[str]:
+    text = (TEMPLATES / f"{name}.json").read_text()
+    return set(re.findall(r'"(\w+)"\s*[:;]', text))
+
+
+@pytest.mark.data
+def test_paper_templates_convert_with_every_field_mapped() -> None:
+    if not TEMPLATES.is_dir():
+        pytest.skip(f"paper templates not found at {TEMPLATES}")
+    rpa = {
+        "icao": 0x34A1B2,
+        "latitude": 40.0,
+        "longitude": -3.0,
+        "altitude": 700.0,
+        "yaw": 10.0,
+        "pitch": 1.0,
+        "roll": -1.0,
+        "groundspeed": 12.0,
+        "covariance_h": 9.0,
+        "covariance_v": 16.0,
+        "hpl": 30.0,
+        "hal": 40.0,
+        "hpe": 3.0,
+        "vpl": 50.0,
+        "val": 45.0,
+        "vpe": 4.0,
+        "solution_mode": 2,
+        "timestamp": T0 * 1000,
+        "jamming": False,
+        "spoofing": True,
+        "anomalous_clock_drift": False,
+        "anomalous_pos_drift": False,
+        "signal_noise_ratio": 42.0,
+        "received_power": -130.0,
+    }
+    assert set(rpa) == _template_keys("RPA_STATE_INFO")
+    msg = decode(T, T.state("alice"), json.dumps(paper.rpa_state_from_paper(rpa)), T0)
+    assert isinstance(msg, RpaState)
+    assert msg.measurement.icao24 == "34a1b2" and msg.measurement.capture_t_s == T0
+    assert msg.measurement.eph_m == 3.0 and msg.gnss is not None and msg.gnss.cn0_dbhz == 42.0
+    assert {h.kind for h in msg.hazards} == {
+        ThreatKind.SPOOFING_ATTACK,
+        ThreatKind.GNSS_DEGRADATION,
+    }
+
+    adsb = {
+        "icao": "4CA1FE",
+        "callsign": "IBE1",
+        "latitude": 40.1,
+        "longitude": -3.1,
+        "altitude": 1500,
+        "heading": 180,
+        "speed": 90,
+        "timestamp": T0 * 1000,
+    }
+    assert set(adsb) == _template_keys("ADSB_SURVEILLANCE")
+    m = decode(T, T.adsb, json.dumps(paper.adsb_from_paper(adsb)), T0)
+    assert m.vel_ned_mps == pytest.approx((-90.0, 0.0, 0.0), abs=1e-9)  # type: ignore[union-attr]
+
+    status = {"icao": 1, "flight_plan_id": "op-1", "status": "STARTED", "timestamp": T0 * 1000}
+    assert set(status) == _template_keys("RPS_CHANGE_FLIGHT_STATUS")
+    assert decode(T, T.flight_status("a"), json.dumps(paper.flight_status_from_paper(status)), T0)
+
+    accept = {"icao": 1, "flight_plan_id": "rec-1", "accept": True}
+    assert set(accept) == _template_keys("RPS_FLIGHT_PLAN_ACCEPT")
+    a = decode(
+        T, T.answers("a"), json.dumps(paper.pilot_answer_from_paper(accept, version=2, t_s=T0)), T0
+    )
+    assert isinstance(a, PilotAnswer) and a.version == 2 and a.decision is PilotDecision.ACCEPT
+
+    plan = {
+        "icao": 1,
+        "waypoints": "LINESTRING(23.369827 35.916399 10.5,23.389827 35.516399 30.5,23.349827 35.616399 130.5)",
+    }
+    assert set(plan) == _template_keys("GCS_FLIGHT_PLAN")
+    conv = paper.flight_plan_from_paper(
+        plan, operation_id="op-1", start_t_s=T0, ground_speed_mps=20
+    )
+    sub = decode(T, T.flight_plans("a"), json.dumps(conv), T0)
+    wps = sub.plan.waypoints  # type: ignore[union-attr]
+    assert wps[0].lon_deg == 23.369827 and wps[0].lat_deg == 35.916399
+    assert wps[1].t_s - wps[0].t_s == pytest.approx(44_500 / 20, rel=0.01)  # ~44.5 km leg
+
+    update = {
+        "id": "e25bed06",
+        "name": "Wildfire",
+        "type": "wildfire",
+        "country": "SPAIN",
+        "state": "a",
+        "city": "Madrid",
+        "last_updated": T0 * 1000,
+        "date_effective": T0 * 1000,
+        "geometry": "CIRCLE(40.4, -3.7, 1500)",
+    }
+    assert set(update) == _template_keys("AIRSPACE_UPDATE")
+    h = decode(T, T.airspace_alerts, json.dumps(paper.airspace_alert_from_paper(update)), T0)
+    assert isinstance(h, HazardReport) and h.area is not None
+    assert h.area.center is not None and h.area.center.lat_deg == 40.4 and h.area.radius_m == 1500
+
+
+def test_schema_errors_name_the_field() -> None:
+    good = {
+        "schema_version": 1,
+        "type": "pilot_answer",
+        "recommendation_id": "r",
+        "version": 1,
+        "decision": "accept",
+        "t_s": 1.0,
+    }
+    cases = {
+        "decision": {**good, "decision": "maybe"},
+        "version": {**good, "version": "1"},
+        "extra": {**good, "extra": 1},
+        "t_s": {k: v for k, v in good.items() if k != "t_s"},
+    }
+    for field, obj in cases.items():
+        with pytest.raises(MqttMessageError) as err:
+            decode(T, T.answers("alice"), json.dumps(obj), 0.0)
+        assert err.value.field == field or field == "extra", (field, err.value)
+        assert err.value.topic == T.answers("alice")
+    with pytest.raises(MqttMessageError, match="unknown operation"):
+        T.classify("gcs_utm/operators/alice/launch")
+    with pytest.raises(MqttMessageError, match="NaN"):
+        decode(T, T.answers("alice"), b'{"t_s": NaN}', 0.0)
+    with pytest.raises(MqttMessageError, match="'adsb' message on a 'pilot_answer' topic"):
+        decode(T, T.answers("alice"), json.dumps({**good, "type": "adsb"}), 0.0)
+    validate("pilot_answer", good)
+
+
+def test_outgoing_queue_is_bounded_latest_wins_and_backoff_capped() -> None:
+    clock = ManualClock(T0)
+    cfg = MqttConfig(queue_max=5, backoff_initial_s=0.5, backoff_max_s=4.0, traffic_rate_hz=1.0)
+    bridge = MqttBridge(cfg, clock, handler=None)  # type: ignore[arg-type]
+    for i in range(8):
+        bridge.publish_error(f"gcs_utm/x/{i}", "", "bad")
+    assert bridge.pending == 5 and bridge.stats.dropped == 3
+    bridge.publish_geofences([])
+    bridge.publish_geofences([])  # latest-wins: still one retained state message queued
+    assert bridge.pending == 5 and bridge.stats.dropped == 4
+    assert bridge.publish_traffic([]) and not bridge.publish_traffic([])
+    clock.advance(1.0)
+    assert bridge.publish_traffic([])
+    for n in range(1, 12):
+        d = bridge.backoff_s(n)
+        ceiling = min(4.0, 0.5 * 2 ** (n - 1))
+        assert ceiling / 2 <= d <= ceiling
