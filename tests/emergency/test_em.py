@@ -8,7 +8,7 @@ import pytest
 
 from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
-from gcs_utm.core.emergency import EmergencyConfig, EmergencyManager, select_joint
+from gcs_utm.core.emergency import Decision, EmergencyConfig, EmergencyManager, select_joint
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import plan_vs_geofences, strategic_check
 from gcs_utm.model import (
@@ -149,6 +149,19 @@ def test_no_feasible_alternative_is_an_explicit_escalation() -> None:
     assert d.recommendations == ()
     assert d.escalations and "no conflict-free combination" in d.escalations[0]
     assert d.audit[0].action == "escalation"
+
+
+def test_an_escalated_threat_is_retried_only_after_the_retry_period() -> None:
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], priority=2000)
+    b = sc.make_operation("B", [(1000, 0, 100), (-1000, 0, 100)], priority=2000)
+    snap = sc.snapshot([a, b])
+    threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"])
+    em = make_em(retry_after_s=30.0)
+    assert em.on_threat(threat, snap).escalations
+    updated = replace(threat, status=ThreatStatus.UPDATED)
+    assert em.on_threat(updated, at(snap, snap.t_s + 1.0)) == Decision()  # no churn
+    again = em.on_threat(updated, at(snap, snap.t_s + 31.0))
+    assert again.escalations, "still unsolvable: the operator is reminded"
 
 
 def test_jamming_suspends_creates_a_geofence_and_reroutes_the_neighbour() -> None:

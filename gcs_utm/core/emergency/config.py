@@ -76,6 +76,12 @@ class EmergencyConfig:
     max_replans: int = setting(
         3, "re-plans per threat and UAS after rejection or expiry before escalating", min=0
     )
+    retry_after_s: float = setting(
+        30.0,
+        "a persisting threat whose handling ended in escalation is re-planned this often",
+        min=1.0,
+        unit="s",
+    )
     suspend_command: str = setting(
         "hold", "command for a suspended operation (jamming/spoofing): 'hold' or 'land'"
     )

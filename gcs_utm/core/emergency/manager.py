@@ -66,6 +66,8 @@ SINGLE_MANEUVERS: dict[str, frozenset[Maneuver]] = {
     "back_to_plan": frozenset({Maneuver.BACK_TO_PLAN, Maneuver.NEXT_WAYPOINT}),
     "land_or_home": frozenset({Maneuver.LANDING_SITE, Maneuver.RETURN_HOME}),
 }
+_ONE_SHOT = frozenset({"warn", "suspend_and_geofence", "alert_and_geofence", "geofence_from_area"})
+"""Actions done once per threat: repeating them would only duplicate warnings/geofences."""
 _MODE_MULTI = "multi"
 _MODE_INTRUDER = "intruder"
 _MODE_COMMAND = "command"
@@ -99,6 +101,7 @@ class Decision:
 class _Case:
     threat: Threat
     action: str
+    attempt_t_s: float
     modes: dict[OperationId, str] = field(default_factory=dict)
     excluded: dict[OperationId, set[Maneuver]] = field(default_factory=dict)
     replans: dict[OperationId, int] = field(default_factory=dict)
@@ -150,13 +153,21 @@ class EmergencyManager:
         if threat.status is ThreatStatus.CLOSED:
             return self.on_threat_closed(threat)
         case = self._cases.get(threat.id)
-        if case is not None and self._live(case):
-            # The threat persists and is being handled: a pending or accepted recommendation
-            # stands until answered, expired or the threat closes (no churn every cycle).
+        if case is not None:
+            # The threat persists. A pending or accepted recommendation stands until answered,
+            # expired or the threat closes; one-shot actions (warning, geofence creation) are
+            # done; a case that ended in escalation is retried every retry_after_s with its
+            # refused maneuvers still excluded (no churn every monitoring cycle).
             case.threat = threat
-            return Decision()
+            if self._live(case) or case.action in _ONE_SHOT:
+                return Decision()
+            if snapshot.t_s - case.attempt_t_s < self.config.retry_after_s:
+                return Decision()
+            case.attempt_t_s = snapshot.t_s
+            case.replans.clear()
+            return self._handle(case, snapshot)
         action = self.config.action_for(threat.kind)
-        case = _Case(threat=threat, action=action)
+        case = _Case(threat=threat, action=action, attempt_t_s=snapshot.t_s)
         self._cases[threat.id] = case
         return self._handle(case, snapshot)
 
@@ -233,7 +244,7 @@ class EmergencyManager:
     # ---- internals --------------------------------------------------------------------------
     def _live(self, case: _Case) -> bool:
         live = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED)
-        return any(self._recs[r].state in live for r in case.rec_ids) or not case.rec_ids
+        return any(self._recs[r].state in live for r in case.rec_ids)
 
     def _audit(
         self, t_s: float, action: str, subject: str, detail: dict[str, object]
