@@ -172,7 +172,10 @@ def test_paper_templates_convert_with_every_field_mapped() -> None:
 
     plan = {
         "icao": 1,
-        "waypoints": "LINESTRING(23.369827 35.916399 10.5,23.389827 35.516399 30.5,23.349827 35.616399 130.5)",
+        "waypoints": (
+            "LINESTRING(23.369827 35.916399 10.5,23.389827 35.516399 30.5,"
+            "23.349827 35.616399 130.5)"
+        ),
     }
     assert set(plan) == _template_keys("GCS_FLIGHT_PLAN")
     conv = paper.flight_plan_from_paper(
