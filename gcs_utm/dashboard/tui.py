@@ -14,6 +14,7 @@ from typing import ClassVar
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
+from textual.css.query import NoMatches
 from textual.widgets import Footer, Header, Static
 
 from gcs_utm.dashboard.view import (
@@ -111,8 +112,14 @@ class DashboardApp(App[None]):
         return pending[self._queue[0]] if self._queue else None
 
     def _refresh_view(self) -> None:
-        if not self._mounted_once:
+        if not self._mounted_once or not self.screen.is_attached:
             return
+        try:
+            self._render_all()
+        except NoMatches:  # the app is shutting down: its widgets are gone
+            return
+
+    def _render_all(self) -> None:
         d = collect(self._usm, self._tracks)
         self.query_one("#operations", Static).update(operations_table(d))
         self.query_one("#threats", Static).update(threats_table(d))
