@@ -449,7 +449,8 @@ async def test_thousand_malformed_messages_never_crash(broker: Broker) -> None:
             await tool.send(T.operator("alice", "launch_missiles"), {"x": 1})
         errors = [(await alice.next(T.errors_for("alice"), timeout_s=20.0))[1] for _ in range(1001)]
         assert all(e["reason"] for e in errors)
-        assert "unknown operation" in errors[-1]["reason"]
+        # from another client, so not necessarily last (no order across publishers)
+        assert sum("unknown operation" in e["reason"] for e in errors) == 1
         assert {e["field"] for e in errors} >= {"", "version", "decision", "schema_version"}
         assert bridge.stats.rejected == 1001 and usm.answers == []
         # still alive and serving
