@@ -776,7 +776,7 @@ class TacticalDeconfliction:
             if Maneuver.DIRECT_TO_GOAL in want:
                 add(
                     Maneuver.DIRECT_TO_GOAL,
-                    router.to_point(lp.xyz()[-1], keep_rest=False),
+                    router.to_point(lp.xyz()[-1]),
                     "direct to the final waypoint",
                 )
             off_plan = router.distance_to_plan() > op.flight_geometry_m
@@ -951,7 +951,7 @@ class _Router:
         )
         return shifted, 1
 
-    def to_point(self, target: FloatArray, *, keep_rest: bool) -> tuple[LocalPlan, int] | None:
+    def to_point(self, target: FloatArray) -> tuple[LocalPlan, int] | None:
         path = self._path3d(self.cur, target)
         if path is None:
             return None
@@ -965,7 +965,7 @@ class _Router:
     def back_to_plan(self) -> tuple[LocalPlan, int] | None:
         """To the closest point of the remaining plan, then on along the plan."""
         if len(self.lp) < 2:
-            return self.to_point(self.lp.xyz()[0], keep_rest=False)
+            return self.to_point(self.lp.xyz()[0])
         line = LineString(self.lp.xyz()[:, :2])
         s = line.project(Point(self.cur[0], self.cur[1]))
         cum = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(self.lp.e), np.diff(self.lp.n)))])
