@@ -254,6 +254,8 @@ async def apply_decision(usm: Usm, decision: Decision, store: Persistence) -> No
         await usm.execute_command(command, reason="autonomous mode")
     for text in decision.escalations:
         await usm.escalate(text)
+    for text in decision.warnings:
+        usm.log_event("warning", text)
 
 
 # ---- scenario runs ---------------------------------------------------------------------------
