@@ -261,12 +261,26 @@ async def apply_decision(usm: Usm, decision: Decision, store: Persistence) -> No
 # ---- scenario runs ---------------------------------------------------------------------------
 
 
-def _vehicle_specs(scenario: Scenario, lead_s: float, gcs_port: int) -> list[Any]:
-    """Simulated vehicles of a scenario: each preloaded with its filed plan as its mission
-    (as if the pilot had uploaded it), started so that it reaches its first waypoint at the
-    filed time plus its start delay."""
-    from sitl import MissionItemSpec, VehicleSpec
+def vehicle_specs(
+    scenario: Scenario,
+    *,
+    lead_s: float,
+    gcs_host: str = "127.0.0.1",
+    gcs_port: int = 14550,
+    ephemeral_ports: bool = False,
+) -> list[Any]:
+    """Simulated vehicles of a scenario (``sitl.VehicleSpec``), PX4-like instance numbers,
+    each preloaded with its filed plan as its mission (as if the pilot had uploaded it), with
+    DO_CHANGE_SPEED per segment so it keeps the plan's timing, and the scenario's faults.
+    ``lead_s`` is the simulated time between the fleet start and the scenario's t0.
 
+    A vehicle appears in flight at its first waypoint at the filed start time plus its start
+    delay (sitl's ``start_airborne``; silent until then): the paper's encounters are timed to
+    the second, and a take-off and climb-out would shift every vehicle by a different amount.
+    """
+    from sitl import FaultKind, FaultSpec, MissionItemSpec, VehicleSpec
+
+    frame = scenario.frame
     specs = []
     for i, v in enumerate(scenario.vehicles):
         wps = v.plan.waypoints
@@ -274,29 +288,38 @@ def _vehicle_specs(scenario: Scenario, lead_s: float, gcs_port: int) -> list[Any
         for j, w in enumerate(wps):
             speed = None
             if j > 0:
-                a, b = wps[j - 1], w
-                e0, n0 = scenario.frame.point_to_local(a.lat_deg, a.lon_deg)
-                e1, n1 = scenario.frame.point_to_local(b.lat_deg, b.lon_deg)
-                dist = math.dist((e0, n0, a.alt_amsl_m), (e1, n1, b.alt_amsl_m))
-                dt = b.t_s - a.t_s
+                a = wps[j - 1]
+                e0, n0 = frame.point_to_local(a.lat_deg, a.lon_deg)
+                e1, n1 = frame.point_to_local(w.lat_deg, w.lon_deg)
+                dist = math.dist((e0, n0, a.alt_amsl_m), (e1, n1, w.alt_amsl_m))
+                dt = w.t_s - a.t_s
                 speed = dist / dt if dt > 0 and dist > 0 else None
             items.append(
                 MissionItemSpec(
                     lat_deg=w.lat_deg, lon_deg=w.lon_deg, alt_amsl_m=w.alt_amsl_m, speed_mps=speed
                 )
             )
-        # The vehicle appears in flight at its first waypoint at the filed start time plus its
-        # start delay (sitl's start_airborne): the paper's encounters are timed to the second,
-        # and a take-off/climb-out would shift every vehicle by a different amount.
-        start_at = lead_s + (wps[0].t_s - scenario.t0_s) + v.start_delay_s
+        start_at = max(0.5, lead_s + (wps[0].t_s - scenario.t0_s) + v.start_delay_s)
         fastest = max([it.speed_mps or 0.0 for it in items] + [v.cruise_speed_mps])
-        faults = _faults_for(scenario, v.operation_id, lead_s)
+        faults = [
+            FaultSpec(
+                kind=FaultKind[_FAULTS[ev.kind]],
+                at_s=lead_s + ev.at_s,
+                duration_s=ev.duration_s,
+                # a scenario's jamming strength in 0..1 is not a drift: use the default drift
+                value=None
+                if ev.kind is EventKind.GNSS_JAMMING and ev.value is not None and ev.value <= 1.0
+                else ev.value,
+            )
+            for ev in scenario.events
+            if ev.uas == v.operation_id and ev.kind in _FAULTS
+        ]
         specs.append(
             VehicleSpec(
                 instance=i,
                 sys_id=int(v.sys_id) if v.sys_id is not None else i + 1,
                 kind=v.vehicle_kind.value,
-                autopilot=v.autopilot.value if v.autopilot.value in ("px4", "ardupilot") else "px4",
+                autopilot=v.autopilot.value if v.autopilot.value == "ardupilot" else "px4",
                 home_lat_deg=v.home.lat_deg,
                 home_lon_deg=v.home.lon_deg,
                 home_alt_amsl_m=v.home.alt_amsl_m,
@@ -304,14 +327,14 @@ def _vehicle_specs(scenario: Scenario, lead_s: float, gcs_port: int) -> list[Any
                 max_speed_mps=max(fastest * 1.2, v.cruise_speed_mps + 2.0),
                 climb_rate_mps=v.max_climb_rate_mps,
                 mission=tuple(items),
-                auto_start_at_s=max(0.5, start_at),
+                auto_start_at_s=start_at,
                 start_airborne=True,
                 # silent until it appears in flight: a tracker must not see a 100 m jump
-                boot_at_s=max(0.5, start_at) + 0.2,
-                gcs_host="127.0.0.1",
+                boot_at_s=start_at + 0.2,
+                gcs_host=gcs_host,
                 gcs_port=gcs_port,
-                bind_port=0,
-                tcp_port=0,
+                bind_port=0 if ephemeral_ports else None,
+                tcp_port=0 if ephemeral_ports else None,
                 faults=tuple(faults),
                 battery_capacity_s=v.endurance_s or 1800.0,
                 seed=i,
@@ -329,27 +352,6 @@ _FAULTS = {
     EventKind.PACKET_LOSS: "PACKET_LOSS",
     EventKind.MOTOR_FAILURE: "MOTOR_FAILURE",
 }
-
-
-def _faults_for(scenario: Scenario, op_id: OperationId, lead_s: float) -> list[Any]:
-    from sitl import FaultKind, FaultSpec
-
-    out = []
-    for ev in scenario.events:
-        if ev.uas != op_id or ev.kind not in _FAULTS:
-            continue
-        value = ev.value
-        if ev.kind is EventKind.GNSS_JAMMING and value is not None and value <= 1.0:
-            value = None  # the scenario's 0..1 strength: use the vehicle's default drift
-        out.append(
-            FaultSpec(
-                kind=FaultKind[_FAULTS[ev.kind]],
-                at_s=lead_s + ev.at_s,
-                duration_s=ev.duration_s,
-                value=value,
-            )
-        )
-    return out
 
 
 async def _play_alerts(rt: Runtime, scenario: Scenario, lead_s: float) -> None:
@@ -426,7 +428,7 @@ async def run_scenario(
         from sitl import Fleet, SimTime
 
         fleet = Fleet(
-            _vehicle_specs(scenario, lead_s, gcs_port),
+            vehicle_specs(scenario, lead_s=lead_s, gcs_port=gcs_port, ephemeral_ports=True),
             SimTime(options.speed, start_utc_s=start_utc),
         )
 

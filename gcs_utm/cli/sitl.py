@@ -5,8 +5,8 @@ Each vehicle of the scenario (:attr:`gcs_utm.scenario.Scenario.vehicles`) become
 :class:`sitl.VehicleSpec`: instance ``i`` in file order (UDP ``18570+i`` like ``px4 -i i``;
 ``--ephemeral-ports`` for any free port), sysid = its operation's ``sys_id``, preloaded with its
 filed plan as its mission (segment speeds from the plan's 4D timing, as ``DO_CHANGE_SPEED``),
-and auto-started so that it reaches its first waypoint at the plan's start time plus its start
-delay (the take-off climb is started early by ``climb / climb_rate + 2 s``). Time: the
+and started in flight at its first waypoint at the plan's start time plus its start delay
+(:func:`gcs_utm.app.vehicle_specs`, shared with ``gcs-utm run``). Time: the
 scenario's t0 is ``now + lead_s`` (simulated), so the vehicles boot, get a fix and are
 discovered before the first plan starts. Scenario faults (GNSS jamming, spoofing, battery,
 link, motor) are scheduled on the vehicle they name.
@@ -22,101 +22,12 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-from gcs_utm.scenario import EventKind, Scenario, ScenarioError
-
-if TYPE_CHECKING:
-    import sitl
+from gcs_utm.app import vehicle_specs
+from gcs_utm.scenario import Scenario, ScenarioError
 
 _log = logging.getLogger(__name__)
-
-_START_MARGIN_S = 2.0  # arm + take-off transition before the climb starts
-_DEFAULT_LEAD_S = 10.0
-_FAULTS = {
-    EventKind.GNSS_JAMMING: "GNSS_JAMMING",
-    EventKind.SPOOFING: "SPOOFING",
-    EventKind.BATTERY_DROP: "BATTERY_DROP",
-    EventKind.BATTERY_DRAIN: "BATTERY_DRAIN",
-    EventKind.LINK_LOSS: "LINK_LOSS",
-    EventKind.PACKET_LOSS: "PACKET_LOSS",
-    EventKind.MOTOR_FAILURE: "MOTOR_FAILURE",
-}
-
-
-def vehicle_specs(
-    scenario: Scenario,
-    *,
-    lead_s: float,
-    gcs_host: str = "127.0.0.1",
-    gcs_port: int = 14550,
-    ephemeral_ports: bool = False,
-) -> list[sitl.VehicleSpec]:
-    """The simulated vehicles of ``scenario`` (see the module docstring). ``lead_s`` is the
-    simulated time between the fleet start and the scenario's t0."""
-    from sitl import FaultKind, FaultSpec, MissionItemSpec, VehicleSpec
-
-    frame = scenario.frame
-    specs: list[VehicleSpec] = []
-    for i, v in enumerate(scenario.vehicles):
-        wps = v.plan.waypoints
-        items: list[MissionItemSpec] = []
-        for j, w in enumerate(wps):
-            speed: float | None = None
-            if j > 0:
-                a = wps[j - 1]
-                e0, n0 = frame.point_to_local(a.lat_deg, a.lon_deg)
-                e1, n1 = frame.point_to_local(w.lat_deg, w.lon_deg)
-                dist = math.dist((e0, n0, a.alt_amsl_m), (e1, n1, w.alt_amsl_m))
-                dt = w.t_s - a.t_s
-                speed = dist / dt if dt > 0.0 and dist > 0.0 else None
-            items.append(
-                MissionItemSpec(
-                    lat_deg=w.lat_deg, lon_deg=w.lon_deg, alt_amsl_m=w.alt_amsl_m, speed_mps=speed
-                )
-            )
-        climb_s = max(0.0, wps[0].alt_amsl_m - v.home.alt_amsl_m) / max(v.max_climb_rate_mps, 0.1)
-        start_at = (
-            lead_s + (wps[0].t_s - scenario.t0_s) + v.start_delay_s - climb_s - _START_MARGIN_S
-        )
-        faults = [
-            FaultSpec(
-                kind=FaultKind[_FAULTS[ev.kind]],
-                at_s=lead_s + ev.at_s,
-                duration_s=ev.duration_s,
-                # a scenario's jamming strength in 0..1 is not a drift: use the default drift
-                value=(
-                    None
-                    if ev.kind is EventKind.GNSS_JAMMING and ev.value is not None and ev.value <= 1
-                    else ev.value
-                ),
-            )
-            for ev in scenario.events
-            if ev.uas == v.operation_id and ev.kind in _FAULTS
-        ]
-        specs.append(
-            VehicleSpec(
-                instance=i,
-                sys_id=int(v.sys_id) if v.sys_id is not None else i + 1,
-                kind=v.vehicle_kind.value,
-                autopilot=v.autopilot.value if v.autopilot.value == "ardupilot" else "px4",
-                home_lat_deg=v.home.lat_deg,
-                home_lon_deg=v.home.lon_deg,
-                home_alt_amsl_m=v.home.alt_amsl_m,
-                cruise_speed_mps=v.cruise_speed_mps,
-                climb_rate_mps=v.max_climb_rate_mps,
-                mission=tuple(items),
-                auto_start_at_s=max(0.5, start_at),
-                gcs_host=gcs_host,
-                gcs_port=gcs_port,
-                bind_port=0 if ephemeral_ports else None,
-                tcp_port=0 if ephemeral_ports else None,
-                faults=tuple(faults),
-                battery_capacity_s=v.endurance_s or 1800.0,
-                seed=i,
-            )
-        )
-    return specs
+_DEFAULT_LEAD_S = 10.0  # simulated s before t0: vehicles boot and are discovered first
 
 
 def parse_host_port(text: str) -> tuple[str, int]:

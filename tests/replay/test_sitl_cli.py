@@ -11,8 +11,9 @@ import pytest
 os.environ["MAVLINK20"] = "1"
 from pymavlink.dialects.v20 import common as mav
 
+from gcs_utm.app import vehicle_specs
 from gcs_utm.cli import main
-from gcs_utm.cli.sitl import parse_host_port, run_sitl, vehicle_specs
+from gcs_utm.cli.sitl import parse_host_port, run_sitl
 from gcs_utm.scenario import load_any
 
 UC1 = Path(__file__).resolve().parents[2] / "config/scenarios/use_case_1.toml"
@@ -62,16 +63,20 @@ async def test_sitl_sends_heartbeats_of_both_vehicles_to_the_gcs() -> None:
     port = transport.get_extra_info("sockname")[1]
     stop = asyncio.Event()
     task = asyncio.create_task(
-        run_sitl(UC1, speed=10.0, gcs=("127.0.0.1", port), ephemeral_ports=True, stop=stop)
+        run_sitl(
+            UC1, speed=50.0, gcs=("127.0.0.1", port), lead_s=1.0, ephemeral_ports=True, stop=stop
+        )
     )
     try:
-        await asyncio.sleep(1.0)
+        # each vehicle powers on when its operation starts (UAS2's plan starts at t0 + 70 s):
+        # 2 s at speed 50 is 100 simulated seconds
+        await asyncio.sleep(2.0)
     finally:
         stop.set()
         await asyncio.wait_for(task, 5.0)
         transport.close()
     assert set(gcs.heartbeats) == {1, 2}
-    assert all(n >= 3 for n in gcs.heartbeats.values())  # 1 Hz x speed 10, ~1 s
+    assert all(n >= 3 for n in gcs.heartbeats.values())  # 1 Hz simulated, >= 29 s each
 
 
 def test_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
