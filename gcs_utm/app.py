@@ -446,6 +446,14 @@ async def run_scenario(
         rt.usm.attach_operator(app)
     for op_port in operators:
         rt.usm.attach_operator(op_port)
+    gateway = None
+    if options.mqtt or settings.mqtt.enabled:
+        from gcs_utm.services.mqtt_gateway import MqttGateway
+
+        gateway = MqttGateway(rt.usm, settings.mqtt, tracks=rt.tracks)
+        rt.usm.attach_operator(gateway)
+        rt.usm.attach_threat_sink(gateway.on_threats)
+        rt.usm.attach_geofence_listener(gateway.on_geofences)
 
     wall0 = time.perf_counter()
     try:
@@ -465,6 +473,8 @@ async def run_scenario(
                 ]
                 if options.headless:
                     tasks.append(tg.create_task(_headless_status(rt), name="status"))
+                if gateway is not None:
+                    tasks.append(tg.create_task(gateway.run(), name="mqtt"))
                 if app is not None:
                     tasks.append(tg.create_task(app.run_async(), name="dashboard"))
                 await _until(rt.clock, end_t_s, app)
@@ -823,6 +833,14 @@ async def serve(settings: Settings, *, db_path: Path, operator: str, headless: b
 
         app = DashboardApp(rt.usm, rt.tracks, refresh_s=settings.dashboard.refresh_s)
         rt.usm.attach_operator(app)
+    gateway = None
+    if settings.mqtt.enabled:
+        from gcs_utm.services.mqtt_gateway import MqttGateway
+
+        gateway = MqttGateway(rt.usm, settings.mqtt, tracks=rt.tracks)
+        rt.usm.attach_operator(gateway)
+        rt.usm.attach_threat_sink(gateway.on_threats)
+        rt.usm.attach_geofence_listener(gateway.on_geofences)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -838,6 +856,8 @@ async def serve(settings: Settings, *, db_path: Path, operator: str, headless: b
             ]
             if headless:
                 tasks.append(tg.create_task(_headless_status(rt), name="status"))
+            if gateway is not None:
+                tasks.append(tg.create_task(gateway.run(), name="mqtt"))
             if app is not None:
                 dash = tg.create_task(app.run_async(), name="dashboard")
                 dash.add_done_callback(lambda _t: stop.set())

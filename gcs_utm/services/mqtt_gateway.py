@@ -1,0 +1,202 @@
+"""The USM's MQTT side: connects :class:`adapters.mqtt.bridge.MqttBridge` to the :class:`Usm`.
+
+In (the bridge calls this as its :class:`~adapters.mqtt.bridge.MqttHandler`): positions and
+hazards go to the USM; pilot answers go to :meth:`Usm.answer` (the USM matches id + version and
+refuses an operator that does not fly the UAS); flight plans become operations in the
+airspace; start/stop change the operation's state.
+Out (this is also an :class:`~gcs_utm.services.usm.OperatorPort`, a threat sink and a geofence
+listener of the USM): recommendations and their state changes to the operator of the
+operation, alerts for new threats, the active geofence set (retained), and traffic at
+``traffic_rate_hz`` from :meth:`MqttGateway.run`.
+
+Invariants:
+- the operator of an inbound message is the topic's operator level (set by the codec); an
+  answer always reaches the USM with ``source == "mqtt"``;
+- an inbound message the USM cannot take raises ``ValueError``: the bridge reports it on the
+  errors topics and logs it, nothing crashes;
+- every publish only enqueues (the bridge never blocks the USM).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import logging
+from collections.abc import Callable, Mapping, Sequence
+
+from adapters.mqtt import answers as mqtt_answers
+from adapters.mqtt.bridge import MqttBridge
+from adapters.mqtt.codec import FlightPlanSubmission, FlightStatusKind, FlightStatusReport
+from adapters.mqtt.config import MqttConfig
+from gcs_utm.messages import HazardReport, PilotAnswer
+from gcs_utm.model import (
+    Geofence,
+    Measurement,
+    MeasurementSource,
+    Operation,
+    OperationId,
+    OperationState,
+    Recommendation,
+    Threat,
+    ThreatId,
+    ThreatStatus,
+    Track,
+    TrackId,
+)
+from gcs_utm.services.airspace import AirspaceError
+from gcs_utm.services.usm import Usm
+
+_log = logging.getLogger(__name__)
+
+TrackSource = Callable[[], Mapping[TrackId, Track]]
+
+
+class MqttGateway:
+    """``gw = MqttGateway(usm, config, tracks=...)``; ``gw.attach()`` wires it into the USM;
+    ``await gw.run()`` (in a task group) runs the bridge and the traffic publisher."""
+
+    def __init__(
+        self,
+        usm: Usm,
+        config: MqttConfig,
+        *,
+        tracks: TrackSource | None = None,
+        bridge: MqttBridge | None = None,
+    ) -> None:
+        self.usm = usm
+        self.config = config
+        self._tracks = tracks
+        self.bridge = bridge or MqttBridge(config, usm.clock, self)
+        self._alerted: set[ThreatId] = set()
+
+    def attach(self) -> None:
+        """Register as operator port, threat sink and geofence listener of the USM."""
+        self.usm.attach_operator(self)
+        self.usm.attach_threat_sink(self.on_threats)
+        self.usm.attach_geofence_listener(self.on_geofences)
+
+    async def run(self) -> None:
+        """The bridge's connection loop and the periodic traffic publisher (until
+        cancelled). The current geofence set is published at start (retained)."""
+        self.publish_geofences(self.usm.airspace.geofences())
+        async with asyncio.TaskGroup() as tg:
+            tg.create_task(self.bridge.run(), name="mqtt-bridge")
+            if self._tracks is not None:
+                tg.create_task(self._traffic_loop(self._tracks), name="mqtt-traffic")
+
+    async def _traffic_loop(self, tracks: TrackSource) -> None:
+        period_s = 1.0 / self.config.traffic_rate_hz
+        while True:
+            try:
+                self.bridge.publish_traffic(list(tracks().values()))
+            except Exception:  # one bad snapshot must not stop the traffic feed
+                _log.exception("mqtt: traffic publication failed")
+            await self.usm.clock.sleep(period_s)
+
+    # ------------------------------------------------------------ MqttHandler (inbound side)
+
+    async def on_measurement(self, m: Measurement) -> None:
+        if m.source is MeasurementSource.MQTT and m.operation_id is not None:
+            operator = m.link.removeprefix("mqtt:")
+            self._own_operation(m.operation_id, operator)
+        self.usm.on_measurement(m)
+
+    async def on_hazard(self, h: HazardReport) -> None:
+        if h.operation_id is not None and h.operation_id not in self.usm.airspace.operations:
+            raise ValueError(f"unknown operation {h.operation_id!r}")
+        self.usm.on_hazard(h)
+
+    async def on_pilot_answer(self, a: PilotAnswer) -> mqtt_answers.AnswerOutcome:
+        if a.source != "mqtt":
+            a = dataclasses.replace(a, source="mqtt")
+        outcome = await self.usm.answer(a)
+        record = self.usm.recommendations.get(a.recommendation_id)
+        return mqtt_answers.AnswerOutcome(
+            status=mqtt_answers.AnswerStatus(outcome.status.value),
+            recommendation_id=a.recommendation_id,
+            version=a.version,
+            decision=a.decision,
+            reason=outcome.reason,
+            state=None if record is None else record.rec.state,
+        )
+
+    async def on_flight_plan(self, s: FlightPlanSubmission) -> None:
+        airspace = self.usm.airspace
+        if s.operation_id in airspace.operations:
+            raise ValueError(f"operation {s.operation_id!r} already exists")
+        cfg = self.usm.config
+        op = s.to_operation(
+            default_priority=cfg.default_priority,
+            default_cruise_speed_mps=cfg.default_cruise_speed_mps,
+            default_flight_geometry_m=cfg.default_flight_geometry_m,
+            default_operational_volume_m=cfg.default_operational_volume_m,
+        )
+        airspace.add_operation(op)
+        self.usm.log_event("operation", f"{op.id} filed over MQTT by {s.operator}")
+
+    async def on_flight_status(self, s: FlightStatusReport) -> None:
+        op = self._own_operation(s.operation_id, s.operator)
+        if s.plan_version is not None and s.plan_version != op.plan.version:
+            raise ValueError(
+                f"plan version {s.plan_version} is not the current version {op.plan.version}"
+            )
+        if s.status is FlightStatusKind.START:
+            if op.state not in (OperationState.PLANNED, OperationState.ACTIVE):
+                raise ValueError(f"operation {op.id} is {op.state.value}: cannot start")
+            state = OperationState.ACTIVE
+        else:
+            state = OperationState.ENDED
+        self.usm.airspace.set_state(op.id, state)
+        self.usm.log_event("operation", f"{op.id} {s.status.value} by {s.operator}")
+
+    def _own_operation(self, op_id: OperationId, operator: str) -> Operation:
+        try:
+            op = self.usm.airspace.operation(op_id)
+        except AirspaceError as exc:
+            raise ValueError(str(exc)) from None
+        if operator not in (op.operator, "admin"):
+            raise ValueError(f"operator {operator!r} does not fly {op_id}")
+        return op
+
+    # ------------------------------------------------------------- OperatorPort (outbound)
+
+    def _operator_of(self, rec: Recommendation) -> str | None:
+        try:
+            return self.usm.airspace.operation(rec.operation_id).operator
+        except AirspaceError:
+            _log.warning("mqtt: recommendation %s for unknown operation", rec.id)
+            return None
+
+    async def present(self, rec: Recommendation) -> None:
+        operator = self._operator_of(rec)
+        if operator is not None:
+            self.bridge.publish_recommendation(rec, operator)
+
+    async def update(self, rec: Recommendation) -> None:
+        operator = self._operator_of(rec)
+        if operator is not None:
+            self.bridge.publish_recommendation_status(rec, operator)
+
+    # ------------------------------------------------------------- threats and geofences
+
+    async def on_threats(self, threats: list[Threat]) -> None:
+        """Threat sink: one alert per new threat, to the operators of the UAS involved (or
+        to everyone for an airspace-wide threat)."""
+        ops = self.usm.airspace.operations
+        for t in threats:
+            if t.status is ThreatStatus.CLOSED:
+                self._alerted.discard(t.id)
+                continue
+            if t.id in self._alerted:
+                continue
+            self._alerted.add(t.id)
+            operators = sorted({ops[u].operator for u in t.uas_ids if u in ops})
+            self.bridge.publish_alert(t, operators)
+
+    async def on_geofences(self, geofences: Sequence[Geofence]) -> None:
+        """Geofence listener: the active set, retained."""
+        self.publish_geofences(geofences)
+
+    def publish_geofences(self, geofences: Sequence[Geofence]) -> None:
+        now = self.usm.clock.now_s()
+        self.bridge.publish_geofences(g for g in geofences if g.end_t_s is None or g.end_t_s >= now)

@@ -1,0 +1,259 @@
+"""MQTT gateway end to end: a real mosquitto (tests/mqtt/mqtt_helpers: password file + the
+gcs-utm ACL), the real USM with a fake vehicle port, a remote pilot station as an MQTT peer.
+
+recommendation -> alice's recommendations topic (schema-valid) -> accept with id + version on
+alice's answers topic -> upload to the vehicle -> "applied" on alice's status topic; a wrong
+version is refused with its reason and uploads nothing; plans filed over MQTT become
+operations, duplicates are refused on the errors topic; new threats become alerts."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import sys
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "mqtt"))
+
+from mqtt_helpers import T0, Broker, Peer, make_broker, peer
+
+from adapters.mqtt.codec import Topics
+from gcs_utm.clock import ManualClock
+from gcs_utm.model import (
+    Alternative,
+    Autopilot,
+    Command,
+    FlightPlan,
+    Maneuver,
+    Operation,
+    OperationId,
+    Recommendation,
+    RecommendationId,
+    RecommendationState,
+    SysId,
+    Threat,
+    ThreatId,
+    ThreatKind,
+    VehicleKind,
+    Waypoint4D,
+)
+from gcs_utm.services.airspace import Airspace
+from gcs_utm.services.mqtt_gateway import MqttGateway
+from gcs_utm.services.usm import Usm
+
+OP = OperationId("UAS1")
+T = Topics("gcs_utm")
+
+
+def _plan(version: int, t0: float = T0) -> FlightPlan:
+    return FlightPlan(
+        operation_id=OP,
+        version=version,
+        waypoints=(
+            Waypoint4D(lat_deg=40.0, lon_deg=-3.0, alt_amsl_m=700.0, t_s=t0),
+            Waypoint4D(lat_deg=40.001, lon_deg=-3.0, alt_amsl_m=700.0, t_s=t0 + 30),
+        ),
+    )
+
+
+def _op() -> Operation:
+    return Operation(
+        id=OP,
+        icao24=None,
+        sys_id=SysId(1),
+        priority=1,
+        plan=_plan(1),
+        vehicle_kind=VehicleKind.MULTIROTOR,
+        cruise_speed_mps=5.0,
+        flight_geometry_m=5.0,
+        operational_volume_m=15.0,
+        operator="alice",
+    )
+
+
+def _rec() -> Recommendation:
+    return Recommendation(
+        id=RecommendationId("r1"),
+        version=1,
+        threat_id=ThreatId("t1"),
+        threat_kind=ThreatKind.LOSS_OF_SEPARATION,
+        operation_id=OP,
+        created_t_s=T0,
+        deadline_t_s=T0 + 60.0,
+        selected=Alternative(
+            operation_id=OP, maneuver=Maneuver.GO_DOWN, plan=_plan(1, T0 + 10), cost=1.0, risk=0.1
+        ),
+    )
+
+
+@dataclass
+class _Result:
+    ok: bool
+    verified: bool
+    error: str = ""
+
+
+class FakeVehicles:
+    def __init__(self) -> None:
+        self.uploads: list[FlightPlan] = []
+        self.commands: list[Command] = []
+
+    async def upload_plan(
+        self,
+        sys_id: SysId,
+        plan: FlightPlan,
+        *,
+        autopilot: Autopilot | None = None,
+        deadline_t_s: float | None = None,
+    ) -> _Result:
+        self.uploads.append(plan)
+        return _Result(ok=True, verified=True)
+
+    async def send_command(self, sys_id: SysId, command: Command) -> _Result:
+        self.commands.append(command)
+        return _Result(ok=True, verified=True)
+
+
+@dataclass
+class _World:
+    usm: Usm
+    gateway: MqttGateway
+    vehicles: FakeVehicles
+    alice: Peer
+
+
+@contextlib.asynccontextmanager
+async def _world(tmp_path: Path) -> AsyncIterator[_World]:
+    broker: Broker = make_broker(tmp_path)
+    try:
+        clock = ManualClock(T0)
+        airspace = Airspace()
+        airspace.load([_op()], [])
+        usm = Usm(airspace, clock)
+        vehicles = FakeVehicles()
+        usm.attach_vehicles(vehicles)
+        gateway = MqttGateway(usm, broker.config())
+        gateway.attach()
+        task = asyncio.create_task(gateway.run())
+        try:
+            async with peer(
+                broker,
+                "alice",
+                (
+                    T.recommendations("alice"),
+                    T.status("alice"),
+                    T.errors_for("alice"),
+                    T.alerts_for("alice"),
+                ),
+            ) as alice:
+                await gateway.bridge.wait_connected(5.0)
+                yield _World(usm, gateway, vehicles, alice)
+        finally:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+            await usm.drain()
+            await usm.close()
+    finally:
+        broker.stop()
+
+
+def _answer(version: int, decision: str = "accept") -> dict[str, Any]:
+    return {
+        "schema_version": 1,
+        "type": "pilot_answer",
+        "recommendation_id": "r1",
+        "version": version,
+        "decision": decision,
+        "t_s": T0 + 1.0,
+    }
+
+
+async def _status_until(alice: Peer, cond: Any) -> list[dict[str, Any]]:
+    seen: list[dict[str, Any]] = []
+    while True:
+        _, obj, _ = await alice.next(T.status("alice"))
+        seen.append(obj)
+        if cond(obj):
+            return seen
+
+
+async def test_accept_over_mqtt_uploads_and_reports_applied(tmp_path: Path) -> None:
+    async with _world(tmp_path) as w:
+        await w.usm.on_recommendation(_rec())
+        _, rec, _ = await w.alice.next(T.recommendations("alice"))  # schema-validated by peer
+        assert rec["type"] == "recommendation"
+        assert (rec["recommendation_id"], rec["version"]) == ("r1", 1)
+
+        await w.alice.send(T.answers("alice"), _answer(rec["version"]))
+        seen = await _status_until(w.alice, lambda o: o["state"] == "applied")
+        outcomes = [o["answer"] for o in seen if o["answer"] is not None]
+        assert outcomes == [{"outcome": "accepted", "decision": "accept", "version": 1}]
+        assert [o["state"] for o in seen if o["answer"] is None] == [
+            "accepted",
+            "uploading",
+            "applied",
+        ]
+        assert len(w.vehicles.uploads) == 1
+        record = w.usm.recommendations[RecommendationId("r1")]
+        assert record.rec.state is RecommendationState.APPLIED and record.verified
+        assert w.usm.airspace.operation(OP).plan.version == 2
+
+
+async def test_wrong_version_is_refused_with_reason_and_uploads_nothing(tmp_path: Path) -> None:
+    async with _world(tmp_path) as w:
+        await w.usm.on_recommendation(_rec())
+        await w.alice.next(T.recommendations("alice"))
+        await w.alice.send(T.answers("alice"), _answer(2))
+        _, status, _ = await w.alice.next(T.status("alice"))
+        assert status["answer"]["outcome"] == "refused"
+        assert "version 2" in status["reason"]
+        assert status["state"] == "proposed"
+        await w.usm.drain()
+        assert w.vehicles.uploads == []
+        assert w.usm.recommendations[RecommendationId("r1")].rec.state is (
+            RecommendationState.PROPOSED
+        )
+        assert w.usm.counters["answers_refused"] == 1
+
+
+async def test_flight_plan_creates_operation_duplicate_refused_and_threat_alerted(
+    tmp_path: Path,
+) -> None:
+    async with _world(tmp_path) as w:
+        plan = {
+            "schema_version": 1,
+            "type": "flight_plan",
+            "operation_id": "UAS2",
+            "t_s": T0,
+            "waypoints": [
+                {"lat_deg": 40.0, "lon_deg": -3.0, "alt_amsl_m": 700.0, "t_s": T0},
+                {"lat_deg": 40.01, "lon_deg": -3.0, "alt_amsl_m": 700.0, "t_s": T0 + 100},
+            ],
+        }
+        await w.alice.send(T.flight_plans("alice"), plan)
+        await w.alice.send(T.flight_plans("alice"), plan)
+        _, err, _ = await w.alice.next(T.errors_for("alice"))
+        assert "already exists" in err["reason"]
+        op = w.usm.airspace.operation(OperationId("UAS2"))
+        assert op.operator == "alice"
+        assert op.priority == w.usm.config.default_priority
+        assert op.flight_geometry_m == w.usm.config.default_flight_geometry_m
+
+        threat = Threat(
+            id=ThreatId("thr-9"),
+            kind=ThreatKind.LOSS_OF_SEPARATION,
+            uas_ids=(OP,),
+            detected_at_s=T0,
+            predicted_event_at_s=T0 + 20.0,
+        )
+        await w.usm.on_threats([threat])
+        await w.usm.on_threats([threat])  # Monitoring repeats a live threat: one alert only
+        _, alert, _ = await w.alice.next(T.alerts_for("alice"))
+        assert alert["type"] == "alert"
+        await w.gateway.bridge.flush(5.0)
+        await asyncio.sleep(0.2)
+        assert not [m for m in w.alice.empty_for() if m[0] == T.alerts_for("alice")]
