@@ -45,6 +45,8 @@ from gcs_utm.model import (
     FlightPlan,
     Geofence,
     Measurement,
+    Operation,
+    OperationId,
     OperationState,
     Recommendation,
     RecommendationId,
@@ -54,6 +56,8 @@ from gcs_utm.model import (
     ThreatId,
     ThreatKind,
     ThreatStatus,
+    VehicleKind,
+    Waypoint4D,
 )
 from gcs_utm.services.airspace import Airspace, AirspaceError
 
@@ -100,6 +104,78 @@ class OperatorPort(Protocol):
     async def present(self, rec: Recommendation) -> None: ...
 
     async def update(self, rec: Recommendation) -> None: ...
+
+
+_NAV_WAYPOINT = 16
+_NAV_LOITER_TIME = 19
+_NAV_LAND = 21
+_NAV_TAKEOFF = 22
+_DO_CHANGE_SPEED = 178
+_RELATIVE_FRAMES = frozenset({3, 6})  # MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT): metres above home
+
+
+def mission_to_plan(
+    items: Sequence[object],
+    op_id: OperationId,
+    *,
+    t0_s: float,
+    cruise_speed_mps: float,
+    home_alt_amsl_m: float | None,
+    skip_first: bool = False,
+) -> FlightPlan | None:
+    """A 4D plan from a downloaded MAVLink mission: its positional items in order, times from
+    the DO_CHANGE_SPEED items (else ``cruise_speed_mps``) starting at ``t0_s``. Relative
+    altitudes are made AMSL with ``home_alt_amsl_m`` (the vehicle's first reported altitude:
+    it connects on the ground); without it such items are skipped."""
+    import math
+
+    speed = cruise_speed_mps
+    wps: list[Waypoint4D] = []
+    for i, it in enumerate(items):
+        if skip_first and i == 0:
+            continue  # ArduPilot: seq 0 is home
+        command = int(getattr(it, "command", -1))
+        if command == _DO_CHANGE_SPEED:
+            value = float(getattr(it, "param2", 0.0))
+            if value > 0.0:
+                speed = value
+            continue
+        if command not in (_NAV_WAYPOINT, _NAV_LOITER_TIME, _NAV_LAND, _NAV_TAKEOFF):
+            continue
+        lat = float(getattr(it, "x", 0)) / 1e7
+        lon = float(getattr(it, "y", 0)) / 1e7
+        alt = float(getattr(it, "z", 0.0))
+        if int(getattr(it, "frame", 0)) in _RELATIVE_FRAMES:
+            if home_alt_amsl_m is None:
+                continue
+            alt += home_alt_amsl_m
+        if (lat, lon) == (0.0, 0.0) and wps:  # takeoff/land "here": same place as before
+            lat, lon = wps[-1].lat_deg, wps[-1].lon_deg
+        if (lat, lon) == (0.0, 0.0):
+            continue
+        t = t0_s
+        if wps:
+            prev = wps[-1]
+            k = math.cos(math.radians(prev.lat_deg))
+            dist = math.hypot(
+                (lat - prev.lat_deg) * 110_540.0,
+                (lon - prev.lon_deg) * 111_320.0 * k,
+                alt - prev.alt_amsl_m,
+            )
+            t = prev.t_s + dist / max(speed, 0.1)
+        try:
+            wps.append(Waypoint4D(lat_deg=lat, lon_deg=lon, alt_amsl_m=alt, t_s=t))
+        except ValueError:
+            continue  # a malformed item is skipped, not fatal
+    if not wps:
+        return None
+    return FlightPlan(
+        operation_id=op_id,
+        version=1,
+        waypoints=tuple(wps),
+        created_t_s=t0_s,
+        reason="downloaded from the vehicle",
+    )
 
 
 class AnswerStatus(Enum):
@@ -232,6 +308,7 @@ class Usm:
         self.threat_log: list[Threat] = []
         self.recommendations: dict[RecommendationId, RecommendationRecord] = {}
         self.telemetry: dict[str, TelemetryStats] = {}
+        self._first_alt: dict[SysId, float] = {}
         self.events: deque[UsmEvent] = deque(maxlen=self.config.event_log_size)
         self._hazard_seen: dict[tuple[ThreatKind, str], float] = {}
         self._hazard_seq = itertools.count(1)
@@ -277,6 +354,8 @@ class Usm:
     # ---- telemetry side (adapters.mavlink TelemetrySink, ADS-B, tlog, MQTT) ---------------
     def on_measurement(self, m: Measurement) -> None:
         self.counters["measurements"] += 1
+        if m.sys_id is not None and m.sys_id not in self._first_alt:
+            self._first_alt[m.sys_id] = m.alt_amsl_m
         key = f"{m.source.value}:" + (
             str(m.sys_id) if m.sys_id is not None else (m.icao24 or m.operation_id or "?")
         )
@@ -313,7 +392,67 @@ class Usm:
         self.health[h.sys_id] = h
 
     def on_vehicle(self, v: object) -> None:
-        self.log_event("vehicle", f"vehicle discovered: {v}")
+        """A newly heard vehicle: with no operation for its system id, download its mission and
+        file an operation from it (paper: operations come from the pilots' ground stations)."""
+        key = getattr(v, "key", None)
+        sys_id = getattr(key, "sys_id", None)
+        self.log_event("vehicle", f"vehicle discovered: sysid {sys_id}")
+        if sys_id is None or self.airspace.by_sys_id(SysId(int(sys_id))) is not None:
+            return
+        download = getattr(self._vehicles, "download_mission", None)
+        if download is None:
+            return
+        autopilot = getattr(v, "autopilot", Autopilot.UNKNOWN)
+        kind = getattr(v, "vehicle_kind", None) or VehicleKind.MULTIROTOR
+        self._spawn(self._operation_from_vehicle(SysId(int(sys_id)), autopilot, kind, download))
+
+    async def _operation_from_vehicle(
+        self,
+        sys_id: SysId,
+        autopilot: Autopilot,
+        kind: VehicleKind,
+        download: Callable[[SysId], Awaitable[Sequence[object]]],
+    ) -> None:
+        try:
+            items = await download(sys_id)
+        except Exception as exc:  # the link's own error types; the vehicle may not answer
+            self.log_event("vehicle", f"sysid {sys_id}: mission download failed: {exc}")
+            return
+        home_alt = self._first_alt.get(sys_id)
+        plan = mission_to_plan(
+            items,
+            OperationId(f"sys{sys_id}"),
+            t0_s=self.clock.now_s(),
+            cruise_speed_mps=self.config.default_cruise_speed_mps,
+            home_alt_amsl_m=home_alt,
+            skip_first=autopilot is Autopilot.ARDUPILOT,
+        )
+        if plan is None:
+            self.log_event("vehicle", f"sysid {sys_id}: no waypoints in its mission: no operation")
+            return
+        if self.airspace.by_sys_id(sys_id) is not None:  # filed meanwhile (scenario, MQTT)
+            return
+        op = Operation(
+            id=plan.operation_id,
+            icao24=None,
+            sys_id=sys_id,
+            priority=self.config.default_priority,
+            plan=plan,
+            vehicle_kind=kind,
+            cruise_speed_mps=self.config.default_cruise_speed_mps,
+            flight_geometry_m=self.config.default_flight_geometry_m,
+            operational_volume_m=self.config.default_operational_volume_m,
+            conops="from vehicle mission",
+            autopilot=autopilot,
+        )
+        try:
+            self.airspace.add_operation(op)
+        except AirspaceError as exc:
+            self.log_event("vehicle", f"sysid {sys_id}: {exc}")
+            return
+        self.log_event(
+            "operation", f"{op.id} filed from sysid {sys_id}'s mission ({len(plan.waypoints)} wp)"
+        )
 
     def on_hazard(self, h: HazardReport) -> None:
         """A hazard from outside Monitoring becomes a threat for EM, coalesced per
