@@ -803,8 +803,17 @@ def _truth(
 # ---- serve -----------------------------------------------------------------------------------
 
 
-async def serve(settings: Settings, *, db_path: Path, operator: str, headless: bool) -> int:
-    """Long-running service: links from config, persistent store; restart resumes."""
+async def serve(
+    settings: Settings,
+    *,
+    db_path: Path,
+    operator: str,
+    headless: bool,
+    stop: asyncio.Event | None = None,
+    on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
+) -> int:
+    """Long-running service: links from config, persistent store; restart resumes. Runs until
+    SIGINT/SIGTERM (or ``stop`` is set)."""
     clock = RealClock()
     frame = LocalFrame(
         settings.airspace.origin_lat_deg,
@@ -841,7 +850,9 @@ async def serve(settings: Settings, *, db_path: Path, operator: str, headless: b
         rt.usm.attach_operator(gateway)
         rt.usm.attach_threat_sink(gateway.on_threats)
         rt.usm.attach_geofence_listener(gateway.on_geofences)
-    stop = asyncio.Event()
+    stop = stop or asyncio.Event()
+    if on_runtime is not None:
+        await on_runtime(rt)
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         with contextlib.suppress(NotImplementedError):
@@ -866,6 +877,9 @@ async def serve(settings: Settings, *, db_path: Path, operator: str, headless: b
             for t in tasks:
                 t.cancel()
     finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(NotImplementedError, RuntimeError):
+                loop.remove_signal_handler(sig)
         await rt.usm.close()
         await rt.hub.close()
         store.close()
