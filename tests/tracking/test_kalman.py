@@ -73,10 +73,12 @@ def test_batched_filter_equals_filterpy(
         r = np.array(sig_l) ** 2
         zv = np.array(zv_l)
         rv = r / 10.0
-        # Rounding differences scale with the inputs (positions, velocities and sigmas):
-        # 1e-9 relative to the largest magnitude seen so far.
+        # Rounding differences scale with the operands: inputs (positions, velocities,
+        # sigmas) and the prior covariance the update subtracts from (a large prior and a tiny
+        # measurement sigma cancel almost completely): 1e-9 relative to the largest magnitude.
         scale = max(scale, float(np.abs(z).max()), float(np.abs(zv).max()), *sig_l)
         kalman.predict(x, p, np.array([dt]), q)
+        scale = max(scale, float(np.abs(p).max()))
         if with_vel:
             kalman.update_position_velocity(
                 x, p, z[None], zv[None], r_m2=r[None], rv_m2ps2=rv[None]
