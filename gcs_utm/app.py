@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
 import json
 import logging
 import math
@@ -475,9 +474,11 @@ async def run_scenario(
                     tasks.append(tg.create_task(_headless_status(rt), name="status"))
                 if gateway is not None:
                     tasks.append(tg.create_task(gateway.run(), name="mqtt"))
+                dash: asyncio.Task[Any] | None = None
                 if app is not None:
-                    tasks.append(tg.create_task(app.run_async(), name="dashboard"))
-                await _until(rt.clock, end_t_s, app)
+                    dash = tg.create_task(app.run_async(), name="dashboard")
+                    tasks.append(dash)
+                await _until(rt.clock, end_t_s, app, dash)
                 for t in tasks:
                     t.cancel()
     finally:
@@ -503,9 +504,12 @@ async def run_scenario(
     return report
 
 
-async def _until(clock: Clock, end_t_s: float, app: Any) -> None:
+async def _until(
+    clock: Clock, end_t_s: float, app: Any, dashboard: asyncio.Task[Any] | None
+) -> None:
+    """Run until the scenario's end, or until the operator quits the dashboard."""
     while clock.now_s() < end_t_s:
-        if app is not None and getattr(app, "_exit", False):
+        if dashboard is not None and dashboard.done():
             return
         await clock.sleep(min(1.0, max(0.05, end_t_s - clock.now_s())))
     if app is not None:
@@ -885,10 +889,3 @@ async def serve(
         store.close()
     print("gcs-utm serve: stopped", file=sys.stderr)
     return 0
-
-
-def audit_text(entry: AuditEntry) -> str:
-    return f"{entry.t_s:.1f} {entry.actor} {entry.action} {entry.subject}"
-
-
-_ = dataclasses  # kept for dataclasses.replace users of this module's API

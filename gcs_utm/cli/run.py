@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import sys
 from importlib import resources
 from pathlib import Path
@@ -204,5 +203,3 @@ def _serve(args: argparse.Namespace) -> int:
     headless = args.headless or operator != OperatorMode.DASHBOARD
     return asyncio.run(serve(settings, db_path=args.db, operator=operator, headless=headless))
 
-
-_ = json

@@ -17,15 +17,15 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "mqtt"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "services"))
 
 from mqtt_helpers import T0, Broker, Peer, make_broker, peer
+from usm_fakes import OP, FakeVehicles, make_operation, make_plan
 
 from adapters.mqtt.codec import Topics
 from gcs_utm.clock import ManualClock
 from gcs_utm.model import (
     Alternative,
-    Autopilot,
-    Command,
     FlightPlan,
     Maneuver,
     Operation,
@@ -33,45 +33,23 @@ from gcs_utm.model import (
     Recommendation,
     RecommendationId,
     RecommendationState,
-    SysId,
     Threat,
     ThreatId,
     ThreatKind,
-    VehicleKind,
-    Waypoint4D,
 )
 from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.mqtt_gateway import MqttGateway
 from gcs_utm.services.usm import Usm
 
-OP = OperationId("UAS1")
 T = Topics("gcs_utm")
 
 
 def _plan(version: int, t0: float = T0) -> FlightPlan:
-    return FlightPlan(
-        operation_id=OP,
-        version=version,
-        waypoints=(
-            Waypoint4D(lat_deg=40.0, lon_deg=-3.0, alt_amsl_m=700.0, t_s=t0),
-            Waypoint4D(lat_deg=40.001, lon_deg=-3.0, alt_amsl_m=700.0, t_s=t0 + 30),
-        ),
-    )
+    return make_plan(version, t0)
 
 
 def _op() -> Operation:
-    return Operation(
-        id=OP,
-        icao24=None,
-        sys_id=SysId(1),
-        priority=1,
-        plan=_plan(1),
-        vehicle_kind=VehicleKind.MULTIROTOR,
-        cruise_speed_mps=5.0,
-        flight_geometry_m=5.0,
-        operational_volume_m=15.0,
-        operator="alice",
-    )
+    return make_operation(T0, operator="alice")
 
 
 def _rec() -> Recommendation:
@@ -87,34 +65,6 @@ def _rec() -> Recommendation:
             operation_id=OP, maneuver=Maneuver.GO_DOWN, plan=_plan(1, T0 + 10), cost=1.0, risk=0.1
         ),
     )
-
-
-@dataclass
-class _Result:
-    ok: bool
-    verified: bool
-    error: str = ""
-
-
-class FakeVehicles:
-    def __init__(self) -> None:
-        self.uploads: list[FlightPlan] = []
-        self.commands: list[Command] = []
-
-    async def upload_plan(
-        self,
-        sys_id: SysId,
-        plan: FlightPlan,
-        *,
-        autopilot: Autopilot | None = None,
-        deadline_t_s: float | None = None,
-    ) -> _Result:
-        self.uploads.append(plan)
-        return _Result(ok=True, verified=True)
-
-    async def send_command(self, sys_id: SysId, command: Command) -> _Result:
-        self.commands.append(command)
-        return _Result(ok=True, verified=True)
 
 
 @dataclass

@@ -4,7 +4,9 @@ coalesced, nothing dropped."""
 from __future__ import annotations
 
 import dataclasses
+import sys
 from dataclasses import dataclass
+from pathlib import Path
 
 import pytest
 
@@ -28,67 +30,20 @@ from gcs_utm.model import (
     ThreatId,
     ThreatKind,
     VehicleKind,
-    Waypoint4D,
 )
 from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.usm import AnswerStatus, Usm
 
-OP = OperationId("UAS1")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from usm_fakes import OP, FakeVehicles, make_operation, make_plan
 
 
 def _plan(version: int, t0: float = 100.0) -> FlightPlan:
-    return FlightPlan(
-        operation_id=OP,
-        version=version,
-        waypoints=(
-            Waypoint4D(lat_deg=40.0, lon_deg=-3.0, alt_amsl_m=700.0, t_s=t0),
-            Waypoint4D(lat_deg=40.001, lon_deg=-3.0, alt_amsl_m=700.0, t_s=t0 + 30),
-        ),
-    )
+    return make_plan(version, t0)
 
 
 def _op() -> Operation:
-    return Operation(
-        id=OP,
-        icao24=None,
-        sys_id=SysId(1),
-        priority=1,
-        plan=_plan(1),
-        vehicle_kind=VehicleKind.MULTIROTOR,
-        cruise_speed_mps=5.0,
-        flight_geometry_m=5.0,
-        operational_volume_m=15.0,
-    )
-
-
-@dataclass
-class _Result:
-    ok: bool
-    verified: bool
-    error: str = ""
-
-
-class FakeVehicles:
-    def __init__(self, *, verified: bool = True, command_ok: bool = True) -> None:
-        self.uploads: list[FlightPlan] = []
-        self.commands: list[Command] = []
-        self.verified = verified
-        self.command_ok = command_ok
-
-    async def upload_plan(
-        self,
-        sys_id: SysId,
-        plan: FlightPlan,
-        *,
-        autopilot: Autopilot | None = None,
-        deadline_t_s: float | None = None,
-    ) -> _Result:
-        self.uploads.append(plan)
-        return _Result(ok=True, verified=self.verified, error="" if self.verified else "mismatch")
-
-    async def send_command(self, sys_id: SysId, command: Command) -> _Result:
-        self.commands.append(command)
-        return _Result(ok=self.command_ok, verified=True)
+    return make_operation(100.0)
 
 
 def _rec(version: int = 1, deadline: float = 200.0) -> Recommendation:
