@@ -202,4 +202,3 @@ def _serve(args: argparse.Namespace) -> int:
     )
     headless = args.headless or operator != OperatorMode.DASHBOARD
     return asyncio.run(serve(settings, db_path=args.db, operator=operator, headless=headless))
-
