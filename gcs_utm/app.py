@@ -22,7 +22,7 @@ import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -399,6 +399,14 @@ async def run_scenario(
     start_utc = math.floor(time.time())
     clock = ScaledClock(options.speed, start_utc_s=start_utc)
     scenario = load_any(scenario_path, t0_s=start_utc + lead_s)
+    if scenario.safety_distance_m is not None:
+        # the scenario was written for one 3D safety distance (GAUSS safetyDistance)
+        settings = replace(settings, monitoring=scenario.monitoring_for(settings.monitoring))
+        _log.info(
+            "%s: separation is the scenario's 3D safety distance of %.0f m",
+            scenario.name,
+            scenario.safety_distance_m,
+        )
     options.out_dir.mkdir(parents=True, exist_ok=True)
     db_path = options.out_dir / f"{scenario.name}.sqlite"
     for suffix in ("", "-wal", "-shm"):
@@ -570,6 +578,7 @@ def _geofence_json(g: Geofence, t0: float) -> dict[str, Any]:
         "end_s": _rel(g.end_t_s, t0),
         "kind": g.kind.value,
         "reason": g.reason,
+        "exempt": list(g.exempt),
     }
     if g.shape is GeofenceShape.CYLINDER and g.center is not None:
         out["center"] = {"lat_deg": g.center.lat_deg, "lon_deg": g.center.lon_deg}
@@ -608,6 +617,7 @@ def build_report(
     ops = rt.airspace.operations
     sep_h = rt.settings.monitoring.separation_horizontal_m
     sep_v = rt.settings.monitoring.separation_vertical_m
+    delays = {v.operation_id: v.start_delay_s for v in scenario.vehicles}
     report: dict[str, Any] = {
         "scenario": scenario.name,
         "description": scenario.description,
@@ -618,7 +628,12 @@ def build_report(
             "lon_deg": scenario.frame.origin_lon_deg,
             "ground_elevation_amsl_m": scenario.frame.ground_elevation_amsl_m,
         },
-        "separation_minimum": {"horizontal_m": sep_h, "vertical_m": sep_v},
+        "separation_minimum": {
+            "mode": rt.settings.monitoring.separation_mode,
+            "horizontal_m": sep_h,
+            "vertical_m": sep_v,
+            "safety_distance_m": rt.settings.monitoring.safety_distance_m,
+        },
         "operations": [
             {
                 "id": op.id,
@@ -628,6 +643,7 @@ def build_report(
                 "state": op.state.value,
                 "flight_geometry_m": op.flight_geometry_m,
                 "operational_volume_m": op.operational_volume_m,
+                "start_delay_s": delays.get(op.id, 0.0),
                 "plans": [_plan_json(p, t0) for p in rt.plan_history.get(op.id, [op.plan])],
             }
             for op in ops.values()
@@ -681,7 +697,7 @@ def build_report(
     report["separation"] = _separation(rt, ops, sep_h, sep_v)
     report["geofence_intrusions"] = _intrusions(rt, t0)
     if vehicles:
-        report["truth"] = _truth(vehicles, scenario, rt, sep_h, sep_v)
+        report["truth"] = _truth(vehicles, scenario, rt)
     return report
 
 
@@ -706,7 +722,7 @@ def _separation(
                 best_h = min(best_h, dh)
                 best_v = min(best_v, dv) if dh < sep_h * 3 else best_v
                 best_3d = min(best_3d, math.hypot(dh, dv))
-                loss = loss or (dh < sep_h and dv < sep_v)
+                loss = loss or _is_loss(rt, dh, dv)
             out.append(
                 {
                     "pair": [a, b],
@@ -717,6 +733,14 @@ def _separation(
                 }
             )
     return out
+
+
+def _is_loss(rt: Runtime, dh: float, dv: float) -> bool:
+    """Loss of separation under the run's rule (cylinder: both minima; sphere: 3D distance)."""
+    mon = rt.settings.monitoring
+    if mon.spherical:
+        return math.hypot(dh, dv) < mon.safety_distance_m
+    return dh < mon.separation_horizontal_m and dv < mon.separation_vertical_m
 
 
 def _nearest(samples: Sequence[tuple[float, ...]], t_s: float) -> tuple[float, ...] | None:
@@ -768,9 +792,7 @@ def _inside(lf: Any, east_m: float, north_m: float, alt_amsl_m: float) -> bool:
     return bool(inside[0])
 
 
-def _truth(
-    vehicles: Any, scenario: Scenario, rt: Runtime, sep_h: float, sep_v: float
-) -> dict[str, Any]:
+def _truth(vehicles: Any, scenario: Scenario, rt: Runtime) -> dict[str, Any]:
     """Ground truth from the simulated vehicles (their true positions, not the tracks)."""
     by_sys = {int(v.sys_id): v for v in vehicles}
     ops = {int(op.sys_id): op.id for op in scenario.operations if op.sys_id is not None}
@@ -793,7 +815,7 @@ def _truth(
                 dh = math.hypot(ea - eb, na - nb)
                 dv = abs(alt - hb[j][3])
                 best = min(best, math.hypot(dh, dv))
-                loss = loss or (dh < sep_h and dv < sep_v)
+                loss = loss or _is_loss(rt, dh, dv)
             out["pairs"].append(
                 {
                     "pair": [ops[a], ops[b]],

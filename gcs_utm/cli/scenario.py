@@ -50,10 +50,17 @@ def delayed_operations(scenario: Scenario) -> list[Operation]:
 
 def report_document(scenario: Scenario, report: StrategicReport) -> dict[str, Any]:
     t0 = scenario.t0_s
+    config = scenario.monitoring_for(MonitoringConfig())
     return {
         "scenario": scenario.name,
         "source": scenario.source,
         "duration_s": scenario.duration_s,
+        "separation": {
+            "mode": config.separation_mode,
+            "safety_distance_m": config.safety_distance_m if config.spherical else None,
+            "horizontal_m": None if config.spherical else config.separation_horizontal_m,
+            "vertical_m": None if config.spherical else config.separation_vertical_m,
+        },
         "origin": {
             "lat_deg": scenario.frame.origin_lat_deg,
             "lon_deg": scenario.frame.origin_lon_deg,
@@ -117,9 +124,8 @@ def _check(args: argparse.Namespace) -> int:
         print(f"error: --step-s must be positive, got {args.step_s}", file=sys.stderr)
         return 2
     ops = delayed_operations(scenario) if args.apply_delays else list(scenario.operations)
-    report = strategic_check(
-        ops, scenario.geofences, scenario.frame, MonitoringConfig(), step_s=args.step_s
-    )
+    config = scenario.monitoring_for(MonitoringConfig())
+    report = strategic_check(ops, scenario.geofences, scenario.frame, config, step_s=args.step_s)
     doc = report_document(scenario, report)
     if args.json:
         json.dump(doc, sys.stdout, indent=2)

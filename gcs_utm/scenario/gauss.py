@@ -7,8 +7,15 @@ GAUSS conventions (from its ``db_manager`` and ``usp_testers`` configs):
 - ``stamp`` is seconds after scenario start; geofence altitudes are metres above the origin;
 - ``icao_address`` is a decimal integer (e.g. 3434000): we keep it as the operation id, as
   the YAML refers to vehicles by it, and derive the 24-bit ICAO hex from it;
-- ``simulation.auto_start[].delay`` is when the vehicle is started (our ``start_delay_s``);
-  ``simulation.change_param[]`` with ``name: jamming`` is a GNSS jamming event.
+- ``simulation.auto_start[].delay`` is *when* the vehicle is started, in seconds after
+  scenario start (``gauss_light_sim`` fires its start timer at ``init_time + delay``), not a
+  lateness: the files start a vehicle exactly at its first stamp (madrid_loss_separation:
+  first stamp 5 s, delay 5 s) or a little after it. Our ``start_delay_s`` (how late the
+  vehicle is on its plan) is therefore ``max(0, delay - first stamp)``;
+- ``safetyDistance`` is GAUSS's one 3D separation minimum (its Monitoring compares the 3D
+  distance of the two trajectories with it): it becomes :attr:`Scenario.safety_distance_m`,
+  which runs and strategic checks apply in ``sphere`` separation mode;
+- ``simulation.change_param[]`` with ``name: jamming`` is a GNSS jamming event.
 
 GAUSS does not say the vehicle type: a plan whose fastest segment exceeds
 :data:`FIXED_WING_MIN_SPEED_MPS` is taken as fixed-wing (the paper's Atlantic I flies 30 m/s,
@@ -172,7 +179,10 @@ def load_gauss(
     ends = [op.plan.end_t_s - t0_s for op in operations]
     delays = [v.start_delay_s for v in vehicles]
     duration = max([*ends, *(e.at_s for e in events), 1.0]) + max([0.0, *delays])
-    sep = params.get("safetyDistance")
+    sep_raw = params.get("safetyDistance")
+    sep = None if sep_raw is None else _num(yfile, "(top level)", "safetyDistance", sep_raw)
+    if sep is not None and sep <= 0.0:
+        raise ScenarioError(yfile, "(top level)", "safetyDistance", f"must be > 0, got {sep}")
     return Scenario(
         name=jpath.stem,
         description=(
@@ -187,6 +197,7 @@ def load_gauss(
         events=tuple(events),
         vehicles=tuple(vehicles),
         source=str(jpath),
+        safety_distance_m=sep,
     )
 
 
@@ -335,7 +346,9 @@ def _operations(
                 plan=plan,
                 cruise_speed_mps=cruise,
                 max_climb_rate_mps=op.max_climb_rate_mps,
-                start_delay_s=delays.get(op_id, 0.0),
+                # auto_start gives the start time; the vehicle is late only by the part of
+                # it after the plan's first stamp
+                start_delay_s=max(0.0, delays.get(op_id, ts[0]) - ts[0]),
             )
         )
     return operations, vehicles

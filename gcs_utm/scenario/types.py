@@ -10,8 +10,9 @@ before building anything half-valid.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
+from typing import Any, TypeVar
 
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
@@ -25,6 +26,8 @@ from gcs_utm.model import (
     SysId,
     VehicleKind,
 )
+
+_Config = TypeVar("_Config", bound=Any)
 
 
 class ScenarioError(ValueError):
@@ -107,6 +110,10 @@ class Scenario:
     events: tuple[ScenarioEvent, ...]
     vehicles: tuple[VehicleSetup, ...]
     source: str = ""
+    safety_distance_m: float | None = None
+    """The scenario's own single 3D separation minimum (GAUSS ``safetyDistance``), or None
+    for the settings' rule. When set, ``gcs-utm run`` and ``scenario check`` use
+    ``separation_mode = "sphere"`` with it (:func:`monitoring_for`)."""
 
     def operation(self, op_id: str) -> Operation:
         """The operation with id ``op_id`` (KeyError if none)."""
@@ -114,6 +121,13 @@ class Scenario:
             if op.id == op_id:
                 return op
         raise KeyError(op_id)
+
+    def monitoring_for(self, config: _Config) -> _Config:
+        """A ``MonitoringConfig`` with this scenario's separation rule applied (unchanged
+        without one). Typed loosely: this layer sits below ``gcs_utm.core``."""
+        if self.safety_distance_m is None:
+            return config
+        return replace(config, separation_mode="sphere", safety_distance_m=self.safety_distance_m)
 
     def vehicle(self, op_id: str) -> VehicleSetup:
         for v in self.vehicles:

@@ -16,7 +16,7 @@ from gcs_utm.cli import scenario as scenario_cli
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import strategic_check
 from gcs_utm.model import GeofenceShape, VehicleKind
-from gcs_utm.scenario import EventKind, ScenarioError, load_gauss, load_scenario
+from gcs_utm.scenario import EventKind, ScenarioError, load_any, load_gauss, load_scenario
 
 REPO = Path(__file__).resolve().parents[2]
 SCEN = REPO / "config/scenarios"
@@ -275,6 +275,40 @@ def test_every_gauss_file_loads() -> None:
     ls = load_gauss(GAUSS / "paper_dev/madrid_loss_separation.json")
     assert ls.operation("3434000").plan.waypoints[0].alt_amsl_m == pytest.approx(675 + 70, abs=0.1)
     assert ls.operation("3434009").vehicle_kind is VehicleKind.FIXED_WING
+
+
+@pytest.mark.data
+@pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
+def test_gauss_start_times_and_safety_distance(capsys: pytest.CaptureFixture[str]) -> None:
+    """auto_start gives when a vehicle starts, not how late it is: madrid_loss_separation
+    starts 3434000 at 5 s, its first stamp (on time), and 3434009 at 2 s, 2 s after its first
+    stamp. Its safetyDistance (350 m) is a 3D minimum: the fixed wing at 400 m passes over the
+    multirotor at 70 m, 330 m above it, at t ~ 335 s -> a conflict in the filed plans."""
+    dev = load_gauss(GAUSS / "paper_dev/madrid_loss_separation.json")
+    assert dev.vehicle("3434000").start_delay_s == 0.0
+    assert dev.vehicle("3434009").start_delay_s == 2.0
+    assert dev.safety_distance_m == 350.0
+    master = load_gauss(GAUSS / "paper_master/madrid_loss_separation.json")
+    assert master.operation("3434000").plan.start_t_s == 20.0  # first stamp 20 s, auto_start 20 s
+    assert master.vehicle("3434000").start_delay_s == 0.0
+    path = str(GAUSS / "paper_dev/madrid_loss_separation.json")
+    for argv, first_loss in (([], 331.1), (["--apply-delays"], 333.1)):
+        code, out, _ = _cli(["scenario", "check", path, "--json", *argv], capsys)
+        doc = json.loads(out)
+        assert code == 0
+        assert doc["separation"] == {
+            "mode": "sphere",
+            "safety_distance_m": 350.0,
+            "horizontal_m": None,
+            "vertical_m": None,
+        }
+        (c,) = doc["conflicts"]
+        assert (c["a"], c["b"]) == ("3434000", "3434009")
+        assert c["first_loss_s"] == pytest.approx(first_loss, abs=0.6)
+        assert c["min_distance_m"] == pytest.approx(330.0, abs=1.0)
+        assert c["min_vertical_m"] == pytest.approx(330.0, abs=1.0)
+    # a scenario without its own rule keeps the settings' cylinder minima
+    assert load_any(str(SCEN / "use_case_1.toml")).safety_distance_m is None
 
 
 @pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
