@@ -1,15 +1,30 @@
-"""Pictures of a run, like the paper's Figures 15, 16, 18 and 19: top view and 3D perspective of
-the flight plans with their operational volumes, the tracks flown, geofences, the alternatives
-TD generated and the one selected, and conflict points. Also GeoJSON and KML exports of the
-same data for QGIS / Google Earth.
+"""Pictures of a run, the counterparts of the paper's result figures for its use cases
+(README "What the use cases show" says figure by figure what matches and what differs):
+
+- ``<stem>_top.png``: top view of the filed plans with their operational volumes, every later
+  plan version, the tracks flown, geofences, the alternatives TD generated (the selected one in
+  black) and the predicted conflict points;
+- ``<stem>_3d.png``: the same in 3D;
+- ``<stem>_altitude.png``: altitude above ground against time per UAS, planned (every
+  version) and flown, with the threat detections and the accepted recommendations;
+- ``<stem>_separation.png``: distance between each UAS pair against time, as flown (tracks)
+  and as the filed plans would have been flown with each vehicle's start delay and no
+  resolution, with the separation minimum and the minimum reached;
+- ``<stem>_geofence.png`` (runs with geofences): a close-up top view of each geofence with the
+  paths near it, and each UAS's signed horizontal distance to the geofence edge over time
+  while it is active (below 0 = inside).
+
+Also GeoJSON and KML exports of the same data for QGIS / Google Earth.
 
 Input is the JSON report of ``gcs-utm run`` (see the README for its fields). Figures use
-matplotlib's non-interactive Agg backend. Each function returns what it drew (counts), so
-tests check the data plotted, not only that a file exists.
+matplotlib's non-interactive Agg backend. Each function returns what it drew (counts and the
+minima it computed from the report), so tests check the data plotted, not only that a file
+exists. Units: metres and seconds from scenario start, as in the report.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from dataclasses import dataclass, field
@@ -35,6 +50,13 @@ class PlotSummary:
     tracks: int = 0
     geofences: int = 0
     conflict_points: int = 0
+    altitude_profiles: int = 0
+    # "A|B" -> smallest flown distance drawn (horizontal, or 3D in sphere mode), metres
+    min_separation_m: dict[str, float] = field(default_factory=dict)
+    # "A|B" -> smallest distance of the filed plans flown late without resolution, metres
+    min_planned_separation_m: dict[str, float] = field(default_factory=dict)
+    # "UAS|geofence" -> smallest signed distance to the edge while active (< 0 = inside)
+    min_geofence_distance_m: dict[str, float] = field(default_factory=dict)
 
 
 def load_report(path: Path) -> dict[str, Any]:
@@ -70,7 +92,7 @@ def _circle(cx: float, cy: float, r: float, n: int = 48) -> tuple[list[float], l
 
 
 def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> PlotSummary:
-    """Write ``<stem>_top.png`` and ``<stem>_3d.png`` into ``out_dir``."""
+    """Write every figure of the module docstring into ``out_dir``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -185,6 +207,13 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
     plt.close(fig)
     plt.close(fig3)
     summary.files += [top, persp]
+    summary.files.append(plot_altitude(report, out_dir, stem, summary))
+    for extra in (
+        plot_separation(report, out_dir, stem, summary),
+        plot_geofences(report, out_dir, stem, summary),
+    ):
+        if extra is not None:
+            summary.files.append(extra)
     return summary
 
 
@@ -197,6 +226,433 @@ def _fill_volume(ax: Any, xs: list[float], ys: list[float], radius_m: float, col
     for poly in polys:
         bx, by = poly.exterior.xy
         ax.fill(list(bx), list(by), color=colour, alpha=0.15, lw=0)
+
+
+# ---- time series: altitude, separation, geofence distance -------------------------------------
+
+
+def _ground(report: dict[str, Any]) -> float:
+    return float(report.get("origin", {}).get("ground_elevation_amsl_m", 0.0) or 0.0)
+
+
+def _interp_plan(wps: list[list[float]], t_s: float) -> tuple[float, float, float] | None:
+    """(lat, lon, alt) of a report plan (``[lat, lon, alt, t]`` rows) at ``t_s``, or None
+    outside its time span."""
+    if not wps or t_s < wps[0][3] or t_s > wps[-1][3]:
+        return None
+    for a, b in itertools.pairwise(wps):
+        if a[3] <= t_s <= b[3]:
+            u = 0.0 if b[3] <= a[3] else (t_s - a[3]) / (b[3] - a[3])
+            return (
+                a[0] + u * (b[0] - a[0]),
+                a[1] + u * (b[1] - a[1]),
+                a[2] + u * (b[2] - a[2]),
+            )
+    return (wps[-1][0], wps[-1][1], wps[-1][2])
+
+
+@dataclass(slots=True)
+class PairSeries:
+    """Distances between two UAS over time (seconds from scenario start, metres)."""
+
+    a: str
+    b: str
+    t_s: list[float] = field(default_factory=list)
+    horizontal_m: list[float] = field(default_factory=list)
+    vertical_m: list[float] = field(default_factory=list)
+
+    @property
+    def distance_m(self) -> list[float]:
+        return [math.hypot(h, v) for h, v in zip(self.horizontal_m, self.vertical_m, strict=True)]
+
+
+def _nearest_sample(samples: list[list[float]], t_s: float, tol_s: float) -> list[float] | None:
+    import bisect
+
+    i = bisect.bisect_left([s[0] for s in samples], t_s)
+    best = None
+    for j in (i - 1, i):
+        if (
+            0 <= j < len(samples)
+            and abs(samples[j][0] - t_s) <= tol_s
+            and (best is None or abs(samples[j][0] - t_s) < abs(best[0] - t_s))
+        ):
+            best = samples[j]
+    return best
+
+
+def flown_pairs(report: dict[str, Any], *, tol_s: float = 0.6) -> list[PairSeries]:
+    """Pairwise distances from the report's tracks, each sample of A matched with B's sample
+    nearest in time (within ``tol_s``), like the report's ``separation``."""
+    local = _Local(report["origin"])
+    tracks = report.get("tracks", {})
+    ids = [op["id"] for op in report.get("operations", []) if len(tracks.get(op["id"], [])) > 1]
+    out = []
+    for i, a in enumerate(ids):
+        for b in ids[i + 1 :]:
+            ps = PairSeries(a=a, b=b)
+            for s in tracks[a]:
+                m = _nearest_sample(tracks[b], s[0], tol_s)
+                if m is None:
+                    continue
+                xa, ya = local.xy(s[1], s[2])
+                xb, yb = local.xy(m[1], m[2])
+                ps.t_s.append(float(s[0]))
+                ps.horizontal_m.append(math.hypot(xa - xb, ya - yb))
+                ps.vertical_m.append(abs(float(s[3]) - float(m[3])))
+            if ps.t_s:
+                out.append(ps)
+    return out
+
+
+def planned_pairs(report: dict[str, Any], *, step_s: float = 0.2) -> list[PairSeries]:
+    """Pairwise distances of the *filed* plans (version 1), each shifted by its vehicle's
+    ``start_delay_s``: what would have been flown without any resolution."""
+    local = _Local(report["origin"])
+    plans = {}
+    for op in report.get("operations", []):
+        if not op.get("plans"):
+            continue
+        delay = float(op.get("start_delay_s", 0.0) or 0.0)
+        wps = [[w[0], w[1], w[2], w[3] + delay] for w in op["plans"][0]["waypoints"]]
+        if len(wps) > 1:
+            plans[op["id"]] = wps
+    ids = list(plans)
+    out = []
+    for i, a in enumerate(ids):
+        for b in ids[i + 1 :]:
+            ps = PairSeries(a=a, b=b)
+            t0 = max(plans[a][0][3], plans[b][0][3])
+            t1 = min(plans[a][-1][3], plans[b][-1][3])
+            n = int((t1 - t0) / step_s) + 1 if t1 >= t0 else 0
+            for k in range(n):
+                t = t0 + k * step_s
+                pa, pb = _interp_plan(plans[a], t), _interp_plan(plans[b], t)
+                if pa is None or pb is None:
+                    continue
+                xa, ya = local.xy(pa[0], pa[1])
+                xb, yb = local.xy(pb[0], pb[1])
+                ps.t_s.append(t)
+                ps.horizontal_m.append(math.hypot(xa - xb, ya - yb))
+                ps.vertical_m.append(abs(pa[2] - pb[2]))
+            if ps.t_s:
+                out.append(ps)
+    return out
+
+
+def _minima(report: dict[str, Any]) -> tuple[str, float, float]:
+    """(mode, horizontal-or-3D minimum, vertical minimum) of the run's separation rule."""
+    sm = report.get("separation_minimum", {})
+    mode = str(sm.get("mode", "cylinder"))
+    if mode == "sphere":
+        d = float(sm.get("safety_distance_m", 0.0) or 0.0)
+        return mode, d, d
+    return mode, float(sm.get("horizontal_m", 0.0) or 0.0), float(sm.get("vertical_m", 0.0) or 0.0)
+
+
+def _fence_signed_distance(local: _Local, g: dict[str, Any], lat: float, lon: float) -> float:
+    """Horizontal distance from a point to a geofence edge, negative inside."""
+    x, y = local.xy(lat, lon)
+    if g.get("shape") == "cylinder":
+        cx, cy = local.xy(g["center"]["lat_deg"], g["center"]["lon_deg"])
+        return math.hypot(x - cx, y - cy) - float(g["radius_m"])
+    from shapely.geometry import Point, Polygon
+
+    poly = Polygon([local.xy(v["lat_deg"], v["lon_deg"]) for v in g["vertices"]])
+    d = float(poly.exterior.distance(Point(x, y)))
+    return -d if poly.contains(Point(x, y)) else d
+
+
+def _active(g: dict[str, Any], t_s: float) -> bool:
+    start, end = g.get("start_s"), g.get("end_s")
+    return (start is None or t_s >= start) and (end is None or t_s <= end)
+
+
+def fence_distances(
+    report: dict[str, Any],
+) -> dict[tuple[str, str], tuple[list[float], list[float]]]:
+    """(UAS, geofence) -> (times, signed horizontal distance to the edge) of the UAS's track
+    while the geofence is active and within its altitude band; UAS exempt from a geofence
+    (the jammed UAS inside its own) are left out."""
+    local = _Local(report["origin"])
+    out: dict[tuple[str, str], tuple[list[float], list[float]]] = {}
+    for g in report.get("geofences", []):
+        exempt = set(g.get("exempt", []))
+        lo = float(g.get("min_alt_amsl_m", -math.inf))
+        hi = float(g.get("max_alt_amsl_m", math.inf))
+        for uas, track in report.get("tracks", {}).items():
+            if uas in exempt:
+                continue
+            ts, ds = [], []
+            for s in track:
+                if _active(g, s[0]) and lo <= float(s[3]) <= hi:
+                    ts.append(float(s[0]))
+                    ds.append(_fence_signed_distance(local, g, s[1], s[2]))
+            if ts:
+                out[(uas, str(g["id"]))] = (ts, ds)
+    return out
+
+
+def _threat_times(report: dict[str, Any], uas: str | None = None) -> list[tuple[float, str]]:
+    out = []
+    seen = set()
+    for t in report.get("threats", []):
+        if t.get("detected_at_s") is None or (uas is not None and uas not in t.get("uas", [])):
+            continue
+        key = (t.get("kind"), tuple(t.get("uas", [])), t.get("detected_at_s"))
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append((float(t["detected_at_s"]), str(t.get("kind", ""))))
+    return out
+
+
+def _answer_times(report: dict[str, Any], uas: str | None = None) -> list[tuple[float, str]]:
+    """(time, maneuver) of each accepted recommendation (its plan version's first time)."""
+    out = []
+    for r in report.get("recommendations", []):
+        if r.get("decision") != "accepted" or (uas is not None and r.get("uas") != uas):
+            continue
+        if r.get("created_at_s") is not None:
+            out.append((float(r["created_at_s"]), str(r.get("maneuver"))))
+    return out
+
+
+def plot_altitude(report: dict[str, Any], out_dir: Path, stem: str, summary: PlotSummary) -> Path:
+    """``<stem>_altitude.png``: altitude above ground over time per UAS."""
+    import matplotlib.pyplot as plt
+
+    ops = report.get("operations", [])
+    ground = _ground(report)
+    fig, axes = plt.subplots(
+        max(1, len(ops)), 1, figsize=(9, 2.6 * max(1, len(ops))), squeeze=False
+    )
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, op in enumerate(ops):
+        ax = axes[i][0]
+        colour = colours[i % len(colours)]
+        for j, plan in enumerate(op.get("plans", [])):
+            wps = plan["waypoints"]
+            ax.plot(
+                [w[3] for w in wps],
+                [w[2] - ground for w in wps],
+                "-" if j == 0 else "--",
+                color=colour if j == 0 else "black",
+                lw=1.5 if j == 0 else 1.0,
+                label="filed plan"
+                if j == 0
+                else f"plan v{plan['version']} ({plan.get('reason', '')})",
+            )
+        track = report.get("tracks", {}).get(op["id"], [])
+        if track:
+            ax.plot(
+                [s[0] for s in track],
+                [s[3] - ground for s in track],
+                ":",
+                color=colour,
+                lw=1.5,
+                label="flown",
+            )
+            summary.altitude_profiles += 1
+        labelled: set[str] = set()
+        for t, kind in _threat_times(report, op["id"]):
+            ax.axvline(t, color="red", lw=0.8, alpha=0.6)
+            if kind not in labelled:
+                labelled.add(kind)
+                ax.annotate(
+                    f"{kind} detected",
+                    (t, ax.get_ylim()[1]),
+                    fontsize=6,
+                    color="red",
+                    rotation=90,
+                    va="top",
+                    ha="right",
+                )
+        for t, man in _answer_times(report, op["id"]):
+            ax.axvline(t, color="green", lw=0.8, ls="--")
+            ax.annotate(
+                f"accepted: {man}",
+                (t, ax.get_ylim()[0]),
+                fontsize=6,
+                color="green",
+                rotation=90,
+                ha="left",
+            )
+        ax.set_ylabel(f"{op['id']}\naltitude AGL [m]")
+        ax.legend(fontsize=6, loc="best")
+        ax.grid(alpha=0.3)
+    axes[-1][0].set_xlabel("time from scenario start [s]")
+    fig.suptitle(f"{report.get('scenario', '')}: altitude profiles (planned vs flown)")
+    fig.tight_layout()
+    path = out_dir / f"{stem}_altitude.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_separation(
+    report: dict[str, Any], out_dir: Path, stem: str, summary: PlotSummary
+) -> Path | None:
+    """``<stem>_separation.png``: pair distances over time, flown and as filed."""
+    import matplotlib.pyplot as plt
+
+    flown = flown_pairs(report)
+    planned = planned_pairs(report)
+    if not flown and not planned:
+        return None
+    mode, d_min, v_min = _minima(report)
+    keys = []
+    for series_ab in [*flown, *planned]:
+        if (series_ab.a, series_ab.b) not in keys:
+            keys.append((series_ab.a, series_ab.b))
+    fig, axes = plt.subplots(
+        2, len(keys), figsize=(9 * len(keys), 6.5), squeeze=False, sharex="col"
+    )
+    for col, (a, b) in enumerate(keys):
+        top, bottom = axes[0][col], axes[1][col]
+        key = f"{a}|{b}"
+        for series, style, label, store in (
+            (
+                planned,
+                "--",
+                "filed plans, flown with the start delays, no resolution",
+                summary.min_planned_separation_m,
+            ),
+            (flown, "-", "flown (UTM tracks)", summary.min_separation_m),
+        ):
+            ps = next((p for p in series if (p.a, p.b) == (a, b)), None)
+            if ps is None:
+                continue
+            main = ps.distance_m if mode == "sphere" else ps.horizontal_m
+            top.plot(ps.t_s, main, style, lw=1.3, label=label)
+            bottom.plot(ps.t_s, ps.vertical_m, style, lw=1.3, label=label)
+            k = min(range(len(main)), key=main.__getitem__)
+            store[key] = main[k]
+            top.plot([ps.t_s[k]], [main[k]], "o", color="black" if style == "-" else "grey")
+            top.annotate(
+                f"min {main[k]:.1f} m at t={ps.t_s[k]:.0f} s",
+                (ps.t_s[k], main[k]),
+                textcoords="offset points",
+                xytext=(5, 8 if style == "-" else -14),
+                fontsize=7,
+            )
+        top.axhline(d_min, color="red", lw=1, label=f"minimum {d_min:g} m")
+        if mode != "sphere":
+            bottom.axhline(v_min, color="red", lw=1, label=f"vertical minimum {v_min:g} m")
+        for t, kind in _threat_times(report):
+            if kind == "LOSS_OF_SEPARATION":
+                top.axvline(t, color="orange", lw=0.8, ls=":")
+        for t, man in _answer_times(report):
+            top.axvline(t, color="green", lw=0.8, ls="--")
+            top.annotate(
+                f"accepted: {man}", (t, d_min), fontsize=6, color="green", rotation=90, va="bottom"
+            )
+        # a 10 km transit would hide the close encounter: show up to 6 minima, or a little
+        # more than the closest distance drawn when that is further
+        closest = [
+            m.get(key, 0.0) for m in (summary.min_separation_m, summary.min_planned_separation_m)
+        ]
+        top.set_ylim(0, max(d_min * 6, 1.3 * max(closest), 1.0))
+        bottom.set_ylim(0, max(v_min * 6, 1.0))
+        top.set_ylabel("3D distance [m]" if mode == "sphere" else "horizontal distance [m]")
+        bottom.set_ylabel("vertical distance [m]")
+        bottom.set_xlabel("time from scenario start [s]")
+        top.set_title(f"{a} - {b}")
+        top.legend(fontsize=6, loc="upper right")
+        top.grid(alpha=0.3)
+        bottom.grid(alpha=0.3)
+    fig.suptitle(f"{report.get('scenario', '')}: separation over time ({mode})")
+    fig.tight_layout()
+    path = out_dir / f"{stem}_separation.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_geofences(
+    report: dict[str, Any], out_dir: Path, stem: str, summary: PlotSummary
+) -> Path | None:
+    """``<stem>_geofence.png``: close-up of the geofences and distance to their edges."""
+    import matplotlib.pyplot as plt
+
+    fences = report.get("geofences", [])
+    if not fences:
+        return None
+    local = _Local(report["origin"])
+    fig, (ax, ax_d) = plt.subplots(1, 2, figsize=(14, 6))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    xs_all: list[float] = []
+    ys_all: list[float] = []
+    for g in fences:
+        if g.get("shape") == "cylinder":
+            cx, cy = local.xy(g["center"]["lat_deg"], g["center"]["lon_deg"])
+            xs, ys = _circle(cx, cy, float(g["radius_m"]))
+        else:
+            pts = [local.xy(v["lat_deg"], v["lon_deg"]) for v in g["vertices"]]
+            pts.append(pts[0])
+            xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+        ax.fill(xs, ys, color="red", alpha=0.25)
+        ax.plot(xs, ys, color="red", lw=1)
+        ax.annotate(f"{g['id']} ({g.get('reason', '')})", (xs[0], ys[0]), color="red", fontsize=7)
+        xs_all += xs
+        ys_all += ys
+    margin = 150.0
+    box = (min(xs_all) - margin, max(xs_all) + margin, min(ys_all) - margin, max(ys_all) + margin)
+    for i, op in enumerate(report.get("operations", [])):
+        colour = colours[i % len(colours)]
+        for j, plan in enumerate(op.get("plans", [])):
+            pts = [local.xy(w[0], w[1]) for w in plan["waypoints"]]
+            ax.plot(
+                [p[0] for p in pts],
+                [p[1] for p in pts],
+                "-" if j == 0 else "--",
+                color=colour,
+                lw=1.5 if j == 0 else 1.0,
+                marker="." if j else None,
+                label=f"{op['id']} plan v{plan['version']}",
+            )
+        track = report.get("tracks", {}).get(op["id"], [])
+        if track:
+            pts = [local.xy(s[1], s[2]) for s in track]
+            ax.plot(
+                [p[0] for p in pts],
+                [p[1] for p in pts],
+                ":",
+                color=colour,
+                lw=2,
+                label=f"{op['id']} flown",
+            )
+    ax.set_xlim(box[0], box[1])
+    ax.set_ylim(box[2], box[3])
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    ax.set_title("geofences: close-up top view")
+    ax.legend(fontsize=6, loc="best")
+    for (uas, gid), (ts, ds) in fence_distances(report).items():
+        ax_d.plot(ts, ds, lw=1.3, label=f"{uas} to {gid}")
+        k = min(range(len(ds)), key=ds.__getitem__)
+        summary.min_geofence_distance_m[f"{uas}|{gid}"] = ds[k]
+        ax_d.plot([ts[k]], [ds[k]], "o", color="black")
+        ax_d.annotate(
+            f"min {ds[k]:.1f} m",
+            (ts[k], ds[k]),
+            textcoords="offset points",
+            xytext=(5, 6),
+            fontsize=7,
+        )
+    ax_d.axhline(0.0, color="red", lw=1, label="geofence edge")
+    ax_d.set_xlabel("time from scenario start [s]")
+    ax_d.set_ylabel("horizontal distance to the edge [m] (< 0 inside)")
+    ax_d.set_title("distance to each geofence while it is active")
+    ax_d.legend(fontsize=6, loc="best")
+    ax_d.grid(alpha=0.3)
+    fig.suptitle(f"{report.get('scenario', '')}: geofences")
+    fig.tight_layout()
+    path = out_dir / f"{stem}_geofence.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 # ---- GeoJSON and KML --------------------------------------------------------------------------

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -106,3 +107,109 @@ def test_cli_plot_and_bad_report(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert "origin" in capsys.readouterr().err
     with pytest.raises(ReportError):
         load_report(tmp_path / "missing.json")
+
+
+# ---- time-series figures on a geometry with known answers -------------------------------------
+
+LAT0, LON0 = 40.0, -3.0
+K = math.cos(math.radians(LAT0))
+
+
+def _ll(east_m: float, north_m: float) -> tuple[float, float]:
+    """Inverse of the plot module's equirectangular projection around (LAT0, LON0)."""
+    return LAT0 + north_m / 110_540.0, LON0 + east_m / (111_320.0 * K)
+
+
+def _crossing_report() -> dict[str, Any]:
+    """UAS1 flies east along north=0 at 10 m/s, UAS2 north along east=0 at 10 m/s but starts
+    2 s late: as filed-and-late they pass 14.14 m apart at t = 11 s. Flown, UAS2 went along
+    east=50 on time: 35.36 m at t = 12.5 s. A 20 m geofence at (0, 60) is 30 m from UAS2's
+    flown path at its closest (t = 16 s)."""
+
+    def wp(e: float, n: float, t: float) -> list[float]:
+        lat, lon = _ll(e, n)
+        return [lat, lon, 700.0, t]
+
+    def track(f: Any) -> list[list[float]]:
+        out = []
+        for k in range(41):
+            t = k * 0.5
+            e, n = f(t)
+            lat, lon = _ll(e, n)
+            out.append([t, lat, lon, 700.0])
+        return out
+
+    clat, clon = _ll(0.0, 60.0)
+    return {
+        "scenario": "crossing",
+        "origin": {"lat_deg": LAT0, "lon_deg": LON0, "ground_elevation_amsl_m": 650.0},
+        "separation_minimum": {"mode": "cylinder", "horizontal_m": 50.0, "vertical_m": 15.0},
+        "operations": [
+            {
+                "id": "UAS1",
+                "start_delay_s": 0.0,
+                "plans": [{"version": 1, "waypoints": [wp(-100, 0, 0), wp(100, 0, 20)]}],
+            },
+            {
+                "id": "UAS2",
+                "start_delay_s": 2.0,
+                "plans": [
+                    {"version": 1, "waypoints": [wp(0, -100, 0), wp(0, 100, 20)]},
+                    {
+                        "version": 2,
+                        "reason": "LOSS_OF_SEPARATION: go_right",
+                        "waypoints": [wp(50, -100, 0), wp(50, 100, 20)],
+                    },
+                ],
+            },
+        ],
+        "tracks": {
+            "UAS1": track(lambda t: (-100 + 10 * t, 0.0)),
+            "UAS2": track(lambda t: (50.0, -100 + 10 * t)),
+        },
+        "geofences": [
+            {
+                "id": "g1",
+                "shape": "cylinder",
+                "center": {"lat_deg": clat, "lon_deg": clon},
+                "radius_m": 20.0,
+                "min_alt_amsl_m": 650.0,
+                "max_alt_amsl_m": 800.0,
+                "start_s": 0.0,
+                "end_s": None,
+                "exempt": ["UAS1"],
+            }
+        ],
+        "threats": [{"kind": "LOSS_OF_SEPARATION", "uas": ["UAS1", "UAS2"], "detected_at_s": 3.0}],
+        "recommendations": [
+            {"uas": "UAS2", "maneuver": "go_right", "decision": "accepted", "created_at_s": 4.0}
+        ],
+    }
+
+
+def test_time_series_figures_draw_the_minima_of_the_report(tmp_path: Path) -> None:
+    summary = export_all(_crossing_report(), tmp_path, stem="x")
+    for name in ("x_top.png", "x_3d.png", "x_altitude.png", "x_separation.png", "x_geofence.png"):
+        data = (tmp_path / name).read_bytes()
+        assert data[:4] == b"\x89PNG" and len(data) > 10_000, name
+    assert summary.altitude_profiles == 2
+    # filed plans with UAS2 2 s late: closest at t = 11 s, |(10, -10)| = 14.14 m
+    assert summary.min_planned_separation_m["UAS1|UAS2"] == pytest.approx(14.142, abs=0.01)
+    # flown: closest at t = 12.5 s, |(-25, 25)| = 35.36 m
+    assert summary.min_separation_m["UAS1|UAS2"] == pytest.approx(35.355, abs=0.01)
+    # UAS2 passes 50 m from the centre of a 20 m geofence; UAS1 is exempt from it
+    assert summary.min_geofence_distance_m == {"UAS2|g1": pytest.approx(30.0, abs=0.01)}
+
+
+def test_series_follow_the_separation_rule_and_skip_what_is_absent(tmp_path: Path) -> None:
+    report = _crossing_report()
+    report["separation_minimum"] = {"mode": "sphere", "safety_distance_m": 40.0}
+    report["tracks"]["UAS2"] = [[s[0], s[1], s[2], 730.0] for s in report["tracks"]["UAS2"]]
+    report["geofences"] = []
+    summary = export_all(report, tmp_path, stem="s")
+    # sphere mode draws the 3D distance: hypot(35.36, 30)
+    assert summary.min_separation_m["UAS1|UAS2"] == pytest.approx(
+        math.hypot(35.355, 30.0), abs=0.01
+    )
+    assert not (tmp_path / "s_geofence.png").exists()
+    assert (tmp_path / "s_separation.png").stat().st_size > 0
