@@ -9,9 +9,12 @@ GAUSS conventions (from its ``db_manager`` and ``usp_testers`` configs):
   the YAML refers to vehicles by it, and derive the 24-bit ICAO hex from it;
 - ``simulation.auto_start[].delay`` is *when* the vehicle is started, in seconds after
   scenario start (``gauss_light_sim`` fires its start timer at ``init_time + delay``), not a
-  lateness: the files start a vehicle exactly at its first stamp (madrid_loss_separation:
-  first stamp 5 s, delay 5 s) or a little after it. Our ``start_delay_s`` (how late the
-  vehicle is on its plan) is therefore ``max(0, delay - first stamp)``;
+  lateness. Once started, GAUSS's simulator places the vehicle where its plan says for the
+  current time (``updatePhysics4D`` interpolates the plan at the absolute time; the files
+  give no ``cruising_speed``, which would select its speed-based mode): a vehicle started
+  after its first stamp skips the start of its plan, it is never late. We reproduce that:
+  the simulated vehicle's mission (:attr:`VehicleSetup.plan`) begins at the plan's position
+  at the start time, and ``start_delay_s`` is 0. The filed operation keeps its whole plan;
 - ``safetyDistance`` is GAUSS's one 3D separation minimum (its Monitoring compares the 3D
   distance of the two trajectories with it): it becomes :attr:`Scenario.safety_distance_m`,
   which runs and strategic checks apply in ``sphere`` separation mode;
@@ -27,6 +30,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -343,15 +347,55 @@ def _operations(
                 autopilot=Autopilot.PX4,
                 vehicle_kind=kind,
                 home=home,
-                plan=plan,
+                plan=_from_start(
+                    plan,
+                    frame=frame,
+                    xs=xs,
+                    ys=ys,
+                    zs=zs,
+                    ts=ts,
+                    start_s=delays.get(op_id),
+                    t0_s=t0_s,
+                ),
                 cruise_speed_mps=cruise,
                 max_climb_rate_mps=op.max_climb_rate_mps,
-                # auto_start gives the start time; the vehicle is late only by the part of
-                # it after the plan's first stamp
-                start_delay_s=max(0.0, delays.get(op_id, ts[0]) - ts[0]),
+                start_delay_s=0.0,
             )
         )
     return operations, vehicles
+
+
+def _from_start(
+    plan: FlightPlan,
+    *,
+    frame: LocalFrame,
+    xs: list[float],
+    ys: list[float],
+    zs: list[float],
+    ts: list[float],
+    start_s: float | None,
+    t0_s: float,
+) -> FlightPlan:
+    """The part of ``plan`` flown by a vehicle GAUSS starts at ``start_s`` (relative): from
+    the plan's position at that time on (see the module docstring). Unchanged when the
+    vehicle starts before its first stamp or no start is given; a start at or after the last
+    stamp leaves the last waypoint only."""
+    if start_s is None or start_s <= ts[0]:
+        return plan
+    if start_s >= ts[-1]:
+        return replace(plan, waypoints=plan.waypoints[-1:])
+    j = next(k for k in range(1, len(ts)) if ts[k] > start_s)
+    u = (start_s - ts[j - 1]) / (ts[j] - ts[j - 1])
+    (p,) = _enu_points(
+        frame,
+        [xs[j - 1] + u * (xs[j] - xs[j - 1])],
+        [ys[j - 1] + u * (ys[j] - ys[j - 1])],
+        [zs[j - 1] + u * (zs[j] - zs[j - 1])],
+    )
+    first = Waypoint4D(
+        lat_deg=p.lat_deg, lon_deg=p.lon_deg, alt_amsl_m=p.alt_amsl_m, t_s=t0_s + start_s
+    )
+    return replace(plan, waypoints=(first, *plan.waypoints[j:]))
 
 
 def _geofences(

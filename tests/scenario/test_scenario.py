@@ -270,7 +270,13 @@ def test_every_gauss_file_loads() -> None:
     uc2 = load_gauss(GAUSS / "paper_master/use_case_geo_conflict.json")
     (ev,) = uc2.events
     assert ev.kind is EventKind.GNSS_JAMMING and ev.uas == "3434007" and ev.at_s == 20.0
-    assert uc2.vehicle("3434007").start_delay_s == 8.0
+    # started at 8 s (auto_start), on its plan's timing: its mission begins where the plan
+    # is at 8 s (the wind-turbine climb at 1 m/s: 8 m above its first waypoint)
+    v = uc2.vehicle("3434007")
+    first = uc2.operation("3434007").plan.waypoints[0]
+    assert v.start_delay_s == 0.0 and v.plan.waypoints[0].t_s == 8.0
+    assert v.plan.waypoints[0].alt_amsl_m - first.alt_amsl_m == pytest.approx(8.0, abs=0.01)
+    assert v.plan.waypoints[1:] == uc2.operation("3434007").plan.waypoints[1:]
     # GAUSS z is up from the origin's ellipsoidal height (675 m in madrid_loss_separation)
     ls = load_gauss(GAUSS / "paper_dev/madrid_loss_separation.json")
     assert ls.operation("3434000").plan.waypoints[0].alt_amsl_m == pytest.approx(675 + 70, abs=0.1)
@@ -280,19 +286,21 @@ def test_every_gauss_file_loads() -> None:
 @pytest.mark.data
 @pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
 def test_gauss_start_times_and_safety_distance(capsys: pytest.CaptureFixture[str]) -> None:
-    """auto_start gives when a vehicle starts, not how late it is: madrid_loss_separation
-    starts 3434000 at 5 s, its first stamp (on time), and 3434009 at 2 s, 2 s after its first
-    stamp. Its safetyDistance (350 m) is a 3D minimum: the fixed wing at 400 m passes over the
-    multirotor at 70 m, 330 m above it, at t ~ 335 s -> a conflict in the filed plans."""
+    """auto_start gives when GAUSS's simulator starts a vehicle, which then flies on its plan's
+    timing (never late): madrid_loss_separation starts 3434000 at 5 s, its first stamp, and
+    3434009 at 2 s, 2 s into its plan. Its safetyDistance (350 m) is a 3D minimum: the fixed
+    wing at 400 m passes 330 m over the multirotor at 70 m at t ~ 335 s, a conflict in the
+    filed plans, which the start times do not change."""
     dev = load_gauss(GAUSS / "paper_dev/madrid_loss_separation.json")
-    assert dev.vehicle("3434000").start_delay_s == 0.0
-    assert dev.vehicle("3434009").start_delay_s == 2.0
+    assert [v.start_delay_s for v in dev.vehicles] == [0.0, 0.0]
+    assert dev.vehicle("3434000").plan == dev.operation("3434000").plan
+    assert dev.vehicle("3434009").plan.start_t_s == 2.0
     assert dev.safety_distance_m == 350.0
     master = load_gauss(GAUSS / "paper_master/madrid_loss_separation.json")
     assert master.operation("3434000").plan.start_t_s == 20.0  # first stamp 20 s, auto_start 20 s
-    assert master.vehicle("3434000").start_delay_s == 0.0
+    assert master.vehicle("3434000").plan == master.operation("3434000").plan
     path = str(GAUSS / "paper_dev/madrid_loss_separation.json")
-    for argv, first_loss in (([], 331.1), (["--apply-delays"], 333.1)):
+    for argv in ([], ["--apply-delays"]):
         code, out, _ = _cli(["scenario", "check", path, "--json", *argv], capsys)
         doc = json.loads(out)
         assert code == 0
@@ -304,9 +312,16 @@ def test_gauss_start_times_and_safety_distance(capsys: pytest.CaptureFixture[str
         }
         (c,) = doc["conflicts"]
         assert (c["a"], c["b"]) == ("3434000", "3434009")
-        assert c["first_loss_s"] == pytest.approx(first_loss, abs=0.6)
+        assert c["first_loss_s"] == pytest.approx(331.1, abs=0.6)
         assert c["min_distance_m"] == pytest.approx(330.0, abs=1.0)
         assert c["min_vertical_m"] == pytest.approx(330.0, abs=1.0)
+    # use_case_loss_separation: 15 m safety distance, 10.5 m at t ~ 76 s
+    code, out, _ = _cli(
+        ["scenario", "check", str(GAUSS / "paper_dev/use_case_loss_separation.json"), "--json"],
+        capsys,
+    )
+    (c,) = json.loads(out)["conflicts"]
+    assert c["first_loss_s"] == pytest.approx(75.7, abs=0.6) and c["min_distance_m"] < 15.0
     # a scenario without its own rule keeps the settings' cylinder minima
     assert load_any(str(SCEN / "use_case_1.toml")).safety_distance_m is None
 
