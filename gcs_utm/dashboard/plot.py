@@ -101,7 +101,13 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
     out_dir.mkdir(parents=True, exist_ok=True)
     local = _Local(report["origin"])
     summary = PlotSummary()
-    fig, ax = plt.subplots(figsize=(9, 8))
+    focus = _focus_point(report, local)
+    if focus is None:
+        fig, ax_all = plt.subplots(figsize=(9, 8))
+        ax: Any = ax_all
+    else:
+        fig, (ax_all, ax_zoom) = plt.subplots(1, 2, figsize=(16, 8))
+        ax = _Both(ax_all, ax_zoom)
     fig3 = plt.figure(figsize=(9, 8))
     ax3 = fig3.add_subplot(projection="3d")
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -192,10 +198,17 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
 
     ax.set_xlabel("east [m]")
     ax.set_ylabel("north [m]")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title(f"{report.get('scenario', '')}: top view")
+    ax_all.set_aspect("equal", adjustable="datalim")
+    ax_all.set_title(f"{report.get('scenario', '')}: top view")
     if summary.plans:
-        ax.legend(fontsize=7, loc="best")
+        ax_all.legend(fontsize=7, loc="best")
+    if focus is not None:
+        (fx, fy), half, what = focus
+        ax_zoom.set_xlim(fx - half, fx + half)
+        ax_zoom.set_ylim(fy - half, fy + half)
+        ax_zoom.plot([fx], [fy], "x", color="red", ms=12, mew=2)
+        ax_zoom.set_aspect("equal", adjustable="box")
+        ax_zoom.set_title(f"close-up: {what} (x), alternatives grey, selected black")
     ax3.set_xlabel("east [m]")
     ax3.set_ylabel("north [m]")
     ax3.set_zlabel("altitude AMSL [m]")
@@ -215,6 +228,52 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
         if extra is not None:
             summary.files.append(extra)
     return summary
+
+
+class _Both:
+    """Draw the same top view on the overall and the close-up axes."""
+
+    def __init__(self, *axes: Any) -> None:
+        self._axes = axes
+
+    def __getattr__(self, name: str) -> Any:
+        def call(*args: Any, **kwargs: Any) -> None:
+            for a in self._axes:
+                getattr(a, name)(*args, **kwargs)
+
+        return call
+
+
+def _focus_point(
+    report: dict[str, Any], local: _Local
+) -> tuple[tuple[float, float], float, str] | None:
+    """Where the close-up looks: the first predicted loss of separation or geofence conflict
+    (east, north), a half-width that shows the manoeuvre around it, and what it is."""
+    for t in report.get("threats", []):
+        kind = t.get("kind")
+        pos = t.get("position")
+        if pos and kind in ("LOSS_OF_SEPARATION", "GEOFENCE_CONFLICT"):
+            half = 250.0
+            for g in report.get("geofences", []):
+                if g.get("id") == t.get("geofence") and g.get("radius_m"):
+                    half = max(half, 3.0 * float(g["radius_m"]))
+            return local.xy(pos["lat_deg"], pos["lon_deg"]), half, str(kind)
+        if kind == "LOSS_OF_SEPARATION" and t.get("closest_approach_at_s") is not None:
+            # no position recorded: midway between the two plans (as flown late) at the
+            # predicted closest approach
+            at = float(t["closest_approach_at_s"])
+            pts = []
+            for op in report.get("operations", []):
+                if op["id"] in t.get("uas", []) and op.get("plans"):
+                    delay = float(op.get("start_delay_s", 0.0) or 0.0)
+                    wps = [[w[0], w[1], w[2], w[3] + delay] for w in op["plans"][0]["waypoints"]]
+                    p = _interp_plan(wps, at)
+                    if p is not None:
+                        pts.append(local.xy(p[0], p[1]))
+            if pts:
+                mid = (sum(p[0] for p in pts) / len(pts), sum(p[1] for p in pts) / len(pts))
+                return mid, 250.0, f"{kind} predicted at t={at:.0f} s"
+    return None
 
 
 def _fill_volume(ax: Any, xs: list[float], ys: list[float], radius_m: float, colour: str) -> None:
