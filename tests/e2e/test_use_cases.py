@@ -11,10 +11,13 @@ from typing import Any
 import pytest
 
 from gcs_utm.app import OperatorMode, RunOptions, run_scenario
+from gcs_utm.dashboard.plot import export_all
 from gcs_utm.settings import Settings
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "config" / "scenarios"
+GAUSS = ROOT.parent / "shared" / "data" / "gauss"
+FIGURES = ("top", "3d", "altitude", "separation")
 SPEED = 10.0
 
 pytestmark = [pytest.mark.slow, pytest.mark.network, pytest.mark.timeout(240)]
@@ -59,11 +62,19 @@ async def test_use_case_1_late_start_loss_of_separation_resolved(tmp_path: Path)
     assert not report["geofence_intrusions"]
     tele = report["telemetry"]
     assert tele and all(v["rate_hz"] > 1.0 for v in tele.values())
-    assert (tmp_path / "use_case_1_top.png").stat().st_size > 0
+    for name in FIGURES:
+        assert (tmp_path / f"use_case_1_{name}.png").read_bytes()[:4] == b"\x89PNG", name
+    # the figures are drawn from the report: the separation figure's flown minimum is the
+    # report's, and the filed plans flown 3 s late (no resolution) dip below the 50 m minimum
+    again = export_all(report, tmp_path / "again", stem="uc1")
+    (sep,) = report["separation"]
+    assert again.min_separation_m["UAS1|UAS2"] == pytest.approx(sep["min_horizontal_m"], abs=1.0)
+    assert again.min_planned_separation_m["UAS1|UAS2"] < 50.0
+    assert again.altitude_profiles == 2
 
 
 async def test_use_case_2_jamming_suspends_and_neighbour_reroutes(tmp_path: Path) -> None:
-    report = await _run(SCENARIOS / "use_case_2.toml", tmp_path)
+    report = await _run(SCENARIOS / "use_case_2.toml", tmp_path, figures=True)
     kinds = [(t["kind"], t["uas"]) for t in report["threats"]]
     assert ("JAMMING_ATTACK", ["UAS1"]) in kinds
     jam = next(t for t in report["threats"] if t["kind"] == "JAMMING_ATTACK")
@@ -82,6 +93,11 @@ async def test_use_case_2_jamming_suspends_and_neighbour_reroutes(tmp_path: Path
     )
     # UAS2 never enters the geofence (actual track, not prediction)
     assert not [g for g in report["geofence_intrusions"] if g["uas"] == "UAS2"]
+    assert (tmp_path / "use_case_2_geofence.png").stat().st_size > 0
+    fence = next(g["id"] for g in report["geofences"] if g["reason"].startswith("JAMMING"))
+    again = export_all(report, tmp_path / "again", stem="uc2")
+    assert again.min_geofence_distance_m[f"UAS2|{fence}"] > 0.0
+    assert f"UAS1|{fence}" not in again.min_geofence_distance_m  # exempt: suspended inside
 
 
 async def test_rejected_recommendation_leads_to_a_different_accepted_one(tmp_path: Path) -> None:
@@ -111,3 +127,20 @@ async def test_vehicle_that_never_answers_ends_with_failed_upload(tmp_path: Path
     assert all(not r["verified"] for r in failed)
     assert failed[0]["error"]
     assert uas2
+
+
+@pytest.mark.data
+@pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
+async def test_gauss_use_case_loss_separation_is_detected_and_resolved(tmp_path: Path) -> None:
+    """The paper repository's own loss-of-separation scenario: its 15 m safetyDistance is the
+    3D minimum; the plans meet at t ~ 76 s (10.5 m); the lower-priority UAS is moved."""
+    report = await _run(GAUSS / "paper_dev" / "use_case_loss_separation.json", tmp_path)
+    assert report["separation_minimum"]["mode"] == "sphere"
+    assert report["separation_minimum"]["safety_distance_m"] == 15.0
+    los = [t for t in report["threats"] if t["kind"] == "LOSS_OF_SEPARATION"]
+    assert los and los[0]["predicted_event_at_s"] - los[0]["detected_at_s"] >= 20.0
+    rec = _recs(report, "LOSS_OF_SEPARATION")[0]
+    assert rec["uas"] == "3434000"  # priority 0 against 1
+    assert (rec["decision"], rec["uploaded"], rec["verified"]) == ("accepted", True, True)
+    (pair,) = report["truth"]["pairs"]
+    assert not pair["loss_of_separation"] and pair["min_distance_m"] > 15.0, pair
