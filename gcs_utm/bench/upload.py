@@ -45,7 +45,7 @@ async def _bench(args: argparse.Namespace) -> tuple[list[float], list[float], li
     from gcs_utm.model import SysId
 
     sim = sitl.SimTime(speed=1.0)
-    clock = ScaledClock(speed=1.0, start_utc_s=sim.start_utc_s)
+    clock = ScaledClock(1.0, start_utc_s=sim.start_utc_s, start_mono_s=sim.start_mono_s)
     home = (47.397742, 8.545594, 488.0)
     items = [
         MissionItem(
