@@ -55,11 +55,12 @@ async def _bench(
     sim = sitl.SimTime(speed=1.0)
     clock = ScaledClock(1.0, start_utc_s=sim.start_utc_s, start_mono_s=sim.start_mono_s)
     home = (47.397742, 8.545594, 488.0)
+    first = 1 if args.autopilot == "ardupilot" else 0  # ArduPilot's seq 0 is home
     items = [
         MissionItem(
             seq=i,
             command=MAV_CMD_NAV_WAYPOINT,
-            current=int(i == 0),
+            current=int(i == first),
             param4=math.nan,
             x=round((home[0] + 0.0002 * (i + 1)) * 1e7),
             y=round(home[1] * 1e7),
