@@ -269,6 +269,10 @@ class MavlinkHub:
     def local_port(self, link: str) -> int:
         return self._links[link].transport.local_port
 
+    def rcvbuf_bytes(self, link: str) -> int:
+        """The UDP receive buffer the kernel granted ``link`` (0 for TCP and serial)."""
+        return self._links[link].transport.rcvbuf_bytes
+
     async def close(self) -> None:
         for task in self._tasks:
             task.cancel()
