@@ -436,7 +436,7 @@ async def run_scenario(
 
         fleet = Fleet(
             vehicle_specs(scenario, lead_s=lead_s, gcs_port=gcs_port, ephemeral_ports=True),
-            SimTime(options.speed, start_utc_s=start_utc),
+            SimTime(options.speed, start_utc_s=start_utc, start_mono_s=clock.start_mono_s),
         )
 
     operators = _operators(rt, options)

@@ -42,14 +42,22 @@ class RealClock:
 class ScaledClock:
     """Simulated time running ``speed`` times faster than the monotonic clock, starting at
     ``start_utc_s`` (default: now). The same formula as ``sitl.SimTime``, so the vehicles and
-    the ground service agree when built with the same start and speed."""
+    the ground service agree when built with the same start, speed and monotonic anchor
+    (``start_mono_s``: pass one clock's anchor to the other; at a speed-up of k, anchors taken
+    d seconds apart put the clocks k*d simulated seconds apart)."""
 
-    def __init__(self, speed: float = 1.0, start_utc_s: float | None = None) -> None:
+    def __init__(
+        self,
+        speed: float = 1.0,
+        start_utc_s: float | None = None,
+        *,
+        start_mono_s: float | None = None,
+    ) -> None:
         if not speed > 0.0:
             raise ValueError(f"speed must be positive, got {speed}")
         self._speed = speed
         self._start_utc_s = time.time() if start_utc_s is None else start_utc_s
-        self._start_mono_s = time.monotonic()
+        self._start_mono_s = time.monotonic() if start_mono_s is None else start_mono_s
 
     @property
     def speed(self) -> float:
@@ -58,6 +66,10 @@ class ScaledClock:
     @property
     def start_utc_s(self) -> float:
         return self._start_utc_s
+
+    @property
+    def start_mono_s(self) -> float:
+        return self._start_mono_s
 
     def now_s(self) -> float:
         return self._start_utc_s + (time.monotonic() - self._start_mono_s) * self._speed

@@ -8,6 +8,15 @@ item (the ground missed our ACK) is answered with the same ACK. Download: MISSIO
 -> MISSION_COUNT -> MISSION_REQUEST(_INT) -> MISSION_ITEM(_INT) (MISSION_ITEM answers the old
 MISSION_REQUEST) -> MISSION_ACK. Fence and rally transfers answer MAV_MISSION_UNSUPPORTED.
 
+PX4 specifics kept: an unexpected item during an upload is ignored silently; a repeated
+MISSION_COUNT restarts only before item 0 arrived (later: ERROR, the transfer goes on); a
+download answers a request for the expected item or the one before it (a re-request) and
+aborts with ERROR on any other. With ``ardupilot=True`` the server behaves as ArduPilot's
+MissionItemProtocol instead: it re-requests every 1 s, NACKs an unexpected item with
+MAV_MISSION_INVALID_SEQUENCE and keeps receiving, answers an item outside an upload with
+MAV_MISSION_ERROR, restarts on a repeated MISSION_COUNT, denies downloads during an upload and
+answers any in-range download request.
+
 The server never touches sockets: it calls `MissionHost.send(peer, name, **fields)`; `peer`
 is opaque (the vehicle's link object) and `now_s` is passed in.
 """
@@ -22,6 +31,7 @@ from typing import Any, Protocol
 from sitl._mav import Inbound, const
 
 REREQUEST_S = 0.25  # PX4 MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT
+AP_REREQUEST_S = 1.0  # ArduPilot MissionItemProtocol: 1000 ms + stream slowdown
 PROTOCOL_TIMEOUT_S = 5.0  # PX4 MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT
 REPEAT_ACK_WINDOW_S = 5.0  # how long a repeated last item is still answered
 
@@ -30,6 +40,7 @@ ERROR = const("MAV_MISSION_ERROR")
 UNSUPPORTED_FRAME = const("MAV_MISSION_UNSUPPORTED_FRAME")
 UNSUPPORTED = const("MAV_MISSION_UNSUPPORTED")
 NO_SPACE = const("MAV_MISSION_NO_SPACE")
+DENIED = const("MAV_MISSION_DENIED")
 INVALID = const("MAV_MISSION_INVALID")
 INVALID_PARAM5_X = const("MAV_MISSION_INVALID_PARAM5_X")
 INVALID_PARAM6_Y = const("MAV_MISSION_INVALID_PARAM6_Y")
@@ -166,6 +177,7 @@ class _Download:
     comp_id: int
     count: int
     last_rx_s: float
+    next_seq: int = 0  # PX4's _transfer_seq: the request it expects next
 
 
 class MissionServer:
@@ -177,8 +189,11 @@ class MissionServer:
         *,
         max_items: int,
         validator: Callable[[RawItem], int] = validate_item,
+        ardupilot: bool = False,
     ) -> None:
         self._host = host
+        self._ap = ardupilot
+        self._rerequest_s = AP_REREQUEST_S if ardupilot else REREQUEST_S
         self._max_items = max_items
         self._validate = validator
         self._up: _Upload | None = None
@@ -233,7 +248,7 @@ class MissionServer:
                 self._host.statustext(
                     const("MAV_SEVERITY_CRITICAL"), "Mission upload: operation timeout"
                 )
-            elif now_s - up.last_req_s >= REREQUEST_S:
+            elif now_s - up.last_req_s >= self._rerequest_s:
                 up.last_req_s = now_s
                 self._host.count("mission_rerequests")
                 self._request(up)
@@ -249,7 +264,10 @@ class MissionServer:
             self._ack(peer, src, comp, UNSUPPORTED, mtype)
             return
         if self._up is not None and self._up.sys_id != src:
-            self._ack(peer, src, comp, ERROR)  # busy with another ground station
+            self._ack(peer, src, comp, DENIED if self._ap else ERROR)  # busy with another GCS
+            return
+        if self._up is not None and not self._ap and self._up.expected > 0:
+            self._ack(peer, src, comp, ERROR)  # PX4: "WPM: REJ. CMD: Busy", transfer goes on
             return
         count = msg.i("count")
         if count > self._max_items:
@@ -283,7 +301,10 @@ class MissionServer:
         up = self._up
         if up is None or up.sys_id != src:
             done = self._last_done
-            if (
+            if self._ap:
+                self._host.count("mission_unexpected_item")
+                self._ack(peer, src, comp, ERROR)  # ArduPilot: not receiving
+            elif (
                 done is not None
                 and done[0] == src
                 and seq == done[2] - 1
@@ -299,13 +320,14 @@ class MissionServer:
             return
         up.last_rx_s = now_s
         up.peer = peer
-        if seq < up.expected:
-            self._host.count("mission_duplicate_item")  # an answer to a re-request: harmless
-            return
         if seq != up.expected:
-            self._host.count("mission_bad_seq")
-            self._fail(up, ERROR if seq >= up.count else INVALID_SEQUENCE)
-            return
+            if seq < up.expected:
+                self._host.count("mission_duplicate_item")  # an answer to a re-request
+            else:
+                self._host.count("mission_bad_seq")
+            if self._ap:
+                self._ack(peer, src, comp, INVALID_SEQUENCE)  # and keep receiving
+            return  # PX4 ignores an item it did not ask for
         item = item_from_message(msg)
         result = self._validate(item)
         if result != ACCEPTED:
@@ -356,6 +378,9 @@ class MissionServer:
                 mission_type=mtype,
             )
             return
+        if self._ap and self._up is not None:
+            self._ack(peer, src, comp, DENIED)
+            return
         items = self._host.mission_items()
         self._down = _Download(peer, src, comp, len(items), now_s) if items else None
         self._host.send(
@@ -371,6 +396,8 @@ class MissionServer:
         src, comp = msg.src_system, msg.src_component
         seq = msg.i("seq")
         if self._up is not None and self._up.sys_id == src:
+            if self._ap:
+                self._ack(peer, src, comp, DENIED)
             return  # requests are ours to send during an upload
         items = self._host.mission_items()
         if msg.i("mission_type") != TYPE_MISSION or not 0 <= seq < len(items):
@@ -378,8 +405,18 @@ class MissionServer:
             self._ack(peer, src, comp, ERROR if seq >= len(items) else INVALID_SEQUENCE)
             self._down = None
             return
-        if self._down is not None:
-            self._down.last_rx_s = now_s
+        down = self._down
+        if down is not None and not self._ap:
+            if seq == down.next_seq:
+                down.next_seq += 1
+            elif seq != down.next_seq - 1:
+                # PX4: "WPM: REJ. CMD: Req. WP was unexpected" (so no pipelined requests)
+                self._host.count("mission_bad_seq")
+                self._down = None
+                self._ack(peer, src, comp, ERROR)
+                return
+        if down is not None:
+            down.last_rx_s = now_s
         it = items[seq]
         common = dict(
             target_system=src,

@@ -187,20 +187,29 @@ class Limits:
 
 
 class SimTime:
-    """Simulated clock: sim_utc = start_utc_s + (monotonic - start_mono) * speed.
+    """Simulated clock: sim_utc = start_utc_s + (monotonic - start_mono_s) * speed.
 
     Like PX4_SIM_SPEED_FACTOR: simulated time runs `speed` times faster than the wall clock.
-    A ground side built on the same (start_utc_s, speed, start_mono) agrees with every
+    A ground side built on the same (start_utc_s, speed, start_mono_s) agrees with every
     time_boot_ms and SYSTEM_TIME the vehicles send. A Fleet counts fault and start times from
     the `elapsed_s()` at which it started; it never re-anchors the clock.
     """
 
-    def __init__(self, speed: float = 1.0, start_utc_s: float | None = None) -> None:
+    def __init__(
+        self,
+        speed: float = 1.0,
+        start_utc_s: float | None = None,
+        *,
+        start_mono_s: float | None = None,
+    ) -> None:
         if speed <= 0:
             raise ValueError("SimTime.speed must be > 0")
         self._speed = float(speed)
         self._start_utc_s = time.time() if start_utc_s is None else float(start_utc_s)
-        self._start_mono = time.monotonic()
+        # Pass the ground clock's monotonic anchor: two clocks with the same start_utc_s but
+        # anchored a few hundred ms apart disagree by that gap times the speed-up, which shows
+        # up as a constant telemetry delay.
+        self._start_mono = time.monotonic() if start_mono_s is None else float(start_mono_s)
 
     @property
     def speed(self) -> float:

@@ -363,7 +363,9 @@ class Vehicle:
         )
         self._mission_climb = False
         self._mission_speed: float | None = None
-        self.mission_server = mp.MissionServer(self, max_items=spec.max_mission_items)
+        self.mission_server = mp.MissionServer(
+            self, max_items=spec.max_mission_items, ardupilot=spec.autopilot == ARDUPILOT
+        )
         # faults
         self._faults = [_FaultState(f) for f in spec.faults]
         self._jam_since: float | None = None

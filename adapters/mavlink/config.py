@@ -47,7 +47,7 @@ class MavlinkConfig:
     )
     min_retry_s: float = setting(
         0.02,
-        "first retransmission timeout of a mission step (doubles per silent retry up "
+        "first retransmission timeout of a mission step (x1.5 per silent retry up "
         "to item_timeout_s): loopback and LAN answer in milliseconds",
         min=0.001,
         unit="s",

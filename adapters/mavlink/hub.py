@@ -47,6 +47,8 @@ _log = logging.getLogger(__name__)
 RawTap = Callable[[str, bytes, float], None]
 
 MAV_MISSION_ACCEPTED = 0
+MAV_MISSION_ERROR = 1
+MAV_MISSION_INVALID_SEQUENCE = 13
 MAV_MISSION_OPERATION_CANCELLED = 15
 MAV_CMD_NAV_LAND = 21
 MAV_CMD_DO_SET_MODE = 176
@@ -58,6 +60,8 @@ MAV_RESULT_IN_PROGRESS = 5
 MAV_FRAME_GLOBAL = 0
 MAV_DATA_STREAM_ALL = 0
 _NAN = math.nan
+_UPLOAD_WINDOW = 8  # at most this many items go out on one upload retry
+_DOWNLOAD_RESTARTS = 2  # a download restarts on a refusal (MISSION_ACK) at most this often
 _PROTOCOL_IDS = frozenset(
     {
         wire.MISSION_REQUEST,
@@ -133,6 +137,7 @@ class HubCounters:
     send_errors: int = 0
     uploads_failed: int = 0
     uploads_verified: int = 0
+    mission_retries: int = 0  # our own timeouts in mission transfers (upload, readback)
 
     def snapshot(self) -> dict[str, int]:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -149,8 +154,10 @@ class _Link:
 
 
 class _Step:
-    """Adaptive retransmission timeout of one transfer: starts at ``min_retry_s``, doubles on
-    every silent retry up to ``item_timeout_s``, back to the smoothed RTT on progress."""
+    """Adaptive retransmission timeout of one transfer: starts at ``min_retry_s``, grows by
+    half on every silent retry up to ``item_timeout_s``, back to 3 x the smoothed RTT (at least
+    ``min_retry_s``) on progress. Loss on a radio link is mostly random, not congestion: a
+    doubling backoff made a few consecutive losses cost more than the rest of the transfer."""
 
     def __init__(self, cfg: MavlinkConfig) -> None:
         self.lo = cfg.min_retry_s
@@ -163,7 +170,7 @@ class _Step:
         self.rto = min(self.hi, max(self.lo, 3.0 * self.srtt))
 
     def backoff(self) -> None:
-        self.rto = min(self.hi, self.rto * 2.0)
+        self.rto = min(self.hi, self.rto * 1.5)
 
 
 class _TransferError(Exception):
@@ -261,6 +268,10 @@ class MavlinkHub:
 
     def local_port(self, link: str) -> int:
         return self._links[link].transport.local_port
+
+    def rcvbuf_bytes(self, link: str) -> int:
+        """The UDP receive buffer the kernel granted ``link`` (0 for TCP and serial)."""
+        return self._links[link].transport.rcvbuf_bytes
 
     async def close(self) -> None:
         for task in self._tasks:
@@ -620,6 +631,16 @@ class MavlinkHub:
         end: float,
         reboots: int,
     ) -> int:
+        """The vehicle drives an upload (it requests item by item and re-requests on its own
+        timer: PX4 every 250 ms, ArduPilot every second), so on a lossy link a lost request
+        would cost a whole vehicle timeout. On our own (RTT-adapted) timeout we therefore send
+        every item the vehicle may be waiting for: from the last one it asked for (our answer
+        may be the lost datagram) to one past the highest we sent (its request may be lost,
+        and items sent ahead may have been taken), twice:
+        PX4 silently ignores an item it did not expect, ArduPilot NACKs it with
+        MAV_MISSION_INVALID_SEQUENCE and keeps receiving, so that NACK is not an error. The
+        first answer to each request goes out once: a clean link sees no extra traffic.
+        Returns 1 + the number of our timeouts."""
         enc = self._encoder(st)
         ts, tc = st.sys_id, st.key.comp_id
         n = len(items)
@@ -627,26 +648,40 @@ class MavlinkHub:
         attempts = 1
         self._to(st, enc.mission_count(ts, tc, n))
         sent_t = time.monotonic()
-        last: int | None = None  # last item sent
-        highest = -1
+        highest = -1  # highest item the vehicle has requested
+        sent_hi = -1  # highest item we have sent (asked for or sent ahead)
+        last_sent = False  # item n-1 went out
         silent = 0
         try:
             while True:
                 self._check(st, reboots, end)
-                m = await self._get(box, min(step.rto, end - time.monotonic()))
+                m = await self._get(box, min(sent_t + step.rto, end) - time.monotonic())
                 self._check(st, reboots, end)
                 if m is None:
                     silent += 1
                     if silent > self.config.max_retries:
+                        if last_sent:
+                            # the vehicle may have taken the last item and its ACK be lost (and
+                            # not every vehicle repeats it): the readback decides
+                            _log.debug("%s: no ACK of the last item; verifying", st.key)
+                            return attempts
                         raise _TransferError(
-                            f"no answer after {silent - 1} retries (last item {last})"
+                            f"no answer after {silent - 1} retries (last item requested "
+                            f"{highest if highest >= 0 else None})"
                         )
                     step.backoff()
                     attempts += 1
-                    if last is None:
+                    self.counters.mission_retries += 1
+                    if highest < 0:
                         self._to(st, enc.mission_count(ts, tc, n))
                     else:
-                        self._to(st, enc.mission_item_int(ts, tc, items[last]))
+                        # the vehicle expects one of highest .. sent_hi + 1
+                        top = min(n - 1, sent_hi + 1, highest + _UPLOAD_WINDOW - 1)
+                        for _ in range(2):  # twice, as the retries of _download
+                            for seq in range(highest, top + 1):
+                                self._to(st, enc.mission_item_int(ts, tc, items[seq]))
+                        sent_hi = max(sent_hi, top)
+                        last_sent = sent_hi == n - 1
                     sent_t = time.monotonic()
                     continue
                 mid = m._header.msgId
@@ -657,20 +692,30 @@ class MavlinkHub:
                     if not 0 <= seq < n:
                         _log.debug("vehicle asked for item %d of %d", seq, n)
                         continue
+                    if seq < highest:
+                        continue  # overtaken by a later request (reordered or re-requested)
                     if seq > highest:
                         step.progress(time.monotonic() - sent_t)
                         highest = seq
                         silent = 0
-                    last = seq
                     self._to(st, enc.mission_item_int(ts, tc, items[seq]))
+                    sent_hi = max(sent_hi, seq)
+                    last_sent = sent_hi == n - 1
                     sent_t = time.monotonic()
                 elif mid == wire.MISSION_ACK:
                     if getattr(m, "mission_type", 0) != 0:
                         continue
                     if m.type == MAV_MISSION_ACCEPTED:
-                        if highest >= n - 1:
+                        if last_sent:
                             return attempts
                         continue  # a stale ACK of an earlier transfer
+                    if m.type == MAV_MISSION_INVALID_SEQUENCE:
+                        continue  # ArduPilot's answer to an item it did not ask for
+                    if m.type == MAV_MISSION_ERROR and last_sent:
+                        # ArduPilot answers a repeated last item with ERROR once the upload
+                        # is complete (its ACCEPTED was lost): the readback decides
+                        _log.debug("%s: ERROR after the last item; verifying by readback", st.key)
+                        return attempts
                     raise _TransferError(f"vehicle rejected the mission: {_mission_result(m.type)}")
         except _TransferError:
             self._cancel(st)
@@ -700,6 +745,7 @@ class MavlinkHub:
         count: int | None = None
         got: list[MissionItem] = []
         silent = 0
+        refusals = 0
 
         def request() -> bytes:
             if count is None:
@@ -711,14 +757,19 @@ class MavlinkHub:
         try:
             while True:
                 self._check(st, reboots, end)
-                m = await self._get(box, min(step.rto, end - time.monotonic()))
+                m = await self._get(box, min(sent_t + step.rto, end) - time.monotonic())
                 self._check(st, reboots, end)
                 if m is None:
                     silent += 1
                     if silent > self.config.max_retries:
                         raise _TransferError(f"no answer to download after {silent - 1} retries")
                     step.backoff()
+                    self.counters.mission_retries += 1
+                    # a retry goes out twice: a lost request or a lost answer costs a whole
+                    # timeout, a duplicate costs one datagram (PX4 answers a repeated request
+                    # for the item it just sent, ArduPilot answers any request)
                     self._to(st, request())
+                    self._to(st, request())  # encoded anew: a signed frame is never replayed
                     sent_t = time.monotonic()
                     continue
                 mid = m._header.msgId
@@ -729,7 +780,19 @@ class MavlinkHub:
                 elif mid == wire.MISSION_ITEM_INT and count is not None and m.seq == len(got):
                     got.append(_item_from(m))
                 elif mid == wire.MISSION_ACK and m.type != MAV_MISSION_ACCEPTED:
-                    raise _TransferError(f"vehicle refused the download: {_mission_result(m.type)}")
+                    # a late answer to an upload item repeated after the upload ended, or the
+                    # vehicle dropped the transfer (PX4 does on a request it did not expect):
+                    # start over; a vehicle that keeps refusing fails the download
+                    refusals += 1
+                    if refusals > _DOWNLOAD_RESTARTS:
+                        raise _TransferError(
+                            f"vehicle refused the download: {_mission_result(m.type)}"
+                        )
+                    count = None
+                    got.clear()
+                    self._to(st, request())
+                    sent_t = time.monotonic()
+                    continue
                 else:
                     continue
                 step.progress(time.monotonic() - sent_t)
@@ -756,8 +819,9 @@ class MavlinkHub:
         that one wait would cost more than the whole transfer)."""
         enc = self._encoder(st)
         step = _Step(self.config)
-        for _ in range(self.config.max_retries + 1):
-            self._to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seq))
+        for attempt in range(self.config.max_retries + 1):
+            for _ in range(1 if attempt == 0 else 2):  # retries twice, as in _download
+                self._to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seq))
             wait_end = min(end, time.monotonic() + step.rto)
             while (left := wait_end - time.monotonic()) > 0:
                 self._check(st, reboots, end)

@@ -32,6 +32,30 @@ class LinkError(OSError):
         self.message = message
 
 
+def set_rcvbuf(sock: socket.socket, want: int, what: str) -> int:
+    """Ask for a ``want``-byte receive buffer and return what the kernel granted
+    (getsockopt; Linux reports twice the usable size it books). SO_RCVBUF is capped at
+    net.core.rmem_max; as root (CAP_NET_ADMIN) SO_RCVBUFFORCE lifts the cap. A smaller
+    buffer than asked is logged once with the sysctl that fixes it."""
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, want)
+    got = int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
+    force = getattr(socket, "SO_RCVBUFFORCE", None)
+    if got < want and force is not None:
+        with contextlib.suppress(OSError):  # EPERM without CAP_NET_ADMIN
+            sock.setsockopt(socket.SOL_SOCKET, force, want)
+            got = int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
+    if got < want:
+        _log.warning(
+            "%s: UDP receive buffer is %d bytes, asked for %d (capped by net.core.rmem_max: "
+            "`sysctl -w net.core.rmem_max=%d`, or run with CAP_NET_ADMIN); bursts may drop",
+            what,
+            got,
+            want,
+            want,
+        )
+    return got
+
+
 class _Stream(asyncio.Protocol):
     def __init__(self, on_chunk: OnChunk, peer: Address) -> None:
         self.on_chunk = on_chunk
@@ -56,6 +80,7 @@ class Transport:
         self.default_peer: Address | None = None
         self.errors = [0]
         self._sock: socket.socket | None = None
+        self.rcvbuf_bytes = 0  # effective UDP receive buffer (getsockopt), 0 for other links
         self._tcp: asyncio.Transport | None = None
         self._fd = -1
 
@@ -66,7 +91,7 @@ class Transport:
             if self.datagram:
                 sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
                 try:
-                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+                    self.rcvbuf_bytes = set_rcvbuf(sock, rcvbuf, str(ep))
                     sock.setblocking(False)
                     if ep.kind is EndpointKind.UDPIN:
                         sock.bind((ep.host, ep.port))
@@ -104,7 +129,7 @@ class Transport:
                 self.errors[0] += 1
                 _log.debug("udp receive on %s: %s", self.endpoint, exc)
                 return
-            on_chunk(data, (addr[0], addr[1]))
+            on_chunk(data, addr)  # (host, port) for AF_INET
 
     def _open_serial(self, on_chunk: OnChunk) -> None:
         ep = self.endpoint

@@ -20,6 +20,7 @@ import asyncio
 import dataclasses
 import itertools
 import logging
+import math
 from collections import deque
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
@@ -242,21 +243,26 @@ class RecommendationRecord:
 
 @dataclass(slots=True)
 class TelemetryStats:
-    """Per-source counts and delays (receipt minus capture, in clock seconds)."""
+    """Per-source counts and delays (receipt minus capture, in clock seconds).
+
+    Delays are not clamped at zero: a negative minimum means the vehicle clock runs ahead of
+    ours (a clock mapping error), which a clamp would hide."""
 
     count: int = 0
     first_capture_t_s: float = 0.0
     last_capture_t_s: float = 0.0
     delay_sum_s: float = 0.0
-    delay_max_s: float = 0.0
+    delay_min_s: float = math.inf
+    delay_max_s: float = -math.inf
 
     def add(self, m: Measurement) -> None:
         if self.count == 0:
             self.first_capture_t_s = m.capture_t_s
         self.count += 1
         self.last_capture_t_s = max(self.last_capture_t_s, m.capture_t_s)
-        delay = max(0.0, m.receipt_t_s - m.capture_t_s)
+        delay = m.receipt_t_s - m.capture_t_s
         self.delay_sum_s += delay
+        self.delay_min_s = min(self.delay_min_s, delay)
         self.delay_max_s = max(self.delay_max_s, delay)
 
     def as_dict(self, speed: float) -> dict[str, float | int]:
@@ -270,7 +276,8 @@ class TelemetryStats:
             "mean_delay_ms": round(1000.0 * scale * self.delay_sum_s / self.count, 3)
             if self.count
             else 0.0,
-            "max_delay_ms": round(1000.0 * scale * self.delay_max_s, 3),
+            "min_delay_ms": round(1000.0 * scale * self.delay_min_s, 3) if self.count else 0.0,
+            "max_delay_ms": round(1000.0 * scale * self.delay_max_s, 3) if self.count else 0.0,
         }
 
 

@@ -109,7 +109,8 @@ async def test_record_a_sitl_vehicle_through_the_hub_and_replay_it(tmp_path: Pat
         link = await hub.add_link("udpin:127.0.0.1:0")
         port = hub.local_port(link)
         spec = VehicleSpec(instance=0, gcs_port=port, bind_port=0, home_alt_amsl_m=488.0)
-        async with Fleet([spec], SimTime(speed, start_utc_s=start)):
+        sim = SimTime(speed, start_utc_s=start, start_mono_s=clock.start_mono_s)
+        async with Fleet([spec], sim):
             await asyncio.sleep(2.0)
     rec.close()
     assert rec.counters.dropped_chunks == 0 and rec.counters.write_errors == 0

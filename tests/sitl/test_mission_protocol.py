@@ -61,12 +61,21 @@ async def test_upload_download_roundtrip_and_old_request(gcs: RawGcs) -> None:
         gcs.send(v.local_port, mav.MAVLink_mission_request_list_message(1, 1, 0))
         cnt = await gcs.wait_type("MISSION_COUNT", start=start)
         assert cnt.count == 4
-        gcs.send(v.local_port, mav.MAVLink_mission_request_int_message(1, 1, 2, 0))
+        gcs.send(v.local_port, mav.MAVLink_mission_request_int_message(1, 1, 0, 0))
         it = await gcs.wait_type("MISSION_ITEM_INT", start=start)
-        assert it.seq == 2 and it.x == round((47.3980 + 0.0004) * 1e7)
-        gcs.send(v.local_port, mav.MAVLink_mission_request_message(1, 1, 1, 0))  # old peer
-        old = await gcs.wait_type("MISSION_ITEM", start=start)
-        assert old.seq == 1 and old.x == pytest.approx(47.3982, abs=1e-6)
+        assert it.seq == 0 and it.x == round(47.3980 * 1e7)
+        for _ in range(2):  # the second one is a re-request (our item was "lost"): answered
+            start = len(gcs.msgs)
+            gcs.send(v.local_port, mav.MAVLink_mission_request_message(1, 1, 1, 0))  # old peer
+            old = await gcs.wait_type("MISSION_ITEM", start=start)
+            assert old.seq == 1 and old.x == pytest.approx(47.3982, abs=1e-6)
+        # PX4 answers only the expected request or a repeat of the last one: no pipelining
+        gcs.send(v.local_port, mav.MAVLink_mission_request_int_message(1, 1, 3, 0))
+        bad = await gcs.wait_type("MISSION_ACK", start=start)
+        assert bad.type == mav.MAV_MISSION_ERROR
+        start = len(gcs.msgs)
+        gcs.send(v.local_port, mav.MAVLink_mission_request_list_message(1, 1, 0))
+        await gcs.wait_type("MISSION_COUNT", start=start)
         gcs.send(v.local_port, mav.MAVLink_mission_request_int_message(1, 1, 9, 0))
         bad = await gcs.wait_type("MISSION_ACK", start=start)
         assert bad.type == mav.MAV_MISSION_ERROR
@@ -91,14 +100,19 @@ async def test_upload_result_codes(gcs: RawGcs) -> None:
         assert ack.type == mav.MAV_MISSION_UNSUPPORTED_FRAME
         ack = await upload(gcs, port, [item(0, 95.0, 8.5, 500)])
         assert ack.type == mav.MAV_MISSION_INVALID_PARAM5_X
-        # out-of-range sequence number during an upload: ERROR, old mission kept
+        # an item it did not ask for during an upload: PX4 ignores it and asks again
         s = len(gcs.msgs)
         gcs.send(port, mav.MAVLink_mission_count_message(1, 1, 2, 0))
         await gcs.wait_type("MISSION_REQUEST_INT", start=s)
+        s = len(gcs.msgs)
         gcs.send(port, item(7, 47.4, 8.5, 500))
-        assert (await gcs.wait_type("MISSION_ACK", start=s)).type == mav.MAV_MISSION_ERROR
+        again = await gcs.wait(
+            lambda m: m.get_type() in ("MISSION_REQUEST_INT", "MISSION_ACK"), start=s
+        )
+        assert again.get_type() == "MISSION_REQUEST_INT" and again.seq == 0
+        assert fleet.vehicles[0].counters["mission_bad_seq"] == 1
         assert fleet.vehicles[0].mission == ()
-        assert fleet.vehicles[0].counters["uploads_failed"] >= 5
+        assert fleet.vehicles[0].counters["uploads_failed"] >= 4
 
 
 async def test_rerequest_timeout_and_repeated_ack(
@@ -156,3 +170,55 @@ async def test_clear_set_current_and_inflight_upload_keeps_index(gcs: RawGcs) ->
         gcs.send(port, mav.MAVLink_mission_clear_all_message(1, 1, 0))
         assert (await gcs.wait_type("MISSION_ACK", start=s)).type == 0
         assert v.mission == () and v.mode == "HOLD"
+
+
+async def test_ardupilot_upload_nacks_unexpected_items_and_keeps_receiving(gcs: RawGcs) -> None:
+    """ArduPilot's MissionItemProtocol: an item it did not ask for gets
+    MAV_MISSION_INVALID_SEQUENCE and the transfer goes on; once the upload is complete a
+    repeated item gets MAV_MISSION_ERROR (not a repeated ACCEPTED, as PX4 sends)."""
+    spec = px4_spec(gcs.port, autopilot="ardupilot")
+    async with sitl.Fleet([spec], sitl.SimTime()) as fleet:
+        v = fleet.vehicles[0]
+        items = square(3)
+        s = len(gcs.msgs)
+        gcs.send(v.local_port, mav.MAVLink_mission_count_message(1, 1, 3, 0))
+        await gcs.wait_type("MISSION_REQUEST_INT", start=s, seq=0)
+        s = len(gcs.msgs)
+        gcs.send(v.local_port, items[1])  # ahead of the request
+        nack = await gcs.wait_type("MISSION_ACK", start=s)
+        assert nack.type == mav.MAV_MISSION_INVALID_SEQUENCE
+        ack = await upload_from(gcs, v.local_port, items, start=s)
+        assert ack.type == mav.MAV_MISSION_ACCEPTED and len(v.mission) == 3
+        s = len(gcs.msgs)
+        gcs.send(v.local_port, items[2])  # as if our ACCEPTED had been lost
+        late = await gcs.wait_type("MISSION_ACK", start=s)
+        assert late.type == mav.MAV_MISSION_ERROR and len(v.mission) == 3
+
+
+async def upload_from(gcs: RawGcs, port: int, items: list[Any], *, start: int) -> Any:
+    """Answer the vehicle's requests from message index ``start`` until its ACCEPTED."""
+    while True:
+        m = await gcs.wait(
+            lambda m: (
+                m.get_type() == "MISSION_REQUEST_INT"
+                or (m.get_type() == "MISSION_ACK" and m.type == mav.MAV_MISSION_ACCEPTED)
+            ),
+            start=start,
+        )
+        start = gcs.last_index
+        if m.get_type() == "MISSION_ACK":
+            return m
+        gcs.send(port, items[m.seq])
+
+
+async def test_ardupilot_rerequests_every_second(gcs: RawGcs) -> None:
+    spec = px4_spec(gcs.port, autopilot="ardupilot")
+    async with sitl.Fleet([spec], sitl.SimTime()) as fleet:
+        v = fleet.vehicles[0]
+        s = len(gcs.msgs)
+        gcs.send(v.local_port, mav.MAVLink_mission_count_message(1, 1, 2, 0))
+        await gcs.wait_type("MISSION_REQUEST_INT", start=s, seq=0)
+        await asyncio.sleep(0.7)  # PX4 would have asked twice more by now
+        assert v.counters["mission_rerequests"] == 0
+        await gcs.wait_type("MISSION_REQUEST_INT", start=gcs.last_index, seq=0)
+        assert v.counters["mission_rerequests"] == 1
