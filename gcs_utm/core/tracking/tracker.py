@@ -586,88 +586,107 @@ class Tracker:
         ``plan_offset_decay_s``), its radius grows by ``plan_sigma_growth_mps``; every other
         track is extrapolated with its filtered velocity and its radius is the filter's
         position covariance propagated (root of the trace). Time is counted from each
-        track's state time, so a stale track's radius keeps growing."""
+        track's state time, so a stale track's radius keeps growing.
+
+        Layout: (N, K) arrays per axis, stacked once at the end (much faster than writing
+        through an (N, K, 4) array). Whichever kind of row is the majority is computed for
+        all rows at once and the minority is written over it: scattering the majority's
+        rows into the result would cost more than computing them."""
         n = self._n
         cfg = self.config
         k = cfg.n_points
         steps = np.arange(k) * cfg.step_s
         times = t_s + steps
-        x = self._x[:n]
-        p = self._p[:n]
         # Time from each track's state to the first point; point k is ahead0 + steps[k]
         # (an outer sum: no (N, K) array of POSIX times is subtracted).
         ahead0 = t_s - self._t[:n]
-        pp = p[:, :, kalman.PP].sum(axis=1)
-        rows, _, dist, tau0 = self._plan_state(x[:, :, kalman.POS], self._t[:n])
-        follow = dist <= self._geom_m[rows] * cfg.plan_follow_factor
+        rows, _, dist, tau0 = self._plan_state(self._x[:n, :, kalman.POS], self._t[:n])
+        follow = dist <= self._geom_m[rows] * self.config.plan_follow_factor
         fr = rows[follow]
-        extrap = np.ones(n, dtype=bool)
-        extrap[fr] = False
-        ex = np.flatnonzero(extrap)
-        # (N, K) arrays per axis, stacked once at the end: much faster than writing through
-        # an (N, K, 4) array or broadcasting over a trailing axis of 3.
-        axes: list[FloatArray] = []
-        sigma: FloatArray
-        if len(fr) < n or n == 0:
-            axes = [np.empty((n, k)) for _ in range(3)]
-            sigma = np.empty((n, k))
-        if len(ex):
-            # Extrapolation only for the tracks that do not follow their plan.
-            tau_x = np.add.outer(ahead0[ex], steps)
-            for axis in range(3):
-                axes[axis][ex] = (
-                    x[ex, axis, kalman.POS, None] + x[ex, axis, kalman.VEL, None] * tau_x
+        is_follow = np.zeros(n, dtype=bool)
+        is_follow[fr] = True
+        ex = np.flatnonzero(~is_follow)
+        if len(fr) * 2 > n:
+            # Rows that do not follow get a placeholder plan (row 0 at its start), are
+            # computed along with the others and then overwritten by extrapolation.
+            plan_rows = np.where(is_follow, self._plan_row[:n], 0)
+            tau_all = np.full(n, self._plans.start_t_s[0])
+            tau_all[fr] = tau0[follow]
+            axes, sigma = self._follow_rows(np.arange(n), plan_rows, tau_all, ahead0, steps)
+            if len(ex):
+                ex_axes, ex_sigma = self._extrapolate_rows(ex, ahead0, steps)
+                for axis in range(3):
+                    axes[axis][ex] = ex_axes[axis]
+                sigma[ex] = ex_sigma
+        else:
+            axes, sigma = self._extrapolate_rows(np.arange(n), ahead0, steps)
+            if len(fr):
+                f_axes, f_sigma = self._follow_rows(
+                    fr, self._plan_row[fr], tau0[follow], ahead0, steps
                 )
-            # Root of the trace of the propagated position covariance, summed over axes.
-            pv = p[ex, :, kalman.PV].sum(axis=1)[:, None]
-            vv = p[ex, :, kalman.VV].sum(axis=1)[:, None]
-            tau2 = tau_x * tau_x
-            var = (
-                pp[ex, None]
-                + 2.0 * pv * tau_x
-                + vv * tau2
-                + (float(self._q.sum()) / 4.0) * (tau2 * tau2)
-            )
-            sigma[ex] = np.sqrt(var)
-        if len(fr):
-            plan_rows = self._plan_row[fr]
-            a0 = ahead0[fr]
-            now = self._plans.follow(plan_rows, tau0[follow], np.zeros(len(fr)), 1.0, 1)
-            ahead_pos = self._plans.follow(plan_rows, tau0[follow], a0, cfg.step_s, k)
-            # The cross-track offset decays as exp(-(a0 + k step) / T): an outer product of
-            # two vectors (no (N, K) exp), added in place.
-            decay_t = cfg.plan_offset_decay_s
-            decay_k = np.exp(-steps / decay_t)
-            decay_0 = np.exp(-a0 / decay_t)
-            # A snapshot older than the track (a0 < 0) must not amplify the offset: those
-            # few rows use exp(-max(a0 + k step, 0) / T) instead.
-            young = np.flatnonzero(a0 < 0.0)
-            capped = np.exp(-np.maximum(np.add.outer(a0[young], steps), 0.0) / decay_t)
-            all_rows = len(fr) == n
-            for axis in range(3):
-                offset = x[fr, axis, kalman.POS] - now[axis][:, 0]
-                value = ahead_pos[axis]
-                plain = value[young]
-                value += np.multiply.outer(offset * decay_0, decay_k)
-                value[young] = plain + offset[young, None] * capped
-                if all_rows:
-                    axes.append(value)
-                else:
-                    axes[axis][fr] = value
-            # sqrt(pp + (growth * (a0 + k step))^2), in place on one (N, K) array.
-            sigma_f = np.add.outer(a0, steps)
-            sigma_f *= cfg.plan_sigma_growth_mps
-            sigma_f *= sigma_f
-            sigma_f += pp[fr, None]
-            np.sqrt(sigma_f, out=sigma_f)
-            if all_rows:
-                sigma = sigma_f
-            else:
-                sigma[fr] = sigma_f
+                for axis in range(3):
+                    axes[axis][fr] = f_axes[axis]
+                sigma[fr] = f_sigma
         points = np.stack([*axes, np.broadcast_to(times, (n, k))], axis=2)
         return PredictedTrajectories(
             t_s=t_s, track_ids=tuple(self._ids[:n]), points=points, sigma_m=sigma
         )
+
+    def _extrapolate_rows(
+        self, ex: IntArray, ahead0: FloatArray, steps: FloatArray
+    ) -> tuple[list[FloatArray], FloatArray]:
+        """Rows ``ex`` extrapolated with the filter's velocity; the radius is the root of the
+        trace of the propagated position covariance."""
+        x = self._x[ex]
+        p = self._p[ex]
+        tau = np.add.outer(ahead0[ex], steps)
+        axes = [
+            x[:, axis, kalman.POS, None] + x[:, axis, kalman.VEL, None] * tau for axis in range(3)
+        ]
+        pp = p[:, :, kalman.PP].sum(axis=1)[:, None]
+        pv = p[:, :, kalman.PV].sum(axis=1)[:, None]
+        vv = p[:, :, kalman.VV].sum(axis=1)[:, None]
+        tau2 = tau * tau
+        var = pp + 2.0 * pv * tau + vv * tau2 + (float(self._q.sum()) / 4.0) * (tau2 * tau2)
+        return axes, np.sqrt(var)
+
+    def _follow_rows(
+        self,
+        fr: IntArray,
+        plan_rows: IntArray,
+        tau0: FloatArray,
+        ahead0: FloatArray,
+        steps: FloatArray,
+    ) -> tuple[list[FloatArray], FloatArray]:
+        """Rows ``fr`` following plans ``plan_rows`` from plan times ``tau0``: the plan
+        positions plus the current cross-track offset decaying as exp(-(a0 + k step) / T);
+        the radius grows linearly with time from the state."""
+        cfg = self.config
+        k = len(steps)
+        a0 = ahead0[fr]
+        now = self._plans.follow(plan_rows, tau0, np.zeros(len(fr)), 1.0, 1)
+        axes = list(self._plans.follow(plan_rows, tau0, a0, cfg.step_s, k))
+        # The decay is an outer product of two vectors (no (N, K) exp), added in place.
+        decay_t = cfg.plan_offset_decay_s
+        decay_k = np.exp(-steps / decay_t)
+        decay_0 = np.exp(-a0 / decay_t)
+        # A snapshot older than the track (a0 < 0) must not amplify the offset: those
+        # few rows use exp(-max(a0 + k step, 0) / T) instead.
+        young = np.flatnonzero(a0 < 0.0)
+        capped = np.exp(-np.maximum(np.add.outer(a0[young], steps), 0.0) / decay_t)
+        for axis in range(3):
+            offset = self._x[fr, axis, kalman.POS] - now[axis][:, 0]
+            value = axes[axis]
+            plain = value[young]
+            value += np.multiply.outer(offset * decay_0, decay_k)
+            value[young] = plain + offset[young, None] * capped
+        # sqrt(pp + (growth * (a0 + k step))^2), in place on one (N, K) array.
+        sigma = np.add.outer(a0, steps)
+        sigma *= cfg.plan_sigma_growth_mps
+        sigma *= sigma
+        sigma += self._p[fr, :, kalman.PP].sum(axis=1)[:, None]
+        np.sqrt(sigma, out=sigma)
+        return axes, sigma
 
     def snapshot(self, t_s: float) -> tuple[dict[TrackId, Track], PredictedTrajectories]:
         """All tracks propagated to ``t_s`` (``Track.t_s == t_s``) and their prediction from
