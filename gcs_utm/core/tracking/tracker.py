@@ -595,7 +595,7 @@ class Tracker:
         n = self._n
         cfg = self.config
         k = cfg.n_points
-        steps = np.arange(k) * cfg.step_s
+        steps: FloatArray = np.arange(k, dtype=np.float64) * cfg.step_s
         times = t_s + steps
         # Time from each track's state to the first point; point k is ahead0 + steps[k]
         # (an outer sum: no (N, K) array of POSIX times is subtracted).
