@@ -34,12 +34,44 @@ _NACP_EPU95_M: dict[int, float] = {
 }
 
 
+# Horizontal containment radius Rc (m) of an airborne position by its type code: DO-260B
+# NIC (Table 2-14); where the NIC supplement bits choose between two radii (TC 11, 13, 16),
+# the larger. It also bounds ADS-B version 0's 95 % radius R_cu of the same type code
+# (NUCp), so it is never optimistic whatever version the transponder speaks.
+_TYPECODE_RC_M: dict[int, float] = {
+    9: 7.5,
+    10: 25.0,
+    11: 185.2,
+    12: 370.4,
+    13: 1111.2,
+    14: 1852.0,
+    15: 3704.0,
+    16: 14816.0,
+    17: 37040.0,
+    20: 7.5,
+    21: 25.0,
+}
+
+
 def nacp_to_eph_m(nac_p: int | None) -> float | None:
-    """NACp category -> 1-sigma horizontal accuracy in metres; ``None`` when unknown (0)."""
+    """NACp category -> 1-sigma horizontal accuracy in metres; ``None`` when unknown (0) or
+    not a NACp (> 11). The bound is a 95 % radius (EPU); the tracker uses ``eph_m`` as the
+    1-sigma of each horizontal axis, and a circular normal of that sigma puts 95 % inside
+    ``sigma * sqrt(-2 ln 0.05)`` = 2.45 sigma."""
     if nac_p is None:
         return None
     epu = _NACP_EPU95_M.get(nac_p)
     return None if epu is None else epu * _EPU95_TO_SIGMA
+
+
+def typecode_to_eph_m(typecode: int) -> float | None:
+    """Fallback 1-sigma horizontal accuracy of an airborne position without a known NACp:
+    its containment radius (see ``_TYPECODE_RC_M``) taken as a 95 % bound. Rc is an
+    integrity bound (the error exceeds it with probability ~1e-7), so the 95 % error is
+    inside it and the sigma is conservative. ``None`` for TC 18/22 (Rc unknown) and for
+    type codes that are not airborne positions."""
+    rc = _TYPECODE_RC_M.get(typecode)
+    return None if rc is None else rc * _EPU95_TO_SIGMA
 
 
 def ground_velocity_ned_mps(

@@ -12,8 +12,13 @@ Only CRC-valid DF17/18 frames are used; other downlink formats are counted as ``
 - Velocity (TC 19 subtypes 1/2: ground speed, true track, vertical rate) is attached to the
   next positions of the same aircraft while younger than ``velocity_max_age_s``; airspeed
   subtypes 3/4 are not a ground velocity and are ignored.
-- Identification (TC 1-4) gives the callsign; operational status (TC 31) and target state
-  (TC 29) give NACp -> ``eph_m``.
+- Identification (TC 1-4) gives the callsign. Horizontal accuracy ``eph_m`` (1-sigma per
+  axis): from the NACp of operational status (TC 31, ADS-B version >= 1; version 0 has no
+  NACp there) or target state (TC 29 subtype 1, DO-260B; subtype 0 has another layout), as
+  its 95 % bound (EPU); until a NACp > 0 is known, from the position's own containment
+  radius by type code (NIC/NUCp), taken as a 95 % bound: conservative
+  (:func:`adapters.adsb.common.typecode_to_eph_m`). The tracker falls back to its
+  ``adsb_eph_m`` default only when neither is known (TC 18/22).
 - Surface positions (TC 5-8) are counted in ``not_adsb`` only when undecodable; otherwise
   skipped: their altitude is the unknown ground elevation.
 """
@@ -32,6 +37,7 @@ from adapters.adsb.common import (
     AdsbCounters,
     ground_velocity_ned_mps,
     nacp_to_eph_m,
+    typecode_to_eph_m,
 )
 from adapters.adsb.config import AdsbConfig
 from adapters.adsb.errors import ModeSFrameError
@@ -207,7 +213,9 @@ class ModeSDecoder:
             return None
         if tc in (29, 31):
             nac_p = d.get("nac_p")
-            if isinstance(nac_p, int):
+            # Only where the field is a NACp: TC 31 from version 1 on, TC 29 subtype 1.
+            has_nacp = d.get("version") in (1, 2) if tc == 31 else d.get("subtype") == 1
+            if has_nacp and isinstance(nac_p, int):
                 ac.eph_m = nacp_to_eph_m(nac_p)
             return None
         if tc in _AIRBORNE_BARO or tc in _AIRBORNE_GNSS:
@@ -247,7 +255,7 @@ class ModeSDecoder:
             lon_deg=float(lon),
             alt_amsl_m=float(alt_ft) * FT_TO_M,
             vel_ned_mps=vel,
-            eph_m=ac.eph_m,
+            eph_m=ac.eph_m if ac.eph_m is not None else typecode_to_eph_m(int(d["typecode"])),
             icao24=icao,
             link=self._link,
             callsign=ac.callsign,

@@ -7,7 +7,11 @@ Records:
   association, WGS84 -> UTM, predict, update). Building the ``Measurement`` objects is the
   adapters' cost and is not timed.
 - ``tracking.predict``: :meth:`Tracker.predict` of all N tracks over the configured horizon
-  (default 61 points: 0..60 s), plan following included (every UAS is on a 10-waypoint plan).
+  (default 61 points: 0..60 s), plan following included (every UAS is on a plan of
+  ``--waypoints`` waypoints, default 10). Steady state: each track's closest segment from the
+  previous cycle seeds the windowed search (``window_share`` = tracks answered that way).
+- ``tracking.predict_cold``: the same without those hints (every track searches every
+  segment of its plan: the first cycle, or tracks far from their plan).
 - ``tracking.snapshot``: :meth:`Tracker.snapshot` (N ``Track`` objects + prediction).
 - ``tracking.filterpy_update``: the reference, one filterpy ``KalmanFilter`` predict+update
   per measurement in a Python loop, to show what the batched filter replaces.
@@ -41,14 +45,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--uas", type=int, default=10_000, help="number of UAS (default 10000)")
     p.add_argument("--runs", type=int, default=9, help="timed repetitions (default 9)")
     p.add_argument("--seed", type=int, default=1, help="random seed of the synthetic fleet")
+    p.add_argument(
+        "--waypoints", type=int, default=10, help="waypoints per plan, >= 2 (default 10)"
+    )
 
 
 def _fleet(
-    frame: LocalFrame, n: int, rng: np.random.Generator
+    frame: LocalFrame, n: int, rng: np.random.Generator, n_wp: int = 10
 ) -> tuple[list[Operation], np.ndarray, np.ndarray]:
-    """N operations on 10-waypoint plans at 10 m/s in a 20 km square; returns the operations,
-    the waypoint positions (N, 10, 3) and times (10,) relative to _T0."""
-    n_wp = 10
+    """N operations on ``n_wp``-waypoint plans at 10 m/s in a 20 km square; returns the
+    operations, the waypoint positions (N, n_wp, 3) and times (n_wp,) relative to _T0."""
     starts = rng.uniform(-10_000, 10_000, size=(n, 1, 2))
     legs = rng.normal(size=(n, n_wp - 1, 2))
     legs = legs / np.linalg.norm(legs, axis=2, keepdims=True) * 100.0  # 100 m legs, 10 s each
@@ -150,9 +156,12 @@ def _filterpy_record(runs: int) -> dict[str, object]:
 def run(args: argparse.Namespace) -> list[dict[str, object]]:
     n = int(args.uas)
     runs = int(args.runs)
+    n_wp = int(args.waypoints)
+    if n_wp < 2:
+        raise ValueError(f"--waypoints must be >= 2, got {n_wp}")
     rng = np.random.default_rng(int(args.seed))
     frame = LocalFrame(37.41, -6.0, 10.0)
-    ops, pos, times = _fleet(frame, n, rng)
+    ops, pos, times = _fleet(frame, n, rng, n_wp)
     warmup = 2
     batches = _batches(frame, pos, times, warmup + runs, rng)
     tracker = Tracker(frame, TrackingConfig())
@@ -163,7 +172,17 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
     ingest_ms = time_runs(lambda: tracker.ingest(next(it)), runs=runs, warmup=warmup)
     counters = tracker.counters
     t_now = _T0 + warmup + runs
+    searches = tracker.plan_searches
     predict_ms = time_runs(lambda: tracker.predict(t_now), runs=runs, warmup=1)
+    after = tracker.plan_searches
+    window = after["window"] - searches["window"]
+    full = after["full"] - searches["full"]
+
+    def cold() -> None:
+        tracker.forget_plan_hints()
+        tracker.predict(t_now)
+
+    cold_ms = time_runs(cold, runs=runs, warmup=1)
     snapshot_ms = time_runs(lambda: tracker.snapshot(t_now), runs=runs, warmup=1)
     points = tracker.config.n_points
     return [
@@ -175,7 +194,16 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
             accepted=counters["accepted"],
             rejected=sum(counters[k] for k in ("out_of_order", "duplicate", "invalid", "gate")),
         ),
-        summary("tracking.predict", n, predict_ms, items_per_run=n, points=points),
+        summary(
+            "tracking.predict",
+            n,
+            predict_ms,
+            items_per_run=n,
+            points=points,
+            waypoints=n_wp,
+            window_share=round(window / max(window + full, 1), 4),
+        ),
+        summary("tracking.predict_cold", n, cold_ms, items_per_run=n, points=points),
         summary("tracking.snapshot", n, snapshot_ms, items_per_run=n, points=points),
         _filterpy_record(runs),
     ]

@@ -3,6 +3,8 @@ its covariance symmetric positive semi-definite."""
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import KalmanFilter
@@ -116,3 +118,71 @@ def test_rows_are_independent() -> None:
         kalman.update_position(xi, pi, z[i : i + 1], r[i : i + 1])
         np.testing.assert_allclose(xb[i], xi[0], rtol=1e-12)
         np.testing.assert_allclose(pb[i], pi[0], rtol=1e-12)
+
+
+def test_as_accurate_as_filterpy_against_exact_arithmetic() -> None:
+    """Against exact rational arithmetic (east axis), on random sequences that include
+    ill-conditioned ones (a long prediction, then a precise position + velocity), the
+    closed form's error stays within an order of magnitude of filterpy's own (both are
+    limited by the conditioning: ~1e-7 relative at worst here). The textbook covariance
+    update P - K P of the joint position + velocity update was 125x worse than filterpy
+    here, and 3 % of the state on other seeds (now P' = K R: no subtraction)."""
+    rng = np.random.default_rng(1)
+    worst_ours = worst_ref = 0.0
+    for _ in range(130):
+        qs = float(rng.choice([0.01, 0.125, 1.0, 5.0, 10.0]))
+        q = np.full(3, qs**2)
+        x = np.zeros((1, 3, 2))
+        x[0, :, 0] = [10.0, -20.0, 100.0]
+        p = np.zeros((1, 3, 3))
+        p[0, :, kalman.PP] = [4.0, 4.0, 9.0]
+        p[0, :, kalman.VV] = 100.0
+        x_full, p_full = kalman.to_full(x, p)
+        kf = _reference(x_full[0], p_full[0])
+        ex = [Fraction(10), Fraction(0)]
+        a, b, c = Fraction(4), Fraction(0), Fraction(100)
+        q_f = Fraction(qs) ** 2
+        for _ in range(int(rng.integers(1, 26))):
+            dt = float(rng.choice([0.0, 0.0, rng.uniform(0, 5), 3.0, 5.0]))
+            z = rng.choice([0.0, 1.0], size=3) * rng.uniform(-1e4, 1e4, size=3)
+            r = rng.choice([0.01, 0.125, 1.0, 45.0, rng.uniform(0.01, 100)], size=3) ** 2
+            with_vel = bool(rng.random() < 0.3)
+            zv = rng.uniform(-50, 50, size=3) * rng.choice([0.0, 1.0])
+            rv = r / 10
+            kalman.predict(x, p, np.array([dt]), q)
+            if with_vel:
+                kalman.update_position_velocity(
+                    x, p, z[None], zv[None], r_m2=r[None], rv_m2ps2=rv[None]
+                )
+                _ref_step(kf, dt, q, z, r, zv, rv)
+            else:
+                kalman.update_position(x, p, z[None], r[None])
+                _ref_step(kf, dt, q, z, r, None, None)
+            # The same step exactly, east axis only (the axes are independent).
+            d = Fraction(dt)
+            a, b, c = (
+                a + 2 * d * b + d * d * c + q_f * d**4 / 4,
+                b + d * c + q_f * d**3 / 2,
+                c + q_f * d * d,
+            )
+            ex = [ex[0] + ex[1] * d, ex[1]]
+            r_f = Fraction(float(r[0]))
+            y1 = Fraction(float(z[0])) - ex[0]
+            if with_vel:
+                rv_f = Fraction(float(rv[0]))
+                s11, s22 = a + r_f, c + rv_f
+                det = s11 * s22 - b * b
+                k11, k12 = (a * s22 - b * b) / det, (b * s11 - a * b) / det
+                k21, k22 = (b * s22 - c * b) / det, (c * s11 - b * b) / det
+                y2 = Fraction(float(zv[0])) - ex[1]
+                ex = [ex[0] + k11 * y1 + k12 * y2, ex[1] + k21 * y1 + k22 * y2]
+                a, b, c = k11 * r_f, k12 * rv_f, k22 * rv_f
+            else:
+                s = a + r_f
+                ex = [ex[0] + a / s * y1, ex[1] + b / s * y1]
+                a, b, c = a * r_f / s, b * r_f / s, c - b * b / s
+            want = np.array([float(ex[0]), float(ex[1])])
+            norm = max(1.0, float(np.abs(want).max()))
+            worst_ours = max(worst_ours, float(np.abs(x[0, 0] - want).max()) / norm)
+            worst_ref = max(worst_ref, float(np.abs(kf.x[[0, 3]] - want).max()) / norm)
+    assert worst_ours <= max(10.0 * worst_ref, 1e-12), (worst_ours, worst_ref)

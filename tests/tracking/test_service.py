@@ -98,3 +98,22 @@ async def test_a_failing_sink_does_not_stop_tracking() -> None:
     await svc.step()
     assert svc.stats["sink_errors"] == 1
     assert svc.tracker.tracks()[TrackId("op1")].updates == 1
+
+
+async def test_reordering_is_repaired_within_a_batch_and_late_ones_are_counted() -> None:
+    svc, clock, _, _ = _service()
+    # Within one batch period: arrival order 1.0 s, 0.5 s; both are used, in capture order.
+    svc.submit(meas(10, 0, 100, T0 + 1.0))
+    svc.submit(meas(5, 0, 100, T0 + 0.5))
+    await svc.step()
+    assert svc.last_ingest is not None
+    assert (svc.last_ingest.accepted, svc.last_ingest.out_of_order) == (2, 0)
+    before = svc.tracker.tracks()[TrackId("op1")]
+    # Arriving after its batch was filtered, an older one is discarded and counted; the
+    # track does not move (no re-filtering from a history buffer).
+    clock.set(T0 + 1.2)
+    svc.submit(meas(500, 0, 100, T0 + 0.8))
+    await svc.step()
+    assert (svc.last_ingest.accepted, svc.last_ingest.out_of_order) == (0, 1)
+    assert svc.tracker.tracks()[TrackId("op1")] == before
+    assert svc.tracker.counters["out_of_order"] == 1

@@ -13,9 +13,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).parent))
-from tracking_helpers import T0, meas, new_tracker, operation, plan_from_local
+from tracking_helpers import FRAME, T0, meas, new_tracker, operation, plan_from_local
 
-from gcs_utm.core.tracking import Tracker, TrackingConfig
+from gcs_utm.core.tracking import Tracker, TrackingConfig, current_waypoint
 from gcs_utm.model import Measurement, MeasurementSource, TrackId
 
 ADSB = MeasurementSource.ADSB
@@ -330,6 +330,95 @@ def test_prediction_follows_the_4d_plan_when_close_and_extrapolates_when_not() -
     pred2 = tr2.predict(T0 + 5)
     assert pred2.points[0, 10, 0] == pytest.approx(150, abs=3)
     assert pred2.points[0, 10, 1] == pytest.approx(-200, abs=3)
+
+
+_TURN = [(0, 0, 100, 0.0), (100, 0, 100, 10.0), (100, 100, 100, 20.0), (0, 100, 100, 30.0)]
+
+
+def _fleet_tracker(which: set[str]) -> Tracker:
+    """Up to three tracks: op1 on its plan (5 m off track), op2 200 m off its plan, and the
+    ADS-B intruder abc123; six seconds of measurements each."""
+    ops = [
+        operation("op1", plan_from_local("op1", [(e, n, a, T0 + t) for e, n, a, t in _TURN])),
+        operation(
+            "op2", plan_from_local("op2", [(e, n, a, T0 + t) for e, n, a, t in _TURN]), sys_id=2
+        ),
+    ]
+    tr = new_tracker()
+    tr.set_operations(ops)
+    for k in range(6):
+        batch = []
+        if "op1" in which:
+            batch.append(meas(10.0 * k, 5.0, 100, T0 + k, eph_m=0.5))
+        if "op2" in which:
+            batch.append(meas(10.0 * k, -200.0, 100, T0 + k, sys_id=2, eph_m=0.5))
+        if "abc123" in which:
+            batch.append(meas(-5.0 * k, 50.0, 300, T0 + k, sys_id=None, icao24="abc123"))
+        tr.ingest(batch)
+    return tr
+
+
+@pytest.mark.parametrize("t_s", [T0 + 2.5, T0 + 5.0, T0 + 9.0, T0 + 40.0])
+def test_each_prediction_row_is_independent_of_the_others(t_s: float) -> None:
+    """Plan-following, extrapolated and intruder rows predicted together equal each track
+    predicted alone (the batched code splits rows by kind; nothing leaks). The times
+    include one before the tracks' state time and one after the plan's end."""
+    together = _fleet_tracker({"op1", "op2", "abc123"}).predict(t_s)
+    for i, tid in enumerate(together.track_ids):
+        alone = _fleet_tracker({str(tid).removeprefix("icao:")}).predict(t_s)
+        assert alone.track_ids == (tid,)
+        np.testing.assert_allclose(together.points[i], alone.points[0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(together.sigma_m[i], alone.sigma_m[0], rtol=0, atol=1e-9)
+
+
+def test_prediction_before_the_state_time_keeps_the_offset_without_amplifying_it() -> None:
+    tr = _fleet_tracker({"op1"})
+    pred = tr.predict(T0 + 2.0)  # 3 s before the track's last measurement
+    # The plan is on north = 0; the track is ~5 m north of it. Before the state time the
+    # offset is held (never grown by exp(+3 s / T)); afterwards it decays.
+    north = pred.points[0, :, 1]
+    offset_now = tr.tracks()[TrackId("op1")].north_m
+    np.testing.assert_allclose(north[:4], offset_now, atol=1e-9)
+    assert np.all(np.abs(north[4:8]) < abs(offset_now))
+
+
+def test_current_waypoint_stays_right_while_flying_a_long_lawn_mower() -> None:
+    """The tracker seeds each search with the previous segment; along a 20-lane pattern
+    flown with noise, every cycle's waypoint equals a fresh full search."""
+    pts: list[tuple[float, float, float, float]] = []
+    t = 0.0
+    for lane in range(20):
+        xs = (0.0, 100.0) if lane % 2 == 0 else (100.0, 0.0)
+        if lane:
+            t += 1.5
+        pts.append((xs[0], 15.0 * lane, 100.0, T0 + t))
+        t += 10.0
+        pts.append((xs[1], 15.0 * lane, 100.0, T0 + t))
+    plan = plan_from_local("op1", pts)
+    tr = new_tracker()
+    tr.set_operations([operation("op1", plan)])
+    rng = np.random.default_rng(5)
+    wt = np.array([p[3] for p in pts])
+    seen = set()
+    for k in range(int(t)):
+        e = float(np.interp(T0 + k, wt, [p[0] for p in pts])) + rng.normal()
+        n = float(np.interp(T0 + k, wt, [p[1] for p in pts])) + rng.normal()
+        tr.ingest([meas(e, n, 100.0, T0 + k, eph_m=1.0)])
+        tracks, _ = tr.snapshot(T0 + k)
+        track = tracks[TrackId("op1")]
+        fresh = current_waypoint(
+            plan,
+            FRAME,
+            east_m=track.east_m,
+            north_m=track.north_m,
+            alt_amsl_m=track.alt_amsl_m,
+            t_s=T0 + k,
+            ambiguity_m=10.0,
+        )
+        assert track.next_waypoint == fresh
+        seen.add(fresh)
+    assert len(seen) >= 35  # it really went down the pattern
+    assert tr.plan_searches["window"] > tr.plan_searches["full"]
 
 
 def test_snapshot_is_consistent_at_one_time() -> None:

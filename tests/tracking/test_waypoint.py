@@ -140,3 +140,118 @@ def test_follow_matches_linear_interpolation_of_the_plan(
                 keep &= np.abs(raw - tj) > 1e-6
             # POSIX times carry ~2e-7 s of rounding; at <= 100 m/s that is < 1e-4 m.
             np.testing.assert_allclose(got[i][keep], want[keep], atol=1e-4)
+
+
+# ---- windowed search from the previous segment ---------------------------------------------
+
+
+def _locate(
+    table: PlanTable, e: float, n: float, t: float, amb: float, hint: int | None
+) -> tuple[int, float, float, int]:
+    wp, dist, tau, seg = table.locate(
+        np.zeros(1, dtype=np.intp),
+        np.array([[e, n, 100.0]]),
+        np.array([T0 + t]),
+        np.array([amb]),
+        hint=None if hint is None else np.array([hint], dtype=np.intp),
+    )
+    return int(wp[0]), float(dist[0]), float(tau[0]), int(seg[0])
+
+
+def test_window_answers_from_the_previous_segment() -> None:
+    table = PlanTable([LOOP], FRAME)
+    # Lap two, hint on the segment it is flying: answered by the window, same as full.
+    assert _locate(table, 50, 1, 45, 5.0, 4)[0] == 5
+    assert table.searches == {"window": 1, "full": 0}
+    assert _locate(table, 50, 1, 45, 5.0, None)[0] == 5
+    assert table.searches == {"window": 1, "full": 1}
+
+
+def test_stale_hint_on_a_revisited_place_falls_back_to_the_full_search() -> None:
+    table = PlanTable([LOOP], FRAME)
+    # The UAS is on lap two at the same place as lap one's first segment; a hint left on
+    # lap one would find the right place at the wrong lap. Its plan time gives it away.
+    assert _locate(table, 50, 1, 45, 5.0, 0)[0] == 5
+    assert table.searches == {"window": 0, "full": 1}
+    # The other way round: on lap one with a hint on lap two.
+    assert _locate(table, 50, 1, 5, 5.0, 5)[0] == 1
+    assert table.searches == {"window": 0, "full": 2}
+
+
+def test_hint_far_from_the_track_falls_back() -> None:
+    table = PlanTable([LAWN], FRAME)
+    # On lane 3 (to wp5) with a hint on lane 1: the window's closest point is 20 m away.
+    assert _locate(table, 100, 41, 54, 5.0, 0)[0] == 5
+    assert table.searches["full"] == 1
+    # Off the plan altogether: full search, as without a hint.
+    got = _locate(table, 100, 300, 54, 5.0, 4)
+    assert got == _locate(table, 100, 300, 54, 5.0, None)
+    assert table.searches == {"window": 0, "full": 3}
+
+
+def _revisiting_plan(rng: np.random.Generator, kind: int) -> FlightPlan:
+    """Lawn-mower with lanes closer than the ambiguity, a loop flown three times, or a
+    random walk with hovers (repeated points): all revisit places."""
+    if kind == 0:
+        pts: list[tuple[float, float]] = []
+        for lane in range(8):
+            xs = (0.0, 120.0) if lane % 2 == 0 else (120.0, 0.0)
+            pts += [(xs[0], 4.0 * lane), (xs[1], 4.0 * lane)]
+    elif kind == 1:
+        square = [(0.0, 0.0), (80.0, 0.0), (80.0, 80.0), (0.0, 80.0)]
+        pts = square * 3 + square[:1]
+    else:
+        steps = rng.normal(size=(25, 2)) * 40.0
+        steps[rng.random(25) < 0.2] = 0.0
+        walk = np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])
+        pts = [(float(a), float(b)) for a, b in walk]
+    t = 0.0
+    out = []
+    for i, (e, n) in enumerate(pts):
+        if i:
+            d = float(np.hypot(e - pts[i - 1][0], n - pts[i - 1][1]))
+            t += d / 10.0 if d > 0 else 3.0
+        out.append((e, n, 100.0, t))
+    return _plan(f"r{kind}", out)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_windowed_search_equals_the_full_search(seed: int) -> None:
+    """Whatever the hint (right, neighbouring, stale, another lap, none), the answer is
+    the full search's: same segment, waypoint and plan time; the distance may be the
+    window's only where that is within the ambiguity (it decides nothing then)."""
+    rng = np.random.default_rng(seed)
+    plans = [_revisiting_plan(rng, kind) for kind in range(3)]
+    table = PlanTable(plans, FRAME)
+    n = 400
+    plan_idx = rng.integers(0, 3, size=n).astype(np.intp)
+    # Positions near the plan at a plan time, flown early/late and off track by a bit.
+    t_true = np.empty(n)
+    pos = np.empty((n, 3))
+    for i, j in enumerate(plan_idx):
+        o, m = int(table.wp_offset[j]), int(table.n_waypoints[j])
+        wt = table.wp_t[o : o + m]
+        t_true[i] = rng.uniform(wt[0], wt[-1])
+        for axis in range(3):
+            pos[i, axis] = np.interp(t_true[i], wt, table.wp_pos[o : o + m, axis])
+    pos += rng.normal(size=(n, 3)) * rng.choice([0.5, 3.0, 15.0], size=(n, 1))
+    t_s = t_true + rng.choice([0.0, 0.0, 4.0, -4.0, 30.0], size=n)
+    amb = rng.choice([0.0, 5.0, 10.0], size=n)
+    _, _, _, right = table.locate(plan_idx, pos, t_s, amb)
+    hint = np.where(
+        rng.random(n) < 0.5,
+        right + rng.integers(-2, 3, size=n),
+        rng.integers(-1, int(table.n_seg.max()), size=n),
+    )
+    hint = np.clip(hint, -1, table.n_seg[plan_idx] - 1)
+    wp_f, d_f, tau_f, seg_f = table.locate(plan_idx, pos, t_s, amb)
+    before = dict(table.searches)
+    wp_w, d_w, tau_w, seg_w = table.locate(plan_idx, pos, t_s, amb, hint=hint)
+    assert table.searches["window"] > before["window"]  # the window path did run
+    np.testing.assert_array_equal(seg_w, seg_f)
+    np.testing.assert_array_equal(wp_w, wp_f)
+    np.testing.assert_array_equal(tau_w, tau_f)
+    differs = d_w != d_f
+    assert np.all(d_w[differs] > d_f[differs])
+    assert np.all(d_w[differs] <= amb[differs])

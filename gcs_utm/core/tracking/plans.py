@@ -20,6 +20,7 @@ zero-length or zero-duration segments are allowed and handled without division b
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -34,12 +35,19 @@ IntArray = npt.NDArray[np.intp]
 # having reached that end's waypoint.
 _REACHED_U = 1.0 - 1e-9
 
+# Windowed search of the closest segment: segments hint - WINDOW_BEHIND .. hint - WINDOW_BEHIND
+# + WINDOW - 1, i.e. the previous segment, the last one and the next two.
+WINDOW = 4
+WINDOW_BEHIND = 1
+
 
 class PlanTable:
     """All plans of the airspace, row j = ``plans[j]``."""
 
     def __init__(self, plans: Sequence[FlightPlan], frame: LocalFrame) -> None:
         self.n_plans = len(plans)
+        # How many tracks locate() answered from their window and from the full search.
+        self.searches: dict[str, int] = {"window": 0, "full": 0}
         counts = np.array([len(p.waypoints) for p in plans], dtype=np.intp)
         self.n_waypoints: IntArray = counts
         total = int(counts.sum())
@@ -99,39 +107,143 @@ class PlanTable:
             self.seg_ta[j, : m - 1] = t[o : o + m - 1]
             self.seg_tb[j, : m - 1] = t[o + 1 : o + m]
             self.seg_valid[j, : m - 1] = True
+        self.n_seg: IntArray = n_seg
+        self._s_max = s_max
+        # Per-axis segment tables for locate(): start point, direction, squared length.
+        d = self.seg_b - self.seg_a
+        self._seg_a_axis = [np.ascontiguousarray(self.seg_a[:, :, a]) for a in range(3)]
+        self._seg_d_axis = [np.ascontiguousarray(d[:, :, a]) for a in range(3)]
+        self.seg_len2: FloatArray = (d * d).sum(axis=2)
+        # A zero-length segment divides 0 by 1: its closest point is its start (u = 0).
+        self._seg_len2_safe: FloatArray = np.where(self.seg_len2 > 0.0, self.seg_len2, 1.0)
+        # The segment that starts at each waypoint as a line in plan-relative time:
+        # position = intercept + t_rel * velocity (for follow()).
+        self._intercept = [
+            self._wp_axis[a] - self._wp_rel_flat * self._seg_vel[a] for a in range(3)
+        ]
 
     def locate(
-        self, plan_idx: IntArray, pos_m: FloatArray, t_s: FloatArray, ambiguity_m: FloatArray
-    ) -> tuple[IntArray, FloatArray, FloatArray]:
+        self,
+        plan_idx: IntArray,
+        pos_m: FloatArray,
+        t_s: FloatArray,
+        ambiguity_m: FloatArray,
+        *,
+        hint: IntArray | None = None,
+        accept_m: FloatArray | None = None,
+    ) -> tuple[IntArray, FloatArray, FloatArray, IntArray]:
         """For N tracks on plans ``plan_idx`` at positions ``pos_m`` (N, 3) and times ``t_s``:
         (current waypoint index within the plan, distance to the plan [m], plan time at the
-        closest point [s])."""
-        a = self.seg_a[plan_idx]
-        d = self.seg_b[plan_idx] - a
-        rel = pos_m[:, None, :] - a
-        len2 = np.einsum("nsk,nsk->ns", d, d)
-        dot = np.einsum("nsk,nsk->ns", rel, d)
-        safe = np.where(len2 > 0.0, len2, 1.0)
-        u = np.clip(np.where(len2 > 0.0, dot / safe, 0.0), 0.0, 1.0)
-        off = rel - u[:, :, None] * d
-        dist = np.sqrt(np.einsum("nsk,nsk->ns", off, off))
-        valid = self.seg_valid[plan_idx]
-        dist = np.where(valid, dist, np.inf)
-        ta = self.seg_ta[plan_idx]
-        tau = ta + u * (self.seg_tb[plan_idx] - ta)
+        closest point [s], closest segment index within the plan).
+
+        ``hint`` (N,): each track's closest segment from a previous call (-1: none). With a
+        hint only the :data:`WINDOW` segments around it are searched, and that answer is
+        kept only when it provably equals the full search's (see :meth:`_window_exact`):
+        the chosen segment is within ``accept_m`` (default ``ambiguity_m``; it must not
+        exceed it) and its plan time is nearer the track time than any plan time outside
+        the window. Every other track -- no hint, off the plan, late or early, moved past
+        the window -- falls back to the search over all segments. The returned distance is
+        then the window's: at most ``accept_m``, and never below the true distance."""
+        n = len(plan_idx)
+        seg = np.zeros(n, dtype=np.intp)
+        u = np.zeros(n)
+        tau = np.zeros(n)
+        dmin = np.zeros(n)
+        todo = np.ones(n, dtype=bool)
+        if hint is not None and self._s_max > WINDOW:
+            accept = ambiguity_m if accept_m is None else np.minimum(accept_m, ambiguity_m)
+            rows = np.flatnonzero(hint >= 0)
+            if len(rows):
+                p = plan_idx[rows]
+                lo = np.clip(hint[rows] - WINDOW_BEHIND, 0, np.maximum(self.n_seg[p] - WINDOW, 0))
+                cols = lo[:, None] + np.arange(WINDOW)
+                s, uu, tt, dd, dc = self._closest(
+                    p, cols, pos_m[rows], t_s[rows], ambiguity_m[rows]
+                )
+                ok = (dc <= accept[rows]) & self._window_exact(p, lo, t_s[rows], tt)
+                done = rows[ok]
+                seg[done], u[done], tau[done], dmin[done] = s[ok], uu[ok], tt[ok], dd[ok]
+                todo[done] = False
+                self.searches["window"] += len(done)
+        rows = np.flatnonzero(todo)
+        if len(rows):
+            p = plan_idx[rows]
+            s, uu, tt, dd, _ = self._closest(p, None, pos_m[rows], t_s[rows], ambiguity_m[rows])
+            seg[rows], u[rows], tau[rows], dmin[rows] = s, uu, tt, dd
+            self.searches["full"] += len(rows)
+        n_wp = self.n_waypoints[plan_idx]
+        # Reached the end of this segment: the UAS now flies to the following waypoint.
+        reached = (u >= _REACHED_U) & (seg + 2 < n_wp)
+        ahead = np.where(reached, seg + 1, seg)
+        waypoint = np.where(n_wp >= 2, ahead + 1, 0).astype(np.intp)
+        return waypoint, dmin, tau, seg
+
+    def _closest(
+        self,
+        plan_idx: IntArray,
+        cols: IntArray | None,
+        pos_m: FloatArray,
+        t_s: FloatArray,
+        ambiguity_m: FloatArray,
+    ) -> tuple[IntArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Closest segment among columns ``cols`` (N, W) of each plan (None: all of them).
+        Returns (segment, u on it, plan time there, min distance, distance of the chosen).
+        Per axis (N, W) arrays: much faster than (N, W, 3) with einsum."""
+        if cols is None:
+
+            def take(table: npt.NDArray[Any]) -> npt.NDArray[Any]:
+                return table[plan_idx]
+
+        else:
+            # Flat indices into the (P, S) tables: one 1-D take each, much faster than
+            # 2-D fancy indexing with (plan, column) pairs.
+            flat = plan_idx[:, None] * self._s_max + cols
+
+            def take(table: npt.NDArray[Any]) -> npt.NDArray[Any]:
+                return np.take(table.ravel(), flat)
+
+        d = [take(self._seg_d_axis[axis]) for axis in range(3)]
+        rel = [pos_m[:, axis, None] - take(self._seg_a_axis[axis]) for axis in range(3)]
+        dot = rel[0] * d[0]
+        dot += rel[1] * d[1]
+        dot += rel[2] * d[2]
+        dot /= take(self._seg_len2_safe)
+        u = np.clip(dot, 0.0, 1.0, out=dot)
+        dist2 = np.zeros_like(dot)
+        for axis in range(3):
+            o = rel[axis] - u * d[axis]
+            o *= o
+            dist2 += o
+        dist = np.where(take(self.seg_valid), np.sqrt(dist2), np.inf)
+        ta = take(self.seg_ta)
+        tau = ta + u * (take(self.seg_tb) - ta)
         dmin = dist.min(axis=1)
         cand = dist <= (dmin + ambiguity_m)[:, None]
         cost = np.where(cand, np.abs(t_s[:, None] - tau), np.inf)
         rows = np.arange(len(plan_idx))
-        seg = np.argmin(cost, axis=1)
-        seg_u = u[rows, seg]
-        seg_tau = tau[rows, seg]
-        n_wp = self.n_waypoints[plan_idx]
-        # Reached the end of this segment: the UAS now flies to the following waypoint.
-        reached = (seg_u >= _REACHED_U) & (seg + 2 < n_wp)
-        seg = np.where(reached, seg + 1, seg)
-        waypoint = np.where(n_wp >= 2, seg + 1, 0).astype(np.intp)
-        return waypoint, dmin, seg_tau
+        k = np.argmin(cost, axis=1)
+        seg = k if cols is None else cols[rows, k]
+        return seg.astype(np.intp), u[rows, k], tau[rows, k], dmin, dist[rows, k]
+
+    def _window_exact(
+        self, plan_idx: IntArray, lo: IntArray, t_s: FloatArray, tau: FloatArray
+    ) -> npt.NDArray[np.bool_]:
+        """True where no segment outside the window ``lo .. lo + WINDOW - 1`` can beat the
+        window's choice at plan time ``tau`` in the full search.
+
+        Outside segments have plan times <= ``t_lo`` (start of the window) or >= ``t_hi``
+        (its end), so their time cost is at least ``min(t - t_lo, t_hi - t)``; a choice
+        with a strictly smaller cost wins every tie-break against them. They could still
+        win by distance only if the choice were farther than (their distance + ambiguity)
+        from the track, which the caller rules out by accepting only choices within the
+        ambiguity."""
+        hi = lo + WINDOW - 1
+        t_lo = np.where(lo > 0, self.seg_ta[plan_idx, lo], -np.inf)
+        last = self.n_seg[plan_idx] - 1
+        t_hi = np.where(hi < last, self.seg_tb[plan_idx, np.minimum(hi, last)], np.inf)
+        margin = np.minimum(t_s - t_lo, t_hi - t_s)
+        out: npt.NDArray[np.bool_] = np.abs(t_s - tau) < margin
+        return out
 
     def follow(
         self,
@@ -145,32 +257,57 @@ class PlanTable:
         k = 0 .. n_points - 1, as three (N, K) arrays (east_m, north_m, alt_amsl_m). Times
         outside the plan are clamped to its first/last waypoint.
 
-        Why not ``searchsorted``: the grid is regular, so the waypoint index of every point
-        is a count of the waypoints whose time has been crossed; each crossing is one integer
-        ``ceil((t_wp - t_first) / step)``, scattered and summed along the row. That and
-        ``take`` on flat per-waypoint tables are several times faster than a binary search and
-        (N, K, 3) fancy indexing."""
+        How: the waypoint at point 0 comes from one binary search per track (``_keys``).
+        On a regular grid the later waypoints are crossed at the integer points
+        ``ceil((t_wp - t_first) / step)``; only those inside the horizon are counted
+        (``bincount`` over all tracks, one pass per waypoint crossed, so the cost does not
+        grow with the plan's length), and a running sum gives the waypoint of every point.
+        The position is then ``intercept[wp] + t * velocity[wp]`` (the segment line written
+        in plan-relative time): two gathers, one multiply, one add per axis."""
         n = len(plan_idx)
+        if n == 0:
+            empty = np.zeros((0, n_points))
+            return empty, empty.copy(), empty.copy()
         start = self.start_t_s[plan_idx]
         dur = self.end_t_s[plan_idx] - start
         first = (tau0_s - start) + first_ahead_s  # plan-relative time of point 0
-        ks = np.arange(n_points, dtype=np.float64)
-        rel = np.clip(first[:, None] + ks[None, :] * step_s, 0.0, dur[:, None])
-        # Index of the first point at or after each waypoint's time; waypoint 0 (time 0) is
-        # always crossed because rel >= 0.
-        wp_rel = self._wp_rel_pad[plan_idx]  # (N, M), +inf padding never crossed
-        cross = np.ceil((wp_rel - first[:, None]) / step_s)
-        cross = np.clip(np.nan_to_num(cross, posinf=n_points), 0, n_points).astype(np.intp)
-        counts = np.zeros((n, n_points + 1), dtype=np.intp)
-        np.add.at(counts, (np.repeat(np.arange(n), cross.shape[1]), cross.ravel()), 1)
-        # Before the plan starts no waypoint is crossed yet; the clamped time sits on wp 0.
-        idx = np.maximum(np.cumsum(counts[:, :n_points], axis=1), 1)
-        i0 = (self.wp_offset[plan_idx][:, None] + idx - 1).ravel()
-        dt = rel.ravel() - np.take(self._wp_rel_flat, i0)
+        offset = self.wp_offset[plan_idx]
+        last = offset + self.n_waypoints[plan_idx] - 1
+        # Waypoint of point 0: the last one whose time is <= first (a repeated time: the later
+        # one, as np.interp); before the plan starts, the first waypoint.
+        key = np.minimum(first, dur) + plan_idx * self._stride
+        i_start = np.clip(np.searchsorted(self._keys, key, side="right") - 1, offset, last)
+        i_start = np.where(first < 0.0, offset, i_start).astype(np.intp)
+        row_base = np.arange(n, dtype=np.intp) * (n_points + 1)
+        parts: list[IntArray] = []
+        nxt = i_start + 1
+        active = np.flatnonzero(nxt <= last)
+        while len(active):
+            crossing = np.ceil((self._wp_rel_flat[nxt[active]] - first[active]) / step_s)
+            inside = crossing < n_points
+            active = active[inside]
+            k = np.maximum(crossing[inside], 0.0).astype(np.intp)
+            parts.append(row_base[active] + k)
+            nxt[active] += 1
+            active = active[nxt[active] <= last[active]]
+        if parts:
+            counts = np.bincount(np.concatenate(parts), minlength=n * (n_points + 1))
+            counts = counts.reshape(n, n_points + 1)[:, :n_points]
+            idx = np.cumsum(counts, axis=1)
+            idx += i_start[:, None]
+        else:
+            idx = np.repeat(i_start[:, None], n_points, axis=1)
+        rel = np.add.outer(first, np.arange(n_points) * step_s)
+        # Clamp to the plan only the rows that leave it (before its start or after its end).
+        leave = np.flatnonzero((first < 0.0) | (rel[:, -1] > dur))
+        if len(leave):
+            rel[leave] = np.clip(rel[leave], 0.0, dur[leave, None])
         out = []
         for axis in range(3):
-            pos = np.take(self._wp_axis[axis], i0) + dt * np.take(self._seg_vel[axis], i0)
-            out.append(pos.reshape(n, n_points))
+            pos = np.take(self._seg_vel[axis], idx)
+            pos *= rel
+            pos += np.take(self._intercept[axis], idx)
+            out.append(pos)
         return out[0], out[1], out[2]
 
 
@@ -187,7 +324,7 @@ def current_waypoint(
     """Index in ``plan.waypoints`` of the waypoint a UAS at this position and time is flying
     to (see the module docstring). ``ambiguity_m`` is typically the flight geometry."""
     table = PlanTable([plan], frame)
-    wp, _, _ = table.locate(
+    wp, _, _, _ = table.locate(
         np.zeros(1, dtype=np.intp),
         np.array([[east_m, north_m, alt_amsl_m]]),
         np.array([t_s]),

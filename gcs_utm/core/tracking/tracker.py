@@ -147,6 +147,9 @@ class Tracker:
         self._stale = np.zeros(0, dtype=bool)
         self._plan_row = np.zeros(0, dtype=np.intp)
         self._geom_m = np.zeros(0)
+        # Closest plan segment found by the last locate (-1: none): the windowed search
+        # starts there (see PlanTable.locate). A cache only: never changes a result.
+        self._seg_hint = np.zeros(0, dtype=np.intp)
         self._ids: list[TrackId] = []
         self._op_ids: list[OperationId | None] = []
         self._icao: list[Icao24 | None] = []
@@ -185,6 +188,7 @@ class Tracker:
         self._by_icao = {op.icao24: op.id for op in ops if op.icao24 is not None}
         self._plans = PlanTable([op.plan for op in ops], self.frame)
         self._plan_of_op = {op.id: j for j, op in enumerate(ops)}
+        self._seg_hint[:] = -1
         for row in range(self._n):
             op_id = self._op_ids[row]
             j = self._plan_of_op.get(op_id, -1) if op_id is not None else -1
@@ -234,6 +238,7 @@ class Tracker:
         self._stale = grown(self._stale)
         self._plan_row = grown(self._plan_row, -1)
         self._geom_m = grown(self._geom_m)
+        self._seg_hint = grown(self._seg_hint, -1)
         self._cap = cap
 
     def _new_row(self, ident: _Identity) -> int:
@@ -252,13 +257,14 @@ class Tracker:
         op = self._ops.get(ident.operation_id) if ident.operation_id is not None else None
         self._plan_row[row] = self._plan_of_op[op.id] if op is not None else -1
         self._geom_m[row] = op.flight_geometry_m if op is not None else 0.0
+        self._seg_hint[row] = -1
         return row
 
     def _compact(self, keep: npt.NDArray[np.bool_]) -> None:
         idx = np.flatnonzero(keep)
         for name in (
             "_x", "_p", "_t", "_src_t", "_updates", "_gate_fails", "_coop", "_stale",
-            "_plan_row", "_geom_m",
+            "_plan_row", "_geom_m", "_seg_hint",
         ):  # fmt: skip
             arr = getattr(self, name)
             arr[: len(idx)] = arr[idx]
@@ -493,13 +499,32 @@ class Tracker:
         if len(rows) == 0:
             empty = np.zeros(0)
             return rows, np.zeros(0, dtype=np.intp), empty, empty
-        wp, dist, tau = self._plans.locate(
+        cfg = self.config
+        geom = self._geom_m[rows]
+        wp, dist, tau, seg = self._plans.locate(
             self._plan_row[rows],
             pos[rows],
             t_s[rows],
-            self._geom_m[rows] * self.config.plan_ambiguity_factor,
+            geom * cfg.plan_ambiguity_factor,
+            hint=self._seg_hint[rows],
+            # A window answer within this distance is exact, and it is also within the
+            # plan-following distance, so predict() decides as with the full search.
+            accept_m=geom * min(cfg.plan_ambiguity_factor, cfg.plan_follow_factor),
         )
+        self._seg_hint[rows] = seg
         return rows, wp, dist, tau
+
+    @property
+    def plan_searches(self) -> dict[str, int]:
+        """How many current-waypoint searches were answered from the window around the
+        previous segment and how many searched the whole plan (since the last
+        :meth:`set_operations`)."""
+        return dict(self._plans.searches)
+
+    def forget_plan_hints(self) -> None:
+        """Drop every track's previous segment: the next search covers whole plans (what
+        the first cycle does; the benchmark times it)."""
+        self._seg_hint[:] = -1
 
     def _make_tracks(
         self, rows_t: FloatArray, pos: FloatArray, vel: FloatArray, pos_var: FloatArray
@@ -561,71 +586,107 @@ class Tracker:
         ``plan_offset_decay_s``), its radius grows by ``plan_sigma_growth_mps``; every other
         track is extrapolated with its filtered velocity and its radius is the filter's
         position covariance propagated (root of the trace). Time is counted from each
-        track's state time, so a stale track's radius keeps growing."""
+        track's state time, so a stale track's radius keeps growing.
+
+        Layout: (N, K) arrays per axis, stacked once at the end (much faster than writing
+        through an (N, K, 4) array). Whichever kind of row is the majority is computed for
+        all rows at once and the minority is written over it: scattering the majority's
+        rows into the result would cost more than computing them."""
         n = self._n
         cfg = self.config
         k = cfg.n_points
-        times = t_s + np.arange(k) * cfg.step_s
-        x = self._x[:n]
-        p = self._p[:n]
-        # (N, K) arrays per axis, stacked once at the end: much faster than writing through
-        # an (N, K, 4) array or broadcasting over a trailing axis of 3.
-        tau = times[None, :] - self._t[:n, None]
-        pp = p[:, :, kalman.PP].sum(axis=1)[:, None]
-        rows, _, dist, tau0 = self._plan_state(x[:, :, kalman.POS], self._t[:n])
-        follow = dist <= self._geom_m[rows] * cfg.plan_follow_factor
+        steps: FloatArray = np.arange(k, dtype=np.float64) * cfg.step_s
+        times = t_s + steps
+        # Time from each track's state to the first point; point k is ahead0 + steps[k]
+        # (an outer sum: no (N, K) array of POSIX times is subtracted).
+        ahead0 = t_s - self._t[:n]
+        rows, _, dist, tau0 = self._plan_state(self._x[:n, :, kalman.POS], self._t[:n])
+        follow = dist <= self._geom_m[rows] * self.config.plan_follow_factor
         fr = rows[follow]
-        extrap = np.ones(n, dtype=bool)
-        extrap[fr] = False
-        ex = np.flatnonzero(extrap)
-        axes = [np.empty((n, k)) for _ in range(3)]
-        sigma = np.empty((n, k))
-        if len(ex):
-            # Extrapolation only for the tracks that do not follow their plan.
-            tau_x = tau[ex]
-            for axis in range(3):
-                axes[axis][ex] = (
-                    x[ex, axis, kalman.POS, None] + x[ex, axis, kalman.VEL, None] * tau_x
+        is_follow = np.zeros(n, dtype=bool)
+        is_follow[fr] = True
+        ex = np.flatnonzero(~is_follow)
+        if len(fr) * 2 > n:
+            # Rows that do not follow get a placeholder plan (row 0 at its start), are
+            # computed along with the others and then overwritten by extrapolation.
+            plan_rows = np.where(is_follow, self._plan_row[:n], 0)
+            tau_all = np.full(n, self._plans.start_t_s[0])
+            tau_all[fr] = tau0[follow]
+            axes, sigma = self._follow_rows(np.arange(n), plan_rows, tau_all, ahead0, steps)
+            if len(ex):
+                ex_axes, ex_sigma = self._extrapolate_rows(ex, ahead0, steps)
+                for axis in range(3):
+                    axes[axis][ex] = ex_axes[axis]
+                sigma[ex] = ex_sigma
+        else:
+            axes, sigma = self._extrapolate_rows(np.arange(n), ahead0, steps)
+            if len(fr):
+                f_axes, f_sigma = self._follow_rows(
+                    fr, self._plan_row[fr], tau0[follow], ahead0, steps
                 )
-            # Root of the trace of the propagated position covariance, summed over axes.
-            pv = p[ex, :, kalman.PV].sum(axis=1)[:, None]
-            vv = p[ex, :, kalman.VV].sum(axis=1)[:, None]
-            tau2 = tau_x * tau_x
-            var = (
-                pp[ex] + 2.0 * pv * tau_x + vv * tau2 + (float(self._q.sum()) / 4.0) * (tau2 * tau2)
-            )
-            sigma[ex] = np.sqrt(var)
-        if len(rows) and len(fr):
-            plan_rows = self._plan_row[fr]
-            ahead0 = tau[fr, 0]
-            now = self._plans.follow(plan_rows, tau0[follow], np.zeros(len(fr)), 1.0, 1)
-            ahead_pos = self._plans.follow(plan_rows, tau0[follow], ahead0, cfg.step_s, k)
-            # exp(-(ahead0 + k step) / T) as an outer product of two vectors (no (N, K)
-            # exp); capped at 1 so a snapshot older than the track does not amplify.
-            steps = np.arange(k) * cfg.step_s
-            decay = np.minimum(
-                np.exp(-ahead0 / cfg.plan_offset_decay_s)[:, None]
-                * np.exp(-steps / cfg.plan_offset_decay_s)[None, :],
-                1.0,
-            )
-            all_rows = len(fr) == n
-            for axis in range(3):
-                offset = x[fr, axis, kalman.POS] - now[axis][:, 0]
-                value = ahead_pos[axis] + offset[:, None] * decay
-                if all_rows:
-                    axes[axis] = value
-                else:
-                    axes[axis][fr] = value
-            growth = cfg.plan_sigma_growth_mps * tau[fr]
-            sigma_f = np.sqrt(pp[fr] + growth * growth)
-            if all_rows:
-                sigma = sigma_f
-            else:
-                sigma[fr] = sigma_f
+                for axis in range(3):
+                    axes[axis][fr] = f_axes[axis]
+                sigma[fr] = f_sigma
         points = np.stack([*axes, np.broadcast_to(times, (n, k))], axis=2)
         return PredictedTrajectories(
             t_s=t_s, track_ids=tuple(self._ids[:n]), points=points, sigma_m=sigma
         )
+
+    def _extrapolate_rows(
+        self, ex: IntArray, ahead0: FloatArray, steps: FloatArray
+    ) -> tuple[list[FloatArray], FloatArray]:
+        """Rows ``ex`` extrapolated with the filter's velocity; the radius is the root of the
+        trace of the propagated position covariance."""
+        x = self._x[ex]
+        p = self._p[ex]
+        tau = np.add.outer(ahead0[ex], steps)
+        axes = [
+            x[:, axis, kalman.POS, None] + x[:, axis, kalman.VEL, None] * tau for axis in range(3)
+        ]
+        pp = p[:, :, kalman.PP].sum(axis=1)[:, None]
+        pv = p[:, :, kalman.PV].sum(axis=1)[:, None]
+        vv = p[:, :, kalman.VV].sum(axis=1)[:, None]
+        tau2 = tau * tau
+        var = pp + 2.0 * pv * tau + vv * tau2 + (float(self._q.sum()) / 4.0) * (tau2 * tau2)
+        return axes, np.sqrt(var)
+
+    def _follow_rows(
+        self,
+        fr: IntArray,
+        plan_rows: IntArray,
+        tau0: FloatArray,
+        ahead0: FloatArray,
+        steps: FloatArray,
+    ) -> tuple[list[FloatArray], FloatArray]:
+        """Rows ``fr`` following plans ``plan_rows`` from plan times ``tau0``: the plan
+        positions plus the current cross-track offset decaying as exp(-(a0 + k step) / T);
+        the radius grows linearly with time from the state."""
+        cfg = self.config
+        k = len(steps)
+        a0 = ahead0[fr]
+        now = self._plans.follow(plan_rows, tau0, np.zeros(len(fr)), 1.0, 1)
+        axes = list(self._plans.follow(plan_rows, tau0, a0, cfg.step_s, k))
+        # The decay is an outer product of two vectors (no (N, K) exp), added in place.
+        decay_t = cfg.plan_offset_decay_s
+        decay_k = np.exp(-steps / decay_t)
+        decay_0 = np.exp(-a0 / decay_t)
+        # A snapshot older than the track (a0 < 0) must not amplify the offset: those
+        # few rows use exp(-max(a0 + k step, 0) / T) instead.
+        young = np.flatnonzero(a0 < 0.0)
+        capped = np.exp(-np.maximum(np.add.outer(a0[young], steps), 0.0) / decay_t)
+        for axis in range(3):
+            offset = self._x[fr, axis, kalman.POS] - now[axis][:, 0]
+            value = axes[axis]
+            plain = value[young]
+            value += np.multiply.outer(offset * decay_0, decay_k)
+            value[young] = plain + offset[young, None] * capped
+        # sqrt(pp + (growth * (a0 + k step))^2), in place on one (N, K) array.
+        sigma = np.add.outer(a0, steps)
+        sigma *= cfg.plan_sigma_growth_mps
+        sigma *= sigma
+        sigma += self._p[fr, :, kalman.PP].sum(axis=1)[:, None]
+        np.sqrt(sigma, out=sigma)
+        return axes, sigma
 
     def snapshot(self, t_s: float) -> tuple[dict[TrackId, Track], PredictedTrajectories]:
         """All tracks propagated to ``t_s`` (``Track.t_s == t_s``) and their prediction from
