@@ -193,6 +193,7 @@ class TacticalDeconfliction:
             fences=fences,
             neighbours=nbs,
             priority_weight=weight,
+            priority_levels=max(0, op.priority - lowest_priority),
             abandons=abandons,
             spherical=self.monitoring.spherical,
             config=self.config,
@@ -421,7 +422,8 @@ class TacticalDeconfliction:
                 Dropped(operation_id=op.id, maneuver=Maneuver.KEEP_PLAN, reason="; ".join(flags))
             )
             return None
-        sc = self._score(lp, lp, op, fences, outsiders, lowest, abandons=False)
+        # Keeping the plan moves nothing: no priority price (the score's cost is then 0).
+        sc = self._score(lp, lp, op, fences, outsiders, op.priority, abandons=False)
         return Alternative(
             operation_id=op.id,
             maneuver=Maneuver.KEEP_PLAN,
@@ -469,7 +471,23 @@ class TacticalDeconfliction:
             [dt, np.hypot(dd[:, 0], dd[:, 1]) / speed, np.abs(dd[:, 2]) / climb]
         )
         t = np.concatenate([[cand.t[0]], cand.t[0] + np.cumsum(need)])
-        return LocalPlan(cand.e, cand.n, cand.z, t)
+        out = LocalPlan(cand.e, cand.n, cand.z, t)
+        goal = lp.xyz()[-1]
+        off = xyz[-1] - goal
+        if float(np.linalg.norm(off)) > 1e-3:
+            # The plan ended before the cord could ramp back: fly back to the filed final
+            # waypoint (cruise speed, climb rate) so the alternative keeps the destination.
+            dt_back = max(
+                float(np.hypot(off[0], off[1])) / op.cruise_speed_mps,
+                abs(float(off[2])) / op.max_climb_rate_mps,
+            )
+            out = LocalPlan(
+                np.append(out.e, goal[0]),
+                np.append(out.n, goal[1]),
+                np.append(out.z, goal[2]),
+                np.append(out.t, out.t[-1] + dt_back),
+            )
+        return out
 
     def _timing(  # noqa: PLR0917 - private helper, called positionally
         self,
