@@ -578,3 +578,44 @@ def test_go_down_under_a_crossing_is_not_free() -> None:
     # A deeper deviation costs more: go_up needs to climb above the fixed wing's 100 m AGL.
     others = [a.cost for a in alts[OperationId("UAS1")] if a.maneuver is not Maneuver.KEEP_PLAN]
     assert min(others) > 0.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    offset=st.tuples(
+        st.floats(min_value=-120.0, max_value=120.0),
+        st.floats(min_value=-120.0, max_value=120.0),
+        st.floats(min_value=-40.0, max_value=40.0),
+    ),
+    bend=st.tuples(
+        st.floats(min_value=-80.0, max_value=80.0), st.floats(min_value=-30.0, max_value=30.0)
+    ),
+    speed_b=st.floats(min_value=2.0, max_value=40.0),
+    sphere=st.booleans(),
+)
+def test_separation_screen_never_contradicts_monitoring(
+    offset: tuple[float, float, float],
+    bend: tuple[float, float],
+    speed_b: float,
+    sphere: bool,
+) -> None:
+    """The sampled screen that spares EM's compatibility test Monitoring's exact check is
+    sound both ways: 'clear' only when Monitoring finds no loss, 'broken' only when it does."""
+    from gcs_utm.core.deconfliction.geometry import separation_screen
+
+    ox, oy, oz = offset
+    a = sc.make_operation("A", [(-300, 0, 100), (0, bend[0], 100 + bend[1]), (300, 0, 100)])
+    b = sc.make_operation(
+        "B", [(ox - 300, oy + 60, 100 + oz), (ox + 300, oy - 60, 100 + oz)], speed_mps=speed_b
+    )
+    mon = MonitoringConfig(separation_mode="sphere" if sphere else "cylinder")
+    h, v = mon.effective_minima(a.operational_volume_m, b.operational_volume_m)
+    broken, clear = separation_screen(
+        plan_to_local(a.plan, sc.FRAME), plan_to_local(b.plan, sc.FRAME), h, v, spherical=sphere
+    )
+    exact = plan_vs_plans(a.plan, a, [b], sc.FRAME, mon)
+    assert not (broken and clear)
+    if clear:
+        assert exact == []
+    if broken:
+        assert exact != []

@@ -93,6 +93,25 @@ def distance_to_polyline(points: FloatArray, vertices: FloatArray) -> FloatArray
     return np.asarray(np.sqrt(np.einsum("nsj,nsj->ns", d, d).min(axis=1)), dtype=np.float64)
 
 
+def _segment_distances(points: FloatArray, polylines: Sequence[FloatArray]) -> list[FloatArray]:
+    """For each polyline (M_i, D) with M_i >= 2, the distance of each point (N, D) to it: one
+    vectorised pass over the segments of all polylines together."""
+    starts = np.concatenate([v[:-1] for v in polylines])
+    ab = np.concatenate([v[1:] - v[:-1] for v in polylines])  # (S, D)
+    ll = np.maximum((ab * ab).sum(axis=1), 1e-12)
+    ap = points[:, None, :] - starts[None, :, :]  # (N, S, D)
+    u = np.minimum(np.maximum((ap * ab).sum(axis=2) / ll, 0.0), 1.0)
+    d = ap - u[:, :, None] * ab[None, :, :]
+    d2 = (d * d).sum(axis=2)
+    out = []
+    k = 0
+    for v in polylines:
+        m = len(v) - 1
+        out.append(np.sqrt(d2[:, k : k + m].min(axis=1)))
+        k += m
+    return out
+
+
 def _prox(x: float, factor: float) -> float:
     return float(np.clip((factor - x) / (factor - 1.0), 0.0, 1.0))
 
@@ -111,25 +130,31 @@ def score(
     spherical: bool,
     config: DeconflictionConfig,
 ) -> Score:
-    extra_d = max(0.0, new.length_m() - old.length_m())  # m, 3D
+    new_xyz = new.xyz()
+    new_len = float(np.sqrt((np.diff(new_xyz, axis=0) ** 2).sum(axis=1)).sum())
+    extra_d = max(0.0, new_len - old.length_m())  # m, 3D
     extra_t = max(0.0, float(new.t[-1] - old.t[-1]))  # s
 
     span = float(new.t[-1] - new.t[0])
     steps = max(2, int(span / SAMPLE_DT_S) + 1)
     times = np.linspace(float(new.t[0]), float(new.t[-1]), steps)
     pos, _ = new.sample(times)
-    seg = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+    seg = np.sqrt((np.diff(pos, axis=0) ** 2).sum(axis=1))
     mid = 0.5 * (pos[1:] + pos[:-1])
     tmid = 0.5 * (times[1:] + times[:-1])
 
-    # m, 3D: farthest point of the new path from the old path (the new plan's own vertices
-    # are added to the samples so a short spike between samples is not missed).
+    # m, 3D: the farthest point of the new path from the old path (the new plan's own
+    # vertices are added to the sampled midpoints so a short spike is not missed), and
+    # the distance of every sampled stretch from the filed plan (outside the OV). One pass.
+    nm = mid.shape[0]
+    probe = np.concatenate([mid, new_xyz])
+    lines = [v for v in (old.xyz(), filed.xyz()) if len(v) >= 2]
+    dists = _segment_distances(probe, lines) if lines else []
     offset = 0.0
     if len(old) >= 2:
-        probe = np.concatenate([pos, new.xyz()])
-        offset = float(distance_to_polyline(probe, old.xyz()).max())
+        offset = float(dists[0][nm:].max())
     elif len(old) == 1:
-        offset = float(np.linalg.norm(pos - old.xyz()[0], axis=1).max())
+        offset = float(np.sqrt(((probe[nm:] - old.xyz()[0]) ** 2).sum(axis=1)).max())
     cost = priority_weight * (
         extra_d / config.cost_distance_scale_m
         + extra_t / config.cost_time_scale_s
@@ -154,7 +179,7 @@ def score(
 
     outside_m = 0.0
     if len(filed) >= 2:
-        dist_plan = distance_to_polyline(mid, filed.xyz())
+        dist_plan = dists[-1][:nm]
         outside_m = float(np.sum(seg[dist_plan > ov_radius_m]))
 
     min_ratio = float("inf")
