@@ -691,6 +691,9 @@ def build_report(
                 "uploaded": record.uploaded,
                 "verified": record.verified,
                 "error": record.error,
+                # every version's proposal and state change, so a rejected or expired version
+                # replaced by a newer one under the same id stays visible
+                "history": [[_rel(t, t0), text] for t, text in record.history],
                 "alternatives": alts,
             }
         )

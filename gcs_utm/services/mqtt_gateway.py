@@ -6,8 +6,9 @@ refuses an operator that does not fly the UAS); flight plans become operations i
 airspace; start/stop change the operation's state.
 Out (this is also an :class:`~gcs_utm.services.usm.OperatorPort`, a threat sink and a geofence
 listener of the USM): recommendations and their state changes to the operator of the
-operation, alerts for new threats, the active geofence set (retained), and traffic at
-``traffic_rate_hz`` from :meth:`MqttGateway.run`.
+operation, alerts for new threats, the active geofence set (retained; republished when it
+changes and when one of its geofences expires, so a late or remote subscriber never keeps an
+expired geofence), and traffic at ``traffic_rate_hz`` from :meth:`MqttGateway.run`.
 
 Invariants:
 - the operator of an inbound message is the topic's operator level (set by the codec); an
@@ -50,6 +51,10 @@ _log = logging.getLogger(__name__)
 
 TrackSource = Callable[[], Mapping[TrackId, Track]]
 
+EXPIRY_SLACK_S = 0.01
+"""A geofence is active up to and including its ``end_t_s``: the set is republished this long
+after the earliest end, when that geofence is strictly expired."""
+
 
 class MqttGateway:
     """``gw = MqttGateway(usm, config, tracks=...)``; ``gw.attach()`` wires it into the USM;
@@ -68,6 +73,8 @@ class MqttGateway:
         self._tracks = tracks
         self.bridge = bridge or MqttBridge(config, usm.clock, self)
         self._alerted: set[ThreatId] = set()
+        self._next_expiry_s: float | None = None  # earliest end of the published set
+        self._republish = asyncio.Event()  # the published set changed: re-arm the expiry
 
     def attach(self) -> None:
         """Register as operator port, threat sink and geofence listener of the USM."""
@@ -81,8 +88,32 @@ class MqttGateway:
         self.publish_geofences(self.usm.airspace.geofences())
         async with asyncio.TaskGroup() as tg:
             tg.create_task(self.bridge.run(), name="mqtt-bridge")
+            tg.create_task(self._expiry_loop(), name="mqtt-geofence-expiry")
             if self._tracks is not None:
                 tg.create_task(self._traffic_loop(self._tracks), name="mqtt-traffic")
+
+    async def _expiry_loop(self) -> None:
+        """Republish the retained geofence set when its earliest geofence expires (on the
+        injected clock); a change of the set in between re-arms the wait."""
+        while True:
+            self._republish.clear()
+            due = self._next_expiry_s
+            if due is None:
+                await self._republish.wait()
+                continue
+            delay = max(0.0, due - self.usm.clock.now_s()) + EXPIRY_SLACK_S
+            sleep = asyncio.ensure_future(self.usm.clock.sleep(delay))
+            changed = asyncio.ensure_future(self._republish.wait())
+            try:
+                done, _ = await asyncio.wait({sleep, changed}, return_when=asyncio.FIRST_COMPLETED)
+            finally:
+                for f in (sleep, changed):
+                    f.cancel()
+            if sleep in done and self._next_expiry_s == due:
+                try:
+                    self.publish_geofences(self.usm.airspace.geofences())
+                except Exception:  # the next change of the set publishes it again
+                    _log.exception("mqtt: geofence republication failed")
 
     async def _traffic_loop(self, tracks: TrackSource) -> None:
         period_s = 1.0 / self.config.traffic_rate_hz
@@ -198,5 +229,11 @@ class MqttGateway:
         self.publish_geofences(geofences)
 
     def publish_geofences(self, geofences: Sequence[Geofence]) -> None:
+        """Publish the geofences not expired now (retained) and arm the republication at the
+        earliest end among them."""
         now = self.usm.clock.now_s()
-        self.bridge.publish_geofences(g for g in geofences if g.end_t_s is None or g.end_t_s >= now)
+        active = [g for g in geofences if g.end_t_s is None or g.end_t_s >= now]
+        self.bridge.publish_geofences(active)
+        ends = [g.end_t_s for g in active if g.end_t_s is not None]
+        self._next_expiry_s = min(ends) if ends else None
+        self._republish.set()

@@ -3,6 +3,7 @@ deformations are smooth, A* keeps the clearance, escape and landing behave."""
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 
 import numpy as np
@@ -452,3 +453,169 @@ def test_cords_separate_any_crossing_and_move_in_inverse_priority(
     elif prio_b > prio_a:
         assert moved[1] <= moved[0] + 1.0
     assert np.abs(np.diff(res.displacement_m, axis=1)).max() <= slope + 1e-9
+
+
+# ---- cost of a deviation -----------------------------------------------------------------------
+
+
+def scenario_climb_crossing() -> tuple[AirspaceSnapshot, ThreatKind, list[str]]:
+    """The geometry of use case 1 at decision time: a slow low-priority multirotor ("UAS1",
+    2 m/s climb, 3.3 m/s cruise) is climbing from 44 to 100 m AGL, then flies 140 m north to its
+    last waypoint; a fast high-priority fixed wing ("UAS2", 30 m/s) crosses its transit leg
+    at 100 m AGL. The conflict is ~23 s before UAS1's plan ends: too late for a deformation to
+    ramp back to the plan before its last waypoint."""
+    g = 675.0
+    t0 = sc.T0_S
+    a = sc.make_operation(
+        "UAS1", [(340, 0, g + 44.3), (340, 0, g + 100), (340, 140, g + 100)], ov_m=15.0
+    )
+    ts = (t0, t0 + 55.7 / 2.0, t0 + 55.7 / 2.0 + 140.0 / 3.3)
+    wps = tuple(replace(w, t_s=t) for w, t in zip(a.plan.waypoints, ts, strict=True))
+    a = replace(
+        a,
+        plan=replace(a.plan, waypoints=wps),
+        cruise_speed_mps=3.3,
+        max_climb_rate_mps=2.0,
+        flight_geometry_m=10.0,
+    )
+    d = np.array([np.sin(np.radians(260.0)), np.cos(np.radians(260.0))])
+    p0 = np.array([340.0, 64.0]) - d * 30.0 * 47.0
+    p1 = np.array([340.0, 64.0]) + d * 30.0 * 60.0
+    b = sc.make_operation(
+        "UAS2",
+        [(p0[0], p0[1], g + 100), (p1[0], p1[1], g + 100)],
+        speed_mps=30.0,
+        priority=10,
+        ov_m=30.0,
+    )
+    return sc.snapshot([a, b]), ThreatKind.LOSS_OF_SEPARATION, ["UAS1", "UAS2"]
+
+
+CORD_MANEUVERS = (Maneuver.GO_UP, Maneuver.GO_DOWN, Maneuver.GO_LEFT, Maneuver.GO_RIGHT)
+
+
+def _dense(lp: LocalPlan, step_m: float) -> np.ndarray:
+    """Points every ``step_m`` along a local plan's 3D path."""
+    pts = [lp.xyz()[0]]
+    for p, q in zip(lp.xyz()[:-1], lp.xyz()[1:], strict=True):
+        n = max(1, int(np.linalg.norm(q - p) / step_m))
+        pts.extend(p + (q - p) * (k / n) for k in range(1, n + 1))
+    return np.array(pts)
+
+
+def _farthest_from_path(points: np.ndarray, path: np.ndarray) -> float:
+    """max over ``points`` of the 3D distance to the polyline ``path``, segment by segment."""
+    best = np.full(len(points), np.inf)
+    for p, q in itertools.pairwise(path):
+        seg = q - p
+        u = np.clip((points - p) @ seg / max(float(seg @ seg), 1e-12), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(points - (p + u[:, None] * seg), axis=1))
+    return float(best.max())
+
+
+@pytest.mark.parametrize("case", ["climb_crossing", "los_2uas", "chain_5uas"])
+def test_every_deviation_costs_its_extra_distance_time_and_offset(case: str) -> None:
+    """cost = w_prio * (extra 3D length / 1000 m + extra time / 120 s + farthest 3D offset /
+    1000 m) + 0.5 per priority level above the lowest, recomputed here independently from the
+    plans; every deviating maneuver costs
+    more than keeping the plan, and every cord alternative still reaches its destination."""
+    if case == "climb_crossing":
+        snap, kind, uas = scenario_climb_crossing()
+        threat = sc.threat(kind, uas, event_in_s=47)
+    else:
+        snap, threat = getattr(sc, f"scenario_{case}")()
+    cfg = DeconflictionConfig()
+    alts = make_td().resolve_loss_of_separation(threat, snap)
+    lowest = min(op.priority for op in snap.operations.values() if op.id in alts)
+    seen = set()
+    for op_id, options in alts.items():
+        op = snap.operations[op_id]
+        old = plan_to_local(op.plan, sc.FRAME).after(snap.t_s)
+        for a in options:
+            if a.maneuver is Maneuver.KEEP_PLAN:
+                assert a.cost == 0.0
+                continue
+            assert a.plan is not None
+            new = plan_to_local(a.plan, sc.FRAME)
+            extra_m = max(0.0, new.length_m() - old.length_m())
+            extra_s = max(0.0, float(new.t[-1] - old.t[-1]))
+            offset_m = _farthest_from_path(_dense(new, 0.5), old.xyz())
+            w = 1.0 + cfg.priority_cost_weight * (op.priority - lowest)
+            expected = w * (
+                extra_m / cfg.cost_distance_scale_m
+                + extra_s / cfg.cost_time_scale_s
+                + offset_m / cfg.cost_offset_scale_m
+            ) + cfg.priority_move_cost * (op.priority - lowest)
+            assert a.cost == pytest.approx(expected, rel=0.02, abs=2e-4), (op_id, a.maneuver)
+            assert a.cost > 0.0, (op_id, a.maneuver, a.detail)
+            if a.maneuver in (
+                Maneuver.GO_UP,
+                Maneuver.GO_DOWN,
+                Maneuver.GO_LEFT,
+                Maneuver.GO_RIGHT,
+            ):
+                assert offset_m > 1.0 and extra_m > 0.0, (op_id, a.maneuver)
+                assert np.allclose(new.xyz()[-1], old.xyz()[-1], atol=0.5), (op_id, a.maneuver)
+            seen.add(a.maneuver)
+    assert Maneuver.GO_DOWN in seen or Maneuver.GO_UP in seen
+
+
+def test_go_down_under_a_crossing_is_not_free() -> None:
+    """Use case 1's bug: the low-priority UAS's go_down cut its own climb and ended below its
+    last waypoint, so its 3D path was *shorter* than the plan and its cost 0.000. Now it climbs
+    back to the last waypoint and pays for leaving the plan."""
+    snap, kind, uas = scenario_climb_crossing()
+    alts = make_td().resolve_loss_of_separation(sc.threat(kind, uas, event_in_s=47), snap)
+    down = [a for a in alts[OperationId("UAS1")] if a.maneuver is Maneuver.GO_DOWN]
+    assert down
+    old = plan_to_local(snap.operations[OperationId("UAS1")].plan, sc.FRAME)
+    for a in down:
+        assert a.plan is not None
+        new = plan_to_local(a.plan, sc.FRAME)
+        assert np.allclose(new.xyz()[-1], old.xyz()[-1], atol=0.5)
+        assert new.length_m() > old.length_m()
+        assert a.cost > 0.05  # an offset of ~50 m and a climb back: not a rounding error
+    # A deeper deviation costs more: go_up needs to climb above the fixed wing's 100 m AGL.
+    others = [a.cost for a in alts[OperationId("UAS1")] if a.maneuver is not Maneuver.KEEP_PLAN]
+    assert min(others) > 0.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    offset=st.tuples(
+        st.floats(min_value=-120.0, max_value=120.0),
+        st.floats(min_value=-120.0, max_value=120.0),
+        st.floats(min_value=-40.0, max_value=40.0),
+    ),
+    bend=st.tuples(
+        st.floats(min_value=-80.0, max_value=80.0), st.floats(min_value=-30.0, max_value=30.0)
+    ),
+    speed_b=st.floats(min_value=2.0, max_value=40.0),
+    sphere=st.booleans(),
+)
+def test_separation_screen_never_contradicts_monitoring(
+    offset: tuple[float, float, float],
+    bend: tuple[float, float],
+    speed_b: float,
+    sphere: bool,
+) -> None:
+    """The sampled screen that spares EM's compatibility test Monitoring's exact check is
+    sound both ways: 'clear' only when Monitoring finds no loss, 'broken' only when it does."""
+    from gcs_utm.core.deconfliction.geometry import separation_screen
+
+    ox, oy, oz = offset
+    a = sc.make_operation("A", [(-300, 0, 100), (0, bend[0], 100 + bend[1]), (300, 0, 100)])
+    b = sc.make_operation(
+        "B", [(ox - 300, oy + 60, 100 + oz), (ox + 300, oy - 60, 100 + oz)], speed_mps=speed_b
+    )
+    mon = MonitoringConfig(separation_mode="sphere" if sphere else "cylinder")
+    h, v = mon.effective_minima(a.operational_volume_m, b.operational_volume_m)
+    broken, clear = separation_screen(
+        plan_to_local(a.plan, sc.FRAME), plan_to_local(b.plan, sc.FRAME), h, v, spherical=sphere
+    )
+    exact = plan_vs_plans(a.plan, a, [b], sc.FRAME, mon)
+    assert not (broken and clear)
+    if clear:
+        assert exact == []
+    if broken:
+        assert exact != []

@@ -27,6 +27,11 @@ from gcs_utm.clock import ManualClock
 from gcs_utm.model import (
     Alternative,
     FlightPlan,
+    Geofence,
+    GeofenceId,
+    GeofenceKind,
+    GeofenceShape,
+    LatLon,
     Maneuver,
     Operation,
     OperationId,
@@ -73,15 +78,19 @@ class _World:
     gateway: MqttGateway
     vehicles: FakeVehicles
     alice: Peer
+    broker: Broker
+    clock: ManualClock
 
 
 @contextlib.asynccontextmanager
-async def _world(tmp_path: Path) -> AsyncIterator[_World]:
+async def _world(
+    tmp_path: Path, geofences: tuple[Geofence, ...] = (), extra: tuple[str, ...] = ()
+) -> AsyncIterator[_World]:
     broker: Broker = make_broker(tmp_path)
     try:
         clock = ManualClock(T0)
         airspace = Airspace()
-        airspace.load([_op()], [])
+        airspace.load([_op()], geofences)
         usm = Usm(airspace, clock)
         vehicles = FakeVehicles()
         usm.attach_vehicles(vehicles)
@@ -97,10 +106,11 @@ async def _world(tmp_path: Path) -> AsyncIterator[_World]:
                     T.status("alice"),
                     T.errors_for("alice"),
                     T.alerts_for("alice"),
+                    *extra,
                 ),
             ) as alice:
                 await gateway.bridge.wait_connected(5.0)
-                yield _World(usm, gateway, vehicles, alice)
+                yield _World(usm, gateway, vehicles, alice, broker, clock)
         finally:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -207,3 +217,47 @@ async def test_flight_plan_creates_operation_duplicate_refused_and_threat_alerte
         await w.gateway.bridge.flush(5.0)
         await asyncio.sleep(0.2)
         assert not [m for m in w.alice.empty_for() if m[0] == T.alerts_for("alice")]
+
+
+def _fence(gid: str, end_t_s: float | None) -> Geofence:
+    return Geofence(
+        id=GeofenceId(gid),
+        shape=GeofenceShape.CYLINDER,
+        min_alt_amsl_m=0.0,
+        max_alt_amsl_m=1000.0,
+        center=LatLon(lat_deg=40.0, lon_deg=-3.0),
+        radius_m=200.0,
+        kind=GeofenceKind.DYNAMIC,
+        reason="wildfire",
+        end_t_s=end_t_s,
+    )
+
+
+async def _fence_ids(peer_: Peer) -> list[str]:
+    _, obj, _ = await peer_.next(T.geofences)
+    return sorted(g["id"] for g in obj["geofences"])
+
+
+async def test_an_expired_geofence_leaves_the_retained_set(tmp_path: Path) -> None:
+    """A dynamic geofence that expires is taken out of the retained set (and announced as
+    removed) on the clock, without any other change of the set: neither a subscriber nor a
+    late one keeps seeing it."""
+    permanent = _fence("gf-perm", None)
+    async with _world(
+        tmp_path, geofences=(permanent,), extra=(T.geofences, T.geofence_events)
+    ) as w:
+        assert await _fence_ids(w.alice) == ["gf-perm"]  # retained at subscription
+        short = _fence("gf-short", T0 + 30.0)
+        await w.usm.add_geofences([short])
+        assert await _fence_ids(w.alice) == ["gf-perm", "gf-short"]
+        _, created, _ = await w.alice.next(T.geofence_events)
+        assert (created["action"], created["geofence"]["id"]) == ("created", "gf-short")
+        # Nothing else happens: the gateway's own timer (on the injected clock) fires.
+        assert await _fence_ids(w.alice) == ["gf-perm"]
+        _, removed, _ = await w.alice.next(T.geofence_events)
+        assert (removed["action"], removed["geofence"]["id"]) == ("removed", "gf-short")
+        assert w.clock.now_s() > T0 + 30.0
+        await w.gateway.bridge.flush(5.0)
+        async with peer(w.broker, "bob", (T.geofences,)) as late:
+            _, obj, retained = await late.next(T.geofences)
+            assert retained and [g["id"] for g in obj["geofences"]] == ["gf-perm"]

@@ -38,24 +38,44 @@ def at(snap: AirspaceSnapshot, t_s: float) -> AirspaceSnapshot:
     return replace(snap, t_s=t_s)
 
 
+def _offset_m(snap: AirspaceSnapshot, alt: Alternative) -> float:
+    """Farthest 3D distance of an alternative's path from the operation's plan."""
+    from gcs_utm.core.deconfliction.geometry import plan_to_local
+    from gcs_utm.core.deconfliction.scoring import distance_to_polyline
+
+    assert alt.plan is not None
+    new = plan_to_local(alt.plan, sc.FRAME).xyz()
+    old = plan_to_local(snap.operations[alt.operation_id].plan, sc.FRAME).xyz()
+    return float(distance_to_polyline(new, old).max())
+
+
 def test_loss_of_separation_recommends_a_jointly_conflict_free_plan_and_audits_it() -> None:
     snap, threat = sc.scenario_los_2uas()
     em = make_em()
     d = em.on_threat(threat, snap)
-    assert len(d.recommendations) == 1 and not d.escalations
-    rec = d.recommendations[0]
-    # Priorities: A (priority 1) moves, B (priority 2) keeps its plan.
-    assert rec.operation_id == "A" and rec.selected is not None
-    assert rec.selected.maneuver is not Maneuver.KEEP_PLAN
+    assert d.recommendations and not d.escalations
+    by_op = {r.operation_id: r for r in d.recommendations}
+    # Priorities: A (priority 1) moves; B (priority 2) keeps its plan or moves less than A.
+    rec = by_op[OperationId("A")]
+    assert rec.selected is not None and rec.selected.maneuver is not Maneuver.KEEP_PLAN
+    if OperationId("B") in by_op:
+        b_sel = by_op[OperationId("B")].selected
+        assert b_sel is not None
+        assert _offset_m(snap, b_sel) < _offset_m(snap, rec.selected)
     assert rec.state is RecommendationState.PROPOSED
     assert rec.deadline_t_s == pytest.approx(threat.predicted_event_at_s - 10.0)  # type: ignore[operator]
     ops = dict(snap.operations)
-    ops[OperationId("A")] = replace(ops[OperationId("A")], plan=rec.selected.plan)
+    for r in d.recommendations:
+        assert r.selected is not None
+        ops[r.operation_id] = replace(ops[r.operation_id], plan=r.selected.plan)
     assert strategic_check(list(ops.values()), (), sc.FRAME, MON).conflicts == ()
-    # Alternatives shown to the pilot are also compatible with B's plan.
-    for alt in rec.alternatives:
-        ops[OperationId("A")] = replace(ops[OperationId("A")], plan=alt.plan)
-        assert strategic_check(list(ops.values()), (), sc.FRAME, MON).conflicts == ()
+    # Alternatives shown to the pilot are also compatible with the others' selection.
+    for r in d.recommendations:
+        mine = ops[r.operation_id]
+        for alt in r.alternatives:
+            ops[r.operation_id] = replace(mine, plan=alt.plan)
+            assert strategic_check(list(ops.values()), (), sc.FRAME, MON).conflicts == ()
+        ops[r.operation_id] = mine
     audit = d.audit[0]
     assert (
         audit.action == "decision" and audit.detail["alpha"] == 1.0 and audit.detail["beta"] == 3.0
@@ -63,7 +83,14 @@ def test_loss_of_separation_recommends_a_jointly_conflict_free_plan_and_audits_i
     alts = audit.detail["alternatives"]
     assert isinstance(alts, list) and len(alts) >= 10
     assert {"cost", "risk", "score", "maneuver", "operation_id"} <= set(alts[0])
-    assert audit.detail["selected"] == {"A": rec.selected.maneuver.value, "B": "keep_plan"}
+    selected = audit.detail["selected"]
+    assert isinstance(selected, dict)
+    assert selected["A"] == rec.selected.maneuver.value
+    assert selected["B"] == (
+        by_op[OperationId("B")].selected.maneuver.value  # type: ignore[union-attr]
+        if OperationId("B") in by_op
+        else "keep_plan"
+    )
 
 
 def test_rejection_replans_without_the_rejected_maneuver() -> None:
@@ -109,12 +136,14 @@ def test_stale_answer_is_ignored_with_a_warning() -> None:
 def test_accept_then_threat_closed_keeps_the_accepted_one() -> None:
     snap, threat = sc.scenario_los_2uas()
     em = make_em()
-    rec = em.on_threat(threat, snap).recommendations[0]
-    d = em.on_answer(rec, True, snap)
-    assert d.recommendations[0].state is RecommendationState.ACCEPTED
+    recs = em.on_threat(threat, snap).recommendations
+    for rec in recs:
+        d = em.on_answer(rec, True, snap)
+        assert d.recommendations[0].state is RecommendationState.ACCEPTED
     closed = em.on_threat_closed(replace(threat, status=ThreatStatus.CLOSED))
     assert closed.superseded == ()
-    assert em.recommendation(rec.id).state is RecommendationState.ACCEPTED  # type: ignore[union-attr]
+    for rec in recs:
+        assert em.recommendation(rec.id).state is RecommendationState.ACCEPTED  # type: ignore[union-attr]
 
 
 def test_expiry_escalates_and_replans_and_closing_supersedes_the_new_version() -> None:
@@ -135,9 +164,11 @@ def test_expiry_escalates_and_replans_and_closing_supersedes_the_new_version() -
 def test_a_persisting_threat_does_not_churn_recommendations() -> None:
     snap, threat = sc.scenario_los_2uas()
     em = make_em()
-    em.on_threat(threat, snap)
+    first = em.on_threat(threat, snap).recommendations
+    assert first
     again = em.on_threat(replace(threat, status=ThreatStatus.UPDATED), at(snap, snap.t_s + 1))
-    assert again.recommendations == () and len(em.pending()) == 1
+    assert again.recommendations == ()
+    assert [r.id for r in em.pending()] == [r.id for r in first]
 
 
 def test_no_feasible_alternative_is_an_explicit_escalation() -> None:

@@ -93,6 +93,13 @@ class DeconflictionConfig:
     cost_time_scale_s: float = setting(
         120.0, "extra time counted as one unit of cost", min=1.0, unit="s"
     )
+    cost_offset_scale_m: float = setting(
+        1000.0,
+        "farthest 3D distance of a new path from the old one counted as one unit of cost "
+        "(leaving the plan costs even when it is not longer)",
+        min=1.0,
+        unit="m",
+    )
     abandon_cost: float = setting(
         5.0, "cost added when an alternative abandons the mission (home, landing site)", min=0.0
     )
@@ -100,6 +107,12 @@ class DeconflictionConfig:
         0.5,
         "cost of moving a UAS is multiplied by 1 + this * (priority - lowest priority in the "
         "conflict): higher priority moves less",
+        min=0.0,
+    )
+    priority_move_cost: float = setting(
+        0.5,
+        "cost added to any change of plan of a UAS per priority level above the lowest in the "
+        "conflict: a higher-priority UAS is moved only when that buys more than this",
         min=0.0,
     )
     risk_length_scale_m: float = setting(

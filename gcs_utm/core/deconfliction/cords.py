@@ -147,26 +147,33 @@ def resolve(
     caps = np.zeros((u, k))
     for i, c in enumerate(cords):
         caps[i] = np.minimum(c.slope_m_per_step * ramp, c.max_offset_m)
+    # Unit direction of each cord's displacement at every step (U, K, 3): up, the left
+    # normal, or nothing; a cord's position is then base + sign * d * direction.
+    dirs = np.zeros((u, k, 3))
+    for i, c in enumerate(cords):
+        if c.axis == AXIS_VERTICAL:
+            dirs[i, :, 2] = 1.0
+        elif c.axis == AXIS_LATERAL:
+            dirs[i, :, :2] = normals[i]
     both = valid[:, None, :] & valid[None, :, :]
     # A pair of rigid cords is not this scenario's business (another threat covers it).
     movable = np.array([c.mobility > 0.0 and c.axis != AXIS_NONE for c in cords])
     both &= (movable[:, None] | movable[None, :])[:, :, None]
-    upper = np.triu(np.ones((u, u), dtype=bool), 1)[:, :, None]
+    idx = np.arange(u)
+    upper = (idx[:, None] < idx[None, :])[:, :, None]
     scale = 1.0 + margin_fraction
     h_min = minima[:, :, 0][:, :, None]
     v_min = minima[:, :, 1][:, :, None]
+    inv_h = 1.0 / np.maximum(h_min, 1e-9)
+    inv_v = 1.0 / np.maximum(v_min, 1e-9)
     for it in range(max_iterations + 1):
-        pos = np.stack(
-            [apply(base[i], normals[i], cords[i].axis, signs[i] or 1, d[i]) for i in range(u)]
-        )
+        sgn = np.array([sg or 1 for sg in signs], dtype=np.float64)
+        pos = base + (sgn[:, None] * d)[:, :, None] * dirs
         dh = np.hypot(
             pos[:, None, :, 0] - pos[None, :, :, 0], pos[:, None, :, 1] - pos[None, :, :, 1]
         )
         dv = np.abs(pos[:, None, :, 2] - pos[None, :, :, 2])
-        if spherical:
-            sep = np.hypot(dh, dv) / np.maximum(h_min, 1e-9)
-        else:
-            sep = np.maximum(dh / np.maximum(h_min, 1e-9), dv / np.maximum(v_min, 1e-9))
+        sep = np.hypot(dh, dv) * inv_h if spherical else np.maximum(dh * inv_h, dv * inv_v)
         if it == 0:
             # Pairs already separated but inside the margin (e.g. a stack at the minimum) only
             # have to stay as they are: demanding the margin there could never be met at the
@@ -197,6 +204,8 @@ def resolve(
                 deficit = need - signs[c] * along
                 deficit = np.maximum(deficit, 0.0)
                 demand[c, ks] = np.maximum(demand[c, ks], d[c, ks] + share * deficit + 0.5)
+        before = d.copy()
+        before_signs = list(signs)
         for i, c in enumerate(cords):
             if c.axis == AXIS_NONE or c.mobility <= 0.0:
                 continue
@@ -209,6 +218,10 @@ def resolve(
                 )
                 cap = np.minimum(cap, np.maximum(room, 0.0))
             d[i] = np.minimum(envelope(demand[i], c.slope_m_per_step), cap)
+        if signs == before_signs and np.array_equal(d, before):
+            # Stuck at the caps: the next iteration would see the same positions, make the
+            # same demands and the same profiles, forever. Give up now.
+            return None
     return None
 
 

@@ -38,9 +38,11 @@ from gcs_utm.core.deconfliction.geometry import (
     LocalPlan,
     fence_to_local,
     local_to_plan,
+    max_speeds,
     merged_obstacles,
     plan_to_local,
     relevant_fences,
+    separation_screen,
 )
 from gcs_utm.core.deconfliction.scoring import Neighbour, Score, score
 from gcs_utm.core.monitoring.config import MonitoringConfig
@@ -86,6 +88,7 @@ class TacticalDeconfliction:
         # Local conversions of the plans in the current snapshot, keyed by object identity
         # (the plan is kept in the value so its id cannot be reused while cached).
         self._local: dict[int, tuple[FlightPlan, LocalPlan]] = {}
+        self._speeds: dict[int, tuple[FlightPlan, tuple[float, float]]] = {}
 
     def _lp(self, plan: FlightPlan) -> LocalPlan:
         hit = self._local.get(id(plan))
@@ -94,6 +97,15 @@ class TacticalDeconfliction:
                 self._local.clear()
             hit = (plan, plan_to_local(plan, self.frame))
             self._local[id(plan)] = hit
+        return hit[1]
+
+    def _max_speeds(self, plan: FlightPlan) -> tuple[float, float]:
+        hit = self._speeds.get(id(plan))
+        if hit is None or hit[0] is not plan:
+            if len(self._speeds) > 4096:
+                self._speeds.clear()
+            hit = (plan, max_speeds(self._lp(plan)))
+            self._speeds[id(plan)] = hit
         return hit[1]
 
     # ---- helpers on the snapshot -------------------------------------------------------------
@@ -133,15 +145,19 @@ class TacticalDeconfliction:
         others: Sequence[Operation],
         geofences: Sequence[Geofence],
     ) -> list[str]:
-        """What Monitoring would flag on ``plan`` (empty list = clean)."""
-        flags = [
-            f"geofence {c.geofence_id} at t={c.entry_t_s:.1f}"
-            for c in plan_vs_geofences(plan, op, geofences, self.frame, self.monitoring)
-        ]
-        flags += [
-            f"separation with {c.b} at t={c.first_loss_t_s:.1f} ({c.min_distance_m:.1f} m)"
-            for c in plan_vs_plans(plan, op, others, self.frame, self.monitoring)
-        ]
+        """What Monitoring would flag on ``plan`` (empty list = clean). With nothing to check
+        against, Monitoring is not asked (it would convert the plan and find nothing)."""
+        flags: list[str] = []
+        if geofences:
+            flags += [
+                f"geofence {c.geofence_id} at t={c.entry_t_s:.1f}"
+                for c in plan_vs_geofences(plan, op, geofences, self.frame, self.monitoring)
+            ]
+        if any(o.id != op.id for o in others):
+            flags += [
+                f"separation with {c.b} at t={c.first_loss_t_s:.1f} ({c.min_distance_m:.1f} m)"
+                for c in plan_vs_plans(plan, op, others, self.frame, self.monitoring)
+            ]
         return flags
 
     def compatible(self, a: Alternative, b: Alternative, snapshot: AirspaceSnapshot) -> bool:
@@ -151,23 +167,24 @@ class TacticalDeconfliction:
             return True
         op_a = snapshot.operations[a.operation_id]
         op_b = replace(snapshot.operations[b.operation_id], plan=b.plan)
-        # Sound shortcut: if two sampled instants of the plans already break the minima,
-        # Monitoring (which finds the exact closest approach) would flag the pair too.
-        pa, pb = self._lp(a.plan), self._lp(b.plan)
-        t0, t1 = max(pa.t[0], pb.t[0]), min(pa.t[-1], pb.t[-1])
-        if t1 > t0:
-            t = np.linspace(t0, t1, max(2, int((t1 - t0) / 2.0) + 1))
-            qa, _ = pa.sample(t)
-            qb, _ = pb.sample(t)
-            h, v = self.monitoring.effective_minima(
-                op_a.operational_volume_m, op_b.operational_volume_m
-            )
-            dh = np.hypot(qa[:, 0] - qb[:, 0], qa[:, 1] - qb[:, 1])
-            dv = np.abs(qa[:, 2] - qb[:, 2])
-            sphere = self.monitoring.spherical
-            broken = np.hypot(dh, dv) < h if sphere else (dh < h) & (dv < v)
-            if bool(broken.any()):
-                return False
+        # Sound shortcuts either way (see separation_screen); only an undecided pair goes to
+        # Monitoring's exact closest-approach check.
+        h, v = self.monitoring.effective_minima(
+            op_a.operational_volume_m, op_b.operational_volume_m
+        )
+        broken, clear = separation_screen(
+            self._lp(a.plan),
+            self._lp(b.plan),
+            h,
+            v,
+            spherical=self.monitoring.spherical,
+            speeds_a=self._max_speeds(a.plan),
+            speeds_b=self._max_speeds(b.plan),
+        )
+        if broken:
+            return False
+        if clear:
+            return True
         return not plan_vs_plans(a.plan, op_a, [op_b], self.frame, self.monitoring)
 
     def _score(  # noqa: PLR0917 - private helper, called positionally
@@ -193,6 +210,7 @@ class TacticalDeconfliction:
             fences=fences,
             neighbours=nbs,
             priority_weight=weight,
+            priority_levels=max(0, op.priority - lowest_priority),
             abandons=abandons,
             spherical=self.monitoring.spherical,
             config=self.config,
@@ -218,6 +236,7 @@ class TacticalDeconfliction:
         plan = local_to_plan(
             new, op.plan, self.frame, created_t_s=snapshot.t_s, reason=f"TD {maneuver.value}"
         )
+        self._local[id(plan)] = (plan, new)  # its local form, without a second conversion
         checked = plan
         if verify_from > 0:
             checked = replace(plan, waypoints=plan.waypoints[verify_from:])
@@ -421,7 +440,8 @@ class TacticalDeconfliction:
                 Dropped(operation_id=op.id, maneuver=Maneuver.KEEP_PLAN, reason="; ".join(flags))
             )
             return None
-        sc = self._score(lp, lp, op, fences, outsiders, lowest, abandons=False)
+        # Keeping the plan moves nothing: no priority price (the score's cost is then 0).
+        sc = self._score(lp, lp, op, fences, outsiders, op.priority, abandons=False)
         return Alternative(
             operation_id=op.id,
             maneuver=Maneuver.KEEP_PLAN,
@@ -452,24 +472,39 @@ class TacticalDeconfliction:
         times = np.union1d(kinks[inside], lp.t)
         base, _ = lp.sample(times)
         disp = np.interp(times, grid, d)
-        new = cd.apply(base, cd.left_normals(base), axis, sign, disp)
-        cand = LocalPlan(new[:, 0], new[:, 1], new[:, 2], times)
+        if axis == cd.AXIS_VERTICAL:
+            xyz = base.copy()
+            xyz[:, 2] += sign * disp
+        else:
+            xyz = cd.apply(base, cd.left_normals(base), axis, sign, disp)
         # Original pace between the kept times, from the undeformed plan.
-        ob, _ = lp.sample(cand.t)
-        dt = np.diff(cand.t)
-        orig_h = np.hypot(np.diff(ob[:, 0]), np.diff(ob[:, 1]))
-        orig_v = np.abs(np.diff(ob[:, 2]))
+        dt = np.diff(times)
+        ob = np.diff(base, axis=0)
         safe_dt = np.maximum(dt, 1e-9)
         f = self.config.max_speed_factor
-        speed = np.maximum(op.cruise_speed_mps, orig_h / safe_dt) * f
-        climb = np.maximum(op.max_climb_rate_mps, orig_v / safe_dt) * f
-        xyz = cand.xyz()
+        speed = np.maximum(op.cruise_speed_mps, np.hypot(ob[:, 0], ob[:, 1]) / safe_dt) * f
+        climb = np.maximum(op.max_climb_rate_mps, np.abs(ob[:, 2]) / safe_dt) * f
         dd = np.diff(xyz, axis=0)
-        need = np.maximum.reduce(
-            [dt, np.hypot(dd[:, 0], dd[:, 1]) / speed, np.abs(dd[:, 2]) / climb]
+        need = np.maximum(
+            dt, np.maximum(np.hypot(dd[:, 0], dd[:, 1]) / speed, np.abs(dd[:, 2]) / climb)
         )
-        t = np.concatenate([[cand.t[0]], cand.t[0] + np.cumsum(need)])
-        return LocalPlan(cand.e, cand.n, cand.z, t)
+        t = np.empty(len(times))
+        t[0] = times[0]
+        np.cumsum(need, out=t[1:])
+        t[1:] += times[0]
+        goal = np.array([lp.e[-1], lp.n[-1], lp.z[-1]])
+        off = xyz[-1] - goal
+        if float(np.abs(off).max()) > 1e-3:
+            # The plan ended before the cord could ramp back: fly back to the filed final
+            # waypoint (cruise speed, climb rate) so the alternative keeps the destination.
+            dt_back = max(
+                float(np.hypot(off[0], off[1])) / op.cruise_speed_mps,
+                abs(float(off[2])) / op.max_climb_rate_mps,
+            )
+            xyz = np.vstack([xyz, goal])
+            t = np.append(t, t[-1] + dt_back)
+        out = LocalPlan(xyz[:, 0], xyz[:, 1], xyz[:, 2], t)
+        return out
 
     def _timing(  # noqa: PLR0917 - private helper, called positionally
         self,
