@@ -80,28 +80,50 @@ def _wrap_pi(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def _vertical(s: KinState, goal: Goal, lim: Limits, dt: float) -> None:
-    descent = goal.descent_rate_mps if goal.descent_rate_mps is not None else lim.descent_rate_mps
-    dz = goal.alt_amsl_m - s.alt_amsl_m
-    want = _clamp(1.0 * dz, -descent, lim.climb_rate_mps)  # P gain 1/s: ~1 s to settle
+def _vertical(s: KinState, goal: Goal, lim: Limits, dt: float, want: float | None = None) -> None:
+    """Vertical speed toward ``want`` (default: P gain 1/s on the altitude error, ~1 s to
+    settle, within the climb/descent limits), rate-limited by the acceleration."""
+    if want is None:
+        want = _clamp(
+            1.0 * (goal.alt_amsl_m - s.alt_amsl_m), -_descent(goal, lim), lim.climb_rate_mps
+        )
     dv = _clamp(want - s.vup_mps, -lim.accel_mps2 * dt, lim.accel_mps2 * dt)
     s.vup_mps += dv
     s.alt_amsl_m += s.vup_mps * dt
+
+
+def _descent(goal: Goal, lim: Limits) -> float:
+    return goal.descent_rate_mps if goal.descent_rate_mps is not None else lim.descent_rate_mps
 
 
 def step_multirotor(s: KinState, goal: Goal, lim: Limits, dt: float) -> None:
     """Position controller: accelerate toward the goal, brake to stop (or pass through)."""
     dn = goal.north_m - s.north_m
     de = goal.east_m - s.east_m
+    dz = goal.alt_amsl_m - s.alt_amsl_m
     dist = math.hypot(dn, de)
     speed = min(goal.speed_mps, lim.max_speed_mps)
     if goal.stop:
         # v = sqrt(2 a d) brakes to a standstill at the point; 0.8 keeps a margin.
         speed = min(speed, math.sqrt(2.0 * lim.accel_mps2 * 0.8 * dist), 1.5 * dist)
-    if dist > 1e-3:
-        wn, we = dn / dist * speed, de / dist * speed
+    # PX4 (FlightTaskAuto): the velocity setpoint points at the target in 3D with magnitude
+    # sqrt(xy^2 + z^2), then is scaled down as a whole until its horizontal norm is within the
+    # horizontal speed and its vertical part within the climb/descent speed: the vehicle flies
+    # the straight 3D line to the waypoint, slowing horizontally when the climb limits it.
+    vz_max = min(lim.climb_rate_mps if dz >= 0.0 else _descent(goal, lim), 1.0 * abs(dz))
+    dist3 = math.hypot(dist, dz)
+    if dist3 > 1e-3:
+        mag = math.hypot(speed, vz_max)
+        wn, we, wz = dn / dist3 * mag, de / dist3 * mag, dz / dist3 * mag
+        xy = math.hypot(wn, we)
+        if xy > speed:
+            f = speed / xy
+            wn, we, wz = wn * f, we * f, wz * f
+        if abs(wz) > vz_max:
+            f = vz_max / abs(wz)
+            wn, we, wz = wn * f, we * f, wz * f
     else:
-        wn = we = 0.0
+        wn = we = wz = 0.0
     an = wn - s.vn_mps
     ae = we - s.ve_mps
     amag = math.hypot(an, ae)
@@ -112,7 +134,7 @@ def step_multirotor(s: KinState, goal: Goal, lim: Limits, dt: float) -> None:
     s.ve_mps += ae
     s.north_m += s.vn_mps * dt
     s.east_m += s.ve_mps * dt
-    _vertical(s, goal, lim, dt)
+    _vertical(s, goal, lim, dt, wz)
     gs = math.hypot(s.vn_mps, s.ve_mps)
     if gs > 0.5:
         s.yaw_rad = math.atan2(s.ve_mps, s.vn_mps)

@@ -520,8 +520,12 @@ class MavlinkHub:
         home: Position | None = None,
         deadline_t_s: float | None = None,
         set_mission_mode: bool = True,
+        climb_rate_mps: float | None = None,
+        descent_rate_mps: float | None = None,
     ) -> UploadResult:
         """Upload ``plan`` as a mission, read it back, set the current item and mission mode.
+        ``start_index`` is the plan waypoint flown first (flagged current); the vertical speeds
+        let a climb on the spot keep the plan's time (see :func:`plan_to_mission_items`).
         Never raises for vehicle behaviour: failures are in the result."""
         t0 = time.monotonic()
         try:
@@ -532,7 +536,13 @@ class MavlinkHub:
             )
         ap = autopilot or st.autopilot
         items = plan_to_mission_items(
-            plan, ap, home, start_index=start_index, max_speed_mps=self.config.max_speed_mps
+            plan,
+            ap,
+            home,
+            start_index=start_index,
+            max_speed_mps=self.config.max_speed_mps,
+            climb_rate_mps=climb_rate_mps,
+            descent_rate_mps=descent_rate_mps,
         )
         return await self.upload_items(
             st.key, items, deadline_t_s=deadline_t_s, set_mission_mode=set_mission_mode, _t0=t0

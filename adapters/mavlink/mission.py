@@ -5,8 +5,12 @@ Encoding of a 4D :class:`FlightPlan` (MAVLink waypoints carry no time):
 - every plan waypoint k becomes a NAV_WAYPOINT (MISSION_ITEM_INT, frame MAV_FRAME_GLOBAL,
   so ``z`` is metres AMSL, ``x``/``y`` are degrees * 1e7);
 - before waypoint k (k >= 1) a DO_CHANGE_SPEED sets the ground speed of segment k-1 -> k to
-  horizontal length / duration, so the vehicle keeps the plan's timing; a segment with no
-  horizontal length but a duration becomes a hold time (NAV_WAYPOINT param1) at its start;
+  horizontal length / duration, so the vehicle keeps the plan's timing (a multirotor flies
+  the straight 3D line, its climb within its limit); a segment with no horizontal length and
+  no climb but a duration becomes a hold time (NAV_WAYPOINT param1) at its start; a climb
+  (descent) on the spot is flown at the vehicle's vertical speed, and only the time the plan
+  gives beyond ``|dz| / climb_rate_mps`` is held, at its end (a hold before the climb made
+  the vehicle late by the whole climb);
 - the first item of plan waypoint ``start_index`` (its speed item, if any) has current=1:
   PX4 otherwise keeps the old index when a mission is replaced in flight;
 - ArduPilot: seq 0 is home (``home`` or the first waypoint), so items shift by one.
@@ -76,10 +80,14 @@ def plan_to_mission_items(
     *,
     start_index: int = 0,
     max_speed_mps: float = 25.0,
+    climb_rate_mps: float | None = None,
+    descent_rate_mps: float | None = None,
 ) -> list[MissionItem]:
     """The MAVLink mission that flies ``plan`` (see the module docstring for the encoding).
 
     Speeds are clamped to ``max_speed_mps`` (a zero-duration segment would ask for infinity).
+    ``climb_rate_mps``/``descent_rate_mps`` are the vehicle's vertical speeds (None: assume
+    the plan timed its climbs at them, no wait is added to a climb on the spot).
     """
     wps = plan.waypoints
     if not 0 <= start_index < len(wps):
@@ -90,6 +98,7 @@ def plan_to_mission_items(
         items.append(_waypoint(h.lat_deg, h.lon_deg, h.alt_amsl_m))
     current = -1
     last_wp = -1  # index in items of the last NAV_WAYPOINT
+    vertical_hold = 0.0
     for k, wp in enumerate(wps):
         first_of_wp = len(items)
         if k >= 1:
@@ -97,13 +106,19 @@ def plan_to_mission_items(
             dt = wp.t_s - prev.t_s
             dist = haversine_m(prev.lat_deg, prev.lon_deg, wp.lat_deg, wp.lon_deg)
             if dist < _MIN_SEGMENT_M:
-                if dt > 0.0:  # a wait (or a slow climb) at the previous point: hold there
-                    held = items[last_wp]
-                    items[last_wp] = replace(held, param1=round(held.param1 + dt, 3))
-                if abs(wp.alt_amsl_m - prev.alt_amsl_m) < 0.01:
+                dz = wp.alt_amsl_m - prev.alt_amsl_m
+                if abs(dz) < 0.01:
+                    if dt > 0.0:  # a wait at the previous point: hold there
+                        held = items[last_wp]
+                        items[last_wp] = replace(held, param1=round(held.param1 + dt, 3))
                     if k == start_index:
                         current = last_wp
                     continue
+                # A climb or descent on the spot: the vehicle flies it at its own vertical
+                # speed (PX4 MPC_Z_V_AUTO_UP/DN, no mission item sets it), so only the time
+                # the plan leaves beyond that is a wait, held at the top (bottom), after it.
+                rate = climb_rate_mps if dz > 0.0 else descent_rate_mps
+                vertical_hold = max(0.0, dt - abs(dz) / rate) if rate else 0.0
             else:
                 speed = dist / dt if dt > 0.0 else max_speed_mps
                 items.append(
@@ -117,6 +132,9 @@ def plan_to_mission_items(
                 )
         last_wp = len(items)
         items.append(_waypoint(wp.lat_deg, wp.lon_deg, wp.alt_amsl_m))
+        if vertical_hold >= 0.05:
+            items[last_wp] = replace(items[last_wp], param1=round(vertical_hold, 3))
+        vertical_hold = 0.0
         if k == start_index:
             current = first_of_wp
     out = [replace(it, seq=i, current=int(i == current)) for i, it in enumerate(items)]

@@ -94,6 +94,9 @@ class VehiclePort(Protocol):
         *,
         autopilot: Autopilot | None = None,
         deadline_t_s: float | None = None,
+        start_index: int = 0,
+        climb_rate_mps: float | None = None,
+        descent_rate_mps: float | None = None,
     ) -> UploadOutcome: ...
 
     async def send_command(self, sys_id: SysId, command: Command) -> CommandOutcome: ...
@@ -105,6 +108,19 @@ class OperatorPort(Protocol):
     async def present(self, rec: Recommendation) -> None: ...
 
     async def update(self, rec: Recommendation) -> None: ...
+
+
+def resume_index(plan: FlightPlan, now_s: float) -> int:
+    """The plan waypoint a vehicle flies to first when ``plan`` is uploaded at ``now_s``: the
+    first one still ahead in time. A new plan starts where the UAS was when it was computed;
+    by the time it is accepted and uploaded (seconds later, operator's answer) the vehicle has
+    moved on, and flying to that first point would turn it back (a 28 m/s fixed wing is 55 m
+    past it after 2 s)."""
+    wps = plan.waypoints
+    for k, w in enumerate(wps):
+        if w.t_s > now_s:
+            return k
+    return max(0, len(wps) - 1)
 
 
 _NAV_WAYPOINT = 16
@@ -705,7 +721,13 @@ class Usm:
         error = ""
         for attempt in range(1, self.config.upload_attempts + 1):
             result = await self._vehicles.upload_plan(
-                op.sys_id, new_plan, autopilot=op.autopilot, deadline_t_s=None
+                op.sys_id,
+                new_plan,
+                autopilot=op.autopilot,
+                deadline_t_s=None,
+                start_index=resume_index(new_plan, self.clock.now_s()),
+                climb_rate_mps=op.max_climb_rate_mps,
+                descent_rate_mps=op.max_climb_rate_mps,
             )
             record.uploaded = record.uploaded or result.ok
             if result.ok and result.verified:

@@ -32,7 +32,7 @@ from gcs_utm.model import (
     VehicleKind,
 )
 from gcs_utm.services.airspace import Airspace
-from gcs_utm.services.usm import AnswerStatus, Usm
+from gcs_utm.services.usm import AnswerStatus, Usm, resume_index
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from usm_fakes import OP, FakeVehicles, make_operation, make_plan
@@ -234,3 +234,39 @@ async def test_vehicle_without_operation_gets_one_from_its_mission() -> None:
     assert len(op.plan.waypoints) == 2
     assert op.plan.waypoints[1].t_s > op.plan.waypoints[0].t_s
     assert len(usm.airspace.operations) == 2
+
+
+def test_resume_index_is_the_first_waypoint_still_ahead() -> None:
+    plan = dataclasses.replace(
+        make_plan(2, 100.0),
+        waypoints=(*make_plan(2, 100.0).waypoints, make_plan(2, 140.0).waypoints[1]),
+    )  # t = 100, 130, 170
+    assert resume_index(plan, 99.0) == 0
+    assert resume_index(plan, 100.0) == 1  # the vehicle is at (or past) the first point
+    assert resume_index(plan, 129.9) == 1
+    assert resume_index(plan, 150.0) == 2
+    assert resume_index(plan, 500.0) == 2  # all in the past: the last point
+
+
+async def test_upload_starts_at_the_first_waypoint_ahead_when_accepted_late() -> None:
+    """A new plan starts where the UAS was when TD computed it; accepted 2 s later, the vehicle
+    has moved on (a 28 m/s fixed wing by 55 m): flying to that point would turn it back."""
+    vehicles = FakeVehicles()
+    usm, clock, _recorded = _usm(vehicles)
+    rec = _rec()
+    assert rec.selected is not None and rec.selected.plan is not None
+    now_plan = make_plan(1, 110.0)  # first waypoint: the UAS at t = 110 (recommendation time)
+    rec = dataclasses.replace(rec, selected=dataclasses.replace(rec.selected, plan=now_plan))
+    await usm.on_recommendation(rec)
+    clock.advance(2.0)
+    out = await usm.answer(_answer(PilotDecision.ACCEPT, t_s=112.0))
+    assert out.status is AnswerStatus.ACCEPTED
+    await usm.drain()
+    assert vehicles.start_indices == [1]
+    # a plan starting in the future is flown from its first waypoint
+    vehicles2 = FakeVehicles()
+    usm2, _c, _r = _usm(vehicles2)
+    await usm2.on_recommendation(_rec())  # plan from t = 120, accepted at 111
+    await usm2.answer(_answer(PilotDecision.ACCEPT))
+    await usm2.drain()
+    assert vehicles2.start_indices == [0]

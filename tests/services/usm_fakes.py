@@ -55,6 +55,7 @@ class Result:
 class FakeVehicles:
     def __init__(self, *, verified: bool = True, command_ok: bool = True) -> None:
         self.uploads: list[FlightPlan] = []
+        self.start_indices: list[int] = []
         self.commands: list[Command] = []
         self.verified = verified
         self.command_ok = command_ok
@@ -66,8 +67,12 @@ class FakeVehicles:
         *,
         autopilot: Autopilot | None = None,
         deadline_t_s: float | None = None,
+        start_index: int = 0,
+        climb_rate_mps: float | None = None,
+        descent_rate_mps: float | None = None,
     ) -> Result:
         self.uploads.append(plan)
+        self.start_indices.append(start_index)
         return Result(ok=True, verified=self.verified, error="" if self.verified else "mismatch")
 
     async def send_command(self, sys_id: SysId, command: Command) -> Result:
