@@ -30,8 +30,8 @@ import numpy as np
 from gcs_utm.core.monitoring.checks import check_geofences, pack_plans, plan_distance
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.fences import LocalFence, localise
-from gcs_utm.core.monitoring.geometry import FloatArray
-from gcs_utm.core.monitoring.separation import detect_los, detect_pairs_between
+from gcs_utm.core.monitoring.geometry import FloatArray, window_extents
+from gcs_utm.core.monitoring.separation import detect_los, detect_pairs_between, window_steps
 from gcs_utm.core.monitoring.strategic import plan_local
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
@@ -150,14 +150,21 @@ class Monitor:
                 rows_intr.append(i)
                 ev.pred_fresh.add(str(tid))
         op_of = {i: snapshot.tracks[pred.track_ids[i]].operation_id for i in rows_coop}
-        pts = pred.points[rows_coop] if rows_coop else np.empty((0, 1, 4))
+        if len(rows_coop) == len(pred.track_ids):
+            pts = pred.points  # every row: no copy
+        else:
+            pts = pred.points[rows_coop] if rows_coop else np.empty((0, 1, 4))
         ov = np.array(
             [ops[op_of[i]].operational_volume_m for i in rows_coop]  # type: ignore[index]
+        )
+        # Window bounds shared by the geofence prefilter and the separation grid.
+        windows = (
+            window_extents(pts, window_steps(pts, cfg)) if len(pts) and pts.shape[1] >= 2 else None
         )
         # Geofences (4D, points and segments).
         fences = [self._fence(g) for g in snapshot.geofences]
         exempt = {g.id: g.exempt for g in snapshot.geofences if g.exempt}
-        for h in check_geofences(pts, fences):
+        for h in check_geofences(pts, fences, windows):
             op_id = op_of[rows_coop[h.row]]
             assert op_id is not None
             if op_id in exempt.get(h.geofence_id, ()):
@@ -168,7 +175,7 @@ class Monitor:
             )
         # Loss of separation (grid or all-pairs by size), and the margin set for closing.
         if len(rows_coop) >= 2:
-            for x in detect_los(pts, ov, cfg):
+            for x in detect_los(pts, ov, cfg, windows):
                 a, b = sorted((op_of[rows_coop[x.a]] or "", op_of[rows_coop[x.b]] or ""))
                 ev.seen[("LOS", a, b)] = _Observation(
                     kind=ThreatKind.LOSS_OF_SEPARATION,

@@ -28,7 +28,13 @@ import numpy as np
 import numpy.typing as npt
 
 from gcs_utm.core.monitoring.config import MonitoringConfig
-from gcs_utm.core.monitoring.geometry import FloatArray, segment_loss, segment_separation
+from gcs_utm.core.monitoring.geometry import (
+    FloatArray,
+    Windows,
+    relative_loss,
+    relative_separation,
+    window_extents,
+)
 
 IntArray = npt.NDArray[np.int64]
 
@@ -80,39 +86,60 @@ def _minima(
     )
 
 
+Planes = tuple[FloatArray, FloatArray, FloatArray]
+
+
+def _planes(points: FloatArray) -> Planes:
+    """East, north, up of ``points`` (N, S, 4) as three contiguous (N, S) arrays: the kernels
+    gather rows and take differences along S far faster than through the (N, S, 4) stride."""
+    return (
+        np.ascontiguousarray(points[:, :, 0]),
+        np.ascontiguousarray(points[:, :, 1]),
+        np.ascontiguousarray(points[:, :, 2]),
+    )
+
+
 def _evaluate(
-    pa: FloatArray,
-    pb: FloatArray,
+    pl_a: Planes,
+    pl_b: Planes,
+    ia: IntArray,
+    ib: IntArray,
+    *,
+    times: FloatArray,
     min_h: FloatArray,
     min_v: FloatArray,
     spherical: bool,
 ) -> tuple[npt.NDArray[np.bool_], FloatArray]:
-    """Full-horizon kernel for C row pairs: pa, pb (C, S, 4); minima (C,). Returns (loss (C,),
-    stats (C, 5) = first_loss_t, closest_t, min_distance, min_horizontal, min_vertical)."""
-    c_n, s_n = pa.shape[0], pa.shape[1] - 1
+    """Full-horizon kernel for C row pairs (rows ``ia`` of ``pl_a``, ``ib`` of ``pl_b``) on the
+    common sample times ``times`` (S,); minima (C,). Returns (loss (C,), stats (C, 5) =
+    first_loss_t, closest_t, min_distance, min_horizontal, min_vertical)."""
+    c_n, s_n = len(ia), len(times) - 1
     loss = np.zeros(c_n, bool)
     stats = np.empty((c_n, 5))
     step = max(1, _CHUNK // max(s_n, 1))
+    t0 = times[:-1]  # s
+    dt = times[1:] - t0  # s
     for i in range(0, c_n, step):
-        a = pa[i : i + step]
-        b = pb[i : i + step]
-        seg = segment_separation(
-            a[:, :-1],
-            a[:, 1:],
-            b[:, :-1],
-            b[:, 1:],
+        ra = ia[i : i + step]
+        rb = ib[i : i + step]
+        rel = [pa[ra] - pb[rb] for pa, pb in zip(pl_a, pl_b, strict=True)]  # m, (c, S)
+        seg = relative_separation(
+            (rel[0][:, :-1], rel[1][:, :-1], rel[2][:, :-1]),
+            (
+                rel[0][:, 1:] - rel[0][:, :-1],
+                rel[1][:, 1:] - rel[1][:, :-1],
+                rel[2][:, 1:] - rel[2][:, :-1],
+            ),
             min_h_m=min_h[i : i + step, None],
             min_v_m=min_v[i : i + step, None],
             spherical=spherical,
         )
-        t0 = a[:, :-1, 3]  # s
-        dt = a[:, 1:, 3] - t0  # s
         loss[i : i + step] = seg.loss.any(axis=1)
         first = np.where(seg.loss, seg.first_loss_s, 0.0)  # avoids inf * 0 on still segments
         stats[i : i + step, 0] = np.min(np.where(seg.loss, t0 + first * dt, np.inf), axis=1)
         k = np.argmin(seg.cpa_m, axis=1)
-        r = np.arange(len(a))
-        stats[i : i + step, 1] = t0[r, k] + seg.cpa_s[r, k] * dt[r, k]
+        r = np.arange(len(ra))
+        stats[i : i + step, 1] = t0[k] + seg.cpa_s[r, k] * dt[k]
         stats[i : i + step, 2] = seg.cpa_m[r, k]
         stats[i : i + step, 3] = seg.min_h_m.min(axis=1)
         stats[i : i + step, 4] = seg.min_v_m.min(axis=1)
@@ -120,13 +147,22 @@ def _evaluate(
 
 
 def _confirm(
-    points: FloatArray, ov_m: FloatArray, ia: IntArray, ib: IntArray, config: MonitoringConfig
+    points: FloatArray,
+    ov_m: FloatArray,
+    ia: IntArray,
+    ib: IntArray,
+    config: MonitoringConfig,
+    *,
+    planes: Planes | None = None,
 ) -> list[SeparationLoss]:
     """Run the kernel on candidate pairs (ia < ib) and return the confirmed losses."""
     if len(ia) == 0:
         return []
+    pl = _planes(points) if planes is None else planes
     mh, mv = _minima(ov_m[ia], ov_m[ib], config)
-    loss, stats = _evaluate(points[ia], points[ib], mh, mv, config.spherical)
+    loss, stats = _evaluate(
+        pl, pl, ia, ib, times=points[0, :, 3], min_h=mh, min_v=mv, spherical=config.spherical
+    )
     return [
         SeparationLoss(
             a=int(ia[i]),
@@ -164,27 +200,21 @@ def _unique(x: IntArray) -> IntArray:
     return x[keep]
 
 
+def window_steps(points: FloatArray, config: MonitoringConfig) -> int:
+    """Segments per grid time window: ``grid_dt_s`` in whole prediction steps (>= 1)."""
+    n_seg = points.shape[1] - 1
+    step_s = float(points[0, 1, 3] - points[0, 0, 3]) if len(points) else 1.0
+    w = max(1, round(config.grid_dt_s / step_s)) if step_s > 0 else n_seg
+    return int(max(1, min(w, n_seg)))
+
+
 def _window_boxes(
-    points: FloatArray, ov_m: FloatArray, config: MonitoringConfig
+    points: FloatArray, ov_m: FloatArray, config: MonitoringConfig, windows: Windows | None
 ) -> tuple[FloatArray, FloatArray, int]:
     """Grown swept boxes per (row, window): lo, hi (N, nw, 3) in metres, and W steps/window."""
-    n, s_pts = points.shape[0], points.shape[1]
-    n_seg = s_pts - 1
-    step_s = float(points[0, 1, 3] - points[0, 0, 3]) if n else 1.0
-    w = max(1, round(config.grid_dt_s / step_s)) if step_s > 0 else n_seg
-    w = min(w, n_seg)
-    nw = math.ceil(n_seg / w)
-    lo = np.empty((n, nw, 3))
-    hi = np.empty((n, nw, 3))
-    for k in range(3):  # one contiguous (N, S) plane per axis: reductions stay cache-friendly
-        x = np.ascontiguousarray(points[:, :, k])  # m
-        pad = nw * w + 1 - s_pts
-        if pad > 0:  # repeat the last sample: adds no position to the last window's box
-            x = np.concatenate([x, np.repeat(x[:, -1:], pad, axis=1)], axis=1)
-        body = x[:, : nw * w].reshape(n, nw, w)
-        ends = x[:, w::w][:, :nw]  # the closing sample of each window
-        lo[:, :, k] = np.minimum(body.min(axis=2), ends)  # m
-        hi[:, :, k] = np.maximum(body.max(axis=2), ends)  # m
+    w = window_steps(points, config)
+    if windows is None or windows.w != w or windows.lo.shape[0] != len(points):
+        windows = window_extents(points, w)
     if config.spherical:
         half_h = half_v = config.safety_distance_m / 2.0
     else:
@@ -193,7 +223,7 @@ def _window_boxes(
     rh = np.maximum(half_h, ov_m)[:, None]  # m, r_a + r_b >= the pair's minimum
     rv = np.maximum(half_v, ov_m)[:, None]
     grow = np.stack([rh, rh, rv], axis=-1)  # (N, 1, 3)
-    return lo - grow, hi + grow, w
+    return windows.lo[:, :, :3] - grow, windows.hi[:, :, :3] + grow, w
 
 
 def _box_overlap(
@@ -204,7 +234,10 @@ def _box_overlap(
 
 
 def detect_los_allpairs(
-    points: FloatArray, ov_m: FloatArray, config: MonitoringConfig
+    points: FloatArray,
+    ov_m: FloatArray,
+    config: MonitoringConfig,
+    windows: Windows | None = None,
 ) -> list[SeparationLoss]:
     """All pairs of grown window boxes, then the kernel on pairs whose boxes overlap in some
     window. Faster than the grid for small N (no hashing or sorting)."""
@@ -213,7 +246,7 @@ def detect_los_allpairs(
     ov = np.asarray(ov_m, np.float64)
     if len(points) < 2:
         return []
-    lo, hi, _ = _window_boxes(points, ov, config)
+    lo, hi, _ = _window_boxes(points, ov, config, windows)
     ia, ib = np.triu_indices(len(points), k=1)
     keep = np.zeros(len(ia), bool)
     for i in range(0, len(ia), _CHUNK // max(lo.shape[1], 1) + 1):
@@ -223,7 +256,7 @@ def detect_los_allpairs(
 
 
 def _screen_windows(
-    points: FloatArray,
+    planes: Planes,
     ov_m: FloatArray,
     ia: IntArray,
     ib: IntArray,
@@ -234,97 +267,143 @@ def _screen_windows(
 ) -> tuple[IntArray, IntArray]:
     """Loss flag on the W segments of each candidate window; returns the unique row pairs
     with a loss somewhere (their full-horizon figures come from ``_confirm``)."""
-    n_seg = points.shape[1] - 1
+    n, s_pts = planes[0].shape
+    n_seg = s_pts - 1
     mh, mv = _minima(ov_m[ia], ov_m[ib], config)
     hits = np.zeros(len(ia), bool)
     step = max(1, _CHUNK // w)
-    offs = np.arange(w)
+    offs = np.arange(w + 1)
     for i in range(0, len(ia), step):
         sl = slice(i, i + step)
-        j = win[sl, None] * w + offs  # segment index, (C, W)
-        valid = j < n_seg
-        j = np.minimum(j, n_seg - 1)
+        cols = win[sl, None] * w + offs  # sample index, (C, W + 1)
+        valid = cols[:, :-1] < n_seg  # segment cols[k] -> cols[k + 1] exists
+        cols = np.minimum(cols, n_seg)
         a = ia[sl, None]
         b = ib[sl, None]
-        flag = segment_loss(
-            points[a, j],
-            points[a, j + 1],
-            points[b, j],
-            points[b, j + 1],
+        rel = [p[a, cols] - p[b, cols] for p in planes]  # m, (C, W + 1)
+        flag = relative_loss(
+            (rel[0][:, :-1], rel[1][:, :-1], rel[2][:, :-1]),
+            (
+                rel[0][:, 1:] - rel[0][:, :-1],
+                rel[1][:, 1:] - rel[1][:, :-1],
+                rel[2][:, 1:] - rel[2][:, :-1],
+            ),
             min_h_m=mh[sl, None],
             min_v_m=mv[sl, None],
             spherical=config.spherical,
         )
         hits[sl] = (flag & valid).any(axis=1)
-    n = len(points)
     code = _unique(ia[hits] * n + ib[hits])
     return code // n, code % n
 
 
 def grid_candidates(
-    points: FloatArray, ov_m: FloatArray, config: MonitoringConfig
+    points: FloatArray,
+    ov_m: FloatArray,
+    config: MonitoringConfig,
+    windows: Windows | None = None,
 ) -> tuple[IntArray, IntArray, IntArray, int]:
     """Candidate (row a < row b, window) triples whose grown window boxes overlap, found by
-    sharing a 4D cell; also returns the window length W in steps."""
+    sharing a 4D cell; also returns the window length W in steps.
+
+    Per time window, each grown box is entered in every (dx, dy, dz) cell it touches; the
+    entries are packed as ``cell << bits | row`` and sorted (a plain sort of integers is far
+    faster than an argsort), so rows sharing a cell end up adjacent."""
     n = len(points)
-    lo, hi, w = _window_boxes(points, ov_m, config)
+    lo, hi, w = _window_boxes(points, ov_m, config, windows)
     nw = lo.shape[1]
-    lo_f = lo.reshape(-1, 3)
-    hi_f = hi.reshape(-1, 3)
-    ext = hi_f - lo_f  # m, box extents
     # A cell at least as big as the median box keeps most boxes within 2 cells per axis.
     cell = np.maximum(
-        np.array([config.grid_dx_m, config.grid_dy_m, config.grid_dz_m]), np.median(ext, axis=0)
+        np.array([config.grid_dx_m, config.grid_dy_m, config.grid_dz_m]),
+        np.median((hi - lo).reshape(-1, 3), axis=0),
     )
-    i0 = np.floor(lo_f / cell).astype(np.int64)
-    i1 = np.floor(hi_f / cell).astype(np.int64)
-    span = i1 - i0 + 1  # cells per axis
-    count = span.prod(axis=1)
-    box = np.repeat(np.arange(n * nw, dtype=np.int64), count)
-    start = np.repeat(np.cumsum(count) - count, count)
-    k = np.arange(len(box), dtype=np.int64) - start  # index within the box's cells
-    sx = span[box, 0]
-    sy = span[box, 1]
-    cx = i0[box, 0] + k % sx
-    cy = i0[box, 1] + (k // sx) % sy
-    cz = i0[box, 2] + k // (sx * sy)
-    cx -= cx.min()
-    cy -= cy.min()
-    cz -= cz.min()
-    wx = int(cx.max()) + 1
-    wy = int(cy.max()) + 1
-    wz = int(cz.max()) + 1
-    key = (((box % nw) * wz + cz) * wy + cy) * wx + cx  # window is the 4th (time) axis
-    order = np.argsort(key)
-    key = key[order]
-    bs = box[order]
+    # (window, axis, row): every per-window, per-axis bound is one contiguous vector.
+    lo_t = np.ascontiguousarray(lo.transpose(1, 2, 0))
+    hi_t = np.ascontiguousarray(hi.transpose(1, 2, 0))
+    bits = max(1, int(n - 1).bit_length())
+    out_a: list[IntArray] = []
+    out_b: list[IntArray] = []
+    out_w: list[IntArray] = []
+    for j in range(nw):
+        lo_j = lo_t[j]
+        hi_j = hi_t[j]
+        a, b = _same_cell_pairs(lo_j, hi_j, cell, bits)
+        if len(a) == 0:
+            continue
+        code = _unique(a * n + b)  # a box meets another in up to 8 cells
+        a = code // n
+        b = code % n
+        keep = (lo_j[0][a] <= hi_j[0][b]) & (lo_j[0][b] <= hi_j[0][a])
+        for k in (1, 2):
+            keep &= (lo_j[k][a] <= hi_j[k][b]) & (lo_j[k][b] <= hi_j[k][a])
+        out_a.append(a[keep])
+        out_b.append(b[keep])
+        out_w.append(np.full(int(keep.sum()), j, np.int64))
+    if not out_a:
+        empty = np.empty(0, np.int64)
+        return empty, empty, empty, w
+    return np.concatenate(out_a), np.concatenate(out_b), np.concatenate(out_w), w
+
+
+def _same_cell_pairs(
+    lo: FloatArray, hi: FloatArray, cell: FloatArray, bits: int
+) -> tuple[IntArray, IntArray]:
+    """Row pairs (a < b, with repeats) whose boxes lo, hi (3, N) touch a common cell."""
+    i0 = [np.floor(lo[k] / cell[k]).astype(np.int64) for k in range(3)]
+    i1 = [np.floor(hi[k] / cell[k]).astype(np.int64) for k in range(3)]
+    for k in range(3):
+        base = i0[k].min()
+        i0[k] -= base
+        i1[k] -= base
+    sx, sy, sz = (i1[k] - i0[k] + 1 for k in range(3))  # cells per axis
+    count = sx * sy * sz
+    row = np.repeat(np.arange(len(count), dtype=np.int64), count)
+    k = np.arange(len(row), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
+    sxr = sx[row]
+    sxy = sxr * sy[row]
+    cx = i0[0][row] + k % sxr
+    cy = i0[1][row] + (k % sxy) // sxr
+    cz = i0[2][row] + k // sxy
+    wx = int(i1[0].max()) + 1
+    wy = int(i1[1].max()) + 1
+    wz = int(i1[2].max()) + 1
+    if math.log2(wx) + math.log2(wy) + math.log2(wz) + bits < 62:
+        packed = np.sort((((cz * wy + cy) * wx + cx) << bits) | row)
+        key = packed >> bits
+        rows = packed & ((1 << bits) - 1)
+    else:  # a huge airspace in tiny cells: keys too wide to pack, sort the pairs instead
+        key = (cz * wy + cy) * wx + cx if wx * wy * wz < 2**62 else _dense(cx, cy, cz)
+        order = np.lexsort((row, key))
+        key = key[order]
+        rows = row[order]
     pa: list[IntArray] = []
     pb: list[IntArray] = []
     d = 1
     while d < len(key):
-        same = key[d:] == key[:-d]  # entries d apart in one cell
+        same = key[d:] == key[:-d]  # entries d apart in one cell (rows ascending within it)
         if not same.any():
             break
-        pa.append(bs[:-d][same])
-        pb.append(bs[d:][same])
+        pa.append(rows[:-d][same])
+        pb.append(rows[d:][same])
         d += 1
-    empty = np.empty(0, np.int64)
     if not pa:
-        return empty, empty, empty, w
-    a = np.concatenate(pa)
-    b = np.concatenate(pb)
-    # Same cell => same window; order by row and drop boxes met in several cells.
-    code = _unique(np.minimum(a, b) * (n * nw) + np.maximum(a, b))
-    ba = code // (n * nw)
-    bb = code % (n * nw)
-    keep = np.all((lo_f[ba] <= hi_f[bb]) & (lo_f[bb] <= hi_f[ba]), axis=1)
-    ba = ba[keep]
-    bb = bb[keep]
-    return ba // nw, bb // nw, ba % nw, w
+        empty = np.empty(0, np.int64)
+        return empty, empty
+    return np.concatenate(pa), np.concatenate(pb)
+
+
+def _dense(cx: IntArray, cy: IntArray, cz: IntArray) -> IntArray:
+    """Cell coordinates -> dense integer ids (for ranges too wide to multiply out)."""
+    _, inv = np.unique(np.column_stack([cx, cy, cz]), axis=0, return_inverse=True)
+    out: IntArray = inv.ravel().astype(np.int64)
+    return out
 
 
 def detect_los_grid(
-    points: FloatArray, ov_m: FloatArray, config: MonitoringConfig
+    points: FloatArray,
+    ov_m: FloatArray,
+    config: MonitoringConfig,
+    windows: Windows | None = None,
 ) -> list[SeparationLoss]:
     """The 4D grid detector (see module doc): candidates sharing a cell, a loss screen on the
     candidate windows, then the full-horizon kernel on the pairs that lose separation."""
@@ -333,18 +412,24 @@ def detect_los_grid(
     ov = np.asarray(ov_m, np.float64)
     if len(points) < 2:
         return []
-    ia, ib, win, w = grid_candidates(points, ov, config)
-    pa, pb = _screen_windows(points, ov, ia, ib, win, w=w, config=config)
-    return _confirm(points, ov, pa, pb, config)
+    ia, ib, win, w = grid_candidates(points, ov, config, windows)
+    planes = _planes(points)
+    pa, pb = _screen_windows(planes, ov, ia, ib, win, w=w, config=config)
+    return _confirm(points, ov, pa, pb, config, planes=planes)
 
 
 def detect_los(
-    points: FloatArray, ov_m: FloatArray, config: MonitoringConfig
+    points: FloatArray,
+    ov_m: FloatArray,
+    config: MonitoringConfig,
+    windows: Windows | None = None,
 ) -> list[SeparationLoss]:
-    """All-pairs below ``config.allpairs_below`` rows, the 4D grid above."""
+    """All-pairs below ``config.allpairs_below`` rows, the 4D grid above. ``windows``: the
+    prediction's :func:`window_extents` at :func:`window_steps` (computed if not given or
+    not matching), so a caller can share them with the geofence check."""
     if len(points) < config.allpairs_below:
-        return detect_los_allpairs(points, ov_m, config)
-    return detect_los_grid(points, ov_m, config)
+        return detect_los_allpairs(points, ov_m, config, windows)
+    return detect_los_grid(points, ov_m, config, windows)
 
 
 def detect_pairs_between(
@@ -361,10 +446,15 @@ def detect_pairs_between(
     pb = _segments(np.asarray(pb, np.float64))
     if len(pa) == 0 or len(pb) == 0:
         return []
-    ga, gb = np.meshgrid(np.arange(len(pa)), np.arange(len(pb)), indexing="ij")
-    ia = ga.ravel()
-    ib = gb.ravel()
+    # Prefilter: whole-horizon boxes, b's grown by the minima (a superset of the losses).
+    grow = np.array([min_h_m, min_h_m, min_h_m if spherical else min_v_m])  # m
+    lo_a, hi_a = pa[:, :, :3].min(axis=1), pa[:, :, :3].max(axis=1)
+    lo_b, hi_b = pb[:, :, :3].min(axis=1) - grow, pb[:, :, :3].max(axis=1) + grow
+    near = np.all((lo_a[:, None] <= hi_b[None]) & (lo_b[None] <= hi_a[:, None]), axis=2)
+    ia, ib = np.nonzero(near)
     mh = np.full(len(ia), float(min_h_m))
     mv = np.full(len(ia), float(min_v_m))
-    loss, stats = _evaluate(pa[ia], pb[ib], mh, mv, spherical)
+    loss, stats = _evaluate(
+        _planes(pa), _planes(pb), ia, ib, times=pa[0, :, 3], min_h=mh, min_v=mv, spherical=spherical
+    )
     return [(int(ia[i]), int(ib[i]), stats[i]) for i in np.nonzero(loss)[0]]
