@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gcs_utm.core.monitoring import MonitoringConfig
+from gcs_utm.core.monitoring.geometry import window_extents
 from gcs_utm.core.monitoring.separation import (
     PredictionError,
     detect_los,
@@ -34,7 +35,7 @@ def _key(losses: list) -> dict:  # type: ignore[type-arg]
     return {(x.a, x.b): (x.first_loss_t_s, x.closest_t_s, x.min_distance_m) for x in losses}
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(
     seed=st.integers(0, 2**31),
     n=st.integers(2, 60),
@@ -60,6 +61,9 @@ def test_grid_and_allpairs_match_bruteforce(
     oracle = _key(detect_los_bruteforce(pts, ov, cfg))
     assert _key(detect_los_grid(pts, ov, cfg)) == oracle
     assert _key(detect_los_allpairs(pts, ov, cfg)) == oracle
+    if steps >= 2:  # window bounds shared with the geofence check (any length) change nothing
+        shared = window_extents(pts, 3)
+        assert _key(detect_los_grid(pts, ov, cfg, shared)) == oracle
 
 
 @settings(max_examples=15, deadline=None)
@@ -112,3 +116,16 @@ def test_rows_on_different_time_bases_are_rejected() -> None:
     pts[1, :, 3] = [5, 6, 7]
     with pytest.raises(PredictionError):
         detect_los_grid(pts, np.zeros(2), MonitoringConfig())
+
+
+def test_grid_over_a_huge_spread_with_tiny_cells_matches_oracle() -> None:
+    # Keys too wide to pack with the row index: the grid falls back to sorting pairs.
+    base = _encounters(3, 20, 300.0, 8, 1.0)
+    far = base.copy()
+    far[:, :, :2] += 5e8  # m, a second cluster far away
+    pts = np.concatenate([base, far])
+    ov = np.full(len(pts), 10.0)
+    cfg = MonitoringConfig(grid_dx_m=1.0, grid_dy_m=1.0, grid_dz_m=1.0, grid_dt_s=1.0)
+    oracle = _key(detect_los_bruteforce(pts, ov, cfg))
+    assert len(oracle) >= 2
+    assert _key(detect_los_grid(pts, ov, cfg)) == oracle

@@ -281,6 +281,7 @@ def segment_entry(
         inside = (p0[:, k] >= a) & (p0[:, k] <= b)
         lo = np.maximum(lo, np.where(moving, np.minimum(s1, s2), np.where(inside, 0.0, 2.0)))
         hi = np.minimum(hi, np.where(moving, np.maximum(s1, s2), np.where(inside, 1.0, -1.0)))
+        hi = np.where(np.greater(a, b), -1.0, hi)  # an inverted band or window is empty
     ok = lo <= hi
     out = np.full(len(p0), np.inf)
     if not ok.any():
