@@ -225,10 +225,33 @@ def relative_separation(
 ) -> SegmentSeparation:
     """:func:`segment_separation` from the relative position ``d0`` at s = 0 and the relative
     motion ``v`` per segment, one array per axis (the same floats either way)."""
-    lo, hi = _loss_interval(
+    lo, hi = relative_loss_interval(d0, v, min_h_m=min_h_m, min_v_m=min_v_m, spherical=spherical)
+    loss = lo < hi
+    cpa_s, cpa_m, min_h, min_v = relative_approach(d0, v)
+    return SegmentSeparation(loss, np.where(loss, lo, np.inf), cpa_s, cpa_m, min_h, min_v)
+
+
+def relative_loss_interval(
+    d0: tuple[FloatArray, FloatArray, FloatArray],
+    v: tuple[FloatArray, FloatArray, FloatArray],
+    *,
+    min_h_m: FloatArray | float,
+    min_v_m: FloatArray | float,
+    spherical: bool = False,
+) -> tuple[FloatArray, FloatArray]:
+    """Segment parameter interval [lo, hi] (within [0, 1]) where the pair is in loss of
+    separation; a loss exists iff lo < hi, and then ``lo`` is the parameter of first loss."""
+    return _loss_interval(
         d0, v, np.asarray(min_h_m, np.float64), np.asarray(min_v_m, np.float64), spherical
     )
-    loss = lo < hi
+
+
+def relative_approach(
+    d0: tuple[FloatArray, FloatArray, FloatArray],
+    v: tuple[FloatArray, FloatArray, FloatArray],
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Closest approach on each segment from the relative position ``d0`` and motion ``v``:
+    (cpa_s, cpa_m, min_h_m, min_v_m) as in :class:`SegmentSeparation`."""
     ah = v[0] ** 2 + v[1] ** 2  # m^2
     bh = 2.0 * (d0[0] * v[0] + d0[1] * v[1])  # m^2
     ch = d0[0] ** 2 + d0[1] ** 2  # m^2
@@ -243,7 +266,7 @@ def relative_separation(
     z0 = d0[2]
     z1 = z0 + v[2]
     min_v = np.where(z0 * z1 <= 0.0, 0.0, np.minimum(np.abs(z0), np.abs(z1)))
-    return SegmentSeparation(loss, np.where(loss, lo, np.inf), cpa_s, cpa_m, min_h, min_v)
+    return cpa_s, cpa_m, min_h, min_v
 
 
 def segment_entry(

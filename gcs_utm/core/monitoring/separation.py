@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -31,7 +32,8 @@ from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.geometry import (
     FloatArray,
     Windows,
-    relative_loss,
+    relative_approach,
+    relative_loss_interval,
     relative_separation,
     window_extents,
 )
@@ -39,16 +41,16 @@ from gcs_utm.core.monitoring.geometry import (
 IntArray = npt.NDArray[np.int64]
 
 # Segment-pairs evaluated per vectorised chunk: bounds memory (~20 arrays of this size).
-_CHUNK = 400_000
+_CHUNK = 100_000
 
 
 class PredictionError(ValueError):
     """Prediction rows that do not share one time base."""
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
-class SeparationLoss:
-    """A predicted loss of separation between rows ``a`` < ``b`` of the prediction."""
+class SeparationLoss(NamedTuple):
+    """A predicted loss of separation between rows ``a`` < ``b`` of the prediction (an
+    immutable record; a named tuple because a dense cycle builds tens of thousands)."""
 
     a: int
     b: int
@@ -97,6 +99,47 @@ def _planes(points: FloatArray) -> Planes:
         np.ascontiguousarray(points[:, :, 1]),
         np.ascontiguousarray(points[:, :, 2]),
     )
+
+
+@dataclass(frozen=True, slots=True)
+class _Flat:
+    """The prediction as four flat planes (east, north, up, t) in one transposed copy, each
+    row of S samples followed by the next and S zeros of padding at the end, so every run of
+    ``w + 1`` samples starting in a row is one row of a sliding-window view (no index
+    arrays, no bounds clipping: samples beyond a row's end are masked as invalid)."""
+
+    buf: FloatArray  # (4, N * S + S)
+    n: int
+    s: int
+
+    @staticmethod
+    def of(points: FloatArray) -> _Flat:
+        n, s, _ = points.shape
+        buf = np.zeros((4, n * s + s))
+        buf[:, : n * s] = points.reshape(n * s, 4).T
+        return _Flat(buf, n, s)
+
+    def plane(self, k: int) -> FloatArray:
+        """Axis ``k`` as an (N, S) view."""
+        out: FloatArray = self.buf[k, : self.n * self.s].reshape(self.n, self.s)
+        return out
+
+    def runs(self, w: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Sliding views (N * S, w + 1) of east, north, up: row ``r * S + k`` holds samples
+        k .. k + w of prediction row r."""
+        view = np.lib.stride_tricks.sliding_window_view
+        return (
+            view(self.buf[0], w + 1)[: self.n * self.s],
+            view(self.buf[1], w + 1)[: self.n * self.s],
+            view(self.buf[2], w + 1)[: self.n * self.s],
+        )
+
+    def check_time_base(self) -> None:
+        if self.n > 1:
+            t = self.plane(3)
+            spread = float(np.max(np.abs(t - t[0])))
+            if spread > 1e-6:
+                raise PredictionError(f"prediction rows have different times (spread {spread} s)")
 
 
 def _evaluate(
@@ -212,9 +255,7 @@ def _window_boxes(
     points: FloatArray, ov_m: FloatArray, config: MonitoringConfig, windows: Windows | None
 ) -> tuple[FloatArray, FloatArray, int]:
     """Grown swept boxes per (row, window): lo, hi (N, nw, 3) in metres, and W steps/window."""
-    w = window_steps(points, config)
-    if windows is None or windows.w != w or windows.lo.shape[0] != len(points):
-        windows = window_extents(points, w)
+    windows = _matching(points, window_steps(points, config), windows)
     if config.spherical:
         half_h = half_v = config.safety_distance_m / 2.0
     else:
@@ -223,7 +264,15 @@ def _window_boxes(
     rh = np.maximum(half_h, ov_m)[:, None]  # m, r_a + r_b >= the pair's minimum
     rv = np.maximum(half_v, ov_m)[:, None]
     grow = np.stack([rh, rh, rv], axis=-1)  # (N, 1, 3)
-    return windows.lo[:, :, :3] - grow, windows.hi[:, :, :3] + grow, w
+    return windows.lo[:, :, :3] - grow, windows.hi[:, :, :3] + grow, windows.w
+
+
+def _matching(points: FloatArray, w: int, windows: Windows | None) -> Windows:
+    """``windows`` if they are the bounds of ``points`` at ``w`` steps, else computed."""
+    nw = -(-(points.shape[1] - 1) // w)
+    if windows is None or windows.w != w or windows.lo.shape[:2] != (len(points), nw):
+        return window_extents(points, w)
+    return windows
 
 
 def _box_overlap(
@@ -242,59 +291,220 @@ def detect_los_allpairs(
     """All pairs of grown window boxes, then the kernel on pairs whose boxes overlap in some
     window. Faster than the grid for small N (no hashing or sorting)."""
     points = _segments(np.asarray(points, np.float64))
-    _check_time_base(points)
+    flat = _Flat.of(points)
+    flat.check_time_base()
     ov = np.asarray(ov_m, np.float64)
     if len(points) < 2:
         return []
-    lo, hi, _ = _window_boxes(points, ov, config, windows)
+    windows = _matching(points, window_steps(points, config), windows)
+    lo, hi, w = _window_boxes(points, ov, config, windows)
     ia, ib = np.triu_indices(len(points), k=1)
-    keep = np.zeros(len(ia), bool)
-    for i in range(0, len(ia), _CHUNK // max(lo.shape[1], 1) + 1):
-        sl = slice(i, i + _CHUNK // max(lo.shape[1], 1) + 1)
-        keep[sl] = _box_overlap(lo, hi, ia[sl], ib[sl]).any(axis=1)
-    return _confirm(points, ov, ia[keep].astype(np.int64), ib[keep].astype(np.int64), config)
+    step = _CHUNK // max(lo.shape[1], 1) + 1
+    out_p: list[IntArray] = []
+    out_w: list[IntArray] = []
+    for i in range(0, len(ia), step):
+        p, j = np.nonzero(_box_overlap(lo, hi, ia[i : i + step], ib[i : i + step]))
+        out_p.append(p + i)
+        out_w.append(j)
+    pi = np.concatenate(out_p)
+    return _windowed_losses(
+        flat,
+        ov,
+        ia[pi].astype(np.int64),
+        ib[pi].astype(np.int64),
+        np.concatenate(out_w).astype(np.int64),
+        w=w,
+        lo=windows.lo,
+        hi=windows.hi,
+        config=config,
+    )
 
 
-def _screen_windows(
-    planes: Planes,
+Runs = tuple[FloatArray, FloatArray, FloatArray]
+
+
+def _window_rel(
+    runs: Runs, s_pts: int, ia: IntArray, ib: IntArray, win: IntArray, *, w: int
+) -> tuple[Planes, Planes, npt.NDArray[np.bool_] | None]:
+    """Relative position at the start of each of the W segments of window ``win`` of pairs
+    (ia, ib), and the relative motion per segment (per axis, (C, W)), from the
+    :meth:`_Flat.runs` views; plus the validity mask of the segments (None: all valid; the
+    last window may be shorter). The floats are exactly those of the full-horizon kernel."""
+    n_seg = s_pts - 1
+    start = win * w  # first sample of the window
+    fa = ia * s_pts + start
+    fb = ib * s_pts + start
+    rel = [r[fa] - r[fb] for r in runs]  # m, (C, W + 1)
+    d0 = (rel[0][:, :-1], rel[1][:, :-1], rel[2][:, :-1])
+    v = (
+        rel[0][:, 1:] - rel[0][:, :-1],
+        rel[1][:, 1:] - rel[1][:, :-1],
+        rel[2][:, 1:] - rel[2][:, :-1],
+    )
+    valid = None if n_seg % w == 0 else start[:, None] + np.arange(w) < n_seg
+    return d0, v, valid
+
+
+def _screen(
+    runs: Runs,
+    times: FloatArray,
+    ia: IntArray,
+    ib: IntArray,
+    win: IntArray,
+    *,
+    w: int,
+    min_h: FloatArray,
+    min_v: FloatArray,
+    spherical: bool,
+) -> tuple[npt.NDArray[np.bool_], FloatArray]:
+    """Exact loss test on the W segments of each candidate (pair, window): (loss somewhere
+    in the window (C,), time of first loss in the window (C,), +inf without loss)."""
+    t0 = times[:-1]  # s
+    dt = times[1:] - t0  # s
+    hit = np.zeros(len(ia), bool)
+    first_t = np.full(len(ia), np.inf)
+    step = max(1, _CHUNK // w)
+    for i in range(0, len(ia), step):
+        sl = slice(i, i + step)
+        d0, v, valid = _window_rel(runs, len(times), ia[sl], ib[sl], win[sl], w=w)
+        lo, hi = relative_loss_interval(
+            d0, v, min_h_m=min_h[sl, None], min_v_m=min_v[sl, None], spherical=spherical
+        )
+        loss = lo < hi
+        if valid is not None:
+            loss &= valid
+        h = loss.any(axis=1)
+        hit[sl] = h
+        if h.any():
+            sk = np.minimum(win[sl][h, None] * w + np.arange(w), len(t0) - 1)  # segment
+            first = np.where(loss[h], t0[sk] + lo[h] * dt[sk], np.inf)  # as in ``_evaluate``
+            first_t[i + np.nonzero(h)[0]] = first.min(axis=1)
+    return hit, first_t
+
+
+def _approach(
+    runs: Runs, times: FloatArray, ia: IntArray, ib: IntArray, win: IntArray, *, w: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Closest approach within each (pair, window): 3D distance, its time (the first segment
+    on a tie) and the minimum horizontal distance, each (C,)."""
+    t0 = times[:-1]  # s
+    dt = times[1:] - t0  # s
+    cpa_m = np.empty(len(ia))
+    cpa_t = np.empty(len(ia))
+    min_h = np.empty(len(ia))
+    step = max(1, _CHUNK // w)
+    for i in range(0, len(ia), step):
+        sl = slice(i, i + step)
+        d0, v, valid = _window_rel(runs, len(times), ia[sl], ib[sl], win[sl], w=w)
+        s_c, d_c, h_c, _ = relative_approach(d0, v)
+        if valid is not None:
+            d_c = np.where(valid, d_c, np.inf)
+            h_c = np.where(valid, h_c, np.inf)
+        k = np.argmin(d_c, axis=1)
+        r = np.arange(len(k))
+        sk = win[sl] * w + k  # segment of the closest approach (always a valid one)
+        cpa_m[sl] = d_c[r, k]
+        cpa_t[sl] = t0[sk] + s_c[r, k] * dt[sk]  # as in ``_evaluate``
+        min_h[sl] = h_c.min(axis=1)
+    return cpa_m, cpa_t, min_h
+
+
+def _min_vertical(z: FloatArray, ia: IntArray, ib: IntArray) -> FloatArray:
+    """Minimum vertical distance over the whole horizon per pair (as ``relative_approach``:
+    0 where the relative altitude changes sign, else the smaller end)."""
+    out = np.empty(len(ia))
+    step = max(1, _CHUNK // z.shape[1])
+    for i in range(0, len(ia), step):
+        sl = slice(i, i + step)
+        rz = z[ia[sl]] - z[ib[sl]]  # m, (c, S)
+        z0 = rz[:, :-1]
+        z1 = z0 + (rz[:, 1:] - z0)  # the kernel's z0 + v, bit for bit
+        seg = np.where(z0 * z1 <= 0.0, 0.0, np.minimum(np.abs(z0), np.abs(z1)))
+        out[sl] = seg.min(axis=1)
+    return out
+
+
+def _windowed_losses(
+    flat: _Flat,
     ov_m: FloatArray,
     ia: IntArray,
     ib: IntArray,
     win: IntArray,
     *,
     w: int,
+    lo: FloatArray,
+    hi: FloatArray,
     config: MonitoringConfig,
-) -> tuple[IntArray, IntArray]:
-    """Loss flag on the W segments of each candidate window; returns the unique row pairs
-    with a loss somewhere (their full-horizon figures come from ``_confirm``)."""
-    n, s_pts = planes[0].shape
-    n_seg = s_pts - 1
+) -> list[SeparationLoss]:
+    """Exact losses from candidate (pair a < b, window) triples that include every window in
+    which a pair can lose separation; ``lo``, ``hi`` (N, nw, >=3) are the UNGROWN window
+    bounds. Gives the oracle's figures (``_evaluate`` over the full horizon) at a fraction of
+    its cost:
+
+    1. loss test on the candidate windows -> the pairs in loss and their first loss (a loss
+       can only occur in a candidate window);
+    2. closest approach on the windows in loss -> upper bounds U (3D) and Uh (horizontal);
+    3. every other window of those pairs whose box gap (a lower bound of the distance in the
+       window) is within U or Uh (plus a rounding margin) is evaluated too; the rest cannot
+       hold the minimum. The minimum vertical distance comes from one cheap pass over z.
+    """
+    n = flat.n
+    if len(ia) == 0:
+        return []
+    runs = flat.runs(w)
+    times = flat.plane(3)[0]
     mh, mv = _minima(ov_m[ia], ov_m[ib], config)
-    hits = np.zeros(len(ia), bool)
-    step = max(1, _CHUNK // w)
-    offs = np.arange(w + 1)
-    for i in range(0, len(ia), step):
-        sl = slice(i, i + step)
-        cols = win[sl, None] * w + offs  # sample index, (C, W + 1)
-        valid = cols[:, :-1] < n_seg  # segment cols[k] -> cols[k + 1] exists
-        cols = np.minimum(cols, n_seg)
-        a = ia[sl, None]
-        b = ib[sl, None]
-        rel = [p[a, cols] - p[b, cols] for p in planes]  # m, (C, W + 1)
-        flag = relative_loss(
-            (rel[0][:, :-1], rel[1][:, :-1], rel[2][:, :-1]),
-            (
-                rel[0][:, 1:] - rel[0][:, :-1],
-                rel[1][:, 1:] - rel[1][:, :-1],
-                rel[2][:, 1:] - rel[2][:, :-1],
-            ),
-            min_h_m=mh[sl, None],
-            min_v_m=mv[sl, None],
-            spherical=config.spherical,
-        )
-        hits[sl] = (flag & valid).any(axis=1)
-    code = _unique(ia[hits] * n + ib[hits])
-    return code // n, code % n
+    hit, first_t = _screen(
+        runs, times, ia, ib, win, w=w, min_h=mh, min_v=mv, spherical=config.spherical
+    )
+    if not hit.any():
+        return []
+    code = ia[hit] * n + ib[hit]
+    hw = win[hit]
+    hf = first_t[hit]
+    order = np.lexsort((hw, code))
+    code, hw, hf = code[order], hw[order], hf[order]
+    new = np.empty(len(code), bool)
+    new[0] = True
+    np.not_equal(code[1:], code[:-1], out=new[1:])
+    starts = np.nonzero(new)[0]
+    pair_of = np.cumsum(new) - 1  # pair index of each hit window
+    pa = code[starts] // n
+    pb = code[starts] % n
+    first = np.minimum.reduceat(hf, starts)
+    # 2. closest approach where the pairs lose separation
+    cm, ct, ch = _approach(runs, times, pa[pair_of], pb[pair_of], hw, w=w)
+    u3 = np.minimum.reduceat(cm, starts)
+    uh = np.minimum.reduceat(ch, starts)
+    # 3. other windows that may hold a closer approach (box gap as the lower bound)
+    gap = np.maximum(
+        np.maximum(lo[pa, :, :3] - hi[pb, :, :3], lo[pb, :, :3] - hi[pa, :, :3]), 0.0
+    )  # m, (P, nw, 3)
+    span = np.maximum(hi[pa, :, :3], hi[pb, :, :3]) - np.minimum(lo[pa, :, :3], lo[pb, :, :3])
+    tol = 1e-3 + 1e-6 * span.sum(axis=2)  # m, far above the kernels' rounding
+    g2h = gap[:, :, 0] ** 2 + gap[:, :, 1] ** 2
+    need = g2h + gap[:, :, 2] ** 2 <= (u3[:, None] + tol) ** 2
+    need |= g2h <= (uh[:, None] + tol) ** 2
+    need[pair_of, hw] = False  # already evaluated
+    xp, xw = np.nonzero(need)
+    if len(xp):
+        cm2, ct2, ch2 = _approach(runs, times, pa[xp], pb[xp], xw, w=w)
+        pair_of = np.concatenate([pair_of, xp])
+        hw = np.concatenate([hw, xw])
+        cm = np.concatenate([cm, cm2])
+        ct = np.concatenate([ct, ct2])
+        ch = np.concatenate([ch, ch2])
+    order = np.lexsort((hw, cm, pair_of))  # per pair: smallest distance, earliest window
+    pair_of, cm, ct, ch = pair_of[order], cm[order], ct[order], ch[order]
+    head = np.empty(len(pair_of), bool)
+    head[0] = True
+    np.not_equal(pair_of[1:], pair_of[:-1], out=head[1:])
+    starts = np.nonzero(head)[0]
+    min_h = np.minimum.reduceat(ch, starts)
+    min_v = _min_vertical(flat.plane(2), pa, pb)
+    cm, ct = cm[starts], ct[starts]
+    fields = (pa, pb, first, ct, cm, min_h, min_v)
+    return list(map(SeparationLoss, *(f.tolist() for f in fields)))
 
 
 def grid_candidates(
@@ -406,16 +616,18 @@ def detect_los_grid(
     windows: Windows | None = None,
 ) -> list[SeparationLoss]:
     """The 4D grid detector (see module doc): candidates sharing a cell, a loss screen on the
-    candidate windows, then the full-horizon kernel on the pairs that lose separation."""
+    candidate windows, then the closest approach on the windows that can hold it
+    (``_windowed_losses``)."""
     points = _segments(np.asarray(points, np.float64))
-    _check_time_base(points)
+    flat = _Flat.of(points)
+    flat.check_time_base()
     ov = np.asarray(ov_m, np.float64)
     if len(points) < 2:
         return []
+    w = window_steps(points, config)
+    windows = _matching(points, w, windows)
     ia, ib, win, w = grid_candidates(points, ov, config, windows)
-    planes = _planes(points)
-    pa, pb = _screen_windows(planes, ov, ia, ib, win, w=w, config=config)
-    return _confirm(points, ov, pa, pb, config, planes=planes)
+    return _windowed_losses(flat, ov, ia, ib, win, w=w, lo=windows.lo, hi=windows.hi, config=config)
 
 
 def detect_los(
