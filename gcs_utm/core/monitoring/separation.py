@@ -124,14 +124,17 @@ class _Flat:
         out: FloatArray = self.buf[k, : self.n * self.s].reshape(self.n, self.s)
         return out
 
-    def runs(self, w: int) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Sliding views (N * S, w + 1) of east, north, up: row ``r * S + k`` holds samples
-        k .. k + w of prediction row r."""
+    def windows(self, w: int) -> Runs:
+        """East, north, up per window of ``w`` segments as contiguous (N * nw, w + 1)
+        arrays: row ``r * nw + j`` holds samples j * w .. j * w + w of prediction row r
+        (a short last window runs into the next row or the padding: mask it)."""
         view = np.lib.stride_tricks.sliding_window_view
+        nw = -(-(self.s - 1) // w)
+        starts = (np.arange(self.n)[:, None] * self.s + np.arange(nw) * w).ravel()
         return (
-            view(self.buf[0], w + 1)[: self.n * self.s],
-            view(self.buf[1], w + 1)[: self.n * self.s],
-            view(self.buf[2], w + 1)[: self.n * self.s],
+            view(self.buf[0], w + 1)[starts],
+            view(self.buf[1], w + 1)[starts],
+            view(self.buf[2], w + 1)[starts],
         )
 
     def check_time_base(self) -> None:
@@ -328,20 +331,20 @@ def _window_rel(
 ) -> tuple[Planes, Planes, npt.NDArray[np.bool_] | None]:
     """Relative position at the start of each of the W segments of window ``win`` of pairs
     (ia, ib), and the relative motion per segment (per axis, (C, W)), from the
-    :meth:`_Flat.runs` views; plus the validity mask of the segments (None: all valid; the
+    :meth:`_Flat.windows` arrays; plus the validity mask of the segments (None: all valid; the
     last window may be shorter). The floats are exactly those of the full-horizon kernel."""
     n_seg = s_pts - 1
-    start = win * w  # first sample of the window
-    fa = ia * s_pts + start
-    fb = ib * s_pts + start
-    rel = [r[fa] - r[fb] for r in runs]  # m, (C, W + 1)
+    nw = -(-n_seg // w)
+    fa = ia * nw + win
+    fb = ib * nw + win
+    rel = [np.take(r, fa, axis=0) - np.take(r, fb, axis=0) for r in runs]  # m, (C, W + 1)
     d0 = (rel[0][:, :-1], rel[1][:, :-1], rel[2][:, :-1])
     v = (
         rel[0][:, 1:] - rel[0][:, :-1],
         rel[1][:, 1:] - rel[1][:, :-1],
         rel[2][:, 1:] - rel[2][:, :-1],
     )
-    valid = None if n_seg % w == 0 else start[:, None] + np.arange(w) < n_seg
+    valid = None if n_seg % w == 0 else (win * w)[:, None] + np.arange(w) < n_seg
     return d0, v, valid
 
 
@@ -451,7 +454,7 @@ def _windowed_losses(
     n = flat.n
     if len(ia) == 0:
         return []
-    runs = flat.runs(w)
+    runs = flat.windows(w)
     times = flat.plane(3)[0]
     mh, mv = _minima(ov_m[ia], ov_m[ib], config)
     hit, first_t = _screen(
