@@ -139,3 +139,30 @@ def test_grid_over_a_huge_spread_with_tiny_cells_matches_oracle() -> None:
     oracle = _key(detect_los_bruteforce(pts, ov, cfg))
     assert len(oracle) >= 2
     assert _key(detect_los_grid(pts, ov, cfg)) == oracle
+
+
+def test_closest_approach_outside_the_windows_in_loss_is_reported() -> None:
+    # B passes 20 m straight over A at t = 5 s (vertical 20 m >= 15 m: no loss there, and
+    # their grown boxes do not even overlap in that window), then loses separation at
+    # t = 40 s (45 m horizontal, 10 m vertical). The closest approach (20 m at 5 s) lies in
+    # a window without loss: the grid must still report it, as the oracle does.
+    t = np.arange(61.0)
+    a = np.column_stack([np.zeros(61), np.zeros(61), np.full(61, 100.0), t])
+    knots_t = [0.0, 10.0, 20.0, 40.0, 60.0]
+    b = np.column_stack(
+        [
+            np.interp(t, knots_t, [-50.0, 50.0, 200.0, 0.0, -200.0]),
+            np.interp(t, knots_t, [0.0, 0.0, 0.0, 45.0, 45.0]),
+            np.interp(t, knots_t, [120.0, 120.0, 110.0, 110.0, 110.0]),
+            t,
+        ]
+    )
+    pts = np.stack([a, b])
+    cfg = MonitoringConfig()
+    (x,) = detect_los_grid(pts, np.zeros(2), cfg)
+    assert _key([x]) == _key(detect_los_bruteforce(pts, np.zeros(2), cfg))
+    assert x.closest_t_s == pytest.approx(5.0)
+    assert x.min_distance_m == pytest.approx(20.0)
+    assert x.min_horizontal_m == pytest.approx(0.0, abs=1e-9)
+    assert x.min_vertical_m == pytest.approx(10.0)
+    assert 30.0 < x.first_loss_t_s < 40.0
