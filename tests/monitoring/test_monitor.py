@@ -234,3 +234,35 @@ def test_degenerate_snapshots() -> None:
     assert mon.cycle(empty) == []
     ops = [_line_op("A", 0)]
     assert mon.cycle(_snapshot(0, {"A": ((0, 0, 100), (0, 0, 0))}, ops, steps=1)) == []
+
+
+def test_conformance_threat_survives_stale_track_and_closes_when_back_on_plan() -> None:
+    op = _line_op("A", 0)  # fg 20 m, ov 40 m along y = 0
+    mon = Monitor(FRAME, MonitoringConfig(close_cycles=2, **LOOSE))
+    (t,) = mon.cycle(_snapshot(0, {"A": ((0, 30, 100), (10, 0, 0))}, [op]))
+    assert t.kind is ThreatKind.UAS_IN_CV
+    back = {"A": ((10, 0, 100), (10, 0, 0))}
+    for k in range(1, 6):  # back on the plan, but the track is stale: nothing closes
+        assert mon.cycle(_snapshot(k, back, [op], stale=frozenset({"A"}))) == []
+    assert [x.id for x in mon.active()] == [t.id]
+    # Just inside the flight geometry (within the 2 m close margin): still not closed.
+    edge = {"A": ((10, 19, 100), (10, 0, 0))}
+    assert mon.cycle(_snapshot(6, edge, [op])) == []
+    assert mon.cycle(_snapshot(7, edge, [op])) == []
+    assert mon.cycle(_snapshot(8, back, [op])) == []
+    (c,) = mon.cycle(_snapshot(9, back, [op]))
+    assert c.status is ThreatStatus.CLOSED and c.id == t.id
+
+
+def test_persisting_conflict_over_many_cycles_is_one_threat() -> None:
+    ops = [_line_op("A", 0), _line_op("B", 0)]
+    mon = Monitor(FRAME, MonitoringConfig(**LOOSE))
+    raised = []
+    for k in range(20):  # closing head-on at 20 m/s, re-detected every cycle
+        states = {
+            "A": ((10.0 * k, 0, 100), (10, 0, 0)),
+            "B": ((900 - 10.0 * k, 0, 100), (-10, 0, 0)),
+        }
+        raised += mon.cycle(_snapshot(k, states, ops))
+    assert len({t.id for t in raised}) == 1
+    assert [t.status for t in raised] == [ThreatStatus.OPEN]  # same event time: no updates

@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gcs_utm.core.monitoring import MonitoringConfig
+from gcs_utm.core.monitoring.geometry import window_extents
 from gcs_utm.core.monitoring.separation import (
     PredictionError,
     detect_los,
@@ -31,10 +32,20 @@ def _encounters(seed: int, n: int, box_m: float, steps: int, dt_s: float) -> np.
 
 
 def _key(losses: list) -> dict:  # type: ignore[type-arg]
-    return {(x.a, x.b): (x.first_loss_t_s, x.closest_t_s, x.min_distance_m) for x in losses}
+    """Every figure, compared exactly (the grid must give the oracle's floats)."""
+    return {
+        (x.a, x.b): (
+            x.first_loss_t_s,
+            x.closest_t_s,
+            x.min_distance_m,
+            x.min_horizontal_m,
+            x.min_vertical_m,
+        )
+        for x in losses
+    }
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(
     seed=st.integers(0, 2**31),
     n=st.integers(2, 60),
@@ -60,6 +71,9 @@ def test_grid_and_allpairs_match_bruteforce(
     oracle = _key(detect_los_bruteforce(pts, ov, cfg))
     assert _key(detect_los_grid(pts, ov, cfg)) == oracle
     assert _key(detect_los_allpairs(pts, ov, cfg)) == oracle
+    if steps >= 2:  # window bounds shared with the geofence check (any length) change nothing
+        shared = window_extents(pts, 3)
+        assert _key(detect_los_grid(pts, ov, cfg, shared)) == oracle
 
 
 @settings(max_examples=15, deadline=None)
@@ -112,3 +126,43 @@ def test_rows_on_different_time_bases_are_rejected() -> None:
     pts[1, :, 3] = [5, 6, 7]
     with pytest.raises(PredictionError):
         detect_los_grid(pts, np.zeros(2), MonitoringConfig())
+
+
+def test_grid_over_a_huge_spread_with_tiny_cells_matches_oracle() -> None:
+    # Keys too wide to pack with the row index: the grid falls back to sorting pairs.
+    base = _encounters(3, 20, 300.0, 8, 1.0)
+    far = base.copy()
+    far[:, :, :2] += 5e8  # m, a second cluster far away
+    pts = np.concatenate([base, far])
+    ov = np.full(len(pts), 10.0)
+    cfg = MonitoringConfig(grid_dx_m=1.0, grid_dy_m=1.0, grid_dz_m=1.0, grid_dt_s=1.0)
+    oracle = _key(detect_los_bruteforce(pts, ov, cfg))
+    assert len(oracle) >= 2
+    assert _key(detect_los_grid(pts, ov, cfg)) == oracle
+
+
+def test_closest_approach_outside_the_windows_in_loss_is_reported() -> None:
+    # B passes 20 m straight over A at t = 5 s (vertical 20 m >= 15 m: no loss there, and
+    # their grown boxes do not even overlap in that window), then loses separation at
+    # t = 40 s (45 m horizontal, 10 m vertical). The closest approach (20 m at 5 s) lies in
+    # a window without loss: the grid must still report it, as the oracle does.
+    t = np.arange(61.0)
+    a = np.column_stack([np.zeros(61), np.zeros(61), np.full(61, 100.0), t])
+    knots_t = [0.0, 10.0, 20.0, 40.0, 60.0]
+    b = np.column_stack(
+        [
+            np.interp(t, knots_t, [-50.0, 50.0, 200.0, 0.0, -200.0]),
+            np.interp(t, knots_t, [0.0, 0.0, 0.0, 45.0, 45.0]),
+            np.interp(t, knots_t, [120.0, 120.0, 110.0, 110.0, 110.0]),
+            t,
+        ]
+    )
+    pts = np.stack([a, b])
+    cfg = MonitoringConfig()
+    (x,) = detect_los_grid(pts, np.zeros(2), cfg)
+    assert _key([x]) == _key(detect_los_bruteforce(pts, np.zeros(2), cfg))
+    assert x.closest_t_s == pytest.approx(5.0)
+    assert x.min_distance_m == pytest.approx(20.0)
+    assert x.min_horizontal_m == pytest.approx(0.0, abs=1e-9)
+    assert x.min_vertical_m == pytest.approx(10.0)
+    assert 30.0 < x.first_loss_t_s < 40.0

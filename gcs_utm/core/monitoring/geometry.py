@@ -46,13 +46,16 @@ def point_in_polygon(x: FloatArray, y: FloatArray, vx: FloatArray, vy: FloatArra
 def points_in_edges(x: FloatArray, y: FloatArray, edges: FloatArray) -> BoolArray:
     """Winding test against any set of closed rings given as (E, 4) edges. Holes must be
     oriented opposite to their exterior (as ``shapely.geometry.polygon.orient`` does), so
-    their signed angles cancel the exterior's."""
+    their signed angles cancel the exterior's.
+
+    ``edges`` may also be (M, E, 4), one edge set per point of ``x``, ``y`` (M,); sets are
+    padded with zero-length edges at a vertex, which add no angle and cross nothing."""
     x = np.asarray(x, np.float64)[..., None]
     y = np.asarray(y, np.float64)[..., None]
-    ax = edges[:, 0] - x  # m, (..., E)
-    ay = edges[:, 1] - y  # m
-    bx = edges[:, 2] - x  # m, next vertex
-    by = edges[:, 3] - y  # m
+    ax = edges[..., 0] - x  # m, (..., E)
+    ay = edges[..., 1] - y  # m
+    bx = edges[..., 2] - x  # m, next vertex
+    by = edges[..., 3] - y  # m
     cross = ax * by - ay * bx  # m^2
     dot = ax * bx + ay * by  # m^2
     total = np.arctan2(cross, dot).sum(axis=-1)  # rad
@@ -67,6 +70,34 @@ def points_in_edges(x: FloatArray, y: FloatArray, edges: FloatArray) -> BoolArra
     on_edge = (dx * dx + dy * dy <= 1e-18).any(axis=-1)
     out: BoolArray = inside | on_edge
     return out
+
+
+@dataclass(frozen=True, slots=True)
+class Windows:
+    """Axis-aligned bounds of each row's samples per time window: ``lo``, ``hi`` (N, nw, 4)
+    (east_m, north_m, alt_amsl_m, t_s). Window j holds segments j*w .. j*w + w - 1, so its
+    bounds cover samples j*w .. j*w + w (the closing sample included): every point of every
+    segment of the window lies in its box (segments are straight)."""
+
+    lo: FloatArray
+    hi: FloatArray
+    w: int
+
+
+def window_extents(points: FloatArray, w: int) -> Windows:
+    """Per-window bounds (see :class:`Windows`) of ``points`` (N, S >= 2, 4), ``w`` >= 1
+    segments per window (clipped to S - 1)."""
+    n_seg = points.shape[1] - 1
+    w = max(1, min(int(w), n_seg))
+    starts = np.arange(0, n_seg, w)
+    # reduceat over [start, start + w + 1) for every window: the interleaved indices make the
+    # odd slots single samples (discarded); the last window runs to the end.
+    idx = np.empty(2 * len(starts) - 1, np.intp)
+    idx[0::2] = starts
+    idx[1::2] = starts[:-1] + w + 1
+    lo = np.minimum.reduceat(points, idx, axis=1)[:, 0::2]
+    hi = np.maximum.reduceat(points, idx, axis=1)[:, 0::2]
+    return Windows(lo, hi, w)
 
 
 def _quad_interval(
@@ -97,32 +128,41 @@ class SegmentSeparation:
 
 
 def _loss_interval(
-    d0: FloatArray, v: FloatArray, rh: FloatArray, rv: FloatArray, spherical: bool
+    d0: tuple[FloatArray, FloatArray, FloatArray],
+    v: tuple[FloatArray, FloatArray, FloatArray],
+    rh: FloatArray,
+    rv: FloatArray,
+    spherical: bool,
 ) -> tuple[FloatArray, FloatArray]:
-    """Parameter interval [lo, hi] (clipped to [0, 1]) of loss; lo >= hi means none."""
-    ah = v[..., 0] ** 2 + v[..., 1] ** 2  # m^2
-    bh = 2.0 * (d0[..., 0] * v[..., 0] + d0[..., 1] * v[..., 1])  # m^2
-    ch = d0[..., 0] ** 2 + d0[..., 1] ** 2  # m^2
+    """Parameter interval [lo, hi] (clipped to [0, 1]) of loss; lo >= hi means none.
+    ``d0``, ``v``: the relative position at s = 0 and the relative motion per segment, one
+    array per axis (east, north, up)."""
+    ah = v[0] ** 2 + v[1] ** 2  # m^2
+    bh = 2.0 * (d0[0] * v[0] + d0[1] * v[1])  # m^2
+    ch = d0[0] ** 2 + d0[1] ** 2  # m^2
     if spherical:
-        lo, hi = _quad_interval(
-            ah + v[..., 2] ** 2,
-            bh + 2.0 * d0[..., 2] * v[..., 2],
-            ch + d0[..., 2] ** 2,
-            rh,
-        )
+        lo, hi = _quad_interval(ah + v[2] ** 2, bh + 2.0 * d0[2] * v[2], ch + d0[2] ** 2, rh)
     else:
         lo_h, hi_h = _quad_interval(ah, bh, ch, rh)
-        vz = v[..., 2]  # m per segment
+        vz = v[2]  # m per segment
         moving = np.abs(vz) > _EPS_V
         safe = np.where(moving, vz, 1.0)
-        s1 = (-rv - d0[..., 2]) / safe
-        s2 = (rv - d0[..., 2]) / safe
-        inside_z = np.abs(d0[..., 2]) < rv
+        s1 = (-rv - d0[2]) / safe
+        s2 = (rv - d0[2]) / safe
+        inside_z = np.abs(d0[2]) < rv
         lo_v = np.where(moving, np.minimum(s1, s2), np.where(inside_z, -np.inf, 1.0))
         hi_v = np.where(moving, np.maximum(s1, s2), np.where(inside_z, np.inf, 0.0))
         lo = np.maximum(lo_h, lo_v)
         hi = np.minimum(hi_h, hi_v)
     return np.maximum(lo, 0.0), np.minimum(hi, 1.0)
+
+
+def _relative(
+    a0: FloatArray, a1: FloatArray, b0: FloatArray, b1: FloatArray
+) -> tuple[tuple[FloatArray, FloatArray, FloatArray], tuple[FloatArray, FloatArray, FloatArray]]:
+    d0 = a0[..., :3] - b0[..., :3]  # m, relative position at s=0
+    v = (a1[..., :3] - b1[..., :3]) - d0  # m per segment, relative motion
+    return (d0[..., 0], d0[..., 1], d0[..., 2]), (v[..., 0], v[..., 1], v[..., 2])
 
 
 def segment_loss(
@@ -136,8 +176,19 @@ def segment_loss(
     spherical: bool = False,
 ) -> BoolArray:
     """Only the loss flag of :func:`segment_separation` (the cheaper screening pass)."""
-    d0 = a0[..., :3] - b0[..., :3]  # m
-    v = (a1[..., :3] - b1[..., :3]) - d0  # m per segment
+    d0, v = _relative(a0, a1, b0, b1)
+    return relative_loss(d0, v, min_h_m=min_h_m, min_v_m=min_v_m, spherical=spherical)
+
+
+def relative_loss(
+    d0: tuple[FloatArray, FloatArray, FloatArray],
+    v: tuple[FloatArray, FloatArray, FloatArray],
+    *,
+    min_h_m: FloatArray | float,
+    min_v_m: FloatArray | float,
+    spherical: bool = False,
+) -> BoolArray:
+    """:func:`segment_loss` from the relative position ``d0`` and motion ``v`` per axis."""
     lo, hi = _loss_interval(
         d0, v, np.asarray(min_h_m, np.float64), np.asarray(min_v_m, np.float64), spherical
     )
@@ -160,27 +211,62 @@ def segment_separation(
     ``a0`` etc. are (..., >=3) arrays of (east_m, north_m, alt_amsl_m[, t_s]); both objects
     move linearly over the same time span. ``spherical`` uses ``min_h_m`` as a 3D distance.
     """
-    d0 = a0[..., :3] - b0[..., :3]  # m, relative position at s=0
-    v = (a1[..., :3] - b1[..., :3]) - d0  # m per segment, relative motion
-    lo, hi = _loss_interval(
+    d0, v = _relative(a0, a1, b0, b1)
+    return relative_separation(d0, v, min_h_m=min_h_m, min_v_m=min_v_m, spherical=spherical)
+
+
+def relative_separation(
+    d0: tuple[FloatArray, FloatArray, FloatArray],
+    v: tuple[FloatArray, FloatArray, FloatArray],
+    *,
+    min_h_m: FloatArray | float,
+    min_v_m: FloatArray | float,
+    spherical: bool = False,
+) -> SegmentSeparation:
+    """:func:`segment_separation` from the relative position ``d0`` at s = 0 and the relative
+    motion ``v`` per segment, one array per axis (the same floats either way)."""
+    lo, hi = relative_loss_interval(d0, v, min_h_m=min_h_m, min_v_m=min_v_m, spherical=spherical)
+    loss = lo < hi
+    cpa_s, cpa_m, min_h, min_v = relative_approach(d0, v)
+    return SegmentSeparation(loss, np.where(loss, lo, np.inf), cpa_s, cpa_m, min_h, min_v)
+
+
+def relative_loss_interval(
+    d0: tuple[FloatArray, FloatArray, FloatArray],
+    v: tuple[FloatArray, FloatArray, FloatArray],
+    *,
+    min_h_m: FloatArray | float,
+    min_v_m: FloatArray | float,
+    spherical: bool = False,
+) -> tuple[FloatArray, FloatArray]:
+    """Segment parameter interval [lo, hi] (within [0, 1]) where the pair is in loss of
+    separation; a loss exists iff lo < hi, and then ``lo`` is the parameter of first loss."""
+    return _loss_interval(
         d0, v, np.asarray(min_h_m, np.float64), np.asarray(min_v_m, np.float64), spherical
     )
-    loss = lo < hi
-    ah = v[..., 0] ** 2 + v[..., 1] ** 2  # m^2
-    bh = 2.0 * (d0[..., 0] * v[..., 0] + d0[..., 1] * v[..., 1])  # m^2
-    ch = d0[..., 0] ** 2 + d0[..., 1] ** 2  # m^2
-    az = v[..., 2] ** 2  # m^2
-    bz = 2.0 * d0[..., 2] * v[..., 2]  # m^2
-    cz = d0[..., 2] ** 2  # m^2
+
+
+def relative_approach(
+    d0: tuple[FloatArray, FloatArray, FloatArray],
+    v: tuple[FloatArray, FloatArray, FloatArray],
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Closest approach on each segment from the relative position ``d0`` and motion ``v``:
+    (cpa_s, cpa_m, min_h_m, min_v_m) as in :class:`SegmentSeparation`."""
+    ah = v[0] ** 2 + v[1] ** 2  # m^2
+    bh = 2.0 * (d0[0] * v[0] + d0[1] * v[1])  # m^2
+    ch = d0[0] ** 2 + d0[1] ** 2  # m^2
+    az = v[2] ** 2  # m^2
+    bz = 2.0 * d0[2] * v[2]  # m^2
+    cz = d0[2] ** 2  # m^2
     a3 = ah + az
     cpa_s = np.where(a3 > _EPS_A, np.clip(-(bh + bz) / np.where(a3 > _EPS_A, 2 * a3, 1), 0, 1), 0)
     cpa_m = np.sqrt(np.maximum(a3 * cpa_s**2 + (bh + bz) * cpa_s + ch + cz, 0.0))
     sh = np.where(ah > _EPS_A, np.clip(-bh / np.where(ah > _EPS_A, 2 * ah, 1), 0, 1), 0)
     min_h = np.sqrt(np.maximum(ah * sh**2 + bh * sh + ch, 0.0))
-    z0 = d0[..., 2]
-    z1 = z0 + v[..., 2]
+    z0 = d0[2]
+    z1 = z0 + v[2]
     min_v = np.where(z0 * z1 <= 0.0, 0.0, np.minimum(np.abs(z0), np.abs(z1)))
-    return SegmentSeparation(loss, np.where(loss, lo, np.inf), cpa_s, cpa_m, min_h, min_v)
+    return cpa_s, cpa_m, min_h, min_v
 
 
 def segment_entry(
@@ -188,18 +274,20 @@ def segment_entry(
     p1: FloatArray,
     *,
     edges: FloatArray | None,
-    center: tuple[float, float] | None,
-    radius_m: float,
-    z_lo: float,
-    z_hi: float,
-    t_lo: float,
-    t_hi: float,
+    center: tuple[float, float] | tuple[FloatArray, FloatArray] | None,
+    radius_m: float | FloatArray,
+    z_lo: float | FloatArray,
+    z_hi: float | FloatArray,
+    t_lo: float | FloatArray,
+    t_hi: float | FloatArray,
 ) -> FloatArray:
     """First parameter s in [0, 1] at which segment p0->p1 ((M, 4) east, north, alt, t) is
     inside a 4D prism, or +inf. The prism is a polygon (``edges``, (E, 4), see
-    :func:`points_in_edges`) or a circle (center,
-    radius_m), an altitude band [z_lo, z_hi] and an activation window [t_lo, t_hi]
-    (closed; use +-inf for unbounded).
+    :func:`points_in_edges`) or a circle (center, radius_m), an altitude band [z_lo, z_hi]
+    and an activation window [t_lo, t_hi] (closed; use +-inf for unbounded).
+
+    Every prism parameter may instead be given per segment: (M,) arrays, centre as a pair of
+    (M,) arrays, edges (M, E, 4) padded as :func:`points_in_edges` allows.
 
     Exact for polygons: the inside set along the segment starts at s_lo (the start of the
     altitude/time window) or at the first edge crossing after it.
@@ -216,6 +304,7 @@ def segment_entry(
         inside = (p0[:, k] >= a) & (p0[:, k] <= b)
         lo = np.maximum(lo, np.where(moving, np.minimum(s1, s2), np.where(inside, 0.0, 2.0)))
         hi = np.minimum(hi, np.where(moving, np.maximum(s1, s2), np.where(inside, 1.0, -1.0)))
+        hi = np.where(np.greater(a, b), -1.0, hi)  # an inverted band or window is empty
     ok = lo <= hi
     out = np.full(len(p0), np.inf)
     if not ok.any():
@@ -227,12 +316,14 @@ def segment_entry(
         b2 = 2.0 * (rx * d[:, 0] + ry * d[:, 1])
         c2 = rx * rx + ry * ry
         # closed disc: nudge the radius so a touch counts as inside
-        clo, chi = _quad_interval(a2, b2, c2, np.full(len(p0), radius_m * (1 + 1e-12) + 1e-9))
+        r = np.broadcast_to(np.asarray(radius_m, np.float64) * (1 + 1e-12) + 1e-9, lo.shape)
+        clo, chi = _quad_interval(a2, b2, c2, r)
         s_in = np.maximum(lo, clo)
         good = ok & (s_in <= np.minimum(hi, chi))
         out[good] = s_in[good]
         return out
     assert edges is not None
+    per_segment = edges.ndim == 3
     sx = p0[:, 0] + lo * d[:, 0]  # m, position at s = lo
     sy = p0[:, 1] + lo * d[:, 1]
     inside_lo = points_in_edges(sx, sy, edges) & ok
@@ -240,14 +331,15 @@ def segment_entry(
     rest = ok & ~inside_lo
     if rest.any():
         idx = np.nonzero(rest)[0]
+        e = edges[idx] if per_segment else edges
         ax = p0[idx, 0, None]
         ay = p0[idx, 1, None]
         dx = d[idx, 0, None]
         dy = d[idx, 1, None]
-        fx = edges[:, 2] - edges[:, 0]  # m, edge vectors (E,)
-        fy = edges[:, 3] - edges[:, 1]
-        wx = edges[:, 0] - ax  # m, (m, E)
-        wy = edges[:, 1] - ay
+        fx = e[..., 2] - e[..., 0]  # m, edge vectors (E,) or (m, E)
+        fy = e[..., 3] - e[..., 1]
+        wx = e[..., 0] - ax  # m, (m, E)
+        wy = e[..., 1] - ay
         den = dx * fy - dy * fx  # m^2
         par = np.abs(den) < 1e-12
         dsafe = np.where(par, 1.0, den)

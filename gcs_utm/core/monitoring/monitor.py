@@ -22,16 +22,20 @@ changes; ``active()`` always holds the latest figures.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from gcs_utm.core.monitoring.checks import check_geofences, pack_plans, plan_distance
+from gcs_utm.core.monitoring.checks import (
+    PlanTable,
+    check_geofences,
+    pack_plans,
+    plan_distance,
+)
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.fences import LocalFence, localise
-from gcs_utm.core.monitoring.geometry import FloatArray
-from gcs_utm.core.monitoring.separation import detect_los, detect_pairs_between
+from gcs_utm.core.monitoring.geometry import FloatArray, window_extents
+from gcs_utm.core.monitoring.separation import detect_los, detect_pairs_between, window_steps
 from gcs_utm.core.monitoring.strategic import plan_local
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
@@ -39,6 +43,7 @@ from gcs_utm.model import (
     FlightPlan,
     Geofence,
     GeofenceId,
+    Operation,
     OperationId,
     OperationState,
     PredictedTrajectories,
@@ -95,6 +100,8 @@ class Monitor:
         self._seq = 0
         self._fence_cache: dict[GeofenceId, tuple[Geofence, LocalFence]] = {}
         self._plan_cache: dict[OperationId, tuple[FlightPlan, FloatArray]] = {}
+        # Operations (frozen objects) of the last conformance table, the table, the anchors.
+        self._conf_cache: tuple[list[Operation], PlanTable, FloatArray] | None = None
 
     # ---- public -------------------------------------------------------------------------
     def active(self) -> list[Threat]:
@@ -112,8 +119,8 @@ class Monitor:
             self._fence_cache[g.id] = hit
         return hit[1]
 
-    def _plan(self, op_id: OperationId, snapshot: AirspaceSnapshot) -> FloatArray:
-        op = snapshot.operations[op_id]
+    def _plan(self, op: Operation) -> FloatArray:
+        op_id = op.id
         hit = self._plan_cache.get(op_id)
         # Keyed on the plan object (frozen): a replaced plan is re-projected even if a caller
         # reuses a version number.
@@ -150,14 +157,21 @@ class Monitor:
                 rows_intr.append(i)
                 ev.pred_fresh.add(str(tid))
         op_of = {i: snapshot.tracks[pred.track_ids[i]].operation_id for i in rows_coop}
-        pts = pred.points[rows_coop] if rows_coop else np.empty((0, 1, 4))
+        if len(rows_coop) == len(pred.track_ids):
+            pts = pred.points  # every row: no copy
+        else:
+            pts = pred.points[rows_coop] if rows_coop else np.empty((0, 1, 4))
         ov = np.array(
             [ops[op_of[i]].operational_volume_m for i in rows_coop]  # type: ignore[index]
+        )
+        # Window bounds shared by the geofence prefilter and the separation grid.
+        windows = (
+            window_extents(pts, window_steps(pts, cfg)) if len(pts) and pts.shape[1] >= 2 else None
         )
         # Geofences (4D, points and segments).
         fences = [self._fence(g) for g in snapshot.geofences]
         exempt = {g.id: g.exempt for g in snapshot.geofences if g.exempt}
-        for h in check_geofences(pts, fences):
+        for h in check_geofences(pts, fences, windows):
             op_id = op_of[rows_coop[h.row]]
             assert op_id is not None
             if op_id in exempt.get(h.geofence_id, ()):
@@ -168,7 +182,7 @@ class Monitor:
             )
         # Loss of separation (grid or all-pairs by size), and the margin set for closing.
         if len(rows_coop) >= 2:
-            for x in detect_los(pts, ov, cfg):
+            for x in detect_los(pts, ov, cfg, windows):
                 a, b = sorted((op_of[rows_coop[x.a]] or "", op_of[rows_coop[x.b]] or ""))
                 ev.seen[("LOS", a, b)] = _Observation(
                     kind=ThreatKind.LOSS_OF_SEPARATION,
@@ -239,52 +253,62 @@ class Monitor:
         cfg = self.config
         if not tracks:
             return
-        op_ids = [t.operation_id for t in tracks]
-        plans = [self._plan(o, snapshot) for o in op_ids if o is not None]
-        table = pack_plans(plans)
+        ops = [snapshot.operations[t.operation_id] for t in tracks]  # type: ignore[index]
+        table, anchors = self._conformance_table(ops)
         pos = np.array([[t.east_m, t.north_m, t.alt_amsl_m] for t in tracks])  # m
         ts = np.array([t.t_s for t in tracks])  # s
         dist = plan_distance(table, pos, ts, cfg.conformance_time_tolerance_s)  # m
-        for k, tr in enumerate(tracks):
-            op = snapshot.operations[op_ids[k]]  # type: ignore[index]
+        fg = np.array([o.flight_geometry_m for o in ops])  # m
+        ovol = np.array([o.operational_volume_m for o in ops])  # m
+        gated = np.zeros(len(ops), bool)
+        if cfg.gate_takeoff_landing:
+            # Near the first or last waypoint or home (NaN when none), horizontally within
+            # the radius and not higher than the height above it.
+            horiz = np.hypot(pos[:, None, 0] - anchors[:, :, 0], pos[:, None, 1] - anchors[:, :, 1])
+            near = (horiz <= cfg.takeoff_landing_radius_m) & (
+                pos[:, None, 2] - anchors[:, :, 2] <= cfg.takeoff_landing_height_m
+            )
+            gated |= near.any(axis=1)
+        if cfg.gate_outside_plan_time:
+            start = np.array([o.plan.start_t_s for o in ops])
+            end = np.array([o.plan.end_t_s for o in ops])
+            gated |= ~((start <= ts) & (ts <= end))
+        out_ov = dist > ovol
+        in_cv = ~out_ov & (dist > fg)
+        marginal = ~(out_ov | in_cv) & (dist > fg - cfg.conformance_close_margin_m)
+        for k in np.nonzero(~gated & marginal)[0]:
+            ev.marginal.add(("CONF", ops[k].id))
+        for k in np.nonzero(~gated & (out_ov | in_cv))[0]:
             d = float(dist[k])
-            key: Key = ("CONF", op.id)
-            if cfg.gate_takeoff_landing and self._near_home(op.id, snapshot, pos[k], plans[k]):
-                continue
-            if cfg.gate_outside_plan_time and not (op.plan.start_t_s <= tr.t_s <= op.plan.end_t_s):
-                continue
-            if d > op.operational_volume_m:
-                kind = ThreatKind.UAS_OUT_OV
-            elif d > op.flight_geometry_m:
-                kind = ThreatKind.UAS_IN_CV
-            else:
-                if d > op.flight_geometry_m - cfg.conformance_close_margin_m:
-                    ev.marginal.add(key)
-                continue
-            ev.seen[key] = _Observation(
-                kind=kind,
-                uas_ids=(op.id,),
-                event_t_s=tr.t_s,
+            ev.seen[("CONF", ops[k].id)] = _Observation(
+                kind=ThreatKind.UAS_OUT_OV if out_ov[k] else ThreatKind.UAS_IN_CV,
+                uas_ids=(ops[k].id,),
+                event_t_s=tracks[k].t_s,
                 closest_m=d,
                 message=f"{d:.1f} m from plan",
             )
 
-    def _near_home(
-        self, op_id: OperationId, snapshot: AirspaceSnapshot, pos: FloatArray, plan: FloatArray
-    ) -> bool:
-        cfg = self.config
-        op = snapshot.operations[op_id]
-        anchors = [plan[0, :3], plan[-1, :3]]
-        if op.home is not None:
-            he, hn = self.frame.point_to_local(op.home.lat_deg, op.home.lon_deg)
-            anchors.append(np.array([he, hn, op.home.alt_amsl_m]))
-        for a in anchors:
-            if (
-                math.hypot(pos[0] - a[0], pos[1] - a[1]) <= cfg.takeoff_landing_radius_m
-                and pos[2] - a[2] <= cfg.takeoff_landing_height_m
-            ):
-                return True
-        return False
+    def _conformance_table(self, ops: list[Operation]) -> tuple[PlanTable, FloatArray]:
+        """Packed local plans and the take-off/landing anchors (N, 3, 3) of these operations,
+        rebuilt only when an operation's plan or home object changed (cached)."""
+        prev = self._conf_cache
+        if (
+            prev is not None
+            and len(prev[0]) == len(ops)
+            and all(a is b for a, b in zip(prev[0], ops, strict=True))
+        ):
+            return prev[1], prev[2]
+        plans = [self._plan(o) for o in ops]
+        anchors = np.full((len(ops), 3, 3), np.nan)
+        for k, (o, p) in enumerate(zip(ops, plans, strict=True)):
+            anchors[k, 0] = p[0, :3]
+            anchors[k, 1] = p[-1, :3]
+            if o.home is not None:
+                he, hn = self.frame.point_to_local(o.home.lat_deg, o.home.lon_deg)
+                anchors[k, 2] = (he, hn, o.home.alt_amsl_m)
+        table = pack_plans(plans)
+        self._conf_cache = (ops, table, anchors)
+        return table, anchors
 
     # ---- life cycle ---------------------------------------------------------------------
     def _fresh(self, key: Key, ev: _Evaluation) -> bool:
