@@ -88,7 +88,7 @@ def left_normals(pos: FloatArray) -> FloatArray:
     k = pos.shape[0]
     d = np.zeros((k, 2))
     if k > 1:
-        step = np.diff(pos[:, :2], axis=0)
+        step = pos[1:, :2] - pos[:-1, :2]
         d[:-1] = step
         d[-1] = step[-1]
     norm = np.hypot(d[:, 0], d[:, 1])

@@ -70,7 +70,8 @@ class LocalPlan:
     def length_m(self, from_t_s: float | None = None) -> float:
         """3D path length, from ``from_t_s`` when given."""
         lp = self if from_t_s is None else self.after(from_t_s)
-        d = np.diff(lp.xyz(), axis=0)
+        xyz = lp.xyz()
+        d = xyz[1:] - xyz[:-1]
         return float(np.sqrt((d * d).sum(axis=1)).sum())
 
     def after(self, t_s: float) -> LocalPlan:
@@ -103,9 +104,10 @@ def max_speeds(lp: LocalPlan) -> tuple[float, float]:
     segment moves in zero time."""
     if len(lp) < 2:
         return 0.0, 0.0
-    dt = np.diff(lp.t)
-    dh = np.hypot(np.diff(lp.e), np.diff(lp.n))
-    dz = np.abs(np.diff(lp.z))
+    e, n, z, t = lp.e, lp.n, lp.z, lp.t
+    dt = t[1:] - t[:-1]
+    dh = np.hypot(e[1:] - e[:-1], n[1:] - n[:-1])
+    dz = np.abs(z[1:] - z[:-1])
     with np.errstate(divide="ignore", invalid="ignore"):
         vh = np.where(dh > 0.0, dh / dt, 0.0)
         vz = np.where(dz > 0.0, dz / dt, 0.0)
@@ -168,15 +170,17 @@ def local_to_plan(
     lat, lon = frame.to_wgs84(lp.e, lp.n)
     lat = np.atleast_1d(lat)
     lon = np.atleast_1d(lon)
-    wps = tuple(
-        Waypoint4D(
-            lat_deg=float(lat[i]),
-            lon_deg=float(lon[i]),
-            alt_amsl_m=float(lp.z[i]),
-            t_s=float(lp.t[i]),
+    cols = (lat.tolist(), lon.tolist(), lp.z.tolist(), lp.t.tolist())
+    if _valid_waypoints(lat, lon, lp.z, lp.t):
+        # Every value already passed the checks Waypoint4D.__post_init__ makes (finite,
+        # latitude and longitude in range), all at once: build the waypoints without
+        # repeating them per point (one Position and one LatLon each).
+        wps = tuple(_trusted_waypoint(*w) for w in zip(*cols, strict=True))
+    else:  # the per-point constructor raises the error naming the bad value
+        wps = tuple(
+            Waypoint4D(lat_deg=a, lon_deg=o, alt_amsl_m=z, t_s=t)
+            for a, o, z, t in zip(*cols, strict=True)
         )
-        for i in range(len(lp))
-    )
     return FlightPlan(
         operation_id=base.operation_id,
         version=base.version + 1,
@@ -184,6 +188,29 @@ def local_to_plan(
         created_t_s=created_t_s,
         reason=reason,
     )
+
+
+def _valid_waypoints(lat: FloatArray, lon: FloatArray, z: FloatArray, t: FloatArray) -> bool:
+    """The checks of ``Waypoint4D`` (and its ``Position``/``LatLon``) on whole columns."""
+    return bool(
+        np.isfinite(z).all()
+        and np.isfinite(t).all()
+        and ((lat >= -90.0) & (lat <= 90.0)).all()  # NaN fails the comparisons
+        and ((lon >= -180.0) & (lon <= 180.0)).all()
+    )
+
+
+_SET = object.__setattr__
+
+
+def _trusted_waypoint(lat: float, lon: float, alt: float, t: float) -> Waypoint4D:
+    """A Waypoint4D from values already validated by :func:`_valid_waypoints`."""
+    w: Waypoint4D = object.__new__(Waypoint4D)
+    _SET(w, "lat_deg", lat)
+    _SET(w, "lon_deg", lon)
+    _SET(w, "alt_amsl_m", alt)
+    _SET(w, "t_s", t)
+    return w
 
 
 def retime(

@@ -131,7 +131,7 @@ def score(
     config: DeconflictionConfig,
 ) -> Score:
     new_xyz = new.xyz()
-    new_len = float(np.sqrt((np.diff(new_xyz, axis=0) ** 2).sum(axis=1)).sum())
+    new_len = float(np.sqrt(((new_xyz[1:] - new_xyz[:-1]) ** 2).sum(axis=1)).sum())
     extra_d = max(0.0, new_len - old.length_m())  # m, 3D
     extra_t = max(0.0, float(new.t[-1] - old.t[-1]))  # s
 
@@ -139,7 +139,7 @@ def score(
     steps = max(2, int(span / SAMPLE_DT_S) + 1)
     times = np.linspace(float(new.t[0]), float(new.t[-1]), steps)
     pos, _ = new.sample(times)
-    seg = np.sqrt((np.diff(pos, axis=0) ** 2).sum(axis=1))
+    seg = np.sqrt(((pos[1:] - pos[:-1]) ** 2).sum(axis=1))
     mid = 0.5 * (pos[1:] + pos[:-1])
     tmid = 0.5 * (times[1:] + times[:-1])
 
