@@ -113,7 +113,8 @@ def _segment_distances(points: FloatArray, polylines: Sequence[FloatArray]) -> l
 
 
 def _prox(x: float, factor: float) -> float:
-    return float(np.clip((factor - x) / (factor - 1.0), 0.0, 1.0))
+    # Plain min/max on a Python float: the same value as np.clip, without the array call.
+    return float(min(max((factor - x) / (factor - 1.0), 0.0), 1.0))
 
 
 def score(

@@ -166,7 +166,7 @@ class TacticalDeconfliction:
         if a.plan is None or b.plan is None:
             return True
         op_a = snapshot.operations[a.operation_id]
-        op_b = replace(snapshot.operations[b.operation_id], plan=b.plan)
+        op_b = snapshot.operations[b.operation_id]
         # Sound shortcuts either way (see separation_screen); only an undecided pair goes to
         # Monitoring's exact closest-approach check.
         h, v = self.monitoring.effective_minima(
@@ -185,6 +185,8 @@ class TacticalDeconfliction:
             return False
         if clear:
             return True
+        # Only now the operation with the alternative's plan (the screen needs none).
+        op_b = replace(op_b, plan=b.plan)
         return not plan_vs_plans(a.plan, op_a, [op_b], self.frame, self.monitoring)
 
     def _score(  # noqa: PLR0917 - private helper, called positionally
