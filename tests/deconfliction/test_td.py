@@ -17,7 +17,12 @@ from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
 from gcs_utm.core.deconfliction import cords as cd
 from gcs_utm.core.deconfliction.astar import VisibilityPlanner
-from gcs_utm.core.deconfliction.geometry import LocalPlan, fence_to_local, plan_to_local
+from gcs_utm.core.deconfliction.geometry import (
+    LocalPlan,
+    fence_to_local,
+    local_to_plan,
+    plan_to_local,
+)
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import plan_vs_geofences, plan_vs_plans, strategic_check
 from gcs_utm.model import (
@@ -25,10 +30,12 @@ from gcs_utm.model import (
     Alternative,
     GeofenceId,
     Maneuver,
+    ModelError,
     OperationId,
     ThreatKind,
     Track,
     TrackId,
+    Waypoint4D,
 )
 
 MON = MonitoringConfig()
@@ -619,3 +626,28 @@ def test_separation_screen_never_contradicts_monitoring(
         assert exact == []
     if broken:
         assert exact != []
+
+
+def test_new_plan_waypoints_equal_validated_ones_and_bad_values_are_refused() -> None:
+    """local_to_plan validates whole columns at once: its waypoints are exactly the ones the
+    validating constructor gives, and a non-finite value still raises the per-point error."""
+    snap, _ = sc.scenario_los_2uas()
+    base = snap.operations[OperationId("A")].plan
+    lp = LocalPlan(
+        np.array([0.0, 120.5, 300.25]),
+        np.array([0.0, -40.0, 10.0]),
+        np.array([100.0, 112.5, 100.0]),
+        np.array([sc.T0_S, sc.T0_S + 13.0, sc.T0_S + 31.0]),
+    )
+    plan = local_to_plan(lp, base, sc.FRAME, created_t_s=sc.T0_S, reason="test")
+    lat, lon = sc.FRAME.to_wgs84(lp.e, lp.n)
+    want = tuple(
+        Waypoint4D(lat_deg=float(a), lon_deg=float(o), alt_amsl_m=float(z), t_s=float(t))
+        for a, o, z, t in zip(lat, lon, lp.z, lp.t, strict=True)
+    )
+    assert plan.waypoints == want
+    assert all(type(w.lat_deg) is float and type(w.t_s) is float for w in plan.waypoints)
+    assert plan.version == base.version + 1
+    bad = LocalPlan(lp.e, lp.n, np.array([100.0, np.nan, 100.0]), lp.t)
+    with pytest.raises(ModelError, match="alt_amsl_m"):
+        local_to_plan(bad, base, sc.FRAME, created_t_s=sc.T0_S, reason="test")
