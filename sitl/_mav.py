@@ -7,7 +7,12 @@ Invariants:
 - one `Encoder` per link (PX4 keeps one sequence counter per MAVLink instance);
 - one `Parser` per peer (UDP source address or TCP connection); datagram links call
   `parse_datagram`, which discards a frame left incomplete at the end of a datagram
-  (counted as `truncated`) so that a truncated frame cannot swallow the next datagram.
+  (counted as `truncated`) so that a truncated frame cannot swallow the next datagram;
+- signing (MAVLink 2 message signing, as PX4 `MAV_SIGN_CFG` / ArduPilot with a key): a `Parser`
+  with a key accepts only frames whose signature verifies with it (and whose timestamp moves
+  forward per link id, system and component), except RADIO_STATUS, which the MAVLink spec lets
+  through unsigned; other frames are dropped and counted (`unsigned_rejected`,
+  `bad_signature`). An `Encoder` with a key signs every frame it packs.
 """
 
 from __future__ import annotations
@@ -16,13 +21,28 @@ import os
 
 os.environ["MAVLINK20"] = "1"
 
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as _apm
 
 # ardupilotmega includes common: one dialect serves both personalities.
 mavlink: Any = _apm
+
+SIGNING_EPOCH_S = 1420070400.0  # 2015-01-01T00:00:00Z: MAVLink signing timestamps count from it
+_IFLAG_SIGNED = 0x01
+_RADIO_STATUS = int(mavlink.MAVLINK_MSG_ID_RADIO_STATUS)
+
+
+def signing_timestamp(t_s: float) -> int:
+    """MAVLink signing timestamp (10 us units since 2015-01-01) of a UNIX time."""
+    return max(0, int((t_s - SIGNING_EPOCH_S) * 100_000))
+
+
+def _allow_unsigned(_mav: Any, msg_id: int) -> bool:
+    # MAVLink spec and PX4/ArduPilot: RADIO_STATUS (injected by radios) may come unsigned.
+    return bool(msg_id == _RADIO_STATUS)
 
 
 @dataclass(slots=True)
@@ -61,20 +81,36 @@ class ParseResult:
     bad_frame: int = 0
     unknown_msgid: int = 0
     truncated: int = 0
+    unsigned_rejected: int = 0  # signing on: frame without signature (not RADIO_STATUS)
+    bad_signature: int = 0  # signing on: wrong key, or a timestamp that went backwards
+    rejected_msg_ids: list[int] = field(default_factory=list)  # of both kinds above
 
 
 class Parser:
     """Sans-IO MAVLink parser for one peer; never raises on bad input."""
 
-    def __init__(self) -> None:
+    def __init__(self, key: bytes | None = None) -> None:
         self._mav: Any = mavlink.MAVLink(None)
         self._mav.robust_parsing = True
+        if key is not None:
+            s = self._mav.signing
+            s.secret_key = key
+            s.allow_unsigned_callback = _allow_unsigned
+            s.timestamp = signing_timestamp(time.time())
 
     def _classify(self, raw: Any, out: ParseResult) -> None:
         kind = raw.get_type()
         if kind == "BAD_DATA":
             reason = str(getattr(raw, "reason", ""))
-            if "prefix" in reason:
+            if reason == "Invalid signature":
+                frame = bytes(getattr(raw, "data", b""))
+                if len(frame) >= 10 and frame[2] & _IFLAG_SIGNED:
+                    out.bad_signature += 1
+                else:
+                    out.unsigned_rejected += 1
+                if len(frame) >= 10:
+                    out.rejected_msg_ids.append(frame[7] | (frame[8] << 8) | (frame[9] << 16))
+            elif "prefix" in reason:
                 out.garbage += 1
             elif "CRC" in reason:
                 out.bad_crc += 1
@@ -120,10 +156,19 @@ class Parser:
 
 
 class Encoder:
-    """Packs messages as one MAVLink 2 sender (system id, component id, own sequence)."""
+    """Packs messages as one MAVLink 2 sender (system id, component id, own sequence), signed
+    with `key` (link id `link_id`) when one is given."""
 
-    def __init__(self, sys_id: int, comp_id: int = 1) -> None:
+    def __init__(
+        self, sys_id: int, comp_id: int = 1, *, key: bytes | None = None, link_id: int = 0
+    ) -> None:
         self._mav: Any = mavlink.MAVLink(None, srcSystem=sys_id, srcComponent=comp_id)
+        if key is not None:
+            s = self._mav.signing
+            s.secret_key = key
+            s.link_id = link_id
+            s.sign_outgoing = True
+            s.timestamp = signing_timestamp(time.time())
 
     def pack(self, name: str, **fields: Any) -> bytes:
         encode = getattr(self._mav, name.lower() + "_encode")

@@ -13,6 +13,7 @@ Format (see docs/sitl.md):
     kind = "multirotor"         # or "fixed_wing"
     home = [47.3977, 8.5456, 488.0]
     auto_start_at_s = 5.0
+    signing_key = "<64 hex digits>"  # optional: enforce MAVLink 2 signing (see VehicleSpec)
     # lat, lon, alt AMSL[, speed]
     mission = [[47.3985, 8.5456, 510.0], [47.3985, 8.5470, 510.0, 6.0]]
     faults = [{ kind = "gnss_jamming", at_s = 30.0, duration_s = 20.0, value = 2.0 }]

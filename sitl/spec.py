@@ -126,6 +126,10 @@ class VehicleSpec:
     stream_rates_hz: tuple[tuple[str, float], ...] = DEFAULT_STREAM_RATES_HZ
     max_real_stream_hz: float = 50.0  # cap per stream in wall-clock Hz (bounds load at speed-up)
     max_mission_items: int = 500
+    # MAVLink 2 signing key, 64 hex digits (32 bytes), as PX4 MAV_SIGN_CFG / ArduPilot signing:
+    # the vehicle then accepts only correctly signed messages (RADIO_STATUS may be unsigned),
+    # counts the rest (`rejected_unsigned`, `rejected_bad_signature`) and signs all it sends.
+    signing_key: str | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in (MULTIROTOR, FIXED_WING):
@@ -138,6 +142,20 @@ class VehicleSpec:
             )
         if self.instance < 0:
             raise ValueError("VehicleSpec.instance must be >= 0")
+        if self.signing_key is not None:
+            if not isinstance(self.signing_key, str):
+                raise ValueError(
+                    "VehicleSpec.signing_key: expected a string of 64 hex digits, "
+                    f"got {type(self.signing_key).__name__}"
+                )
+            try:
+                signing_key_bytes(self.signing_key)
+            except ValueError as exc:
+                raise ValueError(f"VehicleSpec.signing_key: {exc}") from exc
+
+    def signing_key_bytes(self) -> bytes | None:
+        """The 32-byte signing key, or None when signing is off."""
+        return None if self.signing_key is None else signing_key_bytes(self.signing_key)
 
     @property
     def system_id(self) -> int:
@@ -167,6 +185,17 @@ class VehicleSpec:
             loiter_radius_m=_pick(self.loiter_radius_m, d.loiter_radius_m),
             acceptance_radius_m=_pick(self.acceptance_radius_m, d.acceptance_radius_m),
         )
+
+
+def signing_key_bytes(text: str) -> bytes:
+    """A 32-byte MAVLink signing key from 64 hex digits; ValueError naming what is wrong."""
+    try:
+        key = bytes.fromhex(text.strip())
+    except ValueError:
+        raise ValueError(f"expected 64 hex digits, got {text!r}") from None
+    if len(key) != 32:
+        raise ValueError(f"expected 64 hex digits (32 bytes), got {len(key)} bytes") from None
+    return key
 
 
 def _pick(value: float | None, default: float) -> float:

@@ -125,6 +125,8 @@ COUNTER_NAMES = (
     "bad_frame",
     "truncated",
     "unknown_msgid",
+    "rejected_unsigned",
+    "rejected_bad_signature",
     "dropped_other_sysid",
     "dropped_other_compid",
     "unsupported_cmd",
@@ -211,10 +213,13 @@ class _Link:
 
     name: str
 
-    def __init__(self, vehicle: Vehicle, name: str, rates_hz: dict[str, float]) -> None:
+    def __init__(
+        self, vehicle: Vehicle, name: str, rates_hz: dict[str, float], link_id: int = 0
+    ) -> None:
         self.vehicle = vehicle
         self.name = name
-        self.encoder = Encoder(vehicle.sys_id, 1)
+        # signing: one signing link id per channel, as PX4 (its MAVLink instance number)
+        self.encoder = Encoder(vehicle.sys_id, 1, key=vehicle.signing_key, link_id=link_id)
         self.streams: dict[str, _Stream] = {
             n: _Stream(1.0 / hz if hz > 0 else 0.0) for n, hz in rates_hz.items()
         }
@@ -237,9 +242,14 @@ class _Link:
 
 class _UdpLink(_Link, asyncio.DatagramProtocol):
     def __init__(
-        self, vehicle: Vehicle, name: str, rates_hz: dict[str, float], remote: tuple[str, int]
+        self,
+        vehicle: Vehicle,
+        name: str,
+        rates_hz: dict[str, float],
+        remote: tuple[str, int],
+        link_id: int = 0,
     ) -> None:
-        _Link.__init__(self, vehicle, name, rates_hz)
+        _Link.__init__(self, vehicle, name, rates_hz, link_id)
         self.remote = remote
         self.remote_learned = False
         self.transport: asyncio.DatagramTransport | None = None
@@ -262,7 +272,7 @@ class _UdpLink(_Link, asyncio.DatagramProtocol):
         if p is None:
             if len(self.parsers) >= MAX_PEERS:
                 self.parsers.pop(next(iter(self.parsers)))
-            p = self.parsers[peer] = Parser()
+            p = self.parsers[peer] = Parser(self.vehicle.signing_key)
         return p
 
     def transmit(self, data: bytes) -> None:
@@ -278,9 +288,9 @@ class _UdpLink(_Link, asyncio.DatagramProtocol):
 
 class _TcpLink(_Link, asyncio.Protocol):
     def __init__(self, vehicle: Vehicle, rates_hz: dict[str, float]) -> None:
-        _Link.__init__(self, vehicle, "tcp", rates_hz)
+        _Link.__init__(self, vehicle, "tcp", rates_hz, link_id=2)
         self.transport: asyncio.Transport | None = None
-        self.parser = Parser()
+        self.parser = Parser(vehicle.signing_key)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
@@ -315,6 +325,9 @@ class Vehicle:
         self._clock = sim_time
         self._t0 = t0_elapsed_s
         self.sys_id = spec.system_id
+        self.signing_key = spec.signing_key_bytes()
+        # signing on: message name -> count of incoming messages dropped for their signature
+        self.rejected_messages: dict[str, int] = {}
         self.is_ardupilot = spec.autopilot == ARDUPILOT
         self.is_fixed_wing = spec.kind == FIXED_WING
         self.lim = spec.limits()
@@ -470,7 +483,7 @@ class Vehicle:
                 spec.gcs_host,
                 spec.api_port if spec.api_port is not None else 14540 + spec.instance,
             )
-            api = _UdpLink(self, "api", streaming, remote)
+            api = _UdpLink(self, "api", streaming, remote, link_id=1)
             await loop.create_datagram_endpoint(lambda: api, local_addr=(spec.bind_host, port))
             self._api = api
             self._links.append(api)
@@ -550,6 +563,12 @@ class Vehicle:
             c["bad_frame"] += res.bad_frame
             c["truncated"] += res.truncated
             c["unknown_msgid"] += res.unknown_msgid
+            if res.rejected_msg_ids:
+                c["rejected_unsigned"] += res.unsigned_rejected
+                c["rejected_bad_signature"] += res.bad_signature
+                for mid in res.rejected_msg_ids:
+                    name = name_of(mid) or f"MSG_{mid}"
+                    self.rejected_messages[name] = self.rejected_messages.get(name, 0) + 1
             if (
                 res.messages
                 and isinstance(link, _UdpLink)

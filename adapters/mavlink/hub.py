@@ -460,17 +460,39 @@ class MavlinkHub:
             params = (float(mid), 1e6 / hz, 0.0, 0.0, 0.0, 0.0, 0.0)
             self._to(st, enc.command_long(ts, tc, MAV_CMD_SET_MESSAGE_INTERVAL, 0, params))
 
+    def _heartbeats_for(self, link: _Link, addr: Address | None, *, any_addr: bool) -> list[bytes]:
+        """The GCS heartbeats for one peer: signed with the key of each keyed vehicle heard
+        there (a vehicle enforcing signing drops unsigned ones and would see its GCS as lost),
+        plus an unsigned one if an unkeyed vehicle is there or none was heard yet."""
+        enc = link.encoder
+        assert enc is not None
+        if not self._keys:
+            return [enc.heartbeat()]
+        signed: dict[int, bytes] = {}
+        unsigned = False
+        for (name, a, sys_id, _comp), st in list(self._states.items()):
+            if name != link.name or (a != addr and not any_addr):
+                continue
+            if sys_id in self._keys:
+                if sys_id not in signed:
+                    signed[sys_id] = self._encoder(st).heartbeat()
+            else:
+                unsigned = True
+        out = list(signed.values())
+        if unsigned or not out:
+            out.append(enc.heartbeat())
+        return out
+
     async def _heartbeat_loop(self) -> None:
         while True:
             for link in list(self._links.values()):
-                enc = link.encoder
-                assert enc is not None
-                frame = enc.heartbeat()
                 if link.transport.endpoint.kind.value == "udpin":
                     for peer in list(link.peers):
-                        self._send(link, frame, peer)
+                        for frame in self._heartbeats_for(link, peer, any_addr=False):
+                            self._send(link, frame, peer)
                 else:
-                    self._send(link, frame, None)
+                    for frame in self._heartbeats_for(link, None, any_addr=True):
+                        self._send(link, frame, None)
             await asyncio.sleep(self.config.heartbeat_period_s)
 
     async def _health_loop(self) -> None:
