@@ -25,8 +25,12 @@ import socket
 import statistics
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from gcs_utm.bench.timing import summary
+
+if TYPE_CHECKING:
+    from gcs_utm.core.tracking.tracker import Tracker
 
 NAME = "ingest"
 
@@ -116,16 +120,11 @@ def _kernel_drops(port: int) -> int | None:
 class _Sink:
     def __init__(self) -> None:
         self.n = 0
-        self.first = 0.0
-        self.last = 0.0
         self.lat: list[float] = []
         self.updated = 0  # track updates (tracked runs only)
 
     def on_measurement(self, m: object) -> None:
         now = time.time()
-        if self.n == 0:
-            self.first = now
-        self.last = now
         self.n += 1
         self.lat.append(now - m.receipt_t_s)  # type: ignore[attr-defined]
 
@@ -154,38 +153,8 @@ def _frames(n: int, vehicles: int, boot0: int = 1000) -> list[bytes]:
     return out
 
 
-def _inprocess(n: int, vehicles: int, runs: int, fast: bool) -> list[float]:
-    """ms to push ``n`` datagrams through ``_on_chunk`` (1,000 vehicles on 4 addresses)."""
-    from adapters.mavlink import MavlinkConfig, MavlinkHub
-    from gcs_utm.clock import RealClock
-
-    passes = [_frames(n, vehicles, 1000 + r * n) for r in range(runs + 1)]
-    addrs = [("127.0.0.1", 20000 + (i % vehicles) // 250) for i in range(n)]
-
-    async def go() -> list[float]:
-        sink = _Sink()
-        cfg = MavlinkConfig(links=("udpin:127.0.0.1:0",), fast_decode=fast)
-        hub = MavlinkHub(cfg, RealClock(), sink)
-        await hub.start()
-        link = next(iter(hub._links.values()))
-        on_chunk = hub._on_chunk
-        out: list[float] = []
-        for r, frames in enumerate(passes):
-            t0 = time.perf_counter()
-            for f, a in zip(frames, addrs, strict=True):
-                on_chunk(link, f, a)
-            if r:  # the first run discovers the vehicles: warm-up
-                out.append((time.perf_counter() - t0) * 1000.0)
-        await hub.close()
-        if sink.n != n * (runs + 1):
-            raise RuntimeError(f"{sink.n} measurements of {n * (runs + 1)}")
-        return out
-
-    return asyncio.run(go())
-
-
 class _BatchSink(_Sink):
-    """Collects measurements for the tracker, as the tracking service batches them."""
+    """Queues measurements for a tracker, as the tracking service batches them."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -195,45 +164,59 @@ class _BatchSink(_Sink):
         self.n += 1
         self.batch.append(m)
 
+    def feed(self, tracker: Tracker) -> None:
+        """``Tracker.ingest`` the queued measurements; count the track updates."""
+        if self.batch:
+            batch, self.batch = self.batch, []
+            self.updated += tracker.ingest(batch).accepted  # type: ignore[arg-type]
 
-def _inprocess_tracked(n: int, vehicles: int, runs: int, batch: int) -> list[float]:
-    """ms to push ``n`` datagrams through ``_on_chunk`` (fast path) *and* into tracks: every
-    ``batch`` measurements go through ``Tracker.ingest`` (association + Kalman update), the
-    whole path from datagram to updated track on one core."""
-    from adapters.mavlink import MavlinkConfig, MavlinkHub
-    from gcs_utm.clock import RealClock
+
+def _tracker() -> Tracker:
     from gcs_utm.core.tracking import TrackingConfig
     from gcs_utm.core.tracking.tracker import Tracker
     from gcs_utm.geo import LocalFrame
+
+    return Tracker(LocalFrame(47.3977418, 8.5455939, 500.0), TrackingConfig())
+
+
+def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int = 0) -> list[float]:
+    """ms to push ``n`` datagrams through ``_on_chunk`` (1,000 vehicles on 4 addresses); with
+    ``tracker_batch`` > 0 every that many measurements also go through ``Tracker.ingest``
+    (association + Kalman update): datagram to updated track on one core."""
+    from adapters.mavlink import MavlinkConfig, MavlinkHub
+    from gcs_utm.clock import RealClock
 
     passes = [_frames(n, vehicles, 1000 + r * n) for r in range(runs + 1)]
     addrs = [("127.0.0.1", 20000 + (i % vehicles) // 250) for i in range(n)]
 
     async def go() -> list[float]:
-        sink = _BatchSink()
-        cfg = MavlinkConfig(links=("udpin:127.0.0.1:0",), fast_decode=True)
+        sink = _BatchSink() if tracker_batch > 0 else _Sink()
+        tracker = _tracker()
+        cfg = MavlinkConfig(links=("udpin:127.0.0.1:0",), fast_decode=fast)
         hub = MavlinkHub(cfg, RealClock(), sink)
-        tracker = Tracker(LocalFrame(47.3977418, 8.5455939, 500.0), TrackingConfig())
         await hub.start()
         link = next(iter(hub._links.values()))
         on_chunk = hub._on_chunk
         out: list[float] = []
-        updated = 0
+        batched = sink if isinstance(sink, _BatchSink) else None
         for r, frames in enumerate(passes):
             t0 = time.perf_counter()
-            for i, (f, a) in enumerate(zip(frames, addrs, strict=True)):
-                on_chunk(link, f, a)
-                if (i + 1) % batch == 0:
-                    updated += tracker.ingest(sink.batch).accepted  # type: ignore[arg-type]
-                    sink.batch = []
-            if sink.batch:
-                updated += tracker.ingest(sink.batch).accepted  # type: ignore[arg-type]
-                sink.batch = []
-            if r:  # the first run discovers the vehicles and creates the tracks: warm-up
+            if batched is None:
+                for f, a in zip(frames, addrs, strict=True):
+                    on_chunk(link, f, a)
+            else:
+                for i, (f, a) in enumerate(zip(frames, addrs, strict=True)):
+                    on_chunk(link, f, a)
+                    if (i + 1) % tracker_batch == 0:
+                        batched.feed(tracker)
+                batched.feed(tracker)
+            if r:  # the first run discovers the vehicles (and creates the tracks): warm-up
                 out.append((time.perf_counter() - t0) * 1000.0)
         await hub.close()
-        if updated < n * runs:
-            raise RuntimeError(f"{updated} track updates of {n * (runs + 1)} measurements")
+        if sink.n != n * (runs + 1):
+            raise RuntimeError(f"{sink.n} measurements of {n * (runs + 1)}")
+        if tracker_batch > 0 and sink.updated != sink.n:
+            raise RuntimeError(f"{sink.updated} track updates of {sink.n} measurements")
         return out
 
     return asyncio.run(go())
@@ -249,18 +232,6 @@ class _Socket:
     cpu_s: float  # this process's CPU time (the hub) over the run
 
 
-class _TrackedSink(_Sink):
-    """A ``_Sink`` that also queues each measurement for the tracker."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.batch: list[object] = []
-
-    def on_measurement(self, m: object) -> None:
-        super().on_measurement(m)
-        self.batch.append(m)
-
-
 async def _one(
     n: int, vehicles: int, rate: float, fast: bool = True, tracked: bool = False
 ) -> _Socket:
@@ -268,17 +239,13 @@ async def _one(
     ``Tracker.ingest`` in this same process (datagram to updated track on one core)."""
     from adapters.mavlink import MavlinkConfig, MavlinkHub
     from gcs_utm.clock import RealClock
-    from gcs_utm.core.tracking import TrackingConfig
-    from gcs_utm.core.tracking.tracker import Tracker
-    from gcs_utm.geo import LocalFrame
 
-    sink = _TrackedSink() if tracked else _Sink()
-    tracker = Tracker(LocalFrame(47.3977418, 8.5455939, 500.0), TrackingConfig())
+    sink = _BatchSink() if tracked else _Sink()
+    tracker = _tracker()
 
     def feed_tracker() -> None:
-        if isinstance(sink, _TrackedSink) and sink.batch:
-            batch, sink.batch = sink.batch, []
-            sink.updated += tracker.ingest(batch).accepted  # type: ignore[arg-type]
+        if isinstance(sink, _BatchSink):
+            sink.feed(tracker)
 
     hub = MavlinkHub(
         MavlinkConfig(links=("udpin:127.0.0.1:0",), heartbeat_period_s=1.0, fast_decode=fast),
@@ -326,7 +293,7 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
                 vehicles=args.vehicles,
             )
         )
-    ms = _inprocess_tracked(args.messages, args.vehicles, args.runs, batch=3000)
+    ms = _inprocess(args.messages, args.vehicles, args.runs, True, tracker_batch=3000)
     rec0 = summary(
         "ingest_inprocess_tracked",
         args.messages,

@@ -8,7 +8,7 @@ from gcs_utm.bench import ingest
 
 
 def test_inprocess_tracked_updates_one_track_per_vehicle() -> None:
-    ms = ingest._inprocess_tracked(2_000, 100, 1, batch=500)
+    ms = ingest._inprocess(2_000, 100, 1, True, tracker_batch=500)
     assert len(ms) == 1 and ms[0] > 0.0
 
 
