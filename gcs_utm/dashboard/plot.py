@@ -541,12 +541,11 @@ def plot_altitude(report: dict[str, Any], out_dir: Path, stem: str, summary: Plo
         ax.legend(fontsize=6, loc="best")
         ax.grid(alpha=0.3)
     axes[-1][0].set_xlabel("time from scenario start [s]")
-    fig.suptitle(f"{report.get('scenario', '')}: altitude profiles (planned vs flown)")
-    fig.tight_layout()
-    path = out_dir / f"{stem}_altitude.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(
+        fig,
+        out_dir / f"{stem}_altitude.png",
+        f"{report.get('scenario', '')}: altitude profiles (planned vs flown)",
+    )
 
 
 def plot_separation(
@@ -620,12 +619,11 @@ def plot_separation(
         top.legend(fontsize=6, loc="upper right")
         top.grid(alpha=0.3)
         bottom.grid(alpha=0.3)
-    fig.suptitle(f"{report.get('scenario', '')}: separation over time ({mode})")
-    fig.tight_layout()
-    path = out_dir / f"{stem}_separation.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(
+        fig,
+        out_dir / f"{stem}_separation.png",
+        f"{report.get('scenario', '')}: separation over time ({mode})",
+    )
 
 
 def plot_geofences(
@@ -706,12 +704,7 @@ def plot_geofences(
     ax_d.set_title("distance to each geofence while it is active")
     ax_d.legend(fontsize=6, loc="best")
     ax_d.grid(alpha=0.3)
-    fig.suptitle(f"{report.get('scenario', '')}: geofences")
-    fig.tight_layout()
-    path = out_dir / f"{stem}_geofence.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, out_dir / f"{stem}_geofence.png", f"{report.get('scenario', '')}: geofences")
 
 
 # ---- GeoJSON and KML --------------------------------------------------------------------------
@@ -841,3 +834,14 @@ def export_all(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> P
     kml.write_text(to_kml(report))
     summary.files += [gj, kml]
     return summary
+
+
+def _save(fig: Any, path: Path, title: str) -> Path:
+    """Title, lay out, write ``path`` and free the figure."""
+    import matplotlib.pyplot as plt
+
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
