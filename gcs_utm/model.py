@@ -297,6 +297,8 @@ class Measurement:
     to UTC); ``receipt_t_s`` is when we got it. Decisions use capture time.
 
     Identity: at least one of ``operation_id``, ``sys_id`` (telemetry) or ``icao24`` (ADS-B).
+    System ids are 8-bit, so ``vehicle`` (telemetry: ``host:port`` the vehicle was first heard
+    from, empty for a recording) tells apart vehicles that share a system id on one link.
     ``vel_ned_mps`` is (north, east, down); ``eph_m``/``epv_m`` are 1-sigma accuracies when
     known (GNSS eph/epv, ADS-B NACp).
     """
@@ -315,6 +317,7 @@ class Measurement:
     operation_id: OperationId | None = None
     link: str = ""
     callsign: str = ""
+    vehicle: str = ""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

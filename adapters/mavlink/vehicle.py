@@ -66,6 +66,9 @@ class VehicleState:
         self.key = key
         self.cfg = cfg
         self.sys_id = key.sys_id
+        # where the vehicle was first heard: kept when its address moves (NAT rebinding), so
+        # its track does not change identity; tells apart vehicles sharing a system id
+        self.tag = key.address
         self.info: VehicleInfo | None = None
         self.autopilot = Autopilot.UNKNOWN
         self.kind: VehicleKind | None = None
@@ -99,7 +102,8 @@ class VehicleState:
         self._battery_low = False
         self._fix_lost = False
         self._eph_bad = False
-        self.last_position: Position | None = None
+        # the last reported (lat, lon, alt AMSL); a Position is built only for a hazard report
+        self._last_fix: tuple[float, float, float] | None = None
 
     # --- link statistics ------------------------------------------------------------------
     def count_frame(self, seq: int, t_s: float) -> None:
@@ -160,6 +164,14 @@ class VehicleState:
         if self.offset_s is None:
             return receipt_t_s
         return self.offset_s + boot_ms / 1000.0
+
+    @property
+    def last_position(self) -> Position | None:
+        """The last reported position (GLOBAL_POSITION_INT), or None before the first."""
+        fix = self._last_fix
+        if fix is None:
+            return None
+        return Position(lat_deg=fix[0], lon_deg=fix[1], alt_amsl_m=fix[2])
 
     # --- status ---------------------------------------------------------------------------
     def status(self, t_s: float) -> VehicleStatus:
@@ -226,7 +238,7 @@ class VehicleState:
         alt = m.alt / 1000.0
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
             return
-        self.last_position = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=alt)
+        self._last_fix = (lat, lon, alt)
         ev.on_measurement(
             Measurement(
                 source=MeasurementSource.TELEMETRY,
@@ -240,6 +252,7 @@ class VehicleState:
                 epv_m=self.epv_m,
                 sys_id=self.sys_id,
                 link=self.key.link,
+                vehicle=self.tag,
             )
         )
 

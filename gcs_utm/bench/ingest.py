@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import multiprocessing as mp
 import os
 import socket
@@ -30,7 +31,9 @@ from typing import TYPE_CHECKING
 from gcs_utm.bench.timing import summary
 
 if TYPE_CHECKING:
-    from gcs_utm.core.tracking.tracker import Tracker
+    from gcs_utm.clock import Clock
+    from gcs_utm.model import Track
+    from gcs_utm.services.usm import Usm
 
 NAME = "ingest"
 
@@ -153,36 +156,49 @@ def _frames(n: int, vehicles: int, boot0: int = 1000) -> list[bytes]:
     return out
 
 
-class _BatchSink(_Sink):
-    """Queues measurements for a tracker, as the tracking service batches them."""
+class _Pipeline:
+    """The app's receive path as ``gcs_utm.app.build_runtime`` wires it: the hub's events go to
+    the USM, which hands measurements to the tracking service, which batches them into
+    ``Tracker.ingest`` every ``step`` (the service's 0.1 s cycle) and hands the updated tracks
+    to the track sink once a second (the store, in the app; counted here)."""
 
-    def __init__(self) -> None:
-        super().__init__()
-        self.batch: list[object] = []
+    def __init__(self, clock: Clock) -> None:
+        from gcs_utm.core.tracking import TrackingConfig
+        from gcs_utm.core.tracking.tracker import Tracker
+        from gcs_utm.geo import LocalFrame
+        from gcs_utm.services.airspace import Airspace
+        from gcs_utm.services.tracking import TrackingService
+        from gcs_utm.services.usm import Usm
 
-    def on_measurement(self, m: object) -> None:
-        self.n += 1
-        self.batch.append(m)
+        self.tracker = Tracker(LocalFrame(47.3977418, 8.5455939, 500.0), TrackingConfig())
+        self.usm = Usm(Airspace(), clock)
+        self.tracks_out = 0
+        self.tracking = TrackingService(self.tracker, clock, track_sink=self._tracks)
+        self.usm.attach_measurement_sink(self.tracking.submit)
 
-    def feed(self, tracker: Tracker) -> None:
-        """``Tracker.ingest`` the queued measurements; count the track updates."""
-        if self.batch:
-            batch, self.batch = self.batch, []
-            self.updated += tracker.ingest(batch).accepted  # type: ignore[arg-type]
+    def _tracks(self, tracks: list[Track]) -> None:
+        self.tracks_out += len(tracks)
 
+    @property
+    def n(self) -> int:
+        """Measurements the USM received."""
+        return self.usm.counters["measurements"]
 
-def _tracker() -> Tracker:
-    from gcs_utm.core.tracking import TrackingConfig
-    from gcs_utm.core.tracking.tracker import Tracker
-    from gcs_utm.geo import LocalFrame
+    @property
+    def updated(self) -> int:
+        """Measurements that updated a track."""
+        return self.tracker.counters["accepted"]
 
-    return Tracker(LocalFrame(47.3977418, 8.5455939, 500.0), TrackingConfig())
+    @property
+    def tracks(self) -> int:
+        return len(self.tracker)
 
 
 def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int = 0) -> list[float]:
     """ms to push ``n`` datagrams through ``_on_chunk`` (1,000 vehicles on 4 addresses); with
-    ``tracker_batch`` > 0 every that many measurements also go through ``Tracker.ingest``
-    (association + Kalman update): datagram to updated track on one core."""
+    ``tracker_batch`` > 0 the events go through the app's receive path (:class:`_Pipeline`)
+    and every that many datagrams the tracking service steps (association + Kalman update):
+    datagram to updated track on one core."""
     from adapters.mavlink import MavlinkConfig, MavlinkHub
     from gcs_utm.clock import RealClock
 
@@ -190,33 +206,38 @@ def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int 
     addrs = [("127.0.0.1", 20000 + (i % vehicles) // 250) for i in range(n)]
 
     async def go() -> list[float]:
-        sink = _BatchSink() if tracker_batch > 0 else _Sink()
-        tracker = _tracker()
+        clock = RealClock()
+        pipe = _Pipeline(clock) if tracker_batch > 0 else None
+        sink: _Sink | Usm = _Sink() if pipe is None else pipe.usm
         cfg = MavlinkConfig(links=("udpin:127.0.0.1:0",), fast_decode=fast)
-        hub = MavlinkHub(cfg, RealClock(), sink)
+        hub = MavlinkHub(cfg, clock, sink)
         await hub.start()
         link = next(iter(hub._links.values()))
         on_chunk = hub._on_chunk
         out: list[float] = []
-        batched = sink if isinstance(sink, _BatchSink) else None
         for r, frames in enumerate(passes):
             t0 = time.perf_counter()
-            if batched is None:
+            if pipe is None:
                 for f, a in zip(frames, addrs, strict=True):
                     on_chunk(link, f, a)
             else:
+                step = pipe.tracking.step
                 for i, (f, a) in enumerate(zip(frames, addrs, strict=True)):
                     on_chunk(link, f, a)
                     if (i + 1) % tracker_batch == 0:
-                        batched.feed(tracker)
-                batched.feed(tracker)
+                        await step()
+                await step()
             if r:  # the first run discovers the vehicles (and creates the tracks): warm-up
                 out.append((time.perf_counter() - t0) * 1000.0)
         await hub.close()
-        if sink.n != n * (runs + 1):
-            raise RuntimeError(f"{sink.n} measurements of {n * (runs + 1)}")
-        if tracker_batch > 0 and sink.updated != sink.n:
-            raise RuntimeError(f"{sink.updated} track updates of {sink.n} measurements")
+        got = sink.n if isinstance(sink, _Sink) else pipe.n if pipe is not None else 0
+        if got != n * (runs + 1):
+            raise RuntimeError(f"{got} measurements of {n * (runs + 1)}")
+        if pipe is not None:
+            if pipe.updated != pipe.n:
+                raise RuntimeError(f"{pipe.updated} track updates of {pipe.n} measurements")
+            if pipe.tracks != vehicles:
+                raise RuntimeError(f"{pipe.tracks} tracks for {vehicles} vehicles")
         return out
 
     return asyncio.run(go())
@@ -224,7 +245,10 @@ def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int 
 
 @dataclass
 class _Socket:
-    sink: _Sink
+    received: int  # measurements out of the hub
+    updated: int  # of them, track updates (tracked runs; else = received)
+    tracks: int
+    lat: list[float]
     sent: int
     send_s: float
     kernel_drops: int | None
@@ -235,24 +259,22 @@ class _Socket:
 async def _one(
     n: int, vehicles: int, rate: float, fast: bool = True, tracked: bool = False
 ) -> _Socket:
-    """One socket run; ``tracked``: every 50 ms tick the queued measurements go through
-    ``Tracker.ingest`` in this same process (datagram to updated track on one core)."""
+    """One socket run; ``tracked``: the hub feeds the app's receive path (:class:`_Pipeline`),
+    the tracking service running its own 0.1 s cycle in this same process (datagram to
+    updated track on one core)."""
     from adapters.mavlink import MavlinkConfig, MavlinkHub
     from gcs_utm.clock import RealClock
 
-    sink = _BatchSink() if tracked else _Sink()
-    tracker = _tracker()
-
-    def feed_tracker() -> None:
-        if isinstance(sink, _BatchSink):
-            sink.feed(tracker)
-
+    clock = RealClock()
+    pipe = _Pipeline(clock) if tracked else None
+    sink = _Sink()
     hub = MavlinkHub(
         MavlinkConfig(links=("udpin:127.0.0.1:0",), heartbeat_period_s=1.0, fast_decode=fast),
-        RealClock(),
-        sink,
+        clock,
+        sink if pipe is None else pipe.usm,
     )
     await hub.start()
+    task = asyncio.create_task(pipe.tracking.run()) if pipe is not None else None
     link = next(iter(hub._links))
     port = hub.local_port(link)
     ctx = mp.get_context("spawn")
@@ -267,16 +289,20 @@ async def _one(
     deadline = time.time() + 60.0
     while proc.is_alive() and time.time() < deadline:
         await asyncio.sleep(0.05)
-        feed_tracker()
-    await asyncio.sleep(0.3)  # drain what is still queued in the socket
-    feed_tracker()
+    await asyncio.sleep(0.3)  # drain what is still queued in the socket (and a tracking cycle)
     cpu_s = time.process_time() - cpu0
+    if task is not None:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task  # lands what is still pending
     drops = _kernel_drops(port)
     rcvbuf = hub.rcvbuf_bytes(link)
     await hub.close()
     proc.join()
     sent, send_s = out.get(timeout=5.0) if not out.empty() else (0, 0.0)
-    return _Socket(sink, sent, send_s, drops, rcvbuf, cpu_s)
+    if pipe is None:
+        return _Socket(sink.n, sink.n, 0, sink.lat, sent, send_s, drops, rcvbuf, cpu_s)
+    return _Socket(pipe.n, pipe.updated, pipe.tracks, [], sent, send_s, drops, rcvbuf, cpu_s)
 
 
 def run(args: argparse.Namespace) -> list[dict[str, object]]:
@@ -302,13 +328,13 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         vehicles=args.vehicles,
         batch=3000,
     )
-    rec0["note"] = "datagram -> fast decode -> Measurement -> Tracker.ingest, one core"
+    rec0["note"] = "datagram -> fast decode -> USM -> tracking service -> Tracker.ingest, one core"
     recs.append(rec0)
     got: list[_Socket] = [
         asyncio.run(_one(args.messages, args.vehicles, args.offered_rate, fast))
         for _ in range(args.runs)
     ]
-    delivered_per_s = [r.sink.n / r.send_s for r in got if r.send_s > 0]
+    delivered_per_s = [r.received / r.send_s for r in got if r.send_s > 0]
     rec1 = summary(
         "ingest_socket",
         args.messages,
@@ -318,16 +344,16 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         decode=args.decode,
         offered_per_s=args.offered_rate or "max",
         sent_per_s=[round(r.sent / r.send_s) if r.send_s > 0 else 0 for r in got],
-        delivered=[r.sink.n for r in got],
+        delivered=[r.received for r in got],
         delivered_per_s_runs=[round(x) for x in delivered_per_s],
-        lost=[r.sent - r.sink.n for r in got],
-        lost_pct=[round(100.0 * (r.sent - r.sink.n) / max(1, r.sent), 2) for r in got],
+        lost=[r.sent - r.received for r in got],
+        lost_pct=[round(100.0 * (r.sent - r.received) / max(1, r.sent), 2) for r in got],
         kernel_drops=[r.kernel_drops for r in got],
         rcvbuf_bytes=got[0].rcvbuf,
         # load-independent: the hub's CPU per delivered message, socket read included, and
         # the rate one free core would sustain at that cost
-        hub_cpu_us_per_msg=[round(1e6 * r.cpu_s / max(1, r.sink.n), 2) for r in got],
-        capacity_per_core_per_s=[round(r.sink.n / r.cpu_s) if r.cpu_s > 0 else 0 for r in got],
+        hub_cpu_us_per_msg=[round(1e6 * r.cpu_s / max(1, r.received), 2) for r in got],
+        capacity_per_core_per_s=[round(r.received / r.cpu_s) if r.cpu_s > 0 else 0 for r in got],
     )
     rec1["per_s"] = round(statistics.median(delivered_per_s), 1) if delivered_per_s else 0.0
     rec1["note"] = "median_ms/min_ms/max_ms: the sender's sending time per run"
@@ -335,7 +361,7 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         asyncio.run(_one(args.messages, args.vehicles, args.offered_rate, fast, tracked=True))
         for _ in range(args.runs)
     ]
-    t_per_s = [r.sink.updated / r.send_s for r in tgot if r.send_s > 0]
+    t_per_s = [r.updated / r.send_s for r in tgot if r.send_s > 0]
     rec3 = summary(
         "ingest_socket_tracked",
         args.messages,
@@ -344,24 +370,26 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         vehicles=args.vehicles,
         decode=args.decode,
         offered_per_s=args.offered_rate or "max",
-        delivered=[r.sink.n for r in tgot],
-        track_updates=[r.sink.updated for r in tgot],
-        lost=[r.sent - r.sink.n for r in tgot],
+        delivered=[r.received for r in tgot],
+        track_updates=[r.updated for r in tgot],
+        tracks=[r.tracks for r in tgot],
+        lost=[r.sent - r.received for r in tgot],
         kernel_drops=[r.kernel_drops for r in tgot],
-        cpu_us_per_msg=[round(1e6 * r.cpu_s / max(1, r.sink.n), 2) for r in tgot],
+        cpu_us_per_msg=[round(1e6 * r.cpu_s / max(1, r.received), 2) for r in tgot],
+        capacity_per_core_per_s=[round(r.received / r.cpu_s) if r.cpu_s > 0 else 0 for r in tgot],
     )
     rec3["per_s"] = round(statistics.median(t_per_s), 1) if t_per_s else 0.0
     rec3["note"] = (
-        "socket -> hub -> Tracker.ingest every 50 ms in one process; per_s = track updates / "
-        "the sender's sending time"
+        "socket -> hub -> USM -> tracking service (0.1 s cycle) -> Tracker.ingest, one process; "
+        "per_s = track updates / the sender's sending time"
     )
     lat_p99: list[float] = []
     lat_all: list[float] = []
     for _ in range(args.runs):
-        sink = asyncio.run(_one(int(args.rate * 2), args.vehicles, args.rate, fast)).sink
-        q = statistics.quantiles(sink.lat, n=100)
+        lat = asyncio.run(_one(int(args.rate * 2), args.vehicles, args.rate, fast)).lat
+        q = statistics.quantiles(lat, n=100)
         lat_p99.append(q[98] * 1000.0)
-        lat_all.append(statistics.median(sink.lat) * 1000.0)
+        lat_all.append(statistics.median(lat) * 1000.0)
     rec2 = summary(
         "ingest_latency_10k",
         int(args.rate * 2),

@@ -58,6 +58,8 @@ class Airspace:
         self._on_geofence = on_geofence
         self.version = 0
         """Increases on every change; consumers compare it to skip rework."""
+        self._sys_index: dict[SysId, OperationId] = {}
+        self._sys_index_version = -1
 
     # ---- queries --------------------------------------------------------------------------
     @property
@@ -71,10 +73,14 @@ class Airspace:
             raise AirspaceError(f"unknown operation {op_id!r}") from None
 
     def by_sys_id(self, sys_id: SysId) -> Operation | None:
-        for op in self._operations.values():
-            if op.sys_id == sys_id:
-                return op
-        return None
+        """The operation flown by MAVLink system ``sys_id``: the most recently filed one if
+        several (a vehicle that flies again), as Tracking associates it."""
+        if self._sys_index_version != self.version:
+            index = {op.sys_id: op.id for op in self._operations.values() if op.sys_id is not None}
+            self._sys_index = index
+            self._sys_index_version = self.version
+        op_id = self._sys_index.get(sys_id)
+        return None if op_id is None else self._operations[op_id]
 
     def geofences(self, *, active_at_s: float | None = None) -> tuple[Geofence, ...]:
         """All geofences, or those not yet expired at ``active_at_s`` (a geofence that starts

@@ -40,11 +40,11 @@ from gcs_utm.model import (
 
 _log = logging.getLogger(__name__)
 
-_VehicleKey = tuple[str, object, object, object]
+_VehicleKey = tuple[str, object, object, object, str]
 
 
 def _vehicle_key(m: Measurement) -> _VehicleKey:
-    return (m.source.value, m.operation_id, m.sys_id, m.icao24)
+    return (m.source.value, m.operation_id, m.sys_id, m.icao24, m.vehicle)
 
 
 class TrackingService:

@@ -331,6 +331,7 @@ class Usm:
         self.threat_log: list[Threat] = []
         self.recommendations: dict[RecommendationId, RecommendationRecord] = {}
         self.telemetry: dict[str, TelemetryStats] = {}
+        self._telemetry_by_source: dict[tuple[object, ...], TelemetryStats] = {}
         self._first_alt: dict[SysId, float] = {}
         self.events: deque[UsmEvent] = deque(maxlen=self.config.event_log_size)
         self._hazard_seen: dict[tuple[ThreatKind, str], float] = {}
@@ -377,21 +378,28 @@ class Usm:
     # ---- telemetry side (adapters.mavlink TelemetrySink, ADS-B, tlog, MQTT) ---------------
     def on_measurement(self, m: Measurement) -> None:
         self.counters["measurements"] += 1
-        if m.sys_id is not None and m.sys_id not in self._first_alt:
-            self._first_alt[m.sys_id] = m.alt_amsl_m
-        key = f"{m.source.value}:" + (
-            str(m.sys_id) if m.sys_id is not None else (m.icao24 or m.operation_id or "?")
-        )
-        stats = self.telemetry.get(key)
+        sys_id = m.sys_id
+        if sys_id is not None and sys_id not in self._first_alt:
+            self._first_alt[sys_id] = m.alt_amsl_m
+        src = (m.source, sys_id, m.icao24, m.operation_id, m.vehicle)
+        stats = self._telemetry_by_source.get(src)
         if stats is None:
-            stats = self.telemetry[key] = TelemetryStats()
+            key = f"{m.source.value}:" + (
+                str(sys_id) if sys_id is not None else (m.icao24 or m.operation_id or "?")
+            )
+            if m.vehicle:
+                key += f"@{m.vehicle}"
+            stats = self.telemetry.setdefault(key, TelemetryStats())
+            self._telemetry_by_source[src] = stats
         stats.add(m)
-        if m.operation_id is None and m.sys_id is not None:
-            op = self.airspace.by_sys_id(m.sys_id)
-            if op is not None:
-                m = dataclasses.replace(m, operation_id=op.id)
-            else:
-                self.counters["unknown_vehicle_measurements"] += 1
+        # Tracking associates a system id with its operation itself (the same operations, set
+        # on every plan change); here it is only counted when no operation claims it.
+        if (
+            m.operation_id is None
+            and sys_id is not None
+            and self.airspace.by_sys_id(sys_id) is None
+        ):
+            self.counters["unknown_vehicle_measurements"] += 1
         for sink in self._measurement_sinks:
             sink(m)
 

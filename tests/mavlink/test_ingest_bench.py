@@ -1,4 +1,5 @@
-"""The ingest benchmark's datagram-to-track paths really update tracks (small sizes)."""
+"""The ingest benchmark's datagram-to-track paths really update tracks (small sizes), through
+the app's receive path (hub -> USM -> tracking service -> tracker)."""
 
 from __future__ import annotations
 
@@ -8,12 +9,15 @@ from gcs_utm.bench import ingest
 
 
 def test_inprocess_tracked_updates_one_track_per_vehicle() -> None:
-    ms = ingest._inprocess(2_000, 100, 1, True, tracker_batch=500)
+    # 600 vehicles from 3 addresses: system ids 1..250 repeat, the tracks must not merge
+    # (_inprocess raises unless every measurement updated a track and there is one per vehicle)
+    ms = ingest._inprocess(2_400, 600, 1, True, tracker_batch=500)
     assert len(ms) == 1 and ms[0] > 0.0
 
 
-def test_socket_tracked_feeds_every_delivered_measurement_to_the_tracker() -> None:
-    r = asyncio.run(ingest._one(2_000, 100, 5_000.0, tracked=True))
-    assert r.sent == 2_000
-    assert r.sink.n > 0
-    assert r.sink.updated == r.sink.n  # every delivered measurement updated a track
+def test_socket_tracked_feeds_every_delivered_measurement_to_a_track_per_vehicle() -> None:
+    r = asyncio.run(ingest._one(2_400, 600, 5_000.0, tracked=True))
+    assert r.sent == 2_400
+    assert r.received > 0
+    assert r.updated == r.received  # every delivered measurement updated a track
+    assert r.tracks == 600  # vehicles sharing a system id on other addresses stay apart

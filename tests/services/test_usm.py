@@ -270,3 +270,44 @@ async def test_upload_starts_at_the_first_waypoint_ahead_when_accepted_late() ->
     await usm2.answer(_answer(PilotDecision.ACCEPT))
     await usm2.drain()
     assert vehicles2.start_indices == [0]
+
+
+def test_measurements_counted_per_vehicle_and_unclaimed_system_ids_counted() -> None:
+    from gcs_utm.model import Measurement, MeasurementSource
+
+    airspace = Airspace()
+    usm = Usm(airspace, ManualClock(100.0))
+    got: list[Measurement] = []
+    usm.attach_measurement_sink(got.append)
+
+    def m(sys_id: int, vehicle: str) -> Measurement:
+        return Measurement(
+            source=MeasurementSource.TELEMETRY,
+            capture_t_s=100.0,
+            receipt_t_s=100.01,
+            lat_deg=47.0,
+            lon_deg=8.0,
+            alt_amsl_m=500.0,
+            sys_id=SysId(sys_id),
+            vehicle=vehicle,
+        )
+
+    usm.on_measurement(m(1, "10.0.0.1:14550"))
+    usm.on_measurement(m(1, "10.0.0.2:14550"))
+    assert set(usm.telemetry) == {"telemetry:1@10.0.0.1:14550", "telemetry:1@10.0.0.2:14550"}
+    assert usm.counters["unknown_vehicle_measurements"] == 2
+    # once an operation flies system id 1, its measurements are no longer unknown; they are
+    # handed on unchanged (Tracking associates the system id with the operation)
+    airspace.add_operation(_op())
+    usm.on_measurement(m(1, "10.0.0.1:14550"))
+    assert usm.counters["unknown_vehicle_measurements"] == 2
+    assert len(got) == 3 and got[-1].sys_id == 1
+    # a vehicle that flies again: the most recently filed operation is the one it flies
+    op = _op()
+    again = dataclasses.replace(
+        op,
+        id=OperationId("again"),
+        plan=dataclasses.replace(op.plan, operation_id=OperationId("again")),
+    )
+    airspace.add_operation(again)
+    assert airspace.by_sys_id(SysId(1)) == again

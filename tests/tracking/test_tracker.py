@@ -187,6 +187,26 @@ def test_unknown_adsb_is_a_non_cooperative_intruder_until_claimed() -> None:
     assert tr.tracks()[TrackId("op2")].cooperative
 
 
+def test_vehicles_sharing_a_system_id_on_other_addresses_are_separate_until_claimed() -> None:
+    import dataclasses
+
+    tr = new_tracker()
+    a = dataclasses.replace(meas(0, 0, 100, T0), vehicle="10.0.0.1:14550")
+    b = dataclasses.replace(meas(2_000, 0, 100, T0), vehicle="10.0.0.2:14550")
+    stats = tr.ingest([a, b])
+    assert set(stats.new_intruders) == {
+        TrackId("sysid:1@10.0.0.1:14550"),
+        TrackId("sysid:1@10.0.0.2:14550"),
+    }
+    # 2 km apart at the same time: one merged track would have gated one of them away
+    assert stats.accepted == 2
+    # an operation flown by system id 1 claims them: the intruder tracks go
+    tr.set_operations([operation("op1", plan_from_local("op1", [(0, 0, 100, T0)]), sys_id=1)])
+    assert set(tr.tracks()) == set()
+    tr.ingest([dataclasses.replace(meas(1, 0, 100, T0 + 1), vehicle="10.0.0.1:14550")])
+    assert set(tr.tracks()) == {TrackId("op1")}
+
+
 @pytest.mark.parametrize(
     ("bad", "reason"),
     [

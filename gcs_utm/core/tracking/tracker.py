@@ -7,8 +7,10 @@ waypoint and predict all tracks over a horizon. Pure: time is always passed in.
 Association (:meth:`Tracker.set_operations`): a measurement's ``operation_id`` if known, else
 its MAVLink ``sys_id``, else its ICAO address, mapped to the operation. Anything else with an
 ICAO address is the intruder ``"icao:<hex>"``; an unassigned MAVLink vehicle is the intruder
-``"sysid:<n>"``. Intruders are ``cooperative=False`` and carry no operation id, so they are
-never confused with an operation.
+``"sysid:<n>"``, or ``"sysid:<n>@<host:port>"`` when the measurement names the vehicle's
+address (``Measurement.vehicle``: system ids are 8-bit, so a link can carry several vehicles
+with the same one; an operation claims every vehicle with its system id). Intruders are
+``cooperative=False`` and carry no operation id, so they are never confused with an operation.
 
 Ingest (:meth:`Tracker.ingest`), per batch:
 1. scalar checks (finite, in range, identity, capture time not after receipt + max_future_s,
@@ -197,9 +199,11 @@ class Tracker:
             j = self._plan_of_op.get(op_id, -1) if op_id is not None else -1
             self._plan_row[row] = j
             self._geom_m[row] = ops[j].flight_geometry_m if j >= 0 else 0.0
-        claimed = {TrackId(f"icao:{icao}") for icao in self._by_icao}
-        claimed |= {TrackId(f"sysid:{sys_id}") for sys_id in self._by_sys}
-        keep = np.array([tid not in claimed for tid in self._ids[: self._n]], dtype=bool)
+        claimed = {f"icao:{icao}" for icao in self._by_icao}
+        claimed |= {f"sysid:{sys_id}" for sys_id in self._by_sys}
+        keep = np.array(
+            [tid.partition("@")[0] not in claimed for tid in self._ids[: self._n]], dtype=bool
+        )
         if not keep.all():
             self._counters["intruders_dropped"] += int((~keep).sum())
             self._compact(keep)
@@ -217,7 +221,8 @@ class Tracker:
         if m.icao24 is not None:
             return _Identity(TrackId(f"icao:{m.icao24}"), False, None, m.icao24)
         if m.sys_id is not None:
-            return _Identity(TrackId(f"sysid:{m.sys_id}"), False, None, None)
+            tid = f"sysid:{m.sys_id}@{m.vehicle}" if m.vehicle else f"sysid:{m.sys_id}"
+            return _Identity(TrackId(tid), False, None, None)
         return None
 
     # ---- storage ----------------------------------------------------------------------------
