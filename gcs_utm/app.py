@@ -189,7 +189,11 @@ def build_runtime(
         usm.on_hazard(h)
 
     tracking = TrackingService(
-        tracker, clock, on_hazard=tracking_hazard, track_sink=store.write_tracks
+        tracker,
+        clock,
+        on_hazard=tracking_hazard,
+        track_sink=store.write_tracks,
+        ingest_delay_s=settings.tracking.ingest_delay_s,
     )
     holder["tracking"] = tracking
 

@@ -318,12 +318,12 @@ class MavlinkHub:
         parser = link.parsers.get(addr)
         if parser is None:
             parser = link.parsers[addr] = wire.Parser(link.counters, fast=self.config.fast_decode)
-        before = link.counters.bad_frames
+        before = link.counters.rejects
         if link.transport.datagram:
             frames = parser.feed_frames(data)
         else:
             frames = parser.frames(data, datagram=False)
-        if link.counters.bad_frames != before:
+        if link.counters.rejects != before:
             self._sync_bad(link)
             _log.debug("bad frame on %s from %s: %s", link.name, addr, link.counters.last_error)
         for f in frames:

@@ -239,10 +239,11 @@ class VehicleState:
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
             return
         self._last_fix = (lat, lon, alt)
+        offset = self.offset_s  # capture_t_s(), inline
         ev.on_measurement(
             Measurement(
                 source=MeasurementSource.TELEMETRY,
-                capture_t_s=self.capture_t_s(boot_ms, t_s),
+                capture_t_s=t_s if offset is None else offset + boot_ms / 1000.0,
                 receipt_t_s=t_s,
                 lat_deg=lat,
                 lon_deg=lon,

@@ -31,6 +31,7 @@ import time
 from collections import namedtuple
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, NamedTuple
 
 from fastcrc import crc16
@@ -85,6 +86,10 @@ class Frame(NamedTuple):
     msg: MavMsg
 
 
+_new_frame = partial(tuple.__new__, Frame)
+"""``Frame`` from one tuple of its fields, without the Python-level ``__new__`` (hot path)."""
+
+
 @dataclass(frozen=True, slots=True)
 class FastType:
     """What the fast path needs of one message type (taken from pymavlink's dialect)."""
@@ -120,7 +125,7 @@ def _fast_type(mid: int) -> FastType:
         crc_extra=bytes([cls.crc_extra]),
         size=unpacker.size,
         unpack=unpacker.unpack,
-        make=tup._make,
+        make=partial(tuple.__new__, tup),  # = tup._make, without its Python-level call
     )
 
 
@@ -157,6 +162,7 @@ class ParseCounters:
     unknown_msg: int = 0
     truncated: int = 0
     bad_signature: int = 0
+    rejects: int = 0  # every reject above, counted once more: one read tells that one happened
     last_error: str = ""
 
     @property
@@ -186,6 +192,7 @@ class Parser:
     def _classify(self, reason: str) -> None:
         c = self.counters
         c.last_error = reason
+        c.rejects += 1
         r = reason.lower()
         if "crc" in r:
             c.bad_crc += 1
@@ -212,6 +219,7 @@ class Parser:
                 out.append(m)
         if datagram and self._mav.buf_len() > 0:
             self.counters.truncated += 1
+            self.counters.rejects += 1
             self.counters.last_error = f"truncated frame ({self._mav.buf_len()} bytes left)"
             self.reset()
         self.counters.frames += len(out)
@@ -280,7 +288,7 @@ class Parser:
                 payload += bytes(ft.size - plen)  # MAVLink 2 trims trailing zero bytes
             elif plen > ft.size:
                 payload = payload[: ft.size]  # fields of a newer dialect we do not know
-            out.append(Frame(mid, sys_id, comp_id, seq, ft.make(ft.unpack(payload))))
+            out.append(_new_frame((mid, sys_id, comp_id, seq, ft.make(ft.unpack(payload)))))
             self.counters.frames += 1
             i = end
         if i < n:

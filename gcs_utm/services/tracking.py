@@ -10,9 +10,17 @@ batch. When full, a new measurement *replaces* the pending one of the same vehic
 (latest wins per vehicle; the replaced one is counted in ``replaced``); if that vehicle has
 nothing pending the new one is dropped and counted in ``dropped``. Nothing blocks.
 
+Latency: while :meth:`TrackingService.run` runs, a measurement updates its track at most
+``ingest_delay_s`` (wall time, default 2 ms: ``tracking.ingest_delay_s``) after it arrived:
+the first measurement into an empty buffer schedules the ingest of everything that has
+arrived by then. Under load the loop is busy reading, so batches grow by themselves (the
+tracker's cost per measurement falls with the batch size). ``step`` (every
+``batch_period_s`` of clock time) ingests whatever is still pending, checks staleness and
+flushes; ``ingest_delay_s = 0`` ingests on the loop's next turn, ``None`` only on ``step``.
+
 Reorder window: a batch is sorted by capture time before it is filtered, so measurements
-that arrive out of order within one ``batch_period_s`` are used in the right order; older
-ones are rejected by the tracker and counted (see :mod:`gcs_utm.core.tracking.tracker`).
+that arrive out of order within one batch (``ingest_delay_s``) are used in the right order;
+older ones are rejected by the tracker and counted (see :mod:`gcs_utm.core.tracking.tracker`).
 
 Time: all decisions use the injected :class:`Clock`; the core sees only ``t_s``.
 Cancel-safe: on cancellation the pending batch is ingested and flushed, then the
@@ -40,11 +48,8 @@ from gcs_utm.model import (
 
 _log = logging.getLogger(__name__)
 
-_VehicleKey = tuple[str, object, object, object, str]
-
-
-def _vehicle_key(m: Measurement) -> _VehicleKey:
-    return (m.source.value, m.operation_id, m.sys_id, m.icao24, m.vehicle)
+_VehicleKey = tuple[object, object, object, object, str]
+"""(source, operation id, system id, ICAO address, vehicle address) of a measurement."""
 
 
 class TrackingService:
@@ -58,9 +63,15 @@ class TrackingService:
         flush_period_s: float = 1.0,
         batch_period_s: float = 0.1,
         max_pending: int = 20_000,
+        ingest_delay_s: float | None = None,
     ) -> None:
         if flush_period_s <= 0 or batch_period_s <= 0 or max_pending < 1:
             raise ValueError("flush_period_s, batch_period_s and max_pending must be positive")
+        if ingest_delay_s is not None and not 0.0 <= ingest_delay_s <= batch_period_s:
+            raise ValueError("ingest_delay_s must be in [0, batch_period_s]")
+        self._ingest_delay_s = ingest_delay_s
+        self._running = False
+        self._ingest_handle: asyncio.TimerHandle | asyncio.Handle | None = None
         self.tracker = tracker
         self.clock = clock
         self._on_hazard = on_hazard
@@ -79,25 +90,52 @@ class TrackingService:
             "hazards": 0,
             "sink_errors": 0,
             "hazard_errors": 0,
+            "ingest_errors": 0,
         }
         self.last_ingest: IngestStats | None = None
 
     def submit(self, m: Measurement) -> None:
         """Queue one measurement; never blocks (see the buffer policy in the module doc)."""
         self.stats["submitted"] += 1
-        key = _vehicle_key(m)
-        if len(self._pending) >= self._max_pending:
+        key = (m.source, m.operation_id, m.sys_id, m.icao24, m.vehicle)  # _VehicleKey
+        pending = self._pending
+        if len(pending) >= self._max_pending:
             slot = self._slot.get(key)
             if slot is None:
                 self.stats["dropped"] += 1
                 if self.stats["dropped"] % 1000 == 1:
                     _log.warning("tracking buffer full: dropped %d so far", self.stats["dropped"])
                 return
-            self._pending[slot] = m
+            pending[slot] = m
             self.stats["replaced"] += 1
             return
-        self._slot[key] = len(self._pending)
-        self._pending.append(m)
+        self._slot[key] = len(pending)
+        pending.append(m)
+        if self._ingest_handle is None and self._running and self._ingest_delay_s is not None:
+            loop = asyncio.get_running_loop()
+            if self._ingest_delay_s > 0.0:
+                self._ingest_handle = loop.call_later(self._ingest_delay_s, self._ingest_now)
+            else:
+                self._ingest_handle = loop.call_soon(self._ingest_now)
+
+    def _ingest_pending(self) -> None:
+        if self._ingest_handle is not None:
+            self._ingest_handle.cancel()
+            self._ingest_handle = None
+        batch = self._pending
+        self._pending = []
+        self._slot = {}
+        if batch:
+            self.last_ingest = self.tracker.ingest(batch)
+            self.stats["batches"] += 1
+
+    def _ingest_now(self) -> None:
+        self._ingest_handle = None
+        try:
+            self._ingest_pending()
+        except Exception:  # a tracker bug must not stop the loop's callbacks; step() retries
+            self.stats["ingest_errors"] += 1
+            _log.exception("tracking ingest failed")
 
     def set_operations(self, operations: Iterable[Operation]) -> None:
         self.tracker.set_operations(operations)
@@ -108,12 +146,7 @@ class TrackingService:
 
     async def step(self) -> None:
         """One cycle: ingest the pending batch, check staleness, flush if due."""
-        batch = self._pending
-        self._pending = []
-        self._slot = {}
-        if batch:
-            self.last_ingest = self.tracker.ingest(batch)
-            self.stats["batches"] += 1
+        self._ingest_pending()
         now_s = self.clock.now_s()
         for tid in self.tracker.check_stale(now_s):
             await self._raise_stale(tid, now_s)
@@ -164,17 +197,17 @@ class TrackingService:
             _log.exception("track sink failed (%d tracks)", len(updated))
 
     async def run(self) -> None:
-        """Cycle every ``batch_period_s`` of clock time until cancelled."""
+        """Cycle every ``batch_period_s`` of clock time until cancelled; meanwhile ingest
+        within ``ingest_delay_s`` of arrival (module docstring)."""
+        self._running = True
         try:
             while True:
                 await self.step()
                 await self.clock.sleep(self._batch_period_s)
         except asyncio.CancelledError:
             # Land what was already received before the task ends.
-            batch = self._pending
-            self._pending = []
-            self._slot = {}
-            if batch:
-                self.last_ingest = self.tracker.ingest(batch)
+            self._ingest_pending()
             self._flush(self.clock.now_s())
             raise
+        finally:
+            self._running = False

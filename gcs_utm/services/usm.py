@@ -272,14 +272,18 @@ class TelemetryStats:
     delay_max_s: float = -math.inf
 
     def add(self, m: Measurement) -> None:
+        t = m.capture_t_s
         if self.count == 0:
-            self.first_capture_t_s = m.capture_t_s
+            self.first_capture_t_s = t
         self.count += 1
-        self.last_capture_t_s = max(self.last_capture_t_s, m.capture_t_s)
-        delay = m.receipt_t_s - m.capture_t_s
+        if t > self.last_capture_t_s:
+            self.last_capture_t_s = t
+        delay = m.receipt_t_s - t
         self.delay_sum_s += delay
-        self.delay_min_s = min(self.delay_min_s, delay)
-        self.delay_max_s = max(self.delay_max_s, delay)
+        if delay < self.delay_min_s:
+            self.delay_min_s = delay
+        if delay > self.delay_max_s:
+            self.delay_max_s = delay
 
     def as_dict(self, speed: float) -> dict[str, float | int]:
         span = self.last_capture_t_s - self.first_capture_t_s
@@ -295,6 +299,16 @@ class TelemetryStats:
             "min_delay_ms": round(1000.0 * scale * self.delay_min_s, 3) if self.count else 0.0,
             "max_delay_ms": round(1000.0 * scale * self.delay_max_s, 3) if self.count else 0.0,
         }
+
+
+@dataclass(slots=True)
+class _Source:
+    """Per measurement source (kind, system id, ICAO, operation, vehicle address): its
+    statistics, and whether no operation flies its system id (as of an airspace version)."""
+
+    stats: TelemetryStats
+    airspace_version: int = -1
+    unknown: bool = False
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -331,7 +345,7 @@ class Usm:
         self.threat_log: list[Threat] = []
         self.recommendations: dict[RecommendationId, RecommendationRecord] = {}
         self.telemetry: dict[str, TelemetryStats] = {}
-        self._telemetry_by_source: dict[tuple[object, ...], TelemetryStats] = {}
+        self._sources: dict[tuple[object, ...], _Source] = {}
         self._first_alt: dict[SysId, float] = {}
         self.events: deque[UsmEvent] = deque(maxlen=self.config.event_log_size)
         self._hazard_seen: dict[tuple[ThreatKind, str], float] = {}
@@ -377,29 +391,30 @@ class Usm:
 
     # ---- telemetry side (adapters.mavlink TelemetrySink, ADS-B, tlog, MQTT) ---------------
     def on_measurement(self, m: Measurement) -> None:
-        self.counters["measurements"] += 1
+        counters = self.counters
+        counters["measurements"] += 1
         sys_id = m.sys_id
-        if sys_id is not None and sys_id not in self._first_alt:
-            self._first_alt[sys_id] = m.alt_amsl_m
         src = (m.source, sys_id, m.icao24, m.operation_id, m.vehicle)
-        stats = self._telemetry_by_source.get(src)
-        if stats is None:
+        seen = self._sources.get(src)
+        if seen is None:
+            if sys_id is not None and sys_id not in self._first_alt:
+                self._first_alt[sys_id] = m.alt_amsl_m
             key = f"{m.source.value}:" + (
                 str(sys_id) if sys_id is not None else (m.icao24 or m.operation_id or "?")
             )
             if m.vehicle:
                 key += f"@{m.vehicle}"
-            stats = self.telemetry.setdefault(key, TelemetryStats())
-            self._telemetry_by_source[src] = stats
-        stats.add(m)
+            seen = self._sources[src] = _Source(self.telemetry.setdefault(key, TelemetryStats()))
+        seen.stats.add(m)
         # Tracking associates a system id with its operation itself (the same operations, set
         # on every plan change); here it is only counted when no operation claims it.
-        if (
-            m.operation_id is None
-            and sys_id is not None
-            and self.airspace.by_sys_id(sys_id) is None
-        ):
-            self.counters["unknown_vehicle_measurements"] += 1
+        if m.operation_id is None and sys_id is not None:
+            airspace = self.airspace
+            if seen.airspace_version != airspace.version:
+                seen.airspace_version = airspace.version
+                seen.unknown = airspace.by_sys_id(sys_id) is None
+            if seen.unknown:
+                counters["unknown_vehicle_measurements"] += 1
         for sink in self._measurement_sinks:
             sink(m)
 

@@ -96,6 +96,16 @@ class TrackingConfig:
         min=0.0,
         unit="s",
     )
+    # ---- batching (the tracking service) -----------------------------------------------------
+    ingest_delay_s: float = setting(
+        0.002,
+        "a received measurement updates its track at most this long after it arrived; "
+        "measurements arriving within it are fused as one batch in capture-time order "
+        "(the reorder window)",
+        min=0.0,
+        max=0.1,
+        unit="s",
+    )
     # ---- staleness ---------------------------------------------------------------------------
     stale_after_s: float = setting(
         5.0, "a track without an accepted measurement for this long is stale", min=0.1, unit="s"
