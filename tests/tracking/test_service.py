@@ -117,3 +117,43 @@ async def test_reordering_is_repaired_within_a_batch_and_late_ones_are_counted()
     assert (svc.last_ingest.accepted, svc.last_ingest.out_of_order) == (0, 1)
     assert svc.tracker.tracks()[TrackId("op1")] == before
     assert svc.tracker.counters["out_of_order"] == 1
+
+
+async def test_while_running_a_measurement_updates_its_track_within_the_ingest_delay() -> None:
+    clock = ManualClock(T0)  # clock time stands still: no periodic step() after the first
+    tracker = new_tracker()
+    svc = TrackingService(tracker, clock, ingest_delay_s=0.002)
+    task = asyncio.create_task(svc.run())
+    await asyncio.sleep(0)  # the first step has run (nothing pending)
+    svc.submit(meas(0, 0, 100, T0))
+    svc.submit(meas(5, 0, 100, T0 + 0.5))  # the next report within the window: one batch
+    assert len(tracker) == 0  # not synchronously: batched with what arrives within 2 ms
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
+    while len(tracker) == 0 and loop.time() - t0 < 1.0:
+        await asyncio.sleep(0.001)
+    assert len(tracker) == 1 and svc.stats["batches"] == 1
+    assert tracker.tracks()[TrackId("sysid:1")].updates == 2
+    # a later one gets its own batch, again without waiting for the clock's next step
+    svc.submit(meas(100, 0, 100, T0 + 1))
+    t0 = loop.time()
+    while svc.stats["batches"] < 2 and loop.time() - t0 < 1.0:
+        await asyncio.sleep(0.001)
+    assert tracker.tracks()[TrackId("sysid:1")].updates == 3
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+
+
+async def test_without_run_or_delay_measurements_wait_for_step() -> None:
+    svc, _clock, _, _ = _service()
+    svc.submit(meas(0, 0, 100, T0))
+    await asyncio.sleep(0.01)
+    assert len(svc.tracker) == 0
+    await svc.step()
+    assert len(svc.tracker) == 1
+
+
+def test_ingest_delay_longer_than_the_cycle_is_refused() -> None:
+    with pytest.raises(ValueError, match="ingest_delay_s"):
+        TrackingService(new_tracker(), ManualClock(T0), batch_period_s=0.1, ingest_delay_s=0.5)
