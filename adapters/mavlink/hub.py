@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import math
 import time
@@ -253,7 +254,7 @@ class MavlinkHub:
         self._links[name] = link
         try:
             await transport.open(
-                lambda data, addr: self._on_chunk(link, data, addr),
+                functools.partial(self._on_chunk, link),  # (data, addr), no Python frame
                 self.config.udp_rcvbuf_bytes,
                 self.config.udp_batch,
             )
