@@ -167,27 +167,57 @@ def local_to_plan(
     lp: LocalPlan, base: FlightPlan, frame: LocalFrame, *, created_t_s: float, reason: str
 ) -> FlightPlan:
     """A new version of ``base`` through the points of ``lp``."""
-    lat, lon = frame.to_wgs84(lp.e, lp.n)
+    return local_to_plans([lp], [base], frame, created_t_s=created_t_s, reasons=[reason])[0]
+
+
+def local_to_plans(
+    lps: Sequence[LocalPlan],
+    bases: Sequence[FlightPlan],
+    frame: LocalFrame,
+    *,
+    created_t_s: float,
+    reasons: Sequence[str],
+) -> list[FlightPlan]:
+    """New versions of ``bases[i]`` through the points of ``lps[i]``: one frame conversion for
+    all of them (the projection is point by point, so each plan gets exactly the values a
+    conversion of its own would give)."""
+    if not lps:
+        return []
+    lat, lon = frame.to_wgs84(
+        np.concatenate([lp.e for lp in lps]), np.concatenate([lp.n for lp in lps])
+    )
     lat = np.atleast_1d(lat)
     lon = np.atleast_1d(lon)
-    cols = (lat.tolist(), lon.tolist(), lp.z.tolist(), lp.t.tolist())
-    if _valid_waypoints(lat, lon, lp.z, lp.t):
-        # Every value already passed the checks Waypoint4D.__post_init__ makes (finite,
-        # latitude and longitude in range), all at once: build the waypoints without
-        # repeating them per point (one Position and one LatLon each).
-        wps = tuple(_trusted_waypoint(*w) for w in zip(*cols, strict=True))
-    else:  # the per-point constructor raises the error naming the bad value
-        wps = tuple(
-            Waypoint4D(lat_deg=a, lon_deg=o, alt_amsl_m=z, t_s=t)
-            for a, o, z, t in zip(*cols, strict=True)
+    z = np.concatenate([lp.z for lp in lps])
+    t = np.concatenate([lp.t for lp in lps])
+    # Every value passed the checks Waypoint4D.__post_init__ makes (finite, latitude and
+    # longitude in range), all at once: build the waypoints without repeating them per point
+    # (one Position and one LatLon each). Otherwise the per-point constructor raises the error
+    # naming the bad value.
+    trusted = _valid_waypoints(lat, lon, z, t)
+    cols = (lat.tolist(), lon.tolist(), z.tolist(), t.tolist())
+    out = []
+    k = 0
+    for lp, base, reason in zip(lps, bases, reasons, strict=True):
+        m = len(lp)
+        rows = zip(*(c[k : k + m] for c in cols), strict=True)
+        k += m
+        if trusted:
+            wps = tuple(_trusted_waypoint(*w) for w in rows)
+        else:
+            wps = tuple(
+                Waypoint4D(lat_deg=a, lon_deg=o, alt_amsl_m=h, t_s=s) for a, o, h, s in rows
+            )
+        out.append(
+            FlightPlan(
+                operation_id=base.operation_id,
+                version=base.version + 1,
+                waypoints=wps,
+                created_t_s=created_t_s,
+                reason=reason,
+            )
         )
-    return FlightPlan(
-        operation_id=base.operation_id,
-        version=base.version + 1,
-        waypoints=wps,
-        created_t_s=created_t_s,
-        reason=reason,
-    )
+    return out
 
 
 def _valid_waypoints(lat: FloatArray, lon: FloatArray, z: FloatArray, t: FloatArray) -> bool:

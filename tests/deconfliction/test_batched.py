@@ -1,0 +1,286 @@
+"""The batched paths of Tactical Deconfliction give exactly what one call per plan gives.
+
+TD scores all alternatives of a UAS in one vectorised pass (``score_many``) and converts all
+new plans to WGS84 in one projection call (``local_to_plans``). These tests compare them, bit
+for bit, with an independent per-plan implementation: the scoring code as it was before it was
+batched (kept here as the oracle), and one frame conversion per plan.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gcs_utm.bench import deconfliction as sc
+from gcs_utm.core.deconfliction import DeconflictionConfig
+from gcs_utm.core.deconfliction.geometry import (
+    LocalFence,
+    LocalPlan,
+    fence_to_local,
+    local_to_plans,
+)
+from gcs_utm.core.deconfliction.scoring import (
+    SAMPLE_DT_S,
+    Neighbour,
+    Score,
+    reference,
+    sample_times,
+    score_many,
+)
+from gcs_utm.model import FloatArray, OperationId, Waypoint4D
+
+CFG = DeconflictionConfig()
+
+
+# ---- the oracle: one plan at a time (the scoring code before batching) ------------------------
+def _oracle_segment_distances(
+    points: FloatArray, polylines: Sequence[FloatArray]
+) -> list[FloatArray]:
+    starts = np.concatenate([v[:-1] for v in polylines])
+    ab = np.concatenate([v[1:] - v[:-1] for v in polylines])
+    ll = np.maximum((ab * ab).sum(axis=1), 1e-12)
+    ap = points[:, None, :] - starts[None, :, :]
+    u = np.minimum(np.maximum((ap * ab).sum(axis=2) / ll, 0.0), 1.0)
+    d = ap - u[:, :, None] * ab[None, :, :]
+    d2 = (d * d).sum(axis=2)
+    out = []
+    k = 0
+    for v in polylines:
+        m = len(v) - 1
+        out.append(np.sqrt(d2[:, k : k + m].min(axis=1)))
+        k += m
+    return out
+
+
+def _oracle_prox(x: float, factor: float) -> float:
+    return float(np.clip((factor - x) / (factor - 1.0), 0.0, 1.0))
+
+
+def oracle_score(
+    new: LocalPlan,
+    old: LocalPlan,
+    filed: LocalPlan,
+    ov_radius_m: float,
+    fences: Sequence[LocalFence],
+    neighbours: Sequence[Neighbour],
+    priority_weight: float,
+    priority_levels: int,
+    abandons: bool,
+    spherical: bool,
+) -> Score:
+    config = CFG
+    new_xyz = new.xyz()
+    new_len = float(np.sqrt(((new_xyz[1:] - new_xyz[:-1]) ** 2).sum(axis=1)).sum())
+    extra_d = max(0.0, new_len - old.length_m())
+    extra_t = max(0.0, float(new.t[-1] - old.t[-1]))
+    span = float(new.t[-1] - new.t[0])
+    steps = max(2, int(span / SAMPLE_DT_S) + 1)
+    times = np.linspace(float(new.t[0]), float(new.t[-1]), steps)
+    pos, _ = new.sample(times)
+    seg = np.sqrt(((pos[1:] - pos[:-1]) ** 2).sum(axis=1))
+    mid = 0.5 * (pos[1:] + pos[:-1])
+    tmid = 0.5 * (times[1:] + times[:-1])
+    nm = mid.shape[0]
+    probe = np.concatenate([mid, new_xyz])
+    lines = [v for v in (old.xyz(), filed.xyz()) if len(v) >= 2]
+    dists = _oracle_segment_distances(probe, lines) if lines else []
+    offset = 0.0
+    if len(old) >= 2:
+        offset = float(dists[0][nm:].max())
+    elif len(old) == 1:
+        offset = float(np.sqrt(((probe[nm:] - old.xyz()[0]) ** 2).sum(axis=1)).max())
+    cost = priority_weight * (
+        extra_d / config.cost_distance_scale_m
+        + extra_t / config.cost_time_scale_s
+        + offset / config.cost_offset_scale_m
+    )
+    cost += config.priority_move_cost * max(0, priority_levels)
+    if abandons:
+        cost += config.abandon_cost
+    inside_m = 0.0
+    min_fence = float("inf")
+    for f in fences:
+        active = np.asarray(f.active_mask(tmid), dtype=bool) & (
+            mid[:, 2] >= f.min_alt_amsl_m - ov_radius_m
+        )
+        active &= mid[:, 2] <= f.max_alt_amsl_m + ov_radius_m
+        if not active.any():
+            continue
+        dist = f.horizontal_distance(mid[active, 0], mid[active, 1])
+        inside_m += float(np.sum(seg[active][dist < 0.0]))
+        min_fence = min(min_fence, float(dist.min()))
+    outside_m = 0.0
+    if len(filed) >= 2:
+        outside_m = float(np.sum(seg[dists[-1][:nm] > ov_radius_m]))
+    min_ratio = float("inf")
+    for nb in neighbours:
+        other, ok = nb.plan.sample(times)
+        if not ok.any():
+            continue
+        dh = np.hypot(pos[ok, 0] - other[ok, 0], pos[ok, 1] - other[ok, 1])
+        dv = np.abs(pos[ok, 2] - other[ok, 2])
+        if spherical:
+            ratio = np.hypot(dh, dv) / nb.h_min_m
+        else:
+            ratio = np.maximum(dh / nb.h_min_m, dv / nb.v_min_m)
+        min_ratio = min(min_ratio, float(ratio.min()))
+    factor = config.risk_proximity_factor
+    risk = inside_m / config.risk_length_scale_m + outside_m / config.risk_outside_ov_scale_m
+    if np.isfinite(min_fence):
+        risk += _oracle_prox(min_fence / max(ov_radius_m, 1e-6), factor)
+    if np.isfinite(min_ratio):
+        risk += _oracle_prox(min_ratio, factor)
+    return Score(
+        cost=cost,
+        risk=risk,
+        extra_distance_m=extra_d,
+        extra_time_s=extra_t,
+        offset_m=offset,
+        inside_fences_m=inside_m,
+        outside_ov_m=outside_m,
+        min_fence_distance_m=min_fence,
+        min_separation_ratio=min_ratio,
+    )
+
+
+# ---- random plans and fences ----------------------------------------------------------------
+coord = st.floats(min_value=-600.0, max_value=600.0, allow_nan=False)
+alt = st.floats(min_value=40.0, max_value=160.0, allow_nan=False)
+
+
+@st.composite
+def plans(draw: st.DrawFn, min_points: int = 1) -> LocalPlan:
+    k = draw(st.integers(min_value=min_points, max_value=6))
+    t0 = sc.T0_S + draw(st.floats(min_value=0.0, max_value=30.0))
+    # Zero durations are allowed (a hover or an instant vertical leg).
+    dts = draw(st.lists(st.floats(min_value=0.0, max_value=60.0), min_size=k - 1, max_size=k - 1))
+    t = t0 + np.concatenate([[0.0], np.cumsum(dts)])
+    pts = [(draw(coord), draw(coord), draw(alt)) for _ in range(k)]
+    a = np.array(pts, dtype=np.float64).reshape(k, 3)
+    return LocalPlan(a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy(), t)
+
+
+@st.composite
+def local_fences(draw: st.DrawFn) -> LocalFence:
+    e, n = draw(coord), draw(coord)
+    lo = draw(st.floats(min_value=0.0, max_value=120.0))
+    hi = lo + draw(st.floats(min_value=5.0, max_value=200.0))
+    start = draw(st.none() | st.floats(min_value=sc.T0_S, max_value=sc.T0_S + 120.0))
+    if draw(st.booleans()):
+        g = sc.cylinder(
+            "c", e, n, draw(st.floats(min_value=20.0, max_value=200.0)), min_alt_m=lo, max_alt_m=hi
+        )
+    else:
+        w = draw(st.floats(min_value=20.0, max_value=200.0))
+        g = sc.polygon(
+            "p", [(e - w, n - w), (e + w, n - w), (e, n + w)], min_alt_m=lo, max_alt_m=hi
+        )
+    f = fence_to_local(g, sc.FRAME)
+    if start is None:
+        return f
+    return LocalFence(
+        id=f.id,
+        shape=f.shape,
+        cylinder=f.cylinder,
+        min_alt_amsl_m=f.min_alt_amsl_m,
+        max_alt_amsl_m=f.max_alt_amsl_m,
+        start_t_s=start,
+        end_t_s=start + 90.0,
+    )
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    news=st.lists(plans(min_points=2), min_size=1, max_size=5)
+    | st.lists(plans(), min_size=1, max_size=3),
+    old=plans(),
+    filed=plans(),
+    fences=st.lists(local_fences(), max_size=3),
+    nb_plans=st.lists(plans(), max_size=2),
+    data=st.data(),
+    spherical=st.booleans(),
+    ov=st.floats(min_value=5.0, max_value=40.0),
+    levels=st.integers(min_value=0, max_value=3),
+)
+def test_score_many_equals_scoring_each_plan_alone(
+    news: list[LocalPlan],
+    old: LocalPlan,
+    filed: LocalPlan,
+    fences: list[LocalFence],
+    nb_plans: list[LocalPlan],
+    data: st.DataObject,
+    spherical: bool,
+    ov: float,
+    levels: int,
+) -> None:
+    applies = [
+        np.array(
+            data.draw(st.lists(st.booleans(), min_size=len(fences), max_size=len(fences))),
+            dtype=bool,
+        )
+        for _ in news
+    ]
+    abandons = data.draw(st.lists(st.booleans(), min_size=len(news), max_size=len(news)))
+    nbs = [Neighbour(plan=p, h_min_m=50.0, v_min_m=20.0) for p in nb_plans]
+    weight = 1.0 + 0.5 * levels
+    got = score_many(
+        news,
+        reference(old, filed, ov, nbs),
+        fences=fences,
+        applies=applies,
+        priority_weight=weight,
+        priority_levels=levels,
+        abandons=abandons,
+        spherical=spherical,
+        config=CFG,
+    )
+    for i, new in enumerate(news):
+        mine = [f for f, ok in zip(fences, applies[i], strict=True) if ok]
+        want = oracle_score(new, old, filed, ov, mine, nbs, weight, levels, abandons[i], spherical)
+        assert got[i] == want, i
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    spans=st.lists(
+        st.tuples(
+            st.floats(min_value=1.6e9, max_value=1.8e9),
+            st.floats(min_value=0.0, max_value=900.0),
+            st.integers(min_value=2, max_value=400),
+        ),
+        min_size=1,
+        max_size=6,
+    )
+)
+def test_sample_times_is_linspace_per_plan(spans: list[tuple[float, float, int]]) -> None:
+    t0 = np.array([a for a, _, _ in spans])
+    t1 = np.array([a + d for a, d, _ in spans])
+    counts = np.array([c for _, _, c in spans], dtype=np.intp)
+    want = np.concatenate([np.linspace(a, b, c) for a, b, c in zip(t0, t1, counts, strict=True)])
+    assert np.array_equal(sample_times(t0, t1, counts), want)
+
+
+def test_local_to_plans_equals_one_conversion_per_plan() -> None:
+    snap, _ = sc.scenario_los_2uas()
+    bases = [snap.operations[OperationId("A")].plan, snap.operations[OperationId("B")].plan]
+    rng = np.random.default_rng(5)
+    lps = []
+    for k in (2, 5, 1, 7):
+        t = sc.T0_S + np.cumsum(rng.uniform(0.0, 30.0, k))
+        e, n = rng.uniform(-2000.0, 2000.0, (2, k))
+        lps.append(LocalPlan(e, n, rng.uniform(50, 150, k), t))
+    plans = local_to_plans(
+        lps, bases * 2, sc.FRAME, created_t_s=sc.T0_S, reasons=["a", "b", "c", "d"]
+    )
+    for lp, base, plan, reason in zip(lps, bases * 2, plans, "abcd", strict=True):
+        lat, lon = sc.FRAME.to_wgs84(lp.e, lp.n)
+        want = tuple(
+            Waypoint4D(lat_deg=float(a), lon_deg=float(o), alt_amsl_m=float(z), t_s=float(t))
+            for a, o, z, t in zip(np.atleast_1d(lat), np.atleast_1d(lon), lp.z, lp.t, strict=True)
+        )
+        assert plan.waypoints == want
+        assert plan.operation_id == base.operation_id and plan.version == base.version + 1
+        assert plan.reason == reason and plan.created_t_s == sc.T0_S
