@@ -284,3 +284,57 @@ def test_local_to_plans_equals_one_conversion_per_plan() -> None:
         assert plan.waypoints == want
         assert plan.operation_id == base.operation_id and plan.version == base.version + 1
         assert plan.reason == reason and plan.created_t_s == sc.T0_S
+
+
+def test_scenarios_sharing_one_prepared_problem_equal_scenarios_on_their_own() -> None:
+    """TD prepares the scenario-independent part of the cord problem once per decision and
+    runs every scenario on it: each result equals the scenario run alone, and running them
+    leaves the shared arrays untouched."""
+    from gcs_utm.core.deconfliction import cords as cd
+    from gcs_utm.core.deconfliction.geometry import plan_to_local
+
+    snap, _ = sc.scenario_chain_5uas()
+    lps = [plan_to_local(o.plan, sc.FRAME) for o in snap.operations.values()]
+    grid = sc.T0_S + np.arange(0, 201, 2.0)
+    minima = np.full((5, 5, 2), [50.0, 20.0])
+    for spherical in (False, True):
+        problem = cd.prepare(lps, grid, minima, spherical=spherical, margin_fraction=0.15)
+        frozen = [a.copy() for a in (problem.samples.base, problem.sep0, problem.target)]
+        scenarios = [
+            ([axis] * 5, [0] * 5, [True] * 5) for axis in (cd.AXIS_VERTICAL, cd.AXIS_LATERAL)
+        ]
+        for k in range(2):
+            for axis in (cd.AXIS_VERTICAL, cd.AXIS_LATERAL):
+                for sign in (1, -1):
+                    scenarios.append(
+                        (
+                            [axis] * 5,
+                            [sign if j == k else 0 for j in range(5)],
+                            [j == k for j in range(5)],
+                        )
+                    )
+        for axes, signs, mobile in scenarios:
+            cords = [
+                cd.Cord(
+                    plan=lp,
+                    axis=axes[i] if mobile[i] else cd.AXIS_NONE,
+                    sign=signs[i],
+                    mobility=1.0 / (1 + i % 3) if mobile[i] else 0.0,
+                    slope_m_per_step=3.6 if axes[i] == cd.AXIS_VERTICAL else 11.5,
+                    max_offset_m=120.0,
+                    min_alt_amsl_m=0.0,
+                    max_alt_amsl_m=500.0,
+                )
+                for i, lp in enumerate(lps)
+            ]
+            kw = {"spherical": spherical, "margin_fraction": 0.15, "max_iterations": 60}
+            shared = cd.resolve(cords, grid, minima, problem=problem, **kw)  # type: ignore[arg-type]
+            alone = cd.resolve(cords, grid, minima, **kw)  # type: ignore[arg-type]
+            if alone is None:
+                assert shared is None
+                continue
+            assert shared is not None
+            assert shared.signs == alone.signs and shared.iterations == alone.iterations
+            assert np.array_equal(shared.displacement_m, alone.displacement_m)
+        for a, b in zip(frozen, (problem.samples.base, problem.sep0, problem.target), strict=True):
+            assert np.array_equal(a, b)

@@ -453,7 +453,7 @@ class TacticalDeconfliction:
                 spherical=self.monitoring.spherical,
                 margin_fraction=cfg.separation_margin_fraction,
                 max_iterations=cfg.max_iterations,
-                samples=samples,
+                problem=problem,
             )
             if res is None:
                 for k, op in enumerate(members):
@@ -480,7 +480,14 @@ class TacticalDeconfliction:
                     dest=out[op.id],
                 )
 
-        samples = cd.sample_cords([local[op.id] for op in members], grid)
+        # Axes, signs and mobility aside, every scenario works on the same cords.
+        problem = cd.prepare(
+            [local[op.id] for op in members],
+            grid,
+            minima,
+            spherical=self.monitoring.spherical,
+            margin_fraction=cfg.separation_margin_fraction,
+        )
         mobile_all = [self._mobility(op) > 0 for op in members]
         run([cd.AXIS_VERTICAL] * u, [0] * u, mobile_all, "joint vertical repulsion")
         run([cd.AXIS_LATERAL] * u, [0] * u, mobile_all, "joint lateral repulsion")
