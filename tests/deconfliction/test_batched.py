@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gcs_utm.bench import deconfliction as sc
-from gcs_utm.core.deconfliction import DeconflictionConfig
+from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
 from gcs_utm.core.deconfliction.geometry import (
     LocalFence,
     LocalPlan,
@@ -30,6 +30,7 @@ from gcs_utm.core.deconfliction.scoring import (
     sample_times,
     score_many,
 )
+from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.model import FloatArray, OperationId, Waypoint4D
 
 CFG = DeconflictionConfig()
@@ -338,3 +339,66 @@ def test_scenarios_sharing_one_prepared_problem_equal_scenarios_on_their_own() -
             assert np.array_equal(shared.displacement_m, alone.displacement_m)
         for a, b in zip(frozen, (problem.samples.base, problem.sep0, problem.target), strict=True):
             assert np.array_equal(a, b)
+
+
+def _oracle_first_clear_delay(
+    td: object,
+    lp: LocalPlan,
+    now: float,
+    grid_t: FloatArray,
+    others: list[LocalPlan],
+    h: float,
+    v: float,
+) -> float | None:
+    """The delay search as it was: every delayed position interpolated, (D, T, 3) layout."""
+    cfg = td.config  # type: ignore[attr-defined]
+    steps = int(cfg.max_delay_s // cfg.delay_step_s)
+    delays = cfg.delay_step_s * np.arange(1, steps + 1, dtype=np.float64)
+    tt = np.maximum(grid_t[None, :] - delays[:, None], now)
+    valid = tt <= lp.t[-1]
+    pos = np.stack([np.interp(tt, lp.t, c) for c in (lp.e, lp.n, lp.z)], axis=-1)
+    clear = np.ones(delays.shape[0], dtype=bool)
+    for o in others:
+        q, ok = o.sample(grid_t)
+        m = valid & ok[None, :]
+        dh = np.hypot(pos[..., 0] - q[None, :, 0], pos[..., 1] - q[None, :, 1])
+        dv = np.abs(pos[..., 2] - q[None, :, 2])
+        ratio = np.maximum(dh / h, dv / v)
+        clear &= ~((ratio < 1.0 + cfg.separation_margin_fraction) & m).any(axis=1)
+    idx = np.flatnonzero(clear)
+    return float(delays[idx[0]]) if idx.size else None
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    now_frac=st.sampled_from([0.0, 0.3, 0.123456789]),
+    step=st.sampled_from([5.0, 2.5, 1.0, 0.7]),
+    angle=st.floats(min_value=0.0, max_value=180.0),
+    dn=st.floats(min_value=-200.0, max_value=200.0),
+    t_other=st.floats(min_value=-60.0, max_value=60.0),
+)
+def test_delay_search_equals_interpolating_every_delayed_position(
+    now_frac: float, step: float, angle: float, dn: float, t_other: float
+) -> None:
+    """The delay search gathers the plan sampled once on its grid when every delayed time is
+    a grid time (checked value by value), and interpolates otherwise: the smallest clear
+    delay is the same as interpolating every delayed position."""
+    from gcs_utm.core.deconfliction.td import _Screen
+
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(delay_step_s=step), MonitoringConfig())
+    now = sc.T0_S + now_frac
+    lp = LocalPlan(
+        np.array([-1000.0, 1000.0]), np.zeros(2), np.full(2, 100.0), np.array([now, now + 200.0])
+    )
+    a = np.radians(angle)
+    other = LocalPlan(
+        np.array([-1000.0 * np.cos(a), 1000.0 * np.cos(a)]),
+        np.array([dn - 1000.0 * np.sin(a), dn + 1000.0 * np.sin(a)]),
+        np.full(2, 100.0),
+        np.array([now + t_other, now + t_other + 200.0]),
+    )
+    grid_t = np.arange(now, now + 200.0 / 0.6 + 1.0, 1.0)
+    q, ok = other.sample(grid_t)
+    screen = _Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, 50.0, 20.0)
+    got = td._first_clear_delay(lp, now, grid_t, [screen])
+    assert got == _oracle_first_clear_delay(td, lp, now, grid_t, [other], 50.0, 20.0)

@@ -74,6 +74,19 @@ class Dropped:
     reason: str
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class _Screen:
+    """Another plan sampled on the timing search's grid (one array per coordinate), its
+    validity there and the pair's minima."""
+
+    e: FloatArray
+    n: FloatArray
+    z: FloatArray
+    ok: npt.NDArray[np.bool_]
+    h_min_m: float
+    v_min_m: float
+
+
 @dataclass(slots=True, kw_only=True, eq=False)
 class _Candidate:
     """A new plan waiting for Monitoring's verification and for its score (see
@@ -618,7 +631,7 @@ class TacticalDeconfliction:
         for o in others:
             q, ok = self._lp(o.plan).sample(grid_t)
             h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
-            screens.append((q, ok, h, v))
+            screens.append(_Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, h, v))
         delay = self._first_clear_delay(lp, now, grid_t, screens)
         if delay is not None:
             t = np.concatenate([[now, now + delay], lp.t[1:] + delay])
@@ -661,7 +674,7 @@ class TacticalDeconfliction:
         lp: LocalPlan,
         now: float,
         grid_t: FloatArray,
-        screens: Sequence[tuple[FloatArray, npt.NDArray[np.bool_], float, float]],
+        screens: Sequence[_Screen],
     ) -> float | None:
         """The smallest delay step after which holding here and then flying the plan keeps
         (1 + margin) times the minima from every screened plan; all delays at once."""
@@ -672,41 +685,50 @@ class TacticalDeconfliction:
         delays = cfg.delay_step_s * np.arange(1, steps + 1, dtype=np.float64)
         tt = np.maximum(grid_t[None, :] - delays[:, None], now)  # (D, T): plan time flown
         valid = tt <= lp.t[-1]
-        pos = np.stack([np.interp(tt, lp.t, c) for c in (lp.e, lp.n, lp.z)], axis=-1)
+        # Positions at the plan times flown, one (D, T) array per coordinate. When every
+        # plan time is itself a grid time (a delay that is a whole number of grid steps,
+        # checked value by value), they are the plan sampled once on the grid, gathered;
+        # otherwise interpolated.
+        shift = np.rint(delays / (grid_t[1] - grid_t[0]) if grid_t.shape[0] > 1 else delays)
+        idx = np.maximum(np.arange(grid_t.shape[0])[None, :] - shift.astype(np.intp)[:, None], 0)
+        if np.array_equal(grid_t[idx], tt):
+            pe, pn, pz = (np.interp(grid_t, lp.t, c)[idx] for c in (lp.e, lp.n, lp.z))
+        else:
+            pe, pn, pz = (np.interp(tt, lp.t, c) for c in (lp.e, lp.n, lp.z))
         scale = 1.0 + cfg.separation_margin_fraction
         clear = np.ones(delays.shape[0], dtype=bool)
-        for q, ok, h, v in screens:
-            m = valid & ok[None, :]
-            dh = np.hypot(pos[..., 0] - q[None, :, 0], pos[..., 1] - q[None, :, 1])
-            dv = np.abs(pos[..., 2] - q[None, :, 2])
+        for sc in screens:
+            m = valid & sc.ok[None, :]
+            dh = np.hypot(pe - sc.e[None, :], pn - sc.n[None, :])
+            dv = np.abs(pz - sc.z[None, :])
             if self.monitoring.spherical:
-                ratio = np.hypot(dh, dv) / h
+                ratio = np.hypot(dh, dv) / sc.h_min_m
             else:
-                ratio = np.maximum(dh / h, dv / v)
+                ratio = np.maximum(dh / sc.h_min_m, dv / sc.v_min_m)
             clear &= ~((ratio < scale) & m).any(axis=1)
-        idx = np.flatnonzero(clear)
-        return float(delays[idx[0]]) if idx.size else None
+        idx_clear = np.flatnonzero(clear)
+        return float(delays[idx_clear[0]]) if idx_clear.size else None
 
     def _clear(
         self,
         cand: LocalPlan,
         grid_t: FloatArray,
-        screens: Sequence[tuple[FloatArray, npt.NDArray[np.bool_], float, float]],
+        screens: Sequence[_Screen],
     ) -> bool:
         """Fast screen of a timing candidate on a 1 s grid (Monitoring verifies the one that
         passes): every other plan at least (1 + margin) times the pair's minima away."""
         pos, mine = cand.sample(grid_t)
         scale = 1.0 + self.config.separation_margin_fraction
-        for q, ok, h, v in screens:
-            m = ok & mine
+        for sc in screens:
+            m = sc.ok & mine
             if not m.any():
                 continue
-            dh = np.hypot(pos[m, 0] - q[m, 0], pos[m, 1] - q[m, 1])
-            dv = np.abs(pos[m, 2] - q[m, 2])
+            dh = np.hypot(pos[m, 0] - sc.e[m], pos[m, 1] - sc.n[m])
+            dv = np.abs(pos[m, 2] - sc.z[m])
             if self.monitoring.spherical:
-                ratio = np.hypot(dh, dv) / h
+                ratio = np.hypot(dh, dv) / sc.h_min_m
             else:
-                ratio = np.maximum(dh / h, dv / v)
+                ratio = np.maximum(dh / sc.h_min_m, dv / sc.v_min_m)
             if float(ratio.min()) < scale:
                 return False
         return True
