@@ -402,3 +402,98 @@ def test_delay_search_equals_interpolating_every_delayed_position(
     screen = _Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, 50.0, 20.0)
     got = td._first_clear_delay(lp, now, grid_t, [screen])
     assert got == _oracle_first_clear_delay(td, lp, now, grid_t, [other], 50.0, 20.0)
+
+
+def _oracle_left_normals(pos: FloatArray) -> FloatArray:
+    k = pos.shape[0]
+    d = np.zeros((k, 2))
+    if k > 1:
+        step = pos[1:, :2] - pos[:-1, :2]
+        d[:-1] = step
+        d[-1] = step[-1]
+    norm = np.hypot(d[:, 0], d[:, 1])
+    good = norm > 1e-6
+    if not good.any():
+        return np.tile(np.array([0.0, 1.0]), (k, 1))
+    idx = np.where(good, np.arange(k), 0)
+    idx = np.maximum.accumulate(idx)
+    first = int(np.argmax(good))
+    idx[:first] = first
+    u = d[idx] / norm[idx, None]
+    return np.column_stack([-u[:, 1], u[:, 0]])
+
+
+def _oracle_deformed(
+    op: object,
+    cfg: DeconflictionConfig,
+    lp: LocalPlan,
+    grid: FloatArray,
+    d: FloatArray,
+    axis: str,
+    sign: int,
+) -> LocalPlan:
+    """TD's deformation as it was, on (N, 3) rows."""
+    from gcs_utm.core.deconfliction import cords as cd
+
+    cruise, climb_rate = op.cruise_speed_mps, op.max_climb_rate_mps  # type: ignore[attr-defined]
+    d1 = d[1:] - d[:-1]
+    kinks = grid[1:-1][np.abs(d1[1:] - d1[:-1]) > 1e-9]
+    inside = (kinks >= lp.t[0]) & (kinks <= lp.t[-1])
+    times = np.union1d(kinks[inside], lp.t)
+    base, _ = lp.sample(times)
+    disp = np.interp(times, grid, d)
+    if axis == cd.AXIS_VERTICAL:
+        xyz = base.copy()
+        xyz[:, 2] += sign * disp
+    else:
+        xyz = cd.apply(base, _oracle_left_normals(base), axis, sign, disp)
+    dt = times[1:] - times[:-1]
+    ob = base[1:] - base[:-1]
+    safe_dt = np.maximum(dt, 1e-9)
+    f = cfg.max_speed_factor
+    speed = np.maximum(cruise, np.hypot(ob[:, 0], ob[:, 1]) / safe_dt) * f
+    climb = np.maximum(climb_rate, np.abs(ob[:, 2]) / safe_dt) * f
+    dd = xyz[1:] - xyz[:-1]
+    need = np.maximum(
+        dt, np.maximum(np.hypot(dd[:, 0], dd[:, 1]) / speed, np.abs(dd[:, 2]) / climb)
+    )
+    t = np.empty(len(times))
+    t[0] = times[0]
+    np.cumsum(need, out=t[1:])
+    t[1:] += times[0]
+    goal = np.array([lp.e[-1], lp.n[-1], lp.z[-1]])
+    off = xyz[-1] - goal
+    if float(np.abs(off).max()) > 1e-3:
+        dt_back = max(float(np.hypot(off[0], off[1])) / cruise, abs(float(off[2])) / climb_rate)
+        xyz = np.vstack([xyz, goal])
+        t = np.append(t, t[-1] + dt_back)
+    return LocalPlan(xyz[:, 0], xyz[:, 1], xyz[:, 2], t)
+
+
+@settings(max_examples=80, deadline=None)
+@given(lp=plans(), data=st.data(), vertical=st.booleans(), sign=st.sampled_from([1, -1]))
+def test_deformation_and_normals_equal_the_row_wise_code(
+    lp: LocalPlan, data: st.DataObject, vertical: bool, sign: int
+) -> None:
+    """TD's deformation (one array per coordinate) equals the (N, 3) row-wise code it
+    replaced, for any plan (hovers and vertical legs included) and any slope-limited
+    displacement profile, laterally and vertically; so do the cords' left normals."""
+    from gcs_utm.core.deconfliction import cords as cd
+
+    pos = lp.xyz()
+    assert np.array_equal(cd.left_normals(pos), _oracle_left_normals(pos))
+    snap, _ = sc.scenario_los_2uas()
+    op = snap.operations[OperationId("A")]
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MonitoringConfig())
+    grid: FloatArray = float(lp.t[0]) + 2.0 * np.arange(60, dtype=np.float64)
+    demand = np.zeros(60)
+    for _ in range(data.draw(st.integers(min_value=0, max_value=3))):
+        demand[data.draw(st.integers(min_value=1, max_value=59))] = data.draw(
+            st.floats(min_value=0.0, max_value=80.0)
+        )
+    d = np.minimum(cd.envelope(demand, 3.6), 3.6 * np.arange(60))
+    axis = cd.AXIS_VERTICAL if vertical else cd.AXIS_LATERAL
+    got = td._deformed(op, lp, grid, d, axis, sign)
+    want = _oracle_deformed(op, td.config, lp, grid, d, axis, sign)
+    for c in ("e", "n", "z", "t"):
+        assert np.array_equal(getattr(got, c), getattr(want, c)), c

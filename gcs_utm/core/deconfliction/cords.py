@@ -158,22 +158,30 @@ def prepare(
 def left_normals(pos: FloatArray) -> FloatArray:
     """(K, 2) unit left normals of the horizontal track through pos (K, 3); a hover keeps the
     previous direction, a cord that never moves points east."""
-    k = pos.shape[0]
-    d = np.zeros((k, 2))
+    nx, ny = left_normals_en(pos[:, 0], pos[:, 1])
+    return np.column_stack([nx, ny])
+
+
+def left_normals_en(e: FloatArray, n: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`left_normals` of the track through (e, n), one array per component."""
+    k = e.shape[0]
+    de = np.zeros(k)
+    dn = np.zeros(k)
     if k > 1:
-        step = pos[1:, :2] - pos[:-1, :2]
-        d[:-1] = step
-        d[-1] = step[-1]
-    norm = np.hypot(d[:, 0], d[:, 1])
+        de[:-1] = e[1:] - e[:-1]
+        dn[:-1] = n[1:] - n[:-1]
+        de[-1] = de[-2]
+        dn[-1] = dn[-2]
+    norm = np.hypot(de, dn)
     good = norm > 1e-6
     if not good.any():
-        return np.tile(np.array([0.0, 1.0]), (k, 1))
+        return np.zeros(k), np.ones(k)
     idx = np.where(good, np.arange(k), 0)
     idx = np.maximum.accumulate(idx)
     first = int(np.argmax(good))
     idx[:first] = first
-    u = d[idx] / norm[idx, None]
-    return np.column_stack([-u[:, 1], u[:, 0]])
+    nk = norm[idx]
+    return -(dn[idx] / nk), de[idx] / nk
 
 
 def envelope(demand: FloatArray, slope: float) -> FloatArray:

@@ -569,42 +569,64 @@ class TacticalDeconfliction:
         d1 = d[1:] - d[:-1]
         kinks = grid[1:-1][np.abs(d1[1:] - d1[:-1]) > 1e-9]
         inside = (kinks >= lp.t[0]) & (kinks <= lp.t[-1])
-        times = np.union1d(kinks[inside], lp.t)
-        base, _ = lp.sample(times)
-        disp = np.interp(times, grid, d)
-        if axis == cd.AXIS_VERTICAL:
-            xyz = base.copy()
-            xyz[:, 2] += sign * disp
+        # np.union1d without its wrappers: sorted, duplicates removed.
+        times = np.concatenate((kinks[inside], lp.t))
+        times.sort()
+        if times.shape[0] > 1:
+            times = times[np.concatenate(([True], times[1:] != times[:-1]))]
+        # One array per coordinate (the same arithmetic as on (N, 3) rows, without the
+        # strided column reads).
+        if len(lp) == 1:
+            be = np.full(times.shape[0], lp.e[0])
+            bn = np.full(times.shape[0], lp.n[0])
+            bz = np.full(times.shape[0], lp.z[0])
         else:
-            xyz = cd.apply(base, cd.left_normals(base), axis, sign, disp)
+            be = np.interp(times, lp.t, lp.e)
+            bn = np.interp(times, lp.t, lp.n)
+            bz = np.interp(times, lp.t, lp.z)
+        disp = sign * np.interp(times, grid, d)
+        xe, xn, xz = be, bn, bz
+        if axis == cd.AXIS_VERTICAL:
+            xz = bz + disp
+        else:
+            nx, ny = cd.left_normals_en(be, bn)
+            xe = be + disp * nx
+            xn = bn + disp * ny
         # Original pace between the kept times, from the undeformed plan.
         dt = times[1:] - times[:-1]
-        ob = base[1:] - base[:-1]
         safe_dt = np.maximum(dt, 1e-9)
         f = self.config.max_speed_factor
-        speed = np.maximum(op.cruise_speed_mps, np.hypot(ob[:, 0], ob[:, 1]) / safe_dt) * f
-        climb = np.maximum(op.max_climb_rate_mps, np.abs(ob[:, 2]) / safe_dt) * f
-        dd = xyz[1:] - xyz[:-1]
+        speed = (
+            np.maximum(op.cruise_speed_mps, np.hypot(be[1:] - be[:-1], bn[1:] - bn[:-1]) / safe_dt)
+            * f
+        )
+        climb = np.maximum(op.max_climb_rate_mps, np.abs(bz[1:] - bz[:-1]) / safe_dt) * f
         need = np.maximum(
-            dt, np.maximum(np.hypot(dd[:, 0], dd[:, 1]) / speed, np.abs(dd[:, 2]) / climb)
+            dt,
+            np.maximum(
+                np.hypot(xe[1:] - xe[:-1], xn[1:] - xn[:-1]) / speed,
+                np.abs(xz[1:] - xz[:-1]) / climb,
+            ),
         )
         t = np.empty(len(times))
         t[0] = times[0]
         np.cumsum(need, out=t[1:])
         t[1:] += times[0]
-        goal = np.array([lp.e[-1], lp.n[-1], lp.z[-1]])
-        off = xyz[-1] - goal
-        if float(np.abs(off).max()) > 1e-3:
+        off_e = xe[-1] - lp.e[-1]
+        off_n = xn[-1] - lp.n[-1]
+        off_z = xz[-1] - lp.z[-1]
+        if max(abs(off_e), abs(off_n), abs(off_z)) > 1e-3:
             # The plan ended before the cord could ramp back: fly back to the filed final
             # waypoint (cruise speed, climb rate) so the alternative keeps the destination.
             dt_back = max(
-                float(np.hypot(off[0], off[1])) / op.cruise_speed_mps,
-                abs(float(off[2])) / op.max_climb_rate_mps,
+                float(np.hypot(off_e, off_n)) / op.cruise_speed_mps,
+                abs(float(off_z)) / op.max_climb_rate_mps,
             )
-            xyz = np.vstack([xyz, goal])
+            xe = np.append(xe, lp.e[-1])
+            xn = np.append(xn, lp.n[-1])
+            xz = np.append(xz, lp.z[-1])
             t = np.append(t, t[-1] + dt_back)
-        out = LocalPlan(xyz[:, 0], xyz[:, 1], xyz[:, 2], t)
-        return out
+        return LocalPlan(xe, xn, xz, t)
 
     def _timing(  # noqa: PLR0917 - private helper, called positionally
         self,
