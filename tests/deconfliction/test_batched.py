@@ -20,6 +20,7 @@ from gcs_utm.core.deconfliction.geometry import (
     LocalFence,
     LocalPlan,
     fence_to_local,
+    linspace,
     local_to_plans,
 )
 from gcs_utm.core.deconfliction.scoring import (
@@ -262,6 +263,8 @@ def test_sample_times_is_linspace_per_plan(spans: list[tuple[float, float, int]]
     counts = np.array([c for _, _, c in spans], dtype=np.intp)
     want = np.concatenate([np.linspace(a, b, c) for a, b, c in zip(t0, t1, counts, strict=True)])
     assert np.array_equal(sample_times(t0, t1, counts), want)
+    for a, b, c in zip(t0, t1, counts, strict=True):
+        assert np.array_equal(linspace(float(a), float(b), int(c)), np.linspace(a, b, c))
 
 
 def test_local_to_plans_equals_one_conversion_per_plan() -> None:
