@@ -82,25 +82,106 @@ def sample_cords(plans: Sequence[LocalPlan], grid_t: FloatArray) -> Samples:
     return Samples(base=base, valid=valid, normals=normals)
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class Problem:
+    """What every scenario on the same cords shares (axes, signs and mobility aside): the
+    undeformed samples, the minima, which (i < j, k) pairs both exist, and the separation
+    of the undeformed cords with its target (the first iteration of every scenario starts
+    from there). Build it with :func:`prepare`."""
+
+    samples: Samples
+    minima: FloatArray  # (U, U, 2)
+    spherical: bool
+    margin_fraction: float
+    pairs: npt.NDArray[np.bool_]  # (U, U, K): i < j and both valid at k
+    h_min: FloatArray  # (U, U, 1)
+    v_min: FloatArray
+    inv_h: FloatArray
+    inv_v: FloatArray
+    sep0: FloatArray  # (U, U, K) normalised separation, undeformed
+    target: FloatArray  # (U, U, K) what every scenario must reach
+
+
+def _separation(
+    pos: FloatArray, inv_h: FloatArray, inv_v: FloatArray, *, spherical: bool
+) -> FloatArray:
+    """(U, U, K) separation of every pair at every step, in units of the pair's minima."""
+    dh = np.hypot(pos[:, None, :, 0] - pos[None, :, :, 0], pos[:, None, :, 1] - pos[None, :, :, 1])
+    dv = np.abs(pos[:, None, :, 2] - pos[None, :, :, 2])
+    return np.asarray(
+        np.hypot(dh, dv) * inv_h if spherical else np.maximum(dh * inv_h, dv * inv_v),
+        dtype=np.float64,
+    )
+
+
+def prepare(
+    plans: Sequence[LocalPlan],
+    grid_t: FloatArray,
+    minima: FloatArray,
+    *,
+    spherical: bool,
+    margin_fraction: float,
+    samples: Samples | None = None,
+) -> Problem:
+    """The scenario-independent part of a cord problem on ``plans`` (see :class:`Problem`)."""
+    if samples is None:
+        samples = sample_cords(plans, grid_t)
+    u = len(plans)
+    valid = samples.valid
+    idx = np.arange(u)
+    pairs = valid[:, None, :] & valid[None, :, :] & (idx[:, None] < idx[None, :])[:, :, None]
+    h_min = minima[:, :, 0][:, :, None]
+    v_min = minima[:, :, 1][:, :, None]
+    inv_h = 1.0 / np.maximum(h_min, 1e-9)
+    inv_v = 1.0 / np.maximum(v_min, 1e-9)
+    sep0 = _separation(samples.base, inv_h, inv_v, spherical=spherical)
+    scale = 1.0 + margin_fraction
+    # Pairs already separated but inside the margin (e.g. a stack at the minimum) only have
+    # to stay as they are: demanding the margin there could never be met at the current
+    # position (k = 0), where no cord may move.
+    target = np.where(sep0 >= 1.0, np.minimum(scale, sep0) - 1e-6, scale)
+    return Problem(
+        samples=samples,
+        minima=minima,
+        spherical=spherical,
+        margin_fraction=margin_fraction,
+        pairs=pairs,
+        h_min=h_min,
+        v_min=v_min,
+        inv_h=inv_h,
+        inv_v=inv_v,
+        sep0=sep0,
+        target=target,
+    )
+
+
 def left_normals(pos: FloatArray) -> FloatArray:
     """(K, 2) unit left normals of the horizontal track through pos (K, 3); a hover keeps the
     previous direction, a cord that never moves points east."""
-    k = pos.shape[0]
-    d = np.zeros((k, 2))
+    nx, ny = left_normals_en(pos[:, 0], pos[:, 1])
+    return np.column_stack([nx, ny])
+
+
+def left_normals_en(e: FloatArray, n: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`left_normals` of the track through (e, n), one array per component."""
+    k = e.shape[0]
+    de = np.zeros(k)
+    dn = np.zeros(k)
     if k > 1:
-        step = pos[1:, :2] - pos[:-1, :2]
-        d[:-1] = step
-        d[-1] = step[-1]
-    norm = np.hypot(d[:, 0], d[:, 1])
+        de[:-1] = e[1:] - e[:-1]
+        dn[:-1] = n[1:] - n[:-1]
+        de[-1] = de[-2]
+        dn[-1] = dn[-2]
+    norm = np.hypot(de, dn)
     good = norm > 1e-6
     if not good.any():
-        return np.tile(np.array([0.0, 1.0]), (k, 1))
+        return np.zeros(k), np.ones(k)
     idx = np.where(good, np.arange(k), 0)
     idx = np.maximum.accumulate(idx)
     first = int(np.argmax(good))
     idx[:first] = first
-    u = d[idx] / norm[idx, None]
-    return np.column_stack([-u[:, 1], u[:, 0]])
+    nk = norm[idx]
+    return -(dn[idx] / nk), de[idx] / nk
 
 
 def envelope(demand: FloatArray, slope: float) -> FloatArray:
@@ -129,17 +210,24 @@ def resolve(
     spherical: bool,
     margin_fraction: float,
     max_iterations: int,
-    samples: Samples | None = None,
+    problem: Problem | None = None,
 ) -> CordResult | None:
     """Deform ``cords`` on ``grid_t`` until every pair holds ``minima[i, j] = (h, v)``
-    (times 1 + margin); None when the scenario cannot be resolved. ``samples`` are the cords'
-    undeformed positions on the grid when the caller already has them (several scenarios on
-    the same cords)."""
+    (times 1 + margin); None when the scenario cannot be resolved. ``problem`` is the
+    scenario-independent part (:func:`prepare`) when the caller already has it (several
+    scenarios on the same cords, minima and grid)."""
     u = len(cords)
     k = grid_t.shape[0]
-    if samples is None:
-        samples = sample_cords([c.plan for c in cords], grid_t)
-    base, valid, normals = samples.base, samples.valid, samples.normals
+    if problem is None:
+        problem = prepare(
+            [c.plan for c in cords],
+            grid_t,
+            minima,
+            spherical=spherical,
+            margin_fraction=margin_fraction,
+        )
+    base, normals = problem.samples.base, problem.samples.normals
+    h_min, v_min, inv_h, inv_v = problem.h_min, problem.v_min, problem.inv_h, problem.inv_v
     signs = [c.sign for c in cords]
     d = np.zeros((u, k))
     demand = np.zeros((u, k))
@@ -155,31 +243,19 @@ def resolve(
             dirs[i, :, 2] = 1.0
         elif c.axis == AXIS_LATERAL:
             dirs[i, :, :2] = normals[i]
-    both = valid[:, None, :] & valid[None, :, :]
     # A pair of rigid cords is not this scenario's business (another threat covers it).
     movable = np.array([c.mobility > 0.0 and c.axis != AXIS_NONE for c in cords])
-    both &= (movable[:, None] | movable[None, :])[:, :, None]
-    idx = np.arange(u)
-    upper = (idx[:, None] < idx[None, :])[:, :, None]
+    both = problem.pairs & (movable[:, None] | movable[None, :])[:, :, None]
     scale = 1.0 + margin_fraction
-    h_min = minima[:, :, 0][:, :, None]
-    v_min = minima[:, :, 1][:, :, None]
-    inv_h = 1.0 / np.maximum(h_min, 1e-9)
-    inv_v = 1.0 / np.maximum(v_min, 1e-9)
+    target = problem.target
     for it in range(max_iterations + 1):
-        sgn = np.array([sg or 1 for sg in signs], dtype=np.float64)
-        pos = base + (sgn[:, None] * d)[:, :, None] * dirs
-        dh = np.hypot(
-            pos[:, None, :, 0] - pos[None, :, :, 0], pos[:, None, :, 1] - pos[None, :, :, 1]
-        )
-        dv = np.abs(pos[:, None, :, 2] - pos[None, :, :, 2])
-        sep = np.hypot(dh, dv) * inv_h if spherical else np.maximum(dh * inv_h, dv * inv_v)
         if it == 0:
-            # Pairs already separated but inside the margin (e.g. a stack at the minimum) only
-            # have to stay as they are: demanding the margin there could never be met at the
-            # current position (k = 0), where no cord may move.
-            target = np.where(sep >= 1.0, np.minimum(scale, sep) - 1e-6, scale)
-        viol = both & upper & (sep < target)
+            pos, sep = base, problem.sep0  # nothing has moved yet
+        else:
+            sgn = np.array([sg or 1 for sg in signs], dtype=np.float64)
+            pos = base + (sgn[:, None] * d)[:, :, None] * dirs
+            sep = _separation(pos, inv_h, inv_v, spherical=spherical)
+        viol = both & (sep < target)
         if not viol.any():
             return CordResult(displacement_m=d, signs=tuple(s or 1 for s in signs), iterations=it)
         if it == max_iterations:

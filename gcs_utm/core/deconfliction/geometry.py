@@ -63,6 +63,18 @@ class LocalPlan:
         valid = (times >= self.t[0] - 1e-9) & (times <= self.t[-1] + 1e-9)
         return pos, valid
 
+    def coords(self, times: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The positions of :meth:`sample` as one array per coordinate (e, n, z), without
+        the validity mask."""
+        if len(self) == 1:
+            k = times.shape[0]
+            return np.full(k, self.e[0]), np.full(k, self.n[0]), np.full(k, self.z[0])
+        return (
+            np.interp(times, self.t, self.e),
+            np.interp(times, self.t, self.n),
+            np.interp(times, self.t, self.z),
+        )
+
     def position_at(self, t_s: float) -> FloatArray:
         pos, _ = self.sample(np.array([t_s]))
         return np.asarray(pos[0], dtype=np.float64)
@@ -99,6 +111,14 @@ SCREEN_TOLERANCE_M = 0.01
 """Slack for the WGS84 round trip of a plan (far below a millimetre in practice)."""
 
 
+def linspace(start: float, stop: float, num: int) -> FloatArray:
+    """``np.linspace(start, stop, num)`` for num >= 2, by the same arithmetic (index times
+    step, plus start; the last value is the stop) without its argument handling."""
+    out = np.arange(num, dtype=np.float64) * ((stop - start) / (num - 1)) + start
+    out[-1] = stop
+    return out
+
+
 def max_speeds(lp: LocalPlan) -> tuple[float, float]:
     """Largest horizontal and vertical speed (m/s) over the plan's segments; inf when a
     segment moves in zero time."""
@@ -133,12 +153,12 @@ def separation_screen(
     if t1 < t0:
         return False, True
     n = max(2, math.ceil((t1 - t0) / SCREEN_STEP_S) + 1)
-    t = np.linspace(t0, t1, n)
+    t = linspace(t0, t1, n)
     half = 0.5 * (t1 - t0) / (n - 1)  # s: every instant is this close to a sample
-    qa, _ = a.sample(t)
-    qb, _ = b.sample(t)
-    dh = np.hypot(qa[:, 0] - qb[:, 0], qa[:, 1] - qb[:, 1])
-    dv = np.abs(qa[:, 2] - qb[:, 2])
+    ae, an, az = a.coords(t)
+    be, bn, bz = b.coords(t)
+    dh = np.hypot(ae - be, an - bn)
+    dv = np.abs(az - bz)
     vha, vza = speeds_a if speeds_a is not None else max_speeds(a)
     vhb, vzb = speeds_b if speeds_b is not None else max_speeds(b)
     slack_h = (vha + vhb) * half + SCREEN_TOLERANCE_M
@@ -167,27 +187,57 @@ def local_to_plan(
     lp: LocalPlan, base: FlightPlan, frame: LocalFrame, *, created_t_s: float, reason: str
 ) -> FlightPlan:
     """A new version of ``base`` through the points of ``lp``."""
-    lat, lon = frame.to_wgs84(lp.e, lp.n)
+    return local_to_plans([lp], [base], frame, created_t_s=created_t_s, reasons=[reason])[0]
+
+
+def local_to_plans(
+    lps: Sequence[LocalPlan],
+    bases: Sequence[FlightPlan],
+    frame: LocalFrame,
+    *,
+    created_t_s: float,
+    reasons: Sequence[str],
+) -> list[FlightPlan]:
+    """New versions of ``bases[i]`` through the points of ``lps[i]``: one frame conversion for
+    all of them (the projection is point by point, so each plan gets exactly the values a
+    conversion of its own would give)."""
+    if not lps:
+        return []
+    lat, lon = frame.to_wgs84(
+        np.concatenate([lp.e for lp in lps]), np.concatenate([lp.n for lp in lps])
+    )
     lat = np.atleast_1d(lat)
     lon = np.atleast_1d(lon)
-    cols = (lat.tolist(), lon.tolist(), lp.z.tolist(), lp.t.tolist())
-    if _valid_waypoints(lat, lon, lp.z, lp.t):
-        # Every value already passed the checks Waypoint4D.__post_init__ makes (finite,
-        # latitude and longitude in range), all at once: build the waypoints without
-        # repeating them per point (one Position and one LatLon each).
-        wps = tuple(_trusted_waypoint(*w) for w in zip(*cols, strict=True))
-    else:  # the per-point constructor raises the error naming the bad value
-        wps = tuple(
-            Waypoint4D(lat_deg=a, lon_deg=o, alt_amsl_m=z, t_s=t)
-            for a, o, z, t in zip(*cols, strict=True)
+    z = np.concatenate([lp.z for lp in lps])
+    t = np.concatenate([lp.t for lp in lps])
+    # Every value passed the checks Waypoint4D.__post_init__ makes (finite, latitude and
+    # longitude in range), all at once: build the waypoints without repeating them per point
+    # (one Position and one LatLon each). Otherwise the per-point constructor raises the error
+    # naming the bad value.
+    trusted = _valid_waypoints(lat, lon, z, t)
+    cols = (lat.tolist(), lon.tolist(), z.tolist(), t.tolist())
+    out = []
+    k = 0
+    for lp, base, reason in zip(lps, bases, reasons, strict=True):
+        m = len(lp)
+        rows = zip(*(c[k : k + m] for c in cols), strict=True)
+        k += m
+        if trusted:
+            wps = tuple(_trusted_waypoint(*w) for w in rows)
+        else:
+            wps = tuple(
+                Waypoint4D(lat_deg=a, lon_deg=o, alt_amsl_m=h, t_s=s) for a, o, h, s in rows
+            )
+        out.append(
+            FlightPlan(
+                operation_id=base.operation_id,
+                version=base.version + 1,
+                waypoints=wps,
+                created_t_s=created_t_s,
+                reason=reason,
+            )
         )
-    return FlightPlan(
-        operation_id=base.operation_id,
-        version=base.version + 1,
-        waypoints=wps,
-        created_t_s=created_t_s,
-        reason=reason,
-    )
+    return out
 
 
 def _valid_waypoints(lat: FloatArray, lon: FloatArray, z: FloatArray, t: FloatArray) -> bool:

@@ -34,10 +34,12 @@ closest approach at the minimum distance.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from gcs_utm.core.deconfliction.config import DeconflictionConfig
 from gcs_utm.core.deconfliction.geometry import LocalFence, LocalPlan
@@ -93,28 +95,73 @@ def distance_to_polyline(points: FloatArray, vertices: FloatArray) -> FloatArray
     return np.asarray(np.sqrt(np.einsum("nsj,nsj->ns", d, d).min(axis=1)), dtype=np.float64)
 
 
-def _segment_distances(points: FloatArray, polylines: Sequence[FloatArray]) -> list[FloatArray]:
-    """For each polyline (M_i, D) with M_i >= 2, the distance of each point (N, D) to it: one
-    vectorised pass over the segments of all polylines together."""
-    starts = np.concatenate([v[:-1] for v in polylines])
-    ab = np.concatenate([v[1:] - v[:-1] for v in polylines])  # (S, D)
-    ll = np.maximum((ab * ab).sum(axis=1), 1e-12)
-    ap = points[:, None, :] - starts[None, :, :]  # (N, S, D)
-    u = np.minimum(np.maximum((ap * ab).sum(axis=2) / ll, 0.0), 1.0)
-    d = ap - u[:, :, None] * ab[None, :, :]
-    d2 = (d * d).sum(axis=2)
-    out = []
-    k = 0
-    for v in polylines:
-        m = len(v) - 1
-        out.append(np.sqrt(d2[:, k : k + m].min(axis=1)))
-        k += m
-    return out
+class _Segments:
+    """The segments of a 3D polyline (M >= 2 vertices), prepared once for many point
+    queries: start points and direction vectors as (S, 1) columns, squared lengths."""
+
+    __slots__ = ("ax", "ay", "az", "bx", "by", "bz", "ll")
+
+    def __init__(self, vertices: FloatArray) -> None:
+        a = vertices[:-1]
+        ab = vertices[1:] - a
+        self.ax, self.ay, self.az = a[:, 0, None], a[:, 1, None], a[:, 2, None]
+        self.bx, self.by, self.bz = ab[:, 0, None], ab[:, 1, None], ab[:, 2, None]
+        self.ll = np.maximum(self.bx * self.bx + self.by * self.by + self.bz * self.bz, 1e-12)
+
+    def distances(self, px: FloatArray, py: FloatArray, pz: FloatArray) -> FloatArray:
+        """3D distance of each point (N,) to the polyline: (S, N) in one pass, component by
+        component (the same operations, in the same order, as :func:`distance_to_polyline`)."""
+        qx, qy, qz = px - self.ax, py - self.ay, pz - self.az
+        u = np.minimum(np.maximum((qx * self.bx + qy * self.by + qz * self.bz) / self.ll, 0.0), 1.0)
+        dx, dy, dz = qx - u * self.bx, qy - u * self.by, qz - u * self.bz
+        return np.asarray(np.sqrt((dx * dx + dy * dy + dz * dz).min(axis=0)), dtype=np.float64)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Reference:
+    """What every alternative of one UAS is scored against in one decision, prepared once:
+    the remaining plan ``old`` (from now), the whole ``filed`` plan, the OV radius and the
+    other plans for the proximity term. Build it with :func:`reference`."""
+
+    old: LocalPlan
+    filed: LocalPlan
+    ov_radius_m: float
+    neighbours: Sequence[Neighbour]
+    old_length_m: float
+    old_segments: _Segments | None  # None: fewer than 2 points
+    filed_segments: _Segments | None
+
+
+def reference(
+    old: LocalPlan, filed: LocalPlan, ov_radius_m: float, neighbours: Sequence[Neighbour]
+) -> Reference:
+    return Reference(
+        old=old,
+        filed=filed,
+        ov_radius_m=ov_radius_m,
+        neighbours=tuple(neighbours),
+        old_length_m=old.length_m(),
+        old_segments=_Segments(old.xyz()) if len(old) >= 2 else None,
+        filed_segments=_Segments(filed.xyz()) if len(filed) >= 2 else None,
+    )
 
 
 def _prox(x: float, factor: float) -> float:
     # Plain min/max on a Python float: the same value as np.clip, without the array call.
     return float(min(max((factor - x) / (factor - 1.0), 0.0), 1.0))
+
+
+def sample_times(t0_s: FloatArray, t1_s: FloatArray, counts: npt.NDArray[np.intp]) -> FloatArray:
+    """``np.linspace(t0_s[i], t1_s[i], counts[i])`` for every i (counts >= 2), concatenated:
+    the same arithmetic as linspace (index times step, plus start; the last is the stop), in
+    a few array operations instead of one call per plan."""
+    starts = np.zeros(counts.shape[0], dtype=np.intp)
+    np.cumsum(counts[:-1], out=starts[1:])
+    k = np.arange(int(counts.sum()), dtype=np.float64) - np.repeat(starts, counts)
+    step = (t1_s - t0_s) / (counts - 1)
+    times = k * np.repeat(step, counts) + np.repeat(t0_s, counts)
+    times[starts + counts - 1] = t1_s
+    return times
 
 
 def score(
@@ -131,85 +178,165 @@ def score(
     spherical: bool,
     config: DeconflictionConfig,
 ) -> Score:
-    new_xyz = new.xyz()
-    new_len = float(np.sqrt(((new_xyz[1:] - new_xyz[:-1]) ** 2).sum(axis=1)).sum())
-    extra_d = max(0.0, new_len - old.length_m())  # m, 3D
-    extra_t = max(0.0, float(new.t[-1] - old.t[-1]))  # s
+    """The score of one new plan (:func:`score_many` with one candidate)."""
+    return score_many(
+        [new],
+        reference(old, filed, ov_radius_m, neighbours),
+        fences=fences,
+        applies=None,
+        priority_weight=priority_weight,
+        priority_levels=priority_levels,
+        abandons=[abandons],
+        spherical=spherical,
+        config=config,
+    )[0]
 
-    span = float(new.t[-1] - new.t[0])
-    steps = max(2, int(span / SAMPLE_DT_S) + 1)
-    times = np.linspace(float(new.t[0]), float(new.t[-1]), steps)
-    pos, _ = new.sample(times)
-    seg = np.sqrt(((pos[1:] - pos[:-1]) ** 2).sum(axis=1))
-    mid = 0.5 * (pos[1:] + pos[:-1])
+
+def score_many(
+    news: Sequence[LocalPlan],
+    ref: Reference,
+    *,
+    fences: Sequence[LocalFence],
+    applies: Sequence[npt.NDArray[np.bool_]] | None,
+    priority_weight: float,
+    priority_levels: int = 0,
+    abandons: Sequence[bool],
+    spherical: bool,
+    config: DeconflictionConfig,
+) -> list[Score]:
+    """Cost and riskiness of several new plans of one UAS against the same reference, in one
+    vectorised pass: every plan is sampled every ``SAMPLE_DT_S`` at most, the samples of all
+    plans are concatenated, and every term is computed on the concatenation (per-plan sums
+    and extrema over its own slice). Each result equals what the plan alone would get, bit
+    for bit (same operations on the same values in the same order). ``applies[i]`` says which
+    of ``fences`` count for plan i (None: all)."""
+    m = len(news)
+    ov = ref.ov_radius_m
+    old = ref.old
+    # -- samples of every plan, concatenated: plan i owns [s0[i], s0[i] + cnt[i]).
+    t0 = np.array([float(p.t[0]) for p in news])
+    t1 = np.array([float(p.t[-1]) for p in news])
+    cnt = np.maximum(2, ((t1 - t0) / SAMPLE_DT_S).astype(np.intp) + 1)
+    s0 = np.zeros(m, dtype=np.intp)
+    np.cumsum(cnt[:-1], out=s0[1:])
+    times = sample_times(t0, t1, cnt)
+    n = times.shape[0]
+    px, py, pz = np.empty(n), np.empty(n), np.empty(n)
+    for i, p in enumerate(news):
+        sl = slice(int(s0[i]), int(s0[i] + cnt[i]))
+        if len(p) == 1:
+            px[sl], py[sl], pz[sl] = p.e[0], p.n[0], p.z[0]
+        else:
+            ts = times[sl]
+            px[sl] = np.interp(ts, p.t, p.e)
+            py[sl] = np.interp(ts, p.t, p.n)
+            pz[sl] = np.interp(ts, p.t, p.z)
+    # Sampled stretches: entry j joins samples j and j + 1; the entry between two plans
+    # (at s0[i] + cnt[i] - 1) is not a stretch and is masked out or sliced away below.
+    dx, dy, dz = px[1:] - px[:-1], py[1:] - py[:-1], pz[1:] - pz[:-1]
+    seg = np.sqrt(dx * dx + dy * dy + dz * dz)
+    mx, my, mz = 0.5 * (px[1:] + px[:-1]), 0.5 * (py[1:] + py[:-1]), 0.5 * (pz[1:] + pz[:-1])
     tmid = 0.5 * (times[1:] + times[:-1])
+    real = np.ones(n - 1, dtype=bool)
+    real[(s0 + cnt - 1)[:-1]] = False
 
-    # m, 3D: the farthest point of the new path from the old path (the new plan's own
-    # vertices are added to the sampled midpoints so a short spike is not missed), and
-    # the distance of every sampled stretch from the filed plan (outside the OV). One pass.
-    nm = mid.shape[0]
-    probe = np.concatenate([mid, new_xyz])
-    lines = [v for v in (old.xyz(), filed.xyz()) if len(v) >= 2]
-    dists = _segment_distances(probe, lines) if lines else []
-    offset = 0.0
-    if len(old) >= 2:
-        offset = float(dists[0][nm:].max())
+    # -- every plan's vertices, concatenated: plan i owns [v0[i], v0[i] + len(plan i)).
+    vcnt = np.array([len(p) for p in news], dtype=np.intp)
+    v0 = np.zeros(m, dtype=np.intp)
+    np.cumsum(vcnt[:-1], out=v0[1:])
+    vx = np.concatenate([p.e for p in news])
+    vy = np.concatenate([p.n for p in news])
+    vz = np.concatenate([p.z for p in news])
+    ex, ey, ez = vx[1:] - vx[:-1], vy[1:] - vy[:-1], vz[1:] - vz[:-1]
+    vseg = np.sqrt(ex * ex + ey * ey + ez * ez)
+
+    # m, 3D: the farthest vertex of each new path from the old path (the new plan's own
+    # vertices are where it bends, so a short spike is not missed) ...
+    offsets = np.zeros(m)
+    if ref.old_segments is not None:
+        offsets = np.maximum.reduceat(ref.old_segments.distances(vx, vy, vz), v0)
     elif len(old) == 1:
-        offset = float(np.sqrt(((probe[nm:] - old.xyz()[0]) ** 2).sum(axis=1)).max())
-    cost = priority_weight * (
-        extra_d / config.cost_distance_scale_m
-        + extra_t / config.cost_time_scale_s
-        + offset / config.cost_offset_scale_m
-    )
-    cost += config.priority_move_cost * max(0, priority_levels)
-    if abandons:
-        cost += config.abandon_cost
+        ox, oy, oz = vx - old.e[0], vy - old.n[0], vz - old.z[0]
+        offsets = np.maximum.reduceat(np.sqrt(ox * ox + oy * oy + oz * oz), v0)
+    # ... and the sampled stretches farther than the OV radius from the filed plan.
+    far = None
+    if ref.filed_segments is not None:
+        far = ref.filed_segments.distances(mx, my, mz) > ov
 
-    inside_m = 0.0
-    min_fence = float("inf")
-    for f in fences:
-        active = np.asarray(f.active_mask(tmid), dtype=bool) & (
-            mid[:, 2] >= f.min_alt_amsl_m - ov_radius_m
-        )
-        active &= mid[:, 2] <= f.max_alt_amsl_m + ov_radius_m
+    # -- geofences: the length inside and the closest approach, per plan.
+    inside = [0.0] * m
+    min_fence = np.full(m, np.inf)
+    for f_idx, f in enumerate(fences):
+        active = real & f.active_mask(tmid) & (mz >= f.min_alt_amsl_m - ov)
+        active &= mz <= f.max_alt_amsl_m + ov
+        if applies is not None:
+            for i in range(m):
+                if not applies[i][f_idx]:
+                    active[int(s0[i]) : int(s0[i] + cnt[i] - 1)] = False
         if not active.any():
             continue
-        dist = f.horizontal_distance(mid[active, 0], mid[active, 1])
-        inside_m += float(np.sum(seg[active][dist < 0.0]))
-        min_fence = min(min_fence, float(dist.min()))
+        dist = np.full(n - 1, np.inf)
+        dist[active] = f.horizontal_distance(mx[active], my[active])
+        min_fence = np.minimum(min_fence, np.minimum.reduceat(dist, s0))
+        into = dist < 0.0
+        for i in range(m):
+            sl = slice(int(s0[i]), int(s0[i] + cnt[i] - 1))
+            if into[sl].any():
+                inside[i] += float(np.sum(seg[sl][into[sl]]))
 
-    outside_m = 0.0
-    if len(filed) >= 2:
-        dist_plan = dists[-1][:nm]
-        outside_m = float(np.sum(seg[dist_plan > ov_radius_m]))
-
-    min_ratio = float("inf")
-    for nb in neighbours:
+    # -- the closest normalised separation to every other plan, per plan.
+    min_ratio = np.full(m, np.inf)
+    for nb in ref.neighbours:
         other, ok = nb.plan.sample(times)
         if not ok.any():
             continue
-        dh = np.hypot(pos[ok, 0] - other[ok, 0], pos[ok, 1] - other[ok, 1])
-        dv = np.abs(pos[ok, 2] - other[ok, 2])
+        dh = np.hypot(px - other[:, 0], py - other[:, 1])
+        dv = np.abs(pz - other[:, 2])
         if spherical:
             ratio = np.hypot(dh, dv) / nb.h_min_m
         else:
             ratio = np.maximum(dh / nb.h_min_m, dv / nb.v_min_m)
-        min_ratio = min(min_ratio, float(ratio.min()))
+        ratio[~ok] = np.inf
+        min_ratio = np.minimum(min_ratio, np.minimum.reduceat(ratio, s0))
 
     factor = config.risk_proximity_factor
-    risk = inside_m / config.risk_length_scale_m + outside_m / config.risk_outside_ov_scale_m
-    if np.isfinite(min_fence):
-        risk += _prox(min_fence / max(ov_radius_m, 1e-6), factor)
-    if np.isfinite(min_ratio):
-        risk += _prox(min_ratio, factor)
-    return Score(
-        cost=cost,
-        risk=risk,
-        extra_distance_m=extra_d,
-        extra_time_s=extra_t,
-        offset_m=offset,
-        inside_fences_m=inside_m,
-        outside_ov_m=outside_m,
-        min_fence_distance_m=min_fence,
-        min_separation_ratio=min_ratio,
-    )
+    out = []
+    for i, new in enumerate(news):
+        ve = int(v0[i] + vcnt[i])
+        new_len = float(vseg[int(v0[i]) : ve - 1].sum())
+        extra_d = max(0.0, new_len - ref.old_length_m)  # m, 3D
+        extra_t = max(0.0, float(new.t[-1] - old.t[-1]))  # s
+        offset = float(offsets[i])
+        cost = priority_weight * (
+            extra_d / config.cost_distance_scale_m
+            + extra_t / config.cost_time_scale_s
+            + offset / config.cost_offset_scale_m
+        )
+        cost += config.priority_move_cost * max(0, priority_levels)
+        if abandons[i]:
+            cost += config.abandon_cost
+        outside_m = 0.0
+        if far is not None:
+            sl = slice(int(s0[i]), int(s0[i] + cnt[i] - 1))
+            outside_m = float(np.sum(seg[sl][far[sl]]))
+        fence_m = float(min_fence[i])
+        ratio_i = float(min_ratio[i])
+        risk = inside[i] / config.risk_length_scale_m + outside_m / config.risk_outside_ov_scale_m
+        if math.isfinite(fence_m):
+            risk += _prox(fence_m / max(ov, 1e-6), factor)
+        if math.isfinite(ratio_i):
+            risk += _prox(ratio_i, factor)
+        out.append(
+            Score(
+                cost=cost,
+                risk=risk,
+                extra_distance_m=extra_d,
+                extra_time_s=extra_t,
+                offset_m=offset,
+                inside_fences_m=inside[i],
+                outside_ov_m=outside_m,
+                min_fence_distance_m=fence_m,
+                min_separation_ratio=ratio_i,
+            )
+        )
+    return out

@@ -37,14 +37,14 @@ from gcs_utm.core.deconfliction.geometry import (
     LocalFence,
     LocalPlan,
     fence_to_local,
-    local_to_plan,
+    local_to_plans,
     max_speeds,
     merged_obstacles,
     plan_to_local,
     relevant_fences,
     separation_screen,
 )
-from gcs_utm.core.deconfliction.scoring import Neighbour, Score, score
+from gcs_utm.core.deconfliction.scoring import Neighbour, Reference, Score, reference, score_many
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import plan_vs_geofences, plan_vs_plans
 from gcs_utm.geo import LocalFrame
@@ -74,6 +74,40 @@ class Dropped:
     reason: str
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class _Screen:
+    """Another plan sampled on the timing search's grid (one array per coordinate), its
+    validity there and the pair's minima."""
+
+    e: FloatArray
+    n: FloatArray
+    z: FloatArray
+    ok: npt.NDArray[np.bool_]
+    h_min_m: float
+    v_min_m: float
+
+
+@dataclass(slots=True, kw_only=True, eq=False)
+class _Candidate:
+    """A new plan waiting for Monitoring's verification and for its score (see
+    :meth:`TacticalDeconfliction._flush`); ``keep`` marks the filed plan itself (no
+    conversion, verified against every geofence, cost 0). The alternative, if any, is
+    appended to ``dest``."""
+
+    op: Operation
+    maneuver: Maneuver
+    new: LocalPlan
+    old: LocalPlan
+    geofences: Sequence[Geofence]
+    fences: Sequence[LocalFence]
+    outsiders: Sequence[Operation]
+    lowest_priority: int
+    detail: str
+    dest: list[Alternative]
+    verify_from: int = 0
+    keep: bool = False
+
+
 class TacticalDeconfliction:
     """Generates verified alternatives; pure apart from the :attr:`dropped` diagnostics of
     the last call."""
@@ -85,6 +119,8 @@ class TacticalDeconfliction:
         self.config = config
         self.monitoring = monitoring
         self.dropped: list[Dropped] = []
+        # Candidates and drops of the current call, in the order they were made (_flush).
+        self._queue: list[_Candidate | Dropped] = []
         # Local conversions of the plans in the current snapshot, keyed by object identity
         # (the plan is kept in the value so its id cannot be reused while cached).
         self._local: dict[int, tuple[FlightPlan, LocalPlan]] = {}
@@ -189,34 +225,14 @@ class TacticalDeconfliction:
         op_b = replace(op_b, plan=b.plan)
         return not plan_vs_plans(a.plan, op_a, [op_b], self.frame, self.monitoring)
 
-    def _score(  # noqa: PLR0917 - private helper, called positionally
-        self,
-        new: LocalPlan,
-        old: LocalPlan,
-        op: Operation,
-        fences: Sequence[LocalFence],
-        neighbours: Sequence[Operation],
-        lowest_priority: int,
-        abandons: bool,
-    ) -> Score:
+    def _reference(
+        self, op: Operation, old: LocalPlan, neighbours: Sequence[Operation]
+    ) -> Reference:
         nbs = []
         for o in neighbours:
             h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
             nbs.append(Neighbour(plan=self._lp(o.plan), h_min_m=h, v_min_m=v))
-        weight = 1.0 + self.config.priority_cost_weight * max(0, op.priority - lowest_priority)
-        return score(
-            new,
-            old,
-            filed=self._lp(op.plan),
-            ov_radius_m=op.operational_volume_m,
-            fences=fences,
-            neighbours=nbs,
-            priority_weight=weight,
-            priority_levels=max(0, op.priority - lowest_priority),
-            abandons=abandons,
-            spherical=self.monitoring.spherical,
-            config=self.config,
-        )
+        return reference(old, self._lp(op.plan), op.operational_volume_m, nbs)
 
     def _finish(
         self,
@@ -224,48 +240,143 @@ class TacticalDeconfliction:
         maneuver: Maneuver,
         new: LocalPlan,
         old: LocalPlan,
-        snapshot: AirspaceSnapshot,
         *,
         geofences: Sequence[Geofence],
         fences: Sequence[LocalFence],
         outsiders: Sequence[Operation],
         lowest_priority: int,
         detail: str,
+        dest: list[Alternative],
         verify_from: int = 0,
-    ) -> Alternative | None:
-        """Verify ``new`` with Monitoring, score it and wrap it, or record why it was dropped.
-        ``verify_from`` skips leading waypoints (an escape leg that starts inside a fence)."""
-        plan = local_to_plan(
-            new, op.plan, self.frame, created_t_s=snapshot.t_s, reason=f"TD {maneuver.value}"
+    ) -> None:
+        """Queue ``new`` for verification by Monitoring and scoring (:meth:`_flush`), its
+        alternative for ``dest``. ``verify_from`` skips leading waypoints (an escape leg that
+        starts inside a fence)."""
+        self._queue.append(
+            _Candidate(
+                op=op,
+                maneuver=maneuver,
+                new=new,
+                old=old,
+                geofences=geofences,
+                fences=fences,
+                outsiders=outsiders,
+                lowest_priority=lowest_priority,
+                detail=detail,
+                dest=dest,
+                verify_from=verify_from,
+            )
         )
-        self._local[id(plan)] = (plan, new)  # its local form, without a second conversion
+
+    def _drop(self, op_id: OperationId, maneuver: Maneuver, reason: str) -> None:
+        self._queue.append(Dropped(operation_id=op_id, maneuver=maneuver, reason=reason))
+
+    def _flush(self, now: float) -> None:
+        """Turn the queued candidates into alternatives: all new plans converted to WGS84 at
+        once, each verified by Monitoring (in queue order, so :attr:`dropped` lists drops in
+        the order the candidates were made), the survivors of one UAS scored together against
+        one prepared reference (:func:`score_many`), then appended to their lists in queue
+        order."""
+        queue, self._queue = self._queue, []
+        moved = [c for c in queue if isinstance(c, _Candidate) and not c.keep]
+        converted = local_to_plans(
+            [c.new for c in moved],
+            [c.op.plan for c in moved],
+            self.frame,
+            created_t_s=now,
+            reasons=[f"TD {c.maneuver.value}" for c in moved],
+        )
+        plans = {id(c): p for c, p in zip(moved, converted, strict=True)}
+        passed: list[tuple[_Candidate, FlightPlan, list[bool]]] = []
+        for c in queue:
+            if isinstance(c, Dropped):
+                self.dropped.append(c)
+                continue
+            flags, plan, applies = self._check(c, plans.get(id(c)))
+            if flags:
+                self.dropped.append(
+                    Dropped(operation_id=c.op.id, maneuver=c.maneuver, reason="; ".join(flags))
+                )
+            else:
+                passed.append((c, plan, applies))
+        # Candidates of one UAS against the same remaining plan, neighbours, priority floor
+        # and fence list share a reference and are scored in one pass.
+        groups: dict[tuple[object, ...], list[int]] = {}
+        for k, (c, _, _) in enumerate(passed):
+            key = (
+                c.op.id,
+                id(c.old),
+                id(c.fences),
+                c.lowest_priority,
+                *(o.id for o in c.outsiders),
+            )
+            groups.setdefault(key, []).append(k)
+        scores: list[Score | None] = [None] * len(passed)
+        cfg = self.config
+        for idx in groups.values():
+            c0 = passed[idx[0]][0]
+            op = c0.op
+            levels = max(0, op.priority - c0.lowest_priority)
+            got = score_many(
+                [passed[k][0].new for k in idx],
+                self._reference(op, c0.old, c0.outsiders),
+                fences=c0.fences,
+                applies=[np.array(passed[k][2], dtype=bool) for k in idx],
+                priority_weight=1.0 + cfg.priority_cost_weight * levels,
+                priority_levels=levels,
+                abandons=[passed[k][0].maneuver in _ABANDON for k in idx],
+                spherical=self.monitoring.spherical,
+                config=cfg,
+            )
+            for k, sc in zip(idx, got, strict=True):
+                scores[k] = sc
+        for (c, plan, _), got_sc in zip(passed, scores, strict=True):
+            assert got_sc is not None
+            sc = got_sc
+            terms = ", ".join(f"{k}={v}" for k, v in sc.as_dict().items())
+            c.dest.append(
+                Alternative(
+                    operation_id=c.op.id,
+                    maneuver=c.maneuver,
+                    plan=plan,
+                    cost=0.0 if c.keep else sc.cost,
+                    risk=sc.risk,
+                    detail=f"{c.detail}; {terms}",
+                )
+            )
+
+    def _check(
+        self, c: _Candidate, plan: FlightPlan | None
+    ) -> tuple[list[str], FlightPlan, list[bool]]:
+        """Monitoring's flags on a candidate's plan, the plan, and which of its fences the
+        score counts."""
+        op = c.op
+        if c.keep:
+            flags = self.verify(op.plan, op, c.outsiders, c.geofences)
+            return flags, op.plan, [True] * len(c.fences)
+        assert plan is not None
+        self._local[id(plan)] = (plan, c.new)  # its local form, without a second conversion
         checked = plan
-        if verify_from > 0:
-            checked = replace(plan, waypoints=plan.waypoints[verify_from:])
+        if c.verify_from > 0:
+            checked = replace(plan, waypoints=plan.waypoints[c.verify_from :])
         # Monitoring's check is exact but costs a buffer per fence: hand it only the fences
         # whose box comes within the OV radius of the new plan's box (the others cannot be
         # crossed), and score only those within the proximity range.
         ov = op.operational_volume_m
-        near_g = [(g, f) for g, f in _near(geofences, fences, new, ov + 1.0) if g.applies_to(op.id)]
-        flags = self.verify(checked, op, outsiders, [g for g, _ in near_g])
+        near_g = [
+            g
+            for g, near in zip(c.geofences, _near(c.fences, c.new, ov + 1.0), strict=True)
+            if near and g.applies_to(op.id)
+        ]
+        flags = self.verify(checked, op, c.outsiders, near_g)
         if flags:
-            self.dropped.append(
-                Dropped(operation_id=op.id, maneuver=maneuver, reason="; ".join(flags))
-            )
-            return None
+            return flags, plan, []
         reach = ov * self.config.risk_proximity_factor + 1.0
-        near_f = [f for g, f in _near(geofences, fences, new, reach) if g.applies_to(op.id)]
-        sc = self._score(
-            new, old, op, near_f, outsiders, lowest_priority, abandons=maneuver in _ABANDON
-        )
-        return Alternative(
-            operation_id=op.id,
-            maneuver=maneuver,
-            plan=plan,
-            cost=sc.cost,
-            risk=sc.risk,
-            detail=f"{detail}; " + ", ".join(f"{k}={v}" for k, v in sc.as_dict().items()),
-        )
+        applies = [
+            near and g.applies_to(op.id)
+            for g, near in zip(c.geofences, _near(c.fences, c.new, reach), strict=True)
+        ]
+        return flags, plan, applies
 
     def _local_fences(self, geofences: Sequence[Geofence]) -> list[LocalFence]:
         return [fence_to_local(g, self.frame) for g in geofences]
@@ -278,6 +389,7 @@ class TacticalDeconfliction:
         gets ``KEEP_PLAN`` (if Monitoring does not flag its plan against outsiders) so that
         EM's joint selection can leave the higher-priority UAS alone."""
         self.dropped = []
+        self._queue = []
         now = snapshot.t_s
         cfg = self.config
         involved = [snapshot.operations[i] for i in threat.uas_ids if i in snapshot.operations]
@@ -304,9 +416,22 @@ class TacticalDeconfliction:
         lowest = min(op.priority for op in members)
         out: dict[OperationId, list[Alternative]] = {op.id: [] for op in members}
         for op in members:
-            keep = self._keep(op, local[op.id], snapshot, geofences, fences, outsiders, lowest)
-            if keep is not None:
-                out[op.id].append(keep)
+            # Keeping the plan moves nothing: no priority price (the score's cost is then 0).
+            self._queue.append(
+                _Candidate(
+                    op=op,
+                    maneuver=Maneuver.KEEP_PLAN,
+                    new=local[op.id],
+                    old=local[op.id],
+                    geofences=geofences,
+                    fences=fences,
+                    outsiders=outsiders,
+                    lowest_priority=op.priority,
+                    detail="keep the current plan",
+                    dest=out[op.id],
+                    keep=True,
+                )
+            )
 
         def run(axes: list[str], signs: list[int], mobile: list[bool], label: str) -> None:
             cords = []
@@ -341,18 +466,12 @@ class TacticalDeconfliction:
                 spherical=self.monitoring.spherical,
                 margin_fraction=cfg.separation_margin_fraction,
                 max_iterations=cfg.max_iterations,
-                samples=samples,
+                problem=problem,
             )
             if res is None:
                 for k, op in enumerate(members):
                     if mobile[k] and op in involved:
-                        self.dropped.append(
-                            Dropped(
-                                operation_id=op.id,
-                                maneuver=Maneuver.KEEP_PLAN,
-                                reason=f"{label}: no convergence",
-                            )
-                        )
+                        self._drop(op.id, Maneuver.KEEP_PLAN, f"{label}: no convergence")
                 return
             for k, op in enumerate(members):
                 dk = res.displacement_m[k]
@@ -361,22 +480,27 @@ class TacticalDeconfliction:
                 sign = res.signs[k]
                 man = _maneuver(cords[k].axis, sign)
                 new = self._deformed(op, local[op.id], grid, dk, cords[k].axis, sign)
-                alt = self._finish(
+                self._finish(
                     op,
                     man,
                     new,
                     local[op.id],
-                    snapshot,
                     geofences=geofences,
                     fences=fences,
                     outsiders=outsiders,
                     lowest_priority=lowest,
                     detail=f"{label}: {man.value} up to {float(dk.max()):.0f} m",
+                    dest=out[op.id],
                 )
-                if alt is not None:
-                    out[op.id].append(alt)
 
-        samples = cd.sample_cords([local[op.id] for op in members], grid)
+        # Axes, signs and mobility aside, every scenario works on the same cords.
+        problem = cd.prepare(
+            [local[op.id] for op in members],
+            grid,
+            minima,
+            spherical=self.monitoring.spherical,
+            margin_fraction=cfg.separation_margin_fraction,
+        )
         mobile_all = [self._mobility(op) > 0 for op in members]
         run([cd.AXIS_VERTICAL] * u, [0] * u, mobile_all, "joint vertical repulsion")
         run([cd.AXIS_LATERAL] * u, [0] * u, mobile_all, "joint lateral repulsion")
@@ -393,10 +517,10 @@ class TacticalDeconfliction:
                 signs = [sign if j == k else 0 for j in range(u)]
                 run([axis] * u, signs, only, f"{op.id} alone")
             rigid = [o for o in members if o.id != op.id]
-            for alt in self._timing(
-                op, local[op.id], snapshot, geofences, fences, outsiders, rigid, lowest
-            ):
-                out[op.id].append(alt)
+            self._timing(
+                op, local[op.id], snapshot, geofences, fences, outsiders, rigid, lowest, out[op.id]
+            )
+        self._flush(now)
         return {k: _dedupe(v) for k, v in out.items() if v or k in threat.uas_ids}
 
     def _neighbours(
@@ -426,34 +550,6 @@ class TacticalDeconfliction:
         found.sort(key=lambda x: x[0])
         return [op for _, op in found[: self.config.max_neighbours]]
 
-    def _keep(  # noqa: PLR0917 - private helper, called positionally
-        self,
-        op: Operation,
-        lp: LocalPlan,
-        snapshot: AirspaceSnapshot,
-        geofences: Sequence[Geofence],
-        fences: Sequence[LocalFence],
-        outsiders: Sequence[Operation],
-        lowest: int,
-    ) -> Alternative | None:
-        flags = self.verify(op.plan, op, outsiders, geofences)
-        if flags:
-            self.dropped.append(
-                Dropped(operation_id=op.id, maneuver=Maneuver.KEEP_PLAN, reason="; ".join(flags))
-            )
-            return None
-        # Keeping the plan moves nothing: no priority price (the score's cost is then 0).
-        sc = self._score(lp, lp, op, fences, outsiders, op.priority, abandons=False)
-        return Alternative(
-            operation_id=op.id,
-            maneuver=Maneuver.KEEP_PLAN,
-            plan=op.plan,
-            cost=0.0,
-            risk=sc.risk,
-            detail="keep the current plan; "
-            + ", ".join(f"{k}={v}" for k, v in sc.as_dict().items()),
-        )
-
     def _deformed(  # noqa: PLR0917 - private helper, called positionally
         self,
         op: Operation,
@@ -473,42 +569,64 @@ class TacticalDeconfliction:
         d1 = d[1:] - d[:-1]
         kinks = grid[1:-1][np.abs(d1[1:] - d1[:-1]) > 1e-9]
         inside = (kinks >= lp.t[0]) & (kinks <= lp.t[-1])
-        times = np.union1d(kinks[inside], lp.t)
-        base, _ = lp.sample(times)
-        disp = np.interp(times, grid, d)
-        if axis == cd.AXIS_VERTICAL:
-            xyz = base.copy()
-            xyz[:, 2] += sign * disp
+        # np.union1d without its wrappers: sorted, duplicates removed.
+        times = np.concatenate((kinks[inside], lp.t))
+        times.sort()
+        if times.shape[0] > 1:
+            times = times[np.concatenate(([True], times[1:] != times[:-1]))]
+        # One array per coordinate (the same arithmetic as on (N, 3) rows, without the
+        # strided column reads).
+        if len(lp) == 1:
+            be = np.full(times.shape[0], lp.e[0])
+            bn = np.full(times.shape[0], lp.n[0])
+            bz = np.full(times.shape[0], lp.z[0])
         else:
-            xyz = cd.apply(base, cd.left_normals(base), axis, sign, disp)
+            be = np.interp(times, lp.t, lp.e)
+            bn = np.interp(times, lp.t, lp.n)
+            bz = np.interp(times, lp.t, lp.z)
+        disp = sign * np.interp(times, grid, d)
+        xe, xn, xz = be, bn, bz
+        if axis == cd.AXIS_VERTICAL:
+            xz = bz + disp
+        else:
+            nx, ny = cd.left_normals_en(be, bn)
+            xe = be + disp * nx
+            xn = bn + disp * ny
         # Original pace between the kept times, from the undeformed plan.
         dt = times[1:] - times[:-1]
-        ob = base[1:] - base[:-1]
         safe_dt = np.maximum(dt, 1e-9)
         f = self.config.max_speed_factor
-        speed = np.maximum(op.cruise_speed_mps, np.hypot(ob[:, 0], ob[:, 1]) / safe_dt) * f
-        climb = np.maximum(op.max_climb_rate_mps, np.abs(ob[:, 2]) / safe_dt) * f
-        dd = xyz[1:] - xyz[:-1]
+        speed = (
+            np.maximum(op.cruise_speed_mps, np.hypot(be[1:] - be[:-1], bn[1:] - bn[:-1]) / safe_dt)
+            * f
+        )
+        climb = np.maximum(op.max_climb_rate_mps, np.abs(bz[1:] - bz[:-1]) / safe_dt) * f
         need = np.maximum(
-            dt, np.maximum(np.hypot(dd[:, 0], dd[:, 1]) / speed, np.abs(dd[:, 2]) / climb)
+            dt,
+            np.maximum(
+                np.hypot(xe[1:] - xe[:-1], xn[1:] - xn[:-1]) / speed,
+                np.abs(xz[1:] - xz[:-1]) / climb,
+            ),
         )
         t = np.empty(len(times))
         t[0] = times[0]
         np.cumsum(need, out=t[1:])
         t[1:] += times[0]
-        goal = np.array([lp.e[-1], lp.n[-1], lp.z[-1]])
-        off = xyz[-1] - goal
-        if float(np.abs(off).max()) > 1e-3:
+        off_e = xe[-1] - lp.e[-1]
+        off_n = xn[-1] - lp.n[-1]
+        off_z = xz[-1] - lp.z[-1]
+        if max(abs(off_e), abs(off_n), abs(off_z)) > 1e-3:
             # The plan ended before the cord could ramp back: fly back to the filed final
             # waypoint (cruise speed, climb rate) so the alternative keeps the destination.
             dt_back = max(
-                float(np.hypot(off[0], off[1])) / op.cruise_speed_mps,
-                abs(float(off[2])) / op.max_climb_rate_mps,
+                float(np.hypot(off_e, off_n)) / op.cruise_speed_mps,
+                abs(float(off_z)) / op.max_climb_rate_mps,
             )
-            xyz = np.vstack([xyz, goal])
+            xe = np.append(xe, lp.e[-1])
+            xn = np.append(xn, lp.n[-1])
+            xz = np.append(xz, lp.z[-1])
             t = np.append(t, t[-1] + dt_back)
-        out = LocalPlan(xyz[:, 0], xyz[:, 1], xyz[:, 2], t)
-        return out
+        return LocalPlan(xe, xn, xz, t)
 
     def _timing(  # noqa: PLR0917 - private helper, called positionally
         self,
@@ -520,9 +638,11 @@ class TacticalDeconfliction:
         outsiders: Sequence[Operation],
         rigid: Sequence[Operation],
         lowest: int,
-    ) -> list[Alternative]:
+        dest: list[Alternative],
+    ) -> None:
         """The smallest delay (hold at the current point, then the same plan later) and the
-        mildest slow-down that separate ``op`` from every other plan, if any."""
+        mildest slow-down that separate ``op`` from every other plan, if any, queued for
+        ``dest``."""
         now = snapshot.t_s
         cfg = self.config
         others = list(rigid) + list(outsiders)
@@ -533,56 +653,50 @@ class TacticalDeconfliction:
         for o in others:
             q, ok = self._lp(o.plan).sample(grid_t)
             h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
-            screens.append((q, ok, h, v))
-        out: list[Alternative] = []
+            screens.append(_Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, h, v))
         delay = self._first_clear_delay(lp, now, grid_t, screens)
         if delay is not None:
             t = np.concatenate([[now, now + delay], lp.t[1:] + delay])
             e = np.concatenate([[lp.e[0]], lp.e])
             n = np.concatenate([[lp.n[0]], lp.n])
             z = np.concatenate([[lp.z[0]], lp.z])
-            alt = self._finish(
+            self._finish(
                 op,
                 Maneuver.DELAY,
                 LocalPlan(e, n, z, t),
                 lp,
-                snapshot,
                 geofences=geofences,
                 fences=fences,
                 outsiders=others,
                 lowest_priority=lowest,
                 detail=f"hold {delay:.0f} s here, then the plan",
+                dest=dest,
             )
-            if alt is not None:
-                out.append(alt)
         for factor in cfg.slowdown_factors:
             if not 0.0 < factor < 1.0:
                 continue
             cand = LocalPlan(lp.e, lp.n, lp.z, now + (lp.t - now) / factor)
             if self._clear(cand, grid_t, screens):
-                alt = self._finish(
+                self._finish(
                     op,
                     Maneuver.SPEED_CHANGE,
                     cand,
                     lp,
-                    snapshot,
                     geofences=geofences,
                     fences=fences,
                     outsiders=others,
                     lowest_priority=lowest,
                     detail=f"fly the plan at {factor:.0%} of its speed",
+                    dest=dest,
                 )
-                if alt is not None:
-                    out.append(alt)
                 break
-        return out
 
     def _first_clear_delay(
         self,
         lp: LocalPlan,
         now: float,
         grid_t: FloatArray,
-        screens: Sequence[tuple[FloatArray, npt.NDArray[np.bool_], float, float]],
+        screens: Sequence[_Screen],
     ) -> float | None:
         """The smallest delay step after which holding here and then flying the plan keeps
         (1 + margin) times the minima from every screened plan; all delays at once."""
@@ -593,41 +707,50 @@ class TacticalDeconfliction:
         delays = cfg.delay_step_s * np.arange(1, steps + 1, dtype=np.float64)
         tt = np.maximum(grid_t[None, :] - delays[:, None], now)  # (D, T): plan time flown
         valid = tt <= lp.t[-1]
-        pos = np.stack([np.interp(tt, lp.t, c) for c in (lp.e, lp.n, lp.z)], axis=-1)
+        # Positions at the plan times flown, one (D, T) array per coordinate. When every
+        # plan time is itself a grid time (a delay that is a whole number of grid steps,
+        # checked value by value), they are the plan sampled once on the grid, gathered;
+        # otherwise interpolated.
+        shift = np.rint(delays / (grid_t[1] - grid_t[0]) if grid_t.shape[0] > 1 else delays)
+        idx = np.maximum(np.arange(grid_t.shape[0])[None, :] - shift.astype(np.intp)[:, None], 0)
+        if np.array_equal(grid_t[idx], tt):
+            pe, pn, pz = (np.interp(grid_t, lp.t, c)[idx] for c in (lp.e, lp.n, lp.z))
+        else:
+            pe, pn, pz = (np.interp(tt, lp.t, c) for c in (lp.e, lp.n, lp.z))
         scale = 1.0 + cfg.separation_margin_fraction
         clear = np.ones(delays.shape[0], dtype=bool)
-        for q, ok, h, v in screens:
-            m = valid & ok[None, :]
-            dh = np.hypot(pos[..., 0] - q[None, :, 0], pos[..., 1] - q[None, :, 1])
-            dv = np.abs(pos[..., 2] - q[None, :, 2])
+        for sc in screens:
+            m = valid & sc.ok[None, :]
+            dh = np.hypot(pe - sc.e[None, :], pn - sc.n[None, :])
+            dv = np.abs(pz - sc.z[None, :])
             if self.monitoring.spherical:
-                ratio = np.hypot(dh, dv) / h
+                ratio = np.hypot(dh, dv) / sc.h_min_m
             else:
-                ratio = np.maximum(dh / h, dv / v)
+                ratio = np.maximum(dh / sc.h_min_m, dv / sc.v_min_m)
             clear &= ~((ratio < scale) & m).any(axis=1)
-        idx = np.flatnonzero(clear)
-        return float(delays[idx[0]]) if idx.size else None
+        idx_clear = np.flatnonzero(clear)
+        return float(delays[idx_clear[0]]) if idx_clear.size else None
 
     def _clear(
         self,
         cand: LocalPlan,
         grid_t: FloatArray,
-        screens: Sequence[tuple[FloatArray, npt.NDArray[np.bool_], float, float]],
+        screens: Sequence[_Screen],
     ) -> bool:
         """Fast screen of a timing candidate on a 1 s grid (Monitoring verifies the one that
         passes): every other plan at least (1 + margin) times the pair's minima away."""
         pos, mine = cand.sample(grid_t)
         scale = 1.0 + self.config.separation_margin_fraction
-        for q, ok, h, v in screens:
-            m = ok & mine
+        for sc in screens:
+            m = sc.ok & mine
             if not m.any():
                 continue
-            dh = np.hypot(pos[m, 0] - q[m, 0], pos[m, 1] - q[m, 1])
-            dv = np.abs(pos[m, 2] - q[m, 2])
+            dh = np.hypot(pos[m, 0] - sc.e[m], pos[m, 1] - sc.n[m])
+            dv = np.abs(pos[m, 2] - sc.z[m])
             if self.monitoring.spherical:
-                ratio = np.hypot(dh, dv) / h
+                ratio = np.hypot(dh, dv) / sc.h_min_m
             else:
-                ratio = np.maximum(dh / h, dv / v)
+                ratio = np.maximum(dh / sc.h_min_m, dv / sc.v_min_m)
             if float(ratio.min()) < scale:
                 return False
         return True
@@ -661,6 +784,7 @@ class TacticalDeconfliction:
         """Vertical avoidance of a non-cooperative intruder: the UAS's cord alone climbs or
         descends (the intruder is a rigid cord) until the intruder minima hold."""
         self.dropped = []
+        self._queue = []
         op = snapshot.operations.get(operation_id)
         intruder = self.intruder_plan(threat, snapshot)
         if op is None or intruder is None:
@@ -712,27 +836,24 @@ class TacticalDeconfliction:
             )
             man = Maneuver.GO_UP if sign > 0 else Maneuver.GO_DOWN
             if res is None:
-                self.dropped.append(
-                    Dropped(operation_id=op.id, maneuver=man, reason="no convergence")
-                )
+                self._drop(op.id, man, "no convergence")
                 continue
             dk = res.displacement_m[0]
             new = self._deformed(op, lp, grid, dk, cd.AXIS_VERTICAL, sign)
-            alt = self._finish(
+            self._finish(
                 op,
                 man,
                 new,
                 lp,
-                snapshot,
                 geofences=snapshot.geofences,
                 fences=fences,
                 outsiders=outsiders,
                 lowest_priority=op.priority,
                 detail=f"vertical avoidance of intruder {threat.intruder_id}: "
                 f"{man.value} {float(dk.max()):.0f} m",
+                dest=out,
             )
-            if alt is not None:
-                out.append(alt)
+        self._flush(now)
         return out
 
     # ---- single UAS -------------------------------------------------------------------------
@@ -748,6 +869,7 @@ class TacticalDeconfliction:
         (None = all that apply), ``extra_geofences`` are fences not yet in the snapshot (an
         alert area EM is about to create)."""
         self.dropped = []
+        self._queue = []
         op = snapshot.operations.get(operation_id)
         if op is None:
             return []
@@ -783,24 +905,22 @@ class TacticalDeconfliction:
 
         def add(man: Maneuver, route: tuple[LocalPlan, int] | None, detail: str) -> None:
             if route is None:
-                self.dropped.append(Dropped(operation_id=op.id, maneuver=man, reason="no path"))
+                self._drop(op.id, man, "no path")
                 return
             new, verify_from = route
-            alt = self._finish(
+            self._finish(
                 op,
                 man,
                 new,
                 lp,
-                snapshot,
                 geofences=geofences,
                 fences=fences,
                 outsiders=outsiders,
                 lowest_priority=lowest,
                 detail=detail,
+                dest=out,
                 verify_from=verify_from,
             )
-            if alt is not None:
-                out.append(alt)
 
         inside = not planner.free(cur[:2])
         if inside and Maneuver.ESCAPE in want:
@@ -831,27 +951,20 @@ class TacticalDeconfliction:
                 route = router.land_at(self._home(op))
                 left = self._endurance_left(op, now)
                 if route is not None and left is not None and route[0].t[-1] - now > left:
-                    self.dropped.append(
-                        Dropped(
-                            operation_id=op.id,
-                            maneuver=Maneuver.RETURN_HOME,
-                            reason=f"home not reachable with {left:.0f} s of endurance left",
-                        )
+                    self._drop(
+                        op.id,
+                        Maneuver.RETURN_HOME,
+                        f"home not reachable with {left:.0f} s of endurance left",
                     )
                 else:
                     add(Maneuver.RETURN_HOME, route, "return home and land")
             if Maneuver.LANDING_SITE in want and op.landing_sites:
                 best = self._landing(op, router, now)
                 if best is None:
-                    self.dropped.append(
-                        Dropped(
-                            operation_id=op.id,
-                            maneuver=Maneuver.LANDING_SITE,
-                            reason="no landing site reachable",
-                        )
-                    )
+                    self._drop(op.id, Maneuver.LANDING_SITE, "no landing site reachable")
                 else:
                     add(Maneuver.LANDING_SITE, best[0], best[1])
+        self._flush(now)
         return out
 
     def _home(self, op: Operation) -> FloatArray:
@@ -1045,18 +1158,14 @@ class _Router:
         return self._fly([*path, site], self.now), 0
 
 
-def _near(
-    geofences: Sequence[Geofence], fences: Sequence[LocalFence], lp: LocalPlan, margin_m: float
-) -> list[tuple[Geofence, LocalFence]]:
-    """The (geofence, local fence) pairs whose bounding box comes within ``margin_m`` of the
-    plan's bounding box (both lists are in the same order)."""
+def _near(fences: Sequence[LocalFence], lp: LocalPlan, margin_m: float) -> list[bool]:
+    """Per fence: does its bounding box come within ``margin_m`` of the plan's bounding box."""
     e0, e1 = float(lp.e.min()) - margin_m, float(lp.e.max()) + margin_m
     n0, n1 = float(lp.n.min()) - margin_m, float(lp.n.max()) + margin_m
     out = []
-    for g, f in zip(geofences, fences, strict=True):
+    for f in fences:
         b0, b1, b2, b3 = f.shape.bounds
-        if b0 <= e1 and b2 >= e0 and b1 <= n1 and b3 >= n0:
-            out.append((g, f))
+        out.append(b0 <= e1 and b2 >= e0 and b1 <= n1 and b3 >= n0)
     return out
 
 
