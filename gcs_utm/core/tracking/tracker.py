@@ -106,8 +106,8 @@ class _Identity:
 # array: capture time; longitude and latitude, replaced by east and north once projected (so
 # east, north, alt are the position measurement z, contiguous); the grid velocity (east,
 # north, up; zero when not measured); the position variances (east, north, up) [m^2]; the
-# velocity variance [m^2/s^2] (the same on every axis); the source index; 1.0 if a velocity
-# was measured.
+# velocity variances [m^2/s^2] (the same on every axis, three times); the source index; 1.0
+# if a velocity was measured.
 _C_T = 0
 _C_LON = _C_EAST = 1
 _C_LAT = _C_NORTH = 2
@@ -115,9 +115,9 @@ _C_ALT = 3
 _C_VE, _C_VN, _C_VU = 4, 5, 6
 _C_R = 7
 _C_RV = 10
-_C_SRC = 11
-_C_HAS_VEL = 12
-_NCOL = 13
+_C_SRC = 13
+_C_HAS_VEL = 14
+_NCOL = 15
 
 
 class Tracker:
@@ -133,6 +133,7 @@ class Tracker:
                 config.accel_sigma_v_mps2**2,
             ]
         )
+        self._q_col = self._q[:, None]  # kalman.step's layout
         # Grid convergence: true north expressed on the UTM grid at the origin, used to turn
         # measured NED velocities into grid velocities.
         d_east, d_north = frame.point_to_local(frame.origin_lat_deg + 1e-3, frame.origin_lon_deg)
@@ -378,8 +379,27 @@ class Tracker:
             eph = max(eph, min_sigma)
             epv = max(epv, min_sigma)
             eph2 = eph * eph
+            epv2 = epv * epv
             if vel is None:
-                put((t, lon, lat, alt, 0.0, 0.0, 0.0, eph2, eph2, epv * epv, vsig2, src, 0.0))
+                put(
+                    (
+                        t,
+                        lon,
+                        lat,
+                        alt,
+                        0.0,
+                        0.0,
+                        0.0,
+                        eph2,
+                        eph2,
+                        epv2,
+                        vsig2,
+                        vsig2,
+                        vsig2,
+                        src,
+                        0.0,
+                    )
+                )
             else:
                 n_vel += 1
                 # NED (true north/east) -> grid east/north: north along north_dir, east
@@ -388,7 +408,7 @@ class Tracker:
                     (
                         t, lon, lat, alt,
                         vn * nd_e + ve * nd_n, vn * nd_n - ve * nd_e, -vd,
-                        eph2, eph2, epv * epv, vsig2, src, 1.0,
+                        eph2, eph2, epv2, vsig2, vsig2, vsig2, src, 1.0,
                     )
                 )  # fmt: skip
 
@@ -432,40 +452,36 @@ class Tracker:
         out_of_order, duplicate, gate). ``with_vel``: every record has a velocity (True),
         none has (False), or mixed (None)."""
         n = len(rows)
-        a = np.array(records, dtype=np.float64).reshape(n, _NCOL)
-        east, north = self.frame.to_local(a[:, _C_LAT], a[:, _C_LON])
-        a[:, _C_EAST] = east
-        a[:, _C_NORTH] = north
+        # Column j of the records is row j of ``a``: each quantity is contiguous.
+        a = np.array(records, dtype=np.float64).reshape(n, _NCOL).T.copy()
+        self.frame.to_local_in_place(a[_C_LON], a[_C_LAT])
         rw = np.array(rows, dtype=np.intp)
         new_rows = self._n > n_before
         if len(set(rows)) == n:
             # The common case: every track at most once, so one round in any order.
-            init = rw >= n_before if new_rows else None
-            out = self._round(rw, a, init, with_vel)
-        else:
-            # Rounds: sort by capture time, then rank each measurement among those of its
-            # track; round k holds every track's k-th measurement.
-            order = np.argsort(a[:, _C_T], kind="stable")
-            rs = rw[order]
-            by_row = np.argsort(rs, kind="stable")
-            grouped = rs[by_row]
-            pos = np.arange(n)
-            first = np.ones(n, dtype=bool)
-            first[1:] = grouped[1:] != grouped[:-1]
-            rank_grouped = pos - np.maximum.accumulate(np.where(first, pos, 0))
-            rank = np.empty(n, dtype=np.intp)
-            rank[by_row] = rank_grouped
-            totals = [0, 0, 0, 0, 0]
-            for k in range(int(rank.max()) + 1):
-                sel = order[rank == k]
-                r_k = rw[sel]
-                # Rows created by this batch start uninitialised: their earliest measurement
-                # is rank 0.
-                init = r_k >= n_before if new_rows and k == 0 else None
-                res = self._round(r_k, a[sel], init, with_vel)
-                totals = [x + y for x, y in zip(totals, res, strict=True)]
-            out = (totals[0], totals[1], totals[2], totals[3], totals[4])
-        return out
+            return self._round(rw, a, rw >= n_before if new_rows else None, with_vel)
+        # Rounds: sort by capture time, then rank each measurement among those of its
+        # track; round k holds every track's k-th measurement.
+        order = np.argsort(a[_C_T], kind="stable")
+        rs = rw[order]
+        by_row = np.argsort(rs, kind="stable")
+        grouped = rs[by_row]
+        pos = np.arange(n)
+        first = np.ones(n, dtype=bool)
+        first[1:] = grouped[1:] != grouped[:-1]
+        rank_grouped = pos - np.maximum.accumulate(np.where(first, pos, 0))
+        rank = np.empty(n, dtype=np.intp)
+        rank[by_row] = rank_grouped
+        totals = (0, 0, 0, 0, 0)
+        for k in range(int(rank.max()) + 1):
+            sel = order[rank == k]
+            r_k = rw[sel]
+            # Rows created by this batch start uninitialised: their earliest measurement
+            # is rank 0.
+            init = r_k >= n_before if new_rows and k == 0 else None
+            res = self._round(r_k, a[:, sel], init, with_vel)
+            totals = tuple(x + y for x, y in zip(totals, res, strict=True))  # type: ignore[assignment]
+        return totals
 
     def _round(
         self,
@@ -474,16 +490,18 @@ class Tracker:
         init: npt.NDArray[np.bool_] | None,
         with_vel: bool | None,
     ) -> tuple[int, int, int, int, int]:
-        """One round: rows ``rw`` (each at most once) with their records ``a`` (M, _NCOL);
+        """One round: rows ``rw`` (each at most once) with their records ``a`` (_NCOL, M);
         ``init``: rows that start from their measurement (None: none)."""
         cfg = self.config
-        t = a[:, _C_T]
-        z = a[:, _C_EAST : _C_ALT + 1]
-        src = a[:, _C_SRC].astype(np.intp)
-        x = self._x[rw]
+        t = a[_C_T]
+        src = a[_C_SRC].astype(np.intp)
+        # The rows' states as planes (kalman.step): (2, 3, M) and (3, 3, M).
+        x = self._x.transpose(2, 1, 0)[:, :, rw]
         dt = t - self._t[rw]
-        pred = x[:, :, kalman.POS] + x[:, :, kalman.VEL] * dt[:, None]
-        miss = np.sqrt(((z - pred) ** 2).sum(axis=1))
+        x[kalman.POS] += x[kalman.VEL] * dt  # predicted (x is a copy: written back if updated)
+        d = a[_C_EAST : _C_ALT + 1] - x[kalman.POS]
+        d *= d
+        miss = np.sqrt(d[0] + d[1] + d[2])
         allowed = np.minimum(cfg.max_jump_m, cfg.gate_margin_m + cfg.max_speed_mps * dt)
         ooo = dt < 0.0
         dup = t == self._src_t[rw, src]
@@ -510,18 +528,20 @@ class Tracker:
             # New and restarted tracks: state = the measurement, velocity unknown unless
             # measured.
             ri = rw[init]
-            ai = a[init]
-            hv = ai[:, _C_HAS_VEL, None] != 0.0
-            self._x[ri, :, kalman.POS] = ai[:, _C_EAST : _C_ALT + 1]
-            self._x[ri, :, kalman.VEL] = np.where(hv, ai[:, _C_VE : _C_VU + 1], 0.0)
-            self._p[ri, :, kalman.PP] = ai[:, _C_R : _C_R + 3]
-            self._p[ri, :, kalman.PV] = 0.0
-            self._p[ri, :, kalman.VV] = np.where(
-                hv, ai[:, _C_RV, None], cfg.initial_vel_sigma_mps**2
-            )
+            ai = a[:, init]
+            hv = ai[_C_HAS_VEL] != 0.0
+            xi = np.empty((2, 3, len(ri)))
+            xi[kalman.POS] = ai[_C_EAST : _C_ALT + 1]
+            xi[kalman.VEL] = np.where(hv, ai[_C_VE : _C_VU + 1], 0.0)
+            pi = np.empty((3, 3, len(ri)))
+            pi[kalman.PP] = ai[_C_R : _C_R + 3]
+            pi[kalman.PV] = 0.0
+            pi[kalman.VV] = np.where(hv, ai[_C_RV : _C_RV + 3], cfg.initial_vel_sigma_mps**2)
+            self._x.transpose(2, 1, 0)[:, :, ri] = xi
+            self._p.transpose(2, 1, 0)[:, :, ri] = pi
             self._src_t[ri] = -np.inf
         if upd.any():
-            self._filter(rw[upd], x[upd], a[upd], dt[upd], with_vel)
+            self._filter(rw[upd], x[:, :, upd], a[:, upd], dt[upd], with_vel)
         if ok.any():
             self._accept(rw[ok], t[ok], src[ok])
         return (
@@ -535,25 +555,25 @@ class Tracker:
     def _filter(
         self, rw: IntArray, x: FloatArray, a: FloatArray, dt: FloatArray, with_vel: bool | None
     ) -> None:
-        """Predict rows ``rw`` (states ``x``, gathered) by ``dt`` and update them with their
-        records ``a``; written back."""
+        """Predict rows ``rw`` (their states ``x`` as planes, gathered, positions already
+        predicted) by ``dt`` and update them with their records ``a``; written back."""
         if with_vel is None:
-            hv = a[:, _C_HAS_VEL] != 0.0
+            hv = a[_C_HAS_VEL] != 0.0
             for part, wv in ((~hv, False), (hv, True)):
                 if part.any():
-                    self._filter(rw[part], x[part], a[part], dt[part], wv)
+                    self._filter(rw[part], x[:, :, part], a[:, part], dt[part], wv)
             return
-        p = self._p[rw]
-        kalman.predict(x, p, dt, self._q)
-        z = a[:, _C_EAST : _C_ALT + 1]
-        r = a[:, _C_R : _C_R + 3]
+        p = self._p.transpose(2, 1, 0)[:, :, rw]
+        z = a[_C_EAST : _C_ALT + 1]
+        r = a[_C_R : _C_R + 3]
         if with_vel:
-            zv = a[:, _C_VE : _C_VU + 1]
-            kalman.update_position_velocity(x, p, z, zv, r_m2=r, rv_m2ps2=a[:, _C_RV, None])
+            zv = a[_C_VE : _C_VU + 1]
+            rv = a[_C_RV : _C_RV + 3]
+            kalman.step(x, p, dt, self._q_col, z, r, zv, rv, positions_predicted=True)
         else:
-            kalman.update_position(x, p, z, r)
-        self._x[rw] = x
-        self._p[rw] = p
+            kalman.step(x, p, dt, self._q_col, z, r, positions_predicted=True)
+        self._x.transpose(2, 1, 0)[:, :, rw] = x
+        self._p.transpose(2, 1, 0)[:, :, rw] = p
 
     def _accept(self, rw: IntArray, t: FloatArray, src: IntArray) -> None:
         """Bookkeeping of rows ``rw`` that took a measurement of time ``t`` from ``src``."""
