@@ -223,3 +223,40 @@ def test_step_on_planes_equals_predict_then_update_bit_for_bit(
         kalman.step(planes_x, planes_p, dt, q[:, None], z.T, r.T, positions_predicted=predicted)
     assert np.array_equal(planes_x.transpose(2, 1, 0), x)
     assert np.array_equal(planes_p.transpose(2, 1, 0), p)
+
+
+@settings(max_examples=40, deadline=None)
+@given(m=st.integers(1, 6), with_vel=st.booleans(), seed=st.integers(0, 99))
+def test_step_row_in_python_floats_equals_step_bit_for_bit(
+    m: int, with_vel: bool, seed: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(2, 3, m)) * 100
+    p = np.stack(
+        [rng.uniform(0.1, 50, (3, m)), rng.uniform(-1, 1, (3, m)), rng.uniform(0.1, 50, (3, m))]
+    )
+    dt = rng.uniform(0, 5, size=m)
+    q = (4.0, 4.0, 1.0)
+    z = rng.normal(size=(3, m)) * 100
+    r = rng.uniform(0.01, 20, size=(3, m))
+    zv = rng.normal(size=(3, m)) * 10
+    rv = rng.uniform(0.01, 5, size=m)
+    x[kalman.POS] += x[kalman.VEL] * dt
+    rows_x = x.transpose(2, 1, 0).tolist()
+    rows_p = p.transpose(2, 1, 0).tolist()
+    for i in range(m):
+        if with_vel:
+            kalman.step_row(
+                rows_x[i], rows_p[i], float(dt[i]), q, z[:, i].tolist(), r[:, i].tolist(),
+                zv[:, i].tolist(), float(rv[i]),
+            )  # fmt: skip
+        else:
+            kalman.step_row(
+                rows_x[i], rows_p[i], float(dt[i]), q, z[:, i].tolist(), r[:, i].tolist()
+            )
+    kalman.step(
+        x, p, dt, np.array(q)[:, None], z, r, zv if with_vel else None,
+        np.broadcast_to(rv, (3, m)) if with_vel else None, positions_predicted=True,
+    )  # fmt: skip
+    assert np.array_equal(np.array(rows_x).transpose(2, 1, 0), x)
+    assert np.array_equal(np.array(rows_p).transpose(2, 1, 0), p)

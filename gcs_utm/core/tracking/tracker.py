@@ -118,6 +118,10 @@ _C_RV = 10
 _C_SRC = 13
 _C_HAS_VEL = 14
 _NCOL = 15
+# Up to this many measurements, a round in which every measurement simply updates its track
+# is computed in Python floats (kalman.step_row): ~60 NumPy calls cost more than the
+# arithmetic of a few rows (measured crossover ~NN; see _round_small).
+_SMALL_ROUND = 16
 
 
 class Tracker:
@@ -134,6 +138,7 @@ class Tracker:
             ]
         )
         self._q_col = self._q[:, None]  # kalman.step's layout
+        self._q_row = (float(self._q[0]), float(self._q[1]), float(self._q[2]))  # step_row's
         # Grid convergence: true north expressed on the UTM grid at the origin, used to turn
         # measured NED velocities into grid velocities.
         d_east, d_north = frame.point_to_local(frame.origin_lat_deg + 1e-3, frame.origin_lon_deg)
@@ -459,6 +464,10 @@ class Tracker:
         new_rows = self._n > n_before
         if len(set(rows)) == n:
             # The common case: every track at most once, so one round in any order.
+            if not new_rows and n <= _SMALL_ROUND:
+                done = self._round_small(rw, a)
+                if done is not None:
+                    return done
             return self._round(rw, a, rw >= n_before if new_rows else None, with_vel)
         # Rounds: sort by capture time, then rank each measurement among those of its
         # track; round k holds every track's k-th measurement.
@@ -551,6 +560,52 @@ class Tracker:
             int(dup.sum()),
             int(gate.sum()),
         )
+
+    def _round_small(self, rw: IntArray, a: FloatArray) -> tuple[int, int, int, int, int] | None:
+        """:meth:`_round` without new rows, in Python floats, when every measurement updates
+        its track; None (nothing changed) as soon as one does not: :meth:`_round` decides
+        then. The same arithmetic in the same order (bit for bit; tests check it)."""
+        cfg = self.config
+        max_jump = cfg.max_jump_m
+        margin = cfg.gate_margin_m
+        max_speed = cfg.max_speed_mps
+        q = self._q_row
+        step_row = kalman.step_row
+        sqrt = math.sqrt
+        xs = self._x[rw].tolist()
+        ps = self._p[rw].tolist()
+        t_prev = self._t[rw].tolist()
+        src_t = self._src_t[rw].tolist()
+        try:
+            for rec, x, p, t0, ts in zip(a.T.tolist(), xs, ps, t_prev, src_t, strict=True):
+                t = rec[_C_T]
+                dt = t - t0
+                if dt < 0.0 or t == ts[int(rec[_C_SRC])]:
+                    return None
+                xe, xn, xu = x
+                pe = xe[0] + xe[1] * dt
+                pn = xn[0] + xn[1] * dt
+                pu = xu[0] + xu[1] * dt
+                de = rec[_C_EAST] - pe
+                dn = rec[_C_NORTH] - pn
+                du = rec[_C_ALT] - pu
+                if sqrt(de * de + dn * dn + du * du) > min(max_jump, margin + max_speed * dt):
+                    return None
+                xe[0] = pe
+                xn[0] = pn
+                xu[0] = pu
+                z = rec[_C_EAST : _C_ALT + 1]
+                r = rec[_C_R : _C_R + 3]
+                if rec[_C_HAS_VEL]:
+                    step_row(x, p, dt, q, z, r, rec[_C_VE : _C_VU + 1], rec[_C_RV])
+                else:
+                    step_row(x, p, dt, q, z, r)
+        except ZeroDivisionError:
+            return None  # NumPy's inf / nan (and its warning), as with a larger batch
+        self._x[rw] = xs
+        self._p[rw] = ps
+        self._accept(rw, a[_C_T], a[_C_SRC].astype(np.intp))
+        return len(rw), 0, 0, 0, 0
 
     def _filter(
         self, rw: IntArray, x: FloatArray, a: FloatArray, dt: FloatArray, with_vel: bool | None
