@@ -242,8 +242,8 @@ def test_step_row_in_python_floats_equals_step_bit_for_bit(
     zv = rng.normal(size=(3, m)) * 10
     rv = rng.uniform(0.01, 5, size=m)
     x[kalman.POS] += x[kalman.VEL] * dt
-    rows_x = x.transpose(2, 1, 0).tolist()
-    rows_p = p.transpose(2, 1, 0).tolist()
+    rows_x = x.transpose(2, 1, 0).reshape(m, 6).tolist()
+    rows_p = p.transpose(2, 1, 0).reshape(m, 9).tolist()
     for i in range(m):
         if with_vel:
             kalman.step_row(
@@ -258,5 +258,5 @@ def test_step_row_in_python_floats_equals_step_bit_for_bit(
         x, p, dt, np.array(q)[:, None], z, r, zv if with_vel else None,
         np.broadcast_to(rv, (3, m)) if with_vel else None, positions_predicted=True,
     )  # fmt: skip
-    assert np.array_equal(np.array(rows_x).transpose(2, 1, 0), x)
-    assert np.array_equal(np.array(rows_p).transpose(2, 1, 0), p)
+    assert np.array_equal(np.array(rows_x).reshape(m, 3, 2).transpose(2, 1, 0), x)
+    assert np.array_equal(np.array(rows_p).reshape(m, 3, 3).transpose(2, 1, 0), p)
