@@ -461,7 +461,7 @@ class Tracker:
         out_of_order, duplicate, gate). ``with_vel``: every record has a velocity (True),
         none has (False), or mixed (None)."""
         n = len(rows)
-        # Column j of the records is row j of ``a``: each quantity is contiguous.
+        # Field j of every record is row j of ``a`` (_NCOL, N): each quantity is contiguous.
         a = np.array(records, dtype=np.float64).reshape(n, _NCOL).T.copy()
         self.frame.to_local_in_place(a[_C_LON], a[_C_LAT])
         rw = np.array(rows, dtype=np.intp)
@@ -485,7 +485,7 @@ class Tracker:
         rank_grouped = pos - np.maximum.accumulate(np.where(first, pos, 0))
         rank = np.empty(n, dtype=np.intp)
         rank[by_row] = rank_grouped
-        totals = (0, 0, 0, 0, 0)
+        totals = [0, 0, 0, 0, 0]
         for k in range(int(rank.max()) + 1):
             sel = order[rank == k]
             r_k = rw[sel]
@@ -493,8 +493,9 @@ class Tracker:
             # is rank 0.
             init = r_k >= n_before if new_rows and k == 0 else None
             res = self._round(r_k, a[:, sel], init, with_vel)
-            totals = tuple(x + y for x, y in zip(totals, res, strict=True))  # type: ignore[assignment]
-        return totals
+            totals = [x + y for x, y in zip(totals, res, strict=True)]
+        accepted, reinit, ooo, dup, gate = totals
+        return accepted, reinit, ooo, dup, gate
 
     def _round(
         self,
