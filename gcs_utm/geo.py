@@ -93,6 +93,14 @@ class LocalFrame:
             np.asarray(n, dtype=np.float64) - self._origin_en[1],
         )
 
+    def to_local_in_place(self, lon_east: FloatArray, lat_north: FloatArray) -> None:
+        """:meth:`to_local` written over its inputs (C-contiguous float64 arrays): longitudes
+        become east_m and latitudes north_m. The same numbers, without the copies a small
+        batch pays for."""
+        self._fwd.transform(lon_east, lat_north, inplace=True)
+        lon_east -= self._origin_en[0]
+        lat_north -= self._origin_en[1]
+
     def to_wgs84(self, east_m: ArrayLike, north_m: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """(east_m, north_m) relative to the origin -> (lat_deg, lon_deg)."""
         e = np.asarray(east_m, dtype=np.float64) + self._origin_en[0]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -39,6 +40,18 @@ def test_utm_round_trip_to_1_mm(lat0: float, lon0: float, de: float, dn: float) 
     lat, lon = frame.point_to_wgs84(de, dn)
     e, n = frame.point_to_local(lat, lon)
     assert abs(e - de) < 1e-3 and abs(n - dn) < 1e-3
+
+
+@settings(max_examples=30, deadline=None)
+@given(lat0=lats, lon0=lons, d_deg=st.lists(st.floats(-0.2, 0.2), min_size=2, max_size=20))
+def test_to_local_in_place_equals_to_local(lat0: float, lon0: float, d_deg: list[float]) -> None:
+    frame = LocalFrame(lat0, lon0)
+    lat = np.clip(lat0 + np.array(d_deg), -80.0, 84.0)
+    lon = lon0 + np.array(d_deg[::-1])
+    want_e, want_n = frame.to_local(lat, lon)
+    lon_east, lat_north = lon.copy(), lat.copy()
+    frame.to_local_in_place(lon_east, lat_north)
+    assert np.array_equal(lon_east, want_e) and np.array_equal(lat_north, want_n)
 
 
 @settings(max_examples=60, deadline=None)

@@ -186,3 +186,77 @@ def test_as_accurate_as_filterpy_against_exact_arithmetic() -> None:
             worst_ours = max(worst_ours, float(np.abs(x[0, 0] - want).max()) / norm)
             worst_ref = max(worst_ref, float(np.abs(kf.x[[0, 3]] - want).max()) / norm)
     assert worst_ours <= max(10.0 * worst_ref, 1e-12), (worst_ours, worst_ref)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    m=st.integers(1, 12), with_vel=st.booleans(), predicted=st.booleans(), seed=st.integers(0, 99)
+)
+def test_step_on_planes_equals_predict_then_update_bit_for_bit(
+    m: int, with_vel: bool, predicted: bool, seed: int
+) -> None:
+    """kalman.step (the tracker's layout) is predict + update_* exactly, not just closely."""
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(m, 3, 2)) * 100
+    p = np.zeros((m, 3, 3))
+    p[:, :, kalman.PP] = rng.uniform(0.1, 50, size=(m, 3))
+    p[:, :, kalman.PV] = rng.uniform(-1, 1, size=(m, 3))
+    p[:, :, kalman.VV] = rng.uniform(0.1, 50, size=(m, 3))
+    dt = rng.uniform(0, 5, size=m)
+    q = np.array([4.0, 4.0, 1.0])
+    z = rng.normal(size=(m, 3)) * 100
+    r = rng.uniform(0.01, 20, size=(m, 3))
+    zv = rng.normal(size=(m, 3)) * 10
+    rv = np.repeat(rng.uniform(0.01, 5, size=(m, 1)), 3, axis=1)
+    planes_x = np.ascontiguousarray(x.transpose(2, 1, 0))
+    planes_p = np.ascontiguousarray(p.transpose(2, 1, 0))
+    if predicted:
+        planes_x[kalman.POS] += planes_x[kalman.VEL] * dt
+    kalman.predict(x, p, dt, q)
+    if with_vel:
+        kalman.update_position_velocity(x, p, z, zv, r_m2=r, rv_m2ps2=rv)
+        kalman.step(
+            planes_x, planes_p, dt, q[:, None], z.T, r.T, zv.T, rv.T, positions_predicted=predicted
+        )
+    else:
+        kalman.update_position(x, p, z, r)
+        kalman.step(planes_x, planes_p, dt, q[:, None], z.T, r.T, positions_predicted=predicted)
+    assert np.array_equal(planes_x.transpose(2, 1, 0), x)
+    assert np.array_equal(planes_p.transpose(2, 1, 0), p)
+
+
+@settings(max_examples=40, deadline=None)
+@given(m=st.integers(1, 6), with_vel=st.booleans(), seed=st.integers(0, 99))
+def test_step_row_in_python_floats_equals_step_bit_for_bit(
+    m: int, with_vel: bool, seed: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(2, 3, m)) * 100
+    p = np.stack(
+        [rng.uniform(0.1, 50, (3, m)), rng.uniform(-1, 1, (3, m)), rng.uniform(0.1, 50, (3, m))]
+    )
+    dt = rng.uniform(0, 5, size=m)
+    q = (4.0, 4.0, 1.0)
+    z = rng.normal(size=(3, m)) * 100
+    r = rng.uniform(0.01, 20, size=(3, m))
+    zv = rng.normal(size=(3, m)) * 10
+    rv = rng.uniform(0.01, 5, size=m)
+    x[kalman.POS] += x[kalman.VEL] * dt
+    rows_x = x.transpose(2, 1, 0).reshape(m, 6).tolist()
+    rows_p = p.transpose(2, 1, 0).reshape(m, 9).tolist()
+    for i in range(m):
+        if with_vel:
+            kalman.step_row(
+                rows_x[i], rows_p[i], float(dt[i]), q, z[:, i].tolist(), r[:, i].tolist(),
+                zv[:, i].tolist(), float(rv[i]),
+            )  # fmt: skip
+        else:
+            kalman.step_row(
+                rows_x[i], rows_p[i], float(dt[i]), q, z[:, i].tolist(), r[:, i].tolist()
+            )
+    kalman.step(
+        x, p, dt, np.array(q)[:, None], z, r, zv if with_vel else None,
+        np.broadcast_to(rv, (3, m)) if with_vel else None, positions_predicted=True,
+    )  # fmt: skip
+    assert np.array_equal(np.array(rows_x).reshape(m, 3, 2).transpose(2, 1, 0), x)
+    assert np.array_equal(np.array(rows_p).reshape(m, 3, 3).transpose(2, 1, 0), p)

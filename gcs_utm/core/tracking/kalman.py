@@ -14,6 +14,10 @@ Layout (struct of arrays, N rows):
 Symmetry of the covariance holds by construction (one pv entry); positive semi-definiteness
 is kept by the update formulas below (see :func:`update_position`).
 
+Planes (:func:`step`): the same rows gathered axis-major, ``x`` (2, 3, M) and ``p`` (3, 3, M), so
+that every quantity is one contiguous (3, M) array: a small batch costs one NumPy call per
+arithmetic operation, with no strided (M, 3) views (several times slower per call).
+
 Process noise: ``q`` (3,) white-acceleration variances [m^2/s^4]; for a step ``dt`` it is
 ``q * [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]`` -- filterpy's ``Q_discrete_white_noise(dim=2)``.
 """
@@ -117,6 +121,132 @@ def update_position_velocity(
     p[:, :, PP] = k11 * r_m2
     p[:, :, PV] = k12 * rv_m2ps2
     p[:, :, VV] = k22 * rv_m2ps2
+
+
+def step(  # noqa: PLR0917 (the arrays of one filter step, as the other functions)
+    x: FloatArray,
+    p: FloatArray,
+    dt_s: FloatArray,
+    q: FloatArray,
+    z_m: FloatArray,
+    r_m2: FloatArray,
+    zv_mps: FloatArray | None = None,
+    rv_m2ps2: FloatArray | None = None,
+    *,
+    positions_predicted: bool = False,
+) -> None:
+    """:func:`predict` by ``dt_s`` then :func:`update_position` (``zv_mps is None``) or
+    :func:`update_position_velocity`, in place, on planes: ``x`` (2, 3, M) positions and
+    velocities, ``p`` (3, 3, M) pp, pv, vv; ``dt_s`` (M,); ``q`` (3, 1); ``z_m``, ``r_m2``,
+    ``zv_mps``, ``rv_m2ps2`` (3, M). ``positions_predicted``: the caller already moved the
+    positions by ``vel * dt_s`` (it needed them to gate). The same operations in the same
+    order as those functions, so the results are equal bit for bit (tests check it); every
+    operand has the same shape (broadcasting costs a small batch more than the arithmetic)."""
+    pos = x[POS]
+    vel = x[VEL]
+    a = p[PP]
+    b = p[PV]
+    c = p[VV]
+    dt = np.empty_like(pos)
+    dt[...] = dt_s
+    qq = np.empty_like(pos)
+    qq[...] = q
+    # predict
+    dt2 = dt * dt
+    a = a + 2.0 * dt * b + dt2 * c + qq * (dt2 * dt2 / 4.0)
+    b = b + dt * c + qq * (dt2 * dt / 2.0)
+    c = c + qq * dt2
+    if not positions_predicted:
+        pos += vel * dt
+    if zv_mps is None:
+        s = a + r_m2
+        y = z_m - pos
+        k_vel = b / s
+        pos += a / s * y
+        vel += k_vel * y
+        rs = r_m2 / s
+        np.subtract(c, b * k_vel, out=p[VV])
+        np.multiply(a, rs, out=p[PP])
+        np.multiply(b, rs, out=p[PV])
+        return
+    assert rv_m2ps2 is not None
+    s11 = a + r_m2
+    s22 = c + rv_m2ps2
+    bb = b * b
+    det = s11 * s22 - bb
+    k11 = (a * s22 - bb) / det
+    k12 = (b * s11 - a * b) / det
+    k21 = (b * s22 - c * b) / det
+    k22 = (c * s11 - bb) / det
+    y1 = z_m - pos
+    y2 = zv_mps - vel
+    pos += k11 * y1 + k12 * y2
+    vel += k21 * y1 + k22 * y2
+    np.multiply(k11, r_m2, out=p[PP])
+    np.multiply(k12, rv_m2ps2, out=p[PV])
+    np.multiply(k22, rv_m2ps2, out=p[VV])
+
+
+def step_row(  # noqa: PLR0917 (as step)
+    x: list[float],
+    p: list[float],
+    dt: float,
+    q: tuple[float, float, float],
+    z_m: list[float],
+    r_m2: list[float],
+    zv_mps: list[float] | None = None,
+    rv_m2ps2: float = 0.0,
+) -> None:
+    """:func:`step` with ``positions_predicted=True`` for ONE row in Python floats, in place on
+    ``x`` (pos, vel per axis: 6) and ``p`` (pp, pv, vv per axis: 9), a row's ``x`` and ``p``
+    flattened. The same operations in the same order as :func:`step` (IEEE double arithmetic
+    either way), so the results are equal bit for bit (tests check it). For a few rows this
+    is cheaper than :func:`step`, whose ~50 NumPy calls cost ~1 us each whatever the size.
+    Raises ZeroDivisionError where NumPy would give inf or nan."""
+    dt2 = dt * dt
+    dt4 = dt2 * dt2 / 4.0
+    dt3 = dt2 * dt / 2.0
+    two_dt = 2.0 * dt
+    for axis in range(3):
+        i = 2 * axis
+        j = 3 * axis
+        pos = x[i]
+        vel = x[i + 1]
+        a = p[j]
+        b = p[j + 1]
+        c = p[j + 2]
+        qa = q[axis]
+        r = r_m2[axis]
+        a = a + two_dt * b + dt2 * c + qa * dt4
+        b = b + dt * c + qa * dt3
+        c = c + qa * dt2
+        if zv_mps is None:
+            s = a + r
+            y = z_m[axis] - pos
+            k_vel = b / s
+            x[i] = pos + a / s * y
+            x[i + 1] = vel + k_vel * y
+            rs = r / s
+            p[j] = a * rs
+            p[j + 1] = b * rs
+            p[j + 2] = c - b * k_vel
+            continue
+        rv = rv_m2ps2
+        s11 = a + r
+        s22 = c + rv
+        bb = b * b
+        det = s11 * s22 - bb
+        k11 = (a * s22 - bb) / det
+        k12 = (b * s11 - a * b) / det
+        k21 = (b * s22 - c * b) / det
+        k22 = (c * s11 - bb) / det
+        y1 = z_m[axis] - pos
+        y2 = zv_mps[axis] - vel
+        x[i] = pos + (k11 * y1 + k12 * y2)
+        x[i + 1] = vel + (k21 * y1 + k22 * y2)
+        p[j] = k11 * r
+        p[j + 1] = k12 * rv
+        p[j + 2] = k22 * rv
 
 
 def to_full(x: FloatArray, p: FloatArray) -> tuple[FloatArray, FloatArray]:
