@@ -290,6 +290,11 @@ class MeasurementSource(Enum):
     ADSB = "adsb"
     MQTT = "mqtt"
 
+    # Members are singletons compared by identity, so identity hashing is consistent with
+    # equality; Enum's own __hash__ is a Python-level call, and this one is hashed per
+    # measurement on the receive path (source keys in the USM and the tracking service).
+    __hash__ = object.__hash__
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Measurement:

@@ -1,4 +1,5 @@
-"""MAVLink ingest: GLOBAL_POSITION_INT datagrams through a udpin link into Measurements.
+"""MAVLink ingest: GLOBAL_POSITION_INT datagrams through a udpin link into Measurements and
+tracks.
 
 End to end (``ingest_socket``): a sender *process* offers a fixed rate (``--offered-rate``,
 default 30,000 msg/s; 0 = as fast as it can) from 4 sockets (sysids 1..250 on each: 1,000
@@ -7,13 +8,15 @@ sender paces in 1 ms slots and reports what it really sent and how fast (``sent_
 loaded box it may fall short of the offer). Reported: delivered = measurements,
 ``delivered_per_s`` = delivered / the sender's sending time, ``lost`` = sent - delivered with
 the kernel's own count of receive-buffer drops for the socket (/proc/net/udp) and the
-effective receive buffer (getsockopt). Latency: the sender paces 10,000 msg/s; latency =
-on_measurement time - receipt time stamped when the datagram was read (receipt-to-
-measurement), p99 over all messages of a run. In-process: ``_on_chunk`` on pre-encoded
-datagrams without a socket, fast path vs pymavlink for everything (``fast_decode`` false), the
-per-core decode + dispatch cost; ``ingest_inprocess_tracked`` adds the tracker
-(``Tracker.ingest`` every 3,000 measurements, 0.1 s at 30,000 msg/s): datagram to updated
-track on one core."""
+effective receive buffer (getsockopt). ``ingest_socket_tracked``: the same into tracks through
+the app's receive path (hub -> USM -> tracking service -> tracker, :class:`_Pipeline`) in this
+one process. Latency (``ingest_latency_10k``): the sender paces 10,000 msg/s; latency = end of
+the ``Tracker.ingest`` that used a measurement - its receipt time, stamped when its datagram
+was read (receipt-to-track), p99 over all messages of a run. In-process: ``_on_chunk`` on
+pre-encoded datagrams without a socket, fast path vs pymavlink for everything
+(``fast_decode`` false), the per-core decode + dispatch cost; ``ingest_inprocess_tracked``
+adds the app's receive path with a tracking step every 3,000 datagrams (0.1 s at 30,000
+msg/s): datagram to updated track on one core."""
 
 from __future__ import annotations
 
@@ -175,13 +178,23 @@ class _Pipeline:
         from gcs_utm.services.usm import Usm
 
         lat: list[float] = []
+        steady: list[float] = []
+        seen: set[tuple[object, str]] = set()
         self.lat = lat
+        self.steady_lat = steady  # without each vehicle's first measurement (its discovery)
 
         class _Timed(Tracker):
             def ingest(self, measurements: Sequence[Measurement]) -> IngestStats:
                 stats = super().ingest(measurements)
                 now = time.time()
-                lat.extend(now - m.receipt_t_s for m in measurements)
+                for m in measurements:
+                    d = now - m.receipt_t_s
+                    lat.append(d)
+                    key = (m.sys_id, m.vehicle)
+                    if key in seen:
+                        steady.append(d)
+                    else:
+                        seen.add(key)
                 return stats
 
         cfg = TrackingConfig()
@@ -267,6 +280,7 @@ class _Socket:
     updated: int  # of them, track updates (tracked runs; else = received)
     tracks: int
     lat: list[float]
+    steady_lat: list[float]
     sent: int
     send_s: float
     kernel_drops: int | None
@@ -325,8 +339,19 @@ async def _one(
     proc.join()
     sent, send_s = out.get(timeout=5.0) if not out.empty() else (0, 0.0)
     if pipe is None:
-        return _Socket(sink.n, sink.n, 0, sink.lat, sent, send_s, drops, rcvbuf, cpu_s)
-    return _Socket(pipe.n, pipe.updated, pipe.tracks, pipe.lat, sent, send_s, drops, rcvbuf, cpu_s)
+        return _Socket(sink.n, sink.n, 0, sink.lat, [], sent, send_s, drops, rcvbuf, cpu_s)
+    return _Socket(
+        pipe.n,
+        pipe.updated,
+        pipe.tracks,
+        pipe.lat,
+        pipe.steady_lat,
+        sent,
+        send_s,
+        drops,
+        rcvbuf,
+        cpu_s,
+    )
 
 
 def run(args: argparse.Namespace) -> list[dict[str, object]]:
@@ -404,18 +429,22 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
     )
     rec3["per_s"] = round(statistics.median(t_per_s), 1) if t_per_s else 0.0
     rec3["note"] = (
-        "socket -> hub -> USM -> tracking service (0.1 s cycle) -> Tracker.ingest, one process; "
+        "socket -> hub -> USM -> tracking service (ingest within tracking.ingest_delay_s) -> "
+        "Tracker.ingest, one process; "
         "per_s = track updates / the sender's sending time"
     )
     lat_p99: list[float] = []
     lat_all: list[float] = []
+    steady_p99: list[float] = []
     for _ in range(args.runs):
-        lat = asyncio.run(
+        r = asyncio.run(
             _one(int(args.rate * 2), args.vehicles, args.rate, fast, tracked=True, timed=True)
-        ).lat
-        q = statistics.quantiles(lat, n=100)
+        )
+        q = statistics.quantiles(r.lat, n=100)
         lat_p99.append(q[98] * 1000.0)
-        lat_all.append(statistics.median(lat) * 1000.0)
+        lat_all.append(statistics.median(r.lat) * 1000.0)
+        if len(r.steady_lat) >= 100:
+            steady_p99.append(statistics.quantiles(r.steady_lat, n=100)[98] * 1000.0)
     rec2 = summary(
         "ingest_latency_10k",
         int(args.rate * 2),
@@ -423,10 +452,13 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         vehicles=args.vehicles,
         rate_per_s=args.rate,
         median_latency_ms=round(statistics.median(lat_all), 4),
+        steady_p99_ms=[round(x, 3) for x in steady_p99],
     )
     rec2["note"] = (
-        "median_ms/min_ms/max_ms are the per-run p99 receipt-to-track latency: datagram read "
-        "-> hub -> USM -> tracking service -> end of the Tracker.ingest that used it"
+        "median_ms/min_ms/max_ms are the per-run p99 receipt-to-track latency over every "
+        "message: datagram read -> hub -> USM -> tracking service -> end of the Tracker.ingest "
+        "that used it; steady_p99_ms leaves out each vehicle's first message (the discovery of "
+        "1,000 new vehicles and tracks in the first 0.1 s)"
     )
     rec2["decode"] = args.decode
     return [*recs, rec1, rec3, rec2]
