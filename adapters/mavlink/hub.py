@@ -290,11 +290,15 @@ class MavlinkHub:
         return [s.info for s in self._states.values() if s.info is not None]
 
     def health(self) -> list[LinkHealth]:
+        return self._health_of(list(self._states.values()))
+
+    def _health_of(self, states: list[VehicleState]) -> list[LinkHealth]:
         t = self.clock.now_s()
+        links = self._links
         return [
-            s.health(t, self._links[s.key.link].counters.bad_frames)
-            for s in self._states.values()
-            if s.key.link in self._links
+            s.health(t, links[s.key.link].counters.bad_frames)
+            for s in states
+            if s.key.link in links
         ]
 
     def state(self, vehicle: SysId | VehicleKey) -> VehicleState:
@@ -497,10 +501,15 @@ class MavlinkHub:
             await asyncio.sleep(self.config.heartbeat_period_s)
 
     async def _health_loop(self) -> None:
+        chunk = 200  # vehicles per loop turn: a 1,000-vehicle fleet must not stall reading
         while True:
             await asyncio.sleep(self.config.health_period_s)
-            for h in self.health():
-                self.sink.on_link_health(h)
+            states = list(self._states.values())
+            for i in range(0, len(states), chunk):
+                for h in self._health_of(states[i : i + chunk]):
+                    self.sink.on_link_health(h)
+                if i + chunk < len(states):
+                    await asyncio.sleep(0)
 
     # --- protocol exchanges -----------------------------------------------------------------
     def _budget_s(self, deadline_t_s: float | None) -> float:

@@ -13,10 +13,14 @@ nothing pending the new one is dropped and counted in ``dropped``. Nothing block
 Latency: while :meth:`TrackingService.run` runs, a measurement updates its track at most
 ``ingest_delay_s`` (wall time, default 2 ms: ``tracking.ingest_delay_s``) after it arrived:
 the first measurement into an empty buffer schedules the ingest of everything that has
-arrived by then. Under load the loop is busy reading, so batches grow by themselves (the
-tracker's cost per measurement falls with the batch size). ``step`` (every
-``batch_period_s`` of clock time) ingests whatever is still pending, checks staleness and
-flushes; ``ingest_delay_s = 0`` ingests on the loop's next turn, ``None`` only on ``step``.
+arrived by then, and if the loop is still busy reading when that time has come, the next
+measurement to arrive triggers the ingest itself. Under load throughput comes first: an
+ingest starts no sooner than 4x the previous one's duration after it ended, so tracking takes
+at most about a fifth of the loop and the batches grow instead (the tracker's cost per
+measurement falls with the batch size); the delay then stretches to 4x one ingest's time.
+``step`` (every ``batch_period_s`` of clock time) ingests whatever is still pending, checks
+staleness and flushes; ``ingest_delay_s = 0`` ingests on the loop's next turn, ``None``
+only on ``step``.
 
 Reorder window: a batch is sorted by capture time before it is filtered, so measurements
 that arrive out of order within one batch (``ingest_delay_s``) are used in the right order;
@@ -31,6 +35,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from collections.abc import Awaitable, Callable, Iterable
 
 from gcs_utm.clock import Clock
@@ -47,6 +52,10 @@ from gcs_utm.model import (
 )
 
 _log = logging.getLogger(__name__)
+
+_BUSY_FACTOR = 4.0
+"""A delayed ingest starts no sooner than this many times the previous one's duration after it
+ended (see the module docstring)."""
 
 _VehicleKey = tuple[object, object, object, object, str]
 """(source, operation id, system id, ICAO address, vehicle address) of a measurement."""
@@ -71,6 +80,8 @@ class TrackingService:
             raise ValueError("ingest_delay_s must be in [0, batch_period_s]")
         self._ingest_delay_s = ingest_delay_s
         self._running = False
+        self._first_pending_s = 0.0  # loop time (monotonic) of the oldest pending measurement
+        self._next_ingest_s = 0.0  # loop time before which no delayed ingest starts
         self._ingest_handle: asyncio.TimerHandle | asyncio.Handle | None = None
         self.tracker = tracker
         self.clock = clock
@@ -111,12 +122,26 @@ class TrackingService:
             return
         self._slot[key] = len(pending)
         pending.append(m)
-        if self._ingest_handle is None and self._running and self._ingest_delay_s is not None:
+        delay = self._ingest_delay_s
+        if delay is None or not self._running:
+            return
+        if self._ingest_handle is None:
             loop = asyncio.get_running_loop()
-            if self._ingest_delay_s > 0.0:
-                self._ingest_handle = loop.call_later(self._ingest_delay_s, self._ingest_now)
+            now = loop.time()
+            self._first_pending_s = now
+            # not sooner than _BUSY_FACTOR x the last ingest's duration after it ended, so
+            # under load tracking takes at most ~1/(1 + _BUSY_FACTOR) of the loop and the
+            # batches grow instead (throughput over latency when there is no spare time)
+            wait = max(delay, self._next_ingest_s - now)
+            if wait > 0.0:
+                self._ingest_handle = loop.call_later(wait, self._ingest_now)
             else:
                 self._ingest_handle = loop.call_soon(self._ingest_now)
+        else:
+            now = time.monotonic()  # = loop.time()
+            if now - self._first_pending_s >= delay and now >= self._next_ingest_s:
+                # the loop is still busy (a long read burst): the timer cannot fire, ingest now
+                self._timed_ingest()  # (cancels the timer)
 
     def _ingest_pending(self) -> None:
         if self._ingest_handle is not None:
@@ -130,12 +155,19 @@ class TrackingService:
             self.stats["batches"] += 1
 
     def _ingest_now(self) -> None:
+        """The scheduled ingest (timer callback)."""
         self._ingest_handle = None
+        self._timed_ingest()
+
+    def _timed_ingest(self) -> None:
+        t0 = time.monotonic()
         try:
             self._ingest_pending()
         except Exception:  # a tracker bug must not stop the loop's callbacks; step() retries
             self.stats["ingest_errors"] += 1
             _log.exception("tracking ingest failed")
+        t1 = time.monotonic()
+        self._next_ingest_s = t1 + _BUSY_FACTOR * (t1 - t0)
 
     def set_operations(self, operations: Iterable[Operation]) -> None:
         self.tracker.set_operations(operations)

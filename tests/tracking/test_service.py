@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
@@ -12,9 +13,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from tracking_helpers import T0, meas, new_tracker, operation, plan_from_local
 
-from gcs_utm.clock import ManualClock
+from gcs_utm.clock import ManualClock, RealClock
+from gcs_utm.core.tracking import IngestStats
 from gcs_utm.messages import HazardReport
-from gcs_utm.model import OperationId, ThreatKind, Track, TrackId
+from gcs_utm.model import Measurement, OperationId, ThreatKind, Track, TrackId
 from gcs_utm.services.tracking import TrackingService
 
 
@@ -120,9 +122,9 @@ async def test_reordering_is_repaired_within_a_batch_and_late_ones_are_counted()
 
 
 async def test_while_running_a_measurement_updates_its_track_within_the_ingest_delay() -> None:
-    clock = ManualClock(T0)  # clock time stands still: no periodic step() after the first
+    # real time, a 10 s cycle: step() runs once at the start, then only the delay ingests
     tracker = new_tracker()
-    svc = TrackingService(tracker, clock, ingest_delay_s=0.002)
+    svc = TrackingService(tracker, RealClock(), batch_period_s=10.0, ingest_delay_s=0.002)
     task = asyncio.create_task(svc.run())
     await asyncio.sleep(0)  # the first step has run (nothing pending)
     svc.submit(meas(0, 0, 100, T0))
@@ -157,3 +159,41 @@ async def test_without_run_or_delay_measurements_wait_for_step() -> None:
 def test_ingest_delay_longer_than_the_cycle_is_refused() -> None:
     with pytest.raises(ValueError, match="ingest_delay_s"):
         TrackingService(new_tracker(), ManualClock(T0), batch_period_s=0.1, ingest_delay_s=0.5)
+
+
+async def test_a_busy_loop_ingests_inline_but_tracking_takes_at_most_a_fifth_of_it() -> None:
+    import time as _time
+
+    tracker = new_tracker()
+    svc = TrackingService(tracker, RealClock(), batch_period_s=10.0, ingest_delay_s=0.002)
+    task = asyncio.create_task(svc.run())
+    await asyncio.sleep(0)
+    svc.submit(meas(0, 0, 100, T0))
+    _time.sleep(0.003)  # the loop stays busy (a long read burst): the timer cannot fire
+    svc.submit(meas(1, 0, 100, T0 + 0.1))  # so this arrival ingests both, synchronously
+    assert svc.stats["batches"] == 1 and tracker.tracks()[TrackId("sysid:1")].updates == 2
+    # an ingest that took 10 ms: the next one waits 4 x 10 ms after it, inline or not
+    real_ingest = tracker.ingest
+
+    def slow_ingest(batch: Sequence[Measurement]) -> IngestStats:
+        _time.sleep(0.010)
+        return real_ingest(batch)
+
+    tracker.ingest = slow_ingest  # type: ignore[method-assign]
+    await asyncio.sleep(0.1)  # well past 4 x the first ingest's duration
+    svc.submit(meas(2, 0, 100, T0 + 0.2))
+    _time.sleep(0.003)
+    svc.submit(meas(3, 0, 100, T0 + 0.3))  # inline ingest (the 2nd batch takes 10 ms)
+    assert svc.stats["batches"] == 2
+    t_end = _time.monotonic()
+    svc.submit(meas(4, 0, 100, T0 + 0.4))
+    _time.sleep(0.003)
+    svc.submit(meas(5, 0, 100, T0 + 0.5))  # 3 ms >= 2 ms old, but within 4 x 10 ms: wait
+    assert svc.stats["batches"] == 2
+    while svc.stats["batches"] < 3:
+        await asyncio.sleep(0.001)
+    assert _time.monotonic() - t_end >= 0.035
+    assert tracker.tracks()[TrackId("sysid:1")].updates == 6
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
