@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import gc
 import multiprocessing as mp
 import os
 import socket
@@ -303,6 +304,7 @@ async def _one(
     from adapters.mavlink import MavlinkConfig, MavlinkHub
     from gcs_utm.clock import RealClock
 
+    gc.collect()  # every run starts from a collected heap, whatever the runs before left
     clock = RealClock()
     pipe = _Pipeline(clock, timed=timed) if tracked else None
     sink = _Sink()
