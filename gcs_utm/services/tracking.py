@@ -163,11 +163,12 @@ class TrackingService:
 
     def _timed_ingest(self) -> None:
         t0 = time.monotonic()
+        n = len(self._pending)
         try:
             self._ingest_pending()
-        except Exception:  # a tracker bug must not stop the loop's callbacks; step() retries
+        except Exception:  # a tracker bug must not stop the hub's reading (this runs inside it)
             self.stats["ingest_errors"] += 1
-            _log.exception("tracking ingest failed")
+            _log.exception("tracking ingest failed: %d measurements not used", n)
         t1 = time.monotonic()
         self._next_ingest_s = t1 + _BUSY_FACTOR * (t1 - t0)
 

@@ -197,3 +197,29 @@ async def test_a_busy_loop_ingests_inline_but_tracking_takes_at_most_a_third_of_
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
         await task
+
+
+async def test_a_failing_ingest_is_logged_and_counted_and_tracking_goes_on(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    tracker = new_tracker()
+    svc = TrackingService(tracker, RealClock(), batch_period_s=10.0, ingest_delay_s=0.0)
+    task = asyncio.create_task(svc.run())
+    await asyncio.sleep(0)
+    real_ingest = tracker.ingest
+
+    def broken(batch: Sequence[Measurement]) -> IngestStats:
+        raise RuntimeError("tracker bug")
+
+    tracker.ingest = broken  # type: ignore[method-assign]
+    svc.submit(meas(0, 0, 100, T0))
+    await asyncio.sleep(0.01)
+    assert svc.stats["ingest_errors"] == 1
+    assert "1 measurements not used" in caplog.text
+    tracker.ingest = real_ingest  # type: ignore[method-assign]
+    svc.submit(meas(1, 0, 100, T0 + 1))
+    await asyncio.sleep(0.01)
+    assert tracker.tracks()[TrackId("sysid:1")].updates == 1
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
