@@ -130,7 +130,6 @@ class _Sink:
     def __init__(self) -> None:
         self.n = 0
         self.lat: list[float] = []
-        self.updated = 0  # track updates (tracked runs only)
 
     def on_measurement(self, m: object) -> None:
         now = time.time()
@@ -356,6 +355,28 @@ async def _one(
     )
 
 
+def _socket_record(
+    name: str, args: argparse.Namespace, got: list[_Socket], cpu_key: str, **extra: object
+) -> dict[str, object]:
+    """The fields every socket run reports (median_ms etc.: the sender's sending time), plus
+    ``extra``. ``cpu_key``: this process's CPU per delivered message (socket read included),
+    load-independent, with the rate one free core would sustain at that cost."""
+    fields: dict[str, object] = {
+        "vehicles": args.vehicles,
+        "decode": args.decode,
+        "offered_per_s": args.offered_rate or "max",
+        "delivered": [r.received for r in got],
+        "lost": [r.sent - r.received for r in got],
+        "kernel_drops": [r.kernel_drops for r in got],
+        cpu_key: [round(1e6 * r.cpu_s / max(1, r.received), 2) for r in got],
+        "capacity_per_core_per_s": [round(r.received / r.cpu_s) if r.cpu_s > 0 else 0 for r in got],
+        **extra,
+    }
+    return summary(
+        name, args.messages, [r.send_s * 1000.0 for r in got], items_per_run=None, **fields
+    )
+
+
 def run(args: argparse.Namespace) -> list[dict[str, object]]:
     fast = args.decode == "fast"
     recs: list[dict[str, object]] = []
@@ -386,25 +407,15 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         for _ in range(args.runs)
     ]
     delivered_per_s = [r.received / r.send_s for r in got if r.send_s > 0]
-    rec1 = summary(
+    rec1 = _socket_record(
         "ingest_socket",
-        args.messages,
-        [r.send_s * 1000.0 for r in got],
-        items_per_run=None,
-        vehicles=args.vehicles,
-        decode=args.decode,
-        offered_per_s=args.offered_rate or "max",
+        args,
+        got,
+        "hub_cpu_us_per_msg",
         sent_per_s=[round(r.sent / r.send_s) if r.send_s > 0 else 0 for r in got],
-        delivered=[r.received for r in got],
         delivered_per_s_runs=[round(x) for x in delivered_per_s],
-        lost=[r.sent - r.received for r in got],
         lost_pct=[round(100.0 * (r.sent - r.received) / max(1, r.sent), 2) for r in got],
-        kernel_drops=[r.kernel_drops for r in got],
         rcvbuf_bytes=got[0].rcvbuf,
-        # load-independent: the hub's CPU per delivered message, socket read included, and
-        # the rate one free core would sustain at that cost
-        hub_cpu_us_per_msg=[round(1e6 * r.cpu_s / max(1, r.received), 2) for r in got],
-        capacity_per_core_per_s=[round(r.received / r.cpu_s) if r.cpu_s > 0 else 0 for r in got],
     )
     rec1["per_s"] = round(statistics.median(delivered_per_s), 1) if delivered_per_s else 0.0
     rec1["note"] = "median_ms/min_ms/max_ms: the sender's sending time per run"
@@ -413,21 +424,13 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         for _ in range(args.runs)
     ]
     t_per_s = [r.updated / r.send_s for r in tgot if r.send_s > 0]
-    rec3 = summary(
+    rec3 = _socket_record(
         "ingest_socket_tracked",
-        args.messages,
-        [r.send_s * 1000.0 for r in tgot],
-        items_per_run=None,
-        vehicles=args.vehicles,
-        decode=args.decode,
-        offered_per_s=args.offered_rate or "max",
-        delivered=[r.received for r in tgot],
+        args,
+        tgot,
+        "cpu_us_per_msg",
         track_updates=[r.updated for r in tgot],
         tracks=[r.tracks for r in tgot],
-        lost=[r.sent - r.received for r in tgot],
-        kernel_drops=[r.kernel_drops for r in tgot],
-        cpu_us_per_msg=[round(1e6 * r.cpu_s / max(1, r.received), 2) for r in tgot],
-        capacity_per_core_per_s=[round(r.received / r.cpu_s) if r.cpu_s > 0 else 0 for r in tgot],
     )
     rec3["per_s"] = round(statistics.median(t_per_s), 1) if t_per_s else 0.0
     rec3["note"] = (
