@@ -12,10 +12,12 @@ constructors here only check what would silently corrupt state (NaN, inverted ba
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import NewType
+from typing import Any, NewType
 
 import numpy as np
 import numpy.typing as npt
@@ -323,6 +325,100 @@ class Measurement:
     link: str = ""
     callsign: str = ""
     vehicle: str = ""
+
+
+SlotSetter = Callable[[Any, Any], None]
+
+
+def slot_setters(cls: type, names: tuple[str, ...]) -> tuple[SlotSetter, ...] | None:
+    """The member-descriptor setters of ``cls``'s fields ``names``, in that order, or None
+    unless ``cls`` is a slotted dataclass with exactly these fields and no ``__post_init__``.
+
+    A frozen dataclass's generated ``__init__`` writes each field by keyword through
+    ``object.__setattr__`` (about 4 us for 15 fields here). ``object.__new__(cls)`` followed
+    by these setters builds an equal object (same fields, same values; equality and hashing
+    are by fields) in about a third of that, for the few hot paths that build one object per
+    message or per row. Callers fall back to the constructor when this returns None, so a
+    changed class stays correct."""
+    slots = getattr(cls, "__slots__", None)
+    if (
+        not dataclasses.is_dataclass(cls)
+        or tuple(f.name for f in dataclasses.fields(cls)) != names
+        or slots is None
+        or set(slots) != set(names)
+        or hasattr(cls, "__post_init__")
+    ):
+        return None
+    return tuple(cls.__dict__[name].__set__ for name in names)
+
+
+_MEASUREMENT_FIELDS = (
+    "source", "capture_t_s", "receipt_t_s", "lat_deg", "lon_deg", "alt_amsl_m", "vel_ned_mps",
+    "eph_m", "epv_m", "sys_id", "icao24", "operation_id", "link", "callsign", "vehicle",
+)  # fmt: skip
+
+
+def _no_setter(obj: Any, value: Any) -> None:
+    raise AssertionError("unused: telemetry_measurement checks _M_SETTERS first")
+
+
+_M_SETTERS = slot_setters(Measurement, _MEASUREMENT_FIELDS)
+(
+    _m_source, _m_capture, _m_receipt, _m_lat, _m_lon, _m_alt, _m_vel, _m_eph, _m_epv, _m_sys,
+    _m_icao, _m_op, _m_link, _m_callsign, _m_vehicle,
+) = _M_SETTERS if _M_SETTERS is not None else (_no_setter,) * len(_MEASUREMENT_FIELDS)  # fmt: skip
+_TELEMETRY = MeasurementSource.TELEMETRY
+_new = object.__new__
+
+
+def telemetry_measurement(  # noqa: PLR0917
+    capture_t_s: float,
+    receipt_t_s: float,
+    lat_deg: float,
+    lon_deg: float,
+    alt_amsl_m: float,
+    vel_ned_mps: tuple[float, float, float] | None,
+    eph_m: float | None,
+    epv_m: float | None,
+    sys_id: SysId,
+    link: str,
+    vehicle: str,
+) -> Measurement:
+    """``Measurement(source=TELEMETRY, ...)`` with these fields and the others at their
+    defaults, built without the dataclass ``__init__`` (see :func:`slot_setters`): the
+    MAVLink receive path builds one per position report."""
+    if _M_SETTERS is None:
+        return Measurement(
+            source=_TELEMETRY,
+            capture_t_s=capture_t_s,
+            receipt_t_s=receipt_t_s,
+            lat_deg=lat_deg,
+            lon_deg=lon_deg,
+            alt_amsl_m=alt_amsl_m,
+            vel_ned_mps=vel_ned_mps,
+            eph_m=eph_m,
+            epv_m=epv_m,
+            sys_id=sys_id,
+            link=link,
+            vehicle=vehicle,
+        )
+    m: Measurement = _new(Measurement)
+    _m_source(m, _TELEMETRY)
+    _m_capture(m, capture_t_s)
+    _m_receipt(m, receipt_t_s)
+    _m_lat(m, lat_deg)
+    _m_lon(m, lon_deg)
+    _m_alt(m, alt_amsl_m)
+    _m_vel(m, vel_ned_mps)
+    _m_eph(m, eph_m)
+    _m_epv(m, epv_m)
+    _m_sys(m, sys_id)
+    _m_icao(m, None)
+    _m_op(m, None)
+    _m_link(m, link)
+    _m_callsign(m, "")
+    _m_vehicle(m, vehicle)
+    return m
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

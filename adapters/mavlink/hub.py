@@ -152,6 +152,7 @@ class _Link:
     counters: wire.ParseCounters = field(default_factory=wire.ParseCounters)
     encoder: wire.Encoder | None = None
     peers: dict[Address, float] = field(default_factory=dict)
+    fused: bool = False  # datagram link with the fast decode: position reports fused
 
 
 class _Step:
@@ -249,7 +250,9 @@ class MavlinkHub:
         while name in self._links:
             n += 1
             name = f"{base}#{n}"
-        link = _Link(name=name, transport=transport)
+        link = _Link(
+            name=name, transport=transport, fused=transport.datagram and self.config.fast_decode
+        )
         link.encoder = wire.Encoder(self.config.gcs_sys_id, self.config.gcs_comp_id)
         self._links[name] = link
         try:
@@ -320,6 +323,26 @@ class MavlinkHub:
         c.bytes += len(data)
         if self.raw_tap is not None:
             self.raw_tap(link.name, data, t)
+        if link.fused:
+            # the hot case: one position report from a vehicle already heard, in its own
+            # datagram -- straight to its state, without the generic frame objects
+            g = wire.global_position(data)
+            if g is not None:
+                sys_id, comp_id, seq, fields = g
+                st = self._states.get((link.name, addr, sys_id, comp_id))
+                if st is not None:
+                    c.frames += 1
+                    link.counters.frames += 1
+                    self._heard(link, addr, st, seq, t)
+                    reboots = st.reboots
+                    try:
+                        st.on_position(fields, t, self.sink)
+                    except Exception:  # a handler bug must not kill the link
+                        c.handler_errors += 1
+                        _log.exception("handler failed on GLOBAL_POSITION_INT")
+                    if st.reboots != reboots:
+                        self._on_reboot(st)
+                    return
         parser = link.parsers.get(addr)
         if parser is None:
             parser = link.parsers[addr] = wire.Parser(link.counters, fast=self.config.fast_decode)
@@ -358,11 +381,7 @@ class MavlinkHub:
             if mid == wire.HEARTBEAT and m.autopilot == 8:
                 return  # another GCS or a non-autopilot component: not a vehicle
             st = self._new_state(link, addr, sys_id, comp_id, t)
-        st.count_frame(seq, t)
-        if addr is not None:
-            link.peers[addr] = t
-        self._by_sysid[sys_id] = st
-        self._addr[id(st)] = addr
+        self._heard(link, addr, st, seq, t)
         handler = self._handlers.get(mid)
         reboots = st.reboots
         if handler is not None:
@@ -383,6 +402,16 @@ class MavlinkHub:
             box = self._mailbox.get(id(st))
             if box is not None:
                 box.put_nowait(m)
+
+    def _heard(
+        self, link: _Link, addr: Address | None, st: VehicleState, seq: int, t: float
+    ) -> None:
+        """A frame from ``st`` at ``addr``: link statistics, and where to reply."""
+        st.count_frame(seq, t)
+        if addr is not None:
+            link.peers[addr] = t
+        self._by_sysid[st.sys_id] = st
+        self._addr[id(st)] = addr
 
     def _new_state(
         self, link: _Link, addr: Address | None, sys_id: int, comp_id: int, t: float

@@ -24,10 +24,10 @@ from gcs_utm.messages import FlightMode, HazardReport, LinkHealth, VehicleKey, V
 from gcs_utm.model import (
     Autopilot,
     Measurement,
-    MeasurementSource,
     Position,
     ThreatKind,
     VehicleKind,
+    telemetry_measurement,
 )
 
 _log = logging.getLogger(__name__)
@@ -229,31 +229,41 @@ class VehicleState:
         return new
 
     def on_global_position(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
-        if m.lat == 0 and m.lon == 0:
+        if isinstance(m, tuple):  # the fast path's named tuple is in wire order
+            self.on_position(m, t_s, ev)
+        else:
+            self.on_position(
+                (m.time_boot_ms, m.lat, m.lon, m.alt, m.relative_alt, m.vx, m.vy, m.vz, m.hdg),
+                t_s,
+                ev,
+            )
+
+    def on_position(self, f: wire.GlobalPosition, t_s: float, ev: Events) -> None:
+        """GLOBAL_POSITION_INT, its fields in wire order: a measurement for tracking."""
+        boot_ms, lat_e7, lon_e7, alt_mm, _, vx, vy, vz, _ = f
+        if lat_e7 == 0 and lon_e7 == 0:
             return  # no estimate yet
-        boot_ms = int(m.time_boot_ms)
         self.boot_time(boot_ms, t_s)
-        lat = m.lat / 1e7
-        lon = m.lon / 1e7
-        alt = m.alt / 1000.0
+        lat = lat_e7 / 1e7
+        lon = lon_e7 / 1e7
+        alt = alt_mm / 1000.0
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
             return
         self._last_fix = (lat, lon, alt)
         offset = self.offset_s  # capture_t_s(), inline
         ev.on_measurement(
-            Measurement(
-                source=MeasurementSource.TELEMETRY,
-                capture_t_s=t_s if offset is None else offset + boot_ms / 1000.0,
-                receipt_t_s=t_s,
-                lat_deg=lat,
-                lon_deg=lon,
-                alt_amsl_m=alt,
-                vel_ned_mps=(m.vx / 100.0, m.vy / 100.0, m.vz / 100.0),
-                eph_m=self.eph_m,
-                epv_m=self.epv_m,
-                sys_id=self.sys_id,
-                link=self.key.link,
-                vehicle=self.tag,
+            telemetry_measurement(
+                t_s if offset is None else offset + boot_ms / 1000.0,
+                t_s,
+                lat,
+                lon,
+                alt,
+                (vx / 100.0, vy / 100.0, vz / 100.0),
+                self.eph_m,
+                self.epv_m,
+                self.sys_id,
+                self.key.link,
+                self.tag,
             )
         )
 

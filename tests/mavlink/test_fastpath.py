@@ -149,3 +149,165 @@ def test_signed_frames_go_through_pymavlink() -> None:
 @pytest.mark.parametrize("mid", wire.FAST_IDS)
 def test_every_fast_type_matches_dialect_size(mid: int) -> None:
     assert wire.FAST_TYPES[mid].size == mav2.mavlink_map[mid].unpacker.size
+
+
+# --- wire.global_position: the fused single-frame position path of the hub ------------------
+_GPI_FIELDS = mav2.mavlink_map[wire.GLOBAL_POSITION_INT].ordered_fieldnames
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.tuples(*[_field(t) for t in mav2.MAVLink_global_position_int_message.fieldtypes]),
+    st.integers(1, 255),
+    st.integers(0, 255),
+    st.integers(0, 255),
+)
+def test_global_position_equals_pymavlink(
+    values: tuple[Any, ...], sys_id: int, comp_id: int, seq: int
+) -> None:
+    enc = mav2.MAVLink(None, srcSystem=sys_id, srcComponent=comp_id)
+    enc.seq = seq
+    frame = bytes(mav2.MAVLink_global_position_int_message(*values).pack(enc))
+    got = wire.global_position(frame)
+    [ref] = wire.Parser(fast=False).frames(frame, datagram=True)
+    assert got is not None
+    assert got[:3] == (sys_id, comp_id, seq) == tuple(ref[1:4])
+    assert got[3] == tuple(getattr(ref.msg, n) for n in _GPI_FIELDS)
+
+
+def _with_crc(body: bytes, extra: int) -> bytes:
+    """A MAVLink 2 frame from everything but its CRC (the CRC computed here with pymavlink's
+    own x25crc)."""
+    from pymavlink.generator.mavcrc import x25crc
+
+    crc = x25crc(body[1:])
+    crc.accumulate(bytes([extra]))
+    return body + int(crc.crc).to_bytes(2, "little")
+
+
+def test_global_position_declines_what_is_not_one_plain_position_frame() -> None:
+    """None (the general parser decides and counts) for everything but exactly one unsigned
+    MAVLink 2 GLOBAL_POSITION_INT frame with a good CRC; a longer payload (a newer dialect)
+    is cut to the fields we know, as the general fast path does."""
+    enc = mav2.MAVLink(None, srcSystem=3, srcComponent=1)
+    good = _gpi(enc)
+    assert wire.global_position(good) is not None
+    bad_crc = bytearray(good)
+    bad_crc[-1] ^= 0x01
+    v1 = bytes(
+        mav1.MAVLink_global_position_int_message(1, 2, 3, 4, 5, 6, 7, 8, 9).pack(
+            mav1.MAVLink(None, srcSystem=3, srcComponent=1)
+        )
+    )
+    signed = wire.Encoder(3, 1, key=bytes(range(32))).raw(
+        "global_position_int", 5, 1, 2, 3, 4, 5, 6, 7, 8
+    )
+    other = bytes(enc.attitude_encode(1, 0.1, 0.2, 0.3, 0, 0, 0).pack(enc))
+    for data in (
+        b"",
+        good[:11],
+        good[:-1],  # cut short
+        good + b"\x00",  # a trailing byte
+        good + _gpi(enc, 2),  # two frames in one datagram
+        bytes(bad_crc),
+        v1,
+        signed,
+        other,
+    ):
+        assert wire.global_position(data) is None, data.hex()
+    extra = mav2.MAVLink_global_position_int_message.crc_extra
+    payload = mav2.MAVLink_global_position_int_message.unpacker.pack(
+        1000, 473977418, 85455939, 500000, 10000, 1, -2, 3, 7
+    )
+    longer = _with_crc(bytes([0xFD, 30, 0, 0, 9, 3, 1, 33, 0, 0]) + payload + b"\x01\x02", extra)
+    got = wire.global_position(longer)
+    assert got == (3, 1, 9, (1000, 473977418, 85455939, 500000, 10000, 1, -2, 3, 7))
+    [ref] = wire.Parser().feed_frames(longer)
+    assert tuple(ref.msg) == got[3]
+
+
+async def test_hub_fused_position_path_equals_the_general_path(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The same datagrams through a hub with the fused position path (fast decode) and one
+    without (pymavlink for everything): the same measurements, link statistics (loss,
+    duplicates, reboots), counters and vehicles -- and the fused one really skipped the
+    generic path for the position reports of vehicles it already knew."""
+    from adapters.mavlink import MavlinkConfig, MavlinkHub
+    from adapters.mavlink.vehicle import VehicleState
+    from gcs_utm.clock import ManualClock
+
+    from .conftest import Sink
+
+    a, b = ("10.0.0.1", 14550), ("10.0.0.2", 14550)
+    e1 = mav2.MAVLink(None, srcSystem=1, srcComponent=1)
+    e2 = mav2.MAVLink(None, srcSystem=1, srcComponent=1)  # same sysid, another address
+    hb = bytes(e1.heartbeat_encode(2, 12, 129, 4 << 16, 4, 3).pack(e1))
+    e1.seq = 1
+
+    def gpi(enc: Any, boot_ms: int) -> bytes:
+        frame = _gpi(enc, boot_ms)
+        enc.seq = (enc.seq + 1) % 256  # pack() alone does not count
+        return frame
+
+    seqs: list[tuple[bytes, tuple[str, int]]] = [(hb, a)]
+    for i in range(40):
+        boot = 5000 + 100 * i if i < 30 else 100 * (i - 30)  # a reboot at i = 30
+        if i in (7, 8):
+            e1.seq = (e1.seq + 3) % 256  # 3 frames lost before each
+        frame = gpi(e1, boot)
+        seqs.append((frame, a))
+        if i == 12:
+            seqs.append((frame, a))  # duplicated datagram
+        if i == 20:
+            bad = bytearray(frame)
+            bad[-1] ^= 0xFF
+            seqs.append((bytes(bad), a))
+        seqs.append((gpi(e2, 9000 + 100 * i), b))
+    seqs.append((gpi(e1, 99999) + gpi(e1, 100000), a))  # two frames, one datagram
+    no_fix = bytes(e1.global_position_int_encode(100100, 0, 0, 0, 0, 0, 0, 0, 0).pack(e1))
+    e1.seq += 1
+    seqs.append((no_fix, a))
+
+    calls = [0]
+    generic = VehicleState.on_global_position
+
+    def counted(self: VehicleState, m: Any, t_s: float, ev: Any) -> None:
+        calls[0] += 1
+        generic(self, m, t_s, ev)
+
+    monkeypatch.setattr(VehicleState, "on_global_position", counted)
+
+    async def run(fast: bool) -> tuple[Sink, MavlinkHub, int]:
+        calls[0] = 0
+        sink = Sink()
+        clock = ManualClock(1_700_000_000.0)
+        hub = MavlinkHub(MavlinkConfig(links=("udpin:127.0.0.1:0",), fast_decode=fast), clock, sink)
+        await hub.start()
+        link = next(iter(hub._links.values()))
+        # the handler table holds the function itself: point it at the counting wrapper
+        hub._handlers[wire.GLOBAL_POSITION_INT] = counted
+        for data, addr in seqs:
+            clock.advance(0.01)
+            hub._on_chunk(link, data, addr)
+        await hub.close()
+        return sink, hub, calls[0]
+
+    fused, hub_f, generic_f = await run(True)
+    plain, hub_p, generic_p = await run(False)
+    # the duplicated datagram is a measurement too (tracking drops it as a duplicate)
+    assert len(fused.measurements) == len(plain.measurements) == 2 * 40 + 1 + 2
+    assert fused.measurements == plain.measurements
+    assert hub_f.counters.snapshot() == hub_p.counters.snapshot()
+    assert hub_f.counters.bad_crc == 1 and hub_f.counters.frames == 1 + 80 + 1 + 2 + 1
+    assert len(fused.vehicles) == len(plain.vehicles) == 1
+    for key in hub_p._states:
+        sf, sp = hub_f._states[key], hub_p._states[key]
+        got = (sf.received, sf.lost, sf.duplicates, sf.reboots, sf.offset_s, sf.tag)
+        assert got == (sp.received, sp.lost, sp.duplicates, sp.reboots, sp.offset_s, sp.tag)
+    [st1] = [s for k, s in hub_f._states.items() if k[1] == a]
+    assert (st1.lost, st1.duplicates, st1.reboots) == (6, 1, 1)
+    # general path: every position report; fused: only the first from the unknown address b
+    # and the two-frame datagram
+    assert generic_p == 2 * 40 + 1 + 2 + 1
+    assert generic_f == 1 + 2

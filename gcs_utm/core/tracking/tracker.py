@@ -37,10 +37,9 @@ convergence at the origin); times in POSIX seconds.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from itertools import repeat
 from typing import Any
@@ -62,6 +61,7 @@ from gcs_utm.model import (
     SysId,
     Track,
     TrackId,
+    slot_setters,
 )
 
 FloatArray = npt.NDArray[np.float64]
@@ -907,34 +907,16 @@ class Tracker:
 
 
 # ---- building many Track objects -----------------------------------------------------------
-# ``Track`` is a frozen slotted dataclass: its generated __init__ writes each of its 15 fields
-# through ``object.__setattr__`` by keyword, about 4 us per track here (40 ms for 10,000, most
-# of a snapshot). The same slots can be written directly by their member descriptors, one
-# field at a time over all rows with ``map`` (the loop runs in C): the objects are identical
-# (same fields, same values; equality and hashing are by fields). This is only used while
-# ``Track`` is exactly what it was written for -- slotted, these fields in this order, no
-# __post_init__ and no validation in __init__ -- otherwise the plain constructor is called.
+# ``Track``'s generated __init__ costs about 4 us per track here (40 ms for 10,000, most of a
+# snapshot). Its slots are written by their member descriptors instead (see
+# ``model.slot_setters``), one field at a time over all rows with ``map`` (the loop runs in
+# C); while ``Track`` is exactly what this was written for, otherwise the plain constructor.
 _TRACK_FIELDS = (
     "id", "t_s", "lat_deg", "lon_deg", "alt_amsl_m", "east_m", "north_m", "vel_enu_mps",
     "position_sigma_m", "cooperative", "operation_id", "icao24", "stale", "updates",
     "next_waypoint",
 )  # fmt: skip
-
-
-def _slot_setters() -> tuple[Callable[[Track, Any], None], ...] | None:
-    names = tuple(f.name for f in dataclasses.fields(Track))
-    slots = getattr(Track, "__slots__", None)
-    if (
-        names != _TRACK_FIELDS
-        or slots is None
-        or set(slots) != set(names)
-        or hasattr(Track, "__post_init__")
-    ):
-        return None
-    return tuple(Track.__dict__[name].__set__ for name in names)
-
-
-_SETTERS = _slot_setters()
+_SETTERS = slot_setters(Track, _TRACK_FIELDS)
 
 
 def build_tracks(columns: dict[str, list[Any]], n: int, *, fast: bool = True) -> list[Track]:
