@@ -50,6 +50,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=3)
     p.add_argument("--rate", type=float, default=10_000.0, help="latency run send rate")
     p.add_argument(
+        "--latency-seconds",
+        type=float,
+        default=5.0,
+        help="length of each latency run (rate x seconds messages); one host hiccup of a few "
+        "ms moves the p99 of a short run",
+    )
+    p.add_argument(
         "--offered-rate",
         "--send-rate",
         dest="offered_rate",
@@ -441,10 +448,9 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
     lat_p99: list[float] = []
     lat_all: list[float] = []
     steady_p99: list[float] = []
+    n_lat = int(args.rate * args.latency_seconds)
     for _ in range(args.runs):
-        r = asyncio.run(
-            _one(int(args.rate * 2), args.vehicles, args.rate, fast, tracked=True, timed=True)
-        )
+        r = asyncio.run(_one(n_lat, args.vehicles, args.rate, fast, tracked=True, timed=True))
         q = statistics.quantiles(r.lat, n=100)
         lat_p99.append(q[98] * 1000.0)
         lat_all.append(statistics.median(r.lat) * 1000.0)
@@ -452,7 +458,7 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
             steady_p99.append(statistics.quantiles(r.steady_lat, n=100)[98] * 1000.0)
     rec2 = summary(
         "ingest_latency_10k",
-        int(args.rate * 2),
+        n_lat,
         lat_p99,
         vehicles=args.vehicles,
         rate_per_s=args.rate,

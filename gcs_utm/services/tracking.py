@@ -11,7 +11,7 @@ batch. When full, a new measurement *replaces* the pending one of the same vehic
 nothing pending the new one is dropped and counted in ``dropped``. Nothing blocks.
 
 Latency: while :meth:`TrackingService.run` runs, a measurement updates its track at most
-``ingest_delay_s`` (wall time, default 2 ms: ``tracking.ingest_delay_s``) after it arrived:
+``ingest_delay_s`` (wall time, default 1 ms: ``tracking.ingest_delay_s``) after it arrived:
 the first measurement into an empty buffer schedules the ingest of everything that has
 arrived by then, and if the loop is still busy reading when that time has come, the next
 measurement to arrive triggers the ingest itself. Under load throughput comes first: an

@@ -98,7 +98,7 @@ class TrackingConfig:
     )
     # ---- batching (the tracking service) -----------------------------------------------------
     ingest_delay_s: float = setting(
-        0.002,
+        0.001,
         "a received measurement updates its track at most this long after it arrived; "
         "measurements arriving within it are fused as one batch in capture-time order "
         "(the reorder window)",
