@@ -63,6 +63,10 @@ _VehicleKey = tuple[object, object, object, object, str]
 """(source, operation id, system id, ICAO address, vehicle address) of a measurement."""
 
 
+def _key(m: Measurement) -> _VehicleKey:
+    return (m.source, m.operation_id, m.sys_id, m.icao24, m.vehicle)
+
+
 class TrackingService:
     def __init__(
         self,
@@ -110,19 +114,10 @@ class TrackingService:
     def submit(self, m: Measurement) -> None:
         """Queue one measurement; never blocks (see the buffer policy in the module doc)."""
         self.stats["submitted"] += 1
-        key = (m.source, m.operation_id, m.sys_id, m.icao24, m.vehicle)  # _VehicleKey
         pending = self._pending
         if len(pending) >= self._max_pending:
-            slot = self._slot.get(key)
-            if slot is None:
-                self.stats["dropped"] += 1
-                if self.stats["dropped"] % 1000 == 1:
-                    _log.warning("tracking buffer full: dropped %d so far", self.stats["dropped"])
-                return
-            pending[slot] = m
-            self.stats["replaced"] += 1
+            self._replace(m)
             return
-        self._slot[key] = len(pending)
         pending.append(m)
         delay = self._ingest_delay_s
         if delay is None or not self._running:
@@ -144,6 +139,22 @@ class TrackingService:
             if now - self._first_pending_s >= delay and now >= self._next_ingest_s:
                 # the loop is still busy (a long read burst): the timer cannot fire, ingest now
                 self._timed_ingest()  # (cancels the timer)
+
+    def _replace(self, m: Measurement) -> None:
+        """The buffer is full: ``m`` replaces the pending measurement of its vehicle and
+        source (the latest one), or is dropped when that vehicle has nothing pending. The
+        vehicle -> slot map is built once per full buffer, not kept on every submit."""
+        slots = self._slot
+        if not slots:
+            slots.update({_key(p): i for i, p in enumerate(self._pending)})
+        slot = slots.get(_key(m))
+        if slot is None:
+            self.stats["dropped"] += 1
+            if self.stats["dropped"] % 1000 == 1:
+                _log.warning("tracking buffer full: dropped %d so far", self.stats["dropped"])
+            return
+        self._pending[slot] = m
+        self.stats["replaced"] += 1
 
     def _ingest_pending(self) -> None:
         if self._ingest_handle is not None:

@@ -75,6 +75,14 @@ async def test_full_buffer_keeps_the_latest_per_vehicle_and_counts_drops() -> No
     tracks = svc.tracker.tracks()
     assert set(tracks) == {TrackId("op1"), TrackId("sysid:2")}
     assert tracks[TrackId("op1")].t_s == T0 + 1
+    # after the batch the buffer starts empty: a new fill keeps its own latest-per-vehicle
+    svc.submit(meas(10, 0, 100, T0 + 2, sys_id=2))
+    svc.submit(meas(20, 0, 100, T0 + 3, sys_id=2))  # vehicle 2 twice: the later one's slot
+    svc.submit(meas(30, 0, 100, T0 + 4, sys_id=2))
+    svc.submit(meas(40, 0, 100, T0 + 5, sys_id=2))
+    svc.submit(meas(0, 0, 100, T0 + 5, sys_id=1))  # nothing pending for vehicle 1: dropped
+    assert (svc.stats["replaced"], svc.stats["dropped"]) == (3, 2)
+    assert [m.capture_t_s for m in svc._pending] == [T0 + 2, T0 + 5]
 
 
 async def test_run_is_cancel_safe_and_lands_the_pending_batch() -> None:
