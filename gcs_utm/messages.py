@@ -71,7 +71,9 @@ class VehicleStatus:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class LinkHealth:
-    """Per-vehicle link statistics."""
+    """Per-vehicle link statistics. ``vehicle`` is the ``host:port`` the vehicle was first
+    heard from (as :attr:`gcs_utm.model.Measurement.vehicle`): vehicles sharing a system id
+    on one link have a health each."""
 
     sys_id: SysId
     link: str
@@ -81,6 +83,7 @@ class LinkHealth:
     lost: int
     bad_frames: int
     reboots: int
+    vehicle: str = ""
 
     @property
     def loss_ratio(self) -> float:

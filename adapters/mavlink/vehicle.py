@@ -132,6 +132,7 @@ class VehicleState:
             lost=self.lost,
             bad_frames=bad_frames,
             reboots=self.reboots,
+            vehicle=self.tag,
         )
 
     # --- clock ----------------------------------------------------------------------------

@@ -337,7 +337,8 @@ class Usm:
         self._operators: list[OperatorPort] = []
         self._geofence_listeners: list[Callable[[Sequence[Geofence]], Awaitable[None]]] = []
         self.statuses: dict[SysId, VehicleStatus] = {}
-        self.health: dict[SysId, LinkHealth] = {}
+        # per vehicle: (system id, where it was first heard), see LinkHealth.vehicle
+        self.health: dict[tuple[SysId, str], LinkHealth] = {}
         self.threats: dict[ThreatId, Threat] = {}
         self.threat_log: list[Threat] = []
         self.recommendations: dict[RecommendationId, RecommendationRecord] = {}
@@ -432,7 +433,17 @@ class Usm:
             self.airspace.set_state(op.id, state)
 
     def on_link_health(self, h: LinkHealth) -> None:
-        self.health[h.sys_id] = h
+        self.health[(h.sys_id, h.vehicle)] = h
+
+    def health_by_sys_id(self) -> dict[SysId, LinkHealth]:
+        """One link health per system id: of the vehicles flying it, the most recently heard
+        (the one an operation naming that system id is flying now)."""
+        out: dict[SysId, LinkHealth] = {}
+        for h in self.health.values():
+            cur = out.get(h.sys_id)
+            if cur is None or h.last_heard_t_s > cur.last_heard_t_s:
+                out[h.sys_id] = h
+        return out
 
     def on_vehicle(self, v: object) -> None:
         """A newly heard vehicle: with no operation for its system id, download its mission and

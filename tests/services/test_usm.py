@@ -311,3 +311,33 @@ def test_measurements_counted_per_vehicle_and_unclaimed_system_ids_counted() -> 
     )
     airspace.add_operation(again)
     assert airspace.by_sys_id(SysId(1)) == again
+
+
+def test_link_health_kept_per_vehicle_sharing_a_system_id() -> None:
+    """Two vehicles flying system id 4 from two addresses each keep their link health; the
+    dashboard's one-per-system-id view shows the one heard last."""
+    from gcs_utm.messages import LinkHealth
+
+    usm = Usm(Airspace(), ManualClock(100.0))
+
+    def h(vehicle: str, last_heard: float, lost: int) -> LinkHealth:
+        return LinkHealth(
+            sys_id=SysId(4),
+            link="udpin:0.0.0.0:14550",
+            last_heard_t_s=last_heard,
+            rate_hz=10.0,
+            received=100,
+            lost=lost,
+            bad_frames=0,
+            reboots=0,
+            vehicle=vehicle,
+        )
+
+    usm.on_link_health(h("10.0.0.1:14550", 100.0, 0))
+    usm.on_link_health(h("10.0.0.2:14550", 101.0, 30))
+    usm.on_link_health(h("10.0.0.1:14550", 100.5, 2))  # an update, not a third vehicle
+    assert {k: v.lost for k, v in usm.health.items()} == {
+        (SysId(4), "10.0.0.1:14550"): 2,
+        (SysId(4), "10.0.0.2:14550"): 30,
+    }
+    assert usm.health_by_sys_id()[SysId(4)].vehicle == "10.0.0.2:14550"
