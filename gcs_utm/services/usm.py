@@ -276,15 +276,11 @@ class TelemetryStats:
         if self.count == 0:
             self.first_capture_t_s = t
         self.count += 1
-        if t > self.last_capture_t_s:
-            self.last_capture_t_s = t
+        self.last_capture_t_s = max(self.last_capture_t_s, t)
         delay = m.receipt_t_s - t
         self.delay_sum_s += delay
-        # comparisons, not min()/max(): this runs once per received measurement
-        if delay < self.delay_min_s:
-            self.delay_min_s = delay
-        if delay > self.delay_max_s:
-            self.delay_max_s = delay
+        self.delay_min_s = min(self.delay_min_s, delay)
+        self.delay_max_s = max(self.delay_max_s, delay)
 
     def as_dict(self, speed: float) -> dict[str, float | int]:
         span = self.last_capture_t_s - self.first_capture_t_s
