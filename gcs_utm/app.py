@@ -157,10 +157,24 @@ class Runtime:
         return tracks
 
 
+GIL_SWITCH_INTERVAL_S = 0.0005
+"""The event loop shares the interpreter with the store's writer thread, which holds the GIL
+for tens of ms when it writes a second's tracks. With Python's default switch interval (5 ms)
+the loop waited up to 5 ms at each switch: at 10,000 msg/s the receipt-to-track p99 went from
+3-7 ms to 13-24 ms with the store attached (measured side by side); 0.5 ms bounds each wait."""
+
+
+def configure_interpreter() -> None:
+    """Process-wide settings the running service needs (see GIL_SWITCH_INTERVAL_S)."""
+    if sys.getswitchinterval() > GIL_SWITCH_INTERVAL_S:
+        sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+
+
 def build_runtime(
     settings: Settings, clock: Clock, frame: LocalFrame, store: Persistence
 ) -> Runtime:
     """Build and connect the parts (no task started, no socket opened)."""
+    configure_interpreter()
     plan_history: dict[OperationId, list[FlightPlan]] = {}
     geofence_history: dict[str, Geofence] = {}
     tracker = Tracker(frame, settings.tracking)

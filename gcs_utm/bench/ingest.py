@@ -28,8 +28,10 @@ import multiprocessing as mp
 import os
 import socket
 import statistics
+import tempfile
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gcs_utm.bench.timing import summary
@@ -172,17 +174,20 @@ class _Pipeline:
     """The app's receive path as ``gcs_utm.app.build_runtime`` wires it: the hub's events go to
     the USM, which hands measurements to the tracking service, which ingests them into the
     tracker (within ``tracking.ingest_delay_s`` of arrival while its ``run`` task runs; else
-    on every ``step``) and hands the updated tracks to the track sink once a second (the
-    store, in the app; counted here). ``timed``: record each measurement's receipt-to-track
-    latency (wall time from reading its datagram to the end of the ingest that used it)."""
+    on every ``step``) and hands the updated tracks once a second to the store's writer thread
+    (a SQLite file in a temporary folder, as the app does; its GIL use competes with the
+    loop). ``timed``: record each measurement's receipt-to-track latency (wall time from
+    reading its datagram to the end of the ingest that used it). ``close()`` when done."""
 
     def __init__(self, clock: Clock, *, timed: bool = False) -> None:
+        from gcs_utm.app import Persistence, configure_interpreter
         from gcs_utm.core.tracking import IngestStats, TrackingConfig
         from gcs_utm.core.tracking.tracker import Tracker
         from gcs_utm.geo import LocalFrame
         from gcs_utm.services.airspace import Airspace
         from gcs_utm.services.tracking import TrackingService
         from gcs_utm.services.usm import Usm
+        from gcs_utm.store.writer import StoreWriter
 
         lat: list[float] = []
         steady: list[float] = []
@@ -209,6 +214,9 @@ class _Pipeline:
         self.tracker = _Timed(frame, cfg) if timed else Tracker(frame, cfg)
         self.usm = Usm(Airspace(), clock)
         self.tracks_out = 0
+        configure_interpreter()  # as build_runtime does
+        self._dir = tempfile.TemporaryDirectory(prefix="gcs-utm-bench-")
+        self.store = Persistence(StoreWriter(Path(self._dir.name) / "ingest.sqlite"))
         self.tracking = TrackingService(
             self.tracker, clock, track_sink=self._tracks, ingest_delay_s=cfg.ingest_delay_s
         )
@@ -216,6 +224,11 @@ class _Pipeline:
 
     def _tracks(self, tracks: list[Track]) -> None:
         self.tracks_out += len(tracks)
+        self.store.write_tracks(tracks)
+
+    def close(self) -> None:
+        self.store.close()
+        self._dir.cleanup()
 
     @property
     def n(self) -> int:
@@ -268,6 +281,8 @@ def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int 
             if r:  # the first run discovers the vehicles (and creates the tracks): warm-up
                 out.append((time.perf_counter() - t0) * 1000.0)
         await hub.close()
+        if pipe is not None:
+            pipe.close()
         got = sink.n if isinstance(sink, _Sink) else pipe.n if pipe is not None else 0
         if got != n * (runs + 1):
             raise RuntimeError(f"{got} measurements of {n * (runs + 1)}")
@@ -344,6 +359,8 @@ async def _one(
     drops = _kernel_drops(port)
     rcvbuf = hub.rcvbuf_bytes(link)
     await hub.close()
+    if pipe is not None:
+        pipe.close()
     proc.join()
     sent, send_s = out.get(timeout=5.0) if not out.empty() else (0, 0.0)
     if pipe is None:

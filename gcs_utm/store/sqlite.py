@@ -15,7 +15,12 @@ A :class:`Store` belongs to the thread that uses it; the asyncio side goes throu
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import json
+import operator
 import sqlite3
+import types
+import typing
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -42,6 +47,49 @@ from gcs_utm.store.schema import MIGRATIONS
 
 class StoreError(RuntimeError):
     """The database cannot be used (newer schema, corrupt document, closed store)."""
+
+
+def _flat_fields(cls: type) -> tuple[str, ...] | None:
+    """The field names of dataclass ``cls`` when each is annotated as a JSON scalar (str,
+    float, int, bool, a NewType of one, optional) or a tuple of floats, else None."""
+    scalars = (str, float, int, bool, type(None))
+
+    def flat(tp: Any) -> bool:
+        tp = getattr(tp, "__supertype__", tp)  # NewType
+        if tp in scalars:
+            return True
+        args = typing.get_args(tp)
+        if typing.get_origin(tp) is tuple:
+            return all(a is float for a in args)
+        if typing.get_origin(tp) in (types.UnionType, typing.Union):
+            return all(flat(a) for a in args)
+        return False
+
+    hints = typing.get_type_hints(cls)
+    names = tuple(f.name for f in dataclasses.fields(cls))
+    return names if all(flat(hints[n]) for n in names) else None
+
+
+_TRACK_FIELDS = _flat_fields(Track)
+_track_values = operator.attrgetter(*_TRACK_FIELDS) if _TRACK_FIELDS else None
+
+
+def track_doc(t: Track) -> str:
+    """``dumps(t)``, about three times faster: the store's writer thread writes every updated
+    track once a second, holding the GIL while it encodes. While every Track field is a JSON
+    scalar or a tuple of floats (checked on the annotations at import), ``json.dumps`` of the
+    fields writes exactly the generic codec's :func:`encode` form (a tuple is an array); a
+    value of another type at run time (a NumPy integer, say) takes the generic path."""
+    if _track_values is None or _TRACK_FIELDS is None:
+        return dumps(t)
+    try:
+        return json.dumps(
+            dict(zip(_TRACK_FIELDS, _track_values(t), strict=True)),
+            separators=(",", ":"),
+            allow_nan=True,
+        )
+    except TypeError:
+        return dumps(t)
 
 
 class Store:
@@ -245,7 +293,7 @@ class Store:
         replaces a newer latest state (history keeps everything)."""
         if not tracks:
             return
-        docs = [(t, dumps(t)) for t in tracks]
+        docs = [(t, track_doc(t)) for t in tracks]
         with self.transaction() as c:
             c.executemany(
                 "INSERT INTO tracks_latest (id, t_s, doc) VALUES (?, ?, ?) "
