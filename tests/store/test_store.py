@@ -447,3 +447,27 @@ def test_track_doc_is_the_codec_document() -> None:
         updates=np.int64(3),  # type: ignore[arg-type]
     )
     assert track_doc(odd) == dumps(odd)
+
+
+def test_write_tracks_large_batch_with_repeats_keeps_newest_latest_and_all_history(
+    tmp_path: Path,
+) -> None:
+    """One batch larger than a statement's chunk, where ids repeat out of time order: the
+    latest state is each id's newest sample, the history holds every sample (as writing them
+    one by one does)."""
+    batch = [_track(i, 100.0 + i, f"T{i % 700}") for i in range(1500)]
+    batch += [_track(9, 50.0, "T3"), _track(9, 5000.0, "T4")]  # older, then newer, again
+    with Store(tmp_path / "db.sqlite3") as store:
+        store.write_tracks(batch)
+        latest = {t.id: t.t_s for t in store.latest_tracks()}
+        assert len(latest) == 700
+        assert latest[TrackId("T3")] == 100.0 + 1403  # not the older 50.0
+        assert latest[TrackId("T4")] == 5000.0
+        assert latest[TrackId("T699")] == 100.0 + 1399
+        assert [t.t_s for t in store.track_history("T3")] == [50.0, 103.0, 803.0, 1503.0]
+        rows = store._conn.execute("SELECT COUNT(*) FROM track_history").fetchone()[0]
+        assert rows == 1502
+    with Store(tmp_path / "one.sqlite3") as one:
+        for t in batch:
+            one.write_tracks([t])
+        assert {t.id: t.t_s for t in one.latest_tracks()} == latest
