@@ -72,6 +72,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default="fast",
         help="socket runs: fast path or pymavlink for everything (fast_decode=false)",
     )
+    p.add_argument(
+        "--no-store",
+        dest="store",
+        action="store_false",
+        help="tracked runs: count the tracks instead of writing them to a SQLite store in a "
+        "temporary folder (the app writes them; its writer thread shares the CPU and the GIL)",
+    )
 
 
 def _sender(port: int, n: int, *, vehicles: int, rate: float, start: float, out: object) -> None:
@@ -179,7 +186,7 @@ class _Pipeline:
     loop). ``timed``: record each measurement's receipt-to-track latency (wall time from
     reading its datagram to the end of the ingest that used it). ``close()`` when done."""
 
-    def __init__(self, clock: Clock, *, timed: bool = False) -> None:
+    def __init__(self, clock: Clock, *, timed: bool = False, store: bool = True) -> None:
         from gcs_utm.app import Persistence, configure_interpreter
         from gcs_utm.core.tracking import IngestStats, TrackingConfig
         from gcs_utm.core.tracking.tracker import Tracker
@@ -216,7 +223,9 @@ class _Pipeline:
         self.tracks_out = 0
         configure_interpreter()  # as build_runtime does
         self._dir = tempfile.TemporaryDirectory(prefix="gcs-utm-bench-")
-        self.store = Persistence(StoreWriter(Path(self._dir.name) / "ingest.sqlite"))
+        self.store = (
+            Persistence(StoreWriter(Path(self._dir.name) / "ingest.sqlite")) if store else None
+        )
         self.tracking = TrackingService(
             self.tracker, clock, track_sink=self._tracks, ingest_delay_s=cfg.ingest_delay_s
         )
@@ -224,10 +233,12 @@ class _Pipeline:
 
     def _tracks(self, tracks: list[Track]) -> None:
         self.tracks_out += len(tracks)
-        self.store.write_tracks(tracks)
+        if self.store is not None:
+            self.store.write_tracks(tracks)
 
     def close(self) -> None:
-        self.store.close()
+        if self.store is not None:
+            self.store.close()
         self._dir.cleanup()
 
     @property
@@ -318,6 +329,7 @@ async def _one(
     *,
     tracked: bool = False,
     timed: bool = False,
+    store: bool = True,
 ) -> _Socket:
     """One socket run; ``tracked``: the hub feeds the app's receive path (:class:`_Pipeline`),
     the tracking service running its own 0.1 s cycle in this same process (datagram to
@@ -327,7 +339,7 @@ async def _one(
 
     gc.collect()  # every run starts from a collected heap, whatever the runs before left
     clock = RealClock()
-    pipe = _Pipeline(clock, timed=timed) if tracked else None
+    pipe = _Pipeline(clock, timed=timed, store=store) if tracked else None
     sink = _Sink()
     hub = MavlinkHub(
         MavlinkConfig(links=("udpin:127.0.0.1:0",), heartbeat_period_s=1.0, fast_decode=fast),
@@ -444,7 +456,16 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
     rec1["per_s"] = round(statistics.median(delivered_per_s), 1) if delivered_per_s else 0.0
     rec1["note"] = "median_ms/min_ms/max_ms: the sender's sending time per run"
     tgot: list[_Socket] = [
-        asyncio.run(_one(args.messages, args.vehicles, args.offered_rate, fast, tracked=True))
+        asyncio.run(
+            _one(
+                args.messages,
+                args.vehicles,
+                args.offered_rate,
+                fast,
+                tracked=True,
+                store=args.store,
+            )
+        )
         for _ in range(args.runs)
     ]
     t_per_s = [r.updated / r.send_s for r in tgot if r.send_s > 0]
@@ -455,6 +476,7 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         "cpu_us_per_msg",
         track_updates=[r.updated for r in tgot],
         tracks=[r.tracks for r in tgot],
+        store=args.store,
     )
     rec3["per_s"] = round(statistics.median(t_per_s), 1) if t_per_s else 0.0
     rec3["note"] = (
@@ -467,7 +489,9 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
     steady_p99: list[float] = []
     n_lat = int(args.rate * args.latency_seconds)
     for _ in range(args.runs):
-        r = asyncio.run(_one(n_lat, args.vehicles, args.rate, fast, tracked=True, timed=True))
+        r = asyncio.run(
+            _one(n_lat, args.vehicles, args.rate, fast, tracked=True, timed=True, store=args.store)
+        )
         q = statistics.quantiles(r.lat, n=100)
         lat_p99.append(q[98] * 1000.0)
         lat_all.append(statistics.median(r.lat) * 1000.0)
@@ -489,4 +513,5 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         "1,000 new vehicles and tracks in the first 0.1 s)"
     )
     rec2["decode"] = args.decode
+    rec2["store"] = args.store
     return [*recs, rec1, rec3, rec2]
