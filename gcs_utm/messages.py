@@ -67,6 +67,7 @@ class VehicleStatus:
     epv_m: float | None = None
     mission_seq: int | None = None
     mission_total: int | None = None
+    vehicle: str = ""  # where it was first heard (as LinkHealth.vehicle)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -193,6 +193,7 @@ class VehicleState:
             epv_m=self.epv_m,
             mission_seq=self.mission_seq,
             mission_total=self.mission_total,
+            vehicle=self.tag,
         )
 
     def hazard(self, kind: ThreatKind, t_s: float, message: str) -> HazardReport:

@@ -51,7 +51,7 @@ def collect(usm: Usm, tracks: Callable[[], dict[TrackId, Track]]) -> DashboardDa
         t_s=now,
         operations=tuple(sorted(usm.airspace.operations.values(), key=lambda o: o.id)),
         tracks=tracks(),
-        statuses=dict(usm.statuses),
+        statuses=usm.statuses_by_sys_id(),
         health=usm.health_by_sys_id(),
         threats=tuple(sorted(usm.threats.values(), key=lambda t: t.detected_at_s)),
         pending=tuple(sorted(usm.pending(), key=lambda r: r.deadline_t_s)),

@@ -336,7 +336,8 @@ class Usm:
         self._answer_sinks: list[Callable[[Recommendation, bool], Awaitable[None]]] = []
         self._operators: list[OperatorPort] = []
         self._geofence_listeners: list[Callable[[Sequence[Geofence]], Awaitable[None]]] = []
-        self.statuses: dict[SysId, VehicleStatus] = {}
+        # per vehicle, as health: (system id, where it was first heard)
+        self.statuses: dict[tuple[SysId, str], VehicleStatus] = {}
         # per vehicle: (system id, where it was first heard), see LinkHealth.vehicle
         self.health: dict[tuple[SysId, str], LinkHealth] = {}
         self.threats: dict[ThreatId, Threat] = {}
@@ -417,7 +418,7 @@ class Usm:
             sink(m)
 
     def on_status(self, s: VehicleStatus) -> None:
-        self.statuses[s.sys_id] = s
+        self.statuses[(s.sys_id, s.vehicle)] = s
         op = self.airspace.by_sys_id(s.sys_id)
         if op is None:
             return
@@ -434,6 +435,15 @@ class Usm:
 
     def on_link_health(self, h: LinkHealth) -> None:
         self.health[(h.sys_id, h.vehicle)] = h
+
+    def statuses_by_sys_id(self) -> dict[SysId, VehicleStatus]:
+        """One status per system id: of the vehicles flying it, the latest report."""
+        out: dict[SysId, VehicleStatus] = {}
+        for s in self.statuses.values():
+            cur = out.get(s.sys_id)
+            if cur is None or s.t_s > cur.t_s:
+                out[s.sys_id] = s
+        return out
 
     def health_by_sys_id(self) -> dict[SysId, LinkHealth]:
         """One link health per system id: of the vehicles flying it, the most recently heard

@@ -157,6 +157,7 @@ async def test_same_sysid_two_addresses_are_two_vehicles_with_unicast(env: Any) 
     assert not any(m.get_type() == "MISSION_REQUEST_LIST" for m in a.received)
     # each has its own link health, tagged with where it was first heard
     assert {h.vehicle for h in env.hub.health() if h.sys_id == 7} == {k.address for k in keys}
+    assert {s.vehicle for s in env.sink.statuses if s.sys_id == 7} == {k.address for k in keys}
     a.close()
     b.close()
 

@@ -341,3 +341,19 @@ def test_link_health_kept_per_vehicle_sharing_a_system_id() -> None:
         (SysId(4), "10.0.0.2:14550"): 30,
     }
     assert usm.health_by_sys_id()[SysId(4)].vehicle == "10.0.0.2:14550"
+
+
+def test_vehicle_status_kept_per_vehicle_sharing_a_system_id() -> None:
+    """As link health: two vehicles flying system id 4 each keep their status (mode, battery);
+    the one-per-system-id view shows the latest report."""
+    from gcs_utm.messages import VehicleStatus
+
+    usm = Usm(Airspace(), ManualClock(100.0))
+    usm.on_status(VehicleStatus(sys_id=SysId(4), t_s=100.0, battery_pct=80.0, vehicle="a:1"))
+    usm.on_status(VehicleStatus(sys_id=SysId(4), t_s=101.0, battery_pct=20.0, vehicle="b:1"))
+    usm.on_status(VehicleStatus(sys_id=SysId(4), t_s=100.5, battery_pct=79.0, vehicle="a:1"))
+    assert {k: v.battery_pct for k, v in usm.statuses.items()} == {
+        (SysId(4), "a:1"): 79.0,
+        (SysId(4), "b:1"): 20.0,
+    }
+    assert usm.statuses_by_sys_id()[SysId(4)].vehicle == "b:1"
