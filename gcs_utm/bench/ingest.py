@@ -222,9 +222,11 @@ class _Pipeline:
         self.usm = Usm(Airspace(), clock)
         self.tracks_out = 0
         configure_interpreter()  # as build_runtime does
-        self._dir = tempfile.TemporaryDirectory(prefix="gcs-utm-bench-")
+        self._dir = tempfile.TemporaryDirectory(prefix="gcs-utm-bench-") if store else None
         self.store = (
-            Persistence(StoreWriter(Path(self._dir.name) / "ingest.sqlite")) if store else None
+            Persistence(StoreWriter(Path(self._dir.name) / "ingest.sqlite"))
+            if self._dir is not None
+            else None
         )
         self.tracking = TrackingService(
             self.tracker, clock, track_sink=self._tracks, ingest_delay_s=cfg.ingest_delay_s
@@ -239,7 +241,8 @@ class _Pipeline:
     def close(self) -> None:
         if self.store is not None:
             self.store.close()
-        self._dir.cleanup()
+        if self._dir is not None:
+            self._dir.cleanup()
 
     @property
     def n(self) -> int:

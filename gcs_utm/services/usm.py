@@ -25,7 +25,7 @@ from collections import deque
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 from gcs_utm.clock import Clock
 from gcs_utm.config import setting
@@ -298,6 +298,22 @@ class TelemetryStats:
         }
 
 
+_T = TypeVar("_T")
+
+
+def _latest_per_sys_id(
+    per_vehicle: dict[tuple[SysId, str], _T], when: Callable[[_T], float]
+) -> dict[SysId, _T]:
+    """Of the entries kept per (system id, vehicle), the one with the latest ``when`` for each
+    system id."""
+    out: dict[SysId, _T] = {}
+    for (sys_id, _), item in per_vehicle.items():
+        cur = out.get(sys_id)
+        if cur is None or when(item) > when(cur):
+            out[sys_id] = item
+    return out
+
+
 @dataclass(slots=True)
 class _Source:
     """Per measurement source (kind, system id, ICAO, operation, vehicle address): its
@@ -438,22 +454,12 @@ class Usm:
 
     def statuses_by_sys_id(self) -> dict[SysId, VehicleStatus]:
         """One status per system id: of the vehicles flying it, the latest report."""
-        out: dict[SysId, VehicleStatus] = {}
-        for s in self.statuses.values():
-            cur = out.get(s.sys_id)
-            if cur is None or s.t_s > cur.t_s:
-                out[s.sys_id] = s
-        return out
+        return _latest_per_sys_id(self.statuses, lambda s: s.t_s)
 
     def health_by_sys_id(self) -> dict[SysId, LinkHealth]:
         """One link health per system id: of the vehicles flying it, the most recently heard
         (the one an operation naming that system id is flying now)."""
-        out: dict[SysId, LinkHealth] = {}
-        for h in self.health.values():
-            cur = out.get(h.sys_id)
-            if cur is None or h.last_heard_t_s > cur.last_heard_t_s:
-                out[h.sys_id] = h
-        return out
+        return _latest_per_sys_id(self.health, lambda h: h.last_heard_t_s)
 
     def on_vehicle(self, v: object) -> None:
         """A newly heard vehicle: with no operation for its system id, download its mission and
