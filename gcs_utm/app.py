@@ -232,7 +232,7 @@ def build_runtime(
         return retime_snapshot(snapshot(t_s), frame)
 
     emergency = EmergencyService(em, em_snapshot, clock, on_decision)
-    usm.attach_measurement_sink(tracking.submit)
+    usm.attach_measurement_sink(tracking.submit, tracking.submit_lane)
     usm.attach_threat_sink(emergency.submit_threats)
 
     async def answer_sink(rec: Recommendation, accepted: bool) -> None:

@@ -421,6 +421,76 @@ def telemetry_measurement(  # noqa: PLR0917
     return m
 
 
+@dataclass(frozen=True, slots=True)
+class LaneSource:
+    """Who a :class:`PositionLane` entry comes from: a telemetry source (one vehicle component
+    on one link), as a :class:`Measurement` of it would name it (``source`` TELEMETRY, no ICAO
+    address, no operation id)."""
+
+    sys_id: SysId
+    link: str
+    vehicle: str
+
+
+LANE_STRIDE = 11
+"""Numbers per :class:`PositionLane` entry: source index (an int), receipt_t_s, capture_t_s,
+lon_deg, lat_deg, alt_amsl_m, v_north, v_east, v_down (m/s), eph_m, epv_m (nan: unknown)."""
+
+
+class PositionLane:
+    """Telemetry position reports in columns, without a :class:`Measurement` object each.
+
+    The MAVLink receive path appends one entry of :data:`LANE_STRIDE` numbers per position
+    report to ``values`` (a flat list: ``values.extend(entry)`` is the whole per-report cost);
+    whoever owns the lane takes them in bursts (:meth:`take`). An entry means exactly the
+    :class:`Measurement` :meth:`measurement` gives for it: ``sources[index]``'s identity,
+    velocity present, and ``nan`` for an unknown ``eph_m``/``epv_m`` (None in a Measurement;
+    telemetry never reports nan otherwise).
+
+    ``sources`` only grows: an index stays valid for the life of the lane."""
+
+    __slots__ = ("_index", "sources", "values")
+
+    def __init__(self) -> None:
+        self.values: list[float] = []
+        self.sources: list[LaneSource] = []
+        self._index: dict[LaneSource, int] = {}
+
+    def register(self, source: LaneSource) -> int:
+        """The index of ``source`` (the same index for an equal source)."""
+        i = self._index.get(source)
+        if i is None:
+            i = self._index[source] = len(self.sources)
+            self.sources.append(source)
+        return i
+
+    def take(self) -> list[float]:
+        """The entries appended since the last take (a new list), and the lane emptied; the
+        producers' bound ``values.extend`` stays valid."""
+        out = self.values.copy()
+        self.values.clear()
+        return out
+
+    def measurement(self, values: list[float], at: int) -> Measurement:
+        """The :class:`Measurement` that the entry starting at ``values[at]`` stands for."""
+        (i, rcv, cap, lon, lat, alt, vn, ve, vd, eph, epv) = values[at : at + LANE_STRIDE]
+        src = self.sources[int(i)]
+        return Measurement(
+            source=MeasurementSource.TELEMETRY,
+            capture_t_s=cap,
+            receipt_t_s=rcv,
+            lat_deg=lat,
+            lon_deg=lon,
+            alt_amsl_m=alt,
+            vel_ned_mps=(vn, ve, vd),
+            eph_m=None if math.isnan(eph) else eph,
+            epv_m=None if math.isnan(epv) else epv,
+            sys_id=src.sys_id,
+            link=src.link,
+            vehicle=src.vehicle,
+        )
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Track:
     """The filtered state of one UAS or intruder at ``t_s``.

@@ -9,6 +9,11 @@ loop.
 Identity: a vehicle is (link, source address, sysid, compid) = :class:`VehicleKey`; API calls
 take a ``SysId`` (resolved to the most recently heard vehicle with it) or a ``VehicleKey``.
 Replies are unicast to the address the vehicle was last heard from.
+
+Positions: with a sink that offers a :class:`~gcs_utm.model.PositionLane` (the USM), each
+GLOBAL_POSITION_INT becomes one lane entry instead of a Measurement, and the lane is handed to
+the sink after every UDP read burst, every 16 reports within a long burst and after every
+stream chunk (:meth:`MavlinkHub.flush_positions`). Other sinks get Measurements.
 """
 
 from __future__ import annotations
@@ -33,12 +38,14 @@ from adapters.mavlink.vehicle import VehicleInfo, VehicleState
 from gcs_utm.clock import Clock
 from gcs_utm.messages import FlightMode, HazardReport, LinkHealth, VehicleKey, VehicleStatus
 from gcs_utm.model import (
+    LANE_STRIDE,
     Autopilot,
     Command,
     CommandKind,
     FlightPlan,
     Measurement,
     Position,
+    PositionLane,
     SysId,
     VehicleKind,
 )
@@ -85,6 +92,12 @@ _ARDUPILOT_STREAM_MSGS = (
     wire.MISSION_CURRENT,
     wire.EXTENDED_SYS_STATE,
 )
+
+
+_LANE_HANDOVER = 16 * LANE_STRIDE
+"""Lane entries are handed to the sink after each read burst, and also once this many
+numbers (16 reports) wait: a burst of 64 datagrams takes 1-3 ms to read, and tracking should
+not wait for its end (see MavlinkHub.flush_positions)."""
 
 
 class MavlinkError(RuntimeError):
@@ -194,6 +207,14 @@ class MavlinkHub:
         self.sink = sink
         self.raw_tap = raw_tap
         self.counters = HubCounters()
+        # A sink that takes positions in columns (the USM: ``position_lane`` and
+        # ``on_position_lane``) gets GLOBAL_POSITION_INT as lane entries, handed over after
+        # each read (a UDP burst, a stream chunk) instead of one Measurement call per report.
+        self._lane: PositionLane | None = getattr(sink, "position_lane", None)
+        self._lane_ready: Callable[[], None] | None = getattr(sink, "on_position_lane", None)
+        if self._lane is None or self._lane_ready is None:
+            self._lane = self._lane_ready = None
+        self._lane_values: list[float] = self._lane.values if self._lane is not None else []
         self._links: dict[str, _Link] = {}
         self._states: dict[tuple[str, Address | None, int, int], VehicleState] = {}
         self._by_sysid: dict[int, VehicleState] = {}
@@ -260,6 +281,7 @@ class MavlinkHub:
                 functools.partial(self._on_chunk, link),  # (data, addr), no Python frame
                 self.config.udp_rcvbuf_bytes,
                 self.config.udp_batch,
+                self.flush_positions,
             )
         except BaseException:
             del self._links[name]
@@ -342,6 +364,8 @@ class MavlinkHub:
                         _log.exception("handler failed on GLOBAL_POSITION_INT")
                     if st.reboots != reboots:
                         self._on_reboot(st)
+                    if len(self._lane_values) >= _LANE_HANDOVER:
+                        self.flush_positions()  # within a long burst too: latency
                     return
         parser = link.parsers.get(addr)
         if parser is None:
@@ -360,6 +384,19 @@ class MavlinkHub:
             except Exception:  # a handler bug must not kill the link
                 c.handler_errors += 1
                 _log.exception("handler failed on %s", wire.msg_name(f.msg_id))
+        if not link.transport.datagram:
+            self.flush_positions()  # (a UDP link's transport calls it after each burst)
+
+    def flush_positions(self) -> None:
+        """Hand the position reports read so far to the sink's lane (see ``__init__``); the
+        UDP transports call it after each burst of reads, stream links after each chunk."""
+        lane = self._lane
+        if lane is not None and lane.values and self._lane_ready is not None:
+            try:
+                self._lane_ready()
+            except Exception:  # a sink bug must not kill the link
+                self.counters.handler_errors += 1
+                _log.exception("position lane sink failed")
 
     def _sync_bad(self, link: _Link) -> None:
         c = self.counters
@@ -447,7 +484,7 @@ class MavlinkHub:
         if old is not None and old.key.comp_id == comp_id:
             self.counters.sysid_collisions += 1
             _log.info("sysid %d also at %s on %s (another vehicle)", sys_id, address, link.name)
-        st = VehicleState(key, self.config, t)
+        st = VehicleState(key, self.config, t, self._lane)
         self._states[(link.name, addr, sys_id, comp_id)] = st
         return st
 

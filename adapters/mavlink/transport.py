@@ -84,7 +84,15 @@ class Transport:
         self._tcp: asyncio.Transport | None = None
         self._fd = -1
 
-    async def open(self, on_chunk: OnChunk, rcvbuf: int, batch: int = 64) -> None:
+    async def open(
+        self,
+        on_chunk: OnChunk,
+        rcvbuf: int,
+        batch: int = 64,
+        on_burst: Callable[[], None] | None = None,
+    ) -> None:
+        """Start delivering chunks to ``on_chunk``; a UDP link reads up to ``batch``
+        datagrams per wake-up and then calls ``on_burst`` (when given)."""
         ep = self.endpoint
         loop = asyncio.get_running_loop()
         try:
@@ -103,7 +111,9 @@ class Transport:
                     raise
                 self.local_port = int(sock.getsockname()[1])
                 self._sock = sock
-                loop.add_reader(sock.fileno(), self._read_udp, sock, on_chunk, max(1, batch))
+                loop.add_reader(
+                    sock.fileno(), self._read_udp, sock, on_chunk, max(1, batch), on_burst
+                )
             elif ep.kind is EndpointKind.TCP:
                 peer = (ep.host, ep.port)
                 tr2, _ = await loop.create_connection(
@@ -117,19 +127,30 @@ class Transport:
         except OSError as exc:
             raise LinkError(str(ep), f"cannot open: {exc}") from exc
 
-    def _read_udp(self, sock: socket.socket, on_chunk: OnChunk, batch: int) -> None:
+    def _read_udp(
+        self,
+        sock: socket.socket,
+        on_chunk: OnChunk,
+        batch: int,
+        on_burst: Callable[[], None] | None,
+    ) -> None:
         recvfrom = sock.recvfrom
-        for _ in range(batch):
-            try:
-                data, addr = recvfrom(_MAX_DATAGRAM)
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError as exc:
-                # ICMP port unreachable after sending to a vehicle that went away: count, go on
-                self.errors[0] += 1
-                _log.debug("udp receive on %s: %s", self.endpoint, exc)
-                return
-            on_chunk(data, addr)  # (host, port) for AF_INET
+        try:
+            for _ in range(batch):
+                try:
+                    data, addr = recvfrom(_MAX_DATAGRAM)
+                except (BlockingIOError, InterruptedError):
+                    return
+                except OSError as exc:
+                    # ICMP port unreachable after sending to a vehicle that went away: count,
+                    # go on
+                    self.errors[0] += 1
+                    _log.debug("udp receive on %s: %s", self.endpoint, exc)
+                    return
+                on_chunk(data, addr)  # (host, port) for AF_INET
+        finally:
+            if on_burst is not None:
+                on_burst()
 
     def _open_serial(self, on_chunk: OnChunk) -> None:
         ep = self.endpoint

@@ -23,8 +23,10 @@ from adapters.mavlink.config import MavlinkConfig
 from gcs_utm.messages import FlightMode, HazardReport, LinkHealth, VehicleKey, VehicleStatus
 from gcs_utm.model import (
     Autopilot,
+    LaneSource,
     Measurement,
     Position,
+    PositionLane,
     ThreatKind,
     VehicleKind,
     telemetry_measurement,
@@ -32,6 +34,7 @@ from gcs_utm.model import (
 
 _log = logging.getLogger(__name__)
 
+_NAN = float("nan")
 _MIN_UNIX_S = 1.5e9  # SYSTEM_TIME before 2017 means "no GNSS time yet"
 _JAM_RE = re.compile(r"jam", re.IGNORECASE)
 _SPOOF_RE = re.compile(r"spoof", re.IGNORECASE)
@@ -62,7 +65,9 @@ class Events(Protocol):
 class VehicleState:
     """Everything we know about one vehicle component on one link."""
 
-    def __init__(self, key: VehicleKey, cfg: MavlinkConfig, t_s: float) -> None:
+    def __init__(
+        self, key: VehicleKey, cfg: MavlinkConfig, t_s: float, lane: PositionLane | None = None
+    ) -> None:
         self.key = key
         self.cfg = cfg
         self.sys_id = key.sys_id
@@ -104,6 +109,11 @@ class VehicleState:
         self._eph_bad = False
         # the last reported (lat, lon, alt AMSL); a Position is built only for a hazard report
         self._last_fix: tuple[float, float, float] | None = None
+        # positions go to ``lane`` as entries when there is one, else as Measurements
+        self._lane_put = lane.values.extend if lane is not None else None
+        self._lane_index = (
+            lane.register(LaneSource(key.sys_id, key.link, self.tag)) if lane is not None else 0
+        )
 
     # --- link statistics ------------------------------------------------------------------
     def count_frame(self, seq: int, t_s: float) -> None:
@@ -253,6 +263,21 @@ class VehicleState:
             return
         self._last_fix = (lat, lon, alt)
         offset = self.offset_s  # capture_t_s(), inline
+        put = self._lane_put
+        if put is not None:  # the same report as the Measurement below, as a lane entry
+            eph = self.eph_m
+            epv = self.epv_m
+            put(
+                (
+                    self._lane_index,
+                    t_s,
+                    t_s if offset is None else offset + boot_ms / 1000.0,
+                    lon, lat, alt, vx / 100.0, vy / 100.0, vz / 100.0,
+                    _NAN if eph is None else eph,
+                    _NAN if epv is None else epv,
+                )
+            )  # fmt: skip
+            return
         ev.on_measurement(
             telemetry_measurement(
                 t_s if offset is None else offset + boot_ms / 1000.0,

@@ -40,7 +40,7 @@ if TYPE_CHECKING:
     from collections.abc import Sequence
 
     from gcs_utm.clock import Clock
-    from gcs_utm.model import Measurement, Track
+    from gcs_utm.model import LaneSource, Measurement, Track
     from gcs_utm.services.usm import Usm
 
 NAME = "ingest"
@@ -191,6 +191,7 @@ class _Pipeline:
         from gcs_utm.core.tracking import IngestStats, TrackingConfig
         from gcs_utm.core.tracking.tracker import Tracker
         from gcs_utm.geo import LocalFrame
+        from gcs_utm.model import LANE_STRIDE
         from gcs_utm.services.airspace import Airspace
         from gcs_utm.services.tracking import TrackingService
         from gcs_utm.services.usm import Usm
@@ -202,18 +203,28 @@ class _Pipeline:
         self.lat = lat
         self.steady_lat = steady  # without each vehicle's first measurement (its discovery)
 
+        def record(now: float, receipt_t_s: float, key: tuple[object, str]) -> None:
+            d = now - receipt_t_s
+            lat.append(d)
+            if key in seen:
+                steady.append(d)
+            else:
+                seen.add(key)
+
         class _Timed(Tracker):
-            def ingest(self, measurements: Sequence[Measurement]) -> IngestStats:
-                stats = super().ingest(measurements)
+            def ingest(
+                self,
+                measurements: Sequence[Measurement],
+                lane: Sequence[float] = (),
+                lane_sources: Sequence[LaneSource] = (),
+            ) -> IngestStats:
+                stats = super().ingest(measurements, lane, lane_sources)
                 now = time.time()
                 for m in measurements:
-                    d = now - m.receipt_t_s
-                    lat.append(d)
-                    key = (m.sys_id, m.vehicle)
-                    if key in seen:
-                        steady.append(d)
-                    else:
-                        seen.add(key)
+                    record(now, m.receipt_t_s, (m.sys_id, m.vehicle))
+                for at in range(0, len(lane), LANE_STRIDE):
+                    src = lane_sources[int(lane[at])]
+                    record(now, lane[at + 1], (src.sys_id, src.vehicle))
                 return stats
 
         cfg = TrackingConfig()
@@ -231,7 +242,7 @@ class _Pipeline:
         self.tracking = TrackingService(
             self.tracker, clock, track_sink=self._tracks, ingest_delay_s=cfg.ingest_delay_s
         )
-        self.usm.attach_measurement_sink(self.tracking.submit)
+        self.usm.attach_measurement_sink(self.tracking.submit, self.tracking.submit_lane)
 
     def _tracks(self, tracks: list[Track]) -> None:
         self.tracks_out += len(tracks)
@@ -287,10 +298,16 @@ def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int 
                     on_chunk(link, f, a)
             else:
                 step = pipe.tracking.step
+                flush = hub.flush_positions
+                burst = cfg.udp_batch
                 for i, (f, a) in enumerate(zip(frames, addrs, strict=True)):
                     on_chunk(link, f, a)
+                    if (i + 1) % burst == 0:
+                        flush()  # as the UDP transport does after each burst of reads
                     if (i + 1) % tracker_batch == 0:
+                        flush()
                         await step()
+                flush()
                 await step()
             if r:  # the first run discovers the vehicles (and creates the tracks): warm-up
                 out.append((time.perf_counter() - t0) * 1000.0)
@@ -394,6 +411,13 @@ async def _one(
     )
 
 
+def _tracker_kernel() -> str:
+    """ "c" when the tracker's common round runs in its C extension, else "python"."""
+    from gcs_utm.core.tracking.tracker import round_kernel
+
+    return round_kernel()
+
+
 def _socket_record(
     name: str, args: argparse.Namespace, got: list[_Socket], cpu_key: str, **extra: object
 ) -> dict[str, object]:
@@ -403,6 +427,7 @@ def _socket_record(
     fields: dict[str, object] = {
         "vehicles": args.vehicles,
         "decode": args.decode,
+        "tracker_kernel": _tracker_kernel(),
         "offered_per_s": args.offered_rate or "max",
         "delivered": [r.received for r in got],
         "lost": [r.sent - r.received for r in got],
@@ -438,6 +463,7 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         items_per_run=args.messages,
         vehicles=args.vehicles,
         batch=3000,
+        tracker_kernel=_tracker_kernel(),
     )
     rec0["note"] = "datagram -> fast decode -> USM -> tracking service -> Tracker.ingest, one core"
     recs.append(rec0)
@@ -508,6 +534,7 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         rate_per_s=args.rate,
         median_latency_ms=round(statistics.median(lat_all), 4),
         steady_p99_ms=[round(x, 3) for x in steady_p99],
+        tracker_kernel=_tracker_kernel(),
     )
     rec2["note"] = (
         "median_ms/min_ms/max_ms are the per-run p99 receipt-to-track latency over every "

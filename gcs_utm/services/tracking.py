@@ -8,7 +8,9 @@ to a sink (the app wires it to the store's ``write_tracks``) every ``flush_perio
 Buffer policy (bounded, written down): up to ``max_pending`` measurements wait for the next
 batch. When full, a new measurement *replaces* the pending one of the same vehicle and source
 (latest wins per vehicle; the replaced one is counted in ``replaced``); if that vehicle has
-nothing pending the new one is dropped and counted in ``dropped``. Nothing blocks.
+nothing pending the new one is dropped and counted in ``dropped``. Nothing blocks. Telemetry
+positions that come as :class:`~gcs_utm.model.PositionLane` entries (:meth:`submit_lane`,
+the USM's lane sink) count towards the same limit and follow the same policy per source.
 
 Latency: while :meth:`TrackingService.run` runs, a measurement updates its track at most
 ``ingest_delay_s`` (wall time, default 1 ms: ``tracking.ingest_delay_s``) after it arrived:
@@ -38,12 +40,14 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Awaitable, Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable, Sequence
 
 from gcs_utm.clock import Clock
 from gcs_utm.core.tracking import IngestStats, Tracker
 from gcs_utm.messages import HazardReport
 from gcs_utm.model import (
+    LANE_STRIDE,
+    LaneSource,
     Measurement,
     Operation,
     Position,
@@ -98,6 +102,11 @@ class TrackingService:
         self._max_pending = max_pending
         self._pending: list[Measurement] = []
         self._slot: dict[_VehicleKey, int] = {}
+        # positions that came as PositionLane entries (submit_lane), with their sources
+        self._lane: list[float] = []
+        self._lane_n = 0
+        self._lane_slot: dict[int, int] = {}  # source index -> offset of its pending entry
+        self._lane_sources: Sequence[LaneSource] = ()
         self._last_flush_s: float | None = None
         self.stats: dict[str, int] = {
             "submitted": 0,
@@ -115,10 +124,49 @@ class TrackingService:
         """Queue one measurement; never blocks (see the buffer policy in the module doc)."""
         self.stats["submitted"] += 1
         pending = self._pending
-        if len(pending) >= self._max_pending:
+        if len(pending) + self._lane_n >= self._max_pending:
             self._replace(m)
             return
         pending.append(m)
+        self._arrived()
+
+    def submit_lane(self, values: list[float], sources: Sequence[LaneSource]) -> None:
+        """Queue position reports given as :class:`~gcs_utm.model.PositionLane` entries
+        naming ``sources`` (``values`` is not changed); the same policy as :meth:`submit`
+        for each of them."""
+        n = len(values) // LANE_STRIDE
+        self.stats["submitted"] += n
+        self._lane_sources = sources
+        room = self._max_pending - len(self._pending) - self._lane_n
+        if n <= room:
+            self._lane += values
+            self._lane_n += n
+        else:
+            take = max(room, 0)
+            self._lane += values[: take * LANE_STRIDE]
+            self._lane_n += take
+            for at in range(take * LANE_STRIDE, n * LANE_STRIDE, LANE_STRIDE):
+                self._replace_lane(values, at)
+        self._arrived()
+
+    def _replace_lane(self, values: list[float], at: int) -> None:
+        """The buffer is full: the entry at ``values[at]`` replaces the pending entry of its
+        source, or is dropped (as :meth:`_replace` does for a Measurement)."""
+        slots = self._lane_slot
+        pending = self._lane
+        if not slots:
+            slots.update({int(pending[k]): k for k in range(0, len(pending), LANE_STRIDE)})
+        k = slots.get(int(values[at]))
+        if k is None:
+            self.stats["dropped"] += 1
+            if self.stats["dropped"] % 1000 == 1:
+                _log.warning("tracking buffer full: dropped %d so far", self.stats["dropped"])
+            return
+        pending[k : k + LANE_STRIDE] = values[at : at + LANE_STRIDE]
+        self.stats["replaced"] += 1
+
+    def _arrived(self) -> None:
+        """Something was queued: schedule its ingest (see Latency in the module doc)."""
         delay = self._ingest_delay_s
         if delay is None or not self._running:
             return
@@ -161,10 +209,18 @@ class TrackingService:
             self._ingest_handle.cancel()
             self._ingest_handle = None
         batch = self._pending
+        lane = self._lane
         self._pending = []
         self._slot = {}
-        if batch:
-            self.last_ingest = self.tracker.ingest(batch)
+        self._lane = []
+        self._lane_n = 0
+        self._lane_slot = {}
+        if batch or lane:
+            self.last_ingest = (
+                self.tracker.ingest(batch, lane, self._lane_sources)
+                if lane
+                else self.tracker.ingest(batch)
+            )
             self.stats["batches"] += 1
 
     def _ingest_now(self) -> None:
@@ -174,7 +230,7 @@ class TrackingService:
 
     def _timed_ingest(self) -> None:
         t0 = time.monotonic()
-        n = len(self._pending)
+        n = len(self._pending) + self._lane_n
         try:
             self._ingest_pending()
         except Exception:  # a tracker bug must not stop the hub's reading (this runs inside it)

@@ -21,14 +21,22 @@ Ingest (:meth:`Tracker.ingest`), per batch:
    window). The result is that of ingesting the measurements one by one in capture-time
    order, bit for bit (tested). Per call cost matters as much as per measurement (the
    service ingests every few milliseconds): a batch in which every track appears once is
-   one round without sorting, and a small round of plain updates is computed in Python
-   floats (:func:`.kalman.step_row`, the same arithmetic), cheaper than ~60 NumPy calls;
+   one round without sorting, and a round of plain updates (every measurement updates its
+   track) is computed row by row -- in C (``_kalman_c.update_rows``, built with the package;
+   optional) or, without it, up to ``_SMALL_ROUND`` rows in Python floats
+   (:func:`.kalman.step_row`) -- the same arithmetic in the same order as the NumPy round, so
+   bit for bit the same (tested), and cheaper than its ~60 NumPy calls;
 3. against its track a measurement is ``out_of_order`` if older than the track's state time,
    a ``duplicate`` if a measurement of the same source with the same capture time was already
    used, ``gate`` if farther from the prediction than
    ``min(max_jump_m, gate_margin_m + max_speed_mps * dt)``. Rejections never touch the state.
    A stale track that rejected ``gate_reset_count`` measurements in a row restarts from the
    next valid one (a wrong first fix must not lock a track out forever).
+
+Position lanes (:class:`~gcs_utm.model.PositionLane`): the MAVLink receive path hands
+telemetry positions over as flat entries instead of Measurements; ``ingest(measurements,
+lane, lane_sources)`` checks and converts them together (in C, or NumPy without it) and uses
+each exactly as its Measurement would be used (tested against the Measurement path).
 
 Units: positions in the airspace's local UTM grid (east_m, north_m) and alt_amsl_m; velocities
 east/north/up in m/s on the same grid (measured NED velocities are rotated by the grid
@@ -48,11 +56,18 @@ import numpy as np
 import numpy.typing as npt
 
 from gcs_utm.core.tracking import kalman
+
+try:  # the common round in C (optional; see _kalman_c.c): the same results
+    from gcs_utm.core.tracking import _kalman_c
+except ImportError:  # pragma: no cover - built by every install with a C compiler
+    _kalman_c = None  # type: ignore[assignment]
 from gcs_utm.core.tracking.config import TrackingConfig
 from gcs_utm.core.tracking.plans import PlanTable
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
+    LANE_STRIDE,
     Icao24,
+    LaneSource,
     Measurement,
     MeasurementSource,
     Operation,
@@ -66,6 +81,13 @@ from gcs_utm.model import (
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
+
+
+def round_kernel() -> str:
+    """Where the common round and the lane checks run: "c" (the extension is built) or
+    "python" (Python floats and NumPy: the same results)."""
+    return "c" if _kalman_c is not None else "python"
+
 
 _SOURCE_INDEX = {
     MeasurementSource.TELEMETRY: 0,
@@ -179,6 +201,9 @@ class Tracker:
         self._row_of_key: dict[
             tuple[OperationId | None, SysId | None, Icao24 | None, str], int
         ] = {}
+        # PositionLane source index -> its track's row (-1: not known yet): the same as
+        # _row_of_key for the source's key, and emptied with it.
+        self._lane_row: IntArray = np.full(0, -1, dtype=np.intp)
         self._dirty: set[TrackId] = set()
         self._ops: dict[OperationId, Operation] = {}
         self._by_sys: dict[SysId, OperationId] = {}
@@ -209,6 +234,7 @@ class Tracker:
         belongs to an operation are removed, so one aircraft never shows up twice."""
         ops = list(operations)
         self._row_of_key.clear()
+        self._lane_row.fill(-1)
         self._ops = {op.id: op for op in ops}
         self._by_sys = {op.sys_id: op.id for op in ops if op.sys_id is not None}
         self._by_icao = {op.icao24: op.id for op in ops if op.icao24 is not None}
@@ -229,20 +255,27 @@ class Tracker:
             self._counters["intruders_dropped"] += int((~keep).sum())
             self._compact(keep)
 
-    def _resolve(self, m: Measurement) -> _Identity | None:
+    def _resolve(
+        self,
+        operation_id: OperationId | None,
+        sys_id: SysId | None,
+        icao24: Icao24 | None,
+        vehicle: str,
+    ) -> _Identity | None:
+        """The track identity of a measurement so named (module docstring: Association)."""
         op_id: OperationId | None = None
-        if m.operation_id is not None and m.operation_id in self._ops:
-            op_id = m.operation_id
-        elif m.sys_id is not None and m.sys_id in self._by_sys:
-            op_id = self._by_sys[m.sys_id]
-        elif m.icao24 is not None and m.icao24 in self._by_icao:
-            op_id = self._by_icao[m.icao24]
+        if operation_id is not None and operation_id in self._ops:
+            op_id = operation_id
+        elif sys_id is not None and sys_id in self._by_sys:
+            op_id = self._by_sys[sys_id]
+        elif icao24 is not None and icao24 in self._by_icao:
+            op_id = self._by_icao[icao24]
         if op_id is not None:
             return _Identity(TrackId(op_id), True, op_id, self._ops[op_id].icao24)
-        if m.icao24 is not None:
-            return _Identity(TrackId(f"icao:{m.icao24}"), False, None, m.icao24)
-        if m.sys_id is not None:
-            tid = f"sysid:{m.sys_id}@{m.vehicle}" if m.vehicle else f"sysid:{m.sys_id}"
+        if icao24 is not None:
+            return _Identity(TrackId(f"icao:{icao24}"), False, None, icao24)
+        if sys_id is not None:
+            tid = f"sysid:{sys_id}@{vehicle}" if vehicle else f"sysid:{sys_id}"
             return _Identity(TrackId(tid), False, None, None)
         return None
 
@@ -304,11 +337,23 @@ class Tracker:
         self._n = len(idx)
         self._row = {tid: i for i, tid in enumerate(self._ids)}
         self._row_of_key.clear()
+        self._lane_row.fill(-1)
         self._dirty.difference_update(removed)
 
     # ---- ingest -----------------------------------------------------------------------------
-    def ingest(self, measurements: Sequence[Measurement]) -> IngestStats:
-        """Fuse a batch of measurements into the tracks; see the module docstring."""
+    def ingest(
+        self,
+        measurements: Sequence[Measurement],
+        lane: Sequence[float] = (),
+        lane_sources: Sequence[LaneSource] = (),
+    ) -> IngestStats:
+        """Fuse a batch of measurements into the tracks; see the module docstring.
+
+        ``lane``: more of the batch as :class:`~gcs_utm.model.PositionLane` entries naming
+        ``lane_sources`` -- each is used exactly as its Measurement (``PositionLane.
+        measurement``) would be, checked and converted in NumPy instead of one by one. In a
+        batch they come after ``measurements`` (which decides only the order of equal capture
+        times of one track)."""
         cfg = self.config
         invalid = 0
         gate = 0
@@ -388,7 +433,7 @@ class Tracker:
             key = (m.operation_id, m.sys_id, m.icao24, m.vehicle)
             row = cache.get(key)
             if row is None:
-                ident = self._resolve(m)
+                ident = self._resolve(*key)
                 if ident is None:
                     if m.operation_id is not None:
                         unassociated += 1
@@ -421,13 +466,31 @@ class Tracker:
                     )
                 )  # fmt: skip
 
+        rw: IntArray | None = None
+        a: FloatArray | None = None
+        if rows:
+            rw = np.array(rows, dtype=np.intp)
+            # Field j of every record is row j of ``a`` (_NCOL, N): each quantity contiguous.
+            a = np.array(records, dtype=np.float64).reshape(len(rows), _NCOL).T.copy()
+        if lane:
+            rw_l, a_l, bad, gated_l = self._lane_records(
+                lane, lane_sources, new_tracks, new_intruders
+            )
+            invalid += bad
+            gate += gated_l
+            n_vel += len(rw_l)
+            if rw is None or a is None:
+                rw, a = rw_l, a_l
+            elif len(rw_l):
+                rw = np.concatenate((rw, rw_l))
+                a = np.concatenate((a, a_l), axis=1)
         c = {"invalid": invalid, "gate": gate, "unassociated": unassociated}
         accepted = 0
         reinit = 0
-        if rows:
-            n = len(rows)
+        if rw is not None and a is not None and len(rw):
+            n = len(rw)
             with_vel = True if n_vel == n else False if n_vel == 0 else None
-            accepted, reinit, ooo, dup, gated = self._apply(rows, records, n_before, with_vel)
+            accepted, reinit, ooo, dup, gated = self._apply(rw, a, n_before, with_vel)
             c["gate"] += gated
             c["out_of_order"] = ooo
             c["duplicate"] = dup
@@ -454,22 +517,166 @@ class Tracker:
         counters["intruders_created"] += len(new_intruders)
         return stats
 
+    def _lane_records(
+        self,
+        lane: Sequence[float],
+        sources: Sequence[LaneSource],
+        new_tracks: list[TrackId],
+        new_intruders: list[TrackId],
+    ) -> tuple[IntArray, FloatArray, int, int]:
+        """:meth:`ingest`'s per-measurement checks and records for lane entries, as its loop
+        makes them for the entries' Measurements: the same conditions in the same order (so
+        the same counts), the same arithmetic (the same records, bit for bit), tracks created
+        in order of first valid entry. In C (:mod:`._kalman_c`) when it is built, else in
+        NumPy. Returns (rows, records (_NCOL, M), invalid, gate)."""
+        fast = _kalman_c
+        if fast is not None:
+            cfg = self.config
+            k = len(lane) // LANE_STRIDE
+            a = np.empty((_NCOL, k))
+            idx = np.empty(k, dtype=np.intp)
+            m, invalid, gate = fast.lane_records(
+                lane, a, idx,
+                self._default_sigma[_SOURCE_INDEX[MeasurementSource.TELEMETRY]],
+                cfg.min_sigma_m, cfg.max_future_s, cfg.max_speed_mps**2, self._north_dir,
+                _MIN_ALT_AMSL_M, _MAX_ALT_AMSL_M,
+            )  # fmt: skip
+            if m < k:
+                a = a[:, :m].copy()
+                idx = idx[:m]
+        else:
+            idx, a, invalid, gate = self._lane_checks(lane)
+        if len(self._lane_row) < len(sources):
+            grown = np.full(max(len(sources), 2 * len(self._lane_row), 64), -1, dtype=np.intp)
+            grown[: len(self._lane_row)] = self._lane_row
+            self._lane_row = grown
+        rows = self._lane_row[idx]
+        if len(rows) and rows.min() < 0:
+            self._lane_resolve(idx[rows < 0].tolist(), sources, new_tracks, new_intruders)
+            rows = self._lane_row[idx]
+        return rows, a, invalid, gate
+
+    def _lane_checks(self, lane: Sequence[float]) -> tuple[IntArray, FloatArray, int, int]:
+        """:meth:`_lane_records` in NumPy: (source indices, records, invalid, gate)."""
+        cfg = self.config
+        # one contiguous row per field (see LANE_STRIDE)
+        v = np.array(lane, dtype=np.float64).reshape(-1, LANE_STRIDE).T.copy()
+        rcv, t, lon, lat, alt, vn, ve, vd = v[1:9]
+        sig = v[9:11]  # eph, epv; nan: unknown
+        eph_d, epv_d, vsig = self._default_sigma[_SOURCE_INDEX[MeasurementSource.TELEMETRY]]
+        max_speed2 = cfg.max_speed_mps**2
+        with np.errstate(all="ignore"):  # nan and inf fail the checks, as in ingest
+            speed2 = vn * vn + ve * ve + vd * vd
+            # The common case first: a few reductions tell that every entry passes (a nan
+            # anywhere makes its reduction nan, and the comparison false).
+            lo = v[1:6].min(axis=1).tolist()
+            hi = v[1:6].max(axis=1).tolist()
+            sig_lo = np.fmin.reduce(sig, axis=1).tolist()  # (fmin/fmax skip nan)
+            sig_hi = np.fmax.reduce(sig, axis=1).tolist()
+            all_ok = (
+                -math.inf < lo[1]
+                and hi[1] < math.inf
+                and lo[2] >= -180.0
+                and hi[2] <= 180.0
+                and lo[3] >= -90.0
+                and hi[3] <= 90.0
+                and lo[4] >= _MIN_ALT_AMSL_M
+                and hi[4] <= _MAX_ALT_AMSL_M
+                and not float(np.fmax.reduce(t - rcv)) > cfg.max_future_s  # (nan rcv: passes)
+                and not (sig_lo[0] < 0.0 or sig_lo[1] < 0.0)
+                and not (sig_hi[0] == math.inf or sig_hi[1] == math.inf)
+                and float(speed2.max()) <= max_speed2
+            )
+            if all_ok:
+                invalid = gate = 0
+                sel: IntArray | slice = slice(None)
+            else:
+                ok = (
+                    np.isfinite(t)
+                    & (lat >= -90.0)
+                    & (lat <= 90.0)
+                    & (lon >= -180.0)
+                    & (lon <= 180.0)
+                    & (alt >= _MIN_ALT_AMSL_M)
+                    & (alt <= _MAX_ALT_AMSL_M)
+                    & ~((t - rcv > cfg.max_future_s) & np.isfinite(rcv))
+                )
+                eph = np.where(np.isnan(sig[0]), eph_d, sig[0])  # unknown: the default
+                epv = np.where(np.isnan(sig[1]), epv_d, sig[1])
+                ok_sigma = np.isfinite(eph) & np.isfinite(epv) & (eph >= 0.0) & (epv >= 0.0)
+                invalid = int(np.count_nonzero(~ok)) + int(np.count_nonzero(ok & ~ok_sigma))
+                ok &= ok_sigma
+                fast = ~(speed2 <= max_speed2)
+                finite_v = np.isfinite(vn) & np.isfinite(ve) & np.isfinite(vd)
+                gate = int(np.count_nonzero(ok & fast & finite_v))
+                invalid += int(np.count_nonzero(ok & fast & ~finite_v))
+                ok &= ~fast
+                sel = np.flatnonzero(ok)
+        idx = v[0, sel].astype(np.intp)
+        m = len(idx)
+        a = np.empty((_NCOL, m))
+        a[_C_T : _C_ALT + 1] = v[2:6, sel]  # t, lon, lat, alt: the record's order
+        nd_e, nd_n = self._north_dir
+        vn = vn[sel]
+        ve = ve[sel]
+        # NED (true north/east) -> grid east/north, as ingest computes it
+        a[_C_VE] = vn * nd_e + ve * nd_n
+        a[_C_VN] = vn * nd_n - ve * nd_e
+        np.negative(vd[sel], out=a[_C_VU])
+        min_sigma = cfg.min_sigma_m
+        for k, default, first in ((0, eph_d, _C_R), (1, epv_d, _C_R + 2)):
+            if math.isnan(sig_lo[k]):  # unknown throughout: the default's variance
+                e2 = max(default, min_sigma)
+                a[first] = e2 * e2
+            else:
+                e = np.where(np.isnan(sig[k, sel]), default, sig[k, sel])
+                np.maximum(e, min_sigma, out=e)
+                np.multiply(e, e, out=a[first])
+        a[_C_R + 1] = a[_C_R]  # east and north: eph
+        a[_C_RV : _C_RV + 3] = vsig * vsig
+        a[_C_SRC] = 0.0
+        a[_C_HAS_VEL] = 1.0
+        return idx, a, invalid, gate
+
+    def _lane_resolve(
+        self,
+        unknown: list[int],
+        sources: Sequence[LaneSource],
+        new_tracks: list[TrackId],
+        new_intruders: list[TrackId],
+    ) -> None:
+        """Rows for the lane sources ``unknown`` (in order of first entry; repeats allowed),
+        as :meth:`ingest` finds them for a Measurement of the same identity."""
+        cache = self._row_of_key
+        for i in dict.fromkeys(unknown):
+            src = sources[i]
+            key = (None, src.sys_id, None, src.vehicle)
+            row = cache.get(key)
+            if row is None:
+                ident = self._resolve(*key)
+                if ident is None:  # (a system id always names a track)
+                    raise ValueError(f"lane source {i} has no identity")
+                row = self._row.get(ident.track_id)
+                if row is None:
+                    row = self._new_row(ident)
+                    (new_tracks if ident.cooperative else new_intruders).append(ident.track_id)
+                cache[key] = row
+            self._lane_row[i] = row
+
     def _apply(
-        self, rows: list[int], records: list[float], n_before: int, with_vel: bool | None
+        self, rw: IntArray, a: FloatArray, n_before: int, with_vel: bool | None
     ) -> tuple[int, int, int, int, int]:
-        """Rounds of one vectorised predict + update. Returns (accepted, reinitialised,
+        """Rounds of one vectorised predict + update of rows ``rw`` with their records ``a``
+        (_NCOL, N; lon/lat become east/north here). Returns (accepted, reinitialised,
         out_of_order, duplicate, gate). ``with_vel``: every record has a velocity (True),
         none has (False), or mixed (None)."""
-        n = len(rows)
-        # Field j of every record is row j of ``a`` (_NCOL, N): each quantity is contiguous.
-        a = np.array(records, dtype=np.float64).reshape(n, _NCOL).T.copy()
+        n = len(rw)
         self.frame.to_local_in_place(a[_C_LON], a[_C_LAT])
-        rw = np.array(rows, dtype=np.intp)
         new_rows = self._n > n_before
-        if len(set(rows)) == n:
+        if len(set(rw.tolist())) == n:
             # The common case: every track at most once, so one round in any order.
-            if not new_rows and n <= _SMALL_ROUND:
-                done = self._round_small(rw, a)
+            if not new_rows:
+                done = self._round_plain(rw, a)
                 if done is not None:
                     return done
             return self._round(rw, a, rw >= n_before if new_rows else None, with_vel)
@@ -565,6 +772,27 @@ class Tracker:
             int(dup.sum()),
             int(gate.sum()),
         )
+
+    def _round_plain(self, rw: IntArray, a: FloatArray) -> tuple[int, int, int, int, int] | None:
+        """The round of existing rows ``rw`` (each once) when every measurement updates its
+        track, as :meth:`_round_small` computes it: in C (:mod:`._kalman_c`) when it is
+        built, for any number of rows, else in Python up to ``_SMALL_ROUND`` rows. None:
+        nothing changed, :meth:`_round` decides."""
+        fast = _kalman_c
+        if fast is not None:
+            cfg = self.config
+            if not fast.update_rows(
+                rw, a, self._x, self._p, self._t, self._src_t, self._updates,
+                self._gate_fails, self._stale, self._q_row,
+                cfg.max_jump_m, cfg.gate_margin_m, cfg.max_speed_mps,
+            ):  # fmt: skip
+                return None
+            ids = self._ids
+            self._dirty.update([ids[i] for i in rw.tolist()])
+            return len(rw), 0, 0, 0, 0
+        if len(rw) <= _SMALL_ROUND:
+            return self._round_small(rw, a)
+        return None
 
     def _round_small(self, rw: IntArray, a: FloatArray) -> tuple[int, int, int, int, int] | None:
         """:meth:`_round` without new rows, in Python floats, when every measurement updates
