@@ -3,7 +3,8 @@
 Role: take measurements from the USM without blocking (:meth:`TrackingService.submit`),
 ingest them in batches on the loop, mark silent tracks stale (one COMMUNICATION_FAILURE
 :class:`HazardReport` per cooperative track each time it goes silent), and hand changed tracks
-to a sink (the app wires it to the store's ``write_tracks``) every ``flush_period_s``.
+to a sink (the app wires it to the store's ``write_tracks``) every ``flush_period_s``, 200
+per loop turn (those changed again meanwhile go with the next flush).
 
 Buffer policy (bounded, written down): up to ``max_pending`` measurements wait for the next
 batch. When full, a new measurement *replaces* the pending one of the same vehicle and source
@@ -62,6 +63,9 @@ _log = logging.getLogger(__name__)
 _BUSY_FACTOR = 2.0
 """A delayed ingest starts no sooner than this many times the previous one's duration after it
 ended (see the module docstring)."""
+
+_FLUSH_CHUNK = 200
+"""Updated tracks handed to the sink per loop turn (see :meth:`TrackingService.step`)."""
 
 _VehicleKey = tuple[object, object, object, object, str]
 """(source, operation id, system id, ICAO address, vehicle address) of a measurement."""
@@ -253,7 +257,13 @@ class TrackingService:
         for tid in self.tracker.check_stale(now_s):
             await self._raise_stale(tid, now_s)
         if self._last_flush_s is None or now_s - self._last_flush_s >= self._flush_period_s:
-            self._flush(now_s)
+            # in chunks, one per loop turn: building a thousand Track objects at once held
+            # the loop 2.5-8.6 ms (measured), which every position waiting behind it felt
+            chunks = max(1, -(-self.tracker.updated_count // _FLUSH_CHUNK))
+            for k in range(chunks):
+                if k:
+                    await asyncio.sleep(0)
+                self._flush(now_s, _FLUSH_CHUNK)
 
     async def _raise_stale(self, tid: TrackId, now_s: float) -> None:
         op = self.tracker.track_operation(tid)
@@ -284,11 +294,11 @@ class TrackingService:
             self.stats["hazard_errors"] += 1
             _log.exception("hazard callback failed for %s", tid)
 
-    def _flush(self, now_s: float) -> None:
+    def _flush(self, now_s: float, limit: int | None = None) -> None:
         self._last_flush_s = now_s
         if self._track_sink is None:
             return
-        updated = self.tracker.take_updated()
+        updated = self.tracker.take_updated(limit)
         if not updated:
             return
         try:

@@ -231,3 +231,32 @@ async def test_a_failing_ingest_is_logged_and_counted_and_tracking_goes_on(
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
         await task
+
+
+async def test_tracks_are_flushed_in_chunks_with_the_loop_free_between_them() -> None:
+    """A thousand changed tracks would hold the loop for milliseconds: the flush hands them
+    to the sink 200 per loop turn, and other callbacks run between the chunks."""
+    clock = ManualClock(T0)
+    events: list[str] = []
+    got: list[Track] = []
+
+    def sink(tracks: list[Track]) -> None:
+        events.append(f"sink {len(tracks)}")
+        got.extend(tracks)
+
+    svc = TrackingService(new_tracker(), clock, track_sink=sink, flush_period_s=1.0)
+    for i in range(450):
+        svc.submit(meas(float(i), 0, 100, T0, sys_id=i % 250 + 1, icao24=f"{i:06x}"))
+
+    async def other() -> None:
+        for _ in range(3):
+            events.append("other")
+            await asyncio.sleep(0)
+
+    task = asyncio.create_task(other())
+    await svc.step()
+    await task
+    sinks = [e for e in events if e.startswith("sink")]
+    assert sinks == ["sink 200", "sink 200", "sink 50"]
+    assert events.index("other") < events.index("sink 50")
+    assert len({t.id for t in got}) == 450

@@ -534,3 +534,22 @@ def test_take_updated_hands_each_change_once() -> None:
     assert tr.take_updated() == []
     tr.ingest([meas(1, 0, 100, T0 + 1)])
     assert [t.id for t in tr.take_updated()] == [TrackId("sysid:1")]
+
+
+def test_take_updated_in_chunks_hands_each_change_once_and_equals_the_tracks() -> None:
+    """A limited take hands over at most that many changed tracks, each equal to what
+    ``tracks()`` says of it (plans and waypoints included), and keeps the rest for later."""
+    tr = new_tracker()
+    plan = plan_from_local("op1", [(0, 0, 100, T0), (500, 0, 100, T0 + 100)])
+    tr.set_operations([operation("op1", plan, sys_id=7)])
+    tr.ingest([meas(3.0 * i, i, 100, T0 + 1, sys_id=i + 1) for i in range(45)])
+    everything = tr.tracks()
+    got: list[list[str]] = []
+    while chunk := tr.take_updated(20):
+        for t in chunk:
+            assert t == everything[t.id]
+        got.append([t.id for t in chunk])
+    assert [len(c) for c in got] == [20, 20, 5]
+    assert sorted(t for c in got for t in c) == sorted(everything)
+    assert everything[TrackId("op1")].next_waypoint is not None
+    assert tr.updated_count == 0 and tr.take_updated() == []

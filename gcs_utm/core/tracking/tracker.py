@@ -896,19 +896,25 @@ class Tracker:
         return out
 
     def _plan_state(
-        self, pos: FloatArray, t_s: FloatArray
+        self, pos: FloatArray, t_s: FloatArray, sel: IntArray | None = None
     ) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
-        """For tracks with a plan: (rows, current waypoint, distance to plan, plan time)."""
-        rows = np.flatnonzero(self._plan_row[: self._n] >= 0)
+        """For tracks with a plan: (rows, current waypoint, distance to plan, plan time).
+        ``pos`` and ``t_s`` are of every row, or with ``sel`` of rows ``sel`` only; the rows
+        returned are then positions in ``sel``."""
+        if sel is None:
+            at = rows = np.flatnonzero(self._plan_row[: self._n] >= 0)
+        else:
+            at = np.flatnonzero(self._plan_row[sel] >= 0)
+            rows = sel[at]
         if len(rows) == 0:
             empty = np.zeros(0)
-            return rows, np.zeros(0, dtype=np.intp), empty, empty
+            return at, np.zeros(0, dtype=np.intp), empty, empty
         cfg = self.config
         geom = self._geom_m[rows]
         wp, dist, tau, seg = self._plans.locate(
             self._plan_row[rows],
-            pos[rows],
-            t_s[rows],
+            pos[at],
+            t_s[at],
             geom * cfg.plan_ambiguity_factor,
             hint=self._seg_hint[rows],
             # A window answer within this distance is exact, and it is also within the
@@ -916,7 +922,7 @@ class Tracker:
             accept_m=geom * min(cfg.plan_ambiguity_factor, cfg.plan_follow_factor),
         )
         self._seg_hint[rows] = seg
-        return rows, wp, dist, tau
+        return at, wp, dist, tau
 
     @property
     def plan_searches(self) -> dict[str, int]:
@@ -931,15 +937,34 @@ class Tracker:
         self._seg_hint[:] = -1
 
     def _make_tracks(
-        self, t_s: float | None, pos: FloatArray, vel: FloatArray, pos_var: FloatArray
+        self,
+        t_s: float | None,
+        pos: FloatArray,
+        vel: FloatArray,
+        pos_var: FloatArray,
+        sel: IntArray | None = None,
     ) -> dict[TrackId, Track]:
-        """Track objects for all rows at ``t_s`` (None: each at its own state time) with
-        positions ``pos`` (N, 3), velocities ``vel`` (N, 3) and position variances
-        ``pos_var`` (N, 3). Every field is converted for all rows at once (``tolist``), then
-        the objects are built column by column (:func:`build_tracks`)."""
-        n = self._n
-        rows_t = np.full(n, t_s) if t_s is not None else self._t[:n]
-        plan_rows, wp, _, _ = self._plan_state(pos, rows_t)
+        """Track objects for all rows (or rows ``sel``) at ``t_s`` (None: each at its own
+        state time) with positions ``pos`` (N, 3), velocities ``vel`` (N, 3) and position
+        variances ``pos_var`` (N, 3) of those rows. Every field is converted for all rows at
+        once (``tolist``), then the objects are built column by column
+        (:func:`build_tracks`)."""
+        if sel is None:
+            n = self._n
+            rows_t = np.full(n, t_s) if t_s is not None else self._t[:n]
+            ids = self._ids[:n]
+            op_ids = self._op_ids[:n]
+            icao = self._icao[:n]
+            coop, stale, updates = self._coop[:n], self._stale[:n], self._updates[:n]
+        else:
+            n = len(sel)
+            rows_t = np.full(n, t_s) if t_s is not None else self._t[sel]
+            at = sel.tolist()
+            ids = [self._ids[i] for i in at]
+            op_ids = [self._op_ids[i] for i in at]
+            icao = [self._icao[i] for i in at]
+            coop, stale, updates = self._coop[sel], self._stale[sel], self._updates[sel]
+        plan_rows, wp, _, _ = self._plan_state(pos, rows_t, sel)
         if len(plan_rows) == n:
             next_wp: list[int | None] = wp.tolist()
         else:
@@ -948,7 +973,6 @@ class Tracker:
                 next_wp[row] = w
         lat, lon = self.frame.to_wgs84(pos[:, 0], pos[:, 1])
         east, north, alt = pos.T.tolist()
-        ids = self._ids[:n]
         columns: dict[str, list[Any]] = {
             "id": ids,
             "t_s": [float(t_s)] * n if t_s is not None else rows_t.tolist(),
@@ -959,11 +983,11 @@ class Tracker:
             "north_m": north,
             "vel_enu_mps": list(zip(*vel.T.tolist(), strict=True)),
             "position_sigma_m": np.sqrt(pos_var.sum(axis=1)).tolist(),
-            "cooperative": self._coop[:n].tolist(),
-            "operation_id": self._op_ids[:n],
-            "icao24": self._icao[:n],
-            "stale": self._stale[:n].tolist(),
-            "updates": self._updates[:n].tolist(),
+            "cooperative": coop.tolist(),
+            "operation_id": op_ids,
+            "icao24": icao,
+            "stale": stale.tolist(),
+            "updates": updates.tolist(),
             "next_waypoint": next_wp,
         }
         return dict(zip(ids, build_tracks(columns, n), strict=True))
@@ -978,14 +1002,33 @@ class Tracker:
             self._p[:n, :, kalman.PP].copy(),
         )
 
-    def take_updated(self) -> list[Track]:
-        """Tracks changed since the previous call (for batched store writes)."""
-        if not self._dirty:
-            return []
+    def take_updated(self, limit: int | None = None) -> list[Track]:
+        """Tracks changed since the previous call (for batched store writes): all of them,
+        or at most ``limit`` (the others stay for the next call)."""
         dirty = self._dirty
-        self._dirty = set()
-        all_tracks = self.tracks()
-        return [all_tracks[tid] for tid in dirty if tid in all_tracks]
+        if not dirty:
+            return []
+        if limit is None or len(dirty) <= limit:
+            taken: Iterable[TrackId] = dirty
+            self._dirty = set()
+        else:
+            taken = [dirty.pop() for _ in range(limit)]
+        row = self._row
+        sel = np.array(sorted(row[tid] for tid in taken if tid in row), dtype=np.intp)
+        return list(
+            self._make_tracks(
+                None,
+                self._x[sel, :, kalman.POS],
+                self._x[sel, :, kalman.VEL],
+                self._p[sel, :, kalman.PP],
+                sel,
+            ).values()
+        )
+
+    @property
+    def updated_count(self) -> int:
+        """How many tracks changed since the last :meth:`take_updated`."""
+        return len(self._dirty)
 
     def predict(self, t_s: float) -> PredictedTrajectories:
         """Predicted trajectories of all tracks (cooperative and intruders) from ``t_s``.
