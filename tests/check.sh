@@ -7,8 +7,8 @@ PY="${PYTHON:-.venv/bin/python}"
 [ -x "$PY" ] || PY=python3
 BIN="$(dirname "$PY")"
 
-echo "== ruff check"; "$BIN/ruff" check gcs_utm adapters sitl tests
-echo "== ruff format --check"; "$BIN/ruff" format --check gcs_utm adapters sitl tests
+echo "== ruff check"; "$BIN/ruff" check gcs_utm adapters sitl tests setup.py
+echo "== ruff format --check"; "$BIN/ruff" format --check gcs_utm adapters sitl tests setup.py
 echo "== mypy --strict"; "$BIN/mypy" --strict -p gcs_utm -p adapters -p sitl
 echo "== lint-imports"; "$BIN/lint-imports"
 echo "== pytest"
