@@ -1,0 +1,223 @@
+"""Real PX4 and ArduPilot SITL processes for tests (the builds in ``../shared``).
+
+The real autopilots bind fixed ports (PX4 instance i: UDP 18570+i -> 14550, 14580+i;
+ArduPilot instance i: TCP 5760+10i), so they only run inside a private network namespace:
+``tests/check.sh`` runs pytest under ``unshare --net`` with ``lo`` up, and ``tests/netns.sh``
+does the same for a single command (``bash tests/netns.sh .venv/bin/python -m pytest ...``).
+
+PX4's build tree ships its module commands (``px4-param``, ``px4-commander``, ...) as symlinks
+to ``px4``; a copy of ``../shared`` may hold them flattened into plain 3-byte files without
+execute bits, and then PX4's start script fails ("px4-param: Permission denied", "no autostart
+file found"). :func:`px4_bin_dir` therefore lays a private ``bin/`` with a copy of the binary
+and fresh symlinks; nothing in ``../shared`` is written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+SHARED = Path(os.environ.get("GCS_UTM_SHARED", REPO.parent / "shared"))
+PX4_DIR = SHARED / "px4-sitl"
+ARDUPILOT_DIR = SHARED / "ardupilot-sitl"
+
+PX4_AIRFRAMES = {"quad": (10040, "sihsim_quadx"), "plane": (10041, "sihsim_airplane")}
+ARDUPILOT_VEHICLES = {
+    "copter": ("arducopter", "+", "copter.parm"),
+    "plane": ("arduplane", "plane", "plane.parm"),
+}
+
+# PX4 SIH's default start point (SIH_LOC_LAT0/LON0/H0 in v1.15).
+PX4_DEFAULT_HOME = (45.4671160, -73.7578370, 32.34)
+# ArduPilot run.sh's default home: lat, lon, ground AMSL m, heading deg.
+ARDUPILOT_DEFAULT_HOME = (40.6597, -3.5969, 675.0, 0.0)
+
+
+def private_netns() -> bool:
+    """True when this process's network namespace has no interface but loopback (what
+    ``unshare --net`` gives): nothing else on the machine can hold the autopilots' ports."""
+    try:
+        lines = Path("/proc/self/net/dev").read_text().splitlines()[2:]
+    except OSError:
+        return False
+    names = {line.split(":", 1)[0].strip() for line in lines if ":" in line}
+    return names == {"lo"}
+
+
+def unavailable_reason(kind: str) -> str:
+    """Why a real ``kind`` ("px4" or "ardupilot") SITL cannot run here, or '' when it can."""
+    folder = PX4_DIR if kind == "px4" else ARDUPILOT_DIR
+    if not folder.is_dir():
+        return f"no real {kind} SITL: {folder} is absent (it ships in ../shared beside the clone)"
+    if not private_netns():
+        return (
+            f"real {kind} SITL binds fixed ports: run pytest in a private network namespace "
+            "(bash tests/check.sh, or bash tests/netns.sh <command>)"
+        )
+    return ""
+
+
+def px4_bin_dir(root: Path) -> Path:
+    """A private PX4 ``bin/`` under ``root`` (copied once per root): the binary, its module
+    symlinks and ``px4-alias.sh``."""
+    out = root / "px4-bin"
+    if (out / "px4").exists():
+        return out
+    out.mkdir(parents=True, exist_ok=True)
+    src = PX4_DIR / "bin"
+    shutil.copy2(src / "px4", out / "px4")
+    (out / "px4").chmod(0o755)
+    for f in src.iterdir():
+        if f.name == "px4-alias.sh":
+            shutil.copy2(f, out / f.name)
+            (out / f.name).chmod(0o644)
+        elif f.name.startswith("px4-"):
+            (out / f.name).symlink_to("px4")
+    return out
+
+
+@dataclass
+class SitlProcess:
+    """One running autopilot. ``workdir`` holds its parameters and logs."""
+
+    kind: str
+    instance: int
+    sys_id: int
+    workdir: Path
+    proc: subprocess.Popen[bytes]
+    log_paths: list[Path] = field(default_factory=list)
+
+    @property
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def log_tail(self, n_chars: int = 3000) -> str:
+        """The end of its logs, for failure messages."""
+        parts = []
+        for p in self.log_paths:
+            with contextlib.suppress(OSError):
+                parts.append(f"--- {p.name}\n{p.read_text(errors='replace')[-n_chars:]}")
+        return "\n".join(parts)
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """SIGTERM, then SIGKILL after ``timeout_s``; always reaps the process."""
+        if self.proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.proc.pid, signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait(timeout=timeout_s)
+
+
+def start_px4(
+    root: Path,
+    *,
+    instance: int = 0,
+    airframe: str = "quad",
+    home: tuple[float, float] | None = None,
+    speed: float = 1.0,
+    workdir: Path | None = None,
+) -> SitlProcess:
+    """Start PX4 SITL instance ``instance`` (MAV_SYS_ID instance+1; GCS link from UDP
+    18570+instance to 127.0.0.1:14550). ``home`` is (lat_deg, lon_deg); the ground stays at
+    SIH_LOC_H0 (32.34 m AMSL by default). ``speed`` is PX4_SIM_SPEED_FACTOR."""
+    if airframe not in PX4_AIRFRAMES:
+        raise ValueError(f"PX4 airframe must be one of {sorted(PX4_AIRFRAMES)}, got {airframe!r}")
+    autostart, model = PX4_AIRFRAMES[airframe]
+    wd = workdir or root / f"px4-{instance}"
+    wd.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ)
+    env.update(
+        PX4_SYS_AUTOSTART=str(autostart),
+        PX4_SIMULATOR="sihsim",
+        PX4_SIM_MODEL=model,
+        PX4_SIM_SPEED_FACTOR=f"{speed:g}",
+    )
+    if home is not None:
+        env["PX4_HOME_LAT"] = str(round(home[0] * 1e7))
+        env["PX4_HOME_LON"] = str(round(home[1] * 1e7))
+    out, err = wd / "out.log", wd / "err.log"
+    binary = px4_bin_dir(root) / "px4"
+    with out.open("wb") as o, err.open("wb") as e:
+        proc = subprocess.Popen(
+            [str(binary), "-i", str(instance), "-d", str(PX4_DIR / "etc")],
+            cwd=wd,
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=o,
+            stderr=e,
+            start_new_session=True,
+        )
+    return SitlProcess("px4", instance, instance + 1, wd, proc, [out, err])
+
+
+def start_ardupilot(
+    root: Path,
+    *,
+    instance: int = 0,
+    vehicle: str = "copter",
+    home: tuple[float, float, float, float] = ARDUPILOT_DEFAULT_HOME,
+    speed: float = 1.0,
+    workdir: Path | None = None,
+) -> SitlProcess:
+    """Start ArduPilot SITL instance ``instance`` (SYSID_THISMAV instance+1; MAVLink on TCP
+    5760+10*instance). It waits for a client on that port before its clock starts.
+    ``home`` is (lat_deg, lon_deg, ground_amsl_m, heading_deg)."""
+    if vehicle not in ARDUPILOT_VEHICLES:
+        raise ValueError(
+            f"ArduPilot vehicle must be one of {sorted(ARDUPILOT_VEHICLES)}, got {vehicle!r}"
+        )
+    binary, model, parm = ARDUPILOT_VEHICLES[vehicle]
+    wd = workdir or root / f"ardupilot-{instance}"
+    wd.mkdir(parents=True, exist_ok=True)
+    log = wd / "out.log"
+    home_text = ",".join(f"{v:g}" for v in home)
+    with log.open("wb") as o:
+        proc = subprocess.Popen(
+            [
+                str(ARDUPILOT_DIR / "bin" / binary),
+                "--model",
+                model,
+                "--speedup",
+                f"{speed:g}",
+                "--defaults",
+                str(ARDUPILOT_DIR / parm),
+                "--home",
+                home_text,
+                "-I",
+                str(instance),
+                "--sysid",
+                str(instance + 1),
+            ],
+            cwd=wd,
+            stdin=subprocess.DEVNULL,
+            stdout=o,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+    return SitlProcess("ardupilot", instance, instance + 1, wd, proc, [log])
+
+
+def wait_tcp_listening(port: int, timeout_s: float = 20.0) -> None:
+    """Block until something listens on 127.0.0.1:``port`` (ArduPilot's SERIAL0), without
+    connecting: a connect would take SITL's single client slot."""
+    deadline = time.monotonic() + timeout_s
+    hex_port = f":{port:04X}"
+    while time.monotonic() < deadline:
+        with contextlib.suppress(OSError):
+            for line in Path("/proc/net/tcp").read_text().splitlines()[1:]:
+                cols = line.split()
+                if cols[1].endswith(hex_port) and cols[3] == "0A":  # 0A: LISTEN
+                    return
+        time.sleep(0.05)
+    raise TimeoutError(f"nothing listens on TCP {port} after {timeout_s} s")
