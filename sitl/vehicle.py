@@ -31,7 +31,7 @@ from sitl.spec import (
     FaultKind,
     FaultSpec,
     MissionItemSpec,
-    SimTime,
+    SimClock,
     VehicleSpec,
 )
 
@@ -320,7 +320,7 @@ class _FaultState:
 class Vehicle:
     """A PX4-like (or ArduPilot-like) vehicle. Read-only state is exposed for tests/reports."""
 
-    def __init__(self, spec: VehicleSpec, sim_time: SimTime, *, t0_elapsed_s: float = 0.0) -> None:
+    def __init__(self, spec: VehicleSpec, sim_time: SimClock, *, t0_elapsed_s: float = 0.0) -> None:
         self.spec = spec
         self._clock = sim_time
         self._t0 = t0_elapsed_s

@@ -23,7 +23,6 @@ import contextlib
 import functools
 import logging
 import math
-import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -51,6 +50,13 @@ from gcs_utm.model import (
 )
 
 _log = logging.getLogger(__name__)
+
+
+def _loop_time() -> float:
+    """The running loop's time: exchange timeouts are counted in the units the loop waits in
+    (``time.monotonic()`` on an ordinary loop; simulated seconds on a fast-time loop)."""
+    return asyncio.get_running_loop().time()
+
 
 RawTap = Callable[[str, bytes, float], None]
 
@@ -625,7 +631,7 @@ class MavlinkHub:
         ``start_index`` is the plan waypoint flown first (flagged current); the vertical speeds
         let a climb on the spot keep the plan's time (see :func:`plan_to_mission_items`).
         Never raises for vehicle behaviour: failures are in the result."""
-        t0 = time.monotonic()
+        t0 = _loop_time()
         try:
             st = self.state(sys_id)
         except MavlinkError as exc:
@@ -656,7 +662,7 @@ class MavlinkHub:
         _t0: float | None = None,
     ) -> UploadResult:
         """Upload raw mission items (see :meth:`upload_plan`)."""
-        t0 = time.monotonic() if _t0 is None else _t0
+        t0 = _loop_time() if _t0 is None else _t0
         attempts = 0
         try:
             st = self.state(vehicle)
@@ -687,7 +693,7 @@ class MavlinkHub:
                 verified=False,
                 attempts=attempts,
                 items=len(items),
-                duration_s=time.monotonic() - t0,
+                duration_s=_loop_time() - t0,
                 error=str(exc),
             )
         except MavlinkError as exc:
@@ -696,7 +702,7 @@ class MavlinkHub:
                 verified=False,
                 attempts=attempts,
                 items=len(items),
-                duration_s=time.monotonic() - t0,
+                duration_s=_loop_time() - t0,
                 error=str(exc),
             )
         self.counters.uploads_verified += 1
@@ -710,7 +716,7 @@ class MavlinkHub:
             verified=True,
             attempts=attempts,
             items=len(items),
-            duration_s=time.monotonic() - t0,
+            duration_s=_loop_time() - t0,
             error=err,
             current_set=current_set,
             mode_set=mode_set,
@@ -719,7 +725,7 @@ class MavlinkHub:
     def _check(self, st: VehicleState, reboots: int, end: float) -> None:
         if st.reboots != reboots:
             raise _TransferError("vehicle rebooted during the transfer")
-        if time.monotonic() >= end:
+        if _loop_time() >= end:
             raise _TransferError("deadline passed")
 
     def _cancel(self, st: VehicleState) -> None:
@@ -755,7 +761,7 @@ class MavlinkHub:
         step = _Step(self.config)
         attempts = 1
         self._to(st, enc.mission_count(ts, tc, n))
-        sent_t = time.monotonic()
+        sent_t = _loop_time()
         highest = -1  # highest item the vehicle has requested
         sent_hi = -1  # highest item we have sent (asked for or sent ahead)
         last_sent = False  # item n-1 went out
@@ -763,7 +769,7 @@ class MavlinkHub:
         try:
             while True:
                 self._check(st, reboots, end)
-                m = await self._get(box, min(sent_t + step.rto, end) - time.monotonic())
+                m = await self._get(box, min(sent_t + step.rto, end) - _loop_time())
                 self._check(st, reboots, end)
                 if m is None:
                     silent += 1
@@ -790,7 +796,7 @@ class MavlinkHub:
                                 self._to(st, enc.mission_item_int(ts, tc, items[seq]))
                         sent_hi = max(sent_hi, top)
                         last_sent = sent_hi == n - 1
-                    sent_t = time.monotonic()
+                    sent_t = _loop_time()
                     continue
                 mid = m._header.msgId
                 if mid in (wire.MISSION_REQUEST_INT, wire.MISSION_REQUEST):
@@ -803,13 +809,13 @@ class MavlinkHub:
                     if seq < highest:
                         continue  # overtaken by a later request (reordered or re-requested)
                     if seq > highest:
-                        step.progress(time.monotonic() - sent_t)
+                        step.progress(_loop_time() - sent_t)
                         highest = seq
                         silent = 0
                     self._to(st, enc.mission_item_int(ts, tc, items[seq]))
                     sent_hi = max(sent_hi, seq)
                     last_sent = sent_hi == n - 1
-                    sent_t = time.monotonic()
+                    sent_t = _loop_time()
                 elif mid == wire.MISSION_ACK:
                     if getattr(m, "mission_type", 0) != 0:
                         continue
@@ -834,7 +840,7 @@ class MavlinkHub:
     ) -> list[MissionItem]:
         """The vehicle's mission (MISSION_REQUEST_LIST). Raises :class:`MavlinkError`."""
         st = self.state(sys_id)
-        end = time.monotonic() + self._budget_s(deadline_t_s)
+        end = _loop_time() + self._budget_s(deadline_t_s)
         async with self._exchange(st) as box:
             try:
                 return await self._download(st, box, end, st.reboots)
@@ -861,11 +867,11 @@ class MavlinkHub:
             return enc.mission_request_int(ts, tc, len(got))
 
         self._to(st, request())
-        sent_t = time.monotonic()
+        sent_t = _loop_time()
         try:
             while True:
                 self._check(st, reboots, end)
-                m = await self._get(box, min(sent_t + step.rto, end) - time.monotonic())
+                m = await self._get(box, min(sent_t + step.rto, end) - _loop_time())
                 self._check(st, reboots, end)
                 if m is None:
                     silent += 1
@@ -878,7 +884,7 @@ class MavlinkHub:
                     # for the item it just sent, ArduPilot answers any request)
                     self._to(st, request())
                     self._to(st, request())  # encoded anew: a signed frame is never replayed
-                    sent_t = time.monotonic()
+                    sent_t = _loop_time()
                     continue
                 mid = m._header.msgId
                 if getattr(m, "mission_type", 0) != 0:
@@ -899,17 +905,17 @@ class MavlinkHub:
                     count = None
                     got.clear()
                     self._to(st, request())
-                    sent_t = time.monotonic()
+                    sent_t = _loop_time()
                     continue
                 else:
                     continue
-                step.progress(time.monotonic() - sent_t)
+                step.progress(_loop_time() - sent_t)
                 silent = 0
                 if count is not None and len(got) >= count:
                     self._to(st, enc.mission_ack(ts, tc, MAV_MISSION_ACCEPTED))
                     return got
                 self._to(st, request())
-                sent_t = time.monotonic()
+                sent_t = _loop_time()
         except _TransferError:
             self._cancel(st)
             raise
@@ -930,8 +936,8 @@ class MavlinkHub:
         for attempt in range(self.config.max_retries + 1):
             for _ in range(1 if attempt == 0 else 2):  # retries twice, as in _download
                 self._to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seq))
-            wait_end = min(end, time.monotonic() + step.rto)
-            while (left := wait_end - time.monotonic()) > 0:
+            wait_end = min(end, _loop_time() + step.rto)
+            while (left := wait_end - _loop_time()) > 0:
                 self._check(st, reboots, end)
                 m = await self._get(box, left)
                 if m is not None and m._header.msgId == wire.MISSION_CURRENT and m.seq == seq:
@@ -1028,26 +1034,26 @@ class MavlinkHub:
         build: Callable[[int], bytes],
         deadline_t_s: float | None,
     ) -> CommandResult:
-        end = time.monotonic() + self._budget_s(deadline_t_s)
+        end = _loop_time() + self._budget_s(deadline_t_s)
         attempts = 0
         result: int | None = None
         async with self._exchange(st) as box:
             reboots = st.reboots
             try:
                 for conf in range(self.config.command_retries + 1):
-                    if time.monotonic() >= end:
+                    if _loop_time() >= end:
                         break
                     attempts += 1
                     self._to(st, build(min(conf, 255)))
-                    wait_end = min(end, time.monotonic() + self.config.command_timeout_s)
-                    while (left := wait_end - time.monotonic()) > 0:
+                    wait_end = min(end, _loop_time() + self.config.command_timeout_s)
+                    while (left := wait_end - _loop_time()) > 0:
                         self._check(st, reboots, end + 1.0)
                         m = await self._get(box, left)
                         if m is None or m._header.msgId != wire.COMMAND_ACK or m.command != cmd:
                             continue
                         result = int(m.result)
                         if result == MAV_RESULT_IN_PROGRESS:
-                            wait_end = min(end, time.monotonic() + self.config.command_timeout_s)
+                            wait_end = min(end, _loop_time() + self.config.command_timeout_s)
                             continue
                         ok = result == MAV_RESULT_ACCEPTED
                         return CommandResult(

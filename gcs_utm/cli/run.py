@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
 import sys
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from gcs_utm.app import Report
 
 DEMO_SCENARIOS = ("use_case_1.toml", "use_case_2.toml")
 
@@ -68,9 +72,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, default=None, help="settings TOML")
     p.add_argument(
         "--speed",
-        type=float,
+        type=parse_speed,
         default=1.0,
-        help="run N times faster than real time (vehicles and UTM share the factor)",
+        help="run N times faster than real time (vehicles and UTM share the factor), or "
+        "'max': fast time, as fast as the computation allows, deterministic",
     )
     p.add_argument("--headless", action="store_true", help="no TUI; rich log lines on stderr")
     group = p.add_mutually_exclusive_group()
@@ -84,6 +89,21 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG/GeoJSON/KML output")
     p.add_argument("--mqtt", action="store_true", help="start the MQTT bridge of the config")
+
+
+def parse_speed(text: str) -> float:
+    """``--speed``: a positive factor, or ``max`` (fast time: ``math.inf``)."""
+    if text.strip().lower() == "max":
+        return math.inf
+    try:
+        speed = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive number or 'max', got {text!r}"
+        ) from None
+    if not (speed > 0.0 and math.isfinite(speed)):
+        raise argparse.ArgumentTypeError(f"expected a positive number or 'max', got {text!r}")
+    return speed
 
 
 def _operator(args: argparse.Namespace) -> str:
@@ -129,41 +149,48 @@ def _settings(args: argparse.Namespace) -> Any:
         return None
 
 
-def _summary(report: dict[str, Any]) -> str:
-    recs = report.get("recommendations", [])
+def summary_text(report: Report, path: Path) -> str:
+    """A few lines about a run: threats, decisions, flown separation, intrusions."""
     lines = [
-        f"scenario {report['scenario']}: {len(report.get('threats', []))} threats, "
-        f"{len(recs)} recommendations, report {report.get('report_path')}",
+        f"scenario {report.scenario}: {len(report.threats)} threats, "
+        f"{len(report.recommendations)} recommendations, report {path} "
+        f"({report.wall_clock_s:.1f} s wall clock)",
     ]
-    for r in recs:
+    for r in report.recommendations:
         lines.append(
-            f"  {r['uas']}: {r['threat_kind']} -> {r['maneuver']} "
-            f"(cost {r['cost']}, risk {r['risk']}), {r['decision']}, "
-            f"uploaded={r['uploaded']} verified={r['verified']}"
+            f"  {r.uas}: {r.threat_kind} -> {r.maneuver} "
+            f"(cost {r.cost}, risk {r.risk}), {r.decision}, "
+            f"uploaded={r.uploaded} verified={r.verified}"
         )
-    for s in report.get("separation", []):
+    for s in report.separation:
         lines.append(
-            f"  separation {s['pair'][0]}-{s['pair'][1]}: min {s['min_distance_m']} m"
-            + (" LOSS" if s["loss_of_separation"] else "")
+            f"  separation {s.pair[0]}-{s.pair[1]}: min {s.min_distance_m} m"
+            + (" LOSS" if s.loss_of_separation else "")
         )
-    for g in report.get("geofence_intrusions", []):
-        lines.append(f"  INTRUSION {g['uas']} into {g['geofence']} at {g['first_at_s']} s")
+    for g in report.geofence_intrusions:
+        lines.append(f"  INTRUSION {g.uas} into {g.geofence} at {g.first_at_s} s")
     return "\n".join(lines)
 
 
 def _run_one(path: Path, args: argparse.Namespace) -> int:
-    from gcs_utm.app import run_scenario
+    from gcs_utm.app import configure_interpreter, report_path, run_scenario_blocking
     from gcs_utm.scenario import ScenarioError
 
     settings = _settings(args)
     if settings is None:
         return 2
     try:
-        report = asyncio.run(run_scenario(path, settings, _options(args)))
+        options = _options(args)
+    except ValueError as exc:
+        print(f"gcs-utm: {exc}", file=sys.stderr)
+        return 2
+    configure_interpreter()
+    try:
+        report = run_scenario_blocking(path, settings, options)
     except ScenarioError as exc:
         print(f"gcs-utm: {exc}", file=sys.stderr)
         return 2
-    print(_summary(report))
+    print(summary_text(report, report_path(options.out_dir, report.scenario)))
     return 0
 
 
@@ -186,7 +213,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    from gcs_utm.app import OperatorMode, serve
+    from gcs_utm.app import OperatorMode, configure_interpreter, serve
 
     settings = _settings(args)
     if settings is None:
@@ -201,4 +228,5 @@ def _serve(args: argparse.Namespace) -> int:
         else OperatorMode.NONE
     )
     headless = args.headless or operator != OperatorMode.DASHBOARD
+    configure_interpreter()
     return asyncio.run(serve(settings, db_path=args.db, operator=operator, headless=headless))
