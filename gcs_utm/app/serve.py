@@ -11,7 +11,7 @@ import sys
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 
-from gcs_utm.clock import RealClock
+from gcs_utm.clock import Clock, RealClock, ScaledClock
 from gcs_utm.geo import LocalFrame
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store, StoreWriter
@@ -36,9 +36,12 @@ async def serve(
     headless: bool,
     stop: asyncio.Event | None = None,
     on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
+    speed: float = 1.0,
 ) -> int:
     """Long-running service: links from config, persistent store; restart resumes. Runs until
-    SIGINT/SIGTERM (or ``stop`` is set)."""
+    SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
+    than real time: the service's clock then advances ``speed`` simulated seconds per second."""
+    clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
     frame = LocalFrame(
         settings.airspace.origin_lat_deg,
         settings.airspace.origin_lon_deg,
@@ -49,7 +52,7 @@ async def serve(
     geofences = reader.load_geofences(active_only=True)
     reader.close()
     store = Persistence(StoreWriter(db_path, settings.store))
-    rt = build_runtime(settings, RealClock(), frame, store)
+    rt = build_runtime(settings, clock, frame, store)
     rt.airspace.load(operations, geofences)
     rt.tracking.set_operations(operations)
     _log.info(
