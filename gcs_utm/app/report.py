@@ -4,8 +4,9 @@ with units in the names, serialised to the JSON that ``gcs-utm plot`` and the ev
 Times in the report are seconds after the scenario's t0 (``*_at_s``, waypoint times); positions
 are WGS84 degrees and metres AMSL. ``to_json`` gives the JSON layout field by field (the field
 names are the JSON keys), so a changed field is a type error in every reader, not a missing key.
-Loss of separation is judged with the run's monitoring settings (:func:`is_loss`), on the
-tracks the UTM had (``separation``) and on the simulated vehicles' true positions (``truth``).
+Loss of separation is judged as Monitoring judges it, on the effective minima of each pair
+(operational volumes included, :func:`is_loss`), on the tracks the UTM had (``separation``)
+and on the simulated vehicles' true positions (``truth``).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
+import numpy.typing as npt
 
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.fences import localise
@@ -173,6 +175,12 @@ class IntrusionReport:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class EscalationReport:
+    at_s: float | None
+    text: str
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class TruthPair:
     pair: tuple[str, str]
     min_distance_m: float | None
@@ -208,6 +216,7 @@ class Report:
     counters: Mapping[str, int]
     separation: tuple[SeparationReport, ...]
     geofence_intrusions: tuple[IntrusionReport, ...]
+    escalations: tuple[EscalationReport, ...] = ()
     truth: TruthReport | None = None
 
     def to_json(self) -> Json:
@@ -424,15 +433,25 @@ def build_report(
         counters=dict(rt.usm.counters),
         separation=separation(rt.samples, ops, mon),
         geofence_intrusions=intrusions(rt.samples, rt.geofence_history, rt.frame, t0),
+        escalations=tuple(
+            EscalationReport(at_s=_rel(e.t_s, t0), text=e.text)
+            for e in rt.usm.events
+            if e.kind == "escalation"
+        ),
         truth=truth(vehicles, scenario, rt.frame, mon) if vehicles else None,
     )
 
 
-def is_loss(mon: MonitoringConfig, dh_m: float, dv_m: float) -> bool:
-    """Loss of separation under the run's rule (cylinder: both minima; sphere: 3D distance)."""
+def is_loss(
+    mon: MonitoringConfig, dh_m: float, dv_m: float, ov_a_m: float = 0.0, ov_b_m: float = 0.0
+) -> bool:
+    """Loss of separation under the run's rule, on the effective minima of a pair with these
+    operational volumes, as Monitoring alerts on them (cylinder: both minima; sphere: 3D
+    distance under the safety distance)."""
+    min_h_m, min_v_m = mon.effective_minima(ov_a_m, ov_b_m)
     if mon.spherical:
-        return math.hypot(dh_m, dv_m) < mon.safety_distance_m
-    return dh_m < mon.separation_horizontal_m and dv_m < mon.separation_vertical_m
+        return math.hypot(dh_m, dv_m) < min_h_m
+    return dh_m < min_h_m and dv_m < min_v_m
 
 
 def separation(
@@ -446,6 +465,8 @@ def separation(
     ids = sorted(i for i in samples if OperationId(i) in ops)
     for i, a in enumerate(ids):
         for b in ids[i + 1 :]:
+            ov_a = ops[OperationId(a)].operational_volume_m
+            ov_b = ops[OperationId(b)].operational_volume_m
             sa = {round(s[0], 1): s for s in samples[a]}
             best_h = best_v = best_3d = math.inf
             loss = False
@@ -458,7 +479,7 @@ def separation(
                 best_h = min(best_h, dh)
                 best_v = min(best_v, dv) if dh < mon.separation_horizontal_m * 3 else best_v
                 best_3d = min(best_3d, math.hypot(dh, dv))
-                loss = loss or is_loss(mon, dh, dv)
+                loss = loss or is_loss(mon, dh, dv, ov_a, ov_b)
             out.append(
                 SeparationReport(
                     pair=(a, b),
@@ -531,34 +552,153 @@ def truth(
     frame: LocalFrame,
     mon: MonitoringConfig,
 ) -> TruthReport:
-    """Ground truth from the simulated vehicles (their true positions, not the tracks)."""
+    """Ground truth from the simulated vehicles (their true positions, not the tracks), in
+    true metres (see :func:`_tangent_plane_m`) and metres AMSL.
+
+    The vehicles record their position once a simulated second; between two records each
+    moves linearly, so one vehicle's records are interpolated at the other's record times and
+    every interval between records is checked exactly (closest approach and the instants in
+    loss of separation of linear relative motion), not only the sampled instants."""
     by_sys = {int(v.sys_id): v for v in vehicles}
-    ops = {int(op.sys_id): op.id for op in scenario.operations if op.sys_id is not None}
+    ops = {int(op.sys_id): op for op in scenario.operations if op.sys_id is not None}
+    local = {s: _local_history(frame, by_sys[s].position_history) for s in by_sys if s in ops}
     pairs = []
-    ids = sorted(s for s in by_sys if s in ops)
+    ids = sorted(local)
     for i, a in enumerate(ids):
         for b in ids[i + 1 :]:
-            ha = by_sys[a].position_history
-            hb = by_sys[b].position_history
-            best = math.inf
-            loss = False
-            j = 0
-            for t, lat, lon, alt in ha:
-                while j + 1 < len(hb) and hb[j + 1][0] <= t:
-                    j += 1
-                if not hb or abs(hb[j][0] - t) > 1.0:
-                    continue
-                ea, na = frame.point_to_local(lat, lon)
-                eb, nb = frame.point_to_local(hb[j][1], hb[j][2])
-                dh = math.hypot(ea - eb, na - nb)
-                dv = abs(alt - hb[j][3])
-                best = min(best, math.hypot(dh, dv))
-                loss = loss or is_loss(mon, dh, dv)
+            min_h, min_v = mon.effective_minima(
+                ops[a].operational_volume_m, ops[b].operational_volume_m
+            )
+            best, loss = _pair_truth(local[a], local[b], min_h, min_v, spherical=mon.spherical)
             pairs.append(
                 TruthPair(
-                    pair=(ops[a], ops[b]),
+                    pair=(ops[a].id, ops[b].id),
                     min_distance_m=_finite(best),
                     loss_of_separation=loss,
                 )
             )
     return TruthReport(pairs=tuple(pairs))
+
+
+def _local_history(
+    frame: LocalFrame, history: Sequence[tuple[float, float, float, float]]
+) -> npt.NDArray[np.float64]:
+    """(K, 4) rows of t_s, east_m, north_m, alt_amsl_m."""
+    if not history:
+        return np.zeros((0, 4))
+    h = np.asarray(history, dtype=np.float64)
+    east, north = _tangent_plane_m(frame.origin_lat_deg, frame.origin_lon_deg, h[:, 1], h[:, 2])
+    return np.column_stack((h[:, 0], east, north, h[:, 3]))
+
+
+_WGS84_A_M = 6378137.0
+_WGS84_E2 = 6.69437999014e-3
+
+
+def _tangent_plane_m(
+    lat0_deg: float,
+    lon0_deg: float,
+    lat_deg: npt.NDArray[np.float64],
+    lon_deg: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """(east_m, north_m) in the tangent plane at the origin, through Earth-centred
+    coordinates: true metres (no map projection's scale factor), so the truth does not share
+    the UTM frame the service computes in."""
+
+    def ecef(lat: npt.NDArray[np.float64], lon: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        la, lo = np.radians(lat), np.radians(lon)
+        n = _WGS84_A_M / np.sqrt(1.0 - _WGS84_E2 * np.sin(la) ** 2)
+        return np.stack(
+            (
+                n * np.cos(la) * np.cos(lo),
+                n * np.cos(la) * np.sin(lo),
+                n * (1 - _WGS84_E2) * np.sin(la),
+            )
+        )
+
+    o = ecef(np.array([lat0_deg]), np.array([lon0_deg]))[:, 0]
+    d = ecef(lat_deg, lon_deg) - o[:, None]
+    la, lo = math.radians(lat0_deg), math.radians(lon0_deg)
+    east = -math.sin(lo) * d[0] + math.cos(lo) * d[1]
+    north = (
+        -math.sin(la) * math.cos(lo) * d[0]
+        - math.sin(la) * math.sin(lo) * d[1]
+        + math.cos(la) * d[2]
+    )
+    return east, north
+
+
+def _pair_truth(
+    a: npt.NDArray[np.float64],
+    b: npt.NDArray[np.float64],
+    min_h_m: float,
+    min_v_m: float,
+    *,
+    spherical: bool,
+) -> tuple[float, bool]:
+    """(minimum 3D distance m, loss of separation) while both vehicles were recorded."""
+    if len(a) < 2 or len(b) < 2:
+        return math.inf, False
+    t = a[:, 0]
+    both = (t >= b[0, 0]) & (t <= b[-1, 0])
+    if both.sum() < 2:
+        return math.inf, False
+    t = t[both]
+    rel = a[both, 1:] - np.column_stack([np.interp(t, b[:, 0], b[:, k]) for k in (1, 2, 3)])
+    best = math.inf
+    loss = False
+    for k in range(len(rel) - 1):
+        r0 = (float(rel[k, 0]), float(rel[k, 1]), float(rel[k, 2]))
+        d = (
+            float(rel[k + 1, 0]) - r0[0],
+            float(rel[k + 1, 1]) - r0[1],
+            float(rel[k + 1, 2]) - r0[2],
+        )
+        dd = d[0] ** 2 + d[1] ** 2 + d[2] ** 2
+        u = (
+            0.0
+            if dd == 0.0
+            else max(0.0, min(1.0, -(r0[0] * d[0] + r0[1] * d[1] + r0[2] * d[2]) / dd))
+        )
+        best = min(best, math.dist((0.0, 0.0, 0.0), tuple(r0[i] + u * d[i] for i in range(3))))
+        loss = loss or _segment_in_loss(r0, d, min_h_m, min_v_m, spherical=spherical)
+    return best, loss
+
+
+def _below(a: float, b: float, c: float) -> tuple[float, float]:
+    """The interval of u where a u^2 + b u + c < 0 (a >= 0); empty when lo >= hi."""
+    if a <= 1e-12:
+        if abs(b) <= 1e-12:
+            return (-math.inf, math.inf) if c < 0.0 else (math.inf, -math.inf)
+        root = -c / b
+        return (-math.inf, root) if b > 0.0 else (root, math.inf)
+    disc = b * b - 4.0 * a * c
+    if disc <= 0.0:
+        return math.inf, -math.inf
+    s = math.sqrt(disc)
+    return (-b - s) / (2.0 * a), (-b + s) / (2.0 * a)
+
+
+def _segment_in_loss(
+    r0: tuple[float, float, float],
+    d: tuple[float, float, float],
+    min_h_m: float,
+    min_v_m: float,
+    *,
+    spherical: bool,
+) -> bool:
+    """Is the relative position r0 + u d inside the minima for some u in [0, 1]?"""
+    if spherical:
+        lo, hi = _below(
+            d[0] ** 2 + d[1] ** 2 + d[2] ** 2,
+            2.0 * (r0[0] * d[0] + r0[1] * d[1] + r0[2] * d[2]),
+            r0[0] ** 2 + r0[1] ** 2 + r0[2] ** 2 - min_h_m**2,
+        )
+        return max(0.0, lo) < min(1.0, hi)
+    h_lo, h_hi = _below(
+        d[0] ** 2 + d[1] ** 2,
+        2.0 * (r0[0] * d[0] + r0[1] * d[1]),
+        r0[0] ** 2 + r0[1] ** 2 - min_h_m**2,
+    )
+    v_lo, v_hi = _below(d[2] ** 2, 2.0 * r0[2] * d[2], r0[2] ** 2 - min_v_m**2)
+    return max(0.0, h_lo, v_lo) < min(1.0, h_hi, v_hi)
