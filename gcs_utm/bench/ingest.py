@@ -412,10 +412,10 @@ async def _one(
 
 
 def _tracker_kernel() -> str:
-    """ "c" when the tracker's common round runs in its C extension, else "python"."""
-    from gcs_utm.core.tracking.tracker import round_kernel
+    """ "c" when the tracker's kernels run in its C extension, else "numpy"."""
+    from gcs_utm.core.tracking import kernel
 
-    return round_kernel()
+    return kernel.name()
 
 
 def _socket_record(
