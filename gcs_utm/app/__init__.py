@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import sys
 
-from .report import Report, build_report, is_loss
+from .report import Report, build_report
 from .runner import (
     FAST_TIME_EPOCH_UTC_S,
     RunOptions,
@@ -67,7 +67,6 @@ __all__ = [
     "build_report",
     "build_runtime",
     "configure_interpreter",
-    "is_loss",
     "report_path",
     "run_scenario",
     "run_scenario_blocking",

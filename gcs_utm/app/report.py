@@ -5,8 +5,8 @@ Times in the report are seconds after the scenario's t0 (``*_at_s``, waypoint ti
 are WGS84 degrees and metres AMSL. ``to_json`` gives the JSON layout field by field (the field
 names are the JSON keys), so a changed field is a type error in every reader, not a missing key.
 Loss of separation is judged as Monitoring judges it, on the effective minima of each pair
-(operational volumes included, :func:`is_loss`), on the tracks the UTM had (``separation``)
-and on the simulated vehicles' true positions (``truth``).
+(operational volumes included: :func:`gcs_utm.core.monitoring.loss.is_loss`), on the tracks
+the UTM had (``separation``) and on the simulated vehicles' true positions (``truth``).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import numpy.typing as npt
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.fences import localise
 from gcs_utm.core.monitoring.geometry import points_in_edges
+from gcs_utm.core.monitoring.loss import is_loss
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     FlightPlan,
@@ -440,18 +441,6 @@ def build_report(
         ),
         truth=truth(vehicles, scenario, rt.frame, mon) if vehicles else None,
     )
-
-
-def is_loss(
-    mon: MonitoringConfig, dh_m: float, dv_m: float, ov_a_m: float = 0.0, ov_b_m: float = 0.0
-) -> bool:
-    """Loss of separation under the run's rule, on the effective minima of a pair with these
-    operational volumes, as Monitoring alerts on them (cylinder: both minima; sphere: 3D
-    distance under the safety distance)."""
-    min_h_m, min_v_m = mon.effective_minima(ov_a_m, ov_b_m)
-    if mon.spherical:
-        return math.hypot(dh_m, dv_m) < min_h_m
-    return dh_m < min_h_m and dv_m < min_v_m
 
 
 def separation(

@@ -47,6 +47,7 @@ from gcs_utm.services.tracking import TrackingService
 from gcs_utm.services.usm import Usm
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreWriter
+from gcs_utm.store.ids import life_prefix
 
 if TYPE_CHECKING:
     from gcs_utm.dashboard.tui import DashboardApp
@@ -100,6 +101,11 @@ class Persistence:
     def write_tracks(self, tracks: list[Track]) -> None:
         self.writer.write_tracks(tracks)
 
+    @property
+    def epoch(self) -> int:
+        """The store life this process writes in (ids carry it, see gcs_utm.store.ids)."""
+        return self.writer.epoch
+
     def close(self) -> None:
         self.writer.close()
 
@@ -152,7 +158,8 @@ def build_runtime(
             store.deactivate_geofence(g.id)
 
     airspace = Airspace(on_operation=store.save_operation, on_plan=on_plan, on_geofence=on_geofence)
-    usm = Usm(airspace, clock, config=settings.usm, record=store.record)
+    id_prefix = life_prefix(store.epoch)
+    usm = Usm(airspace, clock, config=settings.usm, record=store.record, id_prefix=id_prefix)
 
     async def tracking_hazard(h: HazardReport) -> None:
         usm.on_hazard(h)
@@ -169,7 +176,7 @@ def build_runtime(
     def snapshot(t_s: float) -> Any:
         return airspace.snapshot(t_s, tracking.snapshot)
 
-    monitor = Monitor(frame, settings.monitoring)
+    monitor = Monitor(frame, settings.monitoring, id_prefix=id_prefix)
     monitoring = MonitoringService(
         monitor, snapshot, clock, usm.on_threats, period_s=settings.monitoring.period_s
     )

@@ -100,7 +100,9 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def parse_speed(text: str) -> float:
-    """``--speed``: a positive factor, or ``max`` (fast time: ``math.inf``)."""
+    """``--speed``: a finite factor > 0 (0 would stop the clock, a negative one run it
+    backwards), or ``max`` (fast time: ``math.inf``); argparse turns the error into one usage
+    line."""
     if text.strip().lower() == "max":
         return math.inf
     try:

@@ -46,6 +46,10 @@ def test_building_the_service_changes_nothing_process_wide() -> None:
         def __init__(self) -> None:
             pass
 
+        @property
+        def epoch(self) -> int:
+            return 1
+
     sys.setswitchinterval(0.005)
     build_runtime(Settings(), ManualClock(0.0), LocalFrame(40.0, -3.0, 600.0), NoStore())
     assert sys.getswitchinterval() == pytest.approx(0.005)
