@@ -11,7 +11,9 @@ Kinds (cycled, so every kind is in any set of 5 or more):
 - ``near_threshold``: crossing tracks whose miss distance is within a few metres of the pair's
   effective minimum, on either side (some are losses, some are not).
 Each encounter mixes multirotors and fixed wings (speeds, volumes and climb rates of their
-kind); UAS beyond the first pair either join the conflict at the same point or fly elsewhere;
+kind); UAS beyond the first pair either join the conflict at the same point or fly elsewhere,
+and are placed only where no pair is near a loss of separation earlier than ``WARNING_S``
+before the conflict (an encounter develops in flight; it does not start in a loss);
 about half the encounters have a cylinder geofence beside the conflict (never on a filed
 path), which a resolution must not enter. Two origins are used (Madrid, Seville) so frames far
 from the UTM zone's central meridian are exercised.
@@ -23,6 +25,7 @@ scenario start. Everything comes from ``random.Random(seed)``: the same seed giv
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import random
 from dataclasses import dataclass
@@ -41,6 +44,9 @@ SEPARATION_V_M = 15.0
 CONFLICT_AT_S = (80.0, 110.0)  # when the first pair meets: time to detect, decide and fly
 AFTER_S = 50.0  # flown after the conflict point
 LEAD_IN_S = (60.0, 75.0)  # flown before it
+WARNING_S = 30.0  # no pair of UAS is within its minima (plus a margin) earlier than this
+# before the first pair's conflict time
+_TRIES = 20
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -224,6 +230,37 @@ def _extra(rng: random.Random, k: int, centre: tuple[float, float], t_s: float) 
     )
 
 
+def _at(plan: list[tuple[float, float, float, float]], t_s: float) -> tuple[float, float, float]:
+    """Position on a filed plan at ``t_s`` (clamped to its ends)."""
+    if t_s <= plan[0][3]:
+        return plan[0][:3]
+    for a, b in itertools.pairwise(plan):
+        if t_s <= b[3]:
+            u = (t_s - a[3]) / (b[3] - a[3])
+            return (a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1]), a[2] + u * (b[2] - a[2]))
+    return plan[-1][:3]
+
+
+def _apart_until(
+    pa: list[tuple[float, float, float, float]],
+    pb: list[tuple[float, float, float, float]],
+    min_h_m: float,
+    until_t_s: float,
+) -> bool:
+    """Are two filed plans clear of each other (with 10 m / 5 m to spare) while both fly,
+    up to ``until_t_s``? An encounter must develop in flight, with time to resolve it: two
+    UAS must not start in (or seconds from) a loss of separation."""
+    t = max(pa[0][3], pb[0][3])
+    while t <= until_t_s:
+        a, b = _at(pa, t), _at(pb, t)
+        if math.hypot(a[0] - b[0], a[1] - b[1]) < min_h_m + 10.0 and abs(a[2] - b[2]) < (
+            SEPARATION_V_M + 5.0
+        ):
+            return False
+        t += 0.5
+    return True
+
+
 def _segment_distance_m(
     p: tuple[float, float], a: tuple[float, float], b: tuple[float, float]
 ) -> float:
@@ -262,11 +299,22 @@ def encounter(index: int, seed: int) -> Encounter:
     centre = (rng.uniform(-200.0, 200.0), rng.uniform(-200.0, 200.0))
     t_c = rng.uniform(*CONFLICT_AT_S)
     uas = _pair(rng, kind, centre, t_c)
-    uas += [_extra(rng, k, centre, t_c) for k in range(3, n_uas + 1)]
+    plans = {u.id: u.waypoints(min(rng.uniform(*LEAD_IN_S), u.t_s - 5.0)) for u in uas}
+    for k in range(3, n_uas + 1):
+        for _ in range(_TRIES):
+            extra = _extra(rng, k, centre, t_c)
+            wps = extra.waypoints(min(rng.uniform(*LEAD_IN_S), extra.t_s - 5.0))
+            if all(
+                _apart_until(wps, plans[u.id], _effective_h_m(extra, u), t_c - WARNING_S)
+                for u in uas
+            ):
+                break
+        else:
+            continue  # no place for one more UAS: the encounter has fewer
+        uas.append(extra)
+        plans[extra.id] = wps
     # priorities 1-10, ties allowed as in the paper
     uas = [dataclasses.replace(u, priority=rng.randint(1, 10)) for u in uas]
-    lead_in = {u.id: min(rng.uniform(*LEAD_IN_S), u.t_s - 5.0) for u in uas}
-    plans = {u.id: u.waypoints(lead_in[u.id]) for u in uas}
     fence = None
     if rng.random() < 0.5:
         fence = _geofence(rng, centre, [[(w[0], w[1]) for w in p] for p in plans.values()])
@@ -278,7 +326,7 @@ def encounter(index: int, seed: int) -> Encounter:
     return Encounter(
         name=name,
         kind=kind,
-        n_uas=n_uas,
+        n_uas=len(uas),
         fixed_wings=sum(u.fixed_wing for u in uas),
         geofence=fence is not None,
         origin=origin[0],
