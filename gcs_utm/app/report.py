@@ -439,7 +439,9 @@ def build_report(
             for e in rt.usm.events
             if e.kind == "escalation"
         ),
-        truth=truth(vehicles, scenario, rt.frame, mon) if vehicles else None,
+        truth=truth(vehicles, scenario, rt.frame, mon, flying_until_t_s=_plan_ends(rt))
+        if vehicles
+        else None,
     )
 
 
@@ -535,14 +537,28 @@ def _inside(lf: Any, east_m: float, north_m: float, alt_amsl_m: float) -> bool:
     return bool(inside[0])
 
 
+def _plan_ends(rt: Runtime) -> dict[str, float]:
+    """End time (t_s) of each operation's latest plan."""
+    return {
+        op_id: plans[-1].waypoints[-1].t_s
+        for op_id, plans in rt.plan_history.items()
+        if plans and plans[-1].waypoints
+    }
+
+
 def truth(
     vehicles: Sequence[SimVehicle],
     scenario: Scenario,
     frame: LocalFrame,
     mon: MonitoringConfig,
+    *,
+    flying_until_t_s: Mapping[str, float] | None = None,
 ) -> TruthReport:
     """Ground truth from the simulated vehicles (their true positions, not the tracks), in
-    true metres (see :func:`_tangent_plane_m`) and metres AMSL.
+    true metres (see :func:`_tangent_plane_m`) and metres AMSL, while both operations of a
+    pair are in progress: up to the end of the earlier one's latest plan
+    (``flying_until_t_s``, by operation id). A simulated vehicle stays in the air after its
+    mission (a fixed wing circles its last waypoint); a real operation ends there.
 
     The vehicles record their position once a simulated second; between two records each
     moves linearly, so one vehicle's records are interpolated at the other's record times and
@@ -558,7 +574,17 @@ def truth(
             min_h, min_v = mon.effective_minima(
                 ops[a].operational_volume_m, ops[b].operational_volume_m
             )
-            best, loss = _pair_truth(local[a], local[b], min_h, min_v, spherical=mon.spherical)
+            until = min(
+                (flying_until_t_s or {}).get(ops[a].id, math.inf),
+                (flying_until_t_s or {}).get(ops[b].id, math.inf),
+            )
+            best, loss = _pair_truth(
+                local[a][local[a][:, 0] <= until] if len(local[a]) else local[a],
+                local[b],
+                min_h,
+                min_v,
+                spherical=mon.spherical,
+            )
             pairs.append(
                 TruthPair(
                     pair=(ops[a].id, ops[b].id),

@@ -319,7 +319,8 @@ def encounter(index: int, seed: int) -> Encounter:
     if rng.random() < 0.5:
         fence = _geofence(rng, centre, [[(w[0], w[1]) for w in p] for p in plans.values()])
     name = f"enc_{seed}_{index:04d}_{kind}"
-    duration_s = math.ceil(max(p[-1][3] for p in plans.values()) + 20.0)
+    # time after the filed plans end for accepted plans that arrive later
+    duration_s = math.ceil(max(p[-1][3] for p in plans.values()) + 45.0)
     text = _toml(
         name, kind=kind, origin=origin, duration_s=duration_s, uas=uas, plans=plans, fence=fence
     )

@@ -3,11 +3,12 @@ and the summary of a set of runs (:class:`EvalSummary`, JSON and a markdown tabl
 
 Definitions (pairs of UAS, judged on the simulated vehicles' true positions and the effective
 minima of each pair, as Monitoring judges; on the UTM's tracks when there is no ground truth):
-- *predicted loss*: a pair for which Monitoring raised LOSS_OF_SEPARATION during the run;
+- *predicted loss*: a pair for which Monitoring raised LOSS_OF_SEPARATION while both
+  operations were in progress (an operation ends with its latest plan);
 - *flown loss*: a pair that actually came closer than its minima;
 - *avoided*: a predicted pair not flown as a loss; share avoided = avoided / predicted;
 - *created by an accepted plan*: a flown loss of a pair with an applied plan of one of its UAS,
-  never predicted before that plan was applied;
+  first predicted after that plan was applied (or never);
 - *missed*: any other flown loss that was never predicted;
 - *extra length / time* of an accepted plan: its 3D path length minus the previous plan's
   length from the new plan's start time on; its end time minus the previous plan's end time;
@@ -128,11 +129,16 @@ def outcome(report: Report) -> ScenarioOutcome:
     frame = LocalFrame(
         report.origin.lat_deg, report.origin.lon_deg, report.origin.ground_elevation_amsl_m
     )
+    # an operation ends with its latest plan (as the report's ground truth does)
+    ends = {op.id: op.plans[-1].waypoints[-1][3] for op in report.operations if op.plans}
     predicted_at: dict[Pair, float] = {}
     for t in report.threats:
-        if t.kind == "LOSS_OF_SEPARATION" and len(t.uas) == 2 and t.detected_at_s is not None:
-            p = _pair(t.uas[0], t.uas[1])
-            predicted_at[p] = min(predicted_at.get(p, math.inf), t.detected_at_s)
+        if t.kind != "LOSS_OF_SEPARATION" or len(t.uas) != 2 or t.detected_at_s is None:
+            continue
+        if t.detected_at_s >= min(ends.get(u, math.inf) for u in t.uas):
+            continue  # raised after one of the two operations ended
+        p = _pair(t.uas[0], t.uas[1])
+        predicted_at[p] = min(predicted_at.get(p, math.inf), t.detected_at_s)
     if report.truth is not None:
         flown = {_pair(*p.pair) for p in report.truth.pairs if p.loss_of_separation}
     else:
@@ -154,7 +160,7 @@ def outcome(report: Report) -> ScenarioOutcome:
     created = set()
     for p in flown:
         first_apply = min(applied_at.get(p[0], math.inf), applied_at.get(p[1], math.inf))
-        if math.isfinite(first_apply) and predicted_at.get(p, math.inf) >= first_apply:
+        if math.isfinite(first_apply) and predicted_at.get(p, math.inf) > first_apply:
             created.add(p)
     return ScenarioOutcome(
         scenario=report.scenario,

@@ -248,3 +248,20 @@ def test_truth_measures_true_metres_not_map_metres(tmp_path: object) -> None:
     (pair,) = truth([_Vehicle(1, a), _Vehicle(2, b)], scenario, frame, MonitoringConfig()).pairs  # type: ignore[arg-type]
     assert pair.min_distance_m == pytest.approx(50.02, abs=0.005)
     assert not pair.loss_of_separation
+
+
+def test_truth_ends_with_the_earlier_operation(tmp_path: object) -> None:
+    """A pass after one UAS's operation has ended (its last plan's end) is not counted: a
+    simulated vehicle stays airborne after its mission, a real operation ends there."""
+    scenario = _scenario_two_uas(tmp_path)
+    a = [(float(t), *_ll(-915.0 + 30.0 * t, 0.0), 100.0) for t in range(61)]
+    b = [(float(t), *_ll(915.0 - 30.0 * t, 40.0), 100.0) for t in range(61)]
+    vehicles = [_Vehicle(1, a), _Vehicle(2, b)]
+    mon = MonitoringConfig()
+    frame = scenario.frame  # type: ignore[attr-defined]
+    (before,) = truth(vehicles, scenario, frame, mon, flying_until_t_s={"A": 20.0}).pairs  # type: ignore[arg-type]
+    (after,) = truth(vehicles, scenario, frame, mon, flying_until_t_s={"B": 31.0}).pairs  # type: ignore[arg-type]
+    assert not before.loss_of_separation and before.min_distance_m == pytest.approx(
+        math.hypot(40.0, 630.0), abs=0.1
+    )
+    assert after.loss_of_separation
