@@ -557,8 +557,9 @@ def scenario_pipeline(path: Path, scenario_path: Path) -> ReplayPipeline:
 
 
 def parse_speed(text: str) -> float | None:
-    """``max`` (as fast as possible) or a positive factor (1 = real time)."""
-    if text.strip().lower() in ("max", "inf", "0"):
+    """``max`` (as fast as possible) or a positive factor (1 = real time). ``0`` is refused,
+    not read as ``max``: a factor of 0 would mean a stopped clock."""
+    if text.strip().lower() in ("max", "inf"):
         return None
     try:
         value = float(text)

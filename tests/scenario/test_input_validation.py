@@ -209,3 +209,8 @@ def test_speed_factor_must_be_positive(speed: str, capsys: pytest.CaptureFixture
         _out, err = capsys.readouterr()
         assert "--speed: expected a positive number" in err
     assert build_parser().parse_args(["run", "s.toml", "--speed", "2.5"]).speed == 2.5
+    if speed != "inf":  # replay reads inf as "max"
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(["replay", "x.tlog", "--speed", speed])
+        assert "expected a positive number or 'max'" in capsys.readouterr().err
+    assert build_parser().parse_args(["replay", "x.tlog", "--speed", "max"]).speed is None
