@@ -1,4 +1,4 @@
-"""Loader of our TOML scenario format (documented in docs/foundation.md).
+"""Loader of our TOML scenario format (documented in docs/formats.md).
 
 Positions are given either as WGS84 (``lat_deg``/``lon_deg``) or as local ENU metres from the
 airspace origin (``east_m``/``north_m``); altitudes either ``alt_agl_m`` (converted with the
