@@ -179,6 +179,9 @@ def test_a_directory_is_reported_as_a_directory(
     assert main(["config", "check", str(tmp_path)]) == 2
     _out, err = capsys.readouterr()
     assert "is a directory" in err
+    assert main(["replay", str(tmp_path), "--no-progress"]) == 2
+    _out, err = capsys.readouterr()
+    assert "is a directory" in err and "no such file" not in err
 
 
 @pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
@@ -202,7 +205,7 @@ def test_gauss_yaml_naming_a_missing_json_names_the_key(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("speed", ["0", "-1", "nan", "inf", "fast"])
 def test_speed_factor_must_be_positive(speed: str, capsys: pytest.CaptureFixture[str]) -> None:
-    for cmd in (["run", "s.toml"], ["demo"]):
+    for cmd in (["run", "s.toml"], ["demo"], ["serve"]):
         with pytest.raises(SystemExit) as info:
             build_parser().parse_args([*cmd, "--speed", speed])
         assert info.value.code == 2
