@@ -19,6 +19,8 @@ from typing import Any
 import jsonschema
 from referencing import Registry, Resource
 
+from gcs_utm.validation import nesting_problem, too_deep
+
 SCHEMA_VERSION = 1
 MAX_PAYLOAD_BYTES = 1_048_576
 """Larger payloads are refused before parsing: the largest legitimate message (a flight plan
@@ -125,20 +127,25 @@ def _reject_constant(name: str) -> float:
 
 
 def parse_json(topic: str, payload: bytes | bytearray | str) -> object:
-    """Strict JSON: UTF-8, no NaN/Infinity, at most :data:`MAX_PAYLOAD_BYTES`."""
+    """Strict JSON: UTF-8, no NaN/Infinity, at most :data:`MAX_PAYLOAD_BYTES`, nested at most
+    :data:`gcs_utm.validation.MAX_NESTING` levels (the rule of every input)."""
     if len(payload) > MAX_PAYLOAD_BYTES:
         raise MqttMessageError(
             topic, "", f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}"
         )
     try:
         text = payload if isinstance(payload, str) else bytes(payload).decode("utf-8")
-        return json.loads(text, parse_constant=_reject_constant)
+        obj = json.loads(text, parse_constant=_reject_constant)
     except UnicodeDecodeError as exc:
         raise MqttMessageError(topic, "", f"payload is not UTF-8: {exc.reason}") from exc
-    except RecursionError as exc:
-        raise MqttMessageError(topic, "", "JSON nested too deeply") from exc
+    except RecursionError:
+        raise MqttMessageError(topic, "", f"malformed JSON: {too_deep()}") from None
     except ValueError as exc:  # json.JSONDecodeError and the NaN rejection
         raise MqttMessageError(topic, "", f"malformed JSON: {short(str(exc))}") from exc
+    problem = nesting_problem(obj)
+    if problem is not None:
+        raise MqttMessageError(topic, "", f"malformed JSON: {problem}")
+    return obj
 
 
 def dumps(obj: Mapping[str, object]) -> bytes:

@@ -302,3 +302,12 @@ def test_codec_modules_split_by_responsibility_and_re_exported() -> None:
     assert codec.Topics is topics.Topics and codec.encode_alert is encode.encode_alert
     assert codec.MqttMessageError is wire.MqttMessageError
     assert set(codec.__all__) <= set(dir(codec))
+
+
+def test_nesting_is_bounded_like_every_other_input() -> None:
+    deep = '{"a": ' + "[" * 100 + "]" * 100 + "}"
+    with pytest.raises(MqttMessageError, match="nested deeper than 64 levels"):
+        decode(T, T.answers("alice"), deep, 0.0)
+    deeper = "[" * 100_000 + "]" * 100_000
+    with pytest.raises(MqttMessageError, match="nested deeper than 64 levels"):
+        decode(T, T.answers("alice"), deeper, 0.0)

@@ -217,3 +217,19 @@ def test_speed_factor_must_be_positive(speed: str, capsys: pytest.CaptureFixture
             build_parser().parse_args(["replay", "x.tlog", "--speed", speed])
         assert "expected a positive number or 'max'" in capsys.readouterr().err
     assert build_parser().parse_args(["replay", "x.tlog", "--speed", "max"]).speed is None
+
+
+def test_a_yaml_alias_bomb_is_walked_in_linear_time(tmp_path: Path) -> None:
+    """Ten levels, each repeating the one below ten times through aliases: 10**10 leaves if
+    expanded, a few hundred containers in memory. Loading stays fast and fails on the
+    missing origin, not on time or memory."""
+    lines = ["l0: &l0 [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]"]
+    for i in range(1, 11):
+        lines.append(f"l{i}: &l{i} [" + ", ".join([f"*l{i - 1}"] * 10) + "]")
+    bomb = _write(tmp_path, "\n".join(lines) + "\n", "bomb.yaml")
+    with pytest.raises(ScenarioError, match="operations_json"):
+        load_any(bomb)
+    shared: list[object] = [1, 2]
+    for _ in range(40):
+        shared = [shared] * 10
+    assert nesting_depth(shared) == 41
