@@ -18,7 +18,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "run",
         help="run a scenario end to end (vehicles, UTM services, dashboard) and write a report",
     )
-    run.add_argument("scenario", type=Path, help="scenario TOML, or a GAUSS JSON file")
+    run.add_argument(
+        "scenario", type=Path, help="scenario TOML, or a GAUSS JSON file or scenario YAML"
+    )
     _common(run)
     run.add_argument(
         "--external",
