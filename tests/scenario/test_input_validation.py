@@ -165,9 +165,26 @@ def test_check_json_prints_an_error_document(
     out, _ = capsys.readouterr()
     assert json.loads(out)["error"]["message"] == "the file does not exist"
     good = _write(tmp_path, BASE, "good.toml")
-    assert main(["scenario", "check", str(good), "--json", "--step-s", "0"]) == 2
+    for step in ("0", "abc", "1e-9", "nan"):
+        assert main(["scenario", "check", str(good), "--json", "--step-s", step]) == 2
+        out, _ = capsys.readouterr()
+        assert json.loads(out)["error"]["field"] == "--step-s"
+
+
+def test_check_json_prints_an_error_document_even_on_a_bug(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from gcs_utm.cli import scenario as scenario_cli
+
+    def broken(*_args: object, **_kw: object) -> None:
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(scenario_cli, "strategic_check", broken)
+    good = _write(tmp_path, BASE, "good.toml")
+    with pytest.raises(ZeroDivisionError):
+        main(["scenario", "check", str(good), "--json"])
     out, _ = capsys.readouterr()
-    assert json.loads(out)["error"]["field"] == "--step-s"
+    assert "a bug" in json.loads(out)["error"]["message"]
 
 
 def test_a_directory_is_reported_as_a_directory(
