@@ -61,6 +61,7 @@ from gcs_utm.services.tracking import TrackingService
 from gcs_utm.services.usm import Usm
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store, StoreWriter
+from gcs_utm.store.ids import life_prefix
 
 _log = logging.getLogger(__name__)
 
@@ -126,6 +127,11 @@ class Persistence:
 
     def write_tracks(self, tracks: list[Track]) -> None:
         self.writer.write_tracks(tracks)
+
+    @property
+    def epoch(self) -> int:
+        """The store life this process writes in (ids carry it, see gcs_utm.store.ids)."""
+        return self.writer.epoch
 
     def close(self) -> None:
         self.writer.close()
@@ -202,7 +208,8 @@ def build_runtime(
             store.deactivate_geofence(g.id)
 
     airspace = Airspace(on_operation=on_operation, on_plan=on_plan, on_geofence=on_geofence)
-    usm = Usm(airspace, clock, config=settings.usm, record=store.record)
+    id_prefix = life_prefix(store.epoch)
+    usm = Usm(airspace, clock, config=settings.usm, record=store.record, id_prefix=id_prefix)
 
     async def tracking_hazard(h: HazardReport) -> None:
         usm.on_hazard(h)
@@ -219,7 +226,7 @@ def build_runtime(
     def snapshot(t_s: float) -> Any:
         return airspace.snapshot(t_s, tracking.snapshot)
 
-    monitor = Monitor(frame, settings.monitoring)
+    monitor = Monitor(frame, settings.monitoring, id_prefix=id_prefix)
     monitoring = MonitoringService(
         monitor, snapshot, clock, usm.on_threats, period_s=settings.monitoring.period_s
     )
@@ -864,10 +871,12 @@ async def serve(
     headless: bool,
     stop: asyncio.Event | None = None,
     on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
+    speed: float = 1.0,
 ) -> int:
     """Long-running service: links from config, persistent store; restart resumes. Runs until
-    SIGINT/SIGTERM (or ``stop`` is set)."""
-    clock = RealClock()
+    SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
+    than real time: the service's clock then advances ``speed`` simulated seconds per second."""
+    clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
     frame = LocalFrame(
         settings.airspace.origin_lat_deg,
         settings.airspace.origin_lon_deg,

@@ -2,7 +2,7 @@
 
 Units are in the names. Every field is declared with :func:`gcs_utm.config.setting` so that
 ``config/default.toml`` is generated from this class; ``DeconflictionConfig()`` is usable as is.
-The cost and riskiness formulas these weights enter are documented in ``docs/emergency.md``
+The cost and riskiness formulas these weights enter are documented in ``docs/deconfliction.md``
 and in :mod:`gcs_utm.core.deconfliction.scoring`.
 """
 
