@@ -191,3 +191,27 @@ def test_new_plans_start_where_the_uas_will_be_when_it_gets_them(kind: VehicleKi
         for x in now[OperationId("A")]
         if x.maneuver is not Maneuver.KEEP_PLAN
     )
+
+
+def test_a_new_plan_carries_timed_points_of_the_path_before_it_starts() -> None:
+    """The vehicle may get the plan as early as 3 s after the decision (an immediate answer
+    plus the upload) and flies to the first waypoint still ahead, untimed: the plan carries
+    its current path every 5 s from then to the start, so that leg is at most 5 s and every
+    later leg keeps its time (a delay plan held at its start point 17 s early without)."""
+    a, b = crossing(VehicleKind.MULTIROTOR)
+    snap = sc.snapshot([a, b])
+    threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], event_in_s=60)
+    start = sc.T0_S + 25.0
+    alts = make_td().resolve_loss_of_separation(
+        threat, snap, start_t_s=start, lead_in_from_t_s=sc.T0_S + 3.0
+    )
+    lp_a = plan_to_local(a.plan, sc.FRAME)
+    mine = moved({OperationId("A"): alts[OperationId("A")]})
+    assert mine
+    for x in mine:
+        assert x.plan is not None
+        lead = [w for w in x.plan.waypoints if w.t_s < start - 1e-6]
+        assert [w.t_s - sc.T0_S for w in lead] == pytest.approx([5.0, 10.0, 15.0, 20.0])
+        for w in lead:
+            e, n = sc.FRAME.point_to_local(w.lat_deg, w.lon_deg)
+            assert np.allclose([e, n, w.alt_amsl_m], lp_a.position_at(w.t_s), atol=0.01)

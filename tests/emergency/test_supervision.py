@@ -60,14 +60,23 @@ def test_a_plan_starts_after_the_answer_the_upload_and_a_margin(
     delay: float | None, autonomous: bool, start_in_s: float
 ) -> None:
     """Pilot: up to the deadline (20 s) + upload 3 s + margin 2 s; an automatic operator:
-    its delay; autonomous: no answer at all. The plan EM proposes starts then."""
+    its delay; autonomous: no answer at all. The plan EM proposes leaves the UAS's path then;
+    before that it carries the path's points every 5 s back to the earliest the vehicle can
+    have it (an immediate answer plus the upload), so no leg but the first is untimed."""
     snap, threat = sc.scenario_los_2uas()
     em = make_em(delay, autonomous=autonomous)
     assert em.plan_start(threat, snap.t_s) == pytest.approx(snap.t_s + start_in_s)
     d = em.on_threat(threat, snap)
     (rec,) = d.recommendations
     assert rec.selected is not None and rec.selected.plan is not None
-    assert rec.selected.plan.start_t_s == pytest.approx(snap.t_s + start_in_s)
+    times = [w.t_s - snap.t_s for w in rec.selected.plan.waypoints]
+    assert any(abs(t - start_in_s) < 1e-3 for t in times)
+    earliest = 3.0 + (delay or 0.0)
+    lead = [t for t in times if t < start_in_s - 1e-3]
+    assert lead == pytest.approx([start_in_s - 5.0 * k for k in range(len(lead), 0, -1)])
+    assert all(t >= earliest - 1e-6 for t in lead)
+    assert len(lead) == int((start_in_s - earliest) // 5.0)
+    assert em.manoeuvre_start(rec) == pytest.approx(snap.t_s + start_in_s)
 
 
 def accept_all(em: EmergencyManager, d: Decision, snap: AirspaceSnapshot) -> list[Recommendation]:
@@ -84,7 +93,7 @@ def test_a_threat_still_predicted_after_the_accepted_plan_gets_a_new_version() -
     em = make_em(max_replans=1)
     (acc,) = accept_all(em, em.on_threat(threat, snap), at(snap, 1.0))
     assert acc.selected is not None and acc.selected.plan is not None
-    settled = acc.selected.plan.start_t_s + em.config.supervision_grace_s - sc.T0_S
+    settled = em.manoeuvre_start(acc) + em.config.supervision_grace_s - sc.T0_S
     updated = replace(threat, status=ThreatStatus.UPDATED, updated_at_s=sc.T0_S + 5.0)
     assert em.on_threat(updated, at(snap, 5.0)) == Decision()  # plan not started yet
     assert em.supervise(at(snap, settled - 1.0)) == Decision()
@@ -95,7 +104,7 @@ def test_a_threat_still_predicted_after_the_accepted_plan_gets_a_new_version() -
     # Accepted again, and the threat still does not close: escalate with the safe command.
     (acc2,) = accept_all(em, d, at(snap, settled + 1.0))
     assert acc2.selected is not None and acc2.selected.plan is not None
-    later = acc2.selected.plan.start_t_s + em.config.supervision_grace_s - sc.T0_S + 1.0
+    later = em.manoeuvre_start(acc2) + em.config.supervision_grace_s - sc.T0_S + 1.0
     later = max(later, settled + 0.5 + em.config.retry_after_s + 1.0)
     d3 = em.supervise(at(snap, later))
     assert d3.escalations and "still predicted" in d3.escalations[0]
@@ -148,7 +157,11 @@ class _FakeTD(TacticalDeconfliction):
         self.ok = ok
 
     def resolve_loss_of_separation(
-        self, threat: Threat, snapshot: AirspaceSnapshot, start_t_s: float | None = None
+        self,
+        threat: Threat,
+        snapshot: AirspaceSnapshot,
+        start_t_s: float | None = None,
+        lead_in_from_t_s: float | None = None,
     ) -> dict[OperationId, list[Alternative]]:
         return {k: list(v) for k, v in self.options.items()}
 

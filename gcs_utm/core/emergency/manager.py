@@ -247,11 +247,27 @@ class EmergencyManager:
         """When a plan decided now can start: the expected answer (none in autonomous mode;
         the automatic operator's delay; else up to the deadline), the upload and a margin.
         The vehicle has the plan before then, and its first waypoint lies ahead of it."""
+        return self._start(now, self._deadline(threat, now))
+
+    def manoeuvre_start(self, rec: Recommendation) -> float:
+        """When the plan of ``rec`` leaves the UAS's path (its lead-in ends)."""
+        return self._start(rec.created_t_s, rec.deadline_t_s)
+
+    def _start(self, now: float, deadline_t_s: float) -> float:
         cfg = self.config
-        answer = 0.0 if cfg.autonomous else self._deadline(threat, now) - now
+        answer = 0.0 if cfg.autonomous else deadline_t_s - now
         if self.answer_delay_s is not None:
             answer = min(answer, self.answer_delay_s)
         return now + answer + cfg.upload_time_s + cfg.start_margin_s
+
+    def earliest_receipt(self, now: float) -> float:
+        """The earliest the vehicle can have a plan decided now: an immediate answer (or the
+        automatic operator's delay) plus the upload. A new plan carries timed points of the
+        current path from then to its start (TD's lead-in)."""
+        answer = 0.0 if self.answer_delay_s is None else self.answer_delay_s
+        if self.config.autonomous:
+            answer = 0.0
+        return now + answer + self.config.upload_time_s
 
     def audit(self, t_s: float, action: str, subject: str, detail: dict[str, object]) -> AuditEntry:
         return AuditEntry(t_s=t_s, actor=ACTOR, action=action, subject=str(subject), detail=detail)
@@ -349,7 +365,12 @@ class EmergencyManager:
         now = snapshot.t_s
         cfg = self.config
         t = case.threat
-        options = self.td.resolve_loss_of_separation(t, snapshot, start_t_s=self.plan_start(t, now))
+        options = self.td.resolve_loss_of_separation(
+            t,
+            snapshot,
+            start_t_s=self.plan_start(t, now),
+            lead_in_from_t_s=self.earliest_receipt(now),
+        )
         for op_id, alts in options.items():
             banned = case.excluded.get(op_id, set())
             options[op_id] = [x for x in alts if x.maneuver not in banned]
@@ -484,6 +505,7 @@ class EmergencyManager:
             maneuvers=allowed,
             extra_geofences=tuple(case.geofences),
             start_t_s=self.plan_start(t, now),
+            lead_in_from_t_s=self.earliest_receipt(now),
         )
         cfg = self.config
         if case.action == "land_or_home":
@@ -541,7 +563,11 @@ class EmergencyManager:
         alts = [
             x
             for x in self.td.resolve_intruder(
-                case.threat, op_id, snapshot, self.plan_start(case.threat, now)
+                case.threat,
+                op_id,
+                snapshot,
+                self.plan_start(case.threat, now),
+                self.earliest_receipt(now),
             )
             if x.maneuver not in banned
         ]

@@ -59,7 +59,7 @@ def settled_at(em: EmergencyManager, rec: Recommendation) -> float:
     if rec.state is RecommendationState.ACCEPTED:
         t += cfg.upload_time_s  # the service may not report the outcome
     if rec.selected is not None and rec.selected.plan is not None:
-        t = max(t, rec.selected.plan.start_t_s)
+        t = max(t, em.manoeuvre_start(rec))
     return t + cfg.supervision_grace_s
 
 
