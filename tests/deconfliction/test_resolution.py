@@ -215,3 +215,16 @@ def test_a_new_plan_carries_timed_points_of_the_path_before_it_starts() -> None:
         for w in lead:
             e, n = sc.FRAME.point_to_local(w.lat_deg, w.lon_deg)
             assert np.allclose([e, n, w.alt_amsl_m], lp_a.position_at(w.t_s), atol=0.01)
+
+
+def test_lead_in_never_goes_past_a_plan_that_is_over() -> None:
+    """A UAS past its last waypoint (hovering there) gets no lead-in after it."""
+    a, b = crossing(VehicleKind.MULTIROTOR)
+    late = sc.T0_S + 400.0
+    snap = sc.snapshot([a, b], t_s=late)
+    threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], t_s=late, event_in_s=60)
+    alts = make_td().resolve_loss_of_separation(
+        threat, snap, start_t_s=late + 25.0, lead_in_from_t_s=late + 3.0
+    )
+    for x in moved(alts):
+        assert x.plan is not None  # the plan's times never go backwards (FlightPlan checks)

@@ -108,7 +108,11 @@ class _Candidate:
     def full(self) -> LocalPlan:
         if self.lead is None or len(self.lead) == 0:
             return self.new
-        a, b = self.lead, self.new
+        b = self.new
+        a = self.lead
+        keep = a.t < b.t[0] - 1e-6  # a plan already over starts before the start time
+        if not keep.all():
+            a = LocalPlan(a.e[keep], a.n[keep], a.z[keep], a.t[keep])
         return LocalPlan(
             np.concatenate([a.e, b.e]),
             np.concatenate([a.n, b.n]),
@@ -470,7 +474,7 @@ class TacticalDeconfliction:
         if unsafe:
             return unsafe, plan, []
         checked = plan
-        skip = c.verify_from + (0 if c.lead is None else len(c.lead))
+        skip = c.verify_from + len(c.full()) - len(c.new)
         if c.verify_from > 0:
             checked = replace(plan, waypoints=plan.waypoints[skip:])
         # Monitoring's check is exact but costs a buffer per fence: hand it only the fences
