@@ -13,12 +13,12 @@ from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
 from gcs_utm.core.deconfliction.geometry import plan_to_local
 from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.envelope import PerformanceEnvelope
 from gcs_utm.model import (
     Alternative,
     Maneuver,
     Operation,
     OperationId,
-    PerformanceEnvelope,
     ThreatKind,
     VehicleKind,
     default_envelope,
@@ -228,3 +228,18 @@ def test_lead_in_never_goes_past_a_plan_that_is_over() -> None:
     )
     for x in moved(alts):
         assert x.plan is not None  # the plan's times never go backwards (FlightPlan checks)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("descent_rate_mps", 0.0), ("min_speed_mps", 50.0), ("turn_radius_m", float("nan"))],
+)
+def test_an_envelope_that_cannot_be_flown_is_refused_naming_the_field(
+    field: str, value: float
+) -> None:
+    from gcs_utm.envelope import EnvelopeError
+
+    good = default_envelope(VehicleKind.FIXED_WING, 20.0, 5.0)
+    with pytest.raises(EnvelopeError) as info:
+        replace(good, **{field: value})
+    assert info.value.field_name == field

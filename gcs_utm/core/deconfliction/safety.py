@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
-from gcs_utm.model import PerformanceEnvelope
+from gcs_utm.envelope import PerformanceEnvelope
 
 SPEED_TOLERANCE = 1.02
 """Relative slack on the speed checks: re-timing arithmetic and the WGS84 round trip move

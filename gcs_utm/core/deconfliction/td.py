@@ -49,7 +49,7 @@ from gcs_utm.core.deconfliction.intruder import intruder_plan, resolve_intruder
 from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags
 from gcs_utm.core.deconfliction.scoring import Neighbour, Reference, Score, reference, score_many
 from gcs_utm.core.deconfliction.single import resolve_single
-from gcs_utm.core.deconfliction.timing import Screen, clear_of, first_clear_delay
+from gcs_utm.core.deconfliction.timing import timing_candidates
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import plan_vs_geofences, plan_vs_plans
 from gcs_utm.geo import LocalFrame
@@ -122,7 +122,7 @@ class _Candidate:
 
 
 @dataclass(slots=True, kw_only=True, eq=False)
-class _Problem:
+class Problem:
     """One charged-cord problem: the members (involved UAS and the neighbours drawn in),
     their plans from the start time on, the common grid and minima, what lies outside the
     problem, and the alternatives collected per member."""
@@ -533,7 +533,7 @@ class TacticalDeconfliction:
                 minima[i, j] = self.monitoring.effective_minima(
                     a.operational_volume_m, b.operational_volume_m
                 )
-        pb = _Problem(
+        pb = Problem(
             members=members,
             involved={op.id for op in involved},
             local=local,
@@ -579,7 +579,7 @@ class TacticalDeconfliction:
         self.flush(snapshot.t_s)
         return {k: _dedupe(v) for k, v in pb.out.items() if v or k in threat.uas_ids}
 
-    def _alone(self, pb: _Problem, k: int, snapshot: AirspaceSnapshot) -> None:
+    def _alone(self, pb: Problem, k: int, snapshot: AirspaceSnapshot) -> None:
         """Single-mover scenarios of member ``k``: up, down, left, right, then timing."""
         u = len(pb.members)
         op = pb.members[k]
@@ -593,7 +593,7 @@ class TacticalDeconfliction:
             signs = [sign if j == k else 0 for j in range(u)]
             self._run(pb, [axis] * u, signs, only, f"{op.id} alone")
         rigid = [o for o in pb.members if o.id != op.id]
-        self._timing(op, pb, rigid, snapshot)
+        timing_candidates(self, op, pb, rigid)
 
     def _cord(self, op: Operation, plan: LocalPlan, axis: str, sign: int, mobile: bool) -> cd.Cord:
         cfg = self.config
@@ -616,7 +616,7 @@ class TacticalDeconfliction:
         )
 
     def _run(
-        self, pb: _Problem, axes: list[str], signs: list[int], mobile: list[bool], label: str
+        self, pb: Problem, axes: list[str], signs: list[int], mobile: list[bool], label: str
     ) -> None:
         """One charged-cord scenario; every deformed member's plan is queued."""
         cfg = self.config
@@ -683,60 +683,6 @@ class TacticalDeconfliction:
                 found.append((best, other))
         found.sort(key=lambda x: x[0])
         return [op for _, op in found[: self.config.max_neighbours]]
-
-    def _timing(
-        self, op: Operation, pb: _Problem, rigid: Sequence[Operation], snapshot: AirspaceSnapshot
-    ) -> None:
-        """The smallest delay (hold at the start point, then the same plan later: only for a
-        vehicle that can hover) and the mildest slow-down that separate ``op`` from every
-        other plan, if any, queued for its alternatives."""
-        cfg = self.config
-        lp = pb.local[op.id]
-        t0 = float(lp.t[0])
-        others = list(rigid) + list(pb.outsiders)
-        slowest = min([f for f in cfg.slowdown_factors if 0.0 < f < 1.0] or [1.0])
-        span = float(lp.t[-1] - t0)
-        grid_t = np.arange(t0, t0 + max(span / slowest, span + cfg.max_delay_s) + 1.0, 1.0)
-        screens = []
-        for o in others:
-            q, ok = self.local_plan(o.plan).sample(grid_t)
-            h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
-            screens.append(Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, h, v))
-        margin = cfg.separation_margin_fraction
-        spherical = self.monitoring.spherical
-
-        def queue(man: Maneuver, cand: LocalPlan, detail: str) -> None:
-            self.finish(
-                op,
-                man,
-                cand,
-                lp,
-                geofences=pb.geofences,
-                fences=pb.fences,
-                outsiders=others,
-                lowest_priority=pb.lowest,
-                detail=detail,
-                dest=pb.out[op.id],
-            )
-
-        steps = int(cfg.max_delay_s // cfg.delay_step_s)
-        delays = cfg.delay_step_s * np.arange(1, max(steps, 0) + 1, dtype=np.float64)
-        if not op.performance().can_hover:
-            delays = delays[:0]  # a fixed wing cannot stop in place
-        delay = first_clear_delay(lp, t0, grid_t, screens, delays, margin, spherical)
-        if delay is not None:
-            t = np.concatenate([[t0, t0 + delay], lp.t[1:] + delay])
-            e = np.concatenate([[lp.e[0]], lp.e])
-            n = np.concatenate([[lp.n[0]], lp.n])
-            z = np.concatenate([[lp.z[0]], lp.z])
-            queue(Maneuver.DELAY, LocalPlan(e, n, z, t), f"hold {delay:.0f} s, then the plan")
-        for factor in cfg.slowdown_factors:
-            if not 0.0 < factor < 1.0:
-                continue
-            cand = LocalPlan(lp.e, lp.n, lp.z, t0 + (lp.t - t0) / factor)
-            if clear_of(cand, grid_t, screens, margin, spherical):
-                queue(Maneuver.SPEED_CHANGE, cand, f"fly the plan at {factor:.0%} of its speed")
-                break
 
     # ---- intruder ---------------------------------------------------------------------------
     def intruder_plan(self, threat: Threat, snapshot: AirspaceSnapshot) -> LocalPlan | None:
