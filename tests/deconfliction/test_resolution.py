@@ -243,3 +243,23 @@ def test_an_envelope_that_cannot_be_flown_is_refused_naming_the_field(
     with pytest.raises(EnvelopeError) as info:
         replace(good, **{field: value})
     assert info.value.field_name == field
+
+
+def test_a_fixed_wing_turn_must_fit_its_turn_radius() -> None:
+    from gcs_utm.core.deconfliction.geometry import LocalPlan
+    from gcs_utm.core.deconfliction.safety import turn_flags
+
+    def lp(pts: list[tuple[float, float]]) -> LocalPlan:
+        arr = np.array(pts, dtype=np.float64)
+        k = arr.shape[0]
+        return LocalPlan(arr[:, 0], arr[:, 1], np.full(k, 100.0), np.arange(k) * 10.0)
+
+    old = lp([(0.0, 0.0), (1000.0, 0.0)])
+    back = lp([(0.0, 0.0), (200.0, 0.0), (0.0, 1.0)])  # turn back at a generated point
+    assert turn_flags(back, old, 80.0) and "turn radius" in turn_flags(back, old, 80.0)[0]
+    gentle = lp([(0.0, 0.0), (200.0, 0.0), (400.0, 115.0)])  # 30 deg: 21 m each side
+    assert turn_flags(gentle, old, 80.0) == []
+    tight = lp([(0.0, 0.0), (200.0, 0.0), (200.0, 60.0)])  # 90 deg, 60 m leg < 80 m
+    assert turn_flags(tight, old, 80.0)
+    assert turn_flags(tight, tight, 80.0) == []  # the filed plan's own corners are not judged
+    assert turn_flags(back, old, 0.0) == []  # a multirotor turns on the spot

@@ -46,7 +46,7 @@ from gcs_utm.core.deconfliction.geometry import (
     separation_screen,
 )
 from gcs_utm.core.deconfliction.intruder import intruder_plan, resolve_intruder
-from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags
+from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags, turn_flags
 from gcs_utm.core.deconfliction.scoring import Neighbour, Reference, Score, reference, score_many
 from gcs_utm.core.deconfliction.single import resolve_single
 from gcs_utm.core.deconfliction.timing import timing_candidates
@@ -468,8 +468,11 @@ class TacticalDeconfliction:
             return flags, op.plan, [True] * len(c.fences)
         assert plan is not None
         self._local[id(plan)] = (plan, c.full())  # its local form, without a second conversion
-        unsafe = envelope_flags(c.new, c.old, op.performance()) + floor_flags(
-            c.new, c.old, self.floor_amsl(op), lands=c.maneuver in _ABANDON
+        env = op.performance()
+        unsafe = (
+            envelope_flags(c.new, c.old, env)
+            + turn_flags(c.new, c.old, env.turn_radius_m)
+            + floor_flags(c.new, c.old, self.floor_amsl(op), lands=c.maneuver in _ABANDON)
         )
         if unsafe:
             return unsafe, plan, []
