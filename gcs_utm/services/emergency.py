@@ -150,8 +150,8 @@ class EmergencyService:
 
     async def _supervise_due(self) -> None:
         now = self._clock.now_s()
-        if now - self._supervised_t_s < self._supervise_s:
-            return
+        if now - self._supervised_t_s < self._supervise_s or not self.em.supervising():
+            return  # no snapshot is built when no accepted plan is waiting
         self._supervised_t_s = now
         await self._decide(lambda: self.em.supervise(self._snapshot(now)), "supervision")
 

@@ -265,3 +265,32 @@ async def _until(cond: object, steps: int = 2000) -> None:
             return
         await asyncio.sleep(0)
     raise AssertionError("condition not reached")
+
+
+async def test_the_service_supervises_on_its_own_clock() -> None:
+    """Monitoring reports a persisting threat only when it changes: the service's tick asks
+    EM to supervise, and the accepted plan that left the threat open gets a new version."""
+    snap, threat = sc.scenario_los_2uas()
+    clock = ManualClock(snap.t_s)
+    em = make_em()
+    got: list[Decision] = []
+
+    async def sink(d: Decision) -> None:
+        got.append(d)
+
+    svc = EmergencyService(em, lambda t: replace(snap, t_s=t), clock, sink)
+    task = asyncio.create_task(svc.run())
+    try:
+        await svc.submit_threats([threat])
+        await _until(lambda: bool(svc.pending()))
+        (rec,) = svc.pending()
+        await svc.submit_answer(rec.id, rec.version, True)
+        await _until(lambda: em.pending() == [] and em.supervising())
+        acc = em.recommendation(rec.id)
+        assert acc is not None
+        clock.advance(em.manoeuvre_start(acc) + em.config.supervision_grace_s - snap.t_s + 1.0)
+        await _until(lambda: bool(svc.pending()))
+        assert svc.pending()[0].version == rec.version + 1
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)

@@ -141,6 +141,10 @@ class EmergencyManager:
         self._cases[threat.id] = case
         return self._handle(case, snapshot)
 
+    def supervising(self) -> bool:
+        """Is any open case waiting on an accepted plan (so :meth:`supervise` has work)?"""
+        return any(self._in_force(c) and not self._pending(c) for c in self._cases.values())
+
     def supervise(self, snapshot: AirspaceSnapshot) -> Decision:
         """Periodic supervision of every open case with accepted plans (Monitoring reports a
         persisting threat only when it changes): see :mod:`.supervision`."""
