@@ -255,7 +255,8 @@ class MavlinkHub:
         self._links: dict[str, _Link] = {}
         self._mailbox: dict[int, asyncio.Queue[wire.MavMsg]] = {}
         self._locks: dict[int, asyncio.Lock] = {}
-        self._ratelog = RateLimitedLog(_log, config.warn_interval_s)
+        # repeated warnings: at most one line per cause per interval of clock time
+        self._ratelog = RateLimitedLog(_log, config.warn_interval_s, now=clock.now_s)
         self._senders = Senders(config, sink, self._lane, self._busy, self._ratelog)
         self._senders.on_forget.append(self._forgotten)
         # the same tables under the names the protocol code uses
