@@ -9,7 +9,7 @@ opened, or that closes (the autopilot restarted, the cable was pulled), is retri
 and counts it (``dropped_down``) instead of writing to a dead socket (asyncio logs a warning
 for every write to a closed transport). One log line per failed attempt would flood a log
 during a long outage: the first failure and every change are logged, the retries in between
-at most once per ``max_s`` (a :class:`~gcs_utm.ratelog.RateLimitedLog`).
+at most once per 30 s (a :class:`~gcs_utm.ratelog.RateLimitedLog`, with the count).
 """
 
 from __future__ import annotations
@@ -128,7 +128,8 @@ class Transport:
         self._on_state: OnState | None = None
         self._keeper: asyncio.Task[None] | None = None
         self._closing = False
-        self._ratelog = RateLimitedLog(_log, backoff.max_s if backoff is not None else 10.0)
+        # retries of a long outage: one line per 30 s at most (or per 3 attempts, if slower)
+        self._ratelog = RateLimitedLog(_log, max(30.0, 3.0 * backoff.max_s) if backoff else 30.0)
 
     async def open(
         self,
