@@ -584,7 +584,7 @@ class MavlinkHub:
             f"it is bound to {owner.key.address or 'no address'} on {owner.key.link}: "
             f"frames dropped ({self.counters.sysid_claims} claims so far)"
         )
-        self._ratelog.warning(f"claim:{sys_id}", "%s", message)
+        self._ratelog.warning("claim", "%s", message)  # one line per interval for all
         self.sink.on_hazard(owner.hazard(ThreatKind.SPOOFING_ATTACK, t, message))
 
     def _unverified(self, link: _Link, cause: str) -> None:

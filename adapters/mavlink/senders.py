@@ -85,10 +85,13 @@ class Senders:
     A frame from another (link, address) claiming a bound system id is refused
     (:meth:`new_state` returns None) and counted; the caller raises the security event. The
     exception is a move: on the same link, once the bound vehicle has been silent for
-    ``address_move_s``, it is taken to be the same one at a new address (NAT rebinding, a
-    restarted bridge or SITL) and its binding follows it. Without ``sysid_binding`` a claim
-    makes a vehicle of its own instead (counted in ``sysid_collisions``), reachable by its
-    :class:`VehicleKey`; ``by_sysid`` stays with the first."""
+    ``address_move_s``, a sender from the same host (another port: NAT rebinding, a restarted
+    bridge or SITL) is taken to be the same vehicle and the binding follows it; from another
+    host only when the vehicle's frames are signed (a key in ``signing_keys``: they were
+    verified before they got here), else it is a claim like any other. Without
+    ``sysid_binding`` a claim makes a vehicle of its own instead (counted in
+    ``sysid_collisions``), reachable by its :class:`VehicleKey`; ``by_sysid`` stays with the
+    first."""
 
     def __init__(
         self,
@@ -108,6 +111,7 @@ class Senders:
         self.by_sysid: dict[int, VehicleState] = {}
         self.addr: dict[int, Address | None] = {}  # id(state) -> its source address
         self.on_forget: list[Callable[[VehicleState], None]] = []
+        self._keyed = frozenset(int(s) for s in config.signing_keys)
 
     def bound_to(self, sys_id: int) -> tuple[str, Address | None] | None:
         """(link, address) that ``sys_id`` is bound to, or None."""
@@ -127,7 +131,11 @@ class Senders:
         owner = self.by_sysid.get(sys_id)
         if owner is not None and (owner.key.link, self.addr.get(id(owner))) != (link, addr):
             silent_s = t_s - owner.last_heard_t_s
-            if owner.key.link == link and silent_s >= self.config.address_move_s:
+            if (
+                owner.key.link == link
+                and silent_s >= self.config.address_move_s
+                and (sys_id in self._keyed or _host(self.addr.get(id(owner))) == _host(addr))
+            ):
                 moved = self._move(owner, link, addr, comp_id)
                 if moved is not None:
                     return moved
@@ -233,3 +241,7 @@ class Senders:
 
     def on_link(self, link: str) -> list[VehicleState]:
         return [st for k, st in self.states.items() if k[0] == link]
+
+
+def _host(addr: Address | None) -> str | None:
+    return None if addr is None else addr[0]

@@ -151,10 +151,13 @@ async def test_a_second_sender_claiming_a_bound_sysid_is_dropped_and_reported() 
         clock.advance(5.0)
         hub._on_chunk(hub._links[other], _hb(spoof), ("127.0.0.1", 9))
         assert hub.counters.sysid_claims == 202 and hub.counters.address_changes == 0
-        # the same link after address_move_s of silence: the vehicle moved
+        # the same link after address_move_s of silence, from another host: still a claim
         hub._on_chunk(link, _hb(spoof), b)
+        assert hub.counters.sysid_claims == 203 and hub.counters.address_changes == 0
+        # from the same host, another port (NAT rebinding, a restarted SITL): it moved
+        hub._on_chunk(link, _hb(owner), ("10.0.0.1", 14551))
         assert hub.counters.address_changes == 1
-        assert hub.state(SysId(1)).key.address == "10.0.0.66:14550"
+        assert hub.state(SysId(1)).key.address == "10.0.0.1:14551"
     finally:
         await hub.close()
 
