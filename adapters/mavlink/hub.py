@@ -270,7 +270,8 @@ class MavlinkHub:
                 self._keys[int(sid)] = wire.parse_key(hexkey)
             except ValueError as exc:
                 raise MavlinkError(f"[mavlink] signing_keys.{sid}: {exc}") from exc
-        self._verify = SignatureCheck(self._keys) if self._keys else None
+        # signing timestamps are UTC: the clock's (tlog time in a replay)
+        self._verify = SignatureCheck(self._keys, now=clock.now_s) if self._keys else None
         self._claim_alerts: dict[int, float] = {}  # sysid -> when its last claim was reported
         self._restream: set[int] = set()  # id(state) of ArduPilot vehicles to ask for streams
         self._tasks: list[asyncio.Task[None]] = []
