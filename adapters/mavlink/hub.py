@@ -466,11 +466,7 @@ class MavlinkHub:
                         self.flush_positions()  # within a long burst too: latency
                     return
         link.seen[addr] = t
-        parser = link.parsers.get(addr)
-        if parser is None:
-            if len(link.parsers) >= self.config.max_senders:
-                self._trim_senders(link)
-            parser = link.parsers[addr] = wire.Parser(link.counters, fast=self.config.fast_decode)
+        parser = link.parsers.get(addr) or self._new_parser(link, addr)
         before = link.counters.rejects
         if link.transport.datagram:
             frames = parser.feed_frames(data)
@@ -618,6 +614,13 @@ class MavlinkHub:
         """``st`` was evicted: drop what the hub keeps by its id."""
         self._locks.pop(id(st), None)
         self._restream.discard(id(st))
+
+    def _new_parser(self, link: _Link, addr: Address | None) -> wire.Parser:
+        """The parser of a source address heard for the first time (room made if full)."""
+        if len(link.parsers) >= self.config.max_senders:
+            self._trim_senders(link)
+        parser = link.parsers[addr] = wire.Parser(link.counters, fast=self.config.fast_decode)
+        return parser
 
     def _trim_senders(self, link: _Link) -> None:
         """``link`` has ``max_senders`` parsers and a new address: forget the oldest eighth."""
