@@ -34,6 +34,9 @@ OnChunk = Callable[[bytes, Address | None], None]
 OnState = Callable[[bool], None]
 
 _MAX_DATAGRAM = 65535  # never truncate: PX4 packs several frames into one datagram
+# A TCP connect to a host that does not answer (no RST) would wait for the kernel's SYN
+# retries (minutes) and hold `serve`'s start: give up sooner and let the backoff retry.
+_CONNECT_TIMEOUT_S = 5.0
 
 
 class LinkError(OSError):
@@ -198,9 +201,13 @@ class Transport:
         assert on_chunk is not None
         if ep.kind is EndpointKind.TCP:
             peer = (ep.host, ep.port)
-            tr2, proto = await asyncio.get_running_loop().create_connection(
+            connect = asyncio.get_running_loop().create_connection(
                 lambda: _Stream(on_chunk, peer), ep.host, ep.port
             )
+            try:
+                tr2, proto = await asyncio.wait_for(connect, _CONNECT_TIMEOUT_S)
+            except TimeoutError as exc:
+                raise OSError(f"no answer within {_CONNECT_TIMEOUT_S:g} s") from exc
             self._tcp = tr2
             self._stream = proto
             self.default_peer = peer

@@ -7,6 +7,7 @@ same. Local TCP servers and ptys only."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import os
 import pty
@@ -198,3 +199,35 @@ def test_backoff_doubles_up_to_its_bound_and_refuses_inverted_bounds() -> None:
         Backoff(min_s=2.0, max_s=1.0)
     with pytest.raises(ValueError, match="must not exceed"):
         MavlinkConfig(reconnect_min_s=2.0, reconnect_max_s=1.0)
+
+
+async def test_a_peer_that_does_not_answer_does_not_hold_the_start(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import adapters.mavlink.transport as transport
+
+    monkeypatch.setattr(transport, "_CONNECT_TIMEOUT_S", 0.3)
+    # a listener that never accepts, its queue full: further SYNs go unanswered
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(0)
+    port = srv.getsockname()[1]
+    fillers = []
+    for _ in range(4):
+        c = socket.socket()
+        c.setblocking(False)
+        with contextlib.suppress(BlockingIOError):
+            c.connect(("127.0.0.1", port))
+        fillers.append(c)
+    await asyncio.sleep(0.2)
+    cfg = MavlinkConfig(links=(f"tcp:127.0.0.1:{port}",), reconnect_min_s=5.0)
+    t0 = time.monotonic()
+    try:
+        async with MavlinkHub(cfg, RealClock(), Sink()) as hub:
+            assert time.monotonic() - t0 < 2.0
+            [ls] = hub.links()
+            assert not ls.up and "no answer within 0.3 s" in ls.last_error
+    finally:
+        for c in fillers:
+            c.close()
+        srv.close()
