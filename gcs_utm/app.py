@@ -887,10 +887,12 @@ async def serve(
     headless: bool,
     stop: asyncio.Event | None = None,
     on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
+    speed: float = 1.0,
 ) -> int:
     """Long-running service: links from config, persistent store; restart resumes. Runs until
-    SIGINT/SIGTERM (or ``stop`` is set)."""
-    clock = RealClock()
+    SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
+    than real time: the service's clock then advances ``speed`` simulated seconds per second."""
+    clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
     frame = LocalFrame(
         settings.airspace.origin_lat_deg,
         settings.airspace.origin_lon_deg,

@@ -58,6 +58,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="SQLite store (kept across restarts; default ./gcs_utm.sqlite)",
     )
     serve.add_argument("--headless", action="store_true", help="no TUI; log lines")
+    serve.add_argument(
+        "--speed",
+        type=_positive_speed,
+        default=1.0,
+        help="the vehicles' simulation speed factor (PX4_SIM_SPEED_FACTOR, ArduPilot "
+        "--speedup): the service's clock runs this many times faster than the wall clock "
+        "(default 1: real vehicles)",
+    )
     group = serve.add_mutually_exclusive_group()
     group.add_argument("--auto-accept", action="store_true")
     group.add_argument("--auto-reject", action="store_true")
@@ -232,4 +240,23 @@ def _serve(args: argparse.Namespace) -> int:
         else OperatorMode.NONE
     )
     headless = args.headless or operator != OperatorMode.DASHBOARD
-    return asyncio.run(serve(settings, db_path=args.db, operator=operator, headless=headless))
+    return asyncio.run(
+        serve(
+            settings,
+            db_path=args.db,
+            operator=operator,
+            headless=headless,
+            speed=args.speed,
+        )
+    )
+
+
+def _positive_speed(text: str) -> float:
+    """argparse type of ``serve --speed``: a finite number above 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--speed must be a number, got {text!r}") from None
+    if not 0.0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"--speed must be above 0, got {text!r}")
+    return value
