@@ -30,7 +30,18 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-from xml.sax.saxutils import escape
+
+from gcs_utm.dashboard.export import to_geojson, to_kml
+
+__all__ = [
+    "PlotSummary",
+    "ReportError",
+    "export_all",
+    "load_report",
+    "plot_report",
+    "to_geojson",
+    "to_kml",
+]
 
 
 class ReportError(ValueError):
@@ -55,6 +66,8 @@ class PlotSummary:
     min_separation_m: dict[str, float] = field(default_factory=dict)
     # "A|B" -> smallest distance of the filed plans flown late without resolution, metres
     min_planned_separation_m: dict[str, float] = field(default_factory=dict)
+    # "A|B" -> the flown pair's verdict, naming both axes against their minima (cylinder rule)
+    separation_verdict: dict[str, str] = field(default_factory=dict)
     # "UAS|geofence" -> smallest signed distance to the edge while active (< 0 = inside)
     min_geofence_distance_m: dict[str, float] = field(default_factory=dict)
 
@@ -141,7 +154,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
             if ov > 0 and j == 0:
                 # the operational volume: the filed plan's path grown by its radius
                 _fill_volume(ax, xs, ys, ov, colour)
-            ax3.plot(xs, ys, zs, style, color=colour, lw=1.5)
+            ax3.plot(xs, ys, zs, style, color=colour, lw=1.5, label=label)
             summary.plans += 1
         track = report.get("tracks", {}).get(op["id"], [])
         if track:
@@ -161,8 +174,18 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
                 ":",
                 color=colour,
                 lw=1,
+                label=f"{op['id']} flown",
             )
             summary.tracks += 1
+
+    labelled: set[str] = set()
+
+    def once(label: str) -> str:
+        """A legend label the first time, none after (one legend entry per kind)."""
+        if label in labelled:
+            return "_nolegend_"
+        labelled.add(label)
+        return label
 
     for rec in report.get("recommendations", []):
         for alt in rec.get("alternatives", []):
@@ -171,6 +194,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
                 continue
             pts = [local.xy(w[0], w[1]) for w in wps]
             chosen = bool(alt.get("selected"))
+            label = once("selected alternative" if chosen else "other TD alternatives")
             ax.plot(
                 [p[0] for p in pts],
                 [p[1] for p in pts],
@@ -178,6 +202,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
                 color="black" if chosen else "grey",
                 lw=1.2 if chosen else 0.6,
                 alpha=1.0 if chosen else 0.6,
+                label=label,
             )
             ax3.plot(
                 [p[0] for p in pts],
@@ -185,6 +210,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
                 [w[2] for w in wps],
                 color="black" if chosen else "grey",
                 lw=0.8,
+                label=label,
             )
             summary.alternatives += 1
 
@@ -192,8 +218,11 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
         pos = t.get("position")
         if pos:
             x, y = local.xy(pos["lat_deg"], pos["lon_deg"])
-            ax.plot([x], [y], "x", color="red", ms=10, mew=2)
-            ax3.scatter([x], [y], [pos.get("alt_amsl_m", 0.0)], marker="x", color="red")
+            label = once("predicted conflict point")
+            ax.plot([x], [y], "x", color="red", ms=10, mew=2, label=label)
+            ax3.scatter(
+                [x], [y], [pos.get("alt_amsl_m", 0.0)], marker="x", color="red", label=label
+            )
             summary.conflict_points += 1
 
     ax.set_xlabel("east [m]")
@@ -213,6 +242,8 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
     ax3.set_ylabel("north [m]")
     ax3.set_zlabel("altitude AMSL [m]")
     ax3.set_title(f"{report.get('scenario', '')}: 3D")
+    if summary.plans:
+        ax3.legend(fontsize=7, loc="upper left")
     top = out_dir / f"{stem}_top.png"
     persp = out_dir / f"{stem}_3d.png"
     fig.savefig(top, dpi=110)
@@ -477,6 +508,10 @@ def _answer_times(report: dict[str, Any], uas: str | None = None) -> list[tuple[
     return out
 
 
+_EVENT_COLOURS = ("red", "darkorange", "purple", "saddlebrown", "magenta", "olive")
+"""One colour per threat kind in the altitude figure (green is for accepted answers)."""
+
+
 def plot_altitude(report: dict[str, Any], out_dir: Path, stem: str, summary: PlotSummary) -> Path:
     """``<stem>_altitude.png``: altitude above ground over time per UAS."""
     import matplotlib.pyplot as plt
@@ -484,7 +519,7 @@ def plot_altitude(report: dict[str, Any], out_dir: Path, stem: str, summary: Plo
     ops = report.get("operations", [])
     ground = _ground(report)
     fig, axes = plt.subplots(
-        max(1, len(ops)), 1, figsize=(9, 2.6 * max(1, len(ops))), squeeze=False
+        max(1, len(ops)), 1, figsize=(12, 2.6 * max(1, len(ops))), squeeze=False
     )
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, op in enumerate(ops):
@@ -513,32 +548,23 @@ def plot_altitude(report: dict[str, Any], out_dir: Path, stem: str, summary: Plo
                 label="flown",
             )
             summary.altitude_profiles += 1
-        labelled: set[str] = set()
+        # events are named in the legend, not in text on the plot: detections a second
+        # apart would print their labels on top of each other
+        kinds: list[str] = []
         for t, kind in _threat_times(report, op["id"]):
-            ax.axvline(t, color="red", lw=0.8, alpha=0.6)
-            if kind not in labelled:
-                labelled.add(kind)
-                ax.annotate(
-                    f"{kind} detected",
-                    (t, ax.get_ylim()[1]),
-                    fontsize=6,
-                    color="red",
-                    rotation=90,
-                    va="top",
-                    ha="right",
-                )
-        for t, man in _answer_times(report, op["id"]):
-            ax.axvline(t, color="green", lw=0.8, ls="--")
-            ax.annotate(
-                f"accepted: {man}",
-                (t, ax.get_ylim()[0]),
-                fontsize=6,
-                color="green",
-                rotation=90,
-                ha="left",
+            first = kind not in kinds
+            kinds += [kind] if first else []
+            ax.axvline(
+                t,
+                color=_EVENT_COLOURS[kinds.index(kind) % len(_EVENT_COLOURS)],
+                lw=1.0,
+                alpha=0.8,
+                label=f"{kind} detected" if first else "_nolegend_",
             )
+        for t, man in _answer_times(report, op["id"]):
+            ax.axvline(t, color="green", lw=0.8, ls="--", label=f"accepted {man} (t={t:.0f} s)")
         ax.set_ylabel(f"{op['id']}\naltitude AGL [m]")
-        ax.legend(fontsize=6, loc="best")
+        ax.legend(fontsize=6, loc="center left", bbox_to_anchor=(1.01, 0.5))
         ax.grid(alpha=0.3)
     axes[-1][0].set_xlabel("time from scenario start [s]")
     return _save(
@@ -569,6 +595,7 @@ def plot_separation(
     for col, (a, b) in enumerate(keys):
         top, bottom = axes[0][col], axes[1][col]
         key = f"{a}|{b}"
+        verdicts: list[str] = []
         for series, style, label, store in (
             (
                 planned,
@@ -586,25 +613,26 @@ def plot_separation(
             bottom.plot(ps.t_s, ps.vertical_m, style, lw=1.3, label=label)
             k = min(range(len(main)), key=main.__getitem__)
             store[key] = main[k]
-            top.plot([ps.t_s[k]], [main[k]], "o", color="black" if style == "-" else "grey")
-            top.annotate(
-                f"min {main[k]:.1f} m at t={ps.t_s[k]:.0f} s",
-                (ps.t_s[k], main[k]),
-                textcoords="offset points",
-                xytext=(5, 8 if style == "-" else -14),
-                fontsize=7,
+            top.plot(
+                [ps.t_s[k]],
+                [main[k]],
+                "o",
+                color="black" if style == "-" else "grey",
+                label=f"closest {main[k]:.1f} m at t={ps.t_s[k]:.0f} s",
             )
-        top.axhline(d_min, color="red", lw=1, label=f"minimum {d_min:g} m")
+            if style == "-" and mode != "sphere":
+                verdicts.append(_shade_verdict(top, bottom, ps, d_min, v_min))
+        top.axhline(d_min, color="red", lw=1, label=f"horizontal minimum {d_min:g} m")
         if mode != "sphere":
             bottom.axhline(v_min, color="red", lw=1, label=f"vertical minimum {v_min:g} m")
+        first = True
         for t, kind in _threat_times(report):
             if kind == "LOSS_OF_SEPARATION":
-                top.axvline(t, color="orange", lw=0.8, ls=":")
+                label = "loss of separation predicted" if first else "_nolegend_"
+                top.axvline(t, color="orange", lw=0.8, ls=":", label=label)
+                first = False
         for t, man in _answer_times(report):
-            top.axvline(t, color="green", lw=0.8, ls="--")
-            top.annotate(
-                f"accepted: {man}", (t, d_min), fontsize=6, color="green", rotation=90, va="bottom"
-            )
+            top.axvline(t, color="green", lw=0.8, ls="--", label=f"accepted {man} (t={t:.0f} s)")
         # a 10 km transit would hide the close encounter: show up to 6 minima, or a little
         # more than the closest distance drawn when that is further
         closest = [
@@ -615,8 +643,11 @@ def plot_separation(
         top.set_ylabel("3D distance [m]" if mode == "sphere" else "horizontal distance [m]")
         bottom.set_ylabel("vertical distance [m]")
         bottom.set_xlabel("time from scenario start [s]")
-        top.set_title(f"{a} - {b}")
+        if verdicts:
+            summary.separation_verdict[key] = verdicts[0]
+        top.set_title(f"{a} - {b}" + (f": {verdicts[0]}" if verdicts else ""), fontsize=9)
         top.legend(fontsize=6, loc="upper right")
+        bottom.legend(fontsize=6, loc="upper right")
         top.grid(alpha=0.3)
         bottom.grid(alpha=0.3)
     return _save(
@@ -624,6 +655,41 @@ def plot_separation(
         out_dir / f"{stem}_separation.png",
         f"{report.get('scenario', '')}: separation over time ({mode})",
     )
+
+
+def _shade_verdict(top: Any, bottom: Any, ps: PairSeries, h_min_m: float, v_min_m: float) -> str:
+    """Shade where the flown pair was horizontally closer than its minimum: green where the
+    vertical distance kept the minimum (separated), red where both were below (a loss).
+    Returns the verdict for the title, naming both axes against their minima."""
+    close = [h < h_min_m for h in ps.horizontal_m]
+    lost = [c and v < v_min_m for c, v in zip(close, ps.vertical_m, strict=True)]
+    kept = [c and not lo for c, lo in zip(close, lost, strict=True)]
+    for where, colour, label in (
+        (kept, "green", "horizontal below minimum, vertical kept"),
+        (lost, "red", "loss of separation (both below)"),
+    ):
+        if not any(where):
+            continue
+        for ax in (top, bottom):
+            ax.fill_between(
+                ps.t_s,
+                0,
+                1,
+                where=where,
+                color=colour,
+                alpha=0.15,
+                transform=ax.get_xaxis_transform(),
+                label=label if ax is top else "_nolegend_",
+            )
+    if any(lost):
+        return f"LOSS of separation (horizontal < {h_min_m:g} m and vertical < {v_min_m:g} m)"
+    if any(close):
+        v_at = min(v for c, v in zip(close, ps.vertical_m, strict=True) if c)
+        return (
+            f"separated: horizontal below {h_min_m:g} m only while vertical >= "
+            f"{v_min_m:g} m (least {v_at:.1f} m)"
+        )
+    return f"separated: horizontal never below {h_min_m:g} m"
 
 
 def plot_geofences(
@@ -687,17 +753,10 @@ def plot_geofences(
     ax.set_title("geofences: close-up top view")
     ax.legend(fontsize=6, loc="best")
     for (uas, gid), (ts, ds) in fence_distances(report).items():
-        ax_d.plot(ts, ds, lw=1.3, label=f"{uas} to {gid}")
         k = min(range(len(ds)), key=ds.__getitem__)
+        ax_d.plot(ts, ds, lw=1.3, label=f"{uas} to {gid} (closest {ds[k]:.1f} m)")
         summary.min_geofence_distance_m[f"{uas}|{gid}"] = ds[k]
         ax_d.plot([ts[k]], [ds[k]], "o", color="black")
-        ax_d.annotate(
-            f"min {ds[k]:.1f} m",
-            (ts[k], ds[k]),
-            textcoords="offset points",
-            xytext=(5, 6),
-            fontsize=7,
-        )
     ax_d.axhline(0.0, color="red", lw=1, label="geofence edge")
     ax_d.set_xlabel("time from scenario start [s]")
     ax_d.set_ylabel("horizontal distance to the edge [m] (< 0 inside)")
@@ -705,124 +764,6 @@ def plot_geofences(
     ax_d.legend(fontsize=6, loc="best")
     ax_d.grid(alpha=0.3)
     return _save(fig, out_dir / f"{stem}_geofence.png", f"{report.get('scenario', '')}: geofences")
-
-
-# ---- GeoJSON and KML --------------------------------------------------------------------------
-
-
-def _geofence_ring(g: dict[str, Any]) -> list[tuple[float, float]]:
-    """(lon, lat) ring of a geofence; cylinders as 48-gons."""
-    if g.get("shape") == "cylinder":
-        lat0, lon0 = float(g["center"]["lat_deg"]), float(g["center"]["lon_deg"])
-        r = float(g["radius_m"])
-        k = math.cos(math.radians(lat0))
-        ring = [
-            (lon0 + r * math.cos(a) / (111_320.0 * k), lat0 + r * math.sin(a) / 110_540.0)
-            for a in (2 * math.pi * i / 48 for i in range(48))
-        ]
-    else:
-        ring = [(float(v["lon_deg"]), float(v["lat_deg"])) for v in g["vertices"]]
-    ring.append(ring[0])
-    return ring
-
-
-def to_geojson(report: dict[str, Any]) -> dict[str, Any]:
-    feats: list[dict[str, Any]] = []
-    for op in report.get("operations", []):
-        for plan in op.get("plans", []):
-            feats.append(
-                {
-                    "type": "Feature",
-                    "properties": {
-                        "kind": "plan",
-                        "operation": op["id"],
-                        "version": plan["version"],
-                        "reason": plan.get("reason", ""),
-                    },
-                    "geometry": {
-                        "type": "LineString",
-                        "coordinates": [[w[1], w[0], w[2]] for w in plan["waypoints"]],
-                    },
-                }
-            )
-        track = report.get("tracks", {}).get(op["id"], [])
-        if len(track) >= 2:
-            feats.append(
-                {
-                    "type": "Feature",
-                    "properties": {"kind": "track", "operation": op["id"]},
-                    "geometry": {
-                        "type": "LineString",
-                        "coordinates": [[p[2], p[1], p[3]] for p in track],
-                    },
-                }
-            )
-    for g in report.get("geofences", []):
-        feats.append(
-            {
-                "type": "Feature",
-                "properties": {
-                    "kind": "geofence",
-                    "id": g["id"],
-                    "reason": g.get("reason", ""),
-                    "min_alt_amsl_m": g.get("min_alt_amsl_m"),
-                    "max_alt_amsl_m": g.get("max_alt_amsl_m"),
-                },
-                "geometry": {"type": "Polygon", "coordinates": [_geofence_ring(g)]},
-            }
-        )
-    for rec in report.get("recommendations", []):
-        for alt in rec.get("alternatives", []):
-            wps = alt.get("waypoints") or []
-            if len(wps) >= 2:
-                feats.append(
-                    {
-                        "type": "Feature",
-                        "properties": {
-                            "kind": "alternative",
-                            "operation": rec.get("uas"),
-                            "maneuver": alt.get("maneuver"),
-                            "selected": bool(alt.get("selected")),
-                            "cost": alt.get("cost"),
-                            "risk": alt.get("risk"),
-                        },
-                        "geometry": {
-                            "type": "LineString",
-                            "coordinates": [[w[1], w[0], w[2]] for w in wps],
-                        },
-                    }
-                )
-    return {"type": "FeatureCollection", "features": feats}
-
-
-def to_kml(report: dict[str, Any]) -> str:
-    """KML with absolute (AMSL) altitudes, one Placemark per GeoJSON feature."""
-    out = [
-        '<?xml version="1.0" encoding="UTF-8"?>',
-        '<kml xmlns="http://www.opengis.net/kml/2.2"><Document>',
-        f"<name>{escape(str(report.get('scenario', 'gcs-utm')))}</name>",
-    ]
-    for feat in to_geojson(report)["features"]:
-        props = feat["properties"]
-        name = escape(f"{props['kind']} {props.get('operation') or props.get('id', '')}")
-        geom = feat["geometry"]
-        if geom["type"] == "LineString":
-            coords = " ".join(f"{c[0]},{c[1]},{c[2]}" for c in geom["coordinates"])
-            body = (
-                f"<LineString><altitudeMode>absolute</altitudeMode>"
-                f"<coordinates>{coords}</coordinates></LineString>"
-            )
-        else:
-            alt = props.get("max_alt_amsl_m") or 0.0
-            coords = " ".join(f"{c[0]},{c[1]},{alt}" for c in geom["coordinates"][0])
-            body = (
-                "<Polygon><extrude>1</extrude><altitudeMode>absolute</altitudeMode>"
-                f"<outerBoundaryIs><LinearRing><coordinates>{coords}</coordinates>"
-                "</LinearRing></outerBoundaryIs></Polygon>"
-            )
-        out.append(f"<Placemark><name>{name}</name>{body}</Placemark>")
-    out.append("</Document></kml>")
-    return "\n".join(out)
 
 
 def export_all(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> PlotSummary:
