@@ -236,7 +236,9 @@ def _serve(args: argparse.Namespace) -> int:
         else OperatorMode.AUTO_REJECT
         if args.auto_reject
         else OperatorMode.DASHBOARD
-        if sys.stdout.isatty() and not args.headless
+        if sys.stdout.isatty() and sys.stdin.isatty() and not args.headless
+        else OperatorMode.LINE
+        if sys.stdin.isatty()
         else OperatorMode.NONE
     )
     headless = args.headless or operator != OperatorMode.DASHBOARD

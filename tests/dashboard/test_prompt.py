@@ -9,8 +9,13 @@ import re
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
+
+import pytest
+from textual.app import App
 
 from gcs_utm.clock import ManualClock
+from gcs_utm.dashboard.summary import SummaryApp
 from gcs_utm.dashboard.tui import DashboardApp
 from gcs_utm.dashboard.view import Minima
 from gcs_utm.model import (
@@ -94,7 +99,7 @@ def _app(usm: Usm, mono: FakeMonotonic, **kw: object) -> DashboardApp:
     return app
 
 
-def screen_text(app: DashboardApp) -> str:
+def screen_text(app: App[Any]) -> str:
     """The characters on screen, row by row (from Textual's SVG screenshot)."""
     svg = app.export_screenshot()
     rows: dict[float, list[tuple[float, str]]] = {}
@@ -233,3 +238,16 @@ async def test_highlight_is_kept_per_recommendation_version() -> None:
         await usm.on_recommendation(replace(_rec(), id=RecommendationId("t1/UAS9")))
         await pilot.pause()
         assert "[a] accept 2 go_down" in screen_text(app)
+
+
+@pytest.mark.parametrize(
+    ("key", "last", "expected"),
+    [("enter", False, True), ("q", False, False), ("enter", True, False)],
+)
+async def test_summary_screen_between_use_cases(key: str, last: bool, expected: bool) -> None:
+    app = SummaryApp("scenario use_case_1: 2 threats", title="use_case_1 done", last=last)
+    async with app.run_test(size=(80, 24)) as pilot:
+        assert "scenario use_case_1: 2 threats" in screen_text(app)
+        await pilot.press(key)
+        await pilot.pause()
+    assert app.return_value is expected
