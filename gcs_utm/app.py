@@ -570,7 +570,9 @@ def _operators(rt: Runtime, options: RunOptions) -> list[Any]:
     if options.operator == OperatorMode.LINE:
         ops.append(LinePrompt(rt.usm, rt.tracks, minima=minima))
     elif options.headless or options.operator != OperatorMode.DASHBOARD:
-        by = {"none": "MQTT (remote pilot station)"}.get(options.operator, options.operator)
+        mqtt = options.mqtt or rt.settings.mqtt.enabled
+        by = options.operator if options.operator != OperatorMode.NONE else ""
+        by = by or ("MQTT (remote pilot station)" if mqtt else "")
         ops.append(HeadlessView(rt.usm, rt.tracks, answered_by=by, minima=minima))
     if options.operator in (OperatorMode.AUTO_ACCEPT, OperatorMode.AUTO_REJECT):
         ops.append(

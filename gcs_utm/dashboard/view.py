@@ -151,6 +151,13 @@ def operations_table(d: DashboardData, *, width: int | None = None, wide_at: int
     return table
 
 
+def _closest(t: Threat) -> str:
+    """The predicted closest approach, per axis when known (a vertical pass is not a loss)."""
+    if t.horizontal_m is not None and t.vertical_m is not None:
+        return f"{t.horizontal_m:.0f} m h / {t.vertical_m:.0f} m v"
+    return _fmt(t.closest_approach_m, ".0f", " m")
+
+
 def threats_table(d: DashboardData) -> Table:
     table = Table(title="Active threats", expand=True)
     for col in ("Kind", "UAS", "Geofence", "Detected", "Event in", "Closest"):
@@ -167,7 +174,7 @@ def threats_table(d: DashboardData) -> Table:
             t.geofence_id or "-",
             f"{d.t_s - t.detected_at_s:.0f} s ago",
             event_in,
-            _fmt(t.closest_approach_m, ".0f", " m"),
+            _closest(t),
         )
     return table
 
