@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
 import sys
 from importlib import resources
 from pathlib import Path
@@ -76,7 +77,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, default=None, help="settings TOML")
     p.add_argument(
         "--speed",
-        type=float,
+        type=positive_speed,
         default=1.0,
         help="run N times faster than real time (vehicles and UTM share the factor)",
     )
@@ -92,6 +93,18 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG/GeoJSON/KML output")
     p.add_argument("--mqtt", action="store_true", help="start the MQTT bridge of the config")
+
+
+def positive_speed(text: str) -> float:
+    """A speed factor: a finite number > 0 (0 would stop the clock, a negative one run it
+    backwards); argparse turns the error into one usage line."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (value > 0.0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
 
 
 NO_ANSWER_SOURCE = (

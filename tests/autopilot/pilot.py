@@ -1,10 +1,11 @@
-"""An independent ground station for tests: the pilot's own GCS on PX4's API link.
+"""An independent ground station for tests: the pilot's own GCS beside gcs-utm.
 
-PX4 instance i also talks MAVLink from UDP 14580+i to 14540+i (its onboard/API link), so a test
-can fly the vehicle (upload the operator's mission, arm, start it) and read PX4's own positions
-there while gcs-utm holds the GCS link (14550). Written with raw pymavlink, sharing nothing with
-``adapters.mavlink``: a bug there cannot hide in the measurement. Blocking calls: run it beside
-a ``gcs-utm`` subprocess, or in a thread.
+PX4 instance i also talks MAVLink from UDP 14580+i to 14540+i (its onboard/API link), and
+ArduPilot instance i serves MAVLink on TCP 5760+10i (SERIAL0) and 5762+10i (SERIAL1), so a test
+can fly the vehicle (upload the operator's mission, arm, start it) and read the autopilot's own
+positions on one link while gcs-utm holds another (PX4: 14550; ArduPilot: SERIAL1). Written
+with raw pymavlink, sharing nothing with ``adapters.mavlink``: a bug there cannot hide in the
+measurement. Blocking calls: run it beside a ``gcs-utm`` subprocess, or in a thread.
 """
 
 from __future__ import annotations
@@ -50,9 +51,11 @@ class Sample:
 
 @dataclass
 class PilotLink:
-    """The pilot's GCS on PX4 instance ``instance``'s API link."""
+    """The pilot's GCS on PX4 instance ``instance``'s API link (``autopilot="px4"``) or on
+    ArduPilot instance ``instance``'s SERIAL0 (``autopilot="ardupilot"``, TCP)."""
 
     instance: int
+    autopilot: str = "px4"
     sock: socket.socket = field(init=False)
     enc: Any = field(init=False)
     dec: Any = field(init=False)
@@ -62,8 +65,11 @@ class PilotLink:
     home: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 14540 + self.instance))
+        if self.autopilot == "px4":
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self.sock.bind(("127.0.0.1", 14540 + self.instance))
+        else:
+            self.sock = socket.create_connection(("127.0.0.1", 5760 + 10 * self.instance), 10.0)
         self.sock.settimeout(0.05)
         self.enc = mav.MAVLink(None, srcSystem=254, srcComponent=191)
         self.dec = mav.MAVLink(None)
@@ -77,7 +83,14 @@ class PilotLink:
         self.sock.close()
 
     def send(self, msg: Any) -> None:
-        self.sock.sendto(msg.pack(self.enc), ("127.0.0.1", 14580 + self.instance))
+        if self.autopilot == "px4":
+            self.sock.sendto(msg.pack(self.enc), ("127.0.0.1", 14580 + self.instance))
+        else:
+            self.sock.sendall(msg.pack(self.enc))
+
+    def request_streams(self, rate_hz: int = 10) -> None:
+        """ArduPilot sends nothing but HEARTBEAT until asked (all streams at ``rate_hz``)."""
+        self.send(mav.MAVLink_request_data_stream_message(self.sys_id, 1, 0, rate_hz, 1))
 
     def poll(self, duration_s: float = 0.0) -> list[Any]:
         """Read what arrived (for ``duration_s`` at least once), keeping positions and
@@ -86,7 +99,7 @@ class PilotLink:
         end = time.monotonic() + duration_s
         while True:
             try:
-                data, _ = self.sock.recvfrom(65536)
+                data = self.sock.recv(65536)
             except TimeoutError:
                 data = b""
             for m in self.dec.parse_buffer(data) or [] if data else []:
@@ -116,10 +129,12 @@ class PilotLink:
             for m in self.poll():
                 if m.get_type() == kind and (pred is None or pred(m)):
                     return m
-        raise TimeoutError(f"PX4 {self.sys_id}: no {kind} within {timeout_s} s")
+        raise TimeoutError(f"{self.autopilot} {self.sys_id}: no {kind} within {timeout_s} s")
 
     def wait_ready(self, timeout_s: float = 60.0) -> None:
-        """Until PX4 has a position fix and a home."""
+        """Until the autopilot has a position fix and a home."""
+        if self.autopilot != "px4":
+            self.request_streams()
         self.wait("GLOBAL_POSITION_INT", timeout_s, lambda m: m.lat != 0)
         end = time.monotonic() + timeout_s
         while self.home is None and time.monotonic() < end:
@@ -128,7 +143,9 @@ class PilotLink:
             )
             self.poll(0.3)
         if self.home is None:
-            raise TimeoutError(f"PX4 {self.sys_id}: no HOME_POSITION within {timeout_s} s")
+            raise TimeoutError(
+                f"{self.autopilot} {self.sys_id}: no HOME_POSITION within {timeout_s} s"
+            )
 
     def upload(self, items: list[Any], timeout_s: float = 10.0) -> None:
         """MISSION_COUNT, answer each request with MISSION_ITEM_INT, expect an accepted ACK."""
@@ -141,9 +158,11 @@ class PilotLink:
                     self.send(items[m.seq])
                 elif kind == "MISSION_ACK":
                     if m.type != 0:
-                        raise AssertionError(f"PX4 {self.sys_id} refused the mission: {m.type}")
+                        raise AssertionError(
+                            f"{self.autopilot} {self.sys_id} refused the mission: {m.type}"
+                        )
                     return
-        raise TimeoutError(f"PX4 {self.sys_id}: mission upload timed out")
+        raise TimeoutError(f"{self.autopilot} {self.sys_id}: mission upload timed out")
 
     def command(self, command: int, *params: float, timeout_s: float = 5.0) -> int:
         """COMMAND_LONG (resent every 0.5 s) -> the COMMAND_ACK result."""
@@ -156,43 +175,73 @@ class PilotLink:
                 for m in self.poll():
                     if m.get_type() == "COMMAND_ACK" and m.command == command:
                         return int(m.result)
-        raise TimeoutError(f"PX4 {self.sys_id}: no COMMAND_ACK for {command}")
+        raise TimeoutError(f"{self.autopilot} {self.sys_id}: no COMMAND_ACK for {command}")
 
-    def arm_and_start(self, timeout_s: float = 60.0) -> None:
-        """Arm (retrying while preflight checks refuse) and start the mission."""
+    def arm_and_start(self, timeout_s: float = 60.0, takeoff_agl_m: float = 30.0) -> None:
+        """Arm (retrying while preflight checks refuse) and start the mission. ArduCopter
+        arms in GUIDED, takes off to ``takeoff_agl_m`` and is switched to AUTO there."""
+        if self.autopilot != "px4":
+            self.set_mode(4)  # GUIDED
+        self._arm(timeout_s)
+        if self.autopilot == "px4":
+            result = self.command(mav.MAV_CMD_MISSION_START, 0.0, 0.0)
+            if result != mav.MAV_RESULT_ACCEPTED:
+                raise AssertionError(f"PX4 {self.sys_id} refused MISSION_START ({result})")
+            return
+        cmd = mav.MAV_CMD_NAV_TAKEOFF
+        result = self.command(cmd, 0, 0, 0, 0, 0, 0, takeoff_agl_m)
+        if result != mav.MAV_RESULT_ACCEPTED:
+            raise AssertionError(f"ArduPilot {self.sys_id} refused TAKEOFF ({result})")
+        self.wait(
+            "GLOBAL_POSITION_INT",
+            timeout_s,
+            lambda m: m.relative_alt / 1000.0 > 0.9 * takeoff_agl_m,
+        )
+        self.set_mode(3)  # AUTO
+
+    def set_mode(self, custom_mode: int) -> None:
+        """DO_SET_MODE with a custom mode number (ArduPilot: 3 AUTO, 4 GUIDED, 17 BRAKE)."""
+        result = self.command(mav.MAV_CMD_DO_SET_MODE, 1.0, float(custom_mode))
+        if result != mav.MAV_RESULT_ACCEPTED:
+            raise AssertionError(f"{self.autopilot} {self.sys_id} refused mode {custom_mode}")
+
+    def _arm(self, timeout_s: float) -> None:
         end = time.monotonic() + timeout_s
         result = -1
         while time.monotonic() < end:
             result = self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
             if result == mav.MAV_RESULT_ACCEPTED:
-                break
+                return
             self.poll(1.0)
-        else:
-            raise AssertionError(
-                f"PX4 {self.sys_id} refused to arm ({result}): {self.statustexts[-5:]}"
-            )
-        result = self.command(mav.MAV_CMD_MISSION_START, 0.0, 0.0)
-        if result != mav.MAV_RESULT_ACCEPTED:
-            raise AssertionError(f"PX4 {self.sys_id} refused MISSION_START ({result})")
+        raise AssertionError(
+            f"{self.autopilot} {self.sys_id} refused to arm ({result}): {self.statustexts[-5:]}"
+        )
 
 
 def mission_items(
-    sys_id: int, start: tuple[float, float], waypoints: list[tuple[float, float, float]]
+    sys_id: int,
+    start: tuple[float, float],
+    waypoints: list[tuple[float, float, float]],
+    *,
+    autopilot: str = "px4",
 ) -> list[Any]:
-    """A PX4 mission: take off above ``start`` to the first waypoint's altitude, then the
-    waypoints (lat_deg, lon_deg, alt_amsl_m), all in MAV_FRAME_GLOBAL_INT."""
-    frame = mav.MAV_FRAME_GLOBAL_INT
-    items = [
-        mav.MAVLink_mission_item_int_message(
-            sys_id, 1, 0, frame, mav.MAV_CMD_NAV_TAKEOFF, 0, 1, 0, 0, 0, math.nan,
-            round(start[0] * 1e7), round(start[1] * 1e7), waypoints[0][2], 0,
-        )
-    ]  # fmt: skip
-    for k, (lat, lon, alt) in enumerate(waypoints, start=1):
-        items.append(
-            mav.MAVLink_mission_item_int_message(
-                sys_id, 1, k, frame, mav.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 2.0, 0, math.nan,
-                round(lat * 1e7), round(lon * 1e7), alt, 0,
-            )
+    """The operator's mission: take off above ``start`` to the first waypoint's altitude, then
+    the waypoints (lat_deg, lon_deg, alt). PX4: MAV_FRAME_GLOBAL_INT, alt in metres AMSL.
+    ArduPilot: seq 0 is home (``start``), then MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, alt in
+    metres above home, as its ground stations send it."""
+    ardupilot = autopilot != "px4"
+    frame = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT if ardupilot else mav.MAV_FRAME_GLOBAL_INT
+
+    def item(seq: int, command: int, lat: float, lon: float, alt: float, hold_s: float) -> Any:
+        return mav.MAVLink_mission_item_int_message(
+            sys_id, 1, seq, frame, command, 0, 1, hold_s, 2.0, 0, math.nan,
+            round(lat * 1e7), round(lon * 1e7), alt, 0,
         )  # fmt: skip
+
+    items = []
+    if ardupilot:
+        items.append(item(0, mav.MAV_CMD_NAV_WAYPOINT, *start, 0.0, 0.0))
+    items.append(item(len(items), mav.MAV_CMD_NAV_TAKEOFF, *start, waypoints[0][2], 0.0))
+    for lat, lon, alt in waypoints:
+        items.append(item(len(items), mav.MAV_CMD_NAV_WAYPOINT, lat, lon, alt, 0.0))
     return items
