@@ -26,7 +26,6 @@ scenario start, as in the report.
 
 from __future__ import annotations
 
-import itertools
 import json
 import logging
 import math
@@ -40,13 +39,23 @@ __all__ = [
     "PlotSummary",
     "ReportError",
     "export_all",
+    "flown_pairs",
     "load_report",
+    "planned_pairs",
     "plot_report",
     "to_geojson",
     "to_kml",
 ]
 
 from gcs_utm.dashboard.plotting import PlotsUnavailableError, require_plots
+from gcs_utm.dashboard.series import (
+    Local,
+    PairSeries,
+    flown_pairs,
+    interp_plan,
+    minima,
+    planned_pairs,
+)
 
 _log = logging.getLogger(__name__)
 
@@ -92,19 +101,6 @@ def load_report(path: Path) -> dict[str, Any]:
     return data
 
 
-class _Local:
-    """Equirectangular metres around the report origin: exact enough for figures at the
-    scale of one operation area (a few km)."""
-
-    def __init__(self, origin: dict[str, Any]) -> None:
-        self.lat0 = float(origin["lat_deg"])
-        self.lon0 = float(origin["lon_deg"])
-        self.k = math.cos(math.radians(self.lat0))
-
-    def xy(self, lat: float, lon: float) -> tuple[float, float]:
-        return ((lon - self.lon0) * 111_320.0 * self.k, (lat - self.lat0) * 110_540.0)
-
-
 def _circle(cx: float, cy: float, r: float, n: int = 48) -> tuple[list[float], list[float]]:
     xs = [cx + r * math.cos(2 * math.pi * i / n) for i in range(n + 1)]
     ys = [cy + r * math.sin(2 * math.pi * i / n) for i in range(n + 1)]
@@ -120,7 +116,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
     import matplotlib.pyplot as plt
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    local = _Local(report["origin"])
+    local = Local(report["origin"])
     summary = PlotSummary()
     focus = _focus_point(report, local)
     if focus is None:
@@ -284,7 +280,7 @@ class _Both:
 
 
 def _focus_point(
-    report: dict[str, Any], local: _Local
+    report: dict[str, Any], local: Local
 ) -> tuple[tuple[float, float], float, str] | None:
     """Where the close-up looks: the first predicted loss of separation or geofence conflict
     (east, north), a half-width that shows the manoeuvre around it, and what it is."""
@@ -306,7 +302,7 @@ def _focus_point(
                 if op["id"] in t.get("uas", []) and op.get("plans"):
                     delay = float(op.get("start_delay_s", 0.0) or 0.0)
                     wps = [[w[0], w[1], w[2], w[3] + delay] for w in op["plans"][0]["waypoints"]]
-                    p = _interp_plan(wps, at)
+                    p = interp_plan(wps, at)
                     if p is not None:
                         pts.append(local.xy(p[0], p[1]))
             if pts:
@@ -333,122 +329,7 @@ def _ground(report: dict[str, Any]) -> float:
     return float(report.get("origin", {}).get("ground_elevation_amsl_m", 0.0) or 0.0)
 
 
-def _interp_plan(wps: list[list[float]], t_s: float) -> tuple[float, float, float] | None:
-    """(lat, lon, alt) of a report plan (``[lat, lon, alt, t]`` rows) at ``t_s``, or None
-    outside its time span."""
-    if not wps or t_s < wps[0][3] or t_s > wps[-1][3]:
-        return None
-    for a, b in itertools.pairwise(wps):
-        if a[3] <= t_s <= b[3]:
-            u = 0.0 if b[3] <= a[3] else (t_s - a[3]) / (b[3] - a[3])
-            return (
-                a[0] + u * (b[0] - a[0]),
-                a[1] + u * (b[1] - a[1]),
-                a[2] + u * (b[2] - a[2]),
-            )
-    return (wps[-1][0], wps[-1][1], wps[-1][2])
-
-
-@dataclass(slots=True)
-class PairSeries:
-    """Distances between two UAS over time (seconds from scenario start, metres)."""
-
-    a: str
-    b: str
-    t_s: list[float] = field(default_factory=list)
-    horizontal_m: list[float] = field(default_factory=list)
-    vertical_m: list[float] = field(default_factory=list)
-
-    @property
-    def distance_m(self) -> list[float]:
-        return [math.hypot(h, v) for h, v in zip(self.horizontal_m, self.vertical_m, strict=True)]
-
-
-def _nearest_sample(samples: list[list[float]], t_s: float, tol_s: float) -> list[float] | None:
-    import bisect
-
-    i = bisect.bisect_left([s[0] for s in samples], t_s)
-    best = None
-    for j in (i - 1, i):
-        if (
-            0 <= j < len(samples)
-            and abs(samples[j][0] - t_s) <= tol_s
-            and (best is None or abs(samples[j][0] - t_s) < abs(best[0] - t_s))
-        ):
-            best = samples[j]
-    return best
-
-
-def flown_pairs(report: dict[str, Any], *, tol_s: float = 0.6) -> list[PairSeries]:
-    """Pairwise distances from the report's tracks, each sample of A matched with B's sample
-    nearest in time (within ``tol_s``), like the report's ``separation``."""
-    local = _Local(report["origin"])
-    tracks = report.get("tracks", {})
-    ids = [op["id"] for op in report.get("operations", []) if len(tracks.get(op["id"], [])) > 1]
-    out = []
-    for i, a in enumerate(ids):
-        for b in ids[i + 1 :]:
-            ps = PairSeries(a=a, b=b)
-            for s in tracks[a]:
-                m = _nearest_sample(tracks[b], s[0], tol_s)
-                if m is None:
-                    continue
-                xa, ya = local.xy(s[1], s[2])
-                xb, yb = local.xy(m[1], m[2])
-                ps.t_s.append(float(s[0]))
-                ps.horizontal_m.append(math.hypot(xa - xb, ya - yb))
-                ps.vertical_m.append(abs(float(s[3]) - float(m[3])))
-            if ps.t_s:
-                out.append(ps)
-    return out
-
-
-def planned_pairs(report: dict[str, Any], *, step_s: float = 0.2) -> list[PairSeries]:
-    """Pairwise distances of the *filed* plans (version 1), each shifted by its vehicle's
-    ``start_delay_s``: what would have been flown without any resolution."""
-    local = _Local(report["origin"])
-    plans = {}
-    for op in report.get("operations", []):
-        if not op.get("plans"):
-            continue
-        delay = float(op.get("start_delay_s", 0.0) or 0.0)
-        wps = [[w[0], w[1], w[2], w[3] + delay] for w in op["plans"][0]["waypoints"]]
-        if len(wps) > 1:
-            plans[op["id"]] = wps
-    ids = list(plans)
-    out = []
-    for i, a in enumerate(ids):
-        for b in ids[i + 1 :]:
-            ps = PairSeries(a=a, b=b)
-            t0 = max(plans[a][0][3], plans[b][0][3])
-            t1 = min(plans[a][-1][3], plans[b][-1][3])
-            n = int((t1 - t0) / step_s) + 1 if t1 >= t0 else 0
-            for k in range(n):
-                t = t0 + k * step_s
-                pa, pb = _interp_plan(plans[a], t), _interp_plan(plans[b], t)
-                if pa is None or pb is None:
-                    continue
-                xa, ya = local.xy(pa[0], pa[1])
-                xb, yb = local.xy(pb[0], pb[1])
-                ps.t_s.append(t)
-                ps.horizontal_m.append(math.hypot(xa - xb, ya - yb))
-                ps.vertical_m.append(abs(pa[2] - pb[2]))
-            if ps.t_s:
-                out.append(ps)
-    return out
-
-
-def _minima(report: dict[str, Any]) -> tuple[str, float, float]:
-    """(mode, horizontal-or-3D minimum, vertical minimum) of the run's separation rule."""
-    sm = report.get("separation_minimum", {})
-    mode = str(sm.get("mode", "cylinder"))
-    if mode == "sphere":
-        d = float(sm.get("safety_distance_m", 0.0) or 0.0)
-        return mode, d, d
-    return mode, float(sm.get("horizontal_m", 0.0) or 0.0), float(sm.get("vertical_m", 0.0) or 0.0)
-
-
-def _fence_signed_distance(local: _Local, g: dict[str, Any], lat: float, lon: float) -> float:
+def _fence_signed_distance(local: Local, g: dict[str, Any], lat: float, lon: float) -> float:
     """Horizontal distance from a point to a geofence edge, negative inside."""
     x, y = local.xy(lat, lon)
     if g.get("shape") == "cylinder":
@@ -472,7 +353,7 @@ def fence_distances(
     """(UAS, geofence) -> (times, signed horizontal distance to the edge) of the UAS's track
     while the geofence is active and within its altitude band; UAS exempt from a geofence
     (the jammed UAS inside its own) are left out."""
-    local = _Local(report["origin"])
+    local = Local(report["origin"])
     out: dict[tuple[str, str], tuple[list[float], list[float]]] = {}
     for g in report.get("geofences", []):
         exempt = set(g.get("exempt", []))
@@ -592,7 +473,7 @@ def plot_separation(
     planned = planned_pairs(report)
     if not flown and not planned:
         return None
-    mode, d_min, v_min = _minima(report)
+    mode, d_min, v_min = minima(report)
     keys = []
     for series_ab in [*flown, *planned]:
         if (series_ab.a, series_ab.b) not in keys:
@@ -709,7 +590,7 @@ def plot_geofences(
     fences = report.get("geofences", [])
     if not fences:
         return None
-    local = _Local(report["origin"])
+    local = Local(report["origin"])
     fig, (ax, ax_d) = plt.subplots(1, 2, figsize=(14, 6))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     xs_all: list[float] = []
