@@ -149,6 +149,9 @@ class RecommendationReport:
     created_at_s: float | None
     deadline_at_s: float | None
     decision: str
+    answered_by: str
+    answered_via: str
+    chosen_alternative_index: int | None
     state: str
     uploaded: bool
     verified: bool
@@ -219,6 +222,7 @@ class Report:
     geofence_intrusions: tuple[IntrusionReport, ...]
     escalations: tuple[EscalationReport, ...] = ()
     truth: TruthReport | None = None
+    operator_quit: bool = False  # the operator ended the run from the dashboard (q)
 
     def to_json(self) -> Json:
         """The JSON object (``json.dumps``-ready) of the report; ``truth`` only when known."""
@@ -369,6 +373,9 @@ def _recommendations(rt: Runtime, t0: float) -> tuple[RecommendationReport, ...]
                 created_at_s=_rel(rec.created_t_s, t0),
                 deadline_at_s=_rel(rec.deadline_t_s, t0),
                 decision=record.decision or rec.state.value,
+                answered_by=record.answered_by,
+                answered_via=record.answered_via,
+                chosen_alternative_index=record.chosen_index,
                 state=rec.state.value,
                 uploaded=record.uploaded,
                 verified=record.verified,
@@ -387,6 +394,7 @@ def build_report(
     wall_s: float,
     speed: float | str,
     vehicles: Sequence[SimVehicle] = (),
+    operator_quit: bool = False,
 ) -> Report:
     t0 = scenario.t0_s
     ops = rt.airspace.operations
@@ -442,6 +450,7 @@ def build_report(
         truth=truth(vehicles, scenario, rt.frame, mon, flying_until_t_s=_plan_ends(rt))
         if vehicles
         else None,
+        operator_quit=operator_quit,
     )
 
 

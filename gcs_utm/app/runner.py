@@ -324,6 +324,7 @@ async def run_scenario(
         ),
     )
     wall0 = time.perf_counter()
+    quit_requested = False
     try:
         async with contextlib.AsyncExitStack() as stack:
             if fleet is not None:
@@ -338,6 +339,9 @@ async def run_scenario(
                 await _until(rt.clock, end_t_s, dash)
                 if frontends.dashboard is not None and dash is not None and not dash.done():
                     frontends.dashboard.exit()
+                quit_requested = (
+                    frontends.dashboard is not None and frontends.dashboard.quit_requested
+                )
                 for t in tasks:
                     t.cancel()
     finally:
@@ -351,6 +355,7 @@ async def run_scenario(
         wall_s=wall_s,
         speed="max" if options.fast_time else options.speed,
         vehicles=fleet.vehicles if fleet is not None else (),
+        operator_quit=quit_requested,
     )
     store.close()
     data = report.to_json()

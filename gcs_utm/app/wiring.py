@@ -26,6 +26,8 @@ from gcs_utm.core.emergency import Decision, EmergencyManager
 from gcs_utm.core.monitoring import Monitor
 from gcs_utm.core.tracking import Tracker
 from gcs_utm.dashboard.headless import HeadlessView
+from gcs_utm.dashboard.line import LinePrompt
+from gcs_utm.dashboard.view import Minima
 from gcs_utm.geo import LocalFrame
 from gcs_utm.messages import HazardReport, PilotAnswer, PilotDecision
 from gcs_utm.model import (
@@ -63,7 +65,8 @@ class OperatorMode:
     DASHBOARD = "dashboard"
     AUTO_ACCEPT = "auto-accept"
     AUTO_REJECT = "auto-reject"
-    NONE = "none"
+    LINE = "line"  # headless, answers typed on stdin (gcs_utm.dashboard.line)
+    NONE = "none"  # answers only from MQTT
 
 
 class Persistence:
@@ -257,12 +260,21 @@ class Frontends:
     headless: HeadlessView | None
     dashboard: DashboardApp | None
     gateway: MqttGateway | None
+    line: LinePrompt | None = None
+
+
+def minima(settings: Settings) -> Minima:
+    """The separation minima the operator's views show."""
+    mon = settings.monitoring
+    return Minima(horizontal_m=mon.separation_horizontal_m, vertical_m=mon.separation_vertical_m)
 
 
 def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
     """Attach the operator ports to the USM, the same way for ``serve`` and ``run``: the
-    dashboard answers under the configured operator name (``dashboard.operator``)."""
+    dashboard and the line prompt answer under the configured operator name
+    (``dashboard.operator``)."""
     settings = rt.settings
+    shown = minima(settings)
     dashboard = None
     if options.operator == OperatorMode.DASHBOARD and not options.headless:
         from gcs_utm.dashboard.tui import DashboardApp
@@ -272,11 +284,18 @@ def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
             rt.tracks,
             refresh_s=settings.dashboard.refresh_s,
             operator=settings.dashboard.operator,
+            minima=shown,
         )
         rt.usm.attach_operator(dashboard)
-    headless = None
-    if dashboard is None and not options.quiet:
-        headless = HeadlessView(rt.usm, rt.tracks)
+    mqtt = options.mqtt or settings.mqtt.enabled
+    headless = line = None
+    if options.operator == OperatorMode.LINE:
+        line = LinePrompt(rt.usm, rt.tracks, operator=settings.dashboard.operator, minima=shown)
+        rt.usm.attach_operator(line)
+    elif dashboard is None and not options.quiet:
+        by = options.operator if options.operator != OperatorMode.NONE else ""
+        by = by or ("MQTT (remote pilot station)" if mqtt else "")
+        headless = HeadlessView(rt.usm, rt.tracks, answered_by=by, minima=shown)
         rt.usm.attach_operator(headless)
     if options.operator in (OperatorMode.AUTO_ACCEPT, OperatorMode.AUTO_REJECT):
         rt.usm.attach_operator(
@@ -291,14 +310,14 @@ def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
             )
         )
     gateway = None
-    if options.mqtt or settings.mqtt.enabled:
+    if mqtt:
         from gcs_utm.services.mqtt_gateway import MqttGateway
 
         gateway = MqttGateway(rt.usm, settings.mqtt, tracks=rt.tracks)
         rt.usm.attach_operator(gateway)
         rt.usm.attach_threat_sink(gateway.on_threats)
         rt.usm.attach_geofence_listener(gateway.on_geofences)
-    return Frontends(headless=headless, dashboard=dashboard, gateway=gateway)
+    return Frontends(headless=headless, dashboard=dashboard, gateway=gateway, line=line)
 
 
 def start_service_tasks(
@@ -313,6 +332,8 @@ def start_service_tasks(
     ]
     if frontends.headless is not None:
         tasks.append(tg.create_task(_headless_status(rt, frontends.headless), name="status"))
+    if frontends.line is not None:
+        tasks.append(tg.create_task(frontends.line.run(), name="line"))
     if frontends.gateway is not None:
         tasks.append(tg.create_task(frontends.gateway.run(), name="mqtt"))
     if frontends.dashboard is not None:

@@ -13,7 +13,8 @@ minima of each pair, as Monitoring judges; on the UTM's tracks when there is no 
 - *extra length / time* of an accepted plan: its 3D path length minus the previous plan's
   length from the new plan's start time on; its end time minus the previous plan's end time;
 - *detection to recommendation / verified upload*: from the threat's detection to the
-  recommendation's creation, and to its ``applied: mission verified`` state change.
+  recommendation's first proposal, and to its first ``applied: ... mission verified`` state
+  change.
 """
 
 from __future__ import annotations
@@ -117,9 +118,19 @@ def _accepted_plans(report: Report, frame: LocalFrame) -> tuple[AcceptedPlan, ..
     return tuple(out)
 
 
-def _verified_at_s(history: Sequence[tuple[float | None, str]]) -> float | None:
+def _first_proposed_at_s(history: Sequence[tuple[float | None, str]]) -> float | None:
+    """When the recommendation was first proposed (later versions re-plan the same threat)."""
     for t, text in history:
-        if t is not None and text.startswith("applied: mission verified"):
+        if t is not None and text.startswith("proposed v"):
+            return t
+    return None
+
+
+def _verified_at_s(history: Sequence[tuple[float | None, str]]) -> float | None:
+    """When a version's mission was verified on the vehicle: the history's ``vN applied:
+    MANEUVER: mission verified by readback`` state change."""
+    for t, text in history:
+        if t is not None and "applied:" in text and "mission verified" in text:
             return t
     return None
 
@@ -153,8 +164,9 @@ def outcome(report: Report) -> ScenarioOutcome:
             applied_at[r.uas] = min(applied_at.get(r.uas, math.inf), verified)
         if detected is None:
             continue
-        if r.created_at_s is not None:
-            to_rec.append(round(r.created_at_s - detected, 3))
+        proposed = _first_proposed_at_s(r.history)
+        if proposed is not None:
+            to_rec.append(round(proposed - detected, 3))
         if verified is not None:
             to_upload.append(round(verified - detected, 3))
     created = set()

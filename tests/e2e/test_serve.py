@@ -155,7 +155,8 @@ async def test_serve_dashboard_answers_under_the_configured_operator(
                     while not apps or not apps[0].is_running:
                         await asyncio.sleep(0.05)
                     await rt.usm.on_recommendation(_recommendation(rt.clock.now_s()))
-                    await asyncio.sleep(0.2)
+                    # the dashboard ignores keys for a second after a prompt appears
+                    await asyncio.sleep(1.6)
                     await apps[0].action_accept()
             finally:
                 stop.set()

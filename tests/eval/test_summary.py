@@ -66,7 +66,7 @@ def _threat(uas: tuple[str, str], at_s: float) -> ThreatReport:
 def _rec(uas: str, detected: float, created: float, verified: float | None) -> RecommendationReport:
     history: list[tuple[float | None, str]] = [(created, "proposed v1")]
     if verified is not None:
-        history.append((verified, "applied: mission verified"))
+        history.append((verified, "v1 applied: go_left: mission verified by readback"))
     return RecommendationReport(
         id=f"r-{uas}",
         version=1,
@@ -81,6 +81,9 @@ def _rec(uas: str, detected: float, created: float, verified: float | None) -> R
         created_at_s=created,
         deadline_at_s=created + 30.0,
         decision="accepted",
+        answered_by="auto",
+        answered_via="auto",
+        chosen_alternative_index=0,
         state="applied" if verified is not None else "accepted",
         uploaded=verified is not None,
         verified=verified is not None,
