@@ -135,12 +135,9 @@ def _verified_at_s(history: Sequence[tuple[float | None, str]]) -> float | None:
     return None
 
 
-def outcome(report: Report) -> ScenarioOutcome:
-    """Reduce a run report to the evaluation's counts."""
-    frame = LocalFrame(
-        report.origin.lat_deg, report.origin.lon_deg, report.origin.ground_elevation_amsl_m
-    )
-    # an operation ends with its latest plan (as the report's ground truth does)
+def _predicted_at(report: Report) -> dict[Pair, float]:
+    """First detection time of each pair's LOSS_OF_SEPARATION while both operations were in
+    progress (an operation ends with its latest plan, as the report's ground truth does)."""
     ends = {op.id: op.plans[-1].waypoints[-1][3] for op in report.operations if op.plans}
     predicted_at: dict[Pair, float] = {}
     for t in report.threats:
@@ -150,18 +147,25 @@ def outcome(report: Report) -> ScenarioOutcome:
             continue  # raised after one of the two operations ended
         p = _pair(t.uas[0], t.uas[1])
         predicted_at[p] = min(predicted_at.get(p, math.inf), t.detected_at_s)
-    if report.truth is not None:
-        flown = {_pair(*p.pair) for p in report.truth.pairs if p.loss_of_separation}
-    else:
-        flown = {_pair(*s.pair) for s in report.separation if s.loss_of_separation}
+    return predicted_at
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class _Timings:
+    applied_at: dict[str, float]  # first verified mission per UAS
+    to_recommendation_s: tuple[float, ...]
+    to_verified_upload_s: tuple[float, ...]
+
+
+def _timings(report: Report) -> _Timings:
     applied_at: dict[str, float] = {}
     to_rec: list[float] = []
     to_upload: list[float] = []
     for r in report.recommendations:
-        detected = r.threat_detected_at_s
         verified = _verified_at_s(r.history)
         if verified is not None:
             applied_at[r.uas] = min(applied_at.get(r.uas, math.inf), verified)
+        detected = r.threat_detected_at_s
         if detected is None:
             continue
         proposed = _first_proposed_at_s(r.history)
@@ -169,9 +173,28 @@ def outcome(report: Report) -> ScenarioOutcome:
             to_rec.append(round(proposed - detected, 3))
         if verified is not None:
             to_upload.append(round(verified - detected, 3))
+    return _Timings(
+        applied_at=applied_at,
+        to_recommendation_s=tuple(to_rec),
+        to_verified_upload_s=tuple(to_upload),
+    )
+
+
+def outcome(report: Report) -> ScenarioOutcome:
+    """Reduce a run report to the evaluation's counts."""
+    frame = LocalFrame(
+        report.origin.lat_deg, report.origin.lon_deg, report.origin.ground_elevation_amsl_m
+    )
+    predicted_at = _predicted_at(report)
+    if report.truth is not None:
+        flown = {_pair(*p.pair) for p in report.truth.pairs if p.loss_of_separation}
+    else:
+        flown = {_pair(*s.pair) for s in report.separation if s.loss_of_separation}
+    timings = _timings(report)
     created = set()
     for p in flown:
-        first_apply = min(applied_at.get(p[0], math.inf), applied_at.get(p[1], math.inf))
+        applied = timings.applied_at
+        first_apply = min(applied.get(p[0], math.inf), applied.get(p[1], math.inf))
         if math.isfinite(first_apply) and predicted_at.get(p, math.inf) > first_apply:
             created.add(p)
     return ScenarioOutcome(
@@ -183,8 +206,8 @@ def outcome(report: Report) -> ScenarioOutcome:
         geofence_intrusions=len(report.geofence_intrusions),
         escalations=len(report.escalations),
         accepted_plans=_accepted_plans(report, frame),
-        detection_to_recommendation_s=tuple(to_rec),
-        detection_to_verified_upload_s=tuple(to_upload),
+        detection_to_recommendation_s=timings.to_recommendation_s,
+        detection_to_verified_upload_s=timings.to_verified_upload_s,
     )
 
 
