@@ -36,6 +36,8 @@ from gcs_utm.core.monitoring.fences import localise
 from gcs_utm.core.monitoring.geometry import points_in_edges
 from gcs_utm.core.tracking import Tracker
 from gcs_utm.dashboard.headless import HeadlessView
+from gcs_utm.dashboard.line import LinePrompt
+from gcs_utm.dashboard.view import Minima
 from gcs_utm.geo import LocalFrame
 from gcs_utm.messages import HazardReport, PilotAnswer, PilotDecision
 from gcs_utm.model import (
@@ -61,6 +63,7 @@ from gcs_utm.services.tracking import TrackingService
 from gcs_utm.services.usm import Usm
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store, StoreWriter
+from gcs_utm.store.ids import life_prefix
 
 _log = logging.getLogger(__name__)
 
@@ -69,7 +72,8 @@ class OperatorMode:
     DASHBOARD = "dashboard"
     AUTO_ACCEPT = "auto-accept"
     AUTO_REJECT = "auto-reject"
-    NONE = "none"
+    LINE = "line"  # headless, answers typed on stdin (gcs_utm.dashboard.line)
+    NONE = "none"  # answers only from MQTT
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -126,6 +130,11 @@ class Persistence:
 
     def write_tracks(self, tracks: list[Track]) -> None:
         self.writer.write_tracks(tracks)
+
+    @property
+    def epoch(self) -> int:
+        """The store life this process writes in (ids carry it, see gcs_utm.store.ids)."""
+        return self.writer.epoch
 
     def close(self) -> None:
         self.writer.close()
@@ -202,7 +211,8 @@ def build_runtime(
             store.deactivate_geofence(g.id)
 
     airspace = Airspace(on_operation=on_operation, on_plan=on_plan, on_geofence=on_geofence)
-    usm = Usm(airspace, clock, config=settings.usm, record=store.record)
+    id_prefix = life_prefix(store.epoch)
+    usm = Usm(airspace, clock, config=settings.usm, record=store.record, id_prefix=id_prefix)
 
     async def tracking_hazard(h: HazardReport) -> None:
         usm.on_hazard(h)
@@ -219,7 +229,7 @@ def build_runtime(
     def snapshot(t_s: float) -> Any:
         return airspace.snapshot(t_s, tracking.snapshot)
 
-    monitor = Monitor(frame, settings.monitoring)
+    monitor = Monitor(frame, settings.monitoring, id_prefix=id_prefix)
     monitoring = MonitoringService(
         monitor, snapshot, clock, usm.on_threats, period_s=settings.monitoring.period_s
     )
@@ -472,6 +482,7 @@ async def run_scenario(
             rt.tracks,
             refresh_s=settings.dashboard.refresh_s,
             operator=settings.dashboard.operator,
+            minima=_minima(settings),
         )
         rt.usm.attach_operator(app)
     for op_port in operators:
@@ -486,6 +497,7 @@ async def run_scenario(
         rt.usm.attach_geofence_listener(gateway.on_geofences)
 
     wall0 = time.perf_counter()
+    quit_requested = False
     try:
         async with contextlib.AsyncExitStack() as stack:
             if fleet is not None:
@@ -503,6 +515,7 @@ async def run_scenario(
                 ]
                 if options.headless:
                     tasks.append(tg.create_task(_headless_status(rt), name="status"))
+                tasks += [tg.create_task(o.run(), name="line") for o in _lines(operators)]
                 if gateway is not None:
                     tasks.append(tg.create_task(gateway.run(), name="mqtt"))
                 dash: asyncio.Task[Any] | None = None
@@ -510,6 +523,7 @@ async def run_scenario(
                     dash = tg.create_task(app.run_async(), name="dashboard")
                     tasks.append(dash)
                 await _until(rt.clock, end_t_s, app, dash)
+                quit_requested = app is not None and app.quit_requested
                 for t in tasks:
                     t.cancel()
     finally:
@@ -524,6 +538,7 @@ async def run_scenario(
         speed=options.speed,
         vehicles=fleet.vehicles if fleet is not None else (),
     )
+    report["operator_quit"] = quit_requested
     store.close()
     path = options.out_dir / f"{scenario.name}.json"
     path.write_text(json.dumps(report, indent=1))
@@ -547,10 +562,25 @@ async def _until(
         app.exit()
 
 
+def _minima(settings: Settings) -> Minima:
+    mon = settings.monitoring
+    return Minima(horizontal_m=mon.separation_horizontal_m, vertical_m=mon.separation_vertical_m)
+
+
+def _lines(operators: list[Any]) -> list[LinePrompt]:
+    return [o for o in operators if isinstance(o, LinePrompt)]
+
+
 def _operators(rt: Runtime, options: RunOptions) -> list[Any]:
     ops: list[Any] = []
-    if options.headless or options.operator != OperatorMode.DASHBOARD:
-        ops.append(HeadlessView(rt.usm, rt.tracks))
+    minima = _minima(rt.settings)
+    if options.operator == OperatorMode.LINE:
+        ops.append(LinePrompt(rt.usm, rt.tracks, minima=minima))
+    elif options.headless or options.operator != OperatorMode.DASHBOARD:
+        mqtt = options.mqtt or rt.settings.mqtt.enabled
+        by = options.operator if options.operator != OperatorMode.NONE else ""
+        by = by or ("MQTT (remote pilot station)" if mqtt else "")
+        ops.append(HeadlessView(rt.usm, rt.tracks, answered_by=by, minima=minima))
     if options.operator in (OperatorMode.AUTO_ACCEPT, OperatorMode.AUTO_REJECT):
         ops.append(
             AutoOperator(
@@ -710,6 +740,9 @@ def build_report(
                 "created_at_s": _rel(rec.created_t_s, t0),
                 "deadline_at_s": _rel(rec.deadline_t_s, t0),
                 "decision": record.decision or rec.state.value,
+                "answered_by": record.answered_by,
+                "answered_via": record.answered_via,
+                "chosen_alternative_index": record.chosen_index,
                 "state": rec.state.value,
                 "uploaded": record.uploaded,
                 "verified": record.verified,
@@ -748,7 +781,7 @@ def _separation(
                 best_h = min(best_h, dh)
                 best_v = min(best_v, dv) if dh < sep_h * 3 else best_v
                 best_3d = min(best_3d, math.hypot(dh, dv))
-                loss = loss or _is_loss(rt, dh, dv)
+                loss = loss or _is_loss(rt, dh, dv, ops[OperationId(a)], ops[OperationId(b)])
             out.append(
                 {
                     "pair": [a, b],
@@ -761,12 +794,12 @@ def _separation(
     return out
 
 
-def _is_loss(rt: Runtime, dh: float, dv: float) -> bool:
-    """Loss of separation under the run's rule (cylinder: both minima; sphere: 3D distance)."""
-    mon = rt.settings.monitoring
-    if mon.spherical:
-        return math.hypot(dh, dv) < mon.safety_distance_m
-    return dh < mon.separation_horizontal_m and dv < mon.separation_vertical_m
+def _is_loss(rt: Runtime, dh: float, dv: float, a: Operation, b: Operation) -> bool:
+    """Loss of separation as Monitoring defines it (effective minima of the pair's
+    operational volumes; cylinder or sphere): :func:`gcs_utm.core.monitoring.loss.is_loss`."""
+    from gcs_utm.core.monitoring.loss import is_loss
+
+    return is_loss(rt.settings.monitoring, dh, dv, a.operational_volume_m, b.operational_volume_m)
 
 
 def _nearest(samples: Sequence[tuple[float, ...]], t_s: float) -> tuple[float, ...] | None:
@@ -822,6 +855,7 @@ def _truth(vehicles: Any, scenario: Scenario, rt: Runtime) -> dict[str, Any]:
     """Ground truth from the simulated vehicles (their true positions, not the tracks)."""
     by_sys = {int(v.sys_id): v for v in vehicles}
     ops = {int(op.sys_id): op.id for op in scenario.operations if op.sys_id is not None}
+    op_of = {int(op.sys_id): op for op in scenario.operations if op.sys_id is not None}
     out: dict[str, Any] = {"pairs": []}
     ids = sorted(s for s in by_sys if s in ops)
     for i, a in enumerate(ids):
@@ -841,7 +875,7 @@ def _truth(vehicles: Any, scenario: Scenario, rt: Runtime) -> dict[str, Any]:
                 dh = math.hypot(ea - eb, na - nb)
                 dv = abs(alt - hb[j][3])
                 best = min(best, math.hypot(dh, dv))
-                loss = loss or _is_loss(rt, dh, dv)
+                loss = loss or _is_loss(rt, dh, dv, op_of[a], op_of[b])
             out["pairs"].append(
                 {
                     "pair": [ops[a], ops[b]],
@@ -863,10 +897,12 @@ async def serve(
     headless: bool,
     stop: asyncio.Event | None = None,
     on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
+    speed: float = 1.0,
 ) -> int:
     """Long-running service: links from config, persistent store; restart resumes. Runs until
-    SIGINT/SIGTERM (or ``stop`` is set)."""
-    clock = RealClock()
+    SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
+    than real time: the service's clock then advances ``speed`` simulated seconds per second."""
+    clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
     frame = LocalFrame(
         settings.airspace.origin_lat_deg,
         settings.airspace.origin_lon_deg,
@@ -886,13 +922,16 @@ async def serve(
     for link in settings.mavlink.links:
         await rt.hub.add_link(link)
     options = RunOptions(headless=headless, operator=operator)
-    for op_port in _operators(rt, options):
+    operators = _operators(rt, options)
+    for op_port in operators:
         rt.usm.attach_operator(op_port)
     app = None
     if operator == OperatorMode.DASHBOARD and not headless:
         from gcs_utm.dashboard.tui import DashboardApp
 
-        app = DashboardApp(rt.usm, rt.tracks, refresh_s=settings.dashboard.refresh_s)
+        app = DashboardApp(
+            rt.usm, rt.tracks, refresh_s=settings.dashboard.refresh_s, minima=_minima(settings)
+        )
         rt.usm.attach_operator(app)
     gateway = None
     if settings.mqtt.enabled:
@@ -919,6 +958,7 @@ async def serve(
             ]
             if headless:
                 tasks.append(tg.create_task(_headless_status(rt), name="status"))
+            tasks += [tg.create_task(o.run(), name="line") for o in _lines(operators)]
             if gateway is not None:
                 tasks.append(tg.create_task(gateway.run(), name="mqtt"))
             if app is not None:

@@ -22,6 +22,8 @@ from typing import Any, NewType
 import numpy as np
 import numpy.typing as npt
 
+from gcs_utm.envelope import PerformanceEnvelope, implied
+
 Icao24 = NewType("Icao24", str)
 """ICAO 24-bit address as six lower-case hex digits, e.g. ``"3c6444"``."""
 SysId = NewType("SysId", int)
@@ -232,6 +234,13 @@ class OperationState(Enum):
     ENDED = "ended"
 
 
+def default_envelope(
+    kind: VehicleKind, cruise_speed_mps: float, climb_rate_mps: float
+) -> PerformanceEnvelope:
+    """The envelope an operation's description implies (:func:`gcs_utm.envelope.implied`)."""
+    return implied(kind is VehicleKind.FIXED_WING, cruise_speed_mps, climb_rate_mps)
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Operation:
     """A UAS operation (paper Table 3). The plan is the current version; the store keeps all.
@@ -262,6 +271,14 @@ class Operation:
     endurance_s: float | None = None
     operator: str = "default"
     next_waypoint: int = 0
+    envelope: PerformanceEnvelope | None = None
+    """What the vehicle can fly; None: :func:`default_envelope` of its description."""
+
+    def performance(self) -> PerformanceEnvelope:
+        """The vehicle's envelope: the one given, else what its description implies."""
+        if self.envelope is not None:
+            return self.envelope
+        return default_envelope(self.vehicle_kind, self.cruise_speed_mps, self.max_climb_rate_mps)
 
     def __post_init__(self) -> None:
         item = f"operation {self.id}"
@@ -616,6 +633,18 @@ class Alternative:
     cost: float
     risk: float
     detail: str = ""
+    # What the option changes, for the pilot prompt (None: not computed for this option).
+    extra_length_m: float | None = None
+    """3D path length this option adds to the remaining plan."""
+    extra_time_s: float | None = None
+    """Time this option adds to the arrival at the plan's last waypoint."""
+    separation_ratio: float | None = None
+    """Closest predicted separation from the other plans under this option, as a multiple
+    of the separation minima (at least 1: separated; cylinder rule: the larger of horizontal
+    distance / horizontal minimum and vertical distance / vertical minimum). None: no other
+    plan in range."""
+    fence_distance_m: float | None = None
+    """Closest horizontal distance to an active geofence (negative: inside). None: none near."""
 
 
 class CommandKind(Enum):

@@ -3,13 +3,16 @@
 filed plans: every pair already in conflict, every plan crossing a geofence.
 
 Times are printed in scenario seconds (relative to its start). Exit 0 when the file is valid
-(conflicts are findings, not errors), 2 when it is not (one error line on stderr).
+(conflicts are findings, not errors), 2 when it is not (one error line on stderr; with
+``--json`` also one JSON document on stdout: ``{"error": {"file", "item", "field",
+"message"}}``). FILE may also be a GAUSS scenario YAML: it loads the scenario it names.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from dataclasses import replace
 from typing import Any
@@ -24,7 +27,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("scenario", help="scenario tools")
     cmds = p.add_subparsers(dest="scenario_command", metavar="ACTION", required=True)
     c = cmds.add_parser("check", help="validate a scenario and check its filed plans")
-    c.add_argument("file", help="scenario TOML, or GAUSS operations/geofences JSON")
+    c.add_argument(
+        "file", help="scenario TOML, a GAUSS operations/geofences JSON, or a GAUSS scenario YAML"
+    )
     c.add_argument("--yaml", help="GAUSS YAML with the origin (default: FILE with .yaml)")
     c.add_argument("--json", action="store_true", help="print one JSON document")
     c.add_argument(
@@ -33,9 +38,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="shift each plan by its vehicle's start_delay_s before checking (as flown)",
     )
     c.add_argument(
-        "--step-s", type=float, default=1.0, help="sampling step of the check (default 1 s)"
+        "--step-s",
+        default="1.0",
+        help=f"sampling step of the check, at least {MIN_STEP_S:g} s (default 1 s)",
     )
     c.set_defaults(func=_check)
+
+
+MIN_STEP_S = 0.01
+"""Finer than any vehicle's position stream (50 Hz is 20 ms); a smaller step only multiplies
+the samples the check holds in memory."""
 
 
 def delayed_operations(scenario: Scenario) -> list[Operation]:
@@ -114,23 +126,62 @@ def report_document(scenario: Scenario, report: StrategicReport) -> dict[str, An
     }
 
 
+def _fail(args: argparse.Namespace, error: dict[str, str]) -> int:
+    """One error line on stderr; with --json also the error as a JSON document on stdout."""
+    where = ": ".join(v for v in (error["file"], error["item"], error["field"]) if v)
+    print(f"error: {where}: {error['message']}", file=sys.stderr)
+    if args.json:
+        json.dump({"error": error}, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    return 2
+
+
+def _step_s(text: str) -> float | None:
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if MIN_STEP_S <= value < math.inf else None
+
+
 def _check(args: argparse.Namespace) -> int:
+    try:
+        return _check_file(args)
+    except Exception as exc:
+        # a bug, not bad input: the --json reader still gets its document, the traceback
+        # goes to stderr
+        if args.json:
+            error = {"file": args.file, "item": "", "field": "", "message": f"internal: {exc!r}"}
+            json.dump({"error": error}, sys.stdout, indent=2)
+            sys.stdout.write("\n")
+        raise
+
+
+def _check_file(args: argparse.Namespace) -> int:
+    step_s = _step_s(args.step_s)
+    if step_s is None:
+        message = f"expected a number of seconds >= {MIN_STEP_S:g}, got {args.step_s!r}"
+        return _fail(args, {"file": "", "item": "", "field": "--step-s", "message": message})
     try:
         scenario = load_any(args.file, args.yaml)
     except ScenarioError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    if not args.step_s > 0.0:
-        print(f"error: --step-s must be positive, got {args.step_s}", file=sys.stderr)
-        return 2
+        field = "" if exc.field == exc.item else exc.field
+        return _fail(
+            args, {"file": exc.file, "item": exc.item, "field": field, "message": exc.message}
+        )
     ops = delayed_operations(scenario) if args.apply_delays else list(scenario.operations)
     config = scenario.monitoring_for(MonitoringConfig())
-    report = strategic_check(ops, scenario.geofences, scenario.frame, config, step_s=args.step_s)
+    report = strategic_check(ops, scenario.geofences, scenario.frame, config, step_s=step_s)
     doc = report_document(scenario, report)
     if args.json:
         json.dump(doc, sys.stdout, indent=2)
         sys.stdout.write("\n")
         return 0
+    _print(args, scenario, doc)
+    return 0
+
+
+def _print(args: argparse.Namespace, scenario: Scenario, doc: dict[str, Any]) -> None:
     out = sys.stdout
     out.write(f"{scenario.name} ({scenario.source}): valid, {scenario.duration_s:.0f} s\n")
     out.write(f"  {len(doc['operations'])} operations:\n")
@@ -159,4 +210,3 @@ def _check(args: argparse.Namespace) -> int:
             f"  GEOFENCE {label}: {x['operation']} enters {x['geofence']}"
             f" at t={x['entry_s']:.1f} s\n"
         )
-    return 0

@@ -63,7 +63,8 @@ def test_loss_of_separation_recommends_a_jointly_conflict_free_plan_and_audits_i
         assert b_sel is not None
         assert _offset_m(snap, b_sel) < _offset_m(snap, rec.selected)
     assert rec.state is RecommendationState.PROPOSED
-    assert rec.deadline_t_s == pytest.approx(threat.predicted_event_at_s - 10.0)  # type: ignore[operator]
+    # The event is 100 s ahead: the deadline is the answer window (20 s), not event - 10 s.
+    assert rec.deadline_t_s - snap.t_s == pytest.approx(20.0, abs=1e-6)
     ops = dict(snap.operations)
     for r in d.recommendations:
         assert r.selected is not None
@@ -241,9 +242,10 @@ def test_autonomous_mode_applies_without_confirmation() -> None:
 
 def test_low_battery_goes_to_the_nearest_landing_site_or_lands_now() -> None:
     op = sc.make_operation(
-        "A", [(0, 0, 100), (3000, 0, 100)], landing_sites=[(1400, 300, 0)], endurance_s=300.0
+        "A", [(0, 0, 100), (3000, 0, 100)], landing_sites=[(1400, 300, 60)], endurance_s=300.0
     )
-    t = sc.T0_S + 100.0  # 1000 m out: home is 100 s back, the site 50 s away
+    # 1000 m out: home is 100 s back, the site 50 s away and 27 s down (40 m at 1.5 m/s)
+    t = sc.T0_S + 100.0
     threat = sc.threat(ThreatKind.LACK_OF_BATTERY, ["A"], t_s=t)
     d = make_em().on_threat(threat, sc.snapshot([op], t_s=t))
     (rec,) = d.recommendations

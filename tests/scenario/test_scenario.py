@@ -382,7 +382,7 @@ def test_cli_invalid_file_exit_2_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     path = _write(tmp_path, BASE.replace("sys_id = 2", "sys_id = 1"))
-    code, out, err = _cli(["scenario", "check", str(path), "--json"], capsys)
+    code, out, err = _cli(["scenario", "check", str(path)], capsys)
     assert code == 2 and out == ""
     assert err.count("\n") == 1 and "operations[1] (B): sys_id:" in err
 

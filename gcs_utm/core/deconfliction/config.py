@@ -58,6 +58,13 @@ class DeconflictionConfig:
     max_alt_amsl_m: float = setting(
         10000.0, "airspace ceiling used when an operation has no max_alt_amsl_m", unit="m"
     )
+    min_height_above_home_m: float = setting(
+        10.0,
+        "safety floor: no generated waypoint below the vehicle's home altitude plus this (its "
+        "filed take-off and landing points and a landing manoeuvre's touchdown aside)",
+        min=0.0,
+        unit="m",
+    )
     immovable_priority: int = setting(
         1000, "operations with this priority or higher are never deformed", min=1
     )

@@ -17,14 +17,32 @@ Guarantees:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Sequence
+from dataclasses import replace
 
 from gcs_utm.core.deconfliction import TacticalDeconfliction
 from gcs_utm.core.emergency.config import EmergencyConfig
-from gcs_utm.core.emergency.selection import Selection, select_joint, weighted
+from gcs_utm.core.emergency.decision import (
+    ACTOR,
+    MODE_COMMAND,
+    MODE_INTRUDER,
+    MODE_MULTI,
+    ONE_SHOT,
+    SINGLE_MANEUVERS,
+    Case,
+    Decision,
+)
+from gcs_utm.core.emergency.geofences import area, link_loss, suspend
+from gcs_utm.core.emergency.selection import (
+    STAY_DETAIL,
+    Selection,
+    is_stay,
+    select_by_priority,
+    stay,
+    weighted,
+)
+from gcs_utm.core.emergency.supervision import on_outcome, supervise_case
 from gcs_utm.core.monitoring.config import MonitoringConfig
-from gcs_utm.core.monitoring.strategic import plan_vs_geofences
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -33,10 +51,6 @@ from gcs_utm.model import (
     Command,
     CommandKind,
     Geofence,
-    GeofenceId,
-    GeofenceKind,
-    GeofenceShape,
-    LatLon,
     Maneuver,
     OperationId,
     Recommendation,
@@ -47,66 +61,6 @@ from gcs_utm.model import (
     ThreatKind,
     ThreatStatus,
 )
-
-ACTOR = "EM"
-
-REROUTE_MANEUVERS = frozenset(
-    {
-        Maneuver.REROUTE,
-        Maneuver.ESCAPE,
-        Maneuver.DIRECT_TO_GOAL,
-        Maneuver.BACK_TO_PLAN,
-        Maneuver.NEXT_WAYPOINT,
-        Maneuver.RETURN_HOME,
-        Maneuver.LANDING_SITE,
-    }
-)
-SINGLE_MANEUVERS: dict[str, frozenset[Maneuver]] = {
-    "reroute": REROUTE_MANEUVERS,
-    "back_to_plan": frozenset({Maneuver.BACK_TO_PLAN, Maneuver.NEXT_WAYPOINT}),
-    "land_or_home": frozenset({Maneuver.LANDING_SITE, Maneuver.RETURN_HOME}),
-}
-_ONE_SHOT = frozenset({"warn", "suspend_and_geofence", "alert_and_geofence", "geofence_from_area"})
-"""Actions done once per threat: repeating them would only duplicate warnings/geofences."""
-_MODE_MULTI = "multi"
-_MODE_INTRUDER = "intruder"
-_MODE_COMMAND = "command"
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Decision:
-    """What one EM step asks the rest of the system to do."""
-
-    recommendations: tuple[Recommendation, ...] = ()
-    geofences: tuple[Geofence, ...] = ()
-    commands: tuple[Command, ...] = ()
-    escalations: tuple[str, ...] = ()
-    superseded: tuple[RecommendationId, ...] = ()
-    audit: tuple[AuditEntry, ...] = ()
-    warnings: tuple[str, ...] = ()
-
-    def merge(self, other: Decision) -> Decision:
-        return Decision(
-            recommendations=self.recommendations + other.recommendations,
-            geofences=self.geofences + other.geofences,
-            commands=self.commands + other.commands,
-            escalations=self.escalations + other.escalations,
-            superseded=self.superseded + other.superseded,
-            audit=self.audit + other.audit,
-            warnings=self.warnings + other.warnings,
-        )
-
-
-@dataclass(slots=True)
-class _Case:
-    threat: Threat
-    action: str
-    attempt_t_s: float
-    modes: dict[OperationId, str] = field(default_factory=dict)
-    excluded: dict[OperationId, set[Maneuver]] = field(default_factory=dict)
-    replans: dict[OperationId, int] = field(default_factory=dict)
-    geofences: list[Geofence] = field(default_factory=list)
-    rec_ids: set[RecommendationId] = field(default_factory=set)
 
 
 def _alt_record(alt: Alternative, alpha: float, beta: float) -> dict[str, object]:
@@ -128,12 +82,17 @@ class EmergencyManager:
         config: EmergencyConfig,
         td: TacticalDeconfliction,
         monitoring: MonitoringConfig,
+        *,
+        answer_delay_s: float | None = None,
     ) -> None:
+        """``answer_delay_s``: when an automatic operator answers (``--auto-accept``), its
+        delay; None when a person answers (then up to the deadline is expected)."""
         self.frame = frame
         self.config = config
         self.td = td
         self.monitoring = monitoring
-        self._cases: dict[ThreatId, _Case] = {}
+        self.answer_delay_s = answer_delay_s
+        self._cases: dict[ThreatId, Case] = {}
         self._recs: dict[RecommendationId, Recommendation] = {}
 
     # ---- queries ----------------------------------------------------------------------------
@@ -148,27 +107,66 @@ class EmergencyManager:
     def open_threats(self) -> list[ThreatId]:
         return list(self._cases)
 
+    def case(self, threat_id: ThreatId) -> Case | None:
+        return self._cases.get(threat_id)
+
+    def record(self, rec: Recommendation) -> Recommendation:
+        """Store ``rec`` as the current version of its id; returns it."""
+        self._recs[rec.id] = rec
+        return rec
+
     # ---- entry points -----------------------------------------------------------------------
     def on_threat(self, threat: Threat, snapshot: AirspaceSnapshot) -> Decision:
         if threat.status is ThreatStatus.CLOSED:
             return self.on_threat_closed(threat)
         case = self._cases.get(threat.id)
         if case is not None:
-            # The threat persists. A pending or accepted recommendation stands until answered,
-            # expired or the threat closes; one-shot actions (warning, geofence creation) are
-            # done; a case that ended in escalation is retried every retry_after_s with its
-            # refused maneuvers still excluded (no churn every monitoring cycle).
+            # The threat persists. A pending recommendation stands until answered, expired or
+            # the threat closes; an accepted one is supervised (see .supervision); one-shot
+            # actions (warning, geofence creation) are done; a case that ended in escalation
+            # is retried every retry_after_s with its refused maneuvers still excluded (no
+            # churn every monitoring cycle).
             case.threat = threat
-            if self._live(case) or case.action in _ONE_SHOT:
+            if case.action in ONE_SHOT or self._pending(case):
                 return Decision()
+            if self._in_force(case):
+                return supervise_case(self, case, snapshot)
             if snapshot.t_s - case.attempt_t_s < self.config.retry_after_s:
                 return Decision()
             case.attempt_t_s = snapshot.t_s
             case.replans.clear()
             return self._handle(case, snapshot)
         action = self.config.action_for(threat.kind)
-        case = _Case(threat=threat, action=action, attempt_t_s=snapshot.t_s)
+        case = Case(threat=threat, action=action, attempt_t_s=snapshot.t_s)
         self._cases[threat.id] = case
+        return self._handle(case, snapshot)
+
+    def supervising(self) -> bool:
+        """Is any open case waiting on an accepted plan (so :meth:`supervise` has work)?"""
+        return any(self._in_force(c) and not self._pending(c) for c in self._cases.values())
+
+    def supervise(self, snapshot: AirspaceSnapshot) -> Decision:
+        """Periodic supervision of every open case with accepted plans (Monitoring reports a
+        persisting threat only when it changes): see :mod:`.supervision`."""
+        d = Decision()
+        for case in list(self._cases.values()):
+            if self._in_force(case) and not self._pending(case):
+                d = d.merge(supervise_case(self, case, snapshot))
+        return d
+
+    def on_outcome(
+        self,
+        rec_id: RecommendationId,
+        version: int,
+        applied: bool,
+        reason: str,
+        snapshot: AirspaceSnapshot,
+    ) -> Decision:
+        """The upload (or command) of an accepted recommendation was verified or failed."""
+        return on_outcome(self, rec_id, version, applied, reason, snapshot)
+
+    def decide_again(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+        """A fresh decision for an open case on the current snapshot (new versions)."""
         return self._handle(case, snapshot)
 
     def on_answer(
@@ -185,20 +183,20 @@ class EmergencyManager:
             msg = f"answer to {rec.id} v{rec.version} ignored: current is {state}"
             return Decision(
                 warnings=(msg,),
-                audit=(self._audit(now, "answer_ignored", rec.id, {"reason": msg}),),
+                audit=(self.audit(now, "answer_ignored", rec.id, {"reason": msg}),),
             )
         if accepted:
             new = cur.transition(RecommendationState.ACCEPTED, now, "accepted by the operator")
             self._recs[new.id] = new
             return Decision(
                 recommendations=(new,),
-                audit=(self._audit(now, "accepted", rec.id, {"version": rec.version}),),
+                audit=(self.audit(now, "accepted", rec.id, {"version": rec.version}),),
             )
         new = cur.transition(RecommendationState.REJECTED, now, "rejected by the operator")
         self._recs[new.id] = new
         d = Decision(
             recommendations=(new,),
-            audit=(self._audit(now, "rejected", rec.id, {"version": rec.version}),),
+            audit=(self.audit(now, "rejected", rec.id, {"version": rec.version}),),
         )
         return d.merge(self._replan(new, snapshot, "rejected"))
 
@@ -217,7 +215,7 @@ class EmergencyManager:
         d = Decision(
             recommendations=(new,),
             escalations=(msg,),
-            audit=(self._audit(now, "expired", rec.id, {"version": rec.version}),),
+            audit=(self.audit(now, "expired", rec.id, {"version": rec.version}),),
         )
         return d.merge(self._replan(new, snapshot, "expired"))
 
@@ -237,29 +235,58 @@ class EmergencyManager:
             recommendations=tuple(recs),
             superseded=tuple(r.id for r in recs),
             audit=(
-                self._audit(t, "threat_closed", threat.id, {"superseded": [r.id for r in recs]}),
+                self.audit(t, "threat_closed", threat.id, {"superseded": [r.id for r in recs]}),
             ),
         )
 
     # ---- internals --------------------------------------------------------------------------
-    def _live(self, case: _Case) -> bool:
-        live = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED)
-        return any(self._recs[r].state in live for r in case.rec_ids)
+    def _pending(self, case: Case) -> bool:
+        return any(self._recs[r].state is RecommendationState.PROPOSED for r in case.rec_ids)
 
-    def _audit(
-        self, t_s: float, action: str, subject: str, detail: dict[str, object]
-    ) -> AuditEntry:
+    def _in_force(self, case: Case) -> bool:
+        force = (RecommendationState.ACCEPTED, RecommendationState.APPLIED)
+        return any(self._recs[r].state in force for r in case.rec_ids)
+
+    def plan_start(self, threat: Threat, now: float) -> float:
+        """When a plan decided now can start: the expected answer (none in autonomous mode;
+        the automatic operator's delay; else up to the deadline), the upload and a margin.
+        The vehicle has the plan before then, and its first waypoint lies ahead of it."""
+        return self._start(now, self._deadline(threat, now))
+
+    def manoeuvre_start(self, rec: Recommendation) -> float:
+        """When the plan of ``rec`` leaves the UAS's path (its lead-in ends)."""
+        return self._start(rec.created_t_s, rec.deadline_t_s)
+
+    def _start(self, now: float, deadline_t_s: float) -> float:
+        cfg = self.config
+        answer = 0.0 if cfg.autonomous else deadline_t_s - now
+        if self.answer_delay_s is not None:
+            answer = min(answer, self.answer_delay_s)
+        return now + answer + cfg.upload_time_s + cfg.start_margin_s
+
+    def earliest_receipt(self, now: float) -> float:
+        """The earliest the vehicle can have a plan decided now: an immediate answer (or the
+        automatic operator's delay) plus the upload. A new plan carries timed points of the
+        current path from then to its start (TD's lead-in)."""
+        answer = 0.0 if self.answer_delay_s is None else self.answer_delay_s
+        if self.config.autonomous:
+            answer = 0.0
+        return now + answer + self.config.upload_time_s
+
+    def audit(self, t_s: float, action: str, subject: str, detail: dict[str, object]) -> AuditEntry:
         return AuditEntry(t_s=t_s, actor=ACTOR, action=action, subject=str(subject), detail=detail)
 
     def _deadline(self, threat: Threat, now: float) -> float:
         event = threat.predicted_event_at_s
         if event is None:
             event = now + self.config.default_event_horizon_s
-        return max(now + self.config.min_response_s, event - self.config.deadline_margin_s)
+        cfg = self.config
+        latest = now + max(cfg.min_response_s, cfg.answer_window_s)
+        return min(latest, max(now + cfg.min_response_s, event - cfg.deadline_margin_s))
 
-    def _issue(
+    def issue(
         self,
-        case: _Case,
+        case: Case,
         op_id: OperationId,
         now: float,
         *,
@@ -305,7 +332,7 @@ class EmergencyManager:
             recommendations=tuple(recs), superseded=tuple(superseded), commands=commands
         )
 
-    def _handle(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
+    def _handle(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
         t = case.threat
         now = snapshot.t_s
         a = case.action
@@ -314,12 +341,12 @@ class EmergencyManager:
         if a in SINGLE_MANEUVERS:
             d = Decision()
             for op_id in t.uas_ids:
-                d = d.merge(self._single(case, op_id, snapshot, SINGLE_MANEUVERS[a]))
+                d = d.merge(self.single(case, op_id, snapshot, SINGLE_MANEUVERS[a]))
             return d
         if a == "warn":
             msg = f"{t.kind.value}: {', '.join(t.uas_ids)} {t.message}".strip()
             return Decision(
-                warnings=(msg,), audit=(self._audit(now, "warn", t.id, {"message": msg}),)
+                warnings=(msg,), audit=(self.audit(now, "warn", t.id, {"message": msg}),)
             )
         if a == "vertical_avoidance":
             d = Decision()
@@ -327,22 +354,36 @@ class EmergencyManager:
                 d = d.merge(self._intruder(case, op_id, snapshot))
             return d
         if a == "suspend_and_geofence":
-            return self._suspend(case, snapshot)
+            return suspend(self, case, snapshot)
         if a == "alert_and_geofence":
-            return self._link_loss(case, snapshot)
+            return link_loss(self, case, snapshot)
         if a == "geofence_from_area":
-            return self._area(case, snapshot)
+            return area(self, case, snapshot)
         raise AssertionError(f"unhandled action {a!r}")  # EmergencyConfig validates actions
 
     # -- multi-UAS
-    def _multi(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
+    def _multi(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+        """Charged cords + joint selection under the priority rule (selection tiers). A UAS
+        without a verified option stays on its plan (escalated for it) while the others
+        move; the case escalates only when no combination resolves the conflict."""
         now = snapshot.t_s
         cfg = self.config
         t = case.threat
-        options = self.td.resolve_loss_of_separation(t, snapshot)
+        options = self.td.resolve_loss_of_separation(
+            t,
+            snapshot,
+            start_t_s=self.plan_start(t, now),
+            lead_in_from_t_s=self.earliest_receipt(now),
+        )
         for op_id, alts in options.items():
             banned = case.excluded.get(op_id, set())
             options[op_id] = [x for x in alts if x.maneuver not in banned]
+        ops = snapshot.operations
+        stays = {
+            k: stay(k, ops[k].plan)
+            for k, alts in options.items()
+            if k in ops and not any(x.maneuver is Maneuver.KEEP_PLAN for x in alts)
+        }
         memo: dict[tuple[int, int], bool] = {}
 
         def compatible(x: Alternative, y: Alternative) -> bool:
@@ -351,27 +392,47 @@ class EmergencyManager:
                 memo[key] = self.td.compatible(x, y, snapshot)
             return memo[key]
 
-        sel = select_joint(
+        tiered = select_by_priority(
             options,
+            {k: ops[k].priority for k in options if k in ops},
+            stays,
             alpha=cfg.alpha,
             beta=cfg.beta,
             compatible=compatible,
             max_nodes=cfg.max_combinations,
         )
+        sel = None if tiered is None else tiered.selection
         detail = self._detail(options, sel, "loss of separation: charged cords + joint selection")
-        if sel is None:
+        if tiered is None:
             msg = (
                 f"{t.id}: no conflict-free combination of alternatives for "
                 f"{', '.join(t.uas_ids)}; operator action needed"
             )
             return Decision(
-                escalations=(msg,), audit=(self._audit(now, "escalation", t.id, detail),)
+                escalations=(msg,), audit=(self.audit(now, "escalation", t.id, detail),)
             )
-        d = Decision(audit=(self._audit(now, "decision", t.id, detail),))
+        detail["moved_up_to_priority"] = tiered.moved_up_to_priority
+        d = Decision(audit=(self.audit(now, "decision", t.id, detail),))
+        return d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
+
+    def _issue_joint(
+        self,
+        case: Case,
+        sel: Selection,
+        options: dict[OperationId, list[Alternative]],
+        compatible: Callable[[Alternative, Alternative], bool],
+        now: float,
+    ) -> Decision:
+        """Recommendations for the UAS whose selected option changes their plan."""
+        t = case.threat
+        d = Decision()
         for op_id, alt in sel.chosen.items():
-            case.modes[op_id] = _MODE_MULTI
+            case.modes[op_id] = MODE_MULTI
             rid = RecommendationId(f"{t.id}/{op_id}")
             prev = self._recs.get(rid)
+            if is_stay(alt):
+                msg = f"{t.id}: {op_id} has {STAY_DETAIL}; the others move around it"
+                d = d.merge(Decision(escalations=(msg,)))
             if alt.maneuver is Maneuver.KEEP_PLAN:
                 if prev is not None and prev.state is RecommendationState.PROPOSED:
                     old = prev.transition(RecommendationState.SUPERSEDED, now, "no longer needed")
@@ -390,7 +451,7 @@ class EmergencyManager:
                 x for x in options[op_id] if x is not alt and all(compatible(x, c) for c in others)
             ]
             d = d.merge(
-                self._issue(
+                self.issue(
                     case,
                     op_id,
                     now,
@@ -429,9 +490,9 @@ class EmergencyManager:
         }
 
     # -- single UAS
-    def _single(
+    def single(
         self,
-        case: _Case,
+        case: Case,
         op_id: OperationId,
         snapshot: AirspaceSnapshot,
         maneuvers: frozenset[Maneuver],
@@ -442,7 +503,13 @@ class EmergencyManager:
         case.modes[op_id] = f"single:{','.join(sorted(m.value for m in maneuvers))}"
         allowed = maneuvers - case.excluded.get(op_id, set())
         alts = self.td.resolve_single(
-            t, op_id, snapshot, maneuvers=allowed, extra_geofences=tuple(case.geofences)
+            t,
+            op_id,
+            snapshot,
+            maneuvers=allowed,
+            extra_geofences=tuple(case.geofences),
+            start_t_s=self.plan_start(t, now),
+            lead_in_from_t_s=self.earliest_receipt(now),
         )
         cfg = self.config
         if case.action == "land_or_home":
@@ -470,19 +537,19 @@ class EmergencyManager:
         )
         detail = self._detail(options, sel, f"{t.kind.value}: {case.action}")
         if best is None:
-            audit = (self._audit(now, "escalation", case.threat.id, detail),)
+            audit = (self.audit(now, "escalation", case.threat.id, detail),)
             if case.action == "land_or_home":
                 # Low battery or failure and no reachable site: land where it is, and say so.
                 cmd = Command(kind=CommandKind.LAND, operation_id=op_id)
-                case.modes[op_id] = _MODE_COMMAND
+                case.modes[op_id] = MODE_COMMAND
                 msg = f"{case.threat.id}: no reachable landing site or home for {op_id}: land now"
-                d = self._issue(case, op_id, now, command=cmd, reason=msg)
+                d = self.issue(case, op_id, now, command=cmd, reason=msg)
                 return d.merge(Decision(escalations=(msg,), audit=audit))
             msg = f"{case.threat.id}: no feasible alternative for {op_id} ({t.kind.value})"
             return Decision(escalations=(msg,), audit=audit)
-        d = Decision(audit=(self._audit(now, "decision", case.threat.id, detail),))
+        d = Decision(audit=(self.audit(now, "decision", case.threat.id, detail),))
         return d.merge(
-            self._issue(
+            self.issue(
                 case,
                 op_id,
                 now,
@@ -492,14 +559,20 @@ class EmergencyManager:
             )
         )
 
-    def _intruder(self, case: _Case, op_id: OperationId, snapshot: AirspaceSnapshot) -> Decision:
+    def _intruder(self, case: Case, op_id: OperationId, snapshot: AirspaceSnapshot) -> Decision:
         now = snapshot.t_s
         cfg = self.config
-        case.modes[op_id] = _MODE_INTRUDER
+        case.modes[op_id] = MODE_INTRUDER
         banned = case.excluded.get(op_id, set())
         alts = [
             x
-            for x in self.td.resolve_intruder(case.threat, op_id, snapshot)
+            for x in self.td.resolve_intruder(
+                case.threat,
+                op_id,
+                snapshot,
+                self.plan_start(case.threat, now),
+                self.earliest_receipt(now),
+            )
             if x.maneuver not in banned
         ]
         alts.sort(key=lambda x: weighted(x, cfg.alpha, cfg.beta))
@@ -520,11 +593,11 @@ class EmergencyManager:
                 f"from intruder {case.threat.intruder_id}"
             )
             return Decision(
-                escalations=(msg,), audit=(self._audit(now, "escalation", case.threat.id, detail),)
+                escalations=(msg,), audit=(self.audit(now, "escalation", case.threat.id, detail),)
             )
-        d = Decision(audit=(self._audit(now, "decision", case.threat.id, detail),))
+        d = Decision(audit=(self.audit(now, "decision", case.threat.id, detail),))
         return d.merge(
-            self._issue(
+            self.issue(
                 case,
                 op_id,
                 now,
@@ -533,199 +606,6 @@ class EmergencyManager:
                 reason=f"intruder {case.threat.intruder_id}: {alts[0].maneuver.value}",
             )
         )
-
-    # -- geofence-creating actions
-    def _cylinder(  # noqa: PLR0917 - private helper, one call per geofence kind
-        self,
-        gid: str,
-        east_m: float,
-        north_m: float,
-        alt_amsl_m: float,
-        radius_m: float,
-        band_m: float,
-        now: float,
-        duration_s: float,
-        reason: str,
-        exempt: tuple[OperationId, ...] = (),
-    ) -> Geofence:
-        lat, lon = self.frame.point_to_wgs84(east_m, north_m)
-        return Geofence(
-            id=GeofenceId(gid),
-            shape=GeofenceShape.CYLINDER,
-            min_alt_amsl_m=alt_amsl_m - band_m,
-            max_alt_amsl_m=alt_amsl_m + band_m,
-            center=LatLon(lat_deg=lat, lon_deg=lon),
-            radius_m=radius_m,
-            start_t_s=now,
-            end_t_s=now + duration_s,
-            kind=GeofenceKind.DYNAMIC,
-            reason=reason,
-            source=ACTOR,
-            exempt=exempt,
-        )
-
-    def _reroute_affected(
-        self,
-        case: _Case,
-        fence: Geofence,
-        snapshot: AirspaceSnapshot,
-        exclude: set[OperationId],
-    ) -> Decision:
-        """Reroute every other operation whose plan the new fence now blocks (use case 2)."""
-        d = Decision()
-        for op in snapshot.operations.values():
-            if op.id in exclude or op.plan.end_t_s < snapshot.t_s:
-                continue
-            if not plan_vs_geofences(op.plan, op, [fence], self.frame, self.monitoring):
-                continue
-            sub = replace(
-                case.threat,
-                kind=ThreatKind.GEOFENCE_CONFLICT,
-                uas_ids=(op.id,),
-                geofence_id=fence.id,
-                area=fence,
-            )
-            d = d.merge(self._single(case, op.id, snapshot, REROUTE_MANEUVERS, threat=sub))
-        return d
-
-    def _suspend(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
-        now = snapshot.t_s
-        cfg = self.config
-        t = case.threat
-        kind = CommandKind.HOLD if cfg.suspend_command == "hold" else CommandKind.LAND
-        d = Decision()
-        for op_id in t.uas_ids:
-            op = snapshot.operations.get(op_id)
-            if t.position is not None:
-                e, n = self.frame.point_to_local(t.position.lat_deg, t.position.lon_deg)
-                z = t.position.alt_amsl_m
-            elif op is not None:
-                e, n, z = (float(v) for v in self.td.current_xyz(op, snapshot))
-            else:
-                d = d.merge(Decision(escalations=(f"{t.id}: {t.kind.value} for unknown {op_id}",)))
-                continue
-            fence = self._cylinder(
-                f"em-{t.id}-{op_id}",
-                e,
-                n,
-                z,
-                cfg.jamming_radius_m,
-                cfg.jamming_band_m,
-                now,
-                cfg.jamming_duration_s,
-                f"{t.kind.value} around {op_id}",
-                exempt=(op_id,),
-            )
-            case.geofences.append(fence)
-            case.modes[op_id] = _MODE_COMMAND
-            cmd = Command(kind=kind, operation_id=op_id)
-            d = d.merge(
-                self._issue(
-                    case,
-                    op_id,
-                    now,
-                    command=cmd,
-                    geofence=fence,
-                    reason=f"{t.kind.value}: suspend ({kind.value}) and keep others out",
-                )
-            )
-            d = d.merge(
-                Decision(
-                    geofences=(fence,),
-                    audit=(
-                        self._audit(
-                            now,
-                            "decision",
-                            t.id,
-                            {
-                                "reason": f"{t.kind.value}: suspend + dynamic geofence",
-                                "command": kind.value,
-                                "geofence": fence.id,
-                                "radius_m": cfg.jamming_radius_m,
-                                "band_m": cfg.jamming_band_m,
-                                "duration_s": cfg.jamming_duration_s,
-                            },
-                        ),
-                    ),
-                )
-            )
-            d = d.merge(self._reroute_affected(case, fence, snapshot, set(t.uas_ids)))
-        return d
-
-    def _link_loss(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
-        now = snapshot.t_s
-        cfg = self.config
-        t = case.threat
-        d = Decision()
-        for op_id in t.uas_ids:
-            op = snapshot.operations.get(op_id)
-            msg = (
-                f"{t.id}: link lost with {op_id}; temporary geofence around its predicted position"
-            )
-            if t.position is not None:
-                e, n = self.frame.point_to_local(t.position.lat_deg, t.position.lon_deg)
-                z = t.position.alt_amsl_m
-            elif op is not None:
-                from gcs_utm.core.deconfliction.geometry import plan_to_local
-
-                p = plan_to_local(op.plan, self.frame).position_at(now + cfg.link_loss_predict_s)
-                e, n, z = float(p[0]), float(p[1]), float(p[2])
-            else:
-                d = d.merge(Decision(escalations=(f"{t.id}: link lost with unknown {op_id}",)))
-                continue
-            fence = self._cylinder(
-                f"em-{t.id}-{op_id}",
-                e,
-                n,
-                z,
-                cfg.link_loss_radius_m,
-                cfg.link_loss_band_m,
-                now,
-                cfg.link_loss_duration_s,
-                f"link loss of {op_id}",
-                exempt=(op_id,),
-            )
-            case.geofences.append(fence)
-            d = d.merge(
-                Decision(
-                    geofences=(fence,),
-                    escalations=(msg,),
-                    audit=(
-                        self._audit(now, "decision", t.id, {"reason": msg, "geofence": fence.id}),
-                    ),
-                )
-            )
-            d = d.merge(self._reroute_affected(case, fence, snapshot, set(t.uas_ids)))
-        return d
-
-    def _area(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
-        now = snapshot.t_s
-        t = case.threat
-        if t.area is None:
-            msg = f"{t.id}: {t.kind.value} without an area: {t.message}"
-            return Decision(
-                escalations=(msg,), audit=(self._audit(now, "escalation", t.id, {"reason": msg}),)
-            )
-        fence = replace(
-            t.area,
-            kind=GeofenceKind.DYNAMIC,
-            start_t_s=t.area.start_t_s if t.area.start_t_s is not None else now,
-            end_t_s=t.area.end_t_s
-            if t.area.end_t_s is not None
-            else now + self.config.alert_duration_s,
-            reason=t.area.reason or t.message or t.kind.value,
-            source=t.area.source or ACTOR,
-        )
-        case.geofences.append(fence)
-        d = Decision(
-            geofences=(fence,),
-            audit=(
-                self._audit(
-                    now, "decision", t.id, {"reason": f"alert area -> geofence {fence.id}"}
-                ),
-            ),
-        )
-        return d.merge(self._reroute_affected(case, fence, snapshot, set()))
 
     # -- re-planning after a refusal
     def _replan(self, rec: Recommendation, snapshot: AirspaceSnapshot, why: str) -> Decision:
@@ -739,16 +619,16 @@ class EmergencyManager:
         if rec.selected is not None:
             case.excluded.setdefault(op_id, set()).add(rec.selected.maneuver)
         mode = case.modes.get(op_id, "")
-        if mode == _MODE_COMMAND or n > self.config.max_replans:
-            what = "a command" if mode == _MODE_COMMAND else f"{n - 1} re-plans"
+        if mode == MODE_COMMAND or n > self.config.max_replans:
+            what = "a command" if mode == MODE_COMMAND else f"{n - 1} re-plans"
             msg = f"{rec.threat_id}: {op_id} {why} {what}; operator action needed"
             return Decision(
                 escalations=(msg,),
-                audit=(self._audit(now, "escalation", rec.threat_id, {"reason": msg}),),
+                audit=(self.audit(now, "escalation", rec.threat_id, {"reason": msg}),),
             )
-        if mode == _MODE_MULTI:
+        if mode == MODE_MULTI:
             return self._multi(case, snapshot)
-        if mode == _MODE_INTRUDER:
+        if mode == MODE_INTRUDER:
             return self._intruder(case, op_id, snapshot)
         maneuvers = frozenset(Maneuver(v) for v in mode.removeprefix("single:").split(",") if v)
         threat = case.threat
@@ -756,4 +636,4 @@ class EmergencyManager:
             threat = replace(
                 threat, kind=ThreatKind.GEOFENCE_CONFLICT, uas_ids=(op_id,), area=case.geofences[-1]
             )
-        return self._single(case, op_id, snapshot, maneuvers, threat=threat)
+        return self.single(case, op_id, snapshot, maneuvers, threat=threat)
