@@ -93,7 +93,11 @@ def test_a_threat_still_predicted_after_the_accepted_plan_gets_a_new_version() -
     em = make_em(max_replans=1)
     (acc,) = accept_all(em, em.on_threat(threat, snap), at(snap, 1.0))
     assert acc.selected is not None and acc.selected.plan is not None
-    settled = em.manoeuvre_start(acc) + em.config.supervision_grace_s - sc.T0_S
+    due = em.supervision_due(acc)
+    assert due is not None
+    # Settled once the plan has left the old one (by the flight geometry) plus the grace.
+    assert due > em.manoeuvre_start(acc) + em.config.supervision_grace_s
+    settled = due - sc.T0_S
     updated = replace(threat, status=ThreatStatus.UPDATED, updated_at_s=sc.T0_S + 5.0)
     assert em.on_threat(updated, at(snap, 5.0)) == Decision()  # plan not started yet
     assert em.supervise(at(snap, settled - 1.0)) == Decision()
@@ -104,7 +108,9 @@ def test_a_threat_still_predicted_after_the_accepted_plan_gets_a_new_version() -
     # Accepted again, and the threat still does not close: escalate with the safe command.
     (acc2,) = accept_all(em, d, at(snap, settled + 1.0))
     assert acc2.selected is not None and acc2.selected.plan is not None
-    later = em.manoeuvre_start(acc2) + em.config.supervision_grace_s - sc.T0_S + 1.0
+    due2 = em.supervision_due(acc2)
+    assert due2 is not None
+    later = due2 - sc.T0_S + 1.0
     later = max(later, settled + 0.5 + em.config.retry_after_s + 1.0)
     d3 = em.supervise(at(snap, later))
     assert d3.escalations and "still predicted" in d3.escalations[0]
@@ -288,9 +294,30 @@ async def test_the_service_supervises_on_its_own_clock() -> None:
         await _until(lambda: em.pending() == [] and em.supervising())
         acc = em.recommendation(rec.id)
         assert acc is not None
-        clock.advance(em.manoeuvre_start(acc) + em.config.supervision_grace_s - snap.t_s + 1.0)
+        due = em.supervision_due(acc)
+        assert due is not None
+        clock.advance(due - snap.t_s + 1.0)
         await _until(lambda: bool(svc.pending()))
         assert svc.pending()[0].version == rec.version + 1
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
+
+
+def test_supervision_keeps_a_standing_plan_that_is_still_the_choice() -> None:
+    """Once the applied plan is in the airspace and keeping it is conflict-free, a threat
+    that Monitoring has not closed yet (its predictor extrapolates the track until the UAS
+    turns) gets no new version and no escalation: the standing plan is kept (it used to be
+    replaced by a hold command, stopping a multirotor in the path of the other)."""
+    snap, threat = sc.scenario_los_2uas()
+    em = make_em()
+    (acc,) = accept_all(em, em.on_threat(threat, snap), at(snap, 1.0))
+    assert acc.selected is not None and acc.selected.plan is not None
+    ops = dict(snap.operations)
+    ops[acc.operation_id] = replace(ops[acc.operation_id], plan=acc.selected.plan)
+    flown = replace(snap, operations=ops)
+    due = em.supervision_due(acc)
+    assert due is not None
+    d = em.supervise(replace(flown, t_s=due + 0.5))
+    assert not d.escalations and not plans(d)
+    assert any(a.action == "supervision" for a in d.audit)

@@ -41,7 +41,12 @@ from gcs_utm.core.emergency.selection import (
     stay,
     weighted,
 )
-from gcs_utm.core.emergency.supervision import on_outcome, supervise_case
+from gcs_utm.core.emergency.supervision import (
+    deviation_start,
+    on_outcome,
+    settled_at,
+    supervise_case,
+)
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
@@ -253,6 +258,12 @@ class EmergencyManager:
         The vehicle has the plan before then, and its first waypoint lies ahead of it."""
         return self._start(now, self._deadline(threat, now))
 
+    def supervision_due(self, rec: Recommendation) -> float | None:
+        """When an accepted ``rec`` is settled (see :mod:`.supervision`); None when its case
+        is closed."""
+        case = self._cases.get(rec.threat_id)
+        return None if case is None else settled_at(self, case, rec)
+
     def manoeuvre_start(self, rec: Recommendation) -> float:
         """When the plan of ``rec`` leaves the UAS's path (its lead-in ends)."""
         return self._start(rec.created_t_s, rec.deadline_t_s)
@@ -305,6 +316,11 @@ class EmergencyManager:
             old = prev.transition(RecommendationState.SUPERSEDED, now, "replaced by a new version")
             recs.append(old)
             superseded.append(rid)
+        op = case.operations.get(op_id)
+        if selected is not None and selected.plan is not None and op is not None:
+            t_dev = deviation_start(self.frame, selected.plan, op.plan, op.flight_geometry_m)
+            if t_dev is not None:
+                case.deviates_at[rid] = t_dev
         rec = Recommendation(
             id=rid,
             version=1 if prev is None else prev.version + 1,
@@ -366,6 +382,7 @@ class EmergencyManager:
         """Charged cords + joint selection under the priority rule (selection tiers). A UAS
         without a verified option stays on its plan (escalated for it) while the others
         move; the case escalates only when no combination resolves the conflict."""
+        case.operations = dict(snapshot.operations)
         now = snapshot.t_s
         cfg = self.config
         t = case.threat
@@ -500,6 +517,7 @@ class EmergencyManager:
     ) -> Decision:
         now = snapshot.t_s
         t = threat or case.threat
+        case.operations = dict(snapshot.operations)
         case.modes[op_id] = f"single:{','.join(sorted(m.value for m in maneuvers))}"
         allowed = maneuvers - case.excluded.get(op_id, set())
         alts = self.td.resolve_single(
@@ -560,6 +578,7 @@ class EmergencyManager:
         )
 
     def _intruder(self, case: Case, op_id: OperationId, snapshot: AirspaceSnapshot) -> Decision:
+        case.operations = dict(snapshot.operations)
         now = snapshot.t_s
         cfg = self.config
         case.modes[op_id] = MODE_INTRUDER
