@@ -321,3 +321,27 @@ def test_supervision_keeps_a_standing_plan_that_is_still_the_choice() -> None:
     d = em.supervise(replace(flown, t_s=due + 0.5))
     assert not d.escalations and not plans(d)
     assert any(a.action == "supervision" for a in d.audit)
+
+
+def test_overlapping_threats_build_on_each_others_recommended_plans() -> None:
+    """Three UAS meet at one point: the pairwise threats are decided one after the other,
+    before any plan is uploaded. Each decision builds on the plans the earlier ones
+    recommended, so the plans that end up recommended keep all three apart."""
+    from gcs_utm.core.monitoring.strategic import strategic_check
+
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], priority=1)
+    b = sc.make_operation("B", [(1000, 0, 100), (-1000, 0, 100)], priority=2)
+    c = sc.make_operation("C", [(0, -1000, 100), (0, 1000, 100)], priority=3)
+    snap = sc.snapshot([a, b, c])
+    em = make_em()
+    latest: dict[OperationId, Recommendation] = {}
+    for tid, pair in (("t1", ["A", "B"]), ("t2", ["A", "C"]), ("t3", ["B", "C"])):
+        threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, pair, tid=tid, event_in_s=100)
+        for r in plans(em.on_threat(threat, snap)):
+            latest[r.operation_id] = r
+    ops = dict(snap.operations)
+    for k, r in latest.items():
+        assert r.selected is not None and r.selected.plan is not None
+        ops[k] = replace(ops[k], plan=r.selected.plan)
+    assert latest
+    assert strategic_check(list(ops.values()), (), sc.FRAME, MON).conflicts == ()

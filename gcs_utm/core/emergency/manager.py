@@ -245,6 +245,31 @@ class EmergencyManager:
         )
 
     # ---- internals --------------------------------------------------------------------------
+    def _intended(self, snapshot: AirspaceSnapshot, case: Case) -> AirspaceSnapshot:
+        """``snapshot`` with every plan another case has recommended and that is not in the
+        airspace yet (proposed or accepted) in place of the UAS's plan: overlapping threats
+        decided one after the other build on each other's plans (three pairwise threats
+        among three UAS, each decided on the filed plans, gave two of them plans that met)."""
+        live = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED)
+        latest: dict[OperationId, Recommendation] = {}
+        for r in self._recs.values():
+            if r.threat_id == case.threat.id or r.state not in live:
+                continue
+            if r.selected is None or r.selected.plan is None:
+                continue
+            prev = latest.get(r.operation_id)
+            if prev is None or r.created_t_s >= prev.created_t_s:
+                latest[r.operation_id] = r
+        ops = snapshot.operations
+        changed = {
+            k: replace(ops[k], plan=replace(r.selected.plan, operation_id=k))
+            for k, r in latest.items()
+            if k in ops and r.selected is not None and r.selected.plan is not None
+        }
+        if not changed:
+            return snapshot
+        return replace(snapshot, operations={**ops, **changed})
+
     def _pending(self, case: Case) -> bool:
         return any(self._recs[r].state is RecommendationState.PROPOSED for r in case.rec_ids)
 
@@ -382,6 +407,7 @@ class EmergencyManager:
         """Charged cords + joint selection under the priority rule (selection tiers). A UAS
         without a verified option stays on its plan (escalated for it) while the others
         move; the case escalates only when no combination resolves the conflict."""
+        snapshot = self._intended(snapshot, case)
         case.operations = dict(snapshot.operations)
         now = snapshot.t_s
         cfg = self.config
@@ -517,6 +543,7 @@ class EmergencyManager:
     ) -> Decision:
         now = snapshot.t_s
         t = threat or case.threat
+        snapshot = self._intended(snapshot, case)
         case.operations = dict(snapshot.operations)
         case.modes[op_id] = f"single:{','.join(sorted(m.value for m in maneuvers))}"
         allowed = maneuvers - case.excluded.get(op_id, set())
@@ -578,6 +605,7 @@ class EmergencyManager:
         )
 
     def _intruder(self, case: Case, op_id: OperationId, snapshot: AirspaceSnapshot) -> Decision:
+        snapshot = self._intended(snapshot, case)
         case.operations = dict(snapshot.operations)
         now = snapshot.t_s
         cfg = self.config
