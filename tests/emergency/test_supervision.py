@@ -345,3 +345,27 @@ def test_overlapping_threats_build_on_each_others_recommended_plans() -> None:
         ops[k] = replace(ops[k], plan=r.selected.plan)
     assert latest
     assert strategic_check(list(ops.values()), (), sc.FRAME, MON).conflicts == ()
+
+
+def test_an_escalated_case_is_retried_on_the_supervision_tick() -> None:
+    """Monitoring sends no update while a threat stays the same: the tick retries a case
+    that ended in escalation every retry_after_s (it used to wait for an update forever)."""
+    snap, threat = sc.scenario_los_2uas()
+    opts: dict[OperationId, list[Alternative]] = {
+        OperationId("A"): [
+            _alt(snap, "A", Maneuver.KEEP_PLAN, 0.0),
+            _alt(snap, "A", Maneuver.GO_UP, 0.5),
+        ],
+        OperationId("B"): [_alt(snap, "B", Maneuver.KEEP_PLAN, 0.0)],
+    }
+    td = _FakeTD(opts, set())
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
+    d = em.on_threat(threat, snap)
+    assert d.escalations and not plans(d)
+    assert em.supervising()
+    assert em.supervise(at(snap, 10.0)) == Decision()  # not before retry_after_s
+    td.ok = {frozenset({"A:go_up", "B:keep_plan"})}  # the airspace changed meanwhile
+    d2 = em.supervise(at(snap, em.config.retry_after_s + 1.0))
+    (rec,) = plans(d2)
+    assert rec.operation_id == "A" and rec.selected is not None
+    assert rec.selected.maneuver is Maneuver.GO_UP

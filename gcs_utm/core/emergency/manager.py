@@ -126,37 +126,41 @@ class EmergencyManager:
             return self.on_threat_closed(threat)
         case = self._cases.get(threat.id)
         if case is not None:
-            # The threat persists. A pending recommendation stands until answered, expired or
-            # the threat closes; an accepted one is supervised (see .supervision); one-shot
-            # actions (warning, geofence creation) are done; a case that ended in escalation
-            # is retried every retry_after_s with its refused maneuvers still excluded (no
-            # churn every monitoring cycle).
             case.threat = threat
-            if case.action in ONE_SHOT or self._pending(case):
-                return Decision()
-            if self._in_force(case):
-                return supervise_case(self, case, snapshot)
-            if snapshot.t_s - case.attempt_t_s < self.config.retry_after_s:
-                return Decision()
-            case.attempt_t_s = snapshot.t_s
-            case.replans.clear()
-            return self._handle(case, snapshot)
+            return self._persisting(case, snapshot)
         action = self.config.action_for(threat.kind)
         case = Case(threat=threat, action=action, attempt_t_s=snapshot.t_s)
         self._cases[threat.id] = case
         return self._handle(case, snapshot)
 
+    def _persisting(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+        """The threat of ``case`` persists. A pending recommendation stands until answered,
+        expired or the threat closes; an accepted one is supervised (see .supervision);
+        one-shot actions (warning, geofence creation) are done; a case that ended in
+        escalation is retried every retry_after_s with its refused maneuvers still excluded
+        (no churn every monitoring cycle)."""
+        if case.action in ONE_SHOT or self._pending(case):
+            return Decision()
+        if self._in_force(case):
+            return supervise_case(self, case, snapshot)
+        if snapshot.t_s - case.attempt_t_s < self.config.retry_after_s:
+            return Decision()
+        case.attempt_t_s = snapshot.t_s
+        case.replans.clear()
+        return self._handle(case, snapshot)
+
     def supervising(self) -> bool:
-        """Is any open case waiting on an accepted plan (so :meth:`supervise` has work)?"""
-        return any(self._in_force(c) and not self._pending(c) for c in self._cases.values())
+        """Is any open case waiting on an accepted plan or on a retry after an escalation
+        (so :meth:`supervise` has work)?"""
+        return any(c.action not in ONE_SHOT and not self._pending(c) for c in self._cases.values())
 
     def supervise(self, snapshot: AirspaceSnapshot) -> Decision:
-        """Periodic supervision of every open case with accepted plans (Monitoring reports a
-        persisting threat only when it changes): see :mod:`.supervision`."""
+        """Periodic supervision of every open case (Monitoring reports a persisting threat
+        only when it changes): accepted plans are supervised (see :mod:`.supervision`) and a
+        case that ended in escalation is retried every retry_after_s."""
         d = Decision()
         for case in list(self._cases.values()):
-            if self._in_force(case) and not self._pending(case):
-                d = d.merge(supervise_case(self, case, snapshot))
+            d = d.merge(self._persisting(case, snapshot))
         return d
 
     def on_outcome(
