@@ -633,6 +633,18 @@ class Alternative:
     cost: float
     risk: float
     detail: str = ""
+    # What the option changes, for the pilot prompt (None: not computed for this option).
+    extra_length_m: float | None = None
+    """3D path length this option adds to the remaining plan."""
+    extra_time_s: float | None = None
+    """Time this option adds to the arrival at the plan's last waypoint."""
+    separation_ratio: float | None = None
+    """Closest predicted separation from the other plans under this option, as a multiple
+    of the separation minima (at least 1: separated; cylinder rule: the larger of horizontal
+    distance / horizontal minimum and vertical distance / vertical minimum). None: no other
+    plan in range."""
+    fence_distance_m: float | None = None
+    """Closest horizontal distance to an active geofence (negative: inside). None: none near."""
 
 
 class CommandKind(Enum):

@@ -454,6 +454,14 @@ class TacticalDeconfliction:
                     cost=0.0 if c.keep else sc.cost,
                     risk=sc.risk,
                     detail=f"{c.detail}; {terms}",
+                    extra_length_m=sc.extra_distance_m,
+                    extra_time_s=sc.extra_time_s,
+                    separation_ratio=ratio
+                    if math.isfinite(ratio := sc.min_separation_ratio)
+                    else None,
+                    fence_distance_m=fence
+                    if math.isfinite(fence := sc.min_fence_distance_m)
+                    else None,
                 )
             )
 
