@@ -369,3 +369,17 @@ def test_an_escalated_case_is_retried_on_the_supervision_tick() -> None:
     (rec,) = plans(d2)
     assert rec.operation_id == "A" and rec.selected is not None
     assert rec.selected.maneuver is Maneuver.GO_UP
+
+
+def test_a_predicted_loss_with_clean_plans_is_escalated_not_ignored() -> None:
+    """Every plan already keeps separation (the UAS fly off them): nothing to re-plan, but
+    the decision says so instead of staying silent."""
+    snap, threat = sc.scenario_los_2uas()
+    opts = {
+        OperationId("A"): [_alt(snap, "A", Maneuver.KEEP_PLAN, 0.0)],
+        OperationId("B"): [_alt(snap, "B", Maneuver.KEEP_PLAN, 0.0)],
+    }
+    td = _FakeTD(opts, {frozenset({"A:keep_plan", "B:keep_plan"})})
+    d = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON).on_threat(threat, snap)
+    assert not plans(d)
+    assert d.escalations and "off their plans" in d.escalations[0]

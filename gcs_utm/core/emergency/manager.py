@@ -460,7 +460,19 @@ class EmergencyManager:
             )
         detail["moved_up_to_priority"] = tiered.moved_up_to_priority
         d = Decision(audit=(self.audit(now, "decision", t.id, detail),))
-        return d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
+        d = d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
+        kept = all(a.maneuver is Maneuver.KEEP_PLAN for a in tiered.selection.chosen.values())
+        if kept and not self._in_force(case):
+            # Monitoring predicts the loss from the tracks, yet every plan is clear of it: the
+            # UAS are not where their plans say. Nothing to re-plan; the operator must know.
+            # (With plans of this case in force, keeping them is supervision's normal answer
+            # while the UAS turn onto them.)
+            msg = (
+                f"{t.id}: loss of separation predicted for {', '.join(t.uas_ids)} although "
+                "their plans keep separation (off their plans?); operator attention"
+            )
+            d = d.merge(Decision(escalations=(msg,)))
+        return d
 
     def _issue_joint(
         self,
