@@ -202,7 +202,13 @@ def build_runtime(
             store.deactivate_geofence(g.id)
 
     airspace = Airspace(on_operation=on_operation, on_plan=on_plan, on_geofence=on_geofence)
-    usm = Usm(airspace, clock, config=settings.usm, record=store.record)
+    usm = Usm(
+        airspace,
+        clock,
+        config=settings.usm,
+        record=store.record,
+        ground_elevation_amsl_m=frame.ground_elevation_amsl_m,
+    )
 
     async def tracking_hazard(h: HazardReport) -> None:
         usm.on_hazard(h)

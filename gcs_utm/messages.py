@@ -68,6 +68,9 @@ class VehicleStatus:
     mission_seq: int | None = None
     mission_total: int | None = None
     vehicle: str = ""  # where it was first heard (as LinkHealth.vehicle)
+    home: Position | None = None  # HOME_POSITION (AMSL), None until the vehicle sets one
+    mission_id: int | None = None  # MISSION_CURRENT's opaque mission id, when it sends one
+    position: Position | None = None  # the last reported position (GLOBAL_POSITION_INT)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

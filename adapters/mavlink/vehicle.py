@@ -299,6 +299,9 @@ class VehicleState:
             mission_seq=self.mission_seq,
             mission_total=self.mission_total,
             vehicle=self.tag,
+            home=self.home,
+            mission_id=self.mission_id,
+            position=self.last_position,
         )
 
     def hazard(self, kind: ThreatKind, t_s: float, message: str) -> HazardReport:
@@ -464,14 +467,42 @@ class VehicleState:
         self._battery(None if m.battery_remaining < 0 else float(m.battery_remaining), t_s, ev)
 
     def on_mission_current(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        """The current item, and what shows that the mission changed: its item count (0 when
+        there is none) and its opaque id (PX4 >= 1.14). A status goes out on any change."""
         seq = int(m.seq)
         total = int(getattr(m, "total", 0) or 0)
-        changed = seq != self.mission_seq
+        known = total != 0xFFFF and (total or getattr(m, "mission_state", 0))
+        mission_id = wire.mission_current_id(m)
+        changed = seq != self.mission_seq or mission_id != self.mission_id
         self.mission_seq = seq
-        if total and total != 0xFFFF:
+        self.mission_id = mission_id
+        if known and total != self.mission_total:
+            # (0xFFFF: "not supported"; 0 with mission_state UNKNOWN: a frame without the
+            # extension fields, as MAVLink 1 or an older autopilot sends it)
             self.mission_total = total
+            changed = True
         if changed:
             ev.on_status(self.status(t_s))
+
+    def on_home_position(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        """HOME_POSITION: the vehicle's home (AMSL); a status goes out when it moves."""
+        lat_e7, lon_e7 = int(m.latitude), int(m.longitude)
+        if lat_e7 == 0 and lon_e7 == 0:
+            return  # not set yet
+        lat, lon, alt = lat_e7 / 1e7, lon_e7 / 1e7, m.altitude / 1000.0
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            return
+        old = self.home
+        if (
+            old is not None
+            and abs(old.lat_deg - lat) < 1e-7
+            and abs(old.lon_deg - lon) < 1e-7
+            and abs(old.alt_amsl_m - alt) < 0.01
+        ):
+            return
+        self.home = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=alt)
+        _log.info("%s home %.7f %.7f %.2f m AMSL", self.key, lat, lon, alt)
+        ev.on_status(self.status(t_s))
 
     def on_extended_sys_state(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
         state = int(m.landed_state)
