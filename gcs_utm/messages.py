@@ -88,6 +88,8 @@ class LinkHealth:
     bad_frames: int
     reboots: int
     vehicle: str = ""
+    clock_jumps: int = 0  # re-anchors of the vehicle clock mapping (docs/vehicle-time.md)
+    system_time_rejected: int = 0  # SYSTEM_TIME that disagreed with arrival times
 
     @property
     def loss_ratio(self) -> float:

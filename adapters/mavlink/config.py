@@ -90,7 +90,7 @@ class MavlinkConfig:
         unit="ms",
     )
     clock_max_drift: float = setting(
-        0.05,
+        0.1,
         "fastest rate (s/s) at which a vehicle clock is assumed to fall behind ours: the "
         "capture-time offset may rise this fast without evidence (it falls at once)",
         min=0.0,

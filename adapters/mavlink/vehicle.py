@@ -164,6 +164,8 @@ class VehicleState:
             bad_frames=bad_frames,
             reboots=self.reboots,
             vehicle=self.tag,
+            clock_jumps=self.clock_jumps,
+            system_time_rejected=self.system_time_rejected,
         )
 
     # --- clock ----------------------------------------------------------------------------
@@ -226,7 +228,9 @@ class VehicleState:
         ):
             self.clock_jumps += 1
             self.offset_s = low
-            _log.warning(
+            # the first one warns; the rest are counted (LinkHealth.clock_jumps) and logged
+            # at debug level: a simulator that cannot keep its speed factor jumps often
+            (_log.warning if self.clock_jumps == 1 else _log.debug)(
                 "%s clock re-anchored: arrivals %.3f s later than its time_boot_ms predicted "
                 "(clock jump or drift above %.0f %%)",
                 self.key,

@@ -247,6 +247,18 @@ def test_clock_drift_followed_capture_never_after_receipt(rate: float) -> None:
     assert st.clock_jumps == 0
 
 
+def test_clock_drift_beyond_the_bound_re_anchored() -> None:
+    """A simulator that cannot keep its speed factor (its clock at 0.8 x ours): the rise is
+    too slow, so whole windows arrive late and the offset is re-anchored (counted); reports
+    stay within clock_jump_s + two windows of excess drift (0.5 + 2 x 2 s x 0.15) and the
+    300 ms late reports of their arrival, never after it."""
+    st, ev = _clock_state()
+    lags = _fly(st, ev, seconds=300.0, rate=0.8)
+    assert min(lags) >= -1e-9
+    assert max(lags[50 * 10 :]) < 1.5
+    assert st.clock_jumps > 10
+
+
 def test_clock_one_late_report_does_not_move_the_offset() -> None:
     st, ev = _clock_state()
     _fly(st, ev, seconds=10.0, rate=1.0)
