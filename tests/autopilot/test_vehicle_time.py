@@ -29,7 +29,7 @@ from gcs_utm.clock import Clock, RealClock, ScaledClock
 from gcs_utm.core.tracking import Tracker
 from gcs_utm.core.tracking.config import TrackingConfig
 from gcs_utm.geo import LocalFrame, haversine_m
-from gcs_utm.messages import HazardReport
+from gcs_utm.messages import FlightMode, HazardReport
 from gcs_utm.model import Operation, SysId, ThreatKind
 from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.tracking import TrackingService
@@ -43,6 +43,7 @@ from tests.autopilot.autopilots import (
 
 MAV_FRAME_MISSION = 2
 MAV_FRAME_GLOBAL_INT = 5
+MAV_FRAME_GLOBAL_RELATIVE_ALT = 3
 MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 6
 NAV_WAYPOINT, NAV_TAKEOFF, DO_CHANGE_SPEED = 16, 22, 178
 
@@ -128,12 +129,12 @@ def px4_mission(rel_alt_m: float) -> list[MissionItem]:
 
 
 def assert_plan_from_home(op: Operation, home_amsl_m: float, rel_alt_m: float) -> None:
-    """Every mission waypoint of the plan is ``rel_alt_m`` above the vehicle's home."""
+    """The mission's last two waypoints (both missions end so) are ``rel_alt_m`` above the
+    vehicle's home. (The plan may start at the vehicle's position: it flies from there.)"""
     assert op.home is not None
     assert op.home.alt_amsl_m == pytest.approx(home_amsl_m, abs=2.0)  # its estimate
-    high = [w.alt_amsl_m for w in op.plan.waypoints if w.alt_amsl_m > op.home.alt_amsl_m + 1.0]
-    assert high, op.plan
-    assert high == pytest.approx([op.home.alt_amsl_m + rel_alt_m] * len(high), abs=0.05)
+    alts = [w.alt_amsl_m for w in op.plan.waypoints[-2:]]
+    assert alts == pytest.approx([op.home.alt_amsl_m + rel_alt_m] * 2, abs=0.05), op.plan
 
 
 @pytest.mark.timeout(300)
@@ -226,3 +227,94 @@ async def test_ardupilot_system_time_lag_rejected(ardupilot: Callable[..., SitlP
         assert st.system_time_rejected >= 3 and st.system_time_used == 0
         assert not st.offset_from_system_time
         assert stats.delay_min_s >= -1e-6 and stats.delay_max_s < 0.5
+
+
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_NAV_TAKEOFF = 22
+
+
+def copter_mission(rel_alt_m: float) -> list[MissionItem]:
+    """ArduPilot's layout: seq 0 is home (it keeps its own), then relative-altitude items
+    (frame 3: ArduPilot reads the INT frame 6 back as 3)."""
+    lat, lon, ground, _ = ARDUPILOT_DEFAULT_HOME
+    return [
+        _item(0, NAV_WAYPOINT, 0, lat=lat, lon=lon, z=ground),
+        _item(1, NAV_TAKEOFF, MAV_FRAME_GLOBAL_RELATIVE_ALT, z=rel_alt_m),
+        _item(2, NAV_WAYPOINT, MAV_FRAME_GLOBAL_RELATIVE_ALT, lat=lat + 0.001, lon=lon,
+              z=rel_alt_m),
+        _item(3, NAV_WAYPOINT, MAV_FRAME_GLOBAL_RELATIVE_ALT, lat=lat + 0.001,
+              lon=lon + 0.001, z=rel_alt_m),
+    ]  # fmt: skip
+
+
+async def take_off(s: Stack, alt_m: float) -> None:
+    """GUIDED, arm (refused until the EKF has a position: retried), take off to ``alt_m``."""
+    hub = s.hub
+    st = hub.state(SysId(1))
+    res = await hub.send_mode(SysId(1), FlightMode.GUIDED)
+    assert res.ok, res
+    end = time.monotonic() + 40.0
+    while True:
+        res = await hub._command_long(  # (arming is no UTM command)
+            st, MAV_CMD_COMPONENT_ARM_DISARM, (1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), None
+        )
+        if res.ok:
+            break
+        assert time.monotonic() < end, f"arming refused: {res}"
+        await asyncio.sleep(1.0)
+    res = await hub._command_long(
+        st, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, alt_m), None
+    )
+    assert res.ok, res
+    ground = ARDUPILOT_DEFAULT_HOME[2]
+    await until(
+        lambda: (p := st.last_position) is not None and p.alt_amsl_m > ground + alt_m - 3.0,
+        40.0,
+        "no climb",
+    )
+
+
+@pytest.mark.timeout(240)
+async def test_ardupilot_operation_on_fresh_boot_and_home_when_airborne(
+    ardupilot: Callable[..., SitlProcess], tmp_path: Path
+) -> None:
+    speed = 5.0
+    workdir = tmp_path / "copter-w"
+    ground = ARDUPILOT_DEFAULT_HOME[2]
+    link = "tcp:127.0.0.1:5760"
+    # a mission uploaded after discovery, kept in SITL's eeprom for the next boot
+    p = ardupilot(instance=0, vehicle="copter", speed=speed, workdir=workdir)
+    wait_tcp_listening(5760)
+    async with stack(link, ScaledClock(speed), ground) as s:
+        await until(s.hub.vehicles, 20.0, "ArduCopter not discovered")
+        end = time.monotonic() + 20.0
+        while True:  # just booted, it answers NO_SPACE until its storage is up
+            res = await s.hub.upload_items(SysId(1), copter_mission(30.0), set_mission_mode=False)
+            if res.ok or time.monotonic() > end:
+                break
+            await asyncio.sleep(0.5)
+        assert res.ok and res.verified, res
+        await until(s.op, 20.0, "no operation from the mission uploaded after discovery")
+    p.stop()
+    # freshly booted with that mission: the download ends before the first position (issue
+    # 26.3: no operation); now it is filed with its home from item 0 / HOME_POSITION
+    p = ardupilot(instance=0, vehicle="copter", speed=speed, workdir=workdir)
+    wait_tcp_listening(5760)
+    async with stack(link, ScaledClock(speed), ground) as s:
+        await until(s.op, 20.0, "no operation for a freshly booted copter with a mission")
+        op = s.op()
+        assert op is not None
+        assert_plan_from_home(op, ground, 30.0)
+        await take_off(s, 40.0)
+    # connected while airborne: the first altitude it reports is ~40 m above home (issue
+    # 26.4: plans 39.7 m too high); altitudes come from its home
+    wait_tcp_listening(5760)
+    async with stack(link, ScaledClock(speed), ground) as s:
+        await until(s.op, 20.0, "no operation for the airborne copter")
+        await until(lambda: s.usm.counters["measurements"] > 0, 20.0, "no positions")
+        first = s.hub.state(SysId(1)).last_position
+        assert first is not None and first.alt_amsl_m > ground + 30.0  # airborne
+        op = s.op()
+        assert op is not None
+        assert_plan_from_home(op, ground, 30.0)
+    assert p.alive
