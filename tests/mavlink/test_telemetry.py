@@ -12,6 +12,10 @@ import pytest
 
 os.environ["MAVLINK20"] = "1"
 
+from fastcrc import crc16
+from pymavlink.dialects.v20 import common as mav_common
+from pymavlink.dialects.v20.common import MAVLINK_MSG_ID_MISSION_CURRENT
+
 from adapters.mavlink import EndpointError, EndpointKind, MavlinkConfig, parse_endpoint
 from adapters.mavlink.vehicle import VehicleState
 from adapters.mavlink.wire import Encoder, Parser
@@ -318,3 +322,43 @@ def test_system_time_used_only_when_it_agrees_with_arrivals(lag_s: float, used: 
         assert delay == pytest.approx(lag_s, abs=1e-5)
     else:
         assert -1e-6 <= delay < 0.03
+
+
+def _mission_current_frame(seq: int, total: int, state: int, mission_id: int, n: int) -> bytes:
+    """MISSION_CURRENT as PX4 >= 1.14 sends it: with the 2023 extension fields (mission_id,
+    fence_id, rally_points_id), which pymavlink's bundled dialect cannot encode."""
+    payload = (
+        seq.to_bytes(2, "little")
+        + total.to_bytes(2, "little")
+        + bytes([state, 0])
+        + mission_id.to_bytes(4, "little")
+        + bytes(8)
+    )
+    mid = MAVLINK_MSG_ID_MISSION_CURRENT
+    hdr = bytes([0xFD, len(payload), 0, 0, n, 1, 1]) + mid.to_bytes(3, "little")
+    extra = bytes([mav_common.MAVLink_mission_current_message.crc_extra])
+    crc = crc16.mcrf4xx(extra, crc16.mcrf4xx(hdr[1:] + payload))
+    return hdr + payload + crc.to_bytes(2, "little")
+
+
+async def test_home_position_and_mission_changes_reach_the_status(env: Any) -> None:
+    v = await env.vehicle(1)
+    v.send(v.mav.home_position_encode(454671160, -737578370, 32340, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0))
+    await _settle()
+    home = env.sink.statuses[-1].home
+    assert (home.lat_deg, home.lon_deg, home.alt_amsl_m) == (45.467116, -73.757837, 32.34)
+    n = len(env.sink.statuses)
+    v.send(v.mav.home_position_encode(454671160, -737578370, 32340, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0))
+    await _settle()
+    assert len(env.sink.statuses) == n  # the same home: no status
+    v.send_raw(_mission_current_frame(0, 4, 2, 0xA1B2C3D4, 7))
+    await _settle()
+    s = env.sink.statuses[-1]
+    assert (s.mission_total, s.mission_id, s.mission_seq) == (4, 0xA1B2C3D4, 0)
+    v.send_raw(_mission_current_frame(0, 4, 2, 0x0BADF00D, 8))  # same length, new mission
+    await _settle()
+    assert env.sink.statuses[-1].mission_id == 0x0BADF00D
+    v.send_raw(_mission_current_frame(0, 0xFFFF, 0, 0, 9))  # PX4 with no mission
+    await _settle()
+    assert env.sink.statuses[-1].mission_id is None
+    v.close()
