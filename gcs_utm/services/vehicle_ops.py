@@ -261,6 +261,7 @@ class _Vehicle:
     downloading: bool = False
     again: bool = False  # the mission changed during a download: download once more
     changes: int = 0  # downloads triggered by a change after discovery
+    start_pending: bool = False  # the mission started during a download: re-time after it
     waiting_logged: bool = False
     ground_warned: bool = False
 
@@ -379,6 +380,10 @@ class VehicleOps:
             v.downloading = False
         self._item0_home(v)
         self._file(v, changed=v.changes > 0)
+        if v.start_pending:
+            v.start_pending = False
+            if v.flying:
+                self._retime(v, started=True)
 
     def _item0_home(self, v: _Vehicle) -> None:
         """ArduPilot keeps its home in mission item 0 (absolute altitude): the home until
@@ -493,7 +498,7 @@ class VehicleOps:
                 self._add(v, plan)
             return
         home_moved = op.conops == CONOPS and v.home is not None and _moved(op.home, v.home)
-        if mission_is_plan(points, op.plan) and not home_moved:
+        if _flies_plan(v, points, op.plan) and not home_moved:
             return
         why = reason or "the vehicle's mission changed"
         plan = self._plan(
@@ -550,11 +555,14 @@ class VehicleOps:
         mission, and at a new current item when the plan is more than flight_geometry_m /
         cruise speed off at that item."""
         op = self.airspace.by_sys_id(v.sys_id)
+        if v.downloading:
+            v.start_pending = v.start_pending or started
+            return  # (the arming that started it also downloads the mission: after that)
         if op is None or op.conops != CONOPS or v.items is None:
             return
         points = self._points(v)
-        if not points:
-            return
+        if not points or not _flies_plan(v, points, op.plan):
+            return  # a mission that is not the plan (yet): the mission check re-files it
         plan = self._plan(
             v, points, op.id, op.plan.version + 1, "re-timed from the vehicle's progress"
         )
@@ -579,6 +587,13 @@ class VehicleOps:
                 return
         why = "the vehicle started the mission" if started else "re-timed at a new current item"
         self._replace(v, op, plan, why, counter="retimed")
+
+
+def _flies_plan(v: _Vehicle, points: Sequence[NavPoint], plan: FlightPlan) -> bool:
+    """The mission's points from the current item on are the plan's (a plan filed or re-timed
+    at an earlier item has them all; the items already flown are not compared)."""
+    rest = [p for p in points if v.seq is None or p.seq >= v.seq]
+    return mission_is_plan(rest, plan)
 
 
 def _same_wp(a: Waypoint4D, b: Waypoint4D) -> bool:
