@@ -86,6 +86,7 @@ class NavPoint:
     alt_amsl_m: float
     speed_mps: float
     explicit: bool  # its own lat/lon (not "here": a takeoff or land at 0, 0)
+    command: int = _NAV_WAYPOINT
 
 
 def mission_points(
@@ -130,7 +131,7 @@ def mission_points(
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and math.isfinite(alt)):
             continue  # a malformed item is skipped, not fatal
         seq = int(getattr(it, "seq", i))
-        out.append(NavPoint(seq, lat, lon, alt, speed, explicit))
+        out.append(NavPoint(seq, lat, lon, alt, speed, explicit, command))
     return out
 
 
@@ -209,13 +210,14 @@ def resume_index(plan: FlightPlan, now_s: float) -> int:
 
 
 def mission_is_plan(points: Sequence[NavPoint], plan: FlightPlan) -> bool:
-    """True when every point of the mission with its own position is, in order, a waypoint of
+    """True when every waypoint of the mission (with its own position; takeoff and land
+    items, which uploaders add around a plan, are not compared) is, in order, a waypoint of
     ``plan`` (within half a metre): the vehicle flies the plan (e.g. the UTM uploaded it,
     from some waypoint on)."""
     wps = plan.waypoints
     k = 0
     for p in points:
-        if not p.explicit:
+        if not p.explicit or p.command in (_NAV_TAKEOFF, _NAV_LAND):
             continue
         while k < len(wps) and not _same_place(p, wps[k]):
             k += 1
