@@ -40,6 +40,7 @@ from gcs_utm.model import (
     VehicleKind,
     telemetry_measurement,
 )
+from gcs_utm.ratelog import RateLimitedLog
 
 _log = logging.getLogger(__name__)
 
@@ -76,9 +77,17 @@ class VehicleState:
     """Everything we know about one vehicle component on one link."""
 
     def __init__(
-        self, key: VehicleKey, cfg: MavlinkConfig, t_s: float, lane: PositionLane | None = None
+        self,
+        key: VehicleKey,
+        cfg: MavlinkConfig,
+        t_s: float,
+        lane: PositionLane | None = None,
+        *,
+        ratelog: RateLimitedLog | None = None,
     ) -> None:
         self.key = key
+        # repeated warnings (a sender whose time_boot_ms keeps going back) are rate-limited
+        self._ratelog = ratelog or RateLimitedLog(_log, cfg.warn_interval_s, max_causes=8)
         self.cfg = cfg
         self.sys_id = key.sys_id
         # where the vehicle was first heard: kept when its address moves (NAT rebinding), so
@@ -207,7 +216,13 @@ class VehicleState:
         self.reboots += 1
         self._last_seq = -1
         self._system_time_boot_ms = -1
-        _log.warning("%s rebooted (time_boot_ms %d -> %d)", self.key, self.last_boot_ms, boot_ms)
+        self._ratelog.warning(
+            f"reboot:{self.sys_id}",
+            "%s rebooted (time_boot_ms %d -> %d)",
+            self.key,
+            self.last_boot_ms,
+            boot_ms,
+        )
 
     def _close_window(self, boot_ms: int) -> None:
         """End of a clock window: a SYSTEM_TIME anchor that went quiet stops holding the
@@ -228,9 +243,10 @@ class VehicleState:
         ):
             self.clock_jumps += 1
             self.offset_s = low
-            # the first one warns; the rest are counted (LinkHealth.clock_jumps) and logged
-            # at debug level: a simulator that cannot keep its speed factor jumps often
-            (_log.warning if self.clock_jumps == 1 else _log.debug)(
+            # counted (LinkHealth.clock_jumps) and rate-limited: a simulator that cannot
+            # keep its speed factor jumps often
+            self._ratelog.warning(
+                "clock",
                 "%s clock re-anchored: arrivals %.3f s later than its time_boot_ms predicted "
                 "(clock jump or drift above %.0f %%)",
                 self.key,
@@ -252,7 +268,8 @@ class VehicleState:
         if not 0.0 <= lag_s <= self.cfg.system_time_max_lag_s:
             self.system_time_rejected += 1
             if self.system_time_rejected == 1 or self.offset_from_system_time:
-                _log.warning(
+                self._ratelog.warning(
+                    "system_time",
                     "%s SYSTEM_TIME disagrees with arrival times by %.3f s (allowed: 0 to "
                     "%.3f s earlier): corrected from arrival times",
                     self.key,

@@ -196,19 +196,6 @@ def plan_from_points(
     )
 
 
-def resume_index(plan: FlightPlan, now_s: float) -> int:
-    """The plan waypoint a vehicle flies to first when ``plan`` is uploaded at ``now_s``: the
-    first one still ahead in time. A new plan starts where the UAS was when it was computed;
-    by the time it is accepted and uploaded (seconds later, operator's answer) the vehicle has
-    moved on, and flying to that first point would turn it back (a 28 m/s fixed wing is 55 m
-    past it after 2 s)."""
-    wps = plan.waypoints
-    for k, w in enumerate(wps):
-        if w.t_s > now_s:
-            return k
-    return max(0, len(wps) - 1)
-
-
 def mission_is_plan(points: Sequence[NavPoint], plan: FlightPlan) -> bool:
     """True when every waypoint of the mission (with its own position; takeoff and land
     items, which uploaders add around a plan, are not compared) is, in order, a waypoint of
