@@ -59,7 +59,9 @@ _ABSOLUTE_FRAMES = frozenset({0, 5})  # MAV_FRAME_GLOBAL(_INT): metres AMSL
 _RELATIVE_FRAMES = frozenset({3, 6})  # MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT): metres above home
 _MATCH_H_M = 0.5  # a mission point within this of a plan waypoint is that waypoint (float32 z)
 _MATCH_V_M = 0.5
-_HOME_MOVE_M = 0.5  # a home that moved less than this (GNSS noise at re-arming) is the same
+_HOME_MOVE_M = 2.0
+"""A home that moved less than this is the same home: PX4's HOME_POSITION wanders by about a
+metre while its estimator converges (measured on SIH), which would re-file every few seconds."""
 _FLYING_MODES = frozenset({FlightMode.MISSION, FlightMode.TAKEOFF})
 
 

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
+import shutil
 import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
@@ -37,6 +39,7 @@ from gcs_utm.services.usm import Usm
 from tests.autopilot.autopilots import (
     ARDUPILOT_DEFAULT_HOME,
     PX4_DEFAULT_HOME,
+    SITL_ROOT,
     SitlProcess,
     wait_tcp_listening,
 )
@@ -139,10 +142,18 @@ def assert_plan_from_home(op: Operation, home_amsl_m: float, rel_alt_m: float) -
 
 @pytest.mark.timeout(300)
 async def test_px4_operations_from_missions_and_no_drift_loss(
-    px4: Callable[..., SitlProcess], tmp_path: Path
+    px4: Callable[..., SitlProcess],
 ) -> None:
     speed = 8.0
-    workdir = tmp_path / "px4-w"
+    # kept across a restart, outside /tmp (PX4 runs with a private /tmp)
+    workdir = SITL_ROOT / f"gcs-utm-vehtime-{os.getpid()}" / "px4-w"
+    try:
+        await _px4_scenario(px4, workdir, speed)
+    finally:
+        shutil.rmtree(workdir.parent, ignore_errors=True)
+
+
+async def _px4_scenario(px4: Callable[..., SitlProcess], workdir: Path, speed: float) -> None:
     home_lat, home_lon, ground = PX4_DEFAULT_HOME
     # 1. a mission uploaded after discovery (another ground station's job; here the hub's)
     p = px4(instance=0, speed=speed, workdir=workdir)
