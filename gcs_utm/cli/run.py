@@ -18,7 +18,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "run",
         help="run a scenario end to end (vehicles, UTM services, dashboard) and write a report",
     )
-    run.add_argument("scenario", type=Path, help="scenario TOML, or a GAUSS JSON file")
+    run.add_argument(
+        "scenario", type=Path, help="scenario TOML, or a GAUSS JSON file or scenario YAML"
+    )
     _common(run)
     run.add_argument(
         "--external",
@@ -61,7 +63,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     serve.add_argument("--headless", action="store_true", help="no TUI; log lines")
     serve.add_argument(
         "--speed",
-        type=_positive_speed,
+        type=positive_speed,
         default=1.0,
         help="the vehicles' simulation speed factor (PX4_SIM_SPEED_FACTOR, ArduPilot "
         "--speedup): the service's clock runs this many times faster than the wall clock "
@@ -255,23 +257,18 @@ def _serve(args: argparse.Namespace) -> int:
         else OperatorMode.NONE
     )
     headless = args.headless or operator != OperatorMode.DASHBOARD
-    return asyncio.run(
-        serve(
-            settings,
-            db_path=args.db,
-            operator=operator,
-            headless=headless,
-            speed=args.speed,
-        )
-    )
+    from gcs_utm.store import StoreError
 
-
-def _positive_speed(text: str) -> float:
-    """argparse type of ``serve --speed``: a finite number above 0."""
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--speed must be a number, got {text!r}") from None
-    if not 0.0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"--speed must be above 0, got {text!r}")
-    return value
+        return asyncio.run(
+            serve(
+                settings,
+                db_path=args.db,
+                operator=operator,
+                headless=headless,
+                speed=args.speed,
+            )
+        )
+    except StoreError as exc:  # a folder, a file that is not a store, a newer schema
+        print(f"gcs-utm: {exc}", file=sys.stderr)
+        return 2

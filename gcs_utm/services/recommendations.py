@@ -422,8 +422,8 @@ class RecommendationLifecycle:
                 autopilot=op.autopilot,
                 deadline_t_s=None,
                 start_index=resume_index(new_plan, self.clock.now_s()),
-                climb_rate_mps=op.max_climb_rate_mps,
-                descent_rate_mps=op.max_climb_rate_mps,
+                climb_rate_mps=op.performance().climb_rate_mps,
+                descent_rate_mps=op.performance().descent_rate_mps,
             )
             record.uploaded = record.uploaded or result.ok
             if result.ok and result.verified:
