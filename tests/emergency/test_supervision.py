@@ -380,6 +380,9 @@ def test_a_predicted_loss_with_clean_plans_is_escalated_not_ignored() -> None:
         OperationId("B"): [_alt(snap, "B", Maneuver.KEEP_PLAN, 0.0)],
     }
     td = _FakeTD(opts, {frozenset({"A:keep_plan", "B:keep_plan"})})
-    d = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON).on_threat(threat, snap)
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
+    d = em.on_threat(threat, snap)
     assert not plans(d)
     assert d.escalations and "off their plans" in d.escalations[0]
+    again = em.supervise(at(snap, em.config.retry_after_s + 1.0))
+    assert not again.escalations  # said once per case

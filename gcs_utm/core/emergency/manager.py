@@ -462,7 +462,8 @@ class EmergencyManager:
         d = Decision(audit=(self.audit(now, "decision", t.id, detail),))
         d = d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
         kept = all(a.maneuver is Maneuver.KEEP_PLAN for a in tiered.selection.chosen.values())
-        if kept and not self._in_force(case):
+        if kept and not self._in_force(case) and not case.off_plan_escalated:
+            case.off_plan_escalated = True
             # Monitoring predicts the loss from the tracks, yet every plan is clear of it: the
             # UAS are not where their plans say. Nothing to re-plan; the operator must know.
             # (With plans of this case in force, keeping them is supervision's normal answer
