@@ -371,7 +371,7 @@ def test_an_escalated_case_is_retried_on_the_supervision_tick() -> None:
     assert rec.selected.maneuver is Maneuver.GO_UP
 
 
-def test_a_predicted_loss_with_clean_plans_is_escalated_not_ignored() -> None:
+def test_a_predicted_loss_with_clean_plans_is_reported_not_ignored() -> None:
     """Every plan already keeps separation (the UAS fly off them): nothing to re-plan, but
     the decision says so instead of staying silent."""
     snap, threat = sc.scenario_los_2uas()
@@ -383,6 +383,6 @@ def test_a_predicted_loss_with_clean_plans_is_escalated_not_ignored() -> None:
     em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
     d = em.on_threat(threat, snap)
     assert not plans(d)
-    assert d.escalations and "off their plans" in d.escalations[0]
+    assert d.warnings and "off their plans" in d.warnings[0]
     again = em.supervise(at(snap, em.config.retry_after_s + 1.0))
-    assert not again.escalations  # said once per case
+    assert not again.warnings  # said once per case
