@@ -105,6 +105,7 @@ _ARDUPILOT_STREAM_MSGS = (
     wire.SYSTEM_TIME,
     wire.MISSION_CURRENT,
     wire.EXTENDED_SYS_STATE,
+    wire.HOME_POSITION,
 )
 
 
@@ -293,6 +294,7 @@ class MavlinkHub:
             wire.EXTENDED_SYS_STATE: VehicleState.on_extended_sys_state,
             wire.STATUSTEXT: VehicleState.on_statustext,
             wire.SYSTEM_TIME: VehicleState.on_system_time,
+            wire.HOME_POSITION: VehicleState.on_home_position,
         }
 
     # --- lifecycle ------------------------------------------------------------------------
