@@ -121,16 +121,16 @@ def _accepted_plans(report: Report, frame: LocalFrame) -> tuple[AcceptedPlan, ..
 def _first_proposed_at_s(history: Sequence[tuple[float | None, str]]) -> float | None:
     """When the recommendation was first proposed (later versions re-plan the same threat)."""
     for t, text in history:
-        if t is not None and text.startswith("proposed v"):
+        if t is not None and text.startswith("proposed"):
             return t
     return None
 
 
 def _verified_at_s(history: Sequence[tuple[float | None, str]]) -> float | None:
-    """When a version's mission was verified on the vehicle: the history's ``vN applied:
-    MANEUVER: mission verified by readback`` state change."""
+    """When a version's mission was verified on the vehicle: the history's ``applied``
+    state change whose reason is ``mission verified by readback``."""
     for t, text in history:
-        if t is not None and "applied:" in text and "mission verified" in text:
+        if t is not None and "applied" in text and "mission verified" in text:
             return t
     return None
 

@@ -66,7 +66,7 @@ def _threat(uas: tuple[str, str], at_s: float) -> ThreatReport:
 def _rec(uas: str, detected: float, created: float, verified: float | None) -> RecommendationReport:
     history: list[tuple[float | None, str]] = [(created, "proposed v1")]
     if verified is not None:
-        history.append((verified, "v1 applied: go_left: mission verified by readback"))
+        history.append((verified, "applied v1: go_left: mission verified by readback"))
     return RecommendationReport(
         id=f"r-{uas}",
         version=1,
