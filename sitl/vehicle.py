@@ -56,8 +56,10 @@ R_DENIED = const("MAV_RESULT_DENIED")
 R_UNSUPPORTED = const("MAV_RESULT_UNSUPPORTED")
 R_FAILED = const("MAV_RESULT_FAILED")
 
-# Internal flight modes (strings are what `Vehicle.mode` returns).
-HOLD, MISSION, RTL, LAND, TAKEOFF, GUIDED, POSCTL = (
+# Internal flight modes (strings are what `Vehicle.mode` returns). LOITER is ArduCopter's
+# LOITER: it follows the RC throttle, which without a transmitter sits at its minimum, so the
+# copter descends (HOLD is BRAKE there: position and altitude kept).
+HOLD, MISSION, RTL, LAND, TAKEOFF, GUIDED, POSCTL, LOITER = (
     "HOLD",
     "MISSION",
     "RTL",
@@ -65,6 +67,7 @@ HOLD, MISSION, RTL, LAND, TAKEOFF, GUIDED, POSCTL = (
     "TAKEOFF",
     "GUIDED",
     "POSCTL",
+    "LOITER",
 )
 AUTO_MODES = frozenset({HOLD, MISSION, RTL, LAND, TAKEOFF, GUIDED})
 
@@ -72,8 +75,18 @@ AUTO_MODES = frozenset({HOLD, MISSION, RTL, LAND, TAKEOFF, GUIDED})
 PX4_MAIN_MANUAL, PX4_MAIN_ALTCTL, PX4_MAIN_POSCTL, PX4_MAIN_AUTO = 1, 2, 3, 4
 PX4_SUB = {TAKEOFF: 2, HOLD: 3, MISSION: 4, RTL: 5, LAND: 6}
 PX4_SUB_TO_MODE = {v: k for k, v in PX4_SUB.items()}
-COPTER_MODES = {MISSION: 3, GUIDED: 4, HOLD: 5, RTL: 6, LAND: 9, TAKEOFF: 4, POSCTL: 5}
-COPTER_NUM_TO_MODE = {3: MISSION, 4: GUIDED, 5: HOLD, 6: RTL, 9: LAND, 17: HOLD, 16: HOLD}
+# ArduCopter: STABILIZE 0 (its boot mode), AUTO 3, GUIDED 4, LOITER 5, RTL 6, LAND 9, BRAKE 17
+COPTER_MODES = {
+    MISSION: 3,
+    GUIDED: 4,
+    HOLD: 17,
+    LOITER: 5,
+    RTL: 6,
+    LAND: 9,
+    TAKEOFF: 4,
+    POSCTL: 0,
+}
+COPTER_NUM_TO_MODE = {0: POSCTL, 3: MISSION, 4: GUIDED, 5: LOITER, 6: RTL, 9: LAND, 17: HOLD}
 PLANE_MODES = {MISSION: 10, RTL: 11, HOLD: 12, GUIDED: 15, TAKEOFF: 13, LAND: 10, POSCTL: 12}
 PLANE_NUM_TO_MODE = {10: MISSION, 11: RTL, 12: HOLD, 15: GUIDED, 13: TAKEOFF, 1: HOLD}
 
@@ -346,8 +359,8 @@ class Vehicle:
         self._t = 0.0  # simulated s since fleet start, last advanced to
         self._booted = False
         self._next_history_t = 0.0
-        # flight state
-        self._mode = HOLD
+        # flight state (ArduCopter boots in STABILIZE)
+        self._mode = POSCTL if self.is_ardupilot and not self.is_fixed_wing else HOLD
         self._armed = False
         self._landed = True
         self._armed_at = 0.0
@@ -374,6 +387,7 @@ class Vehicle:
         self._carry_goal: tuple[float, float, float] | None = (
             None  # ArduPilot: target kept over an upload
         )
+        self._stalled = False  # ArduPilot: a replaced mission's current item failed to restart
         self._mission_climb = False
         self._mission_speed: float | None = None
         self.mission_server = mp.MissionServer(
@@ -628,15 +642,25 @@ class Vehicle:
     def accept_mission(self, items: list[mp.RawItem], flagged_current: int | None) -> None:
         flying_mission = self._mode == MISSION and self._armed and not self._landed
         old_seq = self._seq
+        if self.is_ardupilot:
+            items = [mp.ardupilot_stored(it, fixed_wing=self.is_fixed_wing) for it in items]
+            flagged_current = None  # ArduPilot ignores the current flag of an upload
+        else:
+            items = [mp.px4_stored(it) for it in items]
         self._items = items
         first = 1 if self.is_ardupilot else 0
+        self._stalled = False
         if flagged_current is not None:
             self._seq = max(first, flagged_current)
         elif flying_mission:
-            # PX4 keeps the current index; ArduPilot finishes its current waypoint first.
+            # PX4 keeps the current index; ArduPilot restarts the command at the same index,
+            # which fails on a DO item: the vehicle then holds until told another item
             self._seq = min(old_seq, len(items) - 1)
-            if self.is_ardupilot:
-                self._carry_goal = (self._goal_ne[0], self._goal_ne[1], self._goal_alt)
+            if self.is_ardupilot and items[self._seq].command not in mp.NAV_COMMANDS:
+                self._stalled = True
+                self.statustext(SEV_WARNING, "Auto mission changed but failed to restart command")
+            elif self.is_ardupilot:
+                self.statustext(SEV_INFO, "Auto mission changed, restarted command")
         else:
             self._seq = first
         self._seq = max(0, min(self._seq, len(items) - 1))
@@ -661,6 +685,7 @@ class Vehicle:
         self._seq = seq
         self._item_reached_at = None
         self._carry_goal = None
+        self._stalled = False
         self._send_mission_current()
         return True
 
@@ -783,7 +808,8 @@ class Vehicle:
             const("MAV_CMD_DO_SET_MODE"): self._cmd_set_mode,
             const("MAV_CMD_COMPONENT_ARM_DISARM"): self._cmd_arm,
             const("MAV_CMD_NAV_TAKEOFF"): self._cmd_takeoff,
-            const("MAV_CMD_NAV_LAND"): lambda _l, _m, _p: self._request_mode(LAND),
+            const("MAV_CMD_NAV_LAND"): self._cmd_land,
+            const("MAV_CMD_DO_LAND_START"): self._cmd_land_start,
             const("MAV_CMD_NAV_RETURN_TO_LAUNCH"): lambda _l, _m, _p: self._request_mode(RTL),
             const("MAV_CMD_MISSION_START"): self._cmd_mission_start,
             const("MAV_CMD_DO_REPOSITION"): self._cmd_reposition,
@@ -878,6 +904,31 @@ class Vehicle:
             self.statustext(SEV_CRITICAL, "Takeoff denied: disarmed")
             return R_DENIED
         return self._request_mode(TAKEOFF)
+
+    def _cmd_land(self, _l: _Link, _m: Inbound, _p: list[float]) -> int:
+        if self.is_ardupilot and self.is_fixed_wing:
+            return R_UNSUPPORTED  # ArduPlane lands through a mission (DO_LAND_START)
+        return self._request_mode(LAND)
+
+    def _cmd_land_start(self, _l: _Link, _m: Inbound, _p: list[float]) -> int:
+        """Jump to the mission's landing sequence (its DO_LAND_START item) in mission mode;
+        FAILED without one, as ArduPlane."""
+        first = 1 if self.is_ardupilot else 0
+        seq = next(
+            (
+                i
+                for i in range(first, len(self._items))
+                if self._items[i].command == mp.CMD_LAND_START
+            ),
+            None,
+        )
+        if seq is None:
+            self.statustext(SEV_WARNING, "Unable to start landing sequence")
+            return R_FAILED
+        result = self._request_mode(MISSION)
+        if result == R_ACCEPTED:
+            self.set_current(seq)
+        return result
 
     def _cmd_mission_start(self, _l: _Link, _m: Inbound, p: list[float]) -> int:
         if not self._items:
@@ -1070,7 +1121,7 @@ class Vehicle:
         if target in (HOLD, POSCTL, GUIDED):
             self._goal_ne = (self.k.north_m, self.k.east_m)
             self._goal_alt = self.k.alt_amsl_m
-        elif target == LAND:
+        elif target in (LAND, LOITER):
             self._goal_ne = (self.k.north_m, self.k.east_m)
         elif target == RTL:
             self._rtl_phase = 0
@@ -1272,6 +1323,14 @@ class Vehicle:
                 e = self.k.east_m + 1000.0 * math.sin(self.k.yaw_rad)
                 return self._goal(n, e, alt + 1.0, stop=False)
             return self._goal(self._goal_ne[0], self._goal_ne[1], alt + 0.6, stop=True)
+        if mode == LOITER:  # ArduCopter LOITER at minimum RC throttle: straight down
+            return self._goal(
+                self._goal_ne[0],
+                self._goal_ne[1],
+                self.ground_alt_m - 1.0,
+                stop=True,
+                descent=self.lim.descent_rate_mps,
+            )
         if mode == LAND:
             descent = self.lim.descent_rate_mps * (1.7 if self._motor_failed else 1.0)
             speed = self.lim.min_airspeed_mps if self.is_fixed_wing else self._speed()
@@ -1319,7 +1378,7 @@ class Vehicle:
     def _mission_goal(self) -> Goal:
         items = self._items
         first = 1 if self.is_ardupilot else 0
-        if self._mission_state == const("MISSION_STATE_COMPLETE"):
+        if self._mission_state == const("MISSION_STATE_COMPLETE") or self._stalled:
             return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
         # execute DO items until the next NAV item
         guard = 0
