@@ -23,7 +23,8 @@ PX4 refuses an item without a position (DO_*) in a global frame (MAV_MISSION_UNS
 3 -> 6), every param as sent (NaN included). ArduPilot takes DO items in any frame and
 reports them in frame 0, stores a NaN param as 0, and keeps of a NAV_WAYPOINT only what its
 packed command holds: ArduCopter the hold time in whole seconds (param1), ArduPlane the
-acceptance and pass-by radii in whole metres up to 255 (param2/param3).
+acceptance and pass-by radii in whole metres up to 255 (param2/param3); of a NAV_LAND it
+keeps the sign of param4 (-1 or 1).
 
 The server never touches sockets: it calls `MissionHost.send(peer, name, **fields)`; `peer`
 is opaque (the vehicle's link object) and `now_s` is passed in.
@@ -189,6 +190,8 @@ def ardupilot_stored(item: RawItem, *, fixed_wing: bool) -> RawItem:
         it = replace(it, frame=FRAME_GLOBAL)
     elif it.frame in (FRAME_GLOBAL_INT, FRAME_GLOBAL_REL_INT):
         it = replace(it, frame=FRAME_GLOBAL if it.frame == FRAME_GLOBAL_INT else FRAME_GLOBAL_REL)
+    if it.command == CMD_LAND:  # only the sign of param4 is kept (deep-stall direction)
+        it = replace(it, param4=-1.0 if it.param4 < 0.0 else 1.0)
     if it.command == CMD_WAYPOINT:
         if fixed_wing:
             acc = float(min(255, max(0, int(it.param2))))

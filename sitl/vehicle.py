@@ -895,7 +895,8 @@ class Vehicle:
             )
 
     def _cmd_takeoff(self, _l: _Link, _m: Inbound, p: list[float]) -> int:
-        alt = p[6]
+        # param7: PX4 takes the altitude AMSL, ArduPilot metres above home
+        alt = p[6] + self.ground_alt_m if self.is_ardupilot else p[6]
         if math.isfinite(alt) and alt > self.ground_alt_m:
             self._takeoff_alt = alt
         else:

@@ -28,6 +28,7 @@ to keep, not the bytes sent:
 - ArduPilot keeps a NaN param as 0.0; NAV_WAYPOINT keeps only what its 15-byte command
   holds: ArduCopter the hold time (param1, whole seconds), ArduPlane the acceptance and
   pass-by radii (param2/param3, whole metres up to 255); the other params read back 0;
+  NAV_LAND keeps of param4 only its sign (-1 or 1: ArduPlane's deep-stall direction);
 - ArduPilot's seq 0 is its own home, not compared.
 """
 
@@ -231,6 +232,8 @@ def stored_form(
     )
     if not _positional(it):
         it = replace(it, frame=MAV_FRAME_GLOBAL)  # no frame kept for a DO item
+    if it.command == MAV_CMD_NAV_LAND:  # param4 keeps only a direction: -1 or 1
+        it = replace(it, param4=-1.0 if it.param4 < 0.0 else 1.0)
     if it.command == MAV_CMD_NAV_WAYPOINT:
         if kind is VehicleKind.FIXED_WING:
             acc = float(min(255, max(0, int(it.param2))))
