@@ -1,9 +1,10 @@
 """Build of the tracker's optional C extension; everything else is in pyproject.toml.
 
-The tracker's common Kalman round runs in C when this builds, and in Python, bit for bit the
-same, when it does not (no compiler): ``optional=True`` turns a failed build into a warning.
+The tracker's per-measurement checks and common Kalman round run in C when this builds, and
+in NumPy, bit for bit the same, when it does not (no compiler): ``optional=True`` turns a
+failed build into a warning.
 CI requires it (``GCS_UTM_REQUIRE_C=1`` in ``.ci/run``). ``-ffp-contract=off``: no fused
-multiply-add, so the C arithmetic is the Python arithmetic.
+multiply-add, so the C arithmetic is the NumPy arithmetic.
 """
 
 from setuptools import Extension, setup

@@ -61,6 +61,7 @@ from gcs_utm.services.tracking import TrackingService
 from gcs_utm.services.usm import Usm
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store, StoreWriter
+from gcs_utm.store.ids import life_prefix
 
 _log = logging.getLogger(__name__)
 
@@ -126,6 +127,11 @@ class Persistence:
 
     def write_tracks(self, tracks: list[Track]) -> None:
         self.writer.write_tracks(tracks)
+
+    @property
+    def epoch(self) -> int:
+        """The store life this process writes in (ids carry it, see gcs_utm.store.ids)."""
+        return self.writer.epoch
 
     def close(self) -> None:
         self.writer.close()
@@ -202,7 +208,8 @@ def build_runtime(
             store.deactivate_geofence(g.id)
 
     airspace = Airspace(on_operation=on_operation, on_plan=on_plan, on_geofence=on_geofence)
-    usm = Usm(airspace, clock, config=settings.usm, record=store.record)
+    id_prefix = life_prefix(store.epoch)
+    usm = Usm(airspace, clock, config=settings.usm, record=store.record, id_prefix=id_prefix)
 
     async def tracking_hazard(h: HazardReport) -> None:
         usm.on_hazard(h)
@@ -219,7 +226,7 @@ def build_runtime(
     def snapshot(t_s: float) -> Any:
         return airspace.snapshot(t_s, tracking.snapshot)
 
-    monitor = Monitor(frame, settings.monitoring)
+    monitor = Monitor(frame, settings.monitoring, id_prefix=id_prefix)
     monitoring = MonitoringService(
         monitor, snapshot, clock, usm.on_threats, period_s=settings.monitoring.period_s
     )
@@ -748,7 +755,7 @@ def _separation(
                 best_h = min(best_h, dh)
                 best_v = min(best_v, dv) if dh < sep_h * 3 else best_v
                 best_3d = min(best_3d, math.hypot(dh, dv))
-                loss = loss or _is_loss(rt, dh, dv)
+                loss = loss or _is_loss(rt, dh, dv, ops[OperationId(a)], ops[OperationId(b)])
             out.append(
                 {
                     "pair": [a, b],
@@ -761,12 +768,12 @@ def _separation(
     return out
 
 
-def _is_loss(rt: Runtime, dh: float, dv: float) -> bool:
-    """Loss of separation under the run's rule (cylinder: both minima; sphere: 3D distance)."""
-    mon = rt.settings.monitoring
-    if mon.spherical:
-        return math.hypot(dh, dv) < mon.safety_distance_m
-    return dh < mon.separation_horizontal_m and dv < mon.separation_vertical_m
+def _is_loss(rt: Runtime, dh: float, dv: float, a: Operation, b: Operation) -> bool:
+    """Loss of separation as Monitoring defines it (effective minima of the pair's
+    operational volumes; cylinder or sphere): :func:`gcs_utm.core.monitoring.loss.is_loss`."""
+    from gcs_utm.core.monitoring.loss import is_loss
+
+    return is_loss(rt.settings.monitoring, dh, dv, a.operational_volume_m, b.operational_volume_m)
 
 
 def _nearest(samples: Sequence[tuple[float, ...]], t_s: float) -> tuple[float, ...] | None:
@@ -822,6 +829,7 @@ def _truth(vehicles: Any, scenario: Scenario, rt: Runtime) -> dict[str, Any]:
     """Ground truth from the simulated vehicles (their true positions, not the tracks)."""
     by_sys = {int(v.sys_id): v for v in vehicles}
     ops = {int(op.sys_id): op.id for op in scenario.operations if op.sys_id is not None}
+    op_of = {int(op.sys_id): op for op in scenario.operations if op.sys_id is not None}
     out: dict[str, Any] = {"pairs": []}
     ids = sorted(s for s in by_sys if s in ops)
     for i, a in enumerate(ids):
@@ -841,7 +849,7 @@ def _truth(vehicles: Any, scenario: Scenario, rt: Runtime) -> dict[str, Any]:
                 dh = math.hypot(ea - eb, na - nb)
                 dv = abs(alt - hb[j][3])
                 best = min(best, math.hypot(dh, dv))
-                loss = loss or _is_loss(rt, dh, dv)
+                loss = loss or _is_loss(rt, dh, dv, op_of[a], op_of[b])
             out["pairs"].append(
                 {
                     "pair": [ops[a], ops[b]],
@@ -863,10 +871,12 @@ async def serve(
     headless: bool,
     stop: asyncio.Event | None = None,
     on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
+    speed: float = 1.0,
 ) -> int:
     """Long-running service: links from config, persistent store; restart resumes. Runs until
-    SIGINT/SIGTERM (or ``stop`` is set)."""
-    clock = RealClock()
+    SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
+    than real time: the service's clock then advances ``speed`` simulated seconds per second."""
+    clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
     frame = LocalFrame(
         settings.airspace.origin_lat_deg,
         settings.airspace.origin_lon_deg,

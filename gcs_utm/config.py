@@ -23,6 +23,8 @@ from dataclasses import MISSING, field
 from pathlib import Path
 from typing import Any, TypeVar
 
+from gcs_utm.validation import nesting_problem, too_deep
+
 T = TypeVar("T")
 
 
@@ -81,14 +83,18 @@ _TOML_POS = re.compile(r"\(at line (\d+), column (\d+)\)")
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:
-    """Read a TOML file. A missing or malformed file raises :class:`ConfigError` naming the
-    file and, for syntax errors, the line (tomllib only reports it inside its message)."""
+    """Read a TOML file. A missing, unreadable, malformed or absurdly nested file raises
+    :class:`ConfigError` naming the file and, for syntax errors, the line (tomllib only
+    reports it inside its message). Never a traceback: tomllib recurses once per nesting
+    level, so a few thousand levels would end in RecursionError."""
     source = str(path)
     try:
         with open(path, "rb") as fh:
-            return tomllib.load(fh)
+            doc = tomllib.load(fh)
     except FileNotFoundError as exc:
         raise ConfigError(source, "(file)", "the file does not exist") from exc
+    except IsADirectoryError as exc:
+        raise ConfigError(source, "(file)", "is a directory, not a file") from exc
     except OSError as exc:
         raise ConfigError(source, "(file)", f"cannot be read: {exc.strerror}") from exc
     except UnicodeDecodeError as exc:
@@ -98,6 +104,12 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         m = _TOML_POS.search(text)
         where = f"line {m.group(1)}" if m else "(syntax)"
         raise ConfigError(source, where, f"malformed TOML: {text}") from exc
+    except RecursionError:
+        raise ConfigError(source, "(file)", f"malformed TOML: {too_deep()}") from None
+    problem = nesting_problem(doc)
+    if problem is not None:
+        raise ConfigError(source, "(file)", problem)
+    return doc
 
 
 def _type_name(tp: Any) -> str:

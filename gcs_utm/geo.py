@@ -1,10 +1,15 @@
-"""Frames: WGS84 <-> the airspace's local UTM frame, local ENU, AGL <-> AMSL.
+"""Frames: WGS84 <-> the airspace's local metric frame, local ENU, AGL <-> AMSL.
 
-Computation happens in UTM metres (pyproj) with ONE zone fixed per airspace from its origin, so
-an airspace that straddles a zone border still has one continuous metric frame (the UTM
-projection is usable a few hundred kilometres outside its zone). Coordinates are given
-relative to the origin's easting/northing (``east_m``, ``north_m``) to keep numbers small;
-they are still UTM grid metres, not ENU (the two differ by the grid convergence angle).
+Computation happens in metres of ONE transverse Mercator projection per airspace (pyproj,
+WGS84 ellipsoid), centred on the airspace's origin with unit scale there: its central
+meridian is the origin's longitude, its false origin the origin itself. So ``east_m`` /
+``north_m`` are true local metres near the origin: the point scale grows as 1 + d^2 / (2 R^2)
+with the distance d from the central meridian (5e-6 at 20 km: a 50 m distance is off by
+0.25 mm), and grid north is true north at the origin. A UTM zone's grid is not: its scale is
+0.9996 on the central meridian and up to 1.0010 at the zone border (50 m became 49.976 m at
+Madrid, 50.023 m near Seville), enough to flip separation decisions at the minimum. An
+airspace that straddles a UTM zone border still has one continuous frame. ``epsg`` keeps the
+UTM zone of the origin for reference (logs, exports); no computation uses it.
 
 ``LocalFrame.enu_*`` gives true local East-North-Up around the origin (the paper's repository
 stores its scenarios in ENU); ENU uses the WGS84 ellipsoid height of the origin plane and
@@ -48,6 +53,14 @@ def utm_epsg_for(lat_deg: float, lon_deg: float) -> int:
     return (32600 if lat_deg >= 0.0 else 32700) + zone
 
 
+def local_tmerc(lat_deg: float, lon_deg: float) -> CRS:
+    """Transverse Mercator on WGS84 centred on (lat, lon) with unit scale there."""
+    return CRS.from_proj4(
+        f"+proj=tmerc +lat_0={lat_deg!r} +lon_0={lon_deg!r} +k_0=1 +x_0=0 +y_0=0 "
+        "+ellps=WGS84 +units=m +no_defs +type=crs"
+    )
+
+
 @dataclass(frozen=True, slots=True)
 class LocalFrame:
     """The metric frame of one airspace, fixed by its origin."""
@@ -68,8 +81,9 @@ class LocalFrame:
             raise FrameError("origin must be finite")
         epsg = self.epsg or utm_epsg_for(self.origin_lat_deg, self.origin_lon_deg)
         object.__setattr__(self, "epsg", epsg)
-        fwd = Transformer.from_crs(CRS.from_epsg(4326), CRS.from_epsg(epsg), always_xy=True)
-        inv = Transformer.from_crs(CRS.from_epsg(epsg), CRS.from_epsg(4326), always_xy=True)
+        local = local_tmerc(self.origin_lat_deg, self.origin_lon_deg)
+        fwd = Transformer.from_crs(CRS.from_epsg(4326), local, always_xy=True)
+        inv = Transformer.from_crs(local, CRS.from_epsg(4326), always_xy=True)
         object.__setattr__(self, "_fwd", fwd)
         object.__setattr__(self, "_inv", inv)
         e0, n0 = fwd.transform(self.origin_lon_deg, self.origin_lat_deg)
@@ -82,9 +96,9 @@ class LocalFrame:
             self, "_ecef_inv", Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
         )
 
-    # ---- UTM grid, relative to the origin ------------------------------------------------
+    # ---- local transverse Mercator, relative to the origin ----------------------------------
     def to_local(self, lat_deg: ArrayLike, lon_deg: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """WGS84 degrees -> (east_m, north_m) relative to the origin in its UTM zone."""
+        """WGS84 degrees -> (east_m, north_m) relative to the origin (local frame metres)."""
         lat = np.asarray(lat_deg, dtype=np.float64)
         lon = np.asarray(lon_deg, dtype=np.float64)
         e, n = self._fwd.transform(lon, lat)

@@ -233,6 +233,69 @@ class OperationState(Enum):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class PerformanceEnvelope:
+    """What a vehicle can fly: vertical rates, horizontal speed range, turn radius, hover.
+
+    Tactical Deconfliction proposes only manoeuvres inside it: vertical segments within the
+    climb and descent rates, horizontal speeds within [min, max] (a fixed wing cannot slow
+    below its stall margin), no holding in place for a vehicle that cannot hover. From the
+    operation's description (:func:`default_envelope`) unless given (``Operation.envelope``:
+    a scenario file, or the autopilot's parameters where the vehicle reports them)."""
+
+    climb_rate_mps: float
+    descent_rate_mps: float
+    min_speed_mps: float
+    max_speed_mps: float
+    turn_radius_m: float
+    can_hover: bool
+
+    def __post_init__(self) -> None:
+        item = "performance envelope"
+        _finite(
+            item,
+            climb_rate_mps=self.climb_rate_mps,
+            descent_rate_mps=self.descent_rate_mps,
+            min_speed_mps=self.min_speed_mps,
+            max_speed_mps=self.max_speed_mps,
+            turn_radius_m=self.turn_radius_m,
+        )
+        for name in ("climb_rate_mps", "descent_rate_mps", "max_speed_mps"):
+            if getattr(self, name) <= 0.0:
+                raise ModelError(item, name, "must be positive")
+        if self.min_speed_mps < 0.0 or self.turn_radius_m < 0.0:
+            raise ModelError(item, "min_speed_mps", "speeds and radii must be >= 0")
+        if self.min_speed_mps > self.max_speed_mps:
+            raise ModelError(item, "min_speed_mps", "is above max_speed_mps")
+
+
+DEFAULT_DESCENT_RATE_MPS = {"multirotor": 1.5, "fixed_wing": 3.0}
+"""Descent rate assumed when only the climb rate is known: PX4's MPC_Z_V_AUTO_DN and
+ArduCopter's WPNAV_SPEED_DN default to 1.5 m/s; a fixed wing's 3 m/s stays well inside PX4's
+FW_T_SINK_MAX and ArduPlane's TECS_SINK_MAX (5 m/s). Never more than the climb rate."""
+MAX_SPEED_FACTOR = 1.2
+"""A vehicle described by its cruise speed alone is assumed to fly up to 20 % faster."""
+FIXED_WING_MIN_SPEED_FACTOR = 0.7
+"""...and a fixed wing no slower than 70 % of its cruise speed (the stall margin)."""
+FIXED_WING_TURN_RADIUS_M = 80.0
+"""PX4's NAV_LOITER_RAD default, a turn a small fixed wing flies at cruise speed."""
+
+
+def default_envelope(
+    kind: VehicleKind, cruise_speed_mps: float, climb_rate_mps: float
+) -> PerformanceEnvelope:
+    """The envelope an operation's description implies (see the constants above)."""
+    fw = kind is VehicleKind.FIXED_WING
+    return PerformanceEnvelope(
+        climb_rate_mps=climb_rate_mps,
+        descent_rate_mps=min(climb_rate_mps, DEFAULT_DESCENT_RATE_MPS[kind.value]),
+        min_speed_mps=FIXED_WING_MIN_SPEED_FACTOR * cruise_speed_mps if fw else 0.0,
+        max_speed_mps=MAX_SPEED_FACTOR * cruise_speed_mps,
+        turn_radius_m=FIXED_WING_TURN_RADIUS_M if fw else 0.0,
+        can_hover=not fw,
+    )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class Operation:
     """A UAS operation (paper Table 3). The plan is the current version; the store keeps all.
 
@@ -262,6 +325,14 @@ class Operation:
     endurance_s: float | None = None
     operator: str = "default"
     next_waypoint: int = 0
+    envelope: PerformanceEnvelope | None = None
+    """What the vehicle can fly; None: :func:`default_envelope` of its description."""
+
+    def performance(self) -> PerformanceEnvelope:
+        """The vehicle's envelope: the one given, else what its description implies."""
+        if self.envelope is not None:
+            return self.envelope
+        return default_envelope(self.vehicle_kind, self.cruise_speed_mps, self.max_climb_rate_mps)
 
     def __post_init__(self) -> None:
         item = f"operation {self.id}"

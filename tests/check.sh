@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # The whole test suite: lint, format, types, layer contracts, then pytest.
 # Usage: bash tests/check.sh [extra pytest args]
+# pytest runs in a private network namespace (tests/netns.sh) where the machine allows it, so
+# the real PX4 / ArduPilot SITL tests can bind their fixed ports without colliding with
+# anything else; elsewhere those tests skip and say why.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY="${PYTHON:-.venv/bin/python}"
@@ -13,4 +16,4 @@ echo "== mypy --strict"; "$BIN/mypy" --strict -p gcs_utm -p adapters -p sitl
 echo "== lint-imports"; "$BIN/lint-imports"
 echo "== pytest"
 # pytest exits 5 when it collected no test: that must fail CI, and set -e makes it so.
-"$PY" -m pytest -q -p no:cacheprovider "$@"
+bash tests/netns.sh "$PY" -m pytest -q -p no:cacheprovider "$@"

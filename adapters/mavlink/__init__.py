@@ -1,5 +1,5 @@
 """MAVLink adapter: links (UDP/TCP/serial), telemetry -> measurements, mission upload with
-readback verification, commands, MAVLink 2 signing. See docs/mavlink.md."""
+readback verification, commands, MAVLink 2 signing. See docs/usm.md."""
 
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.endpoint import Endpoint, EndpointError, EndpointKind, parse_endpoint

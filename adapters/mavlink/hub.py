@@ -231,6 +231,15 @@ class MavlinkHub(Commands):
         """The UDP receive buffer the kernel granted ``link`` (0 for TCP and serial)."""
         return self._links[link].transport.rcvbuf_bytes
 
+    def link_names(self) -> tuple[str, ...]:
+        """The open links' names, in the order they were opened."""
+        return tuple(self._links)
+
+    def receiver(self, link: str) -> Callable[[bytes, Address | None], None]:
+        """What ``link``'s transport calls with each received chunk and its source address;
+        calling it is receiving those bytes on that link (benchmarks, tests)."""
+        return functools.partial(self._on_chunk, self._links[link])
+
     async def close(self) -> None:
         for task in self._tasks:
             task.cancel()

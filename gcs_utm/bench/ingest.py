@@ -12,7 +12,7 @@ effective receive buffer (getsockopt). ``ingest_socket_tracked``: the same into 
 the app's receive path (hub -> USM -> tracking service -> tracker, :class:`_Pipeline`) in this
 one process. Latency (``ingest_latency_10k``): the sender paces 10,000 msg/s; latency = end of
 the ``Tracker.ingest`` that used a measurement - its receipt time, stamped when its datagram
-was read (receipt-to-track), p99 over all messages of a run. In-process: ``_on_chunk`` on
+was read (receipt-to-track), p99 over all messages of a run. In-process: the link's receiver on
 pre-encoded datagrams without a socket, fast path vs pymavlink for everything
 (``fast_decode`` false), the per-core decode + dispatch cost; ``ingest_inprocess_tracked``
 adds the app's receive path with a tracking step every 3,000 datagrams (0.1 s at 30,000
@@ -271,7 +271,8 @@ class _Pipeline:
 
 
 def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int = 0) -> list[float]:
-    """ms to push ``n`` datagrams through ``_on_chunk`` (1,000 vehicles on 4 addresses); with
+    """ms to push ``n`` datagrams through the link's receiver, what its transport calls (1,000
+    vehicles on 4 addresses); with
     ``tracker_batch`` > 0 the events go through the app's receive path (:class:`_Pipeline`)
     and every that many datagrams the tracking service steps (association + Kalman update):
     datagram to updated track on one core."""
@@ -288,20 +289,19 @@ def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int 
         cfg = MavlinkConfig(links=("udpin:127.0.0.1:0",), fast_decode=fast)
         hub = MavlinkHub(cfg, clock, sink)
         await hub.start()
-        link = next(iter(hub._links.values()))
-        on_chunk = hub._on_chunk
+        receive = hub.receiver(hub.link_names()[0])
         out: list[float] = []
         for r, frames in enumerate(passes):
             t0 = time.perf_counter()
             if pipe is None:
                 for f, a in zip(frames, addrs, strict=True):
-                    on_chunk(link, f, a)
+                    receive(f, a)
             else:
                 step = pipe.tracking.step
                 flush = hub.flush_positions
                 burst = cfg.udp_batch
                 for i, (f, a) in enumerate(zip(frames, addrs, strict=True)):
-                    on_chunk(link, f, a)
+                    receive(f, a)
                     if (i + 1) % burst == 0:
                         flush()  # as the UDP transport does after each burst of reads
                     if (i + 1) % tracker_batch == 0:
@@ -368,7 +368,7 @@ async def _one(
     )
     await hub.start()
     task = asyncio.create_task(pipe.tracking.run()) if pipe is not None else None
-    link = next(iter(hub._links))
+    link = hub.link_names()[0]
     port = hub.local_port(link)
     ctx = mp.get_context("spawn")
     out = ctx.Queue()
@@ -412,10 +412,10 @@ async def _one(
 
 
 def _tracker_kernel() -> str:
-    """ "c" when the tracker's common round runs in its C extension, else "python"."""
-    from gcs_utm.core.tracking.tracker import round_kernel
+    """ "c" when the tracker's kernels run in its C extension, else "numpy"."""
+    from gcs_utm.core.tracking import kernel
 
-    return round_kernel()
+    return kernel.name()
 
 
 def _socket_record(

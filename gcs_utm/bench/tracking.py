@@ -131,8 +131,14 @@ def _batches(
 
 
 def _filterpy_record(runs: int) -> dict[str, object]:
-    from filterpy.common import Q_discrete_white_noise
-    from filterpy.kalman import KalmanFilter
+    try:  # a development dependency (pip install 'gcs-utm[dev]'), not the service's
+        from filterpy.common import Q_discrete_white_noise
+        from filterpy.kalman import KalmanFilter
+    except ImportError:
+        return {
+            "benchmark": "tracking.filterpy_update",
+            "skipped": "filterpy is not installed: pip install 'gcs-utm[dev]'",
+        }
 
     n_updates = 2_000
     kf = KalmanFilter(dim_x=6, dim_z=3)

@@ -73,7 +73,7 @@ async def _bench(
     lossy: list[float] = []
     ok: list[bool] = []
     async with MavlinkHub(cfg, clock, _NullSink()) as hub:
-        port = hub.local_port(next(iter(hub._links)))
+        port = hub.local_port(hub.link_names()[0])
         spec = sitl.VehicleSpec(
             instance=0, gcs_port=port, bind_port=0, autopilot=args.autopilot, seed=args.seed
         )

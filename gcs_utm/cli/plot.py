@@ -16,10 +16,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from gcs_utm.dashboard.plot import ReportError, export_all, load_report
+    from gcs_utm.dashboard.plotting import PlotsUnavailableError, require_plots
 
     try:
+        require_plots()
         report = load_report(args.report)
-    except ReportError as exc:
+    except (ReportError, PlotsUnavailableError) as exc:
         print(f"gcs-utm plot: {exc}", file=sys.stderr)
         return 2
     out = args.out or args.report.parent

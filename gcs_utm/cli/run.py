@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
 import sys
 from importlib import resources
 from pathlib import Path
@@ -58,6 +59,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="SQLite store (kept across restarts; default ./gcs_utm.sqlite)",
     )
     serve.add_argument("--headless", action="store_true", help="no TUI; log lines")
+    serve.add_argument(
+        "--speed",
+        type=_positive_speed,
+        default=1.0,
+        help="the vehicles' simulation speed factor (PX4_SIM_SPEED_FACTOR, ArduPilot "
+        "--speedup): the service's clock runs this many times faster than the wall clock "
+        "(default 1: real vehicles)",
+    )
     group = serve.add_mutually_exclusive_group()
     group.add_argument("--auto-accept", action="store_true")
     group.add_argument("--auto-reject", action="store_true")
@@ -68,7 +77,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, default=None, help="settings TOML")
     p.add_argument(
         "--speed",
-        type=float,
+        type=positive_speed,
         default=1.0,
         help="run N times faster than real time (vehicles and UTM share the factor)",
     )
@@ -84,6 +93,18 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG/GeoJSON/KML output")
     p.add_argument("--mqtt", action="store_true", help="start the MQTT bridge of the config")
+
+
+def positive_speed(text: str) -> float:
+    """A speed factor: a finite number > 0 (0 would stop the clock, a negative one run it
+    backwards); argparse turns the error into one usage line."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (value > 0.0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
 
 
 def _operator(args: argparse.Namespace) -> str:
@@ -201,4 +222,23 @@ def _serve(args: argparse.Namespace) -> int:
         else OperatorMode.NONE
     )
     headless = args.headless or operator != OperatorMode.DASHBOARD
-    return asyncio.run(serve(settings, db_path=args.db, operator=operator, headless=headless))
+    return asyncio.run(
+        serve(
+            settings,
+            db_path=args.db,
+            operator=operator,
+            headless=headless,
+            speed=args.speed,
+        )
+    )
+
+
+def _positive_speed(text: str) -> float:
+    """argparse type of ``serve --speed``: a finite number above 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--speed must be a number, got {text!r}") from None
+    if not 0.0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"--speed must be above 0, got {text!r}")
+    return value

@@ -3,13 +3,16 @@
 filed plans: every pair already in conflict, every plan crossing a geofence.
 
 Times are printed in scenario seconds (relative to its start). Exit 0 when the file is valid
-(conflicts are findings, not errors), 2 when it is not (one error line on stderr).
+(conflicts are findings, not errors), 2 when it is not (one error line on stderr; with
+``--json`` also one JSON document on stdout: ``{"error": {"file", "item", "field",
+"message"}}``). FILE may also be a GAUSS scenario YAML: it loads the scenario it names.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from dataclasses import replace
 from typing import Any
@@ -24,7 +27,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("scenario", help="scenario tools")
     cmds = p.add_subparsers(dest="scenario_command", metavar="ACTION", required=True)
     c = cmds.add_parser("check", help="validate a scenario and check its filed plans")
-    c.add_argument("file", help="scenario TOML, or GAUSS operations/geofences JSON")
+    c.add_argument(
+        "file", help="scenario TOML, a GAUSS operations/geofences JSON, or a GAUSS scenario YAML"
+    )
     c.add_argument("--yaml", help="GAUSS YAML with the origin (default: FILE with .yaml)")
     c.add_argument("--json", action="store_true", help="print one JSON document")
     c.add_argument(
@@ -114,15 +119,27 @@ def report_document(scenario: Scenario, report: StrategicReport) -> dict[str, An
     }
 
 
+def _fail(args: argparse.Namespace, error: dict[str, str]) -> int:
+    """One error line on stderr; with --json also the error as a JSON document on stdout."""
+    where = ": ".join(v for v in (error["file"], error["item"], error["field"]) if v)
+    print(f"error: {where}: {error['message']}", file=sys.stderr)
+    if args.json:
+        json.dump({"error": error}, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    return 2
+
+
 def _check(args: argparse.Namespace) -> int:
     try:
         scenario = load_any(args.file, args.yaml)
     except ScenarioError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    if not args.step_s > 0.0:
-        print(f"error: --step-s must be positive, got {args.step_s}", file=sys.stderr)
-        return 2
+        field = "" if exc.field == exc.item else exc.field
+        return _fail(
+            args, {"file": exc.file, "item": exc.item, "field": field, "message": exc.message}
+        )
+    if not (args.step_s > 0.0 and math.isfinite(args.step_s)):
+        message = f"must be a positive number of seconds, got {args.step_s}"
+        return _fail(args, {"file": "", "item": "", "field": "--step-s", "message": message})
     ops = delayed_operations(scenario) if args.apply_delays else list(scenario.operations)
     config = scenario.monitoring_for(MonitoringConfig())
     report = strategic_check(ops, scenario.geofences, scenario.frame, config, step_s=args.step_s)

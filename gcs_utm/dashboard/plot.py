@@ -1,5 +1,5 @@
 """Pictures of a run, the counterparts of the paper's result figures for its use cases
-(README "What the use cases show" says figure by figure what matches and what differs):
+(docs/use-cases.md says figure by figure what matches and what differs):
 
 - ``<stem>_top.png``: top view of the filed plans with their operational volumes, every later
   plan version, the tracks flown, geofences, the alternatives TD generated (the selected one in
@@ -17,20 +17,27 @@
 Also GeoJSON and KML exports of the same data for QGIS / Google Earth.
 
 Input is the JSON report of ``gcs-utm run`` (see the README for its fields). Figures use
-matplotlib's non-interactive Agg backend. Each function returns what it drew (counts and the
-minima it computed from the report), so tests check the data plotted, not only that a file
-exists. Units: metres and seconds from scenario start, as in the report.
+matplotlib's non-interactive Agg backend; matplotlib is the optional extra ``[plots]``,
+imported only when a figure is drawn (without it ``gcs-utm run`` writes GeoJSON and KML
+only). Each function returns what it drew (counts and the minima it computed from the report),
+so tests check the data plotted, not only that a file exists. Units: metres and seconds from
+scenario start, as in the report.
 """
 
 from __future__ import annotations
 
 import itertools
 import json
+import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import escape
+
+from gcs_utm.dashboard.plotting import PlotsUnavailableError, require_plots
+
+_log = logging.getLogger(__name__)
 
 
 class ReportError(ValueError):
@@ -93,6 +100,7 @@ def _circle(cx: float, cy: float, r: float, n: int = 48) -> tuple[list[float], l
 
 def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> PlotSummary:
     """Write every figure of the module docstring into ``out_dir``."""
+    require_plots()
     import matplotlib
 
     matplotlib.use("Agg")
@@ -826,8 +834,14 @@ def to_kml(report: dict[str, Any]) -> str:
 
 
 def export_all(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> PlotSummary:
-    """Figures plus ``<stem>.geojson`` and ``<stem>.kml``."""
-    summary = plot_report(report, out_dir, stem=stem)
+    """Figures plus ``<stem>.geojson`` and ``<stem>.kml``; without matplotlib, the two
+    exports only (logged)."""
+    try:
+        summary = plot_report(report, out_dir, stem=stem)
+    except PlotsUnavailableError as exc:
+        _log.warning("no figures: %s", exc)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        summary = PlotSummary()
     gj = out_dir / f"{stem}.geojson"
     gj.write_text(json.dumps(to_geojson(report), indent=1))
     kml = out_dir / f"{stem}.kml"

@@ -56,6 +56,14 @@ from gcs_utm.model import (
     Waypoint4D,
 )
 from gcs_utm.scenario.types import EventKind, Scenario, ScenarioError, ScenarioEvent, VehicleSetup
+from gcs_utm.validation import (
+    altitude_problem,
+    nesting_problem,
+    offset_problem,
+    polygon_problem,
+    radius_problem,
+    too_deep,
+)
 
 _log = logging.getLogger(__name__)
 
@@ -68,15 +76,26 @@ def _read_json(path: Path, file: str) -> dict[str, Any]:
         data = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError as exc:
         raise ScenarioError(file, "(file)", "(file)", "the file does not exist") from exc
+    except IsADirectoryError as exc:
+        raise ScenarioError(file, "(file)", "(file)", "is a directory, not a file") from exc
     except json.JSONDecodeError as exc:
         raise ScenarioError(
             file, "(file)", f"line {exc.lineno}", f"malformed JSON: {exc.msg}"
         ) from exc
+    except RecursionError:
+        raise ScenarioError(file, "(file)", "(file)", f"malformed JSON: {too_deep()}") from None
+    _check_depth(file, data)
     if not isinstance(data, dict) or not ({"operations", "geofences"} & set(data)):
         raise ScenarioError(
             file, "(top level)", "operations", "expected a GAUSS operations or geofences JSON"
         )
     return data
+
+
+def _check_depth(file: str, data: object) -> None:
+    problem = nesting_problem(data)
+    if problem is not None:
+        raise ScenarioError(file, "(file)", "(file)", problem)
 
 
 def _read_yaml(path: Path) -> dict[str, Any]:
@@ -85,13 +104,45 @@ def _read_yaml(path: Path) -> dict[str, Any]:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except FileNotFoundError as exc:
         raise ScenarioError(file, "(file)", "(file)", "the file does not exist") from exc
+    except IsADirectoryError as exc:
+        raise ScenarioError(file, "(file)", "(file)", "is a directory, not a file") from exc
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else "(syntax)"
         raise ScenarioError(file, "(file)", where, f"malformed YAML: {exc}") from exc
+    except RecursionError:
+        raise ScenarioError(file, "(file)", "(file)", f"malformed YAML: {too_deep()}") from None
+    _check_depth(file, data)
     if not isinstance(data, dict):
         raise ScenarioError(file, "(top level)", "(file)", "expected a mapping")
     return data
+
+
+def gauss_json_of(yaml_path: str | Path) -> Path:
+    """The JSON a GAUSS YAML describes: its ``operations_json`` (else its ``geofences_json``),
+    a name without suffix in the YAML's folder, as GAUSS's launch files resolve it."""
+    ypath = Path(yaml_path)
+    params = _read_yaml(ypath)
+    for key in ("operations_json", "geofences_json"):
+        name = params.get(key)
+        if name is None:
+            continue
+        if not isinstance(name, str) or not name or "/" in name or "\\" in name:
+            raise ScenarioError(
+                str(ypath), "(top level)", key, f"expected a file name without folder, got {name!r}"
+            )
+        jpath = ypath.with_name(f"{name}.json")
+        if not jpath.is_file():
+            raise ScenarioError(
+                str(ypath), "(top level)", key, f"names {jpath.name}, which does not exist"
+            )
+        return jpath
+    raise ScenarioError(
+        str(ypath),
+        "(top level)",
+        "operations_json",
+        "missing; a GAUSS scenario YAML names its operations_json or geofences_json",
+    )
 
 
 def _num(file: str, item: str, field: str, value: Any) -> float:
@@ -223,11 +274,29 @@ def _xyz(
     xs, ys, zs, ts = [], [], [], []
     for j, w in enumerate(wps):
         f = f"{field}[{j}]"
-        xs.append(_num(file, item, f + ".x", _get(file, item, w, "x")))
-        ys.append(_num(file, item, f + ".y", _get(file, item, w, "y")))
-        zs.append(_num(file, item, f + ".z", w.get("z", 0.0)))
+        xs.append(_offset(file, item, f + ".x", _get(file, item, w, "x")))
+        ys.append(_offset(file, item, f + ".y", _get(file, item, w, "y")))
+        zs.append(_height(file, item, f + ".z", w.get("z", 0.0)))
         ts.append(_num(file, item, f + ".stamp", w.get("stamp", 0.0)))
     return xs, ys, zs, ts
+
+
+def _offset(file: str, item: str, field: str, value: Any) -> float:
+    """x or y: metres east or north of the YAML origin, within the plausibility bound."""
+    v = _num(file, item, field, value)
+    problem = offset_problem(v)
+    if problem is not None:
+        raise ScenarioError(file, item, field, problem)
+    return v
+
+
+def _height(file: str, item: str, field: str, value: Any) -> float:
+    """z: metres above the origin; bounded as an altitude with the origin as ground."""
+    v = _num(file, item, field, value)
+    problem = altitude_problem(v, ground_amsl_m=0.0)
+    if problem is not None:
+        raise ScenarioError(file, item, field, problem)
+    return v
 
 
 def _operations(
@@ -413,10 +482,10 @@ def _geofences(
         item = f"geofences[{i}] ({gid})"
         if any(g.id == gid for g in out):
             raise ScenarioError(file, item, "id", f"duplicate geofence id {gid}")
-        lo = frame.ground_elevation_amsl_m + _num(
+        lo = frame.ground_elevation_amsl_m + _height(
             file, item, "min_altitude", raw.get("min_altitude", 0.0)
         )
-        hi = frame.ground_elevation_amsl_m + _num(
+        hi = frame.ground_elevation_amsl_m + _height(
             file, item, "max_altitude", _get(file, item, raw, "max_altitude")
         )
         if lo > hi:
@@ -443,6 +512,12 @@ def _geofences(
             cx = _num(file, item, "circle.x_center", _get(file, item, c, "x_center"))
             cy = _num(file, item, "circle.y_center", _get(file, item, c, "y_center"))
             r = _num(file, item, "circle.radius", _get(file, item, c, "radius"))
+            problem = radius_problem(r)
+            if problem is not None:
+                raise ScenarioError(file, item, "circle.radius", problem)
+            cx, cy = (
+                _offset(file, item, f"circle.{k}_center", v) for k, v in (("x", cx), ("y", cy))
+            )
             (p,) = _enu_points(frame, [cx], [cy], [0.0])
             out.append(
                 Geofence(
@@ -459,13 +534,10 @@ def _geofences(
                 _get(file, item, _get(file, item, raw, "polygon"), "waypoints"),
                 "polygon.waypoints",
             )
-            from shapely.geometry import Polygon
-
-            if len(xs) < 3 or not Polygon(list(zip(xs, ys, strict=True))).is_valid:
-                raise ScenarioError(
-                    file, item, "polygon", "needs >= 3 vertices and must not intersect itself"
-                )
             pts = _enu_points(frame, xs, ys, [0.0] * len(xs))
+            problem = polygon_problem([(p.lat_deg, p.lon_deg) for p in pts])
+            if problem is not None:
+                raise ScenarioError(file, item, "polygon", problem)
             out.append(
                 Geofence(
                     shape=GeofenceShape.POLYGON,

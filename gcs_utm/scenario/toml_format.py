@@ -1,4 +1,4 @@
-"""Loader of our TOML scenario format (documented in docs/foundation.md).
+"""Loader of our TOML scenario format (documented in docs/formats.md).
 
 Positions are given either as WGS84 (``lat_deg``/``lon_deg``) or as local ENU metres from the
 airspace origin (``east_m``/``north_m``); altitudes either ``alt_agl_m`` (converted with the
@@ -14,12 +14,12 @@ checking happens before the :class:`Scenario` is built, so nothing is ever half-
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
-from shapely.geometry import Polygon
 
 from gcs_utm.config import ConfigError, load_toml
 from gcs_utm.geo import FrameError, LocalFrame
@@ -30,6 +30,7 @@ from gcs_utm.model import (
     GeofenceId,
     GeofenceKind,
     GeofenceShape,
+    Icao24,
     LatLon,
     ModelError,
     Operation,
@@ -47,6 +48,7 @@ from gcs_utm.scenario.types import (
     ScenarioEvent,
     VehicleSetup,
 )
+from gcs_utm.validation import altitude_problem, offset_problem, polygon_problem, radius_problem
 
 T = TypeVar("T")
 
@@ -158,7 +160,9 @@ class _Table:
 
 
 class _Reader:
-    """Shared state while reading one file: the frame and the ground elevation."""
+    """Shared state while reading one file: the frame and the ground elevation. Positions
+    and altitudes are checked against the plausibility bounds of :mod:`gcs_utm.validation`
+    (the same for every input)."""
 
     def __init__(self, file: str, frame: LocalFrame, t0_s: float) -> None:
         self.file = file
@@ -181,10 +185,18 @@ class _Reader:
             if not -180.0 <= lon <= 180.0:
                 raise t.err("lon_deg", f"must be in [-180, 180], got {lon}")
             return LatLon(lat_deg=lat, lon_deg=lon)
-        east = t.req_number("east_m")
-        north = t.req_number("north_m")
+        east = self._offset(t, "east_m")
+        north = self._offset(t, "north_m")
         lat_a, lon_a, _ = self.frame.enu_to_wgs84(east, north, 0.0)
         return LatLon(lat_deg=float(lat_a), lon_deg=float(lon_a))
+
+    @staticmethod
+    def _offset(t: _Table, name: str) -> float:
+        value = t.req_number(name)
+        problem = offset_problem(value)
+        if problem is not None:
+            raise t.err(name, problem)
+        return value
 
     def altitude(self, t: _Table, stem: str = "alt", *, required: bool = True) -> float | None:
         """``<stem>_agl_m`` or ``<stem>_amsl_m`` -> metres AMSL."""
@@ -192,12 +204,21 @@ class _Reader:
         if t.has(agl_key) and t.has(amsl_key):
             raise t.err(agl_key, f"give either {agl_key} or {amsl_key}, not both")
         if t.has(agl_key):
-            return float(self.frame.agl_to_amsl(t.req_number(agl_key)))
-        if t.has(amsl_key):
-            return t.req_number(amsl_key)
-        if required:
+            ground = self.frame.ground_elevation_amsl_m
+            alt = float(self.frame.agl_to_amsl(t.req_number(agl_key)))
+            problem = altitude_problem(alt, ground_amsl_m=ground)
+            key = agl_key
+        elif t.has(amsl_key):
+            alt = t.req_number(amsl_key)
+            problem = altitude_problem(alt)
+            key = amsl_key
+        elif required:
             raise t.err(agl_key, f"missing; expected {agl_key} or {amsl_key}")
-        return None
+        else:
+            return None
+        if problem is not None:
+            raise t.err(key, problem)
+        return alt
 
     def position(self, t: _Table) -> Position:
         ll = self.latlon(t)
@@ -211,6 +232,38 @@ class _Reader:
         t.done()
         return pos
 
+    def _cylinder(self, t: _Table) -> tuple[LatLon, float]:
+        c = t.sub("cylinder", t.raw("cylinder"))
+        center = self.latlon(c)
+        radius_m = c.req_number("radius_m", positive=True)
+        problem = radius_problem(radius_m)
+        if problem is not None:
+            raise c.err("radius_m", problem)
+        c.done()
+        return center, radius_m
+
+    def _polygon(self, t: _Table) -> tuple[LatLon, ...]:
+        raw = t.array("polygon")
+        pts = []
+        for i, v in enumerate(raw):
+            vt = t.sub(f"polygon[{i}]", v)
+            pts.append(self.latlon(vt))
+            vt.done()
+        problem = polygon_problem([(p.lat_deg, p.lon_deg) for p in pts])
+        if problem is not None:
+            raise t.err("polygon", problem)
+        return tuple(pts)
+
+    def _window(self, t: _Table) -> tuple[float | None, float | None]:
+        start = t.number("start_s")
+        end = t.number("end_s")
+        if start is not None and end is not None and start > end:
+            raise t.err("start_s", f"start_s {start} is after end_s {end}")
+        return (
+            None if start is None else self.t0_s + start,
+            None if end is None else self.t0_s + end,
+        )
+
     def volume(self, t: _Table, gid: str, kind: GeofenceKind, reason: str) -> Geofence:
         """A cylinder or polygon with an altitude band and optional validity window."""
         if t.has("cylinder") == t.has("polygon"):
@@ -219,37 +272,17 @@ class _Reader:
         radius_m: float | None = None
         vertices: tuple[LatLon, ...] = ()
         if t.has("cylinder"):
-            c = t.sub("cylinder", t.raw("cylinder"))
-            center = self.latlon(c)
-            radius_m = c.req_number("radius_m", positive=True)
-            c.done()
+            center, radius_m = self._cylinder(t)
             shape = GeofenceShape.CYLINDER
         else:
-            raw = t.array("polygon")
-            if len(raw) < 3:
-                raise t.err("polygon", f"a polygon needs at least 3 vertices, got {len(raw)}")
-            pts = []
-            for i, v in enumerate(raw):
-                vt = t.sub(f"polygon[{i}]", v)
-                pts.append(self.latlon(vt))
-                vt.done()
-            vertices = tuple(pts)
-            east, north = self.frame.to_local(
-                np.array([p.lat_deg for p in pts]), np.array([p.lon_deg for p in pts])
-            )
-            poly = Polygon(list(zip(east.tolist(), north.tolist(), strict=True)))
-            if not poly.is_valid or poly.area <= 0.0:
-                raise t.err("polygon", "the polygon intersects itself or has no area")
+            vertices = self._polygon(t)
             shape = GeofenceShape.POLYGON
         lo = self.altitude(t, "min_alt")
         hi = self.altitude(t, "max_alt")
         assert lo is not None and hi is not None
         if lo > hi:
             raise t.err("min_alt", f"minimum altitude {lo} m AMSL is above maximum {hi} m AMSL")
-        start = t.number("start_s")
-        end = t.number("end_s")
-        if start is not None and end is not None and start > end:
-            raise t.err("start_s", f"start_s {start} is after end_s {end}")
+        start_t_s, end_t_s = self._window(t)
         return Geofence(
             id=GeofenceId(gid),
             shape=shape,
@@ -258,8 +291,8 @@ class _Reader:
             center=center,
             radius_m=radius_m,
             vertices=vertices,
-            start_t_s=None if start is None else self.t0_s + start,
-            end_t_s=None if end is None else self.t0_s + end,
+            start_t_s=start_t_s,
+            end_t_s=end_t_s,
             kind=kind,
             reason=reason,
             source=self.file,
@@ -304,21 +337,45 @@ def load_scenario(path: str | Path, *, t0_s: float = 0.0) -> Scenario:
 
 def _load(file: str, doc: dict[str, Any], t0_s: float) -> Scenario:
     top = _Table(file, "(top level)", doc)
-    for name in _SECTIONS:
-        top.used.add(name)
+    top.used.update(_SECTIONS)
     top.done()
+    name, description, duration_s = _header(file, doc)
+    rd = _Reader(file, _airspace(file, doc), t0_s)
+    sites = _landing_sites(rd, doc)
+    operations, vehicles = _operations(rd, doc, sites)
+    geofences = _geofences(rd, doc)
+    events = _events(rd, doc, duration_s, {o.id for o in operations})
+    return Scenario(
+        name=name,
+        description=description,
+        duration_s=duration_s,
+        t0_s=t0_s,
+        frame=rd.frame,
+        operations=tuple(operations),
+        geofences=tuple(geofences),
+        events=tuple(events),
+        vehicles=tuple(vehicles),
+        source=file,
+    )
 
-    if "scenario" not in doc:
-        raise ScenarioError(file, "scenario", "(table)", "missing [scenario] table")
-    sc = _Table(file, "scenario", doc["scenario"])
+
+def _required_table(file: str, doc: dict[str, Any], name: str) -> _Table:
+    if name not in doc:
+        raise ScenarioError(file, name, "(table)", f"missing [{name}] table")
+    return _Table(file, name, doc[name])
+
+
+def _header(file: str, doc: dict[str, Any]) -> tuple[str, str, float]:
+    sc = _required_table(file, doc, "scenario")
     name = sc.req_string("name")
     description = sc.string("description") or ""
     duration_s = sc.req_number("duration_s", positive=True)
     sc.done()
+    return name, description, duration_s
 
-    if "airspace" not in doc:
-        raise ScenarioError(file, "airspace", "(table)", "missing [airspace] table")
-    air = _Table(file, "airspace", doc["airspace"])
+
+def _airspace(file: str, doc: dict[str, Any]) -> LocalFrame:
+    air = _required_table(file, doc, "airspace")
     lat0 = air.req_number("origin_lat_deg")
     lon0 = air.req_number("origin_lon_deg")
     if not -90.0 <= lat0 <= 90.0:
@@ -326,246 +383,322 @@ def _load(file: str, doc: dict[str, Any], t0_s: float) -> Scenario:
     if not -180.0 <= lon0 <= 180.0:
         raise air.err("origin_lon_deg", f"must be in [-180, 180], got {lon0}")
     ground = air.req_number("ground_elevation_amsl_m")
+    problem = altitude_problem(ground)
+    if problem is not None:
+        raise air.err("ground_elevation_amsl_m", problem)
     air.done()
     try:
-        frame = LocalFrame(lat0, lon0, ground)
+        return LocalFrame(lat0, lon0, ground)
     except FrameError as exc:
         raise ScenarioError(file, "airspace", "origin_lat_deg", str(exc)) from exc
-    rd = _Reader(file, frame, t0_s)
 
-    # Shared landing sites, referenced by id from operations.
+
+def _items(rd: _Reader, doc: dict[str, Any], section: str, key: str) -> Iterator[_Table]:
+    """The tables of ``[[section]]``, each named by its index and then by its ``key``."""
+    for i, raw in enumerate(_list_of_tables(rd.file, doc, section)):
+        t = _Table(rd.file, f"{section}[{i}]", raw)
+        t.item = f"{section}[{i}] ({t.req_string(key)})"
+        yield t
+
+
+def _landing_sites(rd: _Reader, doc: dict[str, Any]) -> dict[str, Position]:
+    """Shared landing sites, referenced by id from operations."""
     sites: dict[str, Position] = {}
-    for i, raw in enumerate(_list_of_tables(file, doc, "landing_sites")):
-        t = _Table(file, f"landing_sites[{i}]", raw)
+    for t in _items(rd, doc, "landing_sites", "id"):
         sid = t.req_string("id")
-        t.item = f"landing_sites[{i}] ({sid})"
         if sid in sites:
             raise t.err("id", f"duplicate landing site id {sid!r}")
         sites[sid] = rd.position(t)
         t.done()
+    return sites
 
+
+class _Identities:
+    """The ids, ICAO addresses and system ids seen so far: each may be used once."""
+
+    def __init__(self) -> None:
+        self.ops: set[str] = set()
+        self.icao: dict[str, str] = {}
+        self.sys: dict[int, str] = {}
+
+    def operation(self, t: _Table) -> str:
+        op_id = t.req_string("id")
+        if op_id in self.ops:
+            raise t.err("id", f"duplicate operation id {op_id!r}")
+        self.ops.add(op_id)
+        return op_id
+
+    def icao24(self, t: _Table, op_id: str) -> Icao24 | None:
+        text = t.string("icao24")
+        if text is None:
+            return None
+        try:
+            icao = normalise_icao24(text)
+        except ModelError as exc:
+            raise t.err("icao24", exc.message) from None
+        if icao in self.icao:
+            raise t.err("icao24", f"{icao} is also used by {self.icao[icao]}")
+        self.icao[icao] = op_id
+        return icao
+
+    def sys_id(self, t: _Table, op_id: str) -> SysId | None:
+        sys_id = t.integer("sys_id")
+        if sys_id is None:
+            return None
+        if not 1 <= sys_id <= 255:
+            raise t.err("sys_id", f"must be in 1..255, got {sys_id}")
+        if sys_id in self.sys:
+            raise t.err("sys_id", f"{sys_id} is also used by {self.sys[sys_id]}")
+        self.sys[sys_id] = op_id
+        return SysId(sys_id)
+
+
+@dataclass(frozen=True, slots=True)
+class _Performance:
+    cruise_mps: float
+    geometry_m: float
+    volume_m: float
+    climb_mps: float
+    endurance_s: float | None
+    delay_s: float
+
+
+def _performance(t: _Table) -> _Performance:
+    cruise = t.req_number("cruise_speed_mps", positive=True)
+    geometry = t.req_number("flight_geometry_m", positive=True)
+    volume = t.req_number("operational_volume_m", positive=True)
+    if volume < geometry:
+        raise t.err("operational_volume_m", f"{volume} is below flight_geometry_m {geometry}")
+    climb = t.number("max_climb_rate_mps", positive=True) or 3.0
+    endurance = t.number("endurance_s", positive=True)
+    delay = t.number("start_delay_s") or 0.0
+    if delay < 0.0:
+        raise t.err("start_delay_s", f"must be >= 0, got {delay}")
+    return _Performance(cruise, geometry, volume, climb, endurance, delay)
+
+
+def _operations(
+    rd: _Reader, doc: dict[str, Any], sites: dict[str, Position]
+) -> tuple[list[Operation], list[VehicleSetup]]:
     operations: list[Operation] = []
     vehicles: list[VehicleSetup] = []
-    seen_sys: dict[int, str] = {}
-    seen_icao: dict[str, str] = {}
-    for i, raw in enumerate(_list_of_tables(file, doc, "operations")):
-        t = _Table(file, f"operations[{i}]", raw)
-        op_id = t.req_string("id")
-        t.item = f"operations[{i}] ({op_id})"
-        if any(o.id == op_id for o in operations):
-            raise t.err("id", f"duplicate operation id {op_id!r}")
-        icao_text = t.string("icao24")
-        icao = None
-        if icao_text is not None:
-            try:
-                icao = normalise_icao24(icao_text)
-            except ModelError as exc:
-                raise t.err("icao24", exc.message) from None
-            if icao in seen_icao:
-                raise t.err("icao24", f"{icao} is also used by {seen_icao[icao]}")
-            seen_icao[icao] = op_id
-        sys_id = t.integer("sys_id")
-        if sys_id is not None:
-            if not 1 <= sys_id <= 255:
-                raise t.err("sys_id", f"must be in 1..255, got {sys_id}")
-            if sys_id in seen_sys:
-                raise t.err("sys_id", f"{sys_id} is also used by {seen_sys[sys_id]}")
-            seen_sys[sys_id] = op_id
-        priority = t.integer("priority", required=True)
-        assert priority is not None
-        conops = t.string("conops") or ""
-        vehicle = t.choice("vehicle", _VEHICLES, VehicleKind.MULTIROTOR)
-        autopilot = t.choice("autopilot", _AUTOPILOTS, Autopilot.PX4)
-        cruise = t.req_number("cruise_speed_mps", positive=True)
-        geometry = t.req_number("flight_geometry_m", positive=True)
-        volume = t.req_number("operational_volume_m", positive=True)
-        if volume < geometry:
-            raise t.err("operational_volume_m", f"{volume} is below flight_geometry_m {geometry}")
-        climb = t.number("max_climb_rate_mps", positive=True) or 3.0
-        endurance = t.number("endurance_s", positive=True)
-        delay = t.number("start_delay_s") or 0.0
-        if delay < 0.0:
-            raise t.err("start_delay_s", f"must be >= 0, got {delay}")
-        operator = t.string("operator") or "default"
-        start_s = t.number("start_s")
+    ids = _Identities()
+    for t in _items(rd, doc, "operations", "id"):
+        op, vehicle = _operation(rd, t, sites, ids)
+        operations.append(op)
+        vehicles.append(vehicle)
+    return operations, vehicles
 
-        wps_raw = t.array("waypoints")
-        if not wps_raw:
-            raise t.err("waypoints", "an operation needs at least one waypoint")
-        waypoints: list[Waypoint4D] = []
-        prev: Position | None = None
-        prev_t = 0.0
-        for j, wraw in enumerate(wps_raw):
-            w = t.sub(f"waypoints[{j}]", wraw)
-            pos = rd.position(w)
-            t_rel = w.number("t_s")
-            speed = w.number("speed_mps", positive=True)
-            w.done()
-            if j == 0:
-                if t_rel is not None and start_s is not None:
-                    raise w.err("t_s", "give either the operation's start_s or waypoints[0].t_s")
-                if speed is not None:
-                    raise w.err("speed_mps", "the first waypoint has no segment to fly")
-                t_rel = t_rel if t_rel is not None else (start_s or 0.0)
-            else:
-                assert prev is not None
-                if t_rel is None:
-                    t_rel = prev_t + _segment_m(frame, prev, pos) / (speed or cruise)
-                elif t_rel < prev_t:
-                    raise w.err("t_s", f"time goes backwards ({t_rel} < {prev_t})")
-            if t_rel < 0.0:
-                raise w.err("t_s", f"must be >= 0 (seconds after scenario start), got {t_rel}")
-            waypoints.append(
-                Waypoint4D(
-                    lat_deg=pos.lat_deg,
-                    lon_deg=pos.lon_deg,
-                    alt_amsl_m=pos.alt_amsl_m,
-                    t_s=t0_s + t_rel,
-                )
-            )
-            prev, prev_t = pos, t_rel
-        plan = FlightPlan(
-            operation_id=OperationId(op_id),
-            version=1,
-            waypoints=tuple(waypoints),
-            created_t_s=t0_s,
-            reason="filed",
+
+def _operation(
+    rd: _Reader, t: _Table, sites: dict[str, Position], ids: _Identities
+) -> tuple[Operation, VehicleSetup]:
+    op_id = ids.operation(t)
+    icao = ids.icao24(t, op_id)
+    sys_id = ids.sys_id(t, op_id)
+    priority = t.integer("priority", required=True)
+    assert priority is not None
+    conops = t.string("conops") or ""
+    vehicle = t.choice("vehicle", _VEHICLES, VehicleKind.MULTIROTOR)
+    autopilot = t.choice("autopilot", _AUTOPILOTS, Autopilot.PX4)
+    perf = _performance(t)
+    operator = t.string("operator") or "default"
+    plan = FlightPlan(
+        operation_id=OperationId(op_id),
+        version=1,
+        waypoints=_waypoints(rd, t, perf.cruise_mps),
+        created_t_s=rd.t0_s,
+        reason="filed",
+    )
+    if perf.endurance_s is not None and plan.end_t_s - plan.start_t_s > perf.endurance_s:
+        raise t.err(
+            "endurance_s",
+            f"the plan lasts {plan.end_t_s - plan.start_t_s:.0f} s, longer than "
+            f"{perf.endurance_s} s",
         )
-        if endurance is not None and plan.end_t_s - plan.start_t_s > endurance:
-            raise t.err(
-                "endurance_s",
-                f"the plan lasts {plan.end_t_s - plan.start_t_s:.0f} s, longer than {endurance} s",
+    home = _home(rd, t, plan)
+    op_sites = _operation_sites(rd, t, sites)
+    t.done()
+    operation = Operation(
+        id=OperationId(op_id),
+        icao24=icao,
+        sys_id=sys_id,
+        priority=priority,
+        plan=plan,
+        vehicle_kind=vehicle,
+        cruise_speed_mps=perf.cruise_mps,
+        flight_geometry_m=perf.geometry_m,
+        operational_volume_m=perf.volume_m,
+        conops=conops,
+        home=home,
+        landing_sites=op_sites,
+        autopilot=autopilot,
+        max_climb_rate_mps=perf.climb_mps,
+        endurance_s=perf.endurance_s,
+        operator=operator,
+    )
+    setup = VehicleSetup(
+        operation_id=operation.id,
+        sys_id=sys_id,
+        icao24=icao,
+        autopilot=autopilot,
+        vehicle_kind=vehicle,
+        home=home,
+        plan=plan,
+        cruise_speed_mps=perf.cruise_mps,
+        max_climb_rate_mps=perf.climb_mps,
+        start_delay_s=perf.delay_s,
+        endurance_s=perf.endurance_s,
+    )
+    return operation, setup
+
+
+def _waypoints(rd: _Reader, t: _Table, cruise_mps: float) -> tuple[Waypoint4D, ...]:
+    """The filed 4D plan: given times, or times from segment lengths and speeds."""
+    start_s = t.number("start_s")
+    wps_raw = t.array("waypoints")
+    if not wps_raw:
+        raise t.err("waypoints", "an operation needs at least one waypoint")
+    waypoints: list[Waypoint4D] = []
+    prev: Position | None = None
+    prev_t = 0.0
+    for j, wraw in enumerate(wps_raw):
+        w = t.sub(f"waypoints[{j}]", wraw)
+        pos = rd.position(w)
+        t_rel = w.number("t_s")
+        speed = w.number("speed_mps", positive=True)
+        w.done()
+        if prev is None:
+            t_rel = _first_time(w, t_rel, start_s, speed)
+        elif t_rel is None:
+            t_rel = prev_t + _segment_m(rd.frame, prev, pos) / (speed or cruise_mps)
+        elif t_rel < prev_t:
+            raise w.err("t_s", f"time goes backwards ({t_rel} < {prev_t})")
+        if t_rel < 0.0:
+            raise w.err("t_s", f"must be >= 0 (seconds after scenario start), got {t_rel}")
+        waypoints.append(
+            Waypoint4D(
+                lat_deg=pos.lat_deg,
+                lon_deg=pos.lon_deg,
+                alt_amsl_m=pos.alt_amsl_m,
+                t_s=rd.t0_s + t_rel,
             )
-        if t.has("home"):
-            home = rd.point_table(t, "home", t.raw("home"))
+        )
+        prev, prev_t = pos, t_rel
+    return tuple(waypoints)
+
+
+def _first_time(
+    w: _Table, t_rel: float | None, start_s: float | None, speed: float | None
+) -> float:
+    if t_rel is not None and start_s is not None:
+        raise w.err("t_s", "give either the operation's start_s or waypoints[0].t_s")
+    if speed is not None:
+        raise w.err("speed_mps", "the first waypoint has no segment to fly")
+    return t_rel if t_rel is not None else (start_s or 0.0)
+
+
+def _home(rd: _Reader, t: _Table, plan: FlightPlan) -> Position:
+    if t.has("home"):
+        return rd.point_table(t, "home", t.raw("home"))
+    # No home given: take off from the ground under the first waypoint.
+    first = plan.waypoints[0]
+    return Position(
+        lat_deg=first.lat_deg,
+        lon_deg=first.lon_deg,
+        alt_amsl_m=rd.frame.ground_elevation_amsl_m,
+    )
+
+
+def _operation_sites(rd: _Reader, t: _Table, sites: dict[str, Position]) -> tuple[Position, ...]:
+    out: list[Position] = []
+    for k, s in enumerate(t.array("landing_sites")):
+        if not isinstance(s, str):
+            out.append(rd.point_table(t, f"landing_sites[{k}]", s))
+        elif s in sites:
+            out.append(sites[s])
         else:
-            # No home given: take off from the ground under the first waypoint.
-            home = Position(
-                lat_deg=waypoints[0].lat_deg,
-                lon_deg=waypoints[0].lon_deg,
-                alt_amsl_m=frame.ground_elevation_amsl_m,
+            raise t.err(
+                f"landing_sites[{k}]",
+                f"unknown landing site {s!r}; known: {', '.join(sorted(sites)) or 'none'}",
             )
-        op_sites: list[Position] = []
-        for k, s in enumerate(t.array("landing_sites")):
-            if isinstance(s, str):
-                if s not in sites:
-                    raise t.err(
-                        f"landing_sites[{k}]",
-                        f"unknown landing site {s!r}; known: {', '.join(sorted(sites)) or 'none'}",
-                    )
-                op_sites.append(sites[s])
-            else:
-                op_sites.append(rd.point_table(t, f"landing_sites[{k}]", s))
-        t.done()
-        operation = Operation(
-            id=OperationId(op_id),
-            icao24=icao,
-            sys_id=None if sys_id is None else SysId(sys_id),
-            priority=priority,
-            plan=plan,
-            vehicle_kind=vehicle,
-            cruise_speed_mps=cruise,
-            flight_geometry_m=geometry,
-            operational_volume_m=volume,
-            conops=conops,
-            home=home,
-            landing_sites=tuple(op_sites),
-            autopilot=autopilot,
-            max_climb_rate_mps=climb,
-            endurance_s=endurance,
-            operator=operator,
-        )
-        operations.append(operation)
-        vehicles.append(
-            VehicleSetup(
-                operation_id=operation.id,
-                sys_id=operation.sys_id,
-                icao24=icao,
-                autopilot=autopilot,
-                vehicle_kind=vehicle,
-                home=home,
-                plan=plan,
-                cruise_speed_mps=cruise,
-                max_climb_rate_mps=climb,
-                start_delay_s=delay,
-                endurance_s=endurance,
-            )
-        )
+    return tuple(out)
 
+
+def _geofences(rd: _Reader, doc: dict[str, Any]) -> list[Geofence]:
     geofences: list[Geofence] = []
-    for i, raw in enumerate(_list_of_tables(file, doc, "geofences")):
-        t = _Table(file, f"geofences[{i}]", raw)
+    for t in _items(rd, doc, "geofences", "id"):
         gid = t.req_string("id")
-        t.item = f"geofences[{i}] ({gid})"
         if any(g.id == gid for g in geofences):
             raise t.err("id", f"duplicate geofence id {gid!r}")
         kind = t.choice("kind", _GEOFENCE_KINDS, GeofenceKind.STATIC)
         reason = t.string("reason") or ""
         geofences.append(rd.volume(t, gid, kind, reason))
         t.done()
+    return geofences
 
-    op_ids = {o.id for o in operations}
-    events: list[ScenarioEvent] = []
-    for i, raw in enumerate(_list_of_tables(file, doc, "events")):
-        t = _Table(file, f"events[{i}]", raw)
-        kind_text = t.req_string("kind")
-        t.item = f"events[{i}] ({kind_text})"
-        if kind_text not in _EVENT_KINDS:
-            raise t.err("kind", f"expected one of {', '.join(map(repr, _EVENT_KINDS))}")
-        ev_kind = _EVENT_KINDS[kind_text]
-        at_s = t.req_number("at_s")
-        if not 0.0 <= at_s <= duration_s:
-            raise t.err("at_s", f"must be within the scenario [0, {duration_s}] s, got {at_s}")
-        uas = t.string("uas")
-        if uas is not None and uas not in op_ids:
-            raise t.err("uas", f"unknown uas {uas!r}; operations are {', '.join(sorted(op_ids))}")
-        if uas is None and ev_kind is not EventKind.ALERT_AREA:
-            raise t.err("uas", f"a {kind_text} event needs the uas it hits")
-        dur = t.number("duration_s", positive=True)
-        value = t.number("value")
-        reason = t.string("reason") or ""
-        area: Geofence | None = None
-        if t.has("area"):
-            a = t.sub("area", t.raw("area"))
-            a_id = a.string("id") or f"alert-{i}"
-            a_reason = a.string("reason") or reason
-            if not a.has("start_s"):
-                # An alert's area is valid from the alert on unless it says otherwise.
-                a.data = {**a.data, "start_s": at_s}
-                if dur is not None and not a.has("end_s"):
-                    a.data["end_s"] = at_s + dur
-            area = rd.volume(a, a_id, GeofenceKind.DYNAMIC, a_reason)
-            a.done()
-        if ev_kind is EventKind.ALERT_AREA and area is None:
-            raise t.err("area", "an alert_area event needs an area (cylinder or polygon)")
-        if ev_kind is not EventKind.ALERT_AREA and area is not None:
-            raise t.err("area", f"only alert_area events take an area, not {kind_text}")
-        t.done()
-        events.append(
-            ScenarioEvent(
-                at_s=at_s,
-                t_s=t0_s + at_s,
-                kind=ev_kind,
-                uas=None if uas is None else OperationId(uas),
-                duration_s=dur,
-                value=value,
-                area=area,
-                reason=reason,
-            )
-        )
+
+def _events(
+    rd: _Reader, doc: dict[str, Any], duration_s: float, op_ids: set[OperationId]
+) -> list[ScenarioEvent]:
+    events = [
+        _event(rd, i, t, duration_s, op_ids)
+        for i, t in enumerate(_items(rd, doc, "events", "kind"))
+    ]
     events.sort(key=lambda e: e.at_s)
-    return Scenario(
-        name=name,
-        description=description,
-        duration_s=duration_s,
-        t0_s=t0_s,
-        frame=frame,
-        operations=tuple(operations),
-        geofences=tuple(geofences),
-        events=tuple(events),
-        vehicles=tuple(vehicles),
-        source=file,
+    return events
+
+
+def _event(
+    rd: _Reader, i: int, t: _Table, duration_s: float, op_ids: set[OperationId]
+) -> ScenarioEvent:
+    kind_text = t.req_string("kind")
+    if kind_text not in _EVENT_KINDS:
+        raise t.err("kind", f"expected one of {', '.join(map(repr, _EVENT_KINDS))}")
+    ev_kind = _EVENT_KINDS[kind_text]
+    at_s = t.req_number("at_s")
+    if not 0.0 <= at_s <= duration_s:
+        raise t.err("at_s", f"must be within the scenario [0, {duration_s}] s, got {at_s}")
+    uas = t.string("uas")
+    if uas is not None and uas not in op_ids:
+        raise t.err("uas", f"unknown uas {uas!r}; operations are {', '.join(sorted(op_ids))}")
+    if uas is None and ev_kind is not EventKind.ALERT_AREA:
+        raise t.err("uas", f"a {kind_text} event needs the uas it hits")
+    dur = t.number("duration_s", positive=True)
+    reason = t.string("reason") or ""
+    area = _event_area(rd, i, t, at_s=at_s, dur=dur, reason=reason) if t.has("area") else None
+    if (ev_kind is EventKind.ALERT_AREA) != (area is not None):
+        if area is None:
+            raise t.err("area", "an alert_area event needs an area (cylinder or polygon)")
+        raise t.err("area", f"only alert_area events take an area, not {kind_text}")
+    event = ScenarioEvent(
+        at_s=at_s,
+        t_s=rd.t0_s + at_s,
+        kind=ev_kind,
+        uas=None if uas is None else OperationId(uas),
+        duration_s=dur,
+        value=t.number("value"),
+        area=area,
+        reason=reason,
     )
+    t.done()
+    return event
+
+
+def _event_area(
+    rd: _Reader, i: int, t: _Table, *, at_s: float, dur: float | None, reason: str
+) -> Geofence:
+    a = t.sub("area", t.raw("area"))
+    a_id = a.string("id") or f"alert-{i}"
+    a_reason = a.string("reason") or reason
+    if not a.has("start_s"):
+        # An alert's area is valid from the alert on unless it says otherwise.
+        a.data = {**a.data, "start_s": at_s}
+        if dur is not None and not a.has("end_s"):
+            a.data["end_s"] = at_s + dur
+    area = rd.volume(a, a_id, GeofenceKind.DYNAMIC, a_reason)
+    a.done()
+    return area
 
 
 def _list_of_tables(file: str, doc: dict[str, Any], name: str) -> list[Any]:

@@ -35,7 +35,8 @@ class ScenarioError(ValueError):
     ``field`` (e.g. ``waypoints[3].t_s``) and what is wrong."""
 
     def __init__(self, file: str, item: str, field: str, message: str) -> None:
-        super().__init__(f"{file}: {item}: {field}: {message}")
+        where = item if field == item else f"{item}: {field}"
+        super().__init__(f"{file}: {where}: {message}")
         self.file = file
         self.item = item
         self.field = field

@@ -451,8 +451,11 @@ class Usm:
         config: UsmConfig | None = None,
         record: Callable[[object], None] | None = None,
         position_lane: bool = True,
+        id_prefix: str = "",
     ) -> None:
         self.airspace = airspace
+        # prefixes hazard threat ids (the store life's ``E<epoch>-``): unique across restarts
+        self.id_prefix = id_prefix
         self.clock = clock
         self.config = config or UsmConfig()
         self._record = record or (lambda _obj: None)
@@ -739,7 +742,7 @@ class Usm:
             return
         self._hazard_seen[key] = h.t_s
         threat = Threat(
-            id=ThreatId(f"{h.kind.value.lower()}-{next(self._hazard_seq)}"),
+            id=ThreatId(f"{self.id_prefix}{h.kind.value.lower()}-{next(self._hazard_seq)}"),
             kind=h.kind,
             uas_ids=(op_id,) if op_id is not None else (),
             detected_at_s=h.t_s,

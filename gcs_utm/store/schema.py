@@ -82,4 +82,17 @@ MIGRATIONS: tuple[str, ...] = (
     );
     CREATE INDEX audit_by_time ON audit (t_s);
     """,
+    # 2: lives. Every process that writes decisions begins a life (one row here, a new epoch);
+    # threat and recommendation rows carry the epoch that wrote them, and a life never
+    # updates a row of another (see Store.save_threat). Rows written before this migration get
+    # epoch 0, a life no process has: they are never overwritten either.
+    """
+    CREATE TABLE lives (
+        epoch INTEGER PRIMARY KEY AUTOINCREMENT,
+        started_unix_s REAL NOT NULL,
+        pid INTEGER NOT NULL
+    );
+    ALTER TABLE threats ADD COLUMN epoch INTEGER NOT NULL DEFAULT 0;
+    ALTER TABLE recommendations ADD COLUMN epoch INTEGER NOT NULL DEFAULT 0;
+    """,
 )

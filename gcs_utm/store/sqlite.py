@@ -18,7 +18,9 @@ import contextlib
 import dataclasses
 import json
 import operator
+import os
 import sqlite3
+import time
 import types
 import typing
 from collections.abc import Iterator, Sequence
@@ -114,6 +116,7 @@ class Store:
         self._conn = conn
         self._max_vars = conn.getlimit(sqlite3.SQLITE_LIMIT_VARIABLE_NUMBER)
         self._depth = 0
+        self._epoch: int | None = None
         conn.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
         if not readonly:
             mode = conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
@@ -147,6 +150,36 @@ class Store:
                 f"BEGIN IMMEDIATE; {MIGRATIONS[number - 1]};"
                 f" PRAGMA user_version = {number}; COMMIT;"
             )
+
+    def begin_life(self, started_unix_s: float | None = None) -> int:
+        """Begin a new life of this store (one process writing decisions) and return its
+        epoch: 1, 2, 3, ... never reused, because SQLite's AUTOINCREMENT never hands out a
+        number twice even after the row is gone. Ids made in this life carry the epoch (see
+        :func:`gcs_utm.store.ids.life_prefix`), and rows written in it are tagged with it."""
+        if self.readonly:
+            raise StoreError(f"{self.path}: a read-only store has no life")
+        with self.transaction() as c:
+            cur = c.execute(
+                "INSERT INTO lives (started_unix_s, pid) VALUES (?, ?)",
+                (time.time() if started_unix_s is None else started_unix_s, os.getpid()),
+            )
+            self._epoch = int(cur.lastrowid or 0)
+        return self._epoch
+
+    @property
+    def epoch(self) -> int:
+        """The epoch of this store's life; the first write of a threat or recommendation
+        begins one when the owner has not."""
+        if self._epoch is None:
+            return self.begin_life()
+        return self._epoch
+
+    def lives(self) -> list[tuple[int, float, int]]:
+        """(epoch, started_unix_s, pid) of every life, oldest first."""
+        return [
+            (int(e), float(t), int(p))
+            for e, t, p in self._rows("SELECT epoch, started_unix_s, pid FROM lives ORDER BY epoch")
+        ]
 
     def close(self) -> None:
         self._conn.close()
@@ -339,19 +372,27 @@ class Store:
 
     # ---- threats and recommendations ----------------------------------------------------
     def save_threat(self, threat: Threat) -> None:
+        """Insert a threat or update it (its life cycle: OPEN, UPDATED, CLOSED). Only the life
+        that wrote a row may update it: a row of an earlier life under the same id raises
+        :class:`StoreError` and stays as it was."""
+        epoch = self.epoch
         with self.transaction() as c:
-            c.execute(
-                "INSERT INTO threats (id, kind, status, detected_at_s, doc) VALUES (?, ?, ?, ?, ?) "
+            cur = c.execute(
+                "INSERT INTO threats (id, kind, status, detected_at_s, doc, epoch) "
+                "VALUES (?, ?, ?, ?, ?, ?) "
                 "ON CONFLICT(id) DO UPDATE SET kind=excluded.kind, status=excluded.status, "
-                "doc=excluded.doc",
+                "doc=excluded.doc WHERE threats.epoch = excluded.epoch",
                 (
                     threat.id,
                     threat.kind.value,
                     threat.status.value,
                     threat.detected_at_s,
                     dumps(threat),
+                    epoch,
                 ),
             )
+            if cur.rowcount == 0:
+                raise StoreError(self._foreign("threat", threat.id, c, "threats", (threat.id,)))
 
     def load_threats(self, *, status: ThreatStatus | None = None) -> list[Threat]:
         if status is None:
@@ -363,11 +404,16 @@ class Store:
         return [self._load(Threat, d) for (d,) in rows]
 
     def save_recommendation(self, rec: Recommendation) -> None:
-        """Insert a version or update its state (the lifecycle of one id+version)."""
+        """Insert a version or update its state (the lifecycle of one id+version). Only the
+        life that wrote a version may update it (see :meth:`save_threat`)."""
+        epoch = self.epoch
         with self.transaction() as c:
-            c.execute(
-                "INSERT INTO recommendations VALUES (?, ?, ?, ?, ?, ?, ?) "
-                "ON CONFLICT(id, version) DO UPDATE SET state=excluded.state, doc=excluded.doc",
+            cur = c.execute(
+                "INSERT INTO recommendations "
+                "(id, version, state, threat_id, operation_id, created_t_s, doc, epoch) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?) "
+                "ON CONFLICT(id, version) DO UPDATE SET state=excluded.state, doc=excluded.doc "
+                "WHERE recommendations.epoch = excluded.epoch",
                 (
                     rec.id,
                     rec.version,
@@ -376,8 +422,31 @@ class Store:
                     rec.operation_id,
                     rec.created_t_s,
                     dumps(rec),
+                    epoch,
                 ),
             )
+            if cur.rowcount == 0:
+                raise StoreError(
+                    self._foreign(
+                        f"recommendation version {rec.version} of",
+                        rec.id,
+                        c,
+                        "recommendations",
+                        (rec.id, rec.version),
+                    )
+                )
+
+    def _foreign(
+        self, what: str, row_id: str, c: sqlite3.Connection, table: str, key: tuple[Any, ...]
+    ) -> str:
+        where = "id=?" if table == "threats" else "id=? AND version=?"
+        row = c.execute(f"SELECT epoch FROM {table} WHERE {where}", key).fetchone()
+        owner = "unknown" if row is None else str(row[0])
+        return (
+            f"{self.path}: {what} {row_id!r} was written by life {owner}, this is life "
+            f"{self.epoch}: rows of another life are never overwritten (an id reused across "
+            "a restart)"
+        )
 
     def load_recommendations(
         self, *, state: RecommendationState | None = None, latest_only: bool = True
@@ -473,6 +542,7 @@ _TABLES = frozenset(
         "recommendations",
         "answers",
         "audit",
+        "lives",
     }
 )
 

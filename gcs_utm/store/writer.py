@@ -61,6 +61,9 @@ class StoreWriter:
         self._closed = False
         self.dropped_tracks = 0
         self.committed_batches = 0
+        # The life this writer begins when it opens the store (see Store.begin_life): the
+        # service prefixes its ids with it.
+        self.epoch = 0
         self._thread = threading.Thread(target=self._run, name="store-writer", daemon=True)
         self._thread.start()
         self._ready.result()  # raises if the file cannot be opened or migrated
@@ -149,6 +152,12 @@ class StoreWriter:
                 busy_timeout_s=self.config.busy_timeout_s,
             )
         except BaseException as exc:
+            self._ready.set_exception(exc)
+            return
+        try:
+            self.epoch = store.begin_life()
+        except BaseException as exc:
+            store.close()
             self._ready.set_exception(exc)
             return
         self._ready.set_result(None)

@@ -15,6 +15,7 @@ and fresh symlinks; nothing in ``../shared`` is written.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import shutil
 import signal
@@ -33,6 +34,9 @@ ARDUPILOT_VEHICLES = {
     "copter": ("arducopter", "+", "copter.parm"),
     "plane": ("arduplane", "plane", "plane.parm"),
 }
+
+SITL_ROOT = Path(os.environ.get("GCS_UTM_SITL_ROOT", "/var/tmp"))
+_serial = itertools.count()
 
 # PX4 SIH's default start point (SIH_LOC_LAT0/LON0/H0 in v1.15).
 PX4_DEFAULT_HOME = (45.4671160, -73.7578370, 32.34)
@@ -93,6 +97,8 @@ class SitlProcess:
     workdir: Path
     proc: subprocess.Popen[bytes]
     log_paths: list[Path] = field(default_factory=list)
+    owned_dir: Path | None = None  # removed by stop() (after its logs are kept)
+    saved_logs: str = ""
 
     @property
     def alive(self) -> bool:
@@ -100,6 +106,8 @@ class SitlProcess:
 
     def log_tail(self, n_chars: int = 3000) -> str:
         """The end of its logs, for failure messages."""
+        if self.saved_logs:
+            return self.saved_logs
         parts = []
         for p in self.log_paths:
             with contextlib.suppress(OSError):
@@ -117,6 +125,9 @@ class SitlProcess:
                 with contextlib.suppress(ProcessLookupError):
                     os.killpg(self.proc.pid, signal.SIGKILL)
                 self.proc.wait(timeout=timeout_s)
+        if self.owned_dir is not None and self.owned_dir.exists():
+            self.saved_logs = self.log_tail()
+            shutil.rmtree(self.owned_dir, ignore_errors=True)
 
 
 def start_px4(
@@ -134,7 +145,11 @@ def start_px4(
     if airframe not in PX4_AIRFRAMES:
         raise ValueError(f"PX4 airframe must be one of {sorted(PX4_AIRFRAMES)}, got {airframe!r}")
     autostart, model = PX4_AIRFRAMES[airframe]
-    wd = workdir or root / f"px4-{instance}"
+    private_tmp = _private_tmp_works()
+    owned = None
+    if workdir is None and private_tmp:
+        owned = SITL_ROOT / f"gcs-utm-px4-{os.getpid()}-{next(_serial)}"
+    wd = workdir or owned or root / f"px4-{instance}"
     wd.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ)
     env.update(
@@ -147,10 +162,13 @@ def start_px4(
         env["PX4_HOME_LAT"] = str(round(home[0] * 1e7))
         env["PX4_HOME_LON"] = str(round(home[1] * 1e7))
     out, err = wd / "out.log", wd / "err.log"
-    binary = px4_bin_dir(root) / "px4"
+    binary = px4_bin_dir(owned or root) / "px4"
+    argv = [str(binary), "-i", str(instance), "-d", str(PX4_DIR / "etc")]
+    if private_tmp:
+        argv = [*_PRIVATE_TMP, *argv]
     with out.open("wb") as o, err.open("wb") as e:
         proc = subprocess.Popen(
-            [str(binary), "-i", str(instance), "-d", str(PX4_DIR / "etc")],
+            argv,
             cwd=wd,
             env=env,
             stdin=subprocess.DEVNULL,
@@ -158,7 +176,23 @@ def start_px4(
             stderr=e,
             start_new_session=True,
         )
-    return SitlProcess("px4", instance, instance + 1, wd, proc, [out, err])
+    return SitlProcess("px4", instance, instance + 1, wd, proc, [out, err], owned)
+
+
+# Runs the command with a fresh tmpfs on /tmp in a private mount namespace.
+_PRIVATE_TMP = [
+    "unshare", "--mount", "--propagation", "private",
+    "sh", "-c", 'mount -t tmpfs gcs-utm-px4-tmp /tmp && exec "$0" "$@"',
+]  # fmt: skip
+
+
+def _private_tmp_works() -> bool:
+    """Whether PX4 can get its own /tmp here (root, or user namespaces, and unshare)."""
+    try:
+        done = subprocess.run([*_PRIVATE_TMP, "true"], capture_output=True, timeout=10, check=False)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return done.returncode == 0
 
 
 def start_ardupilot(

@@ -386,7 +386,7 @@ def test_delay_search_equals_interpolating_every_delayed_position(
     """The delay search gathers the plan sampled once on its grid when every delayed time is
     a grid time (checked value by value), and interpolates otherwise: the smallest clear
     delay is the same as interpolating every delayed position."""
-    from gcs_utm.core.deconfliction.td import _Screen
+    from gcs_utm.core.deconfliction.timing import Screen, first_clear_delay
 
     td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(delay_step_s=step), MonitoringConfig())
     now = sc.T0_S + now_frac
@@ -402,8 +402,14 @@ def test_delay_search_equals_interpolating_every_delayed_position(
     )
     grid_t = np.arange(now, now + 200.0 / 0.6 + 1.0, 1.0)
     q, ok = other.sample(grid_t)
-    screen = _Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, 50.0, 20.0)
-    got = td._first_clear_delay(lp, now, grid_t, [screen])
+    screen = Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, 50.0, 20.0)
+    cfg = td.config
+    delays = cfg.delay_step_s * np.arange(
+        1, int(cfg.max_delay_s // cfg.delay_step_s) + 1, dtype=np.float64
+    )
+    got = first_clear_delay(
+        lp, now, grid_t, [screen], delays, cfg.separation_margin_fraction, False
+    )
     assert got == _oracle_first_clear_delay(td, lp, now, grid_t, [other], 50.0, 20.0)
 
 
@@ -435,10 +441,13 @@ def _oracle_deformed(
     axis: str,
     sign: int,
 ) -> LocalPlan:
-    """TD's deformation as it was, on (N, 3) rows."""
+    """TD's deformation on (N, 3) rows: horizontal speed up to the cruise speed (or the
+    filed pace) times the factor and within the envelope's maximum, climbs at the envelope's
+    climb rate and descents at its descent rate (or the filed pace where steeper)."""
     from gcs_utm.core.deconfliction import cords as cd
 
-    cruise, climb_rate = op.cruise_speed_mps, op.max_climb_rate_mps  # type: ignore[attr-defined]
+    cruise = op.cruise_speed_mps  # type: ignore[attr-defined]
+    env = op.performance()  # type: ignore[attr-defined]
     d1 = d[1:] - d[:-1]
     kinks = grid[1:-1][np.abs(d1[1:] - d1[:-1]) > 1e-9]
     inside = (kinks >= lp.t[0]) & (kinks <= lp.t[-1])
@@ -454,12 +463,13 @@ def _oracle_deformed(
     ob = base[1:] - base[:-1]
     safe_dt = np.maximum(dt, 1e-9)
     f = cfg.max_speed_factor
-    speed = np.maximum(cruise, np.hypot(ob[:, 0], ob[:, 1]) / safe_dt) * f
-    climb = np.maximum(climb_rate, np.abs(ob[:, 2]) / safe_dt) * f
+    pace = np.hypot(ob[:, 0], ob[:, 1]) / safe_dt
+    speed = np.minimum(np.maximum(cruise, pace) * f, np.maximum(env.max_speed_mps, pace))
+    up = np.maximum(env.climb_rate_mps, np.maximum(ob[:, 2], 0.0) / safe_dt)
+    down = np.maximum(env.descent_rate_mps, np.maximum(-ob[:, 2], 0.0) / safe_dt)
     dd = xyz[1:] - xyz[:-1]
-    need = np.maximum(
-        dt, np.maximum(np.hypot(dd[:, 0], dd[:, 1]) / speed, np.abs(dd[:, 2]) / climb)
-    )
+    vertical = np.where(dd[:, 2] > 0.0, dd[:, 2] / up, -dd[:, 2] / down)
+    need = np.maximum(dt, np.maximum(np.hypot(dd[:, 0], dd[:, 1]) / speed, vertical))
     t = np.empty(len(times))
     t[0] = times[0]
     np.cumsum(need, out=t[1:])
@@ -467,7 +477,8 @@ def _oracle_deformed(
     goal = np.array([lp.e[-1], lp.n[-1], lp.z[-1]])
     off = xyz[-1] - goal
     if float(np.abs(off).max()) > 1e-3:
-        dt_back = max(float(np.hypot(off[0], off[1])) / cruise, abs(float(off[2])) / climb_rate)
+        rate = env.descent_rate_mps if off[2] > 0.0 else env.climb_rate_mps
+        dt_back = max(float(np.hypot(off[0], off[1])) / cruise, abs(float(off[2])) / rate)
         xyz = np.vstack([xyz, goal])
         t = np.append(t, t[-1] + dt_back)
     return LocalPlan(xyz[:, 0], xyz[:, 1], xyz[:, 2], t)
@@ -496,7 +507,7 @@ def test_deformation_and_normals_equal_the_row_wise_code(
         )
     d = np.minimum(cd.envelope(demand, 3.6), 3.6 * np.arange(60))
     axis = cd.AXIS_VERTICAL if vertical else cd.AXIS_LATERAL
-    got = td._deformed(op, lp, grid, d, axis, sign)
+    got = td.deform(op, lp, grid, d, axis, sign)
     want = _oracle_deformed(op, td.config, lp, grid, d, axis, sign)
     for c in ("e", "n", "z", "t"):
         assert np.array_equal(getattr(got, c), getattr(want, c)), c

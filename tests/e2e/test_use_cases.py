@@ -16,7 +16,7 @@ from gcs_utm.settings import Settings
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "config" / "scenarios"
-GAUSS = ROOT.parent / "shared" / "data" / "gauss"
+GAUSS = ROOT / "tests" / "data" / "gauss"
 FIGURES = ("top", "3d", "altitude", "separation")
 # 5x, not faster: a vehicle is stale after 5 s without a position (tracking.stale_after_s),
 # which at 10x is 0.5 s of wall time; on a loaded 2-core machine a stalled loop plus the
@@ -136,7 +136,6 @@ async def test_vehicle_that_never_answers_ends_with_failed_upload(tmp_path: Path
 
 
 @pytest.mark.data
-@pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
 async def test_gauss_use_case_loss_separation_is_detected_and_resolved(tmp_path: Path) -> None:
     """The paper repository's own loss-of-separation scenario: its 15 m safetyDistance is the
     3D minimum; the plans meet at t ~ 76 s (10.5 m); the lower-priority UAS is moved."""

@@ -241,9 +241,10 @@ def test_autonomous_mode_applies_without_confirmation() -> None:
 
 def test_low_battery_goes_to_the_nearest_landing_site_or_lands_now() -> None:
     op = sc.make_operation(
-        "A", [(0, 0, 100), (3000, 0, 100)], landing_sites=[(1400, 300, 0)], endurance_s=300.0
+        "A", [(0, 0, 100), (3000, 0, 100)], landing_sites=[(1400, 300, 60)], endurance_s=300.0
     )
-    t = sc.T0_S + 100.0  # 1000 m out: home is 100 s back, the site 50 s away
+    # 1000 m out: home is 100 s back, the site 50 s away and 27 s down (40 m at 1.5 m/s)
+    t = sc.T0_S + 100.0
     threat = sc.threat(ThreatKind.LACK_OF_BATTERY, ["A"], t_s=t)
     d = make_em().on_threat(threat, sc.snapshot([op], t_s=t))
     (rec,) = d.recommendations

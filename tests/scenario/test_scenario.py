@@ -20,7 +20,7 @@ from gcs_utm.scenario import EventKind, ScenarioError, load_any, load_gauss, loa
 
 REPO = Path(__file__).resolve().parents[2]
 SCEN = REPO / "config/scenarios"
-GAUSS = REPO.parent / "shared/data/gauss"
+GAUSS = REPO / "tests" / "data" / "gauss"
 
 BASE = """
 [scenario]
@@ -254,7 +254,6 @@ def _gauss_pairs() -> list[tuple[Path, Path | None]]:
 
 
 @pytest.mark.data
-@pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
 def test_every_gauss_file_loads() -> None:
     pairs = _gauss_pairs()
     assert len(pairs) >= 12
@@ -284,7 +283,6 @@ def test_every_gauss_file_loads() -> None:
 
 
 @pytest.mark.data
-@pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
 def test_gauss_start_times_and_safety_distance(capsys: pytest.CaptureFixture[str]) -> None:
     """auto_start gives when GAUSS's simulator starts a vehicle, which then flies on its plan's
     timing (never late): madrid_loss_separation starts 3434000 at 5 s, its first stamp, and
@@ -326,7 +324,6 @@ def test_gauss_start_times_and_safety_distance(capsys: pytest.CaptureFixture[str
     assert load_any(str(SCEN / "use_case_1.toml")).safety_distance_m is None
 
 
-@pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
 def test_gauss_without_yaml_is_one_clear_error() -> None:
     with pytest.raises(ScenarioError, match="no YAML with the origin"):
         load_gauss(GAUSS / "paper_dev/no_geofences.json")
@@ -385,7 +382,7 @@ def test_cli_invalid_file_exit_2_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     path = _write(tmp_path, BASE.replace("sys_id = 2", "sys_id = 1"))
-    code, out, err = _cli(["scenario", "check", str(path), "--json"], capsys)
+    code, out, err = _cli(["scenario", "check", str(path)], capsys)
     assert code == 2 and out == ""
     assert err.count("\n") == 1 and "operations[1] (B): sys_id:" in err
 

@@ -20,13 +20,11 @@ from adapters.tlog import (
     scan_records,
 )
 
-TLOG = Path(__file__).resolve().parents[2] / "../shared/data/tlog/ardusub_log_tools_small.tlog"
+TLOG = Path(__file__).resolve().parents[1] / "data" / "tlog" / "ardusub_log_tools_small.tlog"
 
 
 @pytest.fixture(scope="module")
 def tlog_path() -> Path:
-    if not TLOG.exists():
-        pytest.skip(f"recording not found: {TLOG} (../shared/data is not checked out)")
     return TLOG
 
 

@@ -1,5 +1,5 @@
 """Position lanes and the C round: a lane entry is ingested exactly as its Measurement, and the
-C kernel (``_kalman_c``) gives exactly what the Python and NumPy code give -- the same counts,
+C kernel (``_kalman_c``) gives exactly what the NumPy reference gives -- the same counts,
 bit for bit the same states and covariances -- whatever the batch holds (bad values of every
 kind, gated jumps, duplicates, out of order, new tracks, unknown accuracies)."""
 
@@ -19,17 +19,18 @@ from hypothesis import strategies as st
 sys.path.insert(0, str(Path(__file__).parent))
 from tracking_helpers import FRAME, T0, new_tracker
 
-import gcs_utm.core.tracking.tracker as tracker_module
-from gcs_utm.core.tracking import Tracker
+from gcs_utm.core.tracking import Tracker, kernel
+from gcs_utm.core.tracking.layout import C_LAYOUT, NCOL
 from gcs_utm.model import LANE_STRIDE, LaneSource, Measurement, PositionLane, SysId
 
 NAN = math.nan
 INF = math.inf
-C_BUILT = tracker_module._kalman_c is not None
+C_BUILT = kernel._c is not None
 
 
 def _no_c() -> mock._patch[None]:  # type: ignore[type-arg]
-    return mock.patch.object(tracker_module, "_kalman_c", None)
+    """The NumPy reference alone, as without a C compiler."""
+    return mock.patch.object(kernel, "_c", None)
 
 
 # one lane entry: (source, step, east, north jump, alt, velocity, eph, epv, what is wrong)
@@ -100,8 +101,8 @@ def test_lane_entries_are_ingested_exactly_as_their_measurements(
     cfg = {"stale_after_s": 1.0, "gate_reset_count": 1}
     by_measurement = new_tracker(**cfg)  # Measurements, the C round when built
     by_lane = new_tracker(**cfg)  # lane entries, checked in C when built
-    by_lane_numpy = new_tracker(**cfg)  # lane entries, checked in NumPy, Python/NumPy rounds
-    by_measurement_python = new_tracker(**cfg)  # Measurements, Python/NumPy rounds only
+    by_lane_numpy = new_tracker(**cfg)  # lane entries, checked in NumPy, NumPy rounds
+    by_measurement_numpy = new_tracker(**cfg)  # Measurements, NumPy rounds only
     for k, entries in enumerate(batches):
         values = _values(entries, T0 + 3.0 * k)
         ms: list[Measurement] = [
@@ -111,11 +112,11 @@ def test_lane_entries_are_ingested_exactly_as_their_measurements(
         assert by_lane.ingest([], values, lane.sources) == want
         with _no_c():
             assert by_lane_numpy.ingest([], values, lane.sources) == want
-            assert by_measurement_python.ingest(ms) == want
+            assert by_measurement_numpy.ingest(ms) == want
         updated: dict[str, object] = {t.id: t for t in by_measurement.take_updated()}
         _same(by_lane, by_measurement, updated)
         _same(by_lane_numpy, by_measurement, updated)
-        _same(by_measurement_python, by_measurement, updated)
+        _same(by_measurement_numpy, by_measurement, updated)
 
 
 def test_a_batch_of_measurements_and_lane_entries_is_one_batch() -> None:
@@ -138,11 +139,11 @@ def test_a_batch_of_measurements_and_lane_entries_is_one_batch() -> None:
     with_vel=st.booleans(),
     seed=st.integers(0, 2**32 - 1),
 )
-def test_the_c_round_equals_the_python_round_bit_for_bit(
+def test_the_c_round_equals_the_numpy_round_bit_for_bit(
     m: int, dt: float, r: float, with_vel: bool, seed: int
 ) -> None:
-    """update_rows against _round_small (which equals kalman.step; test_kalman checks that)
-    on random states, including a zero variance (a division by zero: both decline)."""
+    """update_rows against the NumPy round (kalman.step) on random states, including a zero
+    measurement variance."""
     rng = np.random.default_rng(seed)
 
     def tracker() -> Tracker:
@@ -151,14 +152,14 @@ def test_the_c_round_equals_the_python_round_bit_for_bit(
         tr._grow(m)
         tr._n = m
         tr._ids = [f"sysid:{i}" for i in range(m)]  # type: ignore[misc]
-        tr._x[:m] = rng2.normal(size=(m, 3, 2)) * 10.0
+        tr._x[:m] = rng2.normal(size=(m, 3, 2)) * 2.0  # within the gate of every measurement
         p = np.abs(rng2.normal(size=(m, 3, 3))) + 0.1
         p[:, :, 1] = 0.01  # pv small: a positive definite block
         tr._p[:m] = p
         tr._t[:m] = T0
         return tr
 
-    a = np.zeros((15, m))
+    a = np.zeros((NCOL, m))
     a[0] = T0 + dt
     a[1:4] = rng.normal(size=(3, m)) * 0.5
     a[4:7] = rng.normal(size=(3, m))
@@ -166,20 +167,32 @@ def test_the_c_round_equals_the_python_round_bit_for_bit(
     a[10:13] = 0.25
     a[14] = 1.0 if with_vel else 0.0
     rw = rng.permutation(m).astype(np.intp)
-    c_tr, py_tr = tracker(), tracker()
+    c_tr, np_tr = tracker(), tracker()
     got = c_tr._round_plain(rw, a.copy())
-    with mock.patch.object(tracker_module, "_SMALL_ROUND", 10_000), _no_c():
-        want = py_tr._round_plain(rw, a.copy())
+    assert got == (m, 0, 0, 0, 0)  # the C kernel took the round
+    with _no_c():
+        assert np_tr._round_plain(rw, a.copy()) is None  # without it the NumPy round runs
+        want = np_tr._round(rw, a.copy(), None, with_vel)
     assert got == want
-    assert np.array_equal(c_tr._x, py_tr._x) and np.array_equal(c_tr._p, py_tr._p)
-    assert np.array_equal(c_tr._t, py_tr._t) and np.array_equal(c_tr._src_t, py_tr._src_t)
-    assert np.array_equal(c_tr._updates, py_tr._updates)
+    assert np.array_equal(c_tr._x, np_tr._x) and np.array_equal(c_tr._p, np_tr._p)
+    assert np.array_equal(c_tr._t, np_tr._t) and np.array_equal(c_tr._src_t, np_tr._src_t)
+    assert np.array_equal(c_tr._updates, np_tr._updates)
+    assert c_tr.take_updated() == np_tr.take_updated()
+
+
+def test_the_c_kernel_was_built_from_these_layouts() -> None:
+    """The C kernel's copy of the record and entry layouts is layout.py's (kernel.py refuses
+    a build that differs at import)."""
+    if not C_BUILT:
+        pytest.skip("the C extension _kalman_c is not built here")
+    assert kernel._c is not None
+    assert tuple(kernel._c.LAYOUT) == C_LAYOUT
 
 
 @pytest.mark.skipif(not C_BUILT, reason="the C extension _kalman_c is not built here")
 def test_the_c_kernel_refuses_arrays_it_was_not_made_for() -> None:
     """Bad arrays get one clear error naming the argument, and nothing is written."""
-    c = tracker_module._kalman_c
+    c = kernel._c
     assert c is not None
     tr = new_tracker()
     lane = _lane()

@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from tracking_helpers import FRAME, T0, meas, new_tracker, operation, plan_from_local
 
 from gcs_utm.core.tracking import Tracker, current_waypoint, kalman
-from gcs_utm.core.tracking.tracker import build_tracks
+from gcs_utm.core.tracking.tracks import build_tracks
 from gcs_utm.model import Icao24, MeasurementSource, OperationId, Track, TrackId
 
 FIELDS = [

@@ -2,7 +2,7 @@
 
 Units are in the names. Every field is declared with :func:`gcs_utm.config.setting` so that
 ``config/default.toml`` is generated from this class; ``DeconflictionConfig()`` is usable as is.
-The cost and riskiness formulas these weights enter are documented in ``docs/emergency.md``
+The cost and riskiness formulas these weights enter are documented in ``docs/deconfliction.md``
 and in :mod:`gcs_utm.core.deconfliction.scoring`.
 """
 
@@ -57,6 +57,13 @@ class DeconflictionConfig:
     )
     max_alt_amsl_m: float = setting(
         10000.0, "airspace ceiling used when an operation has no max_alt_amsl_m", unit="m"
+    )
+    min_height_above_home_m: float = setting(
+        10.0,
+        "safety floor: no generated waypoint below the vehicle's home altitude plus this (its "
+        "filed take-off and landing points and a landing manoeuvre's touchdown aside)",
+        min=0.0,
+        unit="m",
     )
     immovable_priority: int = setting(
         1000, "operations with this priority or higher are never deformed", min=1

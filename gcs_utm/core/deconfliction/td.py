@@ -21,30 +21,29 @@ Monitoring function by :meth:`TacticalDeconfliction.compatible` during EM's join
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-import numpy.typing as npt
-from shapely.geometry import LineString, Point
 
 from gcs_utm.core.deconfliction import cords as cd
-from gcs_utm.core.deconfliction.astar import VisibilityPlanner
 from gcs_utm.core.deconfliction.config import DeconflictionConfig
+from gcs_utm.core.deconfliction.deform import deformed
 from gcs_utm.core.deconfliction.geometry import (
     LocalFence,
     LocalPlan,
     fence_to_local,
     local_to_plans,
     max_speeds,
-    merged_obstacles,
     plan_to_local,
-    relevant_fences,
     separation_screen,
 )
+from gcs_utm.core.deconfliction.intruder import intruder_plan, resolve_intruder
+from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags
 from gcs_utm.core.deconfliction.scoring import Neighbour, Reference, Score, reference, score_many
+from gcs_utm.core.deconfliction.single import resolve_single
+from gcs_utm.core.deconfliction.timing import Screen, clear_of, first_clear_delay
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import plan_vs_geofences, plan_vs_plans
 from gcs_utm.geo import LocalFrame
@@ -74,23 +73,10 @@ class Dropped:
     reason: str
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class _Screen:
-    """Another plan sampled on the timing search's grid (one array per coordinate), its
-    validity there and the pair's minima."""
-
-    e: FloatArray
-    n: FloatArray
-    z: FloatArray
-    ok: npt.NDArray[np.bool_]
-    h_min_m: float
-    v_min_m: float
-
-
 @dataclass(slots=True, kw_only=True, eq=False)
 class _Candidate:
     """A new plan waiting for Monitoring's verification and for its score (see
-    :meth:`TacticalDeconfliction._flush`); ``keep`` marks the filed plan itself (no
+    :meth:`TacticalDeconfliction.flush`); ``keep`` marks the filed plan itself (no
     conversion, verified against every geofence, cost 0). The alternative, if any, is
     appended to ``dest``."""
 
@@ -106,6 +92,25 @@ class _Candidate:
     dest: list[Alternative]
     verify_from: int = 0
     keep: bool = False
+
+
+@dataclass(slots=True, kw_only=True, eq=False)
+class _Problem:
+    """One charged-cord problem: the members (involved UAS and the neighbours drawn in),
+    their plans from the start time on, the common grid and minima, what lies outside the
+    problem, and the alternatives collected per member."""
+
+    members: list[Operation]
+    involved: set[OperationId]
+    local: dict[OperationId, LocalPlan]
+    grid: FloatArray
+    minima: FloatArray
+    outsiders: list[Operation]
+    geofences: Sequence[Geofence]
+    fences: list[LocalFence]
+    lowest: int
+    out: dict[OperationId, list[Alternative]]
+    prepared: cd.Problem
 
 
 class TacticalDeconfliction:
@@ -126,7 +131,7 @@ class TacticalDeconfliction:
         self._local: dict[int, tuple[FlightPlan, LocalPlan]] = {}
         self._speeds: dict[int, tuple[FlightPlan, tuple[float, float]]] = {}
 
-    def _lp(self, plan: FlightPlan) -> LocalPlan:
+    def local_plan(self, plan: FlightPlan) -> LocalPlan:
         hit = self._local.get(id(plan))
         if hit is None or hit[0] is not plan:
             if len(self._local) > 4096:
@@ -140,12 +145,12 @@ class TacticalDeconfliction:
         if hit is None or hit[0] is not plan:
             if len(self._speeds) > 4096:
                 self._speeds.clear()
-            hit = (plan, max_speeds(self._lp(plan)))
+            hit = (plan, max_speeds(self.local_plan(plan)))
             self._speeds[id(plan)] = hit
         return hit[1]
 
     # ---- helpers on the snapshot -------------------------------------------------------------
-    def _others(
+    def others(
         self, snapshot: AirspaceSnapshot, exclude: Collection[OperationId]
     ) -> list[Operation]:
         return [
@@ -162,12 +167,62 @@ class TacticalDeconfliction:
             if tr.operation_id == op.id and not tr.stale:
                 e, n = self.frame.point_to_local(tr.lat_deg, tr.lon_deg)
                 return np.array([e, n, tr.alt_amsl_m])
-        return self._lp(op.plan).position_at(snapshot.t_s)
+        return self.local_plan(op.plan).position_at(snapshot.t_s)
 
-    def _alt_limits(self, op: Operation) -> tuple[float, float]:
+    def start_time(self, snapshot: AirspaceSnapshot, start_t_s: float | None) -> float:
+        """When a new plan starts: ``start_t_s`` (the decision time plus the expected answer,
+        upload and margin, from EM), never before the snapshot."""
+        return snapshot.t_s if start_t_s is None else max(snapshot.t_s, start_t_s)
+
+    def start_xyz(self, op: Operation, snapshot: AirspaceSnapshot, t0: float) -> FloatArray:
+        """Where the UAS will be at ``t0``: on its plan (as flown) at ``t0``, offset by how far
+        it is off the plan now. For a fixed wing that is ahead along its path, never a point
+        it has passed by the time it gets the new plan."""
+        lp = self.local_plan(op.plan)
+        ahead = lp.position_at(t0)
+        if t0 <= snapshot.t_s:
+            return self.current_xyz(op, snapshot)
+        off = self.current_xyz(op, snapshot) - lp.position_at(snapshot.t_s)
+        return np.asarray(ahead + off, dtype=np.float64)
+
+    def floor_amsl(self, op: Operation) -> float:
+        """The safety floor: home altitude (else the airspace's ground elevation) plus the
+        configured minimum height above home."""
+        home = op.home.alt_amsl_m if op.home is not None else self.frame.ground_elevation_amsl_m
+        return home + self.config.min_height_above_home_m
+
+    def alt_limits(self, op: Operation) -> tuple[float, float]:
+        """Altitude band a deformation stays in: the operation's band (else the airspace's),
+        never below the safety floor."""
         lo = op.min_alt_amsl_m if op.min_alt_amsl_m is not None else self.config.min_alt_amsl_m
         hi = op.max_alt_amsl_m if op.max_alt_amsl_m is not None else self.config.max_alt_amsl_m
-        return lo, hi
+        return max(lo, self.floor_amsl(op)), hi
+
+    def vertical_slope(self, op: Operation) -> float:
+        """Metres per cord step of a vertical deformation: a share of the climb rate. The
+        cord only shapes the deformation; the new plan's timing keeps it inside the envelope
+        (:func:`.deform.deformed` re-times climbs and descents at their own rates) and that
+        re-timed plan is what Monitoring verifies."""
+        rate = op.performance().climb_rate_mps
+        return rate * self.config.climb_fraction * self.config.cord_dt_s
+
+    def deform(  # noqa: PLR0917 - positional like the cord's description
+        self, op: Operation, lp: LocalPlan, grid: FloatArray, d: FloatArray, axis: str, sign: int
+    ) -> LocalPlan:
+        """The plan through a displaced cord, re-timed inside the vehicle's envelope."""
+        return deformed(
+            lp,
+            grid,
+            d,
+            axis,
+            sign,
+            cruise_speed_mps=op.cruise_speed_mps,
+            envelope=op.performance(),
+            max_speed_factor=self.config.max_speed_factor,
+        )
+
+    def reset_queue(self) -> None:
+        self._queue = []
 
     def _mobility(self, op: Operation) -> float:
         if op.priority >= self.config.immovable_priority:
@@ -209,8 +264,8 @@ class TacticalDeconfliction:
             op_a.operational_volume_m, op_b.operational_volume_m
         )
         broken, clear = separation_screen(
-            self._lp(a.plan),
-            self._lp(b.plan),
+            self.local_plan(a.plan),
+            self.local_plan(b.plan),
             h,
             v,
             spherical=self.monitoring.spherical,
@@ -231,10 +286,10 @@ class TacticalDeconfliction:
         nbs = []
         for o in neighbours:
             h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
-            nbs.append(Neighbour(plan=self._lp(o.plan), h_min_m=h, v_min_m=v))
-        return reference(old, self._lp(op.plan), op.operational_volume_m, nbs)
+            nbs.append(Neighbour(plan=self.local_plan(o.plan), h_min_m=h, v_min_m=v))
+        return reference(old, self.local_plan(op.plan), op.operational_volume_m, nbs)
 
-    def _finish(
+    def finish(
         self,
         op: Operation,
         maneuver: Maneuver,
@@ -249,7 +304,7 @@ class TacticalDeconfliction:
         dest: list[Alternative],
         verify_from: int = 0,
     ) -> None:
-        """Queue ``new`` for verification by Monitoring and scoring (:meth:`_flush`), its
+        """Queue ``new`` for verification by Monitoring and scoring (:meth:`flush`), its
         alternative for ``dest``. ``verify_from`` skips leading waypoints (an escape leg that
         starts inside a fence)."""
         self._queue.append(
@@ -268,10 +323,10 @@ class TacticalDeconfliction:
             )
         )
 
-    def _drop(self, op_id: OperationId, maneuver: Maneuver, reason: str) -> None:
+    def drop(self, op_id: OperationId, maneuver: Maneuver, reason: str) -> None:
         self._queue.append(Dropped(operation_id=op_id, maneuver=maneuver, reason=reason))
 
-    def _flush(self, now: float) -> None:
+    def flush(self, now: float) -> None:
         """Turn the queued candidates into alternatives: all new plans converted to WGS84 at
         once, each verified by Monitoring (in queue order, so :attr:`dropped` lists drops in
         the order the candidates were made), the survivors of one UAS scored together against
@@ -356,6 +411,11 @@ class TacticalDeconfliction:
             return flags, op.plan, [True] * len(c.fences)
         assert plan is not None
         self._local[id(plan)] = (plan, c.new)  # its local form, without a second conversion
+        unsafe = envelope_flags(c.new, c.old, op.performance()) + floor_flags(
+            c.new, c.old, self.floor_amsl(op), lands=c.maneuver in _ABANDON
+        )
+        if unsafe:
+            return unsafe, plan, []
         checked = plan
         if c.verify_from > 0:
             checked = replace(plan, waypoints=plan.waypoints[c.verify_from :])
@@ -378,34 +438,31 @@ class TacticalDeconfliction:
         ]
         return flags, plan, applies
 
-    def _local_fences(self, geofences: Sequence[Geofence]) -> list[LocalFence]:
+    def local_fences(self, geofences: Sequence[Geofence]) -> list[LocalFence]:
         return [fence_to_local(g, self.frame) for g in geofences]
 
     # ---- multi-UAS --------------------------------------------------------------------------
     def resolve_loss_of_separation(
-        self, threat: Threat, snapshot: AirspaceSnapshot
+        self, threat: Threat, snapshot: AirspaceSnapshot, start_t_s: float | None = None
     ) -> dict[OperationId, list[Alternative]]:
         """Alternatives per UAS of the conflict and of the neighbours drawn into it. Every UAS
         gets ``KEEP_PLAN`` (if Monitoring does not flag its plan against outsiders) so that
-        EM's joint selection can leave the higher-priority UAS alone."""
+        EM's joint selection can leave the higher-priority UAS alone. New plans start at
+        ``start_t_s`` (:meth:`start_time`): where each UAS will be when it gets the plan."""
         self.dropped = []
         self._queue = []
-        now = snapshot.t_s
+        t0 = self.start_time(snapshot, start_t_s)
         cfg = self.config
         involved = [snapshot.operations[i] for i in threat.uas_ids if i in snapshot.operations]
         if not involved:
             return {}
-        local = {op.id: self._lp(op.plan).after(now) for op in involved}
-        end = min(now + cfg.horizon_s, max(float(lp.t[-1]) for lp in local.values()))
-        steps = max(2, math.ceil((end - now) / cfg.cord_dt_s) + 1)
-        grid: FloatArray = now + np.arange(steps, dtype=np.float64) * cfg.cord_dt_s
+        local = {op.id: self.local_plan(op.plan).after(t0) for op in involved}
+        end = min(t0 + cfg.horizon_s, max(float(lp.t[-1]) for lp in local.values()))
+        steps = max(2, math.ceil((end - t0) / cfg.cord_dt_s) + 1)
+        grid: FloatArray = t0 + np.arange(steps, dtype=np.float64) * cfg.cord_dt_s
         members = list(involved) + self._neighbours(involved, snapshot, grid)
         for op in members:
-            local.setdefault(op.id, self._lp(op.plan).after(now))
-        ids = {op.id for op in members}
-        outsiders = self._others(snapshot, ids)
-        geofences = snapshot.geofences
-        fences = self._local_fences(geofences)
+            local.setdefault(op.id, self.local_plan(op.plan).after(t0))
         u = len(members)
         minima = np.zeros((u, u, 2))
         for i, a in enumerate(members):
@@ -413,8 +470,26 @@ class TacticalDeconfliction:
                 minima[i, j] = self.monitoring.effective_minima(
                     a.operational_volume_m, b.operational_volume_m
                 )
-        lowest = min(op.priority for op in members)
-        out: dict[OperationId, list[Alternative]] = {op.id: [] for op in members}
+        pb = _Problem(
+            members=members,
+            involved={op.id for op in involved},
+            local=local,
+            grid=grid,
+            minima=minima,
+            outsiders=self.others(snapshot, {op.id for op in members}),
+            geofences=snapshot.geofences,
+            fences=self.local_fences(snapshot.geofences),
+            lowest=min(op.priority for op in members),
+            out={op.id: [] for op in members},
+            # Axes, signs and mobility aside, every scenario works on the same cords.
+            prepared=cd.prepare(
+                [local[op.id] for op in members],
+                grid,
+                minima,
+                spherical=self.monitoring.spherical,
+                margin_fraction=cfg.separation_margin_fraction,
+            ),
+        )
         for op in members:
             # Keeping the plan moves nothing: no priority price (the score's cost is then 0).
             self._queue.append(
@@ -423,105 +498,101 @@ class TacticalDeconfliction:
                     maneuver=Maneuver.KEEP_PLAN,
                     new=local[op.id],
                     old=local[op.id],
-                    geofences=geofences,
-                    fences=fences,
-                    outsiders=outsiders,
+                    geofences=pb.geofences,
+                    fences=pb.fences,
+                    outsiders=pb.outsiders,
                     lowest_priority=op.priority,
                     detail="keep the current plan",
-                    dest=out[op.id],
+                    dest=pb.out[op.id],
                     keep=True,
                 )
             )
+        mobile_all = [self._mobility(op) > 0 for op in members]
+        self._run(pb, [cd.AXIS_VERTICAL] * u, [0] * u, mobile_all, "joint vertical repulsion")
+        self._run(pb, [cd.AXIS_LATERAL] * u, [0] * u, mobile_all, "joint lateral repulsion")
+        for k, op in enumerate(members):
+            if op.id in pb.involved and mobile_all[k]:
+                self._alone(pb, k, snapshot)
+        self.flush(snapshot.t_s)
+        return {k: _dedupe(v) for k, v in pb.out.items() if v or k in threat.uas_ids}
 
-        def run(axes: list[str], signs: list[int], mobile: list[bool], label: str) -> None:
-            cords = []
-            for k, op in enumerate(members):
-                lo, hi = self._alt_limits(op)
-                vertical = axes[k] == cd.AXIS_VERTICAL
-                slope = (
-                    op.max_climb_rate_mps * cfg.climb_fraction * cfg.cord_dt_s
-                    if vertical
-                    else cd.lateral_slope(
-                        op.cruise_speed_mps, cfg.cord_dt_s, cfg.max_lateral_angle_deg
-                    )
-                )
-                cords.append(
-                    cd.Cord(
-                        plan=local[op.id],
-                        axis=axes[k] if mobile[k] else cd.AXIS_NONE,
-                        sign=signs[k],
-                        mobility=self._mobility(op) if mobile[k] else 0.0,
-                        slope_m_per_step=slope,
-                        max_offset_m=cfg.max_vertical_offset_m
-                        if vertical
-                        else cfg.max_lateral_offset_m,
-                        min_alt_amsl_m=lo,
-                        max_alt_amsl_m=hi,
-                    )
-                )
-            res = cd.resolve(
-                cords,
-                grid,
-                minima,
-                spherical=self.monitoring.spherical,
-                margin_fraction=cfg.separation_margin_fraction,
-                max_iterations=cfg.max_iterations,
-                problem=problem,
-            )
-            if res is None:
-                for k, op in enumerate(members):
-                    if mobile[k] and op in involved:
-                        self._drop(op.id, Maneuver.KEEP_PLAN, f"{label}: no convergence")
-                return
-            for k, op in enumerate(members):
-                dk = res.displacement_m[k]
-                if cords[k].axis == cd.AXIS_NONE or float(dk.max()) < 0.5:
-                    continue
-                sign = res.signs[k]
-                man = _maneuver(cords[k].axis, sign)
-                new = self._deformed(op, local[op.id], grid, dk, cords[k].axis, sign)
-                self._finish(
-                    op,
-                    man,
-                    new,
-                    local[op.id],
-                    geofences=geofences,
-                    fences=fences,
-                    outsiders=outsiders,
-                    lowest_priority=lowest,
-                    detail=f"{label}: {man.value} up to {float(dk.max()):.0f} m",
-                    dest=out[op.id],
-                )
+    def _alone(self, pb: _Problem, k: int, snapshot: AirspaceSnapshot) -> None:
+        """Single-mover scenarios of member ``k``: up, down, left, right, then timing."""
+        u = len(pb.members)
+        op = pb.members[k]
+        only = [j == k for j in range(u)]
+        for axis, sign in (
+            (cd.AXIS_VERTICAL, 1),
+            (cd.AXIS_VERTICAL, -1),
+            (cd.AXIS_LATERAL, 1),
+            (cd.AXIS_LATERAL, -1),
+        ):
+            signs = [sign if j == k else 0 for j in range(u)]
+            self._run(pb, [axis] * u, signs, only, f"{op.id} alone")
+        rigid = [o for o in pb.members if o.id != op.id]
+        self._timing(op, pb, rigid, snapshot)
 
-        # Axes, signs and mobility aside, every scenario works on the same cords.
-        problem = cd.prepare(
-            [local[op.id] for op in members],
-            grid,
-            minima,
+    def _cord(self, op: Operation, plan: LocalPlan, axis: str, sign: int, mobile: bool) -> cd.Cord:
+        cfg = self.config
+        lo, hi = self.alt_limits(op)
+        vertical = axis == cd.AXIS_VERTICAL
+        slope = (
+            self.vertical_slope(op)
+            if vertical
+            else cd.lateral_slope(op.cruise_speed_mps, cfg.cord_dt_s, cfg.max_lateral_angle_deg)
+        )
+        return cd.Cord(
+            plan=plan,
+            axis=axis if mobile else cd.AXIS_NONE,
+            sign=sign,
+            mobility=self._mobility(op) if mobile else 0.0,
+            slope_m_per_step=slope,
+            max_offset_m=cfg.max_vertical_offset_m if vertical else cfg.max_lateral_offset_m,
+            min_alt_amsl_m=lo,
+            max_alt_amsl_m=hi,
+        )
+
+    def _run(
+        self, pb: _Problem, axes: list[str], signs: list[int], mobile: list[bool], label: str
+    ) -> None:
+        """One charged-cord scenario; every deformed member's plan is queued."""
+        cfg = self.config
+        cords = [
+            self._cord(op, pb.local[op.id], axes[k], signs[k], mobile[k])
+            for k, op in enumerate(pb.members)
+        ]
+        res = cd.resolve(
+            cords,
+            pb.grid,
+            pb.minima,
             spherical=self.monitoring.spherical,
             margin_fraction=cfg.separation_margin_fraction,
+            max_iterations=cfg.max_iterations,
+            problem=pb.prepared,
         )
-        mobile_all = [self._mobility(op) > 0 for op in members]
-        run([cd.AXIS_VERTICAL] * u, [0] * u, mobile_all, "joint vertical repulsion")
-        run([cd.AXIS_LATERAL] * u, [0] * u, mobile_all, "joint lateral repulsion")
-        for k, op in enumerate(members):
-            if op not in involved or not mobile_all[k]:
+        if res is None:
+            for k, op in enumerate(pb.members):
+                if mobile[k] and op.id in pb.involved:
+                    self.drop(op.id, Maneuver.KEEP_PLAN, f"{label}: no convergence")
+            return
+        for k, op in enumerate(pb.members):
+            dk = res.displacement_m[k]
+            if cords[k].axis == cd.AXIS_NONE or float(dk.max()) < 0.5:
                 continue
-            only = [j == k for j in range(u)]
-            for axis, sign in (
-                (cd.AXIS_VERTICAL, 1),
-                (cd.AXIS_VERTICAL, -1),
-                (cd.AXIS_LATERAL, 1),
-                (cd.AXIS_LATERAL, -1),
-            ):
-                signs = [sign if j == k else 0 for j in range(u)]
-                run([axis] * u, signs, only, f"{op.id} alone")
-            rigid = [o for o in members if o.id != op.id]
-            self._timing(
-                op, local[op.id], snapshot, geofences, fences, outsiders, rigid, lowest, out[op.id]
+            sign = res.signs[k]
+            man = _maneuver(cords[k].axis, sign)
+            self.finish(
+                op,
+                man,
+                self.deform(op, pb.local[op.id], pb.grid, dk, cords[k].axis, sign),
+                pb.local[op.id],
+                geofences=pb.geofences,
+                fences=pb.fences,
+                outsiders=pb.outsiders,
+                lowest_priority=pb.lowest,
+                detail=f"{label}: {man.value} up to {float(dk.max()):.0f} m",
+                dest=pb.out[op.id],
             )
-        self._flush(now)
-        return {k: _dedupe(v) for k, v in out.items() if v or k in threat.uas_ids}
 
     def _neighbours(
         self, involved: Sequence[Operation], snapshot: AirspaceSnapshot, grid: FloatArray
@@ -530,10 +601,10 @@ class TacticalDeconfliction:
         horizon: the ones a deformation can push into (nearest first, at most
         ``max_neighbours``)."""
         ids = {op.id for op in involved}
-        pos = [self._lp(op.plan).sample(grid) for op in involved]
+        pos = [self.local_plan(op.plan).sample(grid) for op in involved]
         found: list[tuple[float, Operation]] = []
-        for other in self._others(snapshot, ids):
-            p, ok = self._lp(other.plan).sample(grid)
+        for other in self.others(snapshot, ids):
+            p, ok = self.local_plan(other.plan).sample(grid)
             best = math.inf
             for op, (q, ok2) in zip(involved, pos, strict=True):
                 m = ok & ok2
@@ -550,311 +621,74 @@ class TacticalDeconfliction:
         found.sort(key=lambda x: x[0])
         return [op for _, op in found[: self.config.max_neighbours]]
 
-    def _deformed(  # noqa: PLR0917 - private helper, called positionally
-        self,
-        op: Operation,
-        lp: LocalPlan,
-        grid: FloatArray,
-        d: FloatArray,
-        axis: str,
-        sign: int,
-    ) -> LocalPlan:
-        """The plan through the displaced cord, re-timed so that no segment is faster than
-        allowed (its original pace, or the cruise speed, times max_speed_factor).
-
-        The displacement is piecewise linear on the grid (an envelope of cones, capped), so
-        the new plan needs points only at the filed waypoints and at the grid times where the
-        displacement's slope changes: between those it is exactly the cord."""
-        # (plain slicing: np.diff does the same subtractions, with call overhead)
-        d1 = d[1:] - d[:-1]
-        kinks = grid[1:-1][np.abs(d1[1:] - d1[:-1]) > 1e-9]
-        inside = (kinks >= lp.t[0]) & (kinks <= lp.t[-1])
-        # np.union1d without its wrappers: sorted, duplicates removed.
-        times = np.concatenate((kinks[inside], lp.t))
-        times.sort()
-        if times.shape[0] > 1:
-            times = times[np.concatenate(([True], times[1:] != times[:-1]))]
-        # One array per coordinate (the same arithmetic as on (N, 3) rows, without the
-        # strided column reads).
-        if len(lp) == 1:
-            be = np.full(times.shape[0], lp.e[0])
-            bn = np.full(times.shape[0], lp.n[0])
-            bz = np.full(times.shape[0], lp.z[0])
-        else:
-            be = np.interp(times, lp.t, lp.e)
-            bn = np.interp(times, lp.t, lp.n)
-            bz = np.interp(times, lp.t, lp.z)
-        disp = sign * np.interp(times, grid, d)
-        xe, xn, xz = be, bn, bz
-        if axis == cd.AXIS_VERTICAL:
-            xz = bz + disp
-        else:
-            nx, ny = cd.left_normals_en(be, bn)
-            xe = be + disp * nx
-            xn = bn + disp * ny
-        # Original pace between the kept times, from the undeformed plan.
-        dt = times[1:] - times[:-1]
-        safe_dt = np.maximum(dt, 1e-9)
-        f = self.config.max_speed_factor
-        speed = (
-            np.maximum(op.cruise_speed_mps, np.hypot(be[1:] - be[:-1], bn[1:] - bn[:-1]) / safe_dt)
-            * f
-        )
-        climb = np.maximum(op.max_climb_rate_mps, np.abs(bz[1:] - bz[:-1]) / safe_dt) * f
-        need = np.maximum(
-            dt,
-            np.maximum(
-                np.hypot(xe[1:] - xe[:-1], xn[1:] - xn[:-1]) / speed,
-                np.abs(xz[1:] - xz[:-1]) / climb,
-            ),
-        )
-        t = np.empty(len(times))
-        t[0] = times[0]
-        np.cumsum(need, out=t[1:])
-        t[1:] += times[0]
-        off_e = xe[-1] - lp.e[-1]
-        off_n = xn[-1] - lp.n[-1]
-        off_z = xz[-1] - lp.z[-1]
-        if max(abs(off_e), abs(off_n), abs(off_z)) > 1e-3:
-            # The plan ended before the cord could ramp back: fly back to the filed final
-            # waypoint (cruise speed, climb rate) so the alternative keeps the destination.
-            dt_back = max(
-                float(np.hypot(off_e, off_n)) / op.cruise_speed_mps,
-                abs(float(off_z)) / op.max_climb_rate_mps,
-            )
-            xe = np.append(xe, lp.e[-1])
-            xn = np.append(xn, lp.n[-1])
-            xz = np.append(xz, lp.z[-1])
-            t = np.append(t, t[-1] + dt_back)
-        return LocalPlan(xe, xn, xz, t)
-
-    def _timing(  # noqa: PLR0917 - private helper, called positionally
-        self,
-        op: Operation,
-        lp: LocalPlan,
-        snapshot: AirspaceSnapshot,
-        geofences: Sequence[Geofence],
-        fences: Sequence[LocalFence],
-        outsiders: Sequence[Operation],
-        rigid: Sequence[Operation],
-        lowest: int,
-        dest: list[Alternative],
+    def _timing(
+        self, op: Operation, pb: _Problem, rigid: Sequence[Operation], snapshot: AirspaceSnapshot
     ) -> None:
-        """The smallest delay (hold at the current point, then the same plan later) and the
-        mildest slow-down that separate ``op`` from every other plan, if any, queued for
-        ``dest``."""
-        now = snapshot.t_s
+        """The smallest delay (hold at the start point, then the same plan later: only for a
+        vehicle that can hover) and the mildest slow-down that separate ``op`` from every
+        other plan, if any, queued for its alternatives."""
         cfg = self.config
-        others = list(rigid) + list(outsiders)
+        lp = pb.local[op.id]
+        t0 = float(lp.t[0])
+        others = list(rigid) + list(pb.outsiders)
         slowest = min([f for f in cfg.slowdown_factors if 0.0 < f < 1.0] or [1.0])
-        span = float(lp.t[-1] - now)
-        grid_t = np.arange(now, now + max(span / slowest, span + cfg.max_delay_s) + 1.0, 1.0)
+        span = float(lp.t[-1] - t0)
+        grid_t = np.arange(t0, t0 + max(span / slowest, span + cfg.max_delay_s) + 1.0, 1.0)
         screens = []
         for o in others:
-            q, ok = self._lp(o.plan).sample(grid_t)
+            q, ok = self.local_plan(o.plan).sample(grid_t)
             h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
-            screens.append(_Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, h, v))
-        delay = self._first_clear_delay(lp, now, grid_t, screens)
+            screens.append(Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, h, v))
+        margin = cfg.separation_margin_fraction
+        spherical = self.monitoring.spherical
+
+        def queue(man: Maneuver, cand: LocalPlan, detail: str) -> None:
+            self.finish(
+                op,
+                man,
+                cand,
+                lp,
+                geofences=pb.geofences,
+                fences=pb.fences,
+                outsiders=others,
+                lowest_priority=pb.lowest,
+                detail=detail,
+                dest=pb.out[op.id],
+            )
+
+        steps = int(cfg.max_delay_s // cfg.delay_step_s)
+        delays = cfg.delay_step_s * np.arange(1, max(steps, 0) + 1, dtype=np.float64)
+        if not op.performance().can_hover:
+            delays = delays[:0]  # a fixed wing cannot stop in place
+        delay = first_clear_delay(lp, t0, grid_t, screens, delays, margin, spherical)
         if delay is not None:
-            t = np.concatenate([[now, now + delay], lp.t[1:] + delay])
+            t = np.concatenate([[t0, t0 + delay], lp.t[1:] + delay])
             e = np.concatenate([[lp.e[0]], lp.e])
             n = np.concatenate([[lp.n[0]], lp.n])
             z = np.concatenate([[lp.z[0]], lp.z])
-            self._finish(
-                op,
-                Maneuver.DELAY,
-                LocalPlan(e, n, z, t),
-                lp,
-                geofences=geofences,
-                fences=fences,
-                outsiders=others,
-                lowest_priority=lowest,
-                detail=f"hold {delay:.0f} s here, then the plan",
-                dest=dest,
-            )
+            queue(Maneuver.DELAY, LocalPlan(e, n, z, t), f"hold {delay:.0f} s, then the plan")
         for factor in cfg.slowdown_factors:
             if not 0.0 < factor < 1.0:
                 continue
-            cand = LocalPlan(lp.e, lp.n, lp.z, now + (lp.t - now) / factor)
-            if self._clear(cand, grid_t, screens):
-                self._finish(
-                    op,
-                    Maneuver.SPEED_CHANGE,
-                    cand,
-                    lp,
-                    geofences=geofences,
-                    fences=fences,
-                    outsiders=others,
-                    lowest_priority=lowest,
-                    detail=f"fly the plan at {factor:.0%} of its speed",
-                    dest=dest,
-                )
+            cand = LocalPlan(lp.e, lp.n, lp.z, t0 + (lp.t - t0) / factor)
+            if clear_of(cand, grid_t, screens, margin, spherical):
+                queue(Maneuver.SPEED_CHANGE, cand, f"fly the plan at {factor:.0%} of its speed")
                 break
-
-    def _first_clear_delay(
-        self,
-        lp: LocalPlan,
-        now: float,
-        grid_t: FloatArray,
-        screens: Sequence[_Screen],
-    ) -> float | None:
-        """The smallest delay step after which holding here and then flying the plan keeps
-        (1 + margin) times the minima from every screened plan; all delays at once."""
-        cfg = self.config
-        steps = int(cfg.max_delay_s // cfg.delay_step_s)
-        if steps < 1:
-            return None
-        delays = cfg.delay_step_s * np.arange(1, steps + 1, dtype=np.float64)
-        tt = np.maximum(grid_t[None, :] - delays[:, None], now)  # (D, T): plan time flown
-        valid = tt <= lp.t[-1]
-        # Positions at the plan times flown, one (D, T) array per coordinate. When every
-        # plan time is itself a grid time (a delay that is a whole number of grid steps,
-        # checked value by value), they are the plan sampled once on the grid, gathered;
-        # otherwise interpolated.
-        shift = np.rint(delays / (grid_t[1] - grid_t[0]) if grid_t.shape[0] > 1 else delays)
-        idx = np.maximum(np.arange(grid_t.shape[0])[None, :] - shift.astype(np.intp)[:, None], 0)
-        if np.array_equal(grid_t[idx], tt):
-            pe, pn, pz = (np.interp(grid_t, lp.t, c)[idx] for c in (lp.e, lp.n, lp.z))
-        else:
-            pe, pn, pz = (np.interp(tt, lp.t, c) for c in (lp.e, lp.n, lp.z))
-        scale = 1.0 + cfg.separation_margin_fraction
-        clear = np.ones(delays.shape[0], dtype=bool)
-        for sc in screens:
-            m = valid & sc.ok[None, :]
-            dh = np.hypot(pe - sc.e[None, :], pn - sc.n[None, :])
-            dv = np.abs(pz - sc.z[None, :])
-            if self.monitoring.spherical:
-                ratio = np.hypot(dh, dv) / sc.h_min_m
-            else:
-                ratio = np.maximum(dh / sc.h_min_m, dv / sc.v_min_m)
-            clear &= ~((ratio < scale) & m).any(axis=1)
-        idx_clear = np.flatnonzero(clear)
-        return float(delays[idx_clear[0]]) if idx_clear.size else None
-
-    def _clear(
-        self,
-        cand: LocalPlan,
-        grid_t: FloatArray,
-        screens: Sequence[_Screen],
-    ) -> bool:
-        """Fast screen of a timing candidate on a 1 s grid (Monitoring verifies the one that
-        passes): every other plan at least (1 + margin) times the pair's minima away."""
-        pos, mine = cand.sample(grid_t)
-        scale = 1.0 + self.config.separation_margin_fraction
-        for sc in screens:
-            m = sc.ok & mine
-            if not m.any():
-                continue
-            dh = np.hypot(pos[m, 0] - sc.e[m], pos[m, 1] - sc.n[m])
-            dv = np.abs(pos[m, 2] - sc.z[m])
-            if self.monitoring.spherical:
-                ratio = np.hypot(dh, dv) / sc.h_min_m
-            else:
-                ratio = np.maximum(dh / sc.h_min_m, dv / sc.v_min_m)
-            if float(ratio.min()) < scale:
-                return False
-        return True
 
     # ---- intruder ---------------------------------------------------------------------------
     def intruder_plan(self, threat: Threat, snapshot: AirspaceSnapshot) -> LocalPlan | None:
-        """The intruder's predicted path: its row of the snapshot's prediction, else its track
-        extrapolated at constant velocity over the horizon."""
-        tid = threat.intruder_id
-        if tid is None:
-            return None
-        pred = snapshot.prediction
-        if pred is not None and tid in pred.track_ids:
-            pts = pred.points[pred.track_ids.index(tid)]
-            return LocalPlan(pts[:, 0].copy(), pts[:, 1].copy(), pts[:, 2].copy(), pts[:, 3].copy())
-        tr = snapshot.tracks.get(tid)
-        if tr is None:
-            return None
-        h = self.config.horizon_s
-        ve, vn, vu = tr.vel_enu_mps
-        return LocalPlan(
-            np.array([tr.east_m, tr.east_m + ve * h]),
-            np.array([tr.north_m, tr.north_m + vn * h]),
-            np.array([tr.alt_amsl_m, tr.alt_amsl_m + vu * h]),
-            np.array([tr.t_s, tr.t_s + h]),
-        )
+        """The intruder's predicted path (see :func:`.intruder.intruder_plan`)."""
+        return intruder_plan(threat, snapshot, self.config.horizon_s)
 
     def resolve_intruder(
-        self, threat: Threat, operation_id: OperationId, snapshot: AirspaceSnapshot
+        self,
+        threat: Threat,
+        operation_id: OperationId,
+        snapshot: AirspaceSnapshot,
+        start_t_s: float | None = None,
     ) -> list[Alternative]:
-        """Vertical avoidance of a non-cooperative intruder: the UAS's cord alone climbs or
-        descends (the intruder is a rigid cord) until the intruder minima hold."""
-        self.dropped = []
-        self._queue = []
-        op = snapshot.operations.get(operation_id)
-        intruder = self.intruder_plan(threat, snapshot)
-        if op is None or intruder is None:
-            return []
-        now = snapshot.t_s
-        cfg = self.config
-        lp = self._lp(op.plan).after(now)
-        end = min(now + cfg.horizon_s, float(lp.t[-1]))
-        steps = max(2, math.ceil((end - now) / cfg.cord_dt_s) + 1)
-        grid: FloatArray = now + np.arange(steps, dtype=np.float64) * cfg.cord_dt_s
-        mon = self.monitoring
-        h_min = max(mon.intruder_horizontal_m, op.operational_volume_m)
-        v_min = max(mon.intruder_vertical_m, op.operational_volume_m)
-        minima = np.array([[[h_min, v_min]] * 2] * 2)
-        lo, hi = self._alt_limits(op)
-        outsiders = self._others(snapshot, {op.id})
-        fences = self._local_fences(snapshot.geofences)
-        out: list[Alternative] = []
-        for sign in (1, -1):
-            cords = [
-                cd.Cord(
-                    plan=lp,
-                    axis=cd.AXIS_VERTICAL,
-                    sign=sign,
-                    mobility=1.0,
-                    slope_m_per_step=op.max_climb_rate_mps * cfg.climb_fraction * cfg.cord_dt_s,
-                    max_offset_m=cfg.max_vertical_offset_m,
-                    min_alt_amsl_m=lo,
-                    max_alt_amsl_m=hi,
-                ),
-                cd.Cord(
-                    plan=intruder,
-                    axis=cd.AXIS_NONE,
-                    sign=0,
-                    mobility=0.0,
-                    slope_m_per_step=0.0,
-                    max_offset_m=0.0,
-                    min_alt_amsl_m=lo,
-                    max_alt_amsl_m=hi,
-                ),
-            ]
-            res = cd.resolve(
-                cords,
-                grid,
-                minima,
-                spherical=False,
-                margin_fraction=cfg.separation_margin_fraction,
-                max_iterations=cfg.max_iterations,
-            )
-            man = Maneuver.GO_UP if sign > 0 else Maneuver.GO_DOWN
-            if res is None:
-                self._drop(op.id, man, "no convergence")
-                continue
-            dk = res.displacement_m[0]
-            new = self._deformed(op, lp, grid, dk, cd.AXIS_VERTICAL, sign)
-            self._finish(
-                op,
-                man,
-                new,
-                lp,
-                geofences=snapshot.geofences,
-                fences=fences,
-                outsiders=outsiders,
-                lowest_priority=op.priority,
-                detail=f"vertical avoidance of intruder {threat.intruder_id}: "
-                f"{man.value} {float(dk.max()):.0f} m",
-                dest=out,
-            )
-        self._flush(now)
-        return out
+        """Vertical avoidance of a non-cooperative intruder (:mod:`.intruder`)."""
+        return resolve_intruder(self, threat, operation_id, snapshot, start_t_s)
 
     # ---- single UAS -------------------------------------------------------------------------
     def resolve_single(
@@ -864,298 +698,13 @@ class TacticalDeconfliction:
         snapshot: AirspaceSnapshot,
         maneuvers: Collection[Maneuver] | None = None,
         extra_geofences: Sequence[Geofence] = (),
+        *,
+        start_t_s: float | None = None,
     ) -> list[Alternative]:
-        """Single-UAS alternatives (A*), verified; ``maneuvers`` limits which are generated
-        (None = all that apply), ``extra_geofences`` are fences not yet in the snapshot (an
-        alert area EM is about to create)."""
-        self.dropped = []
-        self._queue = []
-        op = snapshot.operations.get(operation_id)
-        if op is None:
-            return []
-        want = set(maneuvers) if maneuvers is not None else set(Maneuver)
-        now = snapshot.t_s
-        cfg = self.config
-        geofences = tuple(snapshot.geofences) + tuple(
-            g for g in extra_geofences if g.id not in {f.id for f in snapshot.geofences}
+        """Single-UAS alternatives (A*), verified (:func:`.single.resolve_single`)."""
+        return resolve_single(
+            self, threat, operation_id, snapshot, maneuvers, extra_geofences, start_t_s
         )
-        if threat.area is not None and threat.area.id not in {g.id for g in geofences}:
-            geofences += (threat.area,)
-        # A dynamic geofence drawn around this UAS (jamming, link loss) does not apply to it.
-        geofences = tuple(g for g in geofences if g.applies_to(op.id))
-        fences = self._local_fences(geofences)
-        lp = self._lp(op.plan).after(now)
-        cur = self.current_xyz(op, snapshot)
-        zs = np.concatenate([lp.z, [cur[2]]])
-        ov = op.operational_volume_m
-        active = relevant_fences(
-            fences,
-            now,
-            max(now + cfg.horizon_s, float(lp.t[-1])),
-            float(zs.min()) - ov,
-            float(zs.max()) + ov,
-        )
-        planner = VisibilityPlanner(
-            merged_obstacles(active, ov + cfg.clearance_margin_m, cfg.cylinder_sides)
-        )
-        outsiders = self._others(snapshot, {op.id})
-        lowest = op.priority
-        router = _Router(op, planner, now, cur, lp)
-        out: list[Alternative] = []
-
-        def add(man: Maneuver, route: tuple[LocalPlan, int] | None, detail: str) -> None:
-            if route is None:
-                self._drop(op.id, man, "no path")
-                return
-            new, verify_from = route
-            self._finish(
-                op,
-                man,
-                new,
-                lp,
-                geofences=geofences,
-                fences=fences,
-                outsiders=outsiders,
-                lowest_priority=lowest,
-                detail=detail,
-                dest=out,
-                verify_from=verify_from,
-            )
-
-        inside = not planner.free(cur[:2])
-        if inside and Maneuver.ESCAPE in want:
-            add(
-                Maneuver.ESCAPE,
-                router.escape(cfg.escape_distance_m),
-                "leave by the closest border point, then rejoin the plan",
-            )
-        if not inside:
-            if Maneuver.REROUTE in want:
-                add(Maneuver.REROUTE, router.reroute(), "replace the crossing part of the plan")
-            if Maneuver.DIRECT_TO_GOAL in want:
-                add(
-                    Maneuver.DIRECT_TO_GOAL,
-                    router.to_point(lp.xyz()[-1]),
-                    "direct to the final waypoint",
-                )
-            off_plan = router.distance_to_plan() > op.flight_geometry_m
-            if Maneuver.BACK_TO_PLAN in want and off_plan:
-                add(
-                    Maneuver.BACK_TO_PLAN,
-                    router.back_to_plan(),
-                    "back to the closest point of the plan",
-                )
-            if Maneuver.NEXT_WAYPOINT in want and len(lp) > 1:
-                add(Maneuver.NEXT_WAYPOINT, router.next_waypoint(), "straight to the next waypoint")
-            if Maneuver.RETURN_HOME in want:
-                route = router.land_at(self._home(op))
-                left = self._endurance_left(op, now)
-                if route is not None and left is not None and route[0].t[-1] - now > left:
-                    self._drop(
-                        op.id,
-                        Maneuver.RETURN_HOME,
-                        f"home not reachable with {left:.0f} s of endurance left",
-                    )
-                else:
-                    add(Maneuver.RETURN_HOME, route, "return home and land")
-            if Maneuver.LANDING_SITE in want and op.landing_sites:
-                best = self._landing(op, router, now)
-                if best is None:
-                    self._drop(op.id, Maneuver.LANDING_SITE, "no landing site reachable")
-                else:
-                    add(Maneuver.LANDING_SITE, best[0], best[1])
-        self._flush(now)
-        return out
-
-    def _home(self, op: Operation) -> FloatArray:
-        if op.home is not None:
-            e, n = self.frame.point_to_local(op.home.lat_deg, op.home.lon_deg)
-            return np.array([e, n, op.home.alt_amsl_m])
-        return np.asarray(self._lp(op.plan).xyz()[0], dtype=np.float64)
-
-    def _endurance_left(self, op: Operation, now: float) -> float | None:
-        """Usable flight time left (endurance counted from the plan start, minus the
-        reserve), or None when the endurance is unknown."""
-        if op.endurance_s is None:
-            return None
-        left = op.endurance_s - max(0.0, now - op.plan.start_t_s)
-        return left * (1.0 - self.config.landing_reserve_fraction)
-
-    def _landing(
-        self, op: Operation, router: _Router, now: float
-    ) -> tuple[tuple[LocalPlan, int], str] | None:
-        """The landing site reached soonest that the remaining endurance covers (with the
-        reserve), when the endurance is known (``Operation.endurance_s`` counted from the
-        plan start)."""
-        remaining = self._endurance_left(op, now)
-        best: tuple[tuple[LocalPlan, int], str] | None = None
-        best_t = math.inf
-        for k, site in enumerate(op.landing_sites):
-            e, n = self.frame.point_to_local(site.lat_deg, site.lon_deg)
-            route = router.land_at(np.array([e, n, site.alt_amsl_m]))
-            if route is None:
-                continue
-            dur = float(route[0].t[-1] - now)
-            if remaining is not None and dur > remaining:
-                continue
-            if dur < best_t:
-                best_t = dur
-                best = (route, f"land at site {k} in {dur:.0f} s")
-        return best
-
-
-class _Router:
-    """Builds 4D local plans for one UAS from A* paths: horizontal path at the cruise speed,
-    altitude blended linearly along it, then the rest of the plan shifted to the arrival."""
-
-    def __init__(
-        self, op: Operation, planner: VisibilityPlanner, now: float, cur: FloatArray, lp: LocalPlan
-    ) -> None:
-        self.op = op
-        self.planner = planner
-        self.now = now
-        self.cur = cur
-        self.lp = lp
-
-    def _fly(self, pts: Sequence[FloatArray], t0: float) -> LocalPlan:
-        xyz = np.array([np.asarray(p, dtype=np.float64) for p in pts])
-        d = np.diff(xyz, axis=0)
-        need = np.maximum(
-            np.hypot(d[:, 0], d[:, 1]) / self.op.cruise_speed_mps,
-            np.abs(d[:, 2]) / self.op.max_climb_rate_mps,
-        )
-        t = np.concatenate([[t0], t0 + np.cumsum(need)])
-        return LocalPlan(xyz[:, 0], xyz[:, 1], xyz[:, 2], t)
-
-    def _path3d(self, a: FloatArray, b: FloatArray) -> list[FloatArray] | None:
-        path = self.planner.path(a[:2], b[:2])
-        if path is None:
-            return None
-        lengths = np.concatenate(
-            [
-                [0.0],
-                np.cumsum([np.hypot(*(q - p)) for p, q in itertools.pairwise(path)]),
-            ]
-        )
-        total = lengths[-1] if lengths[-1] > 0 else 1.0
-        return [
-            np.array([p[0], p[1], a[2] + (b[2] - a[2]) * s / total])
-            for p, s in zip(path, lengths, strict=True)
-        ]
-
-    def _join(self, head: LocalPlan, rest_from: int) -> LocalPlan:
-        """``head`` then the plan's waypoints from ``rest_from`` on, shifted in time so that
-        the first of them is reached when ``head`` ends."""
-        if rest_from >= len(self.lp):
-            return head
-        shift = float(head.t[-1]) - float(self.lp.t[rest_from])
-        # ``head`` ends at waypoint rest_from, so the rest starts after it.
-        sl = slice(rest_from + 1, None)
-        return LocalPlan(
-            np.concatenate([head.e, self.lp.e[sl]]),
-            np.concatenate([head.n, self.lp.n[sl]]),
-            np.concatenate([head.z, self.lp.z[sl]]),
-            np.concatenate([head.t, self.lp.t[sl] + shift]),
-        )
-
-    def _route_via(
-        self, start: FloatArray, t0: float, prefix: list[FloatArray], first: int
-    ) -> LocalPlan | None:
-        """From ``start`` through the plan's waypoints from index ``first``, replacing every
-        blocked stretch by an A* path from the last free waypoint before it to the first free
-        one after it."""
-        pts: list[FloatArray] = [*prefix, start]
-        wps = self.lp.xyz()
-        free = [self.planner.free(w[:2]) for w in wps]
-        i = first
-        last = start
-        while i < len(wps):
-            if not free[i]:
-                i += 1
-                continue
-            if self.planner.segment_free(last[:2], wps[i][:2]):
-                pts.append(wps[i])
-            else:
-                seg = self._path3d(last, wps[i])
-                if seg is None:
-                    return None
-                pts.extend(seg[1:])
-            last = wps[i]
-            i += 1
-        if not free[-1]:
-            return None  # the destination itself is blocked
-        return self._fly(pts, t0)
-
-    def reroute(self) -> tuple[LocalPlan, int] | None:
-        plan = self._route_via(self.cur, self.now, [], 1)
-        return None if plan is None else (plan, 0)
-
-    def escape(self, extra_m: float) -> tuple[LocalPlan, int] | None:
-        out2 = self.planner.exit_point(self.cur[:2], extra_m)
-        out = np.array([out2[0], out2[1], self.cur[2]])
-        # Rejoin at the first plan waypoint ahead that is outside every obstacle.
-        plan = self._route_via(out, self.now, [self.cur], 1)
-        if plan is None:
-            return None
-        t1 = self._fly([self.cur, out], self.now).t[-1]
-        shifted = LocalPlan(
-            plan.e, plan.n, plan.z, plan.t + (t1 - self.now) - (plan.t[1] - plan.t[0])
-        )
-        return shifted, 1
-
-    def to_point(self, target: FloatArray) -> tuple[LocalPlan, int] | None:
-        path = self._path3d(self.cur, target)
-        if path is None:
-            return None
-        return self._fly(path, self.now), 0
-
-    def distance_to_plan(self) -> float:
-        if len(self.lp) < 2:
-            return float(np.hypot(*(self.cur[:2] - self.lp.xyz()[0, :2])))
-        return float(LineString(self.lp.xyz()[:, :2]).distance(Point(self.cur[0], self.cur[1])))
-
-    def back_to_plan(self) -> tuple[LocalPlan, int] | None:
-        """To the closest point of the remaining plan, then on along the plan."""
-        if len(self.lp) < 2:
-            return self.to_point(self.lp.xyz()[0])
-        line = LineString(self.lp.xyz()[:, :2])
-        s = line.project(Point(self.cur[0], self.cur[1]))
-        cum = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(self.lp.e), np.diff(self.lp.n)))])
-        k = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(self.lp) - 2))
-        frac = 0.0 if cum[k + 1] == cum[k] else (s - cum[k]) / (cum[k + 1] - cum[k])
-        xyz = self.lp.xyz()
-        q = xyz[k] + frac * (xyz[k + 1] - xyz[k])
-        path = self._path3d(self.cur, q)
-        if path is None:
-            return None
-        head = self._fly(path, self.now)
-        tq = float(self.lp.t[k] + frac * (self.lp.t[k + 1] - self.lp.t[k]))
-        shift = float(head.t[-1]) - tq
-        sl = slice(k + 1, None)
-        return (
-            LocalPlan(
-                np.concatenate([head.e, self.lp.e[sl]]),
-                np.concatenate([head.n, self.lp.n[sl]]),
-                np.concatenate([head.z, self.lp.z[sl]]),
-                np.concatenate([head.t, self.lp.t[sl] + shift]),
-            ),
-            0,
-        )
-
-    def next_waypoint(self) -> tuple[LocalPlan, int] | None:
-        target = self.lp.xyz()[1]
-        path = self._path3d(self.cur, target)
-        if path is None:
-            return None
-        return self._join(self._fly(path, self.now), 1), 0
-
-    def land_at(self, site: FloatArray) -> tuple[LocalPlan, int] | None:
-        """Cruise at the current altitude to above ``site``, then descend onto it."""
-        above = np.array([site[0], site[1], self.cur[2]])
-        path = self._path3d(self.cur, above)
-        if path is None:
-            return None
-        return self._fly([*path, site], self.now), 0
 
 
 def _near(fences: Sequence[LocalFence], lp: LocalPlan, margin_m: float) -> list[bool]:

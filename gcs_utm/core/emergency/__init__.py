@@ -1,7 +1,8 @@
 """Emergency Management (paper §4.4): per-threat policy, joint selection, recommendations."""
 
 from gcs_utm.core.emergency.config import ACTIONS, DEFAULT_POLICY, EmergencyConfig
-from gcs_utm.core.emergency.manager import Decision, EmergencyManager
+from gcs_utm.core.emergency.decision import Decision
+from gcs_utm.core.emergency.manager import EmergencyManager
 from gcs_utm.core.emergency.selection import Selection, select_joint
 
 __all__ = [

@@ -18,13 +18,23 @@ Guarantees:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 from gcs_utm.core.deconfliction import TacticalDeconfliction
 from gcs_utm.core.emergency.config import EmergencyConfig
+from gcs_utm.core.emergency.decision import (
+    ACTOR,
+    MODE_COMMAND,
+    MODE_INTRUDER,
+    MODE_MULTI,
+    ONE_SHOT,
+    SINGLE_MANEUVERS,
+    Case,
+    Decision,
+)
+from gcs_utm.core.emergency.geofences import area, link_loss, suspend
 from gcs_utm.core.emergency.selection import Selection, select_joint, weighted
 from gcs_utm.core.monitoring.config import MonitoringConfig
-from gcs_utm.core.monitoring.strategic import plan_vs_geofences
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -33,10 +43,6 @@ from gcs_utm.model import (
     Command,
     CommandKind,
     Geofence,
-    GeofenceId,
-    GeofenceKind,
-    GeofenceShape,
-    LatLon,
     Maneuver,
     OperationId,
     Recommendation,
@@ -47,66 +53,6 @@ from gcs_utm.model import (
     ThreatKind,
     ThreatStatus,
 )
-
-ACTOR = "EM"
-
-REROUTE_MANEUVERS = frozenset(
-    {
-        Maneuver.REROUTE,
-        Maneuver.ESCAPE,
-        Maneuver.DIRECT_TO_GOAL,
-        Maneuver.BACK_TO_PLAN,
-        Maneuver.NEXT_WAYPOINT,
-        Maneuver.RETURN_HOME,
-        Maneuver.LANDING_SITE,
-    }
-)
-SINGLE_MANEUVERS: dict[str, frozenset[Maneuver]] = {
-    "reroute": REROUTE_MANEUVERS,
-    "back_to_plan": frozenset({Maneuver.BACK_TO_PLAN, Maneuver.NEXT_WAYPOINT}),
-    "land_or_home": frozenset({Maneuver.LANDING_SITE, Maneuver.RETURN_HOME}),
-}
-_ONE_SHOT = frozenset({"warn", "suspend_and_geofence", "alert_and_geofence", "geofence_from_area"})
-"""Actions done once per threat: repeating them would only duplicate warnings/geofences."""
-_MODE_MULTI = "multi"
-_MODE_INTRUDER = "intruder"
-_MODE_COMMAND = "command"
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class Decision:
-    """What one EM step asks the rest of the system to do."""
-
-    recommendations: tuple[Recommendation, ...] = ()
-    geofences: tuple[Geofence, ...] = ()
-    commands: tuple[Command, ...] = ()
-    escalations: tuple[str, ...] = ()
-    superseded: tuple[RecommendationId, ...] = ()
-    audit: tuple[AuditEntry, ...] = ()
-    warnings: tuple[str, ...] = ()
-
-    def merge(self, other: Decision) -> Decision:
-        return Decision(
-            recommendations=self.recommendations + other.recommendations,
-            geofences=self.geofences + other.geofences,
-            commands=self.commands + other.commands,
-            escalations=self.escalations + other.escalations,
-            superseded=self.superseded + other.superseded,
-            audit=self.audit + other.audit,
-            warnings=self.warnings + other.warnings,
-        )
-
-
-@dataclass(slots=True)
-class _Case:
-    threat: Threat
-    action: str
-    attempt_t_s: float
-    modes: dict[OperationId, str] = field(default_factory=dict)
-    excluded: dict[OperationId, set[Maneuver]] = field(default_factory=dict)
-    replans: dict[OperationId, int] = field(default_factory=dict)
-    geofences: list[Geofence] = field(default_factory=list)
-    rec_ids: set[RecommendationId] = field(default_factory=set)
 
 
 def _alt_record(alt: Alternative, alpha: float, beta: float) -> dict[str, object]:
@@ -133,7 +79,7 @@ class EmergencyManager:
         self.config = config
         self.td = td
         self.monitoring = monitoring
-        self._cases: dict[ThreatId, _Case] = {}
+        self._cases: dict[ThreatId, Case] = {}
         self._recs: dict[RecommendationId, Recommendation] = {}
 
     # ---- queries ----------------------------------------------------------------------------
@@ -159,7 +105,7 @@ class EmergencyManager:
             # done; a case that ended in escalation is retried every retry_after_s with its
             # refused maneuvers still excluded (no churn every monitoring cycle).
             case.threat = threat
-            if self._live(case) or case.action in _ONE_SHOT:
+            if self._live(case) or case.action in ONE_SHOT:
                 return Decision()
             if snapshot.t_s - case.attempt_t_s < self.config.retry_after_s:
                 return Decision()
@@ -167,7 +113,7 @@ class EmergencyManager:
             case.replans.clear()
             return self._handle(case, snapshot)
         action = self.config.action_for(threat.kind)
-        case = _Case(threat=threat, action=action, attempt_t_s=snapshot.t_s)
+        case = Case(threat=threat, action=action, attempt_t_s=snapshot.t_s)
         self._cases[threat.id] = case
         return self._handle(case, snapshot)
 
@@ -185,20 +131,20 @@ class EmergencyManager:
             msg = f"answer to {rec.id} v{rec.version} ignored: current is {state}"
             return Decision(
                 warnings=(msg,),
-                audit=(self._audit(now, "answer_ignored", rec.id, {"reason": msg}),),
+                audit=(self.audit(now, "answer_ignored", rec.id, {"reason": msg}),),
             )
         if accepted:
             new = cur.transition(RecommendationState.ACCEPTED, now, "accepted by the operator")
             self._recs[new.id] = new
             return Decision(
                 recommendations=(new,),
-                audit=(self._audit(now, "accepted", rec.id, {"version": rec.version}),),
+                audit=(self.audit(now, "accepted", rec.id, {"version": rec.version}),),
             )
         new = cur.transition(RecommendationState.REJECTED, now, "rejected by the operator")
         self._recs[new.id] = new
         d = Decision(
             recommendations=(new,),
-            audit=(self._audit(now, "rejected", rec.id, {"version": rec.version}),),
+            audit=(self.audit(now, "rejected", rec.id, {"version": rec.version}),),
         )
         return d.merge(self._replan(new, snapshot, "rejected"))
 
@@ -217,7 +163,7 @@ class EmergencyManager:
         d = Decision(
             recommendations=(new,),
             escalations=(msg,),
-            audit=(self._audit(now, "expired", rec.id, {"version": rec.version}),),
+            audit=(self.audit(now, "expired", rec.id, {"version": rec.version}),),
         )
         return d.merge(self._replan(new, snapshot, "expired"))
 
@@ -237,18 +183,16 @@ class EmergencyManager:
             recommendations=tuple(recs),
             superseded=tuple(r.id for r in recs),
             audit=(
-                self._audit(t, "threat_closed", threat.id, {"superseded": [r.id for r in recs]}),
+                self.audit(t, "threat_closed", threat.id, {"superseded": [r.id for r in recs]}),
             ),
         )
 
     # ---- internals --------------------------------------------------------------------------
-    def _live(self, case: _Case) -> bool:
+    def _live(self, case: Case) -> bool:
         live = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED)
         return any(self._recs[r].state in live for r in case.rec_ids)
 
-    def _audit(
-        self, t_s: float, action: str, subject: str, detail: dict[str, object]
-    ) -> AuditEntry:
+    def audit(self, t_s: float, action: str, subject: str, detail: dict[str, object]) -> AuditEntry:
         return AuditEntry(t_s=t_s, actor=ACTOR, action=action, subject=str(subject), detail=detail)
 
     def _deadline(self, threat: Threat, now: float) -> float:
@@ -257,9 +201,9 @@ class EmergencyManager:
             event = now + self.config.default_event_horizon_s
         return max(now + self.config.min_response_s, event - self.config.deadline_margin_s)
 
-    def _issue(
+    def issue(
         self,
-        case: _Case,
+        case: Case,
         op_id: OperationId,
         now: float,
         *,
@@ -305,7 +249,7 @@ class EmergencyManager:
             recommendations=tuple(recs), superseded=tuple(superseded), commands=commands
         )
 
-    def _handle(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
+    def _handle(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
         t = case.threat
         now = snapshot.t_s
         a = case.action
@@ -314,12 +258,12 @@ class EmergencyManager:
         if a in SINGLE_MANEUVERS:
             d = Decision()
             for op_id in t.uas_ids:
-                d = d.merge(self._single(case, op_id, snapshot, SINGLE_MANEUVERS[a]))
+                d = d.merge(self.single(case, op_id, snapshot, SINGLE_MANEUVERS[a]))
             return d
         if a == "warn":
             msg = f"{t.kind.value}: {', '.join(t.uas_ids)} {t.message}".strip()
             return Decision(
-                warnings=(msg,), audit=(self._audit(now, "warn", t.id, {"message": msg}),)
+                warnings=(msg,), audit=(self.audit(now, "warn", t.id, {"message": msg}),)
             )
         if a == "vertical_avoidance":
             d = Decision()
@@ -327,15 +271,15 @@ class EmergencyManager:
                 d = d.merge(self._intruder(case, op_id, snapshot))
             return d
         if a == "suspend_and_geofence":
-            return self._suspend(case, snapshot)
+            return suspend(self, case, snapshot)
         if a == "alert_and_geofence":
-            return self._link_loss(case, snapshot)
+            return link_loss(self, case, snapshot)
         if a == "geofence_from_area":
-            return self._area(case, snapshot)
+            return area(self, case, snapshot)
         raise AssertionError(f"unhandled action {a!r}")  # EmergencyConfig validates actions
 
     # -- multi-UAS
-    def _multi(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
+    def _multi(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
         now = snapshot.t_s
         cfg = self.config
         t = case.threat
@@ -365,11 +309,11 @@ class EmergencyManager:
                 f"{', '.join(t.uas_ids)}; operator action needed"
             )
             return Decision(
-                escalations=(msg,), audit=(self._audit(now, "escalation", t.id, detail),)
+                escalations=(msg,), audit=(self.audit(now, "escalation", t.id, detail),)
             )
-        d = Decision(audit=(self._audit(now, "decision", t.id, detail),))
+        d = Decision(audit=(self.audit(now, "decision", t.id, detail),))
         for op_id, alt in sel.chosen.items():
-            case.modes[op_id] = _MODE_MULTI
+            case.modes[op_id] = MODE_MULTI
             rid = RecommendationId(f"{t.id}/{op_id}")
             prev = self._recs.get(rid)
             if alt.maneuver is Maneuver.KEEP_PLAN:
@@ -390,7 +334,7 @@ class EmergencyManager:
                 x for x in options[op_id] if x is not alt and all(compatible(x, c) for c in others)
             ]
             d = d.merge(
-                self._issue(
+                self.issue(
                     case,
                     op_id,
                     now,
@@ -429,9 +373,9 @@ class EmergencyManager:
         }
 
     # -- single UAS
-    def _single(
+    def single(
         self,
-        case: _Case,
+        case: Case,
         op_id: OperationId,
         snapshot: AirspaceSnapshot,
         maneuvers: frozenset[Maneuver],
@@ -470,19 +414,19 @@ class EmergencyManager:
         )
         detail = self._detail(options, sel, f"{t.kind.value}: {case.action}")
         if best is None:
-            audit = (self._audit(now, "escalation", case.threat.id, detail),)
+            audit = (self.audit(now, "escalation", case.threat.id, detail),)
             if case.action == "land_or_home":
                 # Low battery or failure and no reachable site: land where it is, and say so.
                 cmd = Command(kind=CommandKind.LAND, operation_id=op_id)
-                case.modes[op_id] = _MODE_COMMAND
+                case.modes[op_id] = MODE_COMMAND
                 msg = f"{case.threat.id}: no reachable landing site or home for {op_id}: land now"
-                d = self._issue(case, op_id, now, command=cmd, reason=msg)
+                d = self.issue(case, op_id, now, command=cmd, reason=msg)
                 return d.merge(Decision(escalations=(msg,), audit=audit))
             msg = f"{case.threat.id}: no feasible alternative for {op_id} ({t.kind.value})"
             return Decision(escalations=(msg,), audit=audit)
-        d = Decision(audit=(self._audit(now, "decision", case.threat.id, detail),))
+        d = Decision(audit=(self.audit(now, "decision", case.threat.id, detail),))
         return d.merge(
-            self._issue(
+            self.issue(
                 case,
                 op_id,
                 now,
@@ -492,10 +436,10 @@ class EmergencyManager:
             )
         )
 
-    def _intruder(self, case: _Case, op_id: OperationId, snapshot: AirspaceSnapshot) -> Decision:
+    def _intruder(self, case: Case, op_id: OperationId, snapshot: AirspaceSnapshot) -> Decision:
         now = snapshot.t_s
         cfg = self.config
-        case.modes[op_id] = _MODE_INTRUDER
+        case.modes[op_id] = MODE_INTRUDER
         banned = case.excluded.get(op_id, set())
         alts = [
             x
@@ -520,11 +464,11 @@ class EmergencyManager:
                 f"from intruder {case.threat.intruder_id}"
             )
             return Decision(
-                escalations=(msg,), audit=(self._audit(now, "escalation", case.threat.id, detail),)
+                escalations=(msg,), audit=(self.audit(now, "escalation", case.threat.id, detail),)
             )
-        d = Decision(audit=(self._audit(now, "decision", case.threat.id, detail),))
+        d = Decision(audit=(self.audit(now, "decision", case.threat.id, detail),))
         return d.merge(
-            self._issue(
+            self.issue(
                 case,
                 op_id,
                 now,
@@ -533,199 +477,6 @@ class EmergencyManager:
                 reason=f"intruder {case.threat.intruder_id}: {alts[0].maneuver.value}",
             )
         )
-
-    # -- geofence-creating actions
-    def _cylinder(  # noqa: PLR0917 - private helper, one call per geofence kind
-        self,
-        gid: str,
-        east_m: float,
-        north_m: float,
-        alt_amsl_m: float,
-        radius_m: float,
-        band_m: float,
-        now: float,
-        duration_s: float,
-        reason: str,
-        exempt: tuple[OperationId, ...] = (),
-    ) -> Geofence:
-        lat, lon = self.frame.point_to_wgs84(east_m, north_m)
-        return Geofence(
-            id=GeofenceId(gid),
-            shape=GeofenceShape.CYLINDER,
-            min_alt_amsl_m=alt_amsl_m - band_m,
-            max_alt_amsl_m=alt_amsl_m + band_m,
-            center=LatLon(lat_deg=lat, lon_deg=lon),
-            radius_m=radius_m,
-            start_t_s=now,
-            end_t_s=now + duration_s,
-            kind=GeofenceKind.DYNAMIC,
-            reason=reason,
-            source=ACTOR,
-            exempt=exempt,
-        )
-
-    def _reroute_affected(
-        self,
-        case: _Case,
-        fence: Geofence,
-        snapshot: AirspaceSnapshot,
-        exclude: set[OperationId],
-    ) -> Decision:
-        """Reroute every other operation whose plan the new fence now blocks (use case 2)."""
-        d = Decision()
-        for op in snapshot.operations.values():
-            if op.id in exclude or op.plan.end_t_s < snapshot.t_s:
-                continue
-            if not plan_vs_geofences(op.plan, op, [fence], self.frame, self.monitoring):
-                continue
-            sub = replace(
-                case.threat,
-                kind=ThreatKind.GEOFENCE_CONFLICT,
-                uas_ids=(op.id,),
-                geofence_id=fence.id,
-                area=fence,
-            )
-            d = d.merge(self._single(case, op.id, snapshot, REROUTE_MANEUVERS, threat=sub))
-        return d
-
-    def _suspend(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
-        now = snapshot.t_s
-        cfg = self.config
-        t = case.threat
-        kind = CommandKind.HOLD if cfg.suspend_command == "hold" else CommandKind.LAND
-        d = Decision()
-        for op_id in t.uas_ids:
-            op = snapshot.operations.get(op_id)
-            if t.position is not None:
-                e, n = self.frame.point_to_local(t.position.lat_deg, t.position.lon_deg)
-                z = t.position.alt_amsl_m
-            elif op is not None:
-                e, n, z = (float(v) for v in self.td.current_xyz(op, snapshot))
-            else:
-                d = d.merge(Decision(escalations=(f"{t.id}: {t.kind.value} for unknown {op_id}",)))
-                continue
-            fence = self._cylinder(
-                f"em-{t.id}-{op_id}",
-                e,
-                n,
-                z,
-                cfg.jamming_radius_m,
-                cfg.jamming_band_m,
-                now,
-                cfg.jamming_duration_s,
-                f"{t.kind.value} around {op_id}",
-                exempt=(op_id,),
-            )
-            case.geofences.append(fence)
-            case.modes[op_id] = _MODE_COMMAND
-            cmd = Command(kind=kind, operation_id=op_id)
-            d = d.merge(
-                self._issue(
-                    case,
-                    op_id,
-                    now,
-                    command=cmd,
-                    geofence=fence,
-                    reason=f"{t.kind.value}: suspend ({kind.value}) and keep others out",
-                )
-            )
-            d = d.merge(
-                Decision(
-                    geofences=(fence,),
-                    audit=(
-                        self._audit(
-                            now,
-                            "decision",
-                            t.id,
-                            {
-                                "reason": f"{t.kind.value}: suspend + dynamic geofence",
-                                "command": kind.value,
-                                "geofence": fence.id,
-                                "radius_m": cfg.jamming_radius_m,
-                                "band_m": cfg.jamming_band_m,
-                                "duration_s": cfg.jamming_duration_s,
-                            },
-                        ),
-                    ),
-                )
-            )
-            d = d.merge(self._reroute_affected(case, fence, snapshot, set(t.uas_ids)))
-        return d
-
-    def _link_loss(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
-        now = snapshot.t_s
-        cfg = self.config
-        t = case.threat
-        d = Decision()
-        for op_id in t.uas_ids:
-            op = snapshot.operations.get(op_id)
-            msg = (
-                f"{t.id}: link lost with {op_id}; temporary geofence around its predicted position"
-            )
-            if t.position is not None:
-                e, n = self.frame.point_to_local(t.position.lat_deg, t.position.lon_deg)
-                z = t.position.alt_amsl_m
-            elif op is not None:
-                from gcs_utm.core.deconfliction.geometry import plan_to_local
-
-                p = plan_to_local(op.plan, self.frame).position_at(now + cfg.link_loss_predict_s)
-                e, n, z = float(p[0]), float(p[1]), float(p[2])
-            else:
-                d = d.merge(Decision(escalations=(f"{t.id}: link lost with unknown {op_id}",)))
-                continue
-            fence = self._cylinder(
-                f"em-{t.id}-{op_id}",
-                e,
-                n,
-                z,
-                cfg.link_loss_radius_m,
-                cfg.link_loss_band_m,
-                now,
-                cfg.link_loss_duration_s,
-                f"link loss of {op_id}",
-                exempt=(op_id,),
-            )
-            case.geofences.append(fence)
-            d = d.merge(
-                Decision(
-                    geofences=(fence,),
-                    escalations=(msg,),
-                    audit=(
-                        self._audit(now, "decision", t.id, {"reason": msg, "geofence": fence.id}),
-                    ),
-                )
-            )
-            d = d.merge(self._reroute_affected(case, fence, snapshot, set(t.uas_ids)))
-        return d
-
-    def _area(self, case: _Case, snapshot: AirspaceSnapshot) -> Decision:
-        now = snapshot.t_s
-        t = case.threat
-        if t.area is None:
-            msg = f"{t.id}: {t.kind.value} without an area: {t.message}"
-            return Decision(
-                escalations=(msg,), audit=(self._audit(now, "escalation", t.id, {"reason": msg}),)
-            )
-        fence = replace(
-            t.area,
-            kind=GeofenceKind.DYNAMIC,
-            start_t_s=t.area.start_t_s if t.area.start_t_s is not None else now,
-            end_t_s=t.area.end_t_s
-            if t.area.end_t_s is not None
-            else now + self.config.alert_duration_s,
-            reason=t.area.reason or t.message or t.kind.value,
-            source=t.area.source or ACTOR,
-        )
-        case.geofences.append(fence)
-        d = Decision(
-            geofences=(fence,),
-            audit=(
-                self._audit(
-                    now, "decision", t.id, {"reason": f"alert area -> geofence {fence.id}"}
-                ),
-            ),
-        )
-        return d.merge(self._reroute_affected(case, fence, snapshot, set()))
 
     # -- re-planning after a refusal
     def _replan(self, rec: Recommendation, snapshot: AirspaceSnapshot, why: str) -> Decision:
@@ -739,16 +490,16 @@ class EmergencyManager:
         if rec.selected is not None:
             case.excluded.setdefault(op_id, set()).add(rec.selected.maneuver)
         mode = case.modes.get(op_id, "")
-        if mode == _MODE_COMMAND or n > self.config.max_replans:
-            what = "a command" if mode == _MODE_COMMAND else f"{n - 1} re-plans"
+        if mode == MODE_COMMAND or n > self.config.max_replans:
+            what = "a command" if mode == MODE_COMMAND else f"{n - 1} re-plans"
             msg = f"{rec.threat_id}: {op_id} {why} {what}; operator action needed"
             return Decision(
                 escalations=(msg,),
-                audit=(self._audit(now, "escalation", rec.threat_id, {"reason": msg}),),
+                audit=(self.audit(now, "escalation", rec.threat_id, {"reason": msg}),),
             )
-        if mode == _MODE_MULTI:
+        if mode == MODE_MULTI:
             return self._multi(case, snapshot)
-        if mode == _MODE_INTRUDER:
+        if mode == MODE_INTRUDER:
             return self._intruder(case, op_id, snapshot)
         maneuvers = frozenset(Maneuver(v) for v in mode.removeprefix("single:").split(",") if v)
         threat = case.threat
@@ -756,4 +507,4 @@ class EmergencyManager:
             threat = replace(
                 threat, kind=ThreatKind.GEOFENCE_CONFLICT, uas_ids=(op_id,), area=case.geofences[-1]
             )
-        return self._single(case, op_id, snapshot, maneuvers, threat=threat)
+        return self.single(case, op_id, snapshot, maneuvers, threat=threat)

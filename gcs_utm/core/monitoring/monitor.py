@@ -91,11 +91,16 @@ class _Evaluation:
 
 
 class Monitor:
-    """Stateful threat detector over successive snapshots (pure: no clock, no I/O)."""
+    """Stateful threat detector over successive snapshots (pure: no clock, no I/O).
 
-    def __init__(self, frame: LocalFrame, config: MonitoringConfig) -> None:
+    Threat ids are ``<id_prefix>T<n>-<KIND>`` with ``n`` counted from 1 in each Monitor; the
+    service passes its store life's prefix (``E<epoch>-``) so ids stay unique across
+    restarts."""
+
+    def __init__(self, frame: LocalFrame, config: MonitoringConfig, *, id_prefix: str = "") -> None:
         self.frame = frame
         self.config = config
+        self.id_prefix = id_prefix
         self._states: dict[Key, _State] = {}
         self._seq = 0
         self._fence_cache: dict[GeofenceId, tuple[Geofence, LocalFence]] = {}
@@ -330,7 +335,8 @@ class Monitor:
             if st.threat is None:
                 if st.present >= cfg.open_cycles:
                     self._seq += 1
-                    st.threat = self._make(ThreatId(f"T{self._seq}-{key[0]}"), obs, t, pred)
+                    tid = ThreatId(f"{self.id_prefix}T{self._seq}-{key[0]}")
+                    st.threat = self._make(tid, obs, t, pred)
                     out.append(st.threat)
                 continue
             new = self._make(st.threat.id, obs, st.threat.detected_at_s, pred, updated=t)

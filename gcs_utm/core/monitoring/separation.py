@@ -37,6 +37,7 @@ from gcs_utm.core.monitoring.geometry import (
     relative_separation,
     window_extents,
 )
+from gcs_utm.core.monitoring.loss import minima_arrays
 
 IntArray = npt.NDArray[np.int64]
 
@@ -78,14 +79,7 @@ def _check_time_base(points: FloatArray) -> None:
 def _minima(
     ov_a: FloatArray, ov_b: FloatArray, config: MonitoringConfig
 ) -> tuple[FloatArray, FloatArray]:
-    floor = ov_a + ov_b  # m
-    if config.spherical:
-        s = np.maximum(config.safety_distance_m, floor)
-        return s, s
-    return (
-        np.maximum(config.separation_horizontal_m, floor),
-        np.maximum(config.separation_vertical_m, floor),
-    )
+    return minima_arrays(config, ov_a, ov_b)  # the shared definition (monitoring.loss)
 
 
 Planes = tuple[FloatArray, FloatArray, FloatArray]

@@ -1,11 +1,18 @@
-/* The tracker's common round in C: every measurement of a batch updates its own track.
+/* The tracker's optional C kernel (see gcs_utm/core/tracking/kernel.py, which puts it and
+ * the NumPy reference behind one function each).
  *
- * update_rows() is Tracker._round_small (gcs_utm/core/tracking/tracker.py) for any number of
- * rows: the same checks (out of order, duplicate, gate) and kalman.step_row's arithmetic, the
- * same IEEE double operations in the same order, so the results are equal bit for bit (tests
- * compare the two; build with -ffp-contract=off so that no multiply-add is fused). It changes
- * nothing and returns False as soon as one measurement would not simply update its track, or
- * a division would be by zero (NumPy's inf/nan): the NumPy round decides then.
+ * update_rows(): the common round, in which every measurement of a batch updates its own
+ * track: the same checks (out of order, duplicate, gate) as Tracker._round and kalman.step's
+ * arithmetic per row, the same IEEE double operations in the same order, so the results are
+ * equal bit for bit (tests compare the two; build with -ffp-contract=off so that no
+ * multiply-add is fused). It changes nothing and returns False as soon as one measurement
+ * would not simply update its track, or a division would be by zero (NumPy's inf/nan): the
+ * NumPy round decides then.
+ *
+ * lane_records(): kernel.check_entries for telemetry entries.
+ *
+ * The layouts are those of gcs_utm/core/tracking/layout.py; the module exports its copy as
+ * LAYOUT, which kernel.py compares with layout.C_LAYOUT at import.
  *
  * Only the buffer protocol is used (no NumPy headers): the arrays are passed as they are, and
  * their layout is checked against what the tracker keeps (C-contiguous, float64 / intp /
@@ -17,7 +24,7 @@
 #include <stdint.h>
 #include <string.h>
 
-/* The record layout of tracker.py (_C_*). */
+/* The record layout of layout.py (REC_*). */
 enum { C_T = 0, C_E = 1, C_N = 2, C_U = 3, C_VE = 4, C_R = 7, C_RV = 10, C_SRC = 13, C_HV = 14,
        NCOL = 15 };
 
@@ -45,8 +52,8 @@ static void release(Buf *bufs, int n) {
         if (bufs[i].held) PyBuffer_Release(&bufs[i].b);
 }
 
-/* kalman.step_row on one row: x[6] (pos, vel per axis), p[9] (pp, pv, vv per axis). Returns 0
- * when a divisor is zero (nothing written), 1 otherwise. */
+/* kalman.step (positions already predicted) on one row: x[6] (pos, vel per axis), p[9] (pp,
+ * pv, vv per axis). Returns 0 when a divisor is zero (nothing written), 1 otherwise. */
 static int step_row(double *x, double *p, double dt, const double *q, const double *z,
                     const double *r, const double *zv, double rv) {
     double out_x[6], out_p[9];
@@ -158,7 +165,7 @@ static PyObject *update_rows(PyObject *self, PyObject *args) {
         double dn = A(C_N, k) - pn;
         double du = A(C_U, k) - pu;
         double allowed = margin + max_speed * dt;
-        if (!(allowed < max_jump)) allowed = max_jump; /* Python's min(max_jump, allowed) */
+        if (!(allowed < max_jump)) allowed = max_jump; /* np.minimum(max_jump, allowed) */
         if (sqrt(de * de + dn * dn + du * du) > allowed) goto fallback;
         xs[0] = pe;
         xs[2] = pn;
@@ -201,11 +208,11 @@ done:
 /* lane_records(values, a, idx, defaults, min_sigma, max_future, max_speed2, north_dir,
  *              min_alt, max_alt) -> (m, invalid, gate)
  *
- * Tracker.ingest's checks and record for each PositionLane entry in ``values`` (a sequence of
- * k entries of LANE_STRIDE numbers), in the same order with the same arithmetic as its loop
- * over Measurements: the i-th entry that passes goes to column i of ``a`` (NCOL, k) and its
- * source index to idx[i]; m of them passed. ``defaults``: (eph, epv, velocity sigma) of
- * telemetry; ``north_dir``: (east, north) of true north on the grid. */
+/* kernel.check_entries for each telemetry entry in ``values`` (a sequence of k entries of
+ * STRIDE numbers, layout.py ENT_*), the same conditions in the same order with the same
+ * arithmetic: the i-th entry that passes goes to column i of ``a`` (NCOL, k) and its source
+ * index to idx[i]; m of them passed. ``defaults``: (eph, epv, velocity sigma) of telemetry;
+ * ``north_dir``: (east, north) of true north on the grid. */
 enum { L_IDX = 0, L_RCV, L_T, L_LON, L_LAT, L_ALT, L_VN, L_VE, L_VD, L_EPH, L_EPV, STRIDE };
 
 static PyObject *lane_records(PyObject *self, PyObject *args) {
@@ -278,8 +285,20 @@ static PyObject *lane_records(PyObject *self, PyObject *args) {
                 invalid++;
             continue;
         }
-        double rec[NCOL] = {t, lon, lat, alt, vn * nd_e + ve * nd_n, vn * nd_n - ve * nd_e, -vd,
-                            eph2, eph2, epv2, vsig2, vsig2, vsig2, 0.0, 1.0};
+        double rec[NCOL];
+        rec[C_T] = t;
+        rec[C_E] = lon; /* projected to east/north by the tracker */
+        rec[C_N] = lat;
+        rec[C_U] = alt;
+        rec[C_VE] = vn * nd_e + ve * nd_n;
+        rec[C_VE + 1] = vn * nd_n - ve * nd_e;
+        rec[C_VE + 2] = -vd;
+        rec[C_R] = eph2;
+        rec[C_R + 1] = eph2;
+        rec[C_R + 2] = epv2;
+        rec[C_RV] = rec[C_RV + 1] = rec[C_RV + 2] = vsig2;
+        rec[C_SRC] = 0.0;
+        rec[C_HV] = 1.0;
         for (int f = 0; f < NCOL; f++) a[(Py_ssize_t)f * k + m] = rec[f];
         idx[m] = src;
         m++;
@@ -298,14 +317,27 @@ static PyMethodDef methods[] = {
      "PositionLane entries (see the module source)."},
     {"update_rows", update_rows, METH_VARARGS,
      "update_rows(rw, a, x, p, t, src_t, updates, gate_fails, stale, q, max_jump, margin, "
-     "max_speed) -> bool: Tracker._round_small in C (see the module source)."},
+     "max_speed) -> bool: the common round (see the module source)."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_kalman_c",
-    "The tracker's common Kalman round in C (bit for bit as the Python one).", -1, methods,
+    "The tracker's optional C kernel (bit for bit as the NumPy reference).", -1, methods,
     NULL, NULL, NULL, NULL,
 };
 
-PyMODINIT_FUNC PyInit__kalman_c(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__kalman_c(void) {
+    PyObject *mod = PyModule_Create(&module);
+    if (mod == NULL) return NULL;
+    /* The layouts as this build knows them, in the order of layout.C_LAYOUT. */
+    PyObject *layout = Py_BuildValue(
+        "(iiiiiiiiiiiiiiiiiiiiii)", C_T, C_E, C_N, C_U, C_VE, C_R, C_RV, C_SRC, C_HV, NCOL,
+        L_IDX, L_RCV, L_T, L_LON, L_LAT, L_ALT, L_VN, L_VE, L_VD, L_EPH, L_EPV, STRIDE);
+    if (layout == NULL || PyModule_AddObject(mod, "LAYOUT", layout) < 0) {
+        Py_XDECREF(layout);
+        Py_DECREF(mod);
+        return NULL;
+    }
+    return mod;
+}

@@ -4,6 +4,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+LAYOUT: tuple[int, ...]
+
 def update_rows(
     rw: npt.NDArray[np.intp],
     a: npt.NDArray[np.float64],

@@ -187,68 +187,6 @@ def step(  # noqa: PLR0917 (the arrays of one filter step, as the other function
     np.multiply(k22, rv_m2ps2, out=p[VV])
 
 
-def step_row(  # noqa: PLR0917 (as step)
-    x: list[float],
-    p: list[float],
-    dt: float,
-    q: tuple[float, float, float],
-    z_m: list[float],
-    r_m2: list[float],
-    zv_mps: list[float] | None = None,
-    rv_m2ps2: float = 0.0,
-) -> None:
-    """:func:`step` with ``positions_predicted=True`` for ONE row in Python floats, in place on
-    ``x`` (pos, vel per axis: 6) and ``p`` (pp, pv, vv per axis: 9), a row's ``x`` and ``p``
-    flattened. The same operations in the same order as :func:`step` (IEEE double arithmetic
-    either way), so the results are equal bit for bit (tests check it). For a few rows this
-    is cheaper than :func:`step`, whose ~50 NumPy calls cost ~1 us each whatever the size.
-    Raises ZeroDivisionError where NumPy would give inf or nan."""
-    dt2 = dt * dt
-    dt4 = dt2 * dt2 / 4.0
-    dt3 = dt2 * dt / 2.0
-    two_dt = 2.0 * dt
-    for axis in range(3):
-        i = 2 * axis
-        j = 3 * axis
-        pos = x[i]
-        vel = x[i + 1]
-        a = p[j]
-        b = p[j + 1]
-        c = p[j + 2]
-        qa = q[axis]
-        r = r_m2[axis]
-        a = a + two_dt * b + dt2 * c + qa * dt4
-        b = b + dt * c + qa * dt3
-        c = c + qa * dt2
-        if zv_mps is None:
-            s = a + r
-            y = z_m[axis] - pos
-            k_vel = b / s
-            x[i] = pos + a / s * y
-            x[i + 1] = vel + k_vel * y
-            rs = r / s
-            p[j] = a * rs
-            p[j + 1] = b * rs
-            p[j + 2] = c - b * k_vel
-            continue
-        rv = rv_m2ps2
-        s11 = a + r
-        s22 = c + rv
-        bb = b * b
-        det = s11 * s22 - bb
-        k11 = (a * s22 - bb) / det
-        k12 = (b * s11 - a * b) / det
-        k21 = (b * s22 - c * b) / det
-        k22 = (c * s11 - bb) / det
-        y1 = z_m[axis] - pos
-        y2 = zv_mps[axis] - vel
-        x[i] = pos + (k11 * y1 + k12 * y2)
-        x[i + 1] = vel + (k21 * y1 + k22 * y2)
-        p[j] = k11 * r
-        p[j + 1] = k12 * rv
-        p[j + 2] = k22 * rv
-
-
 def to_full(x: FloatArray, p: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Rows as filterpy's layout: state (N, 6) (e, n, u, ve, vn, vu) and covariance (N, 6, 6)."""
     n = x.shape[0]

@@ -1,0 +1,86 @@
+"""The safety floor and the performance envelope every generated plan must respect.
+
+A candidate plan of Tactical Deconfliction is dropped (with the reason) when:
+
+- a waypoint it generated lies below ``floor_amsl_m`` (the vehicle's home altitude plus the
+  configured minimum height, ``deconfliction.min_height_above_home_m``). Waypoints the filed
+  plan already had (its own take-off and landing points) are not generated; nor is the final
+  touchdown point of a manoeuvre that lands (return home, landing site);
+- a segment asks for more than the envelope allows: horizontal speed above its maximum,
+  climb above its climb rate, descent above its descent rate, or (a vehicle that cannot
+  hover) a speed below its minimum. Each limit is widened to what the filed plan itself
+  already asked, so a filed plan is never judged worse than it was accepted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gcs_utm.core.deconfliction.geometry import LocalPlan
+from gcs_utm.model import PerformanceEnvelope
+
+SPEED_TOLERANCE = 1.02
+"""Relative slack on the speed checks: re-timing arithmetic and the WGS84 round trip move
+a segment's speed by far less; a real excess (a descent at 1.8 m/s for 1.5) is caught."""
+SAME_POINT_M = 0.05
+"""A generated point this close to a filed waypoint is that waypoint."""
+MIN_SEGMENT_S = 0.5
+"""Segments shorter than this in time are not rated (a join between two legs)."""
+
+
+def _rates(lp: LocalPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per segment longer than MIN_SEGMENT_S: horizontal speed, climb, descent, 3D speed."""
+    dt = lp.t[1:] - lp.t[:-1]
+    keep = dt >= MIN_SEGMENT_S
+    dt = dt[keep]
+    dh = np.hypot(lp.e[1:] - lp.e[:-1], lp.n[1:] - lp.n[:-1])[keep]
+    dz = (lp.z[1:] - lp.z[:-1])[keep]
+    return dh / dt, np.maximum(dz, 0.0) / dt, np.maximum(-dz, 0.0) / dt, np.hypot(dh, dz) / dt
+
+
+def _peak(x: np.ndarray) -> float:
+    return float(x.max()) if x.size else 0.0
+
+
+def envelope_flags(new: LocalPlan, old: LocalPlan, envelope: PerformanceEnvelope) -> list[str]:
+    """What in ``new`` the vehicle cannot fly (empty: all inside the envelope)."""
+    if len(new) < 2:
+        return []
+    vh, up, down, v3 = _rates(new)
+    ovh, oup, odown, ov3 = _rates(old) if len(old) >= 2 else (np.zeros(0),) * 4
+    flags = []
+    limits = (
+        ("horizontal speed", vh, max(envelope.max_speed_mps, _peak(ovh)), "m/s above"),
+        ("climb", up, max(envelope.climb_rate_mps, _peak(oup)), "m/s above"),
+        ("descent", down, max(envelope.descent_rate_mps, _peak(odown)), "m/s above"),
+    )
+    for name, got, limit, word in limits:
+        if got.size and float(got.max()) > limit * SPEED_TOLERANCE:
+            flags.append(f"{name} {float(got.max()):.2f} {word} the envelope's {limit:.2f}")
+    if not envelope.can_hover and v3.size:
+        floor = min(envelope.min_speed_mps, float(ov3.min()) if ov3.size else np.inf)
+        if float(v3.min()) * SPEED_TOLERANCE < floor:
+            flags.append(
+                f"speed {float(v3.min()):.2f} m/s below the envelope's minimum {floor:.2f}"
+            )
+    return flags
+
+
+def floor_flags(new: LocalPlan, old: LocalPlan, floor_amsl_m: float, *, lands: bool) -> list[str]:
+    """Generated waypoints of ``new`` below ``floor_amsl_m`` (empty: none)."""
+    low = np.flatnonzero(new.z < floor_amsl_m - 1e-6)
+    if lands:
+        low = low[low != len(new) - 1]
+    if low.size == 0:
+        return []
+    filed = old.xyz()
+    pts = new.xyz()[low]
+    if filed.shape[0]:
+        dist = np.linalg.norm(pts[:, None, :] - filed[None, :, :], axis=2).min(axis=1)
+        low = low[dist > SAME_POINT_M]
+    if low.size == 0:
+        return []
+    k = int(low[np.argmin(new.z[low])])
+    return [
+        f"waypoint {k} at {float(new.z[k]):.1f} m AMSL, below the safety floor {floor_amsl_m:.1f} m"
+    ]

@@ -1,0 +1,206 @@
+"""Single-UAS alternatives of Tactical Deconfliction (paper §4.5): A* on a visibility graph of
+inflated geofences: reroute around a crossing, escape from inside, direct to goal, back to
+plan, next waypoint, return home, nearest reachable landing site. Every new plan starts at
+the start time (:meth:`TacticalDeconfliction.start_time`) where the UAS will be then, and is
+verified and scored by :class:`TacticalDeconfliction` like every other candidate. Pure."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Collection, Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from gcs_utm.core.deconfliction.astar import VisibilityPlanner
+from gcs_utm.core.deconfliction.geometry import LocalPlan, merged_obstacles, relevant_fences
+from gcs_utm.core.deconfliction.router import Router
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    Alternative,
+    FloatArray,
+    Geofence,
+    Maneuver,
+    Operation,
+    OperationId,
+    Threat,
+)
+
+if TYPE_CHECKING:
+    from gcs_utm.core.deconfliction.td import TacticalDeconfliction
+
+
+def resolve_single(  # noqa: PLR0917 - the method's arguments, passed on
+    td: TacticalDeconfliction,
+    threat: Threat,
+    operation_id: OperationId,
+    snapshot: AirspaceSnapshot,
+    maneuvers: Collection[Maneuver] | None = None,
+    extra_geofences: Sequence[Geofence] = (),
+    start_t_s: float | None = None,
+) -> list[Alternative]:
+    """Single-UAS alternatives (A*), verified; ``maneuvers`` limits which are generated
+    (None = all that apply), ``extra_geofences`` are fences not yet in the snapshot (an
+    alert area EM is about to create). New plans start at ``start_t_s``
+    (:meth:`start_time`) from where the UAS will be then."""
+    td.dropped = []
+    td.reset_queue()
+    op = snapshot.operations.get(operation_id)
+    if op is None:
+        return []
+    want = set(maneuvers) if maneuvers is not None else set(Maneuver)
+    t0 = td.start_time(snapshot, start_t_s)
+    cfg = td.config
+    geofences = tuple(snapshot.geofences) + tuple(
+        g for g in extra_geofences if g.id not in {f.id for f in snapshot.geofences}
+    )
+    if threat.area is not None and threat.area.id not in {g.id for g in geofences}:
+        geofences += (threat.area,)
+    # A dynamic geofence drawn around this UAS (jamming, link loss) does not apply to it.
+    geofences = tuple(g for g in geofences if g.applies_to(op.id))
+    fences = td.local_fences(geofences)
+    lp = td.local_plan(op.plan).after(t0)
+    cur = td.start_xyz(op, snapshot, t0)
+    zs = np.concatenate([lp.z, [cur[2]]])
+    ov = op.operational_volume_m
+    active = relevant_fences(
+        fences,
+        t0,
+        max(t0 + cfg.horizon_s, float(lp.t[-1])),
+        float(zs.min()) - ov,
+        float(zs.max()) + ov,
+    )
+    planner = VisibilityPlanner(
+        merged_obstacles(active, ov + cfg.clearance_margin_m, cfg.cylinder_sides)
+    )
+    outsiders = td.others(snapshot, {op.id})
+    out: list[Alternative] = []
+
+    def add(man: Maneuver, route: tuple[LocalPlan, int] | None, detail: str) -> None:
+        if route is None:
+            td.drop(op.id, man, "no path")
+            return
+        new, verify_from = route
+        td.finish(
+            op,
+            man,
+            new,
+            lp,
+            geofences=geofences,
+            fences=fences,
+            outsiders=outsiders,
+            lowest_priority=op.priority,
+            detail=detail,
+            dest=out,
+            verify_from=verify_from,
+        )
+
+    router = Router(op, planner, t0, cur, lp)
+    if not planner.free(cur[:2]):
+        if Maneuver.ESCAPE in want:
+            add(
+                Maneuver.ESCAPE,
+                router.escape(cfg.escape_distance_m),
+                "leave by the closest border point, then rejoin the plan",
+            )
+    else:
+        _routes(td, op, router, want, add)
+        _abandon(td, op, router, want, add)
+    td.flush(snapshot.t_s)
+    return out
+
+
+def _routes(
+    td: TacticalDeconfliction,
+    op: Operation,
+    router: Router,
+    want: set[Maneuver],
+    add: Callable[[Maneuver, tuple[LocalPlan, int] | None, str], None],
+) -> None:
+    """The manoeuvres that stay on the mission: reroute, direct to goal, back to the
+    plan, next waypoint."""
+    lp = router.lp
+    if Maneuver.REROUTE in want:
+        add(Maneuver.REROUTE, router.reroute(), "replace the crossing part of the plan")
+    if Maneuver.DIRECT_TO_GOAL in want:
+        add(
+            Maneuver.DIRECT_TO_GOAL,
+            router.to_point(lp.xyz()[-1]),
+            "direct to the final waypoint",
+        )
+    off_plan = router.distance_to_plan() > op.flight_geometry_m
+    if Maneuver.BACK_TO_PLAN in want and off_plan:
+        add(
+            Maneuver.BACK_TO_PLAN,
+            router.back_to_plan(),
+            "back to the closest point of the plan",
+        )
+    if Maneuver.NEXT_WAYPOINT in want and len(lp) > 1:
+        add(Maneuver.NEXT_WAYPOINT, router.next_waypoint(), "straight to the next waypoint")
+
+
+def _abandon(
+    td: TacticalDeconfliction,
+    op: Operation,
+    router: Router,
+    want: set[Maneuver],
+    add: Callable[[Maneuver, tuple[LocalPlan, int] | None, str], None],
+) -> None:
+    """The manoeuvres that give the mission up: return home, nearest landing site."""
+    t0 = router.now
+    if Maneuver.RETURN_HOME in want:
+        route = router.land_at(_home(td, op))
+        left = _endurance_left(td, op, t0)
+        if route is not None and left is not None and route[0].t[-1] - t0 > left:
+            td.drop(
+                op.id,
+                Maneuver.RETURN_HOME,
+                f"home not reachable with {left:.0f} s of endurance left",
+            )
+        else:
+            add(Maneuver.RETURN_HOME, route, "return home and land")
+    if Maneuver.LANDING_SITE in want and op.landing_sites:
+        best = _landing(td, op, router, t0)
+        if best is None:
+            td.drop(op.id, Maneuver.LANDING_SITE, "no landing site reachable")
+        else:
+            add(Maneuver.LANDING_SITE, best[0], best[1])
+
+
+def _home(td: TacticalDeconfliction, op: Operation) -> FloatArray:
+    if op.home is not None:
+        e, n = td.frame.point_to_local(op.home.lat_deg, op.home.lon_deg)
+        return np.array([e, n, op.home.alt_amsl_m])
+    return np.asarray(td.local_plan(op.plan).xyz()[0], dtype=np.float64)
+
+
+def _endurance_left(td: TacticalDeconfliction, op: Operation, now: float) -> float | None:
+    """Usable flight time left (endurance counted from the plan start, minus the
+    reserve), or None when the endurance is unknown."""
+    if op.endurance_s is None:
+        return None
+    left = op.endurance_s - max(0.0, now - op.plan.start_t_s)
+    return left * (1.0 - td.config.landing_reserve_fraction)
+
+
+def _landing(
+    td: TacticalDeconfliction, op: Operation, router: Router, now: float
+) -> tuple[tuple[LocalPlan, int], str] | None:
+    """The landing site reached soonest that the remaining endurance covers (with the
+    reserve), when the endurance is known (``Operation.endurance_s`` counted from the
+    plan start)."""
+    remaining = _endurance_left(td, op, now)
+    best: tuple[tuple[LocalPlan, int], str] | None = None
+    best_t = math.inf
+    for k, site in enumerate(op.landing_sites):
+        e, n = td.frame.point_to_local(site.lat_deg, site.lon_deg)
+        route = router.land_at(np.array([e, n, site.alt_amsl_m]))
+        if route is None:
+            continue
+        dur = float(route[0].t[-1] - now)
+        if remaining is not None and dur > remaining:
+            continue
+        if dur < best_t:
+            best_t = dur
+            best = (route, f"land at site {k} in {dur:.0f} s")
+    return best

@@ -1,0 +1,83 @@
+"""What Emergency Management decides (:class:`Decision`) and the state of one open case
+(:class:`Case`), shared by the manager and its action modules."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from gcs_utm.model import (
+    AuditEntry,
+    Command,
+    Geofence,
+    Maneuver,
+    OperationId,
+    Recommendation,
+    RecommendationId,
+    Threat,
+)
+
+ACTOR = "EM"
+
+REROUTE_MANEUVERS = frozenset(
+    {
+        Maneuver.REROUTE,
+        Maneuver.ESCAPE,
+        Maneuver.DIRECT_TO_GOAL,
+        Maneuver.BACK_TO_PLAN,
+        Maneuver.NEXT_WAYPOINT,
+        Maneuver.RETURN_HOME,
+        Maneuver.LANDING_SITE,
+    }
+)
+SINGLE_MANEUVERS: dict[str, frozenset[Maneuver]] = {
+    "reroute": REROUTE_MANEUVERS,
+    "back_to_plan": frozenset({Maneuver.BACK_TO_PLAN, Maneuver.NEXT_WAYPOINT}),
+    "land_or_home": frozenset({Maneuver.LANDING_SITE, Maneuver.RETURN_HOME}),
+}
+ONE_SHOT = frozenset({"warn", "suspend_and_geofence", "alert_and_geofence", "geofence_from_area"})
+"""Actions done once per threat: repeating them would only duplicate warnings/geofences."""
+MODE_MULTI = "multi"
+MODE_INTRUDER = "intruder"
+MODE_COMMAND = "command"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Decision:
+    """What one EM step asks the rest of the system to do."""
+
+    recommendations: tuple[Recommendation, ...] = ()
+    geofences: tuple[Geofence, ...] = ()
+    commands: tuple[Command, ...] = ()
+    escalations: tuple[str, ...] = ()
+    superseded: tuple[RecommendationId, ...] = ()
+    audit: tuple[AuditEntry, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+    def merge(self, other: Decision) -> Decision:
+        return Decision(
+            recommendations=self.recommendations + other.recommendations,
+            geofences=self.geofences + other.geofences,
+            commands=self.commands + other.commands,
+            escalations=self.escalations + other.escalations,
+            superseded=self.superseded + other.superseded,
+            audit=self.audit + other.audit,
+            warnings=self.warnings + other.warnings,
+        )
+
+
+@dataclass(slots=True)
+class Case:
+    """One open threat: what EM did and may still do about it. ``failures`` counts failed
+    uploads per UAS; ``supervised`` counts re-plans after an applied plan left the threat
+    open."""
+
+    threat: Threat
+    action: str
+    attempt_t_s: float
+    modes: dict[OperationId, str] = field(default_factory=dict)
+    excluded: dict[OperationId, set[Maneuver]] = field(default_factory=dict)
+    replans: dict[OperationId, int] = field(default_factory=dict)
+    geofences: list[Geofence] = field(default_factory=list)
+    rec_ids: set[RecommendationId] = field(default_factory=set)
+    failures: dict[OperationId, int] = field(default_factory=dict)
+    supervised: int = 0

@@ -1,0 +1,184 @@
+"""The closed loop against real autopilots: pilots fly crossing missions, ``gcs-utm serve
+--headless --auto-accept`` watches them on its own links, and the flown separation is measured
+from the autopilots' own positions (see pilot.py)."""
+
+from __future__ import annotations
+
+import math
+import sqlite3
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from tests.autopilot.pilot import PilotLink, Sample, local_m, mission_items, offset_deg
+
+MIN_H_M, MIN_V_M = 50.0, 15.0  # config/default.toml separation minima
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """Two UAS ``leg_m`` west and south of ``origin`` flying through it to as far beyond."""
+
+    origin: tuple[float, float]
+    ground_amsl_m: float
+    leg_m: float = 220.0
+    cruise_agl_m: float = 30.0
+
+    def starts(self) -> list[tuple[float, float]]:
+        lat0, lon0 = self.origin
+        return [offset_deg(lat0, lon0, -self.leg_m, 0.0), offset_deg(lat0, lon0, 0.0, -self.leg_m)]
+
+    def ends(self) -> list[tuple[float, float]]:
+        lat0, lon0 = self.origin
+        return [offset_deg(lat0, lon0, self.leg_m, 0.0), offset_deg(lat0, lon0, 0.0, self.leg_m)]
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What the closed loop did: store rows, the serve log and the flown closest approach."""
+
+    threat_kinds: list[str]
+    recommendation_states: list[str]
+    mission_totals_before: list[int]
+    mission_totals_after: list[int]
+    closest_h_m: float
+    closest_v_m: float
+    log: str
+
+    @property
+    def flown_loss(self) -> bool:
+        return self.closest_h_m < MIN_H_M and self.closest_v_m < MIN_V_M
+
+
+def upload_crossing(pilots: list[PilotLink], crossing: Crossing) -> None:
+    """Each pilot uploads its leg (PX4: AMSL from its home; ArduPilot: above home)."""
+    for p, start, end in zip(pilots, crossing.starts(), crossing.ends(), strict=True):
+        assert p.home is not None
+        alt = crossing.cruise_agl_m + (p.home[2] if p.autopilot == "px4" else 0.0)
+        p.upload(
+            mission_items(p.sys_id, start, [(*start, alt), (*end, alt)], autopilot=p.autopilot)
+        )
+
+
+def _config(path: Path, crossing: Crossing, links: list[str]) -> Path:
+    quoted = ", ".join(f'"{link}"' for link in links)
+    path.write_text(
+        f"""
+[airspace]
+origin_lat_deg = {crossing.origin[0]}
+origin_lon_deg = {crossing.origin[1]}
+ground_elevation_amsl_m = {crossing.ground_amsl_m}
+
+[mavlink]
+links = [{quoted}]
+"""
+    )
+    return path
+
+
+def rows(db: Path, sql: str) -> list[tuple[object, ...]]:
+    """Rows of the store, read-only beside the running service ([] before its schema)."""
+    if not db.exists():
+        return []
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=5.0)
+    try:
+        return list(con.execute(sql))
+    except sqlite3.OperationalError:
+        return []
+    finally:
+        con.close()
+
+
+def _wait_operations(db: Path, n: int, timeout_s: float, serve: subprocess.Popen[bytes]) -> None:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if serve.poll() is not None:
+            raise AssertionError("gcs-utm serve exited early")
+        if len(rows(db, "SELECT id FROM operations")) >= n:
+            return
+        time.sleep(0.5)
+    raise AssertionError(f"fewer than {n} operations filed after {timeout_s} s")
+
+
+def closest(a: list[Sample], b: list[Sample], origin: tuple[float, float]) -> tuple[float, float]:
+    """Over time-matched samples (within 0.1 s wall), the (horizontal, vertical) separation
+    where the pair comes closest against the cylinder minima."""
+    worst, worst_score = (math.inf, math.inf), math.inf
+    j = 0
+    for s in a:
+        while j + 1 < len(b) and abs(b[j + 1].t_s - s.t_s) <= abs(b[j].t_s - s.t_s):
+            j += 1
+        if not b or abs(b[j].t_s - s.t_s) > 0.1:
+            continue
+        ea, na = local_m(*origin, s.lat_deg, s.lon_deg)
+        eb, nb = local_m(*origin, b[j].lat_deg, b[j].lon_deg)
+        dh = math.hypot(ea - eb, na - nb)
+        dv = abs(s.alt_amsl_m - b[j].alt_amsl_m)
+        score = max(dh / MIN_H_M, dv / MIN_V_M)  # < 1: loss of separation
+        if score < worst_score:
+            worst_score, worst = score, (dh, dv)
+    return worst
+
+
+def _total(p: PilotLink) -> int:
+    return p.mission_current[-1][2] if p.mission_current else 0
+
+
+def fly(
+    pilots: list[PilotLink],
+    crossing: Crossing,
+    links: list[str],
+    speed: float,
+    tmp_path: Path,
+    flight_timeout_s: float = 150.0,
+) -> Outcome:
+    """Start serve on ``links``, wait for its two operations, start both flights, follow them
+    until both reach their ends (or the timeout), stop serve and collect the outcome."""
+    db = tmp_path / "store.sqlite"
+    log_path = tmp_path / "serve.log"
+    cfg = _config(tmp_path / "serve.toml", crossing, links)
+    with log_path.open("wb") as log:
+        serve = subprocess.Popen(
+            [sys.executable, "-m", "gcs_utm", "serve", "--headless", "--auto-accept",
+             "--config", str(cfg), "--db", str(db), "--speed", str(speed)],
+            stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+        )  # fmt: skip
+        try:
+            _wait_operations(db, 2, 40.0, serve)
+            for p in pilots:
+                p.arm_and_start(takeoff_agl_m=crossing.cruise_agl_m)
+            before = [_total(p) for p in pilots]
+            _follow(pilots, crossing, flight_timeout_s)
+            assert serve.poll() is None, "gcs-utm serve exited during the flight"
+        except AssertionError as exc:
+            tail = log_path.read_text(errors="replace")[-4000:]
+            raise AssertionError(f"{exc}\n--- gcs-utm serve log\n{tail}") from exc
+        finally:
+            if serve.poll() is None:
+                serve.terminate()
+                serve.wait(timeout=30)
+    dh, dv = closest(pilots[0].samples, pilots[1].samples, crossing.origin)
+    return Outcome(
+        threat_kinds=[str(r[0]) for r in rows(db, "SELECT kind FROM threats")],
+        recommendation_states=[str(r[0]) for r in rows(db, "SELECT state FROM recommendations")],
+        mission_totals_before=before,
+        mission_totals_after=[_total(p) for p in pilots],
+        closest_h_m=dh,
+        closest_v_m=dv,
+        log=log_path.read_text(errors="replace"),
+    )
+
+
+def _follow(pilots: list[PilotLink], crossing: Crossing, timeout_s: float) -> None:
+    ends = crossing.ends()
+    deadline = time.monotonic() + timeout_s
+    done = [False] * len(pilots)
+    while time.monotonic() < deadline and not all(done):
+        for k, p in enumerate(pilots):
+            p.poll(0.02)
+            if p.samples:
+                s = p.samples[-1]
+                e, n = local_m(*ends[k], s.lat_deg, s.lon_deg)
+                done[k] = done[k] or math.hypot(e, n) < 10.0
