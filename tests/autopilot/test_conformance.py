@@ -273,7 +273,9 @@ async def test_mission_and_commands(case: Case, request: pytest.FixtureRequest) 
             speed_mps=20.0 if plane else 5.0,
             height_m=height_m,
         )
-        res = await hub.upload_plan(SYS, plan, start_index=0)
+        # start at waypoint 1: its DO_CHANGE_SPEED is the flagged item (PX4 starts there,
+        # ArduPilot at the waypoint after it)
+        res = await hub.upload_plan(SYS, plan, start_index=1)
         _check_upload(res)
         assert res.current_seq is not None
         assert st.mode is FlightMode.MISSION
