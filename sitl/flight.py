@@ -75,7 +75,9 @@ class Flight(VehicleCore):
             # which fails on a DO item: the vehicle then holds until told another item
             self._seq = min(old_seq, len(items) - 1)
             if self.is_ardupilot and items[self._seq].command not in mp.NAV_COMMANDS:
-                self._stalled = True
+                self._stalled = True  # it stops where it is and hovers
+                self._goal_ne = (self.k.north_m, self.k.east_m)
+                self._goal_alt = self.k.alt_amsl_m
                 self.statustext(SEV_WARNING, "Auto mission changed but failed to restart command")
             elif self.is_ardupilot:
                 self.statustext(SEV_INFO, "Auto mission changed, restarted command")

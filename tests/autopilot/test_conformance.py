@@ -264,15 +264,20 @@ async def test_mission_and_commands(case: Case, request: pytest.FixtureRequest) 
         await until(lambda: bool(rig.sink.vehicles), 30.0, "vehicle not discovered")
         st = hub.state(SYS)
         assert st.autopilot is case.autopilot and st.kind is case.kind
-        await _take_off(rig, height_m)
-
-        # 2. a timed plan with speed items, uploaded in flight
         plan = _plan(
             case,
             leg_m=300.0 if plane else 40.0,
             speed_mps=20.0 if plane else 5.0,
             height_m=height_m,
         )
+        if not plane:
+            # 1. on the ground, at discovery (ArduPilot refuses uploads with NO_SPACE for a
+            # moment after boot: the retry covers it)
+            res = await hub.upload_plan(SYS, plan, set_mission_mode=False)
+            assert res.ok and res.verified and res.current_set, res
+        await _take_off(rig, height_m)
+
+        # 2. a timed plan with speed items, uploaded in flight
         # start at waypoint 1: its DO_CHANGE_SPEED is the flagged item (PX4 starts there,
         # ArduPilot at the waypoint after it)
         res = await hub.upload_plan(SYS, plan, start_index=1)
