@@ -272,9 +272,6 @@ class VehicleCore:
             const("MISSION_STATE_NOT_STARTED") if self._items else const("MISSION_STATE_NO_MISSION")
         )
         self._item_reached_at: float | None = None
-        self._carry_goal: tuple[float, float, float] | None = (
-            None  # ArduPilot: target kept over an upload
-        )
         self._stalled = False  # ArduPilot: a replaced mission's current item failed to restart
         self._mission_climb = False
         self._mission_speed: float | None = None

@@ -93,7 +93,6 @@ class Flight(VehicleCore):
     def clear_mission(self) -> None:
         self._items = []
         self._seq = 0
-        self._carry_goal = None
         self._mission_state = const("MISSION_STATE_NO_MISSION")
         if self._mode == MISSION and not self._landed:
             self._enter_hold()
@@ -104,7 +103,6 @@ class Flight(VehicleCore):
             return False
         self._seq = seq
         self._item_reached_at = None
-        self._carry_goal = None
         self._stalled = False
         self._send_mission_current()
         return True
@@ -348,7 +346,31 @@ class Flight(VehicleCore):
         first = 1 if self.is_ardupilot else 0
         if self._mission_state == const("MISSION_STATE_COMPLETE") or self._stalled:
             return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
-        # execute DO items until the next NAV item
+        self._run_do_items()
+        if self._seq >= len(items) or self._seq < first:
+            self._seq = max(first, min(self._seq, len(items) - 1))
+            self._mission_state = const("MISSION_STATE_COMPLETE")
+            return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
+        it = items[self._seq]
+        n, e, alt = self._item_target(it)
+        if it.command == mp.CMD_TAKEOFF:
+            n, e = self.k.north_m, self.k.east_m
+            if not math.isfinite(it.z):
+                alt = self.ground_alt_m + self.takeoff_alt_rel_m
+        special = self._special_goal(it, n, e, alt)
+        if special is not None:
+            return special
+        self._goal_ne, self._goal_alt = (n, e), alt
+        last_nav = not any(x.command in mp.NAV_COMMANDS for x in items[self._seq + 1 :])
+        hold_s = it.param1 if it.command in (mp.CMD_WAYPOINT, mp.CMD_LOITER_TIME) else 0.0
+        if self._reached(it, n, e, alt) and self._done_with(hold_s, last_nav):
+            return self._goal(n, e, alt, stop=True)  # mission finished: stay on the last point
+        stop = last_nav or hold_s > 0 or it.command in (mp.CMD_LOITER_UNLIM, mp.CMD_LOITER_TIME)
+        return self._goal(n, e, alt, stop=stop)
+
+    def _run_do_items(self) -> None:
+        """Execute DO items from the current index up to the next navigation item."""
+        items = self._items
         guard = 0
         while (
             self._seq < len(items)
@@ -361,19 +383,9 @@ class Flight(VehicleCore):
             self._seq += 1
             guard += 1
             self._send_mission_current()
-        if self._seq >= len(items) or self._seq < first:
-            self._seq = max(first, min(self._seq, len(items) - 1))
-            self._mission_state = const("MISSION_STATE_COMPLETE")
-            return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
-        it = items[self._seq]
-        if self._carry_goal is not None:
-            n, e, alt = self._carry_goal
-        else:
-            n, e, alt = self._item_target(it)
-        if it.command == mp.CMD_TAKEOFF:
-            n, e = self.k.north_m, self.k.east_m
-            if not math.isfinite(it.z):
-                alt = self.ground_alt_m + self.takeoff_alt_rel_m
+
+    def _special_goal(self, it: mp.RawItem, n: float, e: float, alt: float) -> Goal | None:
+        """The goal of the initial climb, of an RTL item or of a LAND item (else None)."""
         if self._mission_climb:
             climb_alt = max(alt, self.ground_alt_m + self.takeoff_alt_rel_m)
             if self.k.alt_amsl_m < climb_alt - 1.0:
@@ -381,44 +393,44 @@ class Flight(VehicleCore):
                     return self._goal(n, e, climb_alt, stop=False)
                 return self._goal(self.k.north_m, self.k.east_m, climb_alt, stop=True)
             self._mission_climb = False
-        if it.command == mp.CMD_RTL and self._carry_goal is None:
+        if it.command == mp.CMD_RTL:
             self._enter_mode(RTL)
             return self._rtl_goal()
-        if it.command == mp.CMD_LAND and self._carry_goal is None:
+        if it.command == mp.CMD_LAND:
             dist = math.hypot(n - self.k.north_m, e - self.k.east_m)
             if dist > self._acceptance(it) and not self.is_fixed_wing:
                 return self._goal(n, e, self.k.alt_amsl_m, stop=True)
             return self._goal(
                 n, e, self.ground_alt_m - 1.0, stop=True, descent=self.lim.descent_rate_mps
             )
-        self._goal_ne, self._goal_alt = (n, e), alt
+        return None
+
+    def _reached(self, it: mp.RawItem, n: float, e: float, alt: float) -> bool:
+        if it.command == mp.CMD_LOITER_UNLIM:
+            return False
+        if it.command == mp.CMD_TAKEOFF:
+            return self.k.alt_amsl_m >= alt - 1.0
         dist = math.hypot(n - self.k.north_m, e - self.k.east_m)
         alt_ok = abs(alt - self.k.alt_amsl_m) <= (1.5 if not self.is_fixed_wing else 10.0)
-        last_nav = not any(x.command in mp.NAV_COMMANDS for x in items[self._seq + 1 :])
-        hold_s = it.param1 if it.command in (mp.CMD_WAYPOINT, mp.CMD_LOITER_TIME) else 0.0
-        if it.command == mp.CMD_TAKEOFF:
-            reached = self.k.alt_amsl_m >= alt - 1.0
-        else:
-            reached = dist <= self._acceptance(it) and alt_ok
-        if it.command == mp.CMD_LOITER_UNLIM:
-            reached = False
-        if reached:
-            if self._item_reached_at is None:
-                self._item_reached_at = self._t
-                self._broadcast("MISSION_ITEM_REACHED", seq=self._seq)
-            if self._t - self._item_reached_at >= max(0.0, hold_s):
-                self._item_reached_at = None
-                self._carry_goal = None
-                if last_nav:
-                    self._mission_state = const("MISSION_STATE_COMPLETE")
-                    self._seq = max(self._seq, len(items) - 1)
-                    self.statustext(SEV_INFO, "Mission finished, loitering")
-                    # stay on the last point: MISSION mode, COMPLETE
-                    return self._goal(n, e, alt, stop=True)
-                self._seq += 1
-                self._send_mission_current()
-        stop = last_nav or hold_s > 0 or it.command in (mp.CMD_LOITER_UNLIM, mp.CMD_LOITER_TIME)
-        return self._goal(n, e, alt, stop=stop)
+        return dist <= self._acceptance(it) and alt_ok
+
+    def _done_with(self, hold_s: float, last_nav: bool) -> bool:
+        """The current item is reached: after its hold time go on to the next item; True when
+        that ends the mission."""
+        if self._item_reached_at is None:
+            self._item_reached_at = self._t
+            self._broadcast("MISSION_ITEM_REACHED", seq=self._seq)
+        if self._t - self._item_reached_at < max(0.0, hold_s):
+            return False
+        self._item_reached_at = None
+        if last_nav:
+            self._mission_state = const("MISSION_STATE_COMPLETE")
+            self._seq = max(self._seq, len(self._items) - 1)
+            self.statustext(SEV_INFO, "Mission finished, loitering")
+            return True
+        self._seq += 1
+        self._send_mission_current()
+        return False
 
     def _acceptance(self, it: mp.RawItem) -> float:
         if it.command == mp.CMD_WAYPOINT and it.param2 > 0:

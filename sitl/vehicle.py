@@ -14,6 +14,7 @@ import contextlib
 import logging
 import math
 import time
+from collections.abc import Callable
 
 from sitl import mission as mp
 from sitl._mav import Inbound, msg_id_of, name_of
@@ -195,27 +196,26 @@ class Vehicle(CommandHandling):
             return
         if self.mission_server.handle(link, m, time.monotonic()):
             return
-        if t in ("COMMAND_LONG", "COMMAND_INT"):
-            self.counters["commands"] += 1
-            self._on_command(link, m)
-        elif t == "SET_MODE":
-            self._set_mode_numbers(m.i("base_mode"), m.i("custom_mode"))
-        elif t == "REQUEST_DATA_STREAM":
-            self._on_request_data_stream(link, m)
-        elif t == "PARAM_REQUEST_LIST":
-            for i, name in enumerate(self._params):
-                self._send_param(link, name, i)
-        elif t == "PARAM_REQUEST_READ":
-            self._on_param_read(link, m)
-        elif t == "PARAM_SET":
-            self._on_param_set(link, m)
-        elif t == "TIMESYNC":
-            if m.i("tc1") == 0:
-                link.send("TIMESYNC", tc1=int(self.sim_now_utc_s() * 1e9), ts1=m.i("ts1"))
-        elif t in ("SYSTEM_TIME", "COMMAND_ACK", "STATUSTEXT", "PING"):
-            return
-        else:
+        handler = _HANDLERS.get(t)
+        if handler is not None:
+            handler(self, link, m)
+        elif t not in ("SYSTEM_TIME", "COMMAND_ACK", "STATUSTEXT", "PING"):
             self.counters["unhandled_msg"] += 1
+
+    def _on_command_message(self, link: Link, m: Inbound) -> None:
+        self.counters["commands"] += 1
+        self._on_command(link, m)
+
+    def _on_set_mode(self, _link: Link, m: Inbound) -> None:
+        self._set_mode_numbers(m.i("base_mode"), m.i("custom_mode"))
+
+    def _on_param_list(self, link: Link, _m: Inbound) -> None:
+        for i, name in enumerate(self._params):
+            self._send_param(link, name, i)
+
+    def _on_timesync(self, link: Link, m: Inbound) -> None:
+        if m.i("tc1") == 0:
+            link.send("TIMESYNC", tc1=int(self.sim_now_utc_s() * 1e9), ts1=m.i("ts1"))
 
     def advance(self, t_s: float) -> None:
         """Advance the vehicle to `t_s` simulated seconds after fleet start."""
@@ -247,6 +247,18 @@ class Vehicle(CommandHandling):
                 (self.sim_now_utc_s(), self.lat_deg, self.lon_deg, self.alt_amsl_m)
             )
         self._send_streams()
+
+
+_HANDLERS: dict[str, Callable[[Vehicle, Link, Inbound], None]] = {
+    "COMMAND_LONG": Vehicle._on_command_message,
+    "COMMAND_INT": Vehicle._on_command_message,
+    "SET_MODE": Vehicle._on_set_mode,
+    "REQUEST_DATA_STREAM": Vehicle._on_request_data_stream,
+    "PARAM_REQUEST_LIST": Vehicle._on_param_list,
+    "PARAM_REQUEST_READ": Vehicle._on_param_read,
+    "PARAM_SET": Vehicle._on_param_set,
+    "TIMESYNC": Vehicle._on_timesync,
+}
 
 
 def stream_msg_id(name: str) -> int:

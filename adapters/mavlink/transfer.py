@@ -213,85 +213,24 @@ class Transfers:
         MAV_MISSION_INVALID_SEQUENCE and keeps receiving, so that NACK is not an error. The
         first answer to each request goes out once: a clean link sees no extra traffic.
         Returns 1 + the number of our timeouts."""
-        enc = self._encoder(st)
-        ts, tc = st.sys_id, st.key.comp_id
-        n = len(items)
-        step = _Step(self.config)
-        attempts = 1
-        self._to(st, enc.mission_count(ts, tc, n))
-        sent_t = time.monotonic()
-        highest = -1  # highest item the vehicle has requested
-        sent_hi = -1  # highest item we have sent (asked for or sent ahead)
-        last_sent = False  # item n-1 went out
-        silent = 0
+        up = _UploadState(self, st, items)
+        up.send_count()
         try:
             while True:
                 self._check(st, reboots, end)
-                m = await self._get(box, min(sent_t + step.rto, end) - time.monotonic())
+                m = await self._get(box, min(up.sent_t + up.step.rto, end) - time.monotonic())
                 self._check(st, reboots, end)
                 if m is None:
-                    silent += 1
-                    if silent > self.config.max_retries:
-                        if last_sent:
-                            # the vehicle may have taken the last item and its ACK be lost (and
-                            # not every vehicle repeats it): the readback decides
-                            _log.debug("%s: no ACK of the last item; verifying", st.key)
-                            return attempts
-                        raise TransferError(
-                            f"no answer after {silent - 1} retries (last item requested "
-                            f"{highest if highest >= 0 else None})"
-                        )
-                    step.backoff()
-                    attempts += 1
-                    self.counters.mission_retries += 1
-                    if highest < 0:
-                        self._to(st, enc.mission_count(ts, tc, n))
-                    else:
-                        # the vehicle expects one of highest .. sent_hi + 1
-                        top = min(n - 1, sent_hi + 1, highest + _UPLOAD_WINDOW - 1)
-                        for _ in range(2):  # twice, as the retries of _download
-                            for seq in range(highest, top + 1):
-                                self._to(st, enc.mission_item_int(ts, tc, items[seq]))
-                        sent_hi = max(sent_hi, top)
-                        last_sent = sent_hi == n - 1
-                    sent_t = time.monotonic()
+                    if up.on_silence():
+                        return up.attempts
+                    continue
+                if getattr(m, "mission_type", 0) != 0:
                     continue
                 mid = m._header.msgId
                 if mid in (wire.MISSION_REQUEST_INT, wire.MISSION_REQUEST):
-                    if getattr(m, "mission_type", 0) != 0:
-                        continue
-                    seq = int(m.seq)
-                    if not 0 <= seq < n:
-                        _log.debug("vehicle asked for item %d of %d", seq, n)
-                        continue
-                    if seq < highest:
-                        continue  # overtaken by a later request (reordered or re-requested)
-                    if seq > highest:
-                        step.progress(time.monotonic() - sent_t)
-                        highest = seq
-                        silent = 0
-                    self._to(st, enc.mission_item_int(ts, tc, items[seq]))
-                    sent_hi = max(sent_hi, seq)
-                    last_sent = sent_hi == n - 1
-                    sent_t = time.monotonic()
-                elif mid == wire.MISSION_ACK:
-                    if getattr(m, "mission_type", 0) != 0:
-                        continue
-                    if m.type == MAV_MISSION_ACCEPTED:
-                        if last_sent:
-                            return attempts
-                        continue  # a stale ACK of an earlier transfer
-                    if m.type == MAV_MISSION_INVALID_SEQUENCE:
-                        continue  # ArduPilot's answer to an item it did not ask for
-                    if m.type == MAV_MISSION_ERROR and last_sent:
-                        # ArduPilot answers a repeated last item with ERROR once the upload
-                        # is complete (its ACCEPTED was lost): the readback decides
-                        _log.debug("%s: ERROR after the last item; verifying by readback", st.key)
-                        return attempts
-                    raise TransferError(
-                        f"vehicle rejected the mission: {mission_result(m.type)}",
-                        UploadFailure.REFUSED,
-                    )
+                    up.on_request(int(m.seq))
+                elif mid == wire.MISSION_ACK and _upload_done(st, int(m.type), up.last_sent):
+                    return up.attempts
         except TransferError:
             self._cancel(st)
             raise
@@ -528,6 +467,96 @@ class Transfers:
             attempts=attempts,
             error=f"no COMMAND_ACK after {attempts} attempts",
         )
+
+
+class _UploadState:
+    """Our side of one upload: what the vehicle asked for and what we sent (see _upload)."""
+
+    def __init__(self, owner: Transfers, st: VehicleState, items: list[MissionItem]) -> None:
+        self.owner = owner
+        self.st = st
+        self.items = items
+        self.enc = owner._encoder(st)
+        self.step = _Step(owner.config)
+        self.attempts = 1
+        self.sent_t = time.monotonic()
+        self.highest = -1  # highest item the vehicle has requested
+        self.sent_hi = -1  # highest item we have sent (asked for or sent ahead)
+        self.last_sent = False  # item n-1 went out
+        self.silent = 0
+
+    def _send_item(self, seq: int) -> None:
+        st = self.st
+        self.owner._to(st, self.enc.mission_item_int(st.sys_id, st.key.comp_id, self.items[seq]))
+
+    def send_count(self) -> None:
+        st = self.st
+        self.owner._to(st, self.enc.mission_count(st.sys_id, st.key.comp_id, len(self.items)))
+        self.sent_t = time.monotonic()
+
+    def on_silence(self) -> bool:
+        """Our timeout: resend what the vehicle may wait for. True when the transfer should
+        go to the readback (the last item went out and its ACK may be lost)."""
+        n = len(self.items)
+        self.silent += 1
+        if self.silent > self.owner.config.max_retries:
+            if self.last_sent:
+                # the vehicle may have taken the last item and its ACK be lost (and not every
+                # vehicle repeats it): the readback decides
+                _log.debug("%s: no ACK of the last item; verifying", self.st.key)
+                return True
+            raise TransferError(
+                f"no answer after {self.silent - 1} retries (last item requested "
+                f"{self.highest if self.highest >= 0 else None})"
+            )
+        self.step.backoff()
+        self.attempts += 1
+        self.owner.counters.mission_retries += 1
+        if self.highest < 0:
+            self.send_count()
+            return False
+        # the vehicle expects one of highest .. sent_hi + 1
+        top = min(n - 1, self.sent_hi + 1, self.highest + _UPLOAD_WINDOW - 1)
+        for _ in range(2):  # twice, as the retries of _download
+            for seq in range(self.highest, top + 1):
+                self._send_item(seq)
+        self.sent_hi = max(self.sent_hi, top)
+        self.last_sent = self.sent_hi == n - 1
+        self.sent_t = time.monotonic()
+        return False
+
+    def on_request(self, seq: int) -> None:
+        n = len(self.items)
+        if not 0 <= seq < n:
+            _log.debug("vehicle asked for item %d of %d", seq, n)
+            return
+        if seq < self.highest:
+            return  # overtaken by a later request (reordered or re-requested)
+        if seq > self.highest:
+            self.step.progress(time.monotonic() - self.sent_t)
+            self.highest = seq
+            self.silent = 0
+        self._send_item(seq)
+        self.sent_hi = max(self.sent_hi, seq)
+        self.last_sent = self.sent_hi == n - 1
+        self.sent_t = time.monotonic()
+
+
+def _upload_done(st: VehicleState, result: int, last_sent: bool) -> bool:
+    """A MISSION_ACK during an upload: True when the upload is over (to be verified), False
+    to go on; raises on a refusal."""
+    if result == MAV_MISSION_ACCEPTED:
+        return last_sent  # before the last item: a stale ACK of an earlier transfer
+    if result == MAV_MISSION_INVALID_SEQUENCE:
+        return False  # ArduPilot's answer to an item it did not ask for
+    if result == MAV_MISSION_ERROR and last_sent:
+        # ArduPilot answers a repeated last item with ERROR once the upload is complete (its
+        # ACCEPTED was lost): the readback decides
+        _log.debug("%s: ERROR after the last item; verifying by readback", st.key)
+        return True
+    raise TransferError(
+        f"vehicle rejected the mission: {mission_result(result)}", UploadFailure.REFUSED
+    )
 
 
 def item_from(m: wire.MavMsg) -> MissionItem:
