@@ -36,6 +36,8 @@ from gcs_utm.core.monitoring.fences import localise
 from gcs_utm.core.monitoring.geometry import points_in_edges
 from gcs_utm.core.tracking import Tracker
 from gcs_utm.dashboard.headless import HeadlessView
+from gcs_utm.dashboard.line import LinePrompt
+from gcs_utm.dashboard.view import Minima
 from gcs_utm.geo import LocalFrame
 from gcs_utm.messages import HazardReport, PilotAnswer, PilotDecision
 from gcs_utm.model import (
@@ -70,7 +72,8 @@ class OperatorMode:
     DASHBOARD = "dashboard"
     AUTO_ACCEPT = "auto-accept"
     AUTO_REJECT = "auto-reject"
-    NONE = "none"
+    LINE = "line"  # headless, answers typed on stdin (gcs_utm.dashboard.line)
+    NONE = "none"  # answers only from MQTT
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -479,6 +482,7 @@ async def run_scenario(
             rt.tracks,
             refresh_s=settings.dashboard.refresh_s,
             operator=settings.dashboard.operator,
+            minima=_minima(settings),
         )
         rt.usm.attach_operator(app)
     for op_port in operators:
@@ -493,6 +497,7 @@ async def run_scenario(
         rt.usm.attach_geofence_listener(gateway.on_geofences)
 
     wall0 = time.perf_counter()
+    quit_requested = False
     try:
         async with contextlib.AsyncExitStack() as stack:
             if fleet is not None:
@@ -510,6 +515,7 @@ async def run_scenario(
                 ]
                 if options.headless:
                     tasks.append(tg.create_task(_headless_status(rt), name="status"))
+                tasks += [tg.create_task(o.run(), name="line") for o in _lines(operators)]
                 if gateway is not None:
                     tasks.append(tg.create_task(gateway.run(), name="mqtt"))
                 dash: asyncio.Task[Any] | None = None
@@ -517,6 +523,7 @@ async def run_scenario(
                     dash = tg.create_task(app.run_async(), name="dashboard")
                     tasks.append(dash)
                 await _until(rt.clock, end_t_s, app, dash)
+                quit_requested = app is not None and app.quit_requested
                 for t in tasks:
                     t.cancel()
     finally:
@@ -531,6 +538,7 @@ async def run_scenario(
         speed=options.speed,
         vehicles=fleet.vehicles if fleet is not None else (),
     )
+    report["operator_quit"] = quit_requested
     store.close()
     path = options.out_dir / f"{scenario.name}.json"
     path.write_text(json.dumps(report, indent=1))
@@ -554,10 +562,25 @@ async def _until(
         app.exit()
 
 
+def _minima(settings: Settings) -> Minima:
+    mon = settings.monitoring
+    return Minima(horizontal_m=mon.separation_horizontal_m, vertical_m=mon.separation_vertical_m)
+
+
+def _lines(operators: list[Any]) -> list[LinePrompt]:
+    return [o for o in operators if isinstance(o, LinePrompt)]
+
+
 def _operators(rt: Runtime, options: RunOptions) -> list[Any]:
     ops: list[Any] = []
-    if options.headless or options.operator != OperatorMode.DASHBOARD:
-        ops.append(HeadlessView(rt.usm, rt.tracks))
+    minima = _minima(rt.settings)
+    if options.operator == OperatorMode.LINE:
+        ops.append(LinePrompt(rt.usm, rt.tracks, minima=minima))
+    elif options.headless or options.operator != OperatorMode.DASHBOARD:
+        mqtt = options.mqtt or rt.settings.mqtt.enabled
+        by = options.operator if options.operator != OperatorMode.NONE else ""
+        by = by or ("MQTT (remote pilot station)" if mqtt else "")
+        ops.append(HeadlessView(rt.usm, rt.tracks, answered_by=by, minima=minima))
     if options.operator in (OperatorMode.AUTO_ACCEPT, OperatorMode.AUTO_REJECT):
         ops.append(
             AutoOperator(
@@ -717,6 +740,9 @@ def build_report(
                 "created_at_s": _rel(rec.created_t_s, t0),
                 "deadline_at_s": _rel(rec.deadline_t_s, t0),
                 "decision": record.decision or rec.state.value,
+                "answered_by": record.answered_by,
+                "answered_via": record.answered_via,
+                "chosen_alternative_index": record.chosen_index,
                 "state": rec.state.value,
                 "uploaded": record.uploaded,
                 "verified": record.verified,
@@ -896,13 +922,16 @@ async def serve(
     for link in settings.mavlink.links:
         await rt.hub.add_link(link)
     options = RunOptions(headless=headless, operator=operator)
-    for op_port in _operators(rt, options):
+    operators = _operators(rt, options)
+    for op_port in operators:
         rt.usm.attach_operator(op_port)
     app = None
     if operator == OperatorMode.DASHBOARD and not headless:
         from gcs_utm.dashboard.tui import DashboardApp
 
-        app = DashboardApp(rt.usm, rt.tracks, refresh_s=settings.dashboard.refresh_s)
+        app = DashboardApp(
+            rt.usm, rt.tracks, refresh_s=settings.dashboard.refresh_s, minima=_minima(settings)
+        )
         rt.usm.attach_operator(app)
     gateway = None
     if settings.mqtt.enabled:
@@ -929,6 +958,7 @@ async def serve(
             ]
             if headless:
                 tasks.append(tg.create_task(_headless_status(rt), name="status"))
+            tasks += [tg.create_task(o.run(), name="line") for o in _lines(operators)]
             if gateway is not None:
                 tasks.append(tg.create_task(gateway.run(), name="mqtt"))
             if app is not None:

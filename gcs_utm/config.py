@@ -143,74 +143,81 @@ def _describe(value: Any) -> str:
 
 def _convert(tp: Any, value: Any, source: str, key: str, meta: Mapping[str, Any]) -> Any:
     """Check ``value`` (as parsed from TOML) against the annotation ``tp`` and convert it."""
-
-    def bad() -> ConfigError:
-        return ConfigError(source, key, f"expected {_type_name(tp)}, got {_describe(value)}")
-
     if tp is Any:
         return value
     origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
     if origin in (types.UnionType, typing.Union):
-        # TOML has no null: a present value must match one of the non-None members.
-        errors: list[ConfigError] = []
-        for member in args:
-            if member is type(None):
-                continue
-            try:
-                return _convert(member, value, source, key, meta)
-            except ConfigError as exc:
-                errors.append(exc)
-        if len(errors) == 1:
-            raise errors[0]
-        raise bad()
+        return _convert_union(tp, value, source, key, meta)
     if origin in (tuple, list):
-        if not isinstance(value, list):
-            raise bad()
-        if origin is tuple and args and (len(args) != 2 or args[1] is not Ellipsis):
-            if len(value) != len(args):
-                raise ConfigError(
-                    source, key, f"expected an array of {len(args)} items, got {len(value)}"
-                )
-            items = [
-                _convert(a, v, source, f"{key}[{i}]", meta)
-                for i, (a, v) in enumerate(zip(args, value, strict=True))
-            ]
-        else:
-            inner = args[0] if args else Any
-            items = [_convert(inner, v, source, f"{key}[{i}]", meta) for i, v in enumerate(value)]
-        return tuple(items) if origin is tuple else items
+        return _convert_sequence(tp, value, source, key, meta)
     if origin is dict:
         if not isinstance(value, dict):
-            raise bad()
-        return {str(k): _convert(args[1], v, source, f"{key}.{k}", meta) for k, v in value.items()}
+            raise _bad(tp, value, source, key)
+        inner = typing.get_args(tp)[1]
+        return {str(k): _convert(inner, v, source, f"{key}.{k}", meta) for k, v in value.items()}
     if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
-            raise bad()
+            raise _bad(tp, value, source, key)
         return build(tp, value, source=source, section=key)
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
         for member in tp:
             if member.value == value and type(member.value) is type(value):
                 return member
-        raise bad()
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise bad()
+        raise _bad(tp, value, source, key)
+    return _convert_scalar(tp, value, source, key, meta)
+
+
+def _bad(tp: Any, value: Any, source: str, key: str) -> ConfigError:
+    return ConfigError(source, key, f"expected {_type_name(tp)}, got {_describe(value)}")
+
+
+def _convert_union(tp: Any, value: Any, source: str, key: str, meta: Mapping[str, Any]) -> Any:
+    # TOML has no null: a present value must match one of the non-None members.
+    errors: list[ConfigError] = []
+    for member in typing.get_args(tp):
+        if member is type(None):
+            continue
+        try:
+            return _convert(member, value, source, key, meta)
+        except ConfigError as exc:
+            errors.append(exc)
+    if len(errors) == 1:
+        raise errors[0]
+    raise _bad(tp, value, source, key)
+
+
+def _convert_sequence(tp: Any, value: Any, source: str, key: str, meta: Mapping[str, Any]) -> Any:
+    origin = typing.get_origin(tp)
+    if not isinstance(value, list):
+        raise _bad(tp, value, source, key)
+    args = typing.get_args(tp)
+    if origin is tuple and args and (len(args) != 2 or args[1] is not Ellipsis):
+        if len(value) != len(args):
+            raise ConfigError(
+                source, key, f"expected an array of {len(args)} items, got {len(value)}"
+            )
+        items = [
+            _convert(a, v, source, f"{key}[{i}]", meta)
+            for i, (a, v) in enumerate(zip(args, value, strict=True))
+        ]
+    else:
+        inner = args[0] if args else Any
+        items = [_convert(inner, v, source, f"{key}[{i}]", meta) for i, v in enumerate(value)]
+    return tuple(items) if origin is tuple else items
+
+
+def _convert_scalar(tp: Any, value: Any, source: str, key: str, meta: Mapping[str, Any]) -> Any:
+    if tp is bool or tp is str:
+        if not isinstance(value, tp):
+            raise _bad(tp, value, source, key)
         return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise bad()
-        check_range(source, key, value, dict(meta))
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise bad()
-        check_range(source, key, float(value), dict(meta))
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise bad()
-        return value
+    if tp is int or tp is float:
+        allowed = int if tp is int else int | float
+        if isinstance(value, bool) or not isinstance(value, allowed):
+            raise _bad(tp, value, source, key)
+        converted = tp(value)
+        check_range(source, key, converted, dict(meta))
+        return converted
     raise ConfigError(source, key, f"unsupported setting type {tp!r} (a bug in the settings)")
 
 

@@ -22,6 +22,8 @@ from typing import Any, NewType
 import numpy as np
 import numpy.typing as npt
 
+from gcs_utm.envelope import PerformanceEnvelope, implied
+
 Icao24 = NewType("Icao24", str)
 """ICAO 24-bit address as six lower-case hex digits, e.g. ``"3c6444"``."""
 SysId = NewType("SysId", int)
@@ -232,67 +234,11 @@ class OperationState(Enum):
     ENDED = "ended"
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
-class PerformanceEnvelope:
-    """What a vehicle can fly: vertical rates, horizontal speed range, turn radius, hover.
-
-    Tactical Deconfliction proposes only manoeuvres inside it: vertical segments within the
-    climb and descent rates, horizontal speeds within [min, max] (a fixed wing cannot slow
-    below its stall margin), no holding in place for a vehicle that cannot hover. From the
-    operation's description (:func:`default_envelope`) unless given (``Operation.envelope``:
-    a scenario file, or the autopilot's parameters where the vehicle reports them)."""
-
-    climb_rate_mps: float
-    descent_rate_mps: float
-    min_speed_mps: float
-    max_speed_mps: float
-    turn_radius_m: float
-    can_hover: bool
-
-    def __post_init__(self) -> None:
-        item = "performance envelope"
-        _finite(
-            item,
-            climb_rate_mps=self.climb_rate_mps,
-            descent_rate_mps=self.descent_rate_mps,
-            min_speed_mps=self.min_speed_mps,
-            max_speed_mps=self.max_speed_mps,
-            turn_radius_m=self.turn_radius_m,
-        )
-        for name in ("climb_rate_mps", "descent_rate_mps", "max_speed_mps"):
-            if getattr(self, name) <= 0.0:
-                raise ModelError(item, name, "must be positive")
-        if self.min_speed_mps < 0.0 or self.turn_radius_m < 0.0:
-            raise ModelError(item, "min_speed_mps", "speeds and radii must be >= 0")
-        if self.min_speed_mps > self.max_speed_mps:
-            raise ModelError(item, "min_speed_mps", "is above max_speed_mps")
-
-
-DEFAULT_DESCENT_RATE_MPS = {"multirotor": 1.5, "fixed_wing": 3.0}
-"""Descent rate assumed when only the climb rate is known: PX4's MPC_Z_V_AUTO_DN and
-ArduCopter's WPNAV_SPEED_DN default to 1.5 m/s; a fixed wing's 3 m/s stays well inside PX4's
-FW_T_SINK_MAX and ArduPlane's TECS_SINK_MAX (5 m/s). Never more than the climb rate."""
-MAX_SPEED_FACTOR = 1.2
-"""A vehicle described by its cruise speed alone is assumed to fly up to 20 % faster."""
-FIXED_WING_MIN_SPEED_FACTOR = 0.7
-"""...and a fixed wing no slower than 70 % of its cruise speed (the stall margin)."""
-FIXED_WING_TURN_RADIUS_M = 80.0
-"""PX4's NAV_LOITER_RAD default, a turn a small fixed wing flies at cruise speed."""
-
-
 def default_envelope(
     kind: VehicleKind, cruise_speed_mps: float, climb_rate_mps: float
 ) -> PerformanceEnvelope:
-    """The envelope an operation's description implies (see the constants above)."""
-    fw = kind is VehicleKind.FIXED_WING
-    return PerformanceEnvelope(
-        climb_rate_mps=climb_rate_mps,
-        descent_rate_mps=min(climb_rate_mps, DEFAULT_DESCENT_RATE_MPS[kind.value]),
-        min_speed_mps=FIXED_WING_MIN_SPEED_FACTOR * cruise_speed_mps if fw else 0.0,
-        max_speed_mps=MAX_SPEED_FACTOR * cruise_speed_mps,
-        turn_radius_m=FIXED_WING_TURN_RADIUS_M if fw else 0.0,
-        can_hover=not fw,
-    )
+    """The envelope an operation's description implies (:func:`gcs_utm.envelope.implied`)."""
+    return implied(kind is VehicleKind.FIXED_WING, cruise_speed_mps, climb_rate_mps)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -687,6 +633,18 @@ class Alternative:
     cost: float
     risk: float
     detail: str = ""
+    # What the option changes, for the pilot prompt (None: not computed for this option).
+    extra_length_m: float | None = None
+    """3D path length this option adds to the remaining plan."""
+    extra_time_s: float | None = None
+    """Time this option adds to the arrival at the plan's last waypoint."""
+    separation_ratio: float | None = None
+    """Closest predicted separation from the other plans under this option, as a multiple
+    of the separation minima (at least 1: separated; cylinder rule: the larger of horizontal
+    distance / horizontal minimum and vertical distance / vertical minimum). None: no other
+    plan in range."""
+    fence_distance_m: float | None = None
+    """Closest horizontal distance to an active geofence (negative: inside). None: none near."""
 
 
 class CommandKind(Enum):

@@ -20,6 +20,7 @@ from gcs_utm.core.emergency.config import EmergencyConfig
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.tracking.config import TrackingConfig
 from gcs_utm.dashboard.config import DashboardConfig
+from gcs_utm.preflight import check_settings
 from gcs_utm.services.usm import UsmConfig
 from gcs_utm.store.config import StoreConfig
 
@@ -86,10 +87,14 @@ def settings_from_mapping(doc: Mapping[str, Any], *, source: str) -> Settings:
 
 
 def load_settings(path: str | Path | None = None) -> Settings:
-    """The embedded defaults, overlaid with ``path`` when given."""
+    """The embedded defaults, overlaid with ``path`` when given, and checked as ``serve``
+    will use them (:func:`gcs_utm.preflight.check_settings`): a file that loads here does
+    not fail later on a link string, a key, a certificate file or an inverted range."""
     if path is None:
         return Settings()
-    return settings_from_mapping(load_toml(path), source=str(path))
+    settings = settings_from_mapping(load_toml(path), source=str(path))
+    check_settings(settings, source=str(path))
+    return settings
 
 
 def default_toml() -> str:

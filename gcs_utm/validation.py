@@ -107,8 +107,14 @@ def radius_problem(radius_m: float) -> str | None:
 
 def nesting_depth(doc: object, limit: int = MAX_NESTING) -> int:
     """How deep lists and dicts nest in ``doc`` (a scalar is 0), counted without recursion;
-    the walk stops once it passes ``limit`` (the result is then ``limit + 1``)."""
+    the walk stops once it passes ``limit`` (the result is then ``limit + 1``).
+
+    A container shared by several parents (YAML anchors and aliases) is walked again only
+    when reached deeper than before, so an alias bomb (each level repeating the one below
+    ten times) costs at most ``limit`` visits per distinct container, not an exponential
+    number."""
     deepest = 0
+    seen_at: dict[int, int] = {}
     stack: list[tuple[object, int]] = [(doc, 0)]
     while stack:
         node, depth = stack.pop()
@@ -121,6 +127,9 @@ def nesting_depth(doc: object, limit: int = MAX_NESTING) -> int:
         depth += 1
         if depth > limit:
             return limit + 1
+        if seen_at.get(id(node), 0) >= depth:
+            continue
+        seen_at[id(node)] = depth
         deepest = max(deepest, depth)
         stack.extend((c, depth) for c in children)
     return deepest

@@ -1,10 +1,13 @@
 """Settings of the MAVLink adapter (``[mavlink]``): links, buffers, mission and command retries,
-hazard thresholds and per-vehicle signing keys. Frozen; validated by the shared loader."""
+hazard thresholds, per-vehicle signing keys, link reconnects and the bounds of per-sender
+state. Frozen; validated by the shared loader, cross-field rules (backoff order, link strings,
+keys) in ``__post_init__``."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from adapters.mavlink.endpoint import EndpointError, parse_endpoint
 from gcs_utm.config import setting
 
 
@@ -111,3 +114,73 @@ class MavlinkConfig:
         'MAVLink 2 signing keys by sysid: {"1" = "<64 hex digits>"}; outgoing commands '
         "and uploads to that vehicle are signed",
     )
+    sysid_binding: bool = setting(
+        True,
+        "a system id belongs to the link and address it was first heard on: another sender "
+        "claiming it is dropped and reported (SPOOFING_ATTACK); false = each (link, address) "
+        "with a system id is a vehicle of its own (fleets reusing system ids, e.g. ArduPilot "
+        "SITL instances all at sysid 1), addressed by VehicleKey",
+    )
+    reconnect_min_s: float = setting(
+        0.5,
+        "first wait before reopening a TCP or serial link that is down (doubled per failed "
+        "attempt up to reconnect_max_s)",
+        min=0.01,
+        unit="s",
+    )
+    reconnect_max_s: float = setting(
+        10.0,
+        "longest wait between attempts to reopen a link (>= reconnect_min_s)",
+        min=0.01,
+        unit="s",
+    )
+    max_senders: int = setting(
+        1024,
+        "source addresses per link with parser state; beyond it the least recently heard are "
+        "evicted (counted: senders_evicted)",
+        min=1,
+    )
+    max_vehicles: int = setting(
+        1024,
+        "vehicle states (address, sysid, compid) in the hub; beyond it the least recently "
+        "heard are evicted (counted: vehicles_evicted)",
+        min=1,
+    )
+    sender_idle_s: float = setting(
+        60.0,
+        "a source address or vehicle not heard for this long is forgotten (a vehicle that "
+        "comes back is discovered again)",
+        min=1.0,
+        unit="s",
+    )
+    warn_interval_s: float = setting(
+        10.0,
+        "repeated warnings of one cause (reboots, sysid claims, send errors) are written at "
+        "most once per interval, with the count of those held back",
+        min=0.0,
+        unit="s",
+    )
+
+    def __post_init__(self) -> None:
+        if self.reconnect_min_s > self.reconnect_max_s:
+            raise ValueError(
+                f"reconnect_min_s ({self.reconnect_min_s}) must not exceed reconnect_max_s "
+                f"({self.reconnect_max_s})"
+            )
+        for text in self.links:
+            try:
+                parse_endpoint(text)
+            except EndpointError as exc:
+                raise ValueError(f"links: {exc}") from exc
+        for sid, hexkey in self.signing_keys.items():
+            if not sid.isdigit() or not 1 <= int(sid) <= 255:
+                raise ValueError(f"signing_keys: {sid!r} is not a system id (1..255)")
+            try:
+                key = bytes.fromhex(hexkey.strip())
+            except ValueError as exc:
+                raise ValueError(f"signing_keys.{sid}: not hexadecimal: {exc}") from exc
+            if len(key) != 32:
+                raise ValueError(
+                    f"signing_keys.{sid}: a MAVLink signing key has 32 bytes (64 hex digits), "
+                    f"got {len(key)}"
+                )

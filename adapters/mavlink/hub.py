@@ -7,8 +7,18 @@ coroutines that wait on a per-vehicle mailbox with timeouts. A bad frame is coun
 loop.
 
 Identity: a vehicle is (link, source address, sysid, compid) = :class:`VehicleKey`; API calls
-take a ``SysId`` (resolved to the most recently heard vehicle with it) or a ``VehicleKey``.
-Replies are unicast to the address the vehicle was last heard from.
+take a ``SysId`` (resolved to its most recently heard component) or a ``VehicleKey``. Replies
+are unicast to the address the vehicle was last heard from. A system id is bound to the link
+and address it was first heard on; another sender claiming it is dropped, counted and reported
+as a SPOOFING_ATTACK hazard instead of taking it over; system id 0 is never a vehicle; with a
+key in ``signing_keys`` a vehicle's frames must be signed with it (see
+:mod:`adapters.mavlink.senders`, :mod:`adapters.mavlink.signing`). Per-sender state is capped
+and forgotten when idle (``max_senders``, ``max_vehicles``, ``sender_idle_s``).
+
+Links: a TCP or serial link that is down (not up yet at start, or closed by the peer) is
+reopened with backoff (``reconnect_min_s`` .. ``reconnect_max_s``); while it is down each of its
+vehicles is reported with a COMMUNICATION_FAILURE hazard, and on reconnect ArduPilot vehicles
+are asked for their streams again (docs/links-and-security.md).
 
 Positions: with a sink that offers a :class:`~gcs_utm.model.PositionLane` (the USM), each
 GLOBAL_POSITION_INT becomes one lane entry instead of a Measurement, and the lane is handed to
@@ -22,6 +32,7 @@ import asyncio
 import contextlib
 import functools
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -30,11 +41,13 @@ from adapters.mavlink import wire
 from adapters.mavlink.commands import Commands
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.endpoint import parse_endpoint
+from adapters.mavlink.senders import Senders, idle_keys, over_cap_keys
+from adapters.mavlink.signing import SignatureCheck
 from adapters.mavlink.transfer import (
     MavlinkError,
     TransferError,
 )
-from adapters.mavlink.transport import Address, Transport
+from adapters.mavlink.transport import Address, Backoff, Transport
 from adapters.mavlink.vehicle import VehicleInfo, VehicleState
 from gcs_utm.clock import Clock
 from gcs_utm.messages import HazardReport, LinkHealth, VehicleKey, VehicleStatus
@@ -44,7 +57,9 @@ from gcs_utm.model import (
     Measurement,
     PositionLane,
     SysId,
+    ThreatKind,
 )
+from gcs_utm.ratelog import RateLimitedLog
 
 _log = logging.getLogger(__name__)
 
@@ -108,6 +123,15 @@ class HubCounters:
     uploads_failed: int = 0
     uploads_verified: int = 0
     mission_retries: int = 0  # our own timeouts in mission transfers (upload, readback)
+    # per-sender bookkeeping and sender checks (see the module docstring)
+    senders_evicted: int = 0
+    vehicles_evicted: int = 0
+    sysid_zero: int = 0
+    sysid_claims: int = 0
+    unsigned: int = 0  # frames of a keyed vehicle without a signature
+    replayed: int = 0  # frames of a keyed vehicle with an old signing timestamp
+    links_down: int = 0  # times a stream link went down
+    dropped_link_down: int = 0  # frames not sent because their link was down
 
     def snapshot(self) -> dict[str, int]:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -120,8 +144,22 @@ class _Link:
     parsers: dict[Address | None, wire.Parser] = field(default_factory=dict)
     counters: wire.ParseCounters = field(default_factory=wire.ParseCounters)
     encoder: wire.Encoder | None = None
-    peers: dict[Address, float] = field(default_factory=dict)
+    peers: dict[Address, float] = field(default_factory=dict)  # vehicles' addresses
+    seen: dict[Address | None, float] = field(default_factory=dict)  # any sender's last chunk
     fused: bool = False  # datagram link with the fast decode: position reports fused
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LinkState:
+    """One link as the hub sees it (:meth:`MavlinkHub.links`)."""
+
+    name: str
+    up: bool
+    connects: int  # successful opens of a stream link (reconnects = connects - 1)
+    failures: int  # failed opens in a row
+    dropped_down: int  # frames not sent while down
+    senders: int  # source addresses with parser state
+    last_error: str
 
 
 class MavlinkHub(Commands):
@@ -148,11 +186,16 @@ class MavlinkHub(Commands):
             self._lane = self._lane_ready = None
         self._lane_values: list[float] = self._lane.values if self._lane is not None else []
         self._links: dict[str, _Link] = {}
-        self._states: dict[tuple[str, Address | None, int, int], VehicleState] = {}
-        self._by_sysid: dict[int, VehicleState] = {}
-        self._addr: dict[int, Address | None] = {}  # id(state) -> last source address
         self._mailbox: dict[int, asyncio.Queue[wire.MavMsg]] = {}
         self._locks: dict[int, asyncio.Lock] = {}
+        # repeated warnings: at most one line per cause per interval of clock time
+        self._ratelog = RateLimitedLog(_log, config.warn_interval_s, now=clock.now_s)
+        self._senders = Senders(config, sink, self._lane, self._busy, self._ratelog)
+        self._senders.on_forget.append(self._forgotten)
+        # the same tables under the names the protocol code uses
+        self._states = self._senders.states
+        self._by_sysid = self._senders.by_sysid
+        self._addr = self._senders.addr  # id(state) -> last source address
         self._signers: dict[int, wire.Encoder] = {}
         self._keys: dict[int, bytes] = {}
         for sid, hexkey in config.signing_keys.items():
@@ -160,6 +203,10 @@ class MavlinkHub(Commands):
                 self._keys[int(sid)] = wire.parse_key(hexkey)
             except ValueError as exc:
                 raise MavlinkError(f"[mavlink] signing_keys.{sid}: {exc}") from exc
+        # signing timestamps are UTC: the clock's (tlog time in a replay)
+        self._verify = SignatureCheck(self._keys, now=clock.now_s) if self._keys else None
+        self._claim_alerts: dict[int, float] = {}  # sysid -> when its last claim was reported
+        self._restream: set[int] = set()  # id(state) of ArduPilot vehicles to ask for streams
         self._tasks: list[asyncio.Task[None]] = []
         self._handlers = {
             wire.HEARTBEAT: VehicleState.on_heartbeat,
@@ -195,9 +242,12 @@ class MavlinkHub(Commands):
             ]
 
     async def add_link(self, endpoint: str) -> str:
-        """Open one link; returns its name once bound (see :meth:`local_port`)."""
+        """Open one link; returns its name once bound (see :meth:`local_port`). A TCP or
+        serial link whose peer is not there yet is returned all the same, and opened in the
+        background with backoff (module docstring: Links)."""
         ep = parse_endpoint(endpoint)
-        transport = Transport(ep)
+        cfg = self.config
+        transport = Transport(ep, Backoff(min_s=cfg.reconnect_min_s, max_s=cfg.reconnect_max_s))
         name = str(ep)
         base, n = name, 1
         while name in self._links:
@@ -214,15 +264,55 @@ class MavlinkHub(Commands):
                 self.config.udp_rcvbuf_bytes,
                 self.config.udp_batch,
                 self.flush_positions,
+                functools.partial(self._link_state, link),
             )
         except BaseException:
             del self._links[name]
+            transport.close()
             raise
-        if ep.kind.value != "udpin":
+        if transport.datagram and ep.kind.value != "udpin":
             self._send(link, link.encoder.heartbeat(), None)  # make the far end talk to us
         self._ensure_tasks()
-        _log.info("link %s open (local port %d)", name, transport.local_port)
+        if transport.up:
+            _log.info("link %s open (local port %d)", name, transport.local_port)
         return name
+
+    def _link_state(self, link: _Link, up: bool) -> None:
+        """A stream link came up or went down (transport callback)."""
+        if up:
+            assert link.encoder is not None
+            self._send(link, link.encoder.heartbeat(), None)  # make the far end talk to us
+            return
+        self.counters.links_down += 1
+        link.parsers.clear()  # a frame cut by the disconnect must not prefix the next stream
+        t = self.clock.now_s()
+        reason = link.transport.last_error
+        for st in self._senders.on_link(link.name):
+            if st.autopilot is Autopilot.ARDUPILOT:
+                self._restream.add(id(st))  # a restarted ArduPilot sends nothing unasked
+            box = self._mailbox.get(id(st))
+            if box is not None:
+                box.put_nowait(None)  # wake a transfer: its frames cannot go out
+            if st.info is None:
+                continue
+            self.sink.on_hazard(
+                st.hazard(ThreatKind.COMMUNICATION_FAILURE, t, f"link {link.name} down: {reason}")
+            )
+
+    def links(self) -> list[LinkState]:
+        """The state of every link (up, reconnects, frames dropped while down)."""
+        return [
+            LinkState(
+                name=lk.name,
+                up=lk.transport.up,
+                connects=lk.transport.connects,
+                failures=lk.transport.failures,
+                dropped_down=lk.transport.dropped_down,
+                senders=len(lk.parsers),
+                last_error=lk.transport.last_error,
+            )
+            for lk in self._links.values()
+        ]
 
     def local_port(self, link: str) -> int:
         return self._links[link].transport.local_port
@@ -293,7 +383,7 @@ class MavlinkHub(Commands):
             if g is not None:
                 sys_id, comp_id, seq, fields = g
                 st = self._states.get((link.name, addr, sys_id, comp_id))
-                if st is not None:
+                if st is not None and (self._verify is None or sys_id not in self._keys):
                     c.frames += 1
                     link.counters.frames += 1
                     self._heard(link, addr, st, seq, t)
@@ -308,9 +398,8 @@ class MavlinkHub(Commands):
                     if len(self._lane_values) >= _LANE_HANDOVER:
                         self.flush_positions()  # within a long burst too: latency
                     return
-        parser = link.parsers.get(addr)
-        if parser is None:
-            parser = link.parsers[addr] = wire.Parser(link.counters, fast=self.config.fast_decode)
+        link.seen[addr] = t
+        parser = link.parsers.get(addr) or self._new_parser(link, addr)
         before = link.counters.rejects
         if link.transport.datagram:
             frames = parser.feed_frames(data)
@@ -353,12 +442,17 @@ class MavlinkHub(Commands):
     def _dispatch(self, link: _Link, addr: Address | None, f: wire.Frame, t: float) -> None:
         self.counters.frames += 1
         mid, sys_id, comp_id, seq, m = f
+        if self._verify is not None and (cause := self._verify.accept(f)):
+            self._unverified(link, cause)
+            return
         key = (link.name, addr, sys_id, comp_id)
         st = self._states.get(key)
         if st is None:
             if mid == wire.HEARTBEAT and m.autopilot == 8:
                 return  # another GCS or a non-autopilot component: not a vehicle
             st = self._new_state(link, addr, sys_id, comp_id, t)
+            if st is None:
+                return
         self._heard(link, addr, st, seq, t)
         handler = self._handlers.get(mid)
         reboots = st.reboots
@@ -366,7 +460,11 @@ class MavlinkHub(Commands):
             if mid == wire.HEARTBEAT:
                 if m.autopilot == 8:
                     return
-                if handler(st, m, t, self.sink) and st.autopilot is Autopilot.ARDUPILOT:
+                new = handler(st, m, t, self.sink)
+                if new:
+                    self._senders.discovered(st)
+                if st.autopilot is Autopilot.ARDUPILOT and (new or id(st) in self._restream):
+                    self._restream.discard(id(st))
                     self._request_streams(st)
             else:
                 handler(st, m, t, self.sink)
@@ -388,46 +486,104 @@ class MavlinkHub(Commands):
         st.count_frame(seq, t)
         if addr is not None:
             link.peers[addr] = t
-        self._by_sysid[st.sys_id] = st
-        self._addr[id(st)] = addr
 
     def _new_state(
         self, link: _Link, addr: Address | None, sys_id: int, comp_id: int, t: float
-    ) -> VehicleState:
-        address = "" if addr is None else f"{addr[0]}:{addr[1]}"
-        key = VehicleKey(link=link.name, address=address, sys_id=SysId(sys_id), comp_id=comp_id)
-        old = self._by_sysid.get(sys_id)
-        if (
-            old is not None
-            and old.key.link == link.name
-            and old.key.comp_id == comp_id
-            and t - old.last_heard_t_s >= self.config.address_move_s
-        ):
-            # the same vehicle, now at another address (NAT rebinding, restarted bridge)
-            self.counters.address_changes += 1
-            _log.warning(
-                "sysid %d moved on %s: %s -> %s", sys_id, link.name, old.key.address, address
-            )
-            old_addr = _parse_addr(old.key.address)
-            del self._states[(link.name, old_addr, sys_id, comp_id)]
-            old.key = key
-            if old.info is not None:
-                old.info = VehicleInfo(
-                    key=key,
-                    autopilot=old.info.autopilot,
-                    vehicle_kind=old.info.vehicle_kind,
-                    mav_type=old.info.mav_type,
-                    first_heard_t_s=old.info.first_heard_t_s,
-                )
-                self.sink.on_vehicle(old.info)
-            self._states[(link.name, addr, sys_id, comp_id)] = old
-            return old
-        if old is not None and old.key.comp_id == comp_id:
-            self.counters.sysid_collisions += 1
-            _log.info("sysid %d also at %s on %s (another vehicle)", sys_id, address, link.name)
-        st = VehicleState(key, self.config, t, self._lane)
-        self._states[(link.name, addr, sys_id, comp_id)] = st
+    ) -> VehicleState | None:
+        """The state of a sender heard for the first time, or None when its frames are
+        dropped (system id 0, a claim on a system id bound elsewhere: reported)."""
+        st = self._senders.new_state(link.name, addr, sys_id, comp_id, t)
+        self._sync_senders()
+        if st is None and sys_id != 0:
+            self._claimed(link, addr, sys_id, t)
         return st
+
+    def _claimed(self, link: _Link, addr: Address | None, sys_id: int, t: float) -> None:
+        """Another sender claims ``sys_id``: a SPOOFING_ATTACK hazard for the vehicle bound to
+        it, at most once per ``warn_interval_s`` per system id (claims are counted)."""
+        last = self._claim_alerts.get(sys_id)
+        if last is not None and t - last < self.config.warn_interval_s:
+            return
+        self._claim_alerts[sys_id] = t
+        owner = self._by_sysid.get(sys_id)
+        if owner is None:
+            return
+        where = "" if addr is None else f"{addr[0]}:{addr[1]}"
+        message = (
+            f"sysid {sys_id} claimed by another sender ({where or 'no address'} on {link.name}); "
+            f"it is bound to {owner.key.address or 'no address'} on {owner.key.link}: "
+            f"frames dropped ({self.counters.sysid_claims} claims so far)"
+        )
+        self._ratelog.warning("claim", "%s", message)  # one line per interval for all
+        self.sink.on_hazard(owner.hazard(ThreatKind.SPOOFING_ATTACK, t, message))
+
+    def _unverified(self, link: _Link, cause: str) -> None:
+        """A frame of a keyed vehicle that failed verification: dropped, counted by cause (a
+        wrong signature also in the link's bad frames, as the parser counts them)."""
+        v = self._verify
+        assert v is not None
+        c = self.counters
+        c.unsigned, c.replayed = v.counters.unsigned, v.counters.replayed
+        if cause == "bad_signature":
+            link.counters.bad_signature += 1
+            self._sync_bad(link)
+        self._ratelog.log(
+            logging.DEBUG, f"unverified:{cause}", "dropped on %s: %s", link.name, cause
+        )
+
+    def _sync_senders(self) -> None:
+        sc = self._senders.counters
+        c = self.counters
+        c.sysid_zero, c.sysid_claims = sc.sysid_zero, sc.sysid_claims
+        c.sysid_collisions = sc.sysid_collisions
+        c.vehicles_evicted, c.address_changes = sc.vehicles_evicted, sc.address_changes
+
+    def _busy(self, st: VehicleState) -> bool:
+        """A transfer or command exchange with ``st`` is in progress: keep it."""
+        lock = self._locks.get(id(st))
+        return lock is not None and lock.locked()
+
+    def _forgotten(self, st: VehicleState) -> None:
+        """``st`` was evicted: drop what the hub keeps by its id."""
+        self._locks.pop(id(st), None)
+        self._restream.discard(id(st))
+
+    def _new_parser(self, link: _Link, addr: Address | None) -> wire.Parser:
+        """The parser of a source address heard for the first time (room made if full)."""
+        if len(link.parsers) >= self.config.max_senders:
+            self._trim_senders(link)
+        parser = link.parsers[addr] = wire.Parser(link.counters, fast=self.config.fast_decode)
+        return parser
+
+    def _trim_senders(self, link: _Link) -> None:
+        """``link`` has ``max_senders`` parsers and a new address: forget the oldest eighth."""
+        gone = over_cap_keys(link.seen, self.config.max_senders)
+        self._forget_addresses(link, gone)
+
+    def _forget_addresses(self, link: _Link, addrs: list[Address | None]) -> None:
+        for a in addrs:
+            link.seen.pop(a, None)
+            if link.parsers.pop(a, None) is not None:
+                self.counters.senders_evicted += 1
+            if a is not None:
+                link.peers.pop(a, None)
+
+    def evict_idle(self) -> None:
+        """Forget senders and vehicles not heard for ``sender_idle_s`` (clock time); the
+        health loop calls it every ``health_period_s``."""
+        t = self.clock.now_s()
+        self._senders.evict_idle(t)
+        self._sync_senders()
+        idle_s = self.config.sender_idle_s
+        for link in self._links.values():
+            # an address with a vehicle on the fused path is seen through its peers entry
+            for a, heard in link.peers.items():
+                if link.seen.get(a, -math.inf) < heard:
+                    link.seen[a] = heard
+            self._forget_addresses(link, idle_keys(link.seen, t, idle_s))
+        for sys_id in idle_keys(self._claim_alerts, t, idle_s):
+            del self._claim_alerts[sys_id]
+        self._ratelog.flush()
 
     def _on_reboot(self, st: VehicleState) -> None:
         box = self._mailbox.get(id(st))
@@ -511,6 +667,10 @@ class MavlinkHub(Commands):
         chunk = 50  # vehicles per loop turn (~0.5 ms here): a large fleet must not stall reading
         while True:
             await asyncio.sleep(self.config.health_period_s)
+            self.evict_idle()
+            self.counters.dropped_link_down = sum(
+                lk.transport.dropped_down for lk in self._links.values()
+            )
             states = list(self._states.values())
             for i in range(0, len(states), chunk):
                 for h in self._health_of(states[i : i + chunk]):

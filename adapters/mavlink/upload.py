@@ -159,7 +159,7 @@ class Uploads(Transfers):
             reboots = st.reboots
             tried.attempts = await self._upload(st, box, items, end, reboots)
             got = await self._download(st, box, end, reboots)
-            self._verify(st, items, got)
+            self._verify_readback(st, items, got)
             tried.verified = True
             # PX4 in mission mode runs a DO item at once: MISSION_CURRENT may already show
             # the navigation item after it
@@ -187,7 +187,9 @@ class Uploads(Transfers):
             if not res.ok:  # the leg is flown at the previous speed: late or early, not unsafe
                 _log.warning("%s: leg speed of item %d not set: %s", st.key, p.seq, res.error)
 
-    def _verify(self, st: VehicleState, items: list[MissionItem], got: list[MissionItem]) -> None:
+    def _verify_readback(
+        self, st: VehicleState, items: list[MissionItem], got: list[MissionItem]
+    ) -> None:
         if len(got) != len(items):
             raise TransferError(
                 f"readback has {len(got)} items, sent {len(items)}",

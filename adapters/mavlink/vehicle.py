@@ -31,6 +31,7 @@ from gcs_utm.model import (
     VehicleKind,
     telemetry_measurement,
 )
+from gcs_utm.ratelog import RateLimitedLog
 
 _log = logging.getLogger(__name__)
 
@@ -66,9 +67,17 @@ class VehicleState:
     """Everything we know about one vehicle component on one link."""
 
     def __init__(
-        self, key: VehicleKey, cfg: MavlinkConfig, t_s: float, lane: PositionLane | None = None
+        self,
+        key: VehicleKey,
+        cfg: MavlinkConfig,
+        t_s: float,
+        lane: PositionLane | None = None,
+        *,
+        ratelog: RateLimitedLog | None = None,
     ) -> None:
         self.key = key
+        # repeated warnings (a sender whose time_boot_ms keeps going back) are rate-limited
+        self._ratelog = ratelog or RateLimitedLog(_log, cfg.warn_interval_s, max_causes=8)
         self.cfg = cfg
         self.sys_id = key.sys_id
         # where the vehicle was first heard: kept when its address moves (NAT rebinding), so
@@ -156,7 +165,13 @@ class VehicleState:
             self.offset_from_system_time = False
             self._last_seq = -1
             rebooted = True
-            _log.warning("%s rebooted (time_boot_ms %d -> %d)", self.key, last, boot_ms)
+            self._ratelog.warning(
+                f"reboot:{self.sys_id}",
+                "%s rebooted (time_boot_ms %d -> %d)",
+                self.key,
+                last,
+                boot_ms,
+            )
         if boot_ms > last or rebooted:
             self.last_boot_ms = boot_ms
         if not self.offset_from_system_time:

@@ -1,7 +1,8 @@
 """MQTT door of the U-space Service Manager: JSON messages over an MQTT broker (paper §5.2).
 
 - :mod:`adapters.mqtt.codec`: sans-IO JSON <-> typed messages, validated by the JSON Schemas in
-  ``adapters/mqtt/schemas``; topic layout.
+  ``adapters/mqtt/schemas``; topic layout. It decodes and re-exports :mod:`.wire` (strict
+  JSON, schemas, the error type), :mod:`.topics` (topic names) and :mod:`.encode` (outbound).
 - :mod:`adapters.mqtt.answers`: :class:`AnswerBook`, the id+version matching rules of pilot
   answers (pure, reusable by the USM).
 - :mod:`adapters.mqtt.paper`: conversion of the paper's original message templates.

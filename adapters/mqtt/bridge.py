@@ -11,8 +11,13 @@ Invariants and policies:
   ``backoff_max_s`` with equal jitter (half fixed, half random) so a fleet of stations
   restarted together does not reconnect in lock step. Backoff is wall time (asyncio), not
   the injected clock: it is about the network, and a manual test clock must not make it spin.
-- Session: fixed ``client_id`` and ``clean_session=False``, subscriptions at QoS 1, so QoS 1
-  answers sent while the UTM is away are kept by the broker and delivered on reconnect.
+- Session: MQTT 5, fixed ``client_id``, clean start off and a session expiry interval
+  (``session_expiry_s``), subscriptions at QoS 1: QoS 1 answers sent while the UTM is away
+  are kept by the broker (in memory: no broker persistence needed) and delivered on
+  reconnect. A broker restart without persistence (mosquitto's default) loses that session:
+  on every reconnect the bridge re-publishes the recommendations still waiting for an answer
+  (before their deadline), so a station answers them again; the USM takes a repeated answer
+  as a duplicate.
 - Outgoing queue (``queue_max``): every ``publish_*`` call only enqueues (never blocks the
   caller). A message leaves the queue only after the broker acknowledged it (QoS 1) or took
   it (QoS 0), so messages produced while the broker is down are sent after reconnect
@@ -40,6 +45,8 @@ from types import TracebackType
 from typing import Protocol, cast
 
 import aiomqtt
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
 
 from adapters.mqtt.answers import AnswerOutcome
 from adapters.mqtt.codec import (
@@ -70,6 +77,7 @@ from gcs_utm.model import (
     ModelError,
     Recommendation,
     RecommendationId,
+    RecommendationState,
     Threat,
     Track,
 )
@@ -155,6 +163,8 @@ class MqttBridge:
         self._task: asyncio.Task[None] | None = None
         self._abandoned: set[asyncio.Task[None]] = set()
         self._rec_operator: dict[RecommendationId, str] = {}
+        # recommendations still waiting for an answer: re-published on every reconnect
+        self._outstanding: dict[RecommendationId, tuple[Recommendation, str]] = {}
         self._published_geofences: dict[GeofenceId, Geofence] = {}
         self._last_traffic_t_s: float | None = None
 
@@ -205,13 +215,17 @@ class MqttBridge:
                 keyfile=cfg.tls.key_path or None,
                 cert_reqs=ssl.CERT_REQUIRED,
             )
+        connect = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+        connect.SessionExpiryInterval = cfg.session_expiry_s
         return aiomqtt.Client(
             cfg.host,
             cfg.port,
             username=cfg.username or None,
             password=cfg.password or None,
             identifier=cfg.client_id,
-            clean_session=False,
+            protocol=aiomqtt.ProtocolVersion.V5,
+            clean_start=False,
+            properties=connect,
             keepalive=cfg.keepalive_s,
             timeout=cfg.publish_timeout_s,
             tls_params=tls_params,
@@ -295,6 +309,8 @@ class MqttBridge:
             retain=True,
             latest_wins=True,
         )
+        if self.stats.connects:
+            self._rerequest()
         self.stats.connects += 1
         self._connected.set()
         _log.info("mqtt connected to %s:%d", self._config.host, self._config.port)
@@ -377,10 +393,33 @@ class MqttBridge:
 
     def publish_recommendation(self, rec: Recommendation, operator: str) -> None:
         """An alternative plan / command proposal to ``operator`` (QoS 1). Remembers the
-        operator for :meth:`publish_recommendation_status`."""
+        operator for :meth:`publish_recommendation_status`, and the recommendation until it
+        is answered, ends or passes its deadline (re-published on every reconnect)."""
         topic = self.topics.recommendations(operator)
         self._rec_operator[rec.id] = operator
+        if rec.state is RecommendationState.PROPOSED:
+            self._outstanding[rec.id] = (rec, operator)
         self._enqueue(topic, encode_recommendation(rec), qos=QOS_AT_LEAST_ONCE)
+
+    @property
+    def outstanding(self) -> list[RecommendationId]:
+        """Recommendations re-published on the next reconnect."""
+        return list(self._outstanding)
+
+    def _rerequest(self) -> None:
+        """Re-publish the recommendations still waiting for an answer: a broker restarted
+        without persistence lost our session, and with it any answer sent meanwhile."""
+        now = self._clock.now_s()
+        for rec_id, (rec, operator) in list(self._outstanding.items()):
+            if rec.deadline_t_s < now:
+                del self._outstanding[rec_id]
+                continue
+            topic = self.topics.recommendations(operator)
+            payload = encode_recommendation(rec)
+            if any(q.topic == topic and q.payload == payload for q in self._queue):
+                continue  # never sent yet: it goes out anyway
+            _log.info("mqtt: re-requesting an answer to %s v%d", rec.id, rec.version)
+            self._enqueue(topic, payload, qos=QOS_AT_LEAST_ONCE)
 
     def publish_recommendation_status(
         self, rec: Recommendation, operator: str | None = None
@@ -390,6 +429,11 @@ class MqttBridge:
         op = operator or self._rec_operator.get(rec.id)
         if op is None:
             raise ValueError(f"recommendation {rec.id}: operator unknown; pass operator=")
+        waiting = self._outstanding.get(rec.id)
+        if waiting is not None and (
+            rec.state is not RecommendationState.PROPOSED or waiting[0].version < rec.version
+        ):
+            del self._outstanding[rec.id]
         payload = encode_recommendation_status(
             recommendation_id=rec.id,
             version=rec.version,
@@ -401,6 +445,10 @@ class MqttBridge:
 
     def publish_answer_outcome(self, outcome: AnswerOutcome, operator: str) -> None:
         """The outcome of one pilot answer on ``operator``'s status topic (QoS 1)."""
+        if outcome.state not in (None, RecommendationState.PROPOSED):
+            waiting = self._outstanding.get(outcome.recommendation_id)
+            if waiting is not None and waiting[0].version == outcome.version:
+                del self._outstanding[outcome.recommendation_id]
         payload = encode_recommendation_status(
             recommendation_id=outcome.recommendation_id,
             version=outcome.version,

@@ -1,5 +1,9 @@
 """Sans-IO codec of the MQTT interface: topics, JSON bytes <-> typed messages.
 
+This module decodes inbound messages; it re-exports the rest of the codec, which lives by
+responsibility in :mod:`adapters.mqtt.wire` (JSON, schemas, the error type),
+:mod:`adapters.mqtt.topics` (topic names) and :mod:`adapters.mqtt.encode` (outbound).
+
 Every incoming payload is parsed as strict JSON (no NaN/Infinity), validated against its JSON
 Schema (``adapters/mqtt/schemas/<type>.json``, draft 2020-12) and converted to the shared model;
 any failure is one :class:`MqttMessageError` naming the topic, the field (a JSON pointer-like
@@ -31,22 +35,43 @@ its broker user name so the broker ACL can bind topics to identities)::
 
 from __future__ import annotations
 
-import json
 import math
-import re
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
-from functools import cache
-from importlib import resources
 from typing import Any
 
-import jsonschema
-from referencing import Registry, Resource
-
+from adapters.mqtt.encode import (
+    encode_alert,
+    encode_bridge_status,
+    encode_error,
+    encode_geofence_event,
+    encode_geofences,
+    encode_recommendation,
+    encode_recommendation_status,
+    encode_traffic,
+    geofence_json,
+)
+from adapters.mqtt.topics import (
+    OUTBOUND_OPERATOR_LEAVES,
+    InboundKind,
+    Topics,
+    valid_operator,
+)
+from adapters.mqtt.wire import (
+    INBOUND_TYPES,
+    MAX_PAYLOAD_BYTES,
+    MESSAGE_TYPES,
+    OUTBOUND_TYPES,
+    SCHEMA_VERSION,
+    MqttMessageError,
+    dumps,
+    parse_json,
+    schema,
+    validate,
+)
 from gcs_utm.messages import HazardReport, PilotAnswer, PilotDecision
 from gcs_utm.model import (
-    Alternative,
     Autopilot,
     FlightPlan,
     Geofence,
@@ -61,300 +86,14 @@ from gcs_utm.model import (
     Operation,
     OperationId,
     Position,
-    Recommendation,
     RecommendationId,
-    RecommendationState,
     SysId,
-    Threat,
     ThreatKind,
-    Track,
     VehicleKind,
     Waypoint4D,
     normalise_icao24,
 )
-
-SCHEMA_VERSION = 1
-MAX_PAYLOAD_BYTES = 1_048_576
-"""Larger payloads are refused before parsing: the largest legitimate message (a flight plan
-of 10,000 waypoints) is about 800 kB."""
-
-INBOUND_TYPES = (
-    "rpa_state",
-    "adsb",
-    "flight_status",
-    "flight_plan",
-    "pilot_answer",
-    "airspace_alert",
-)
-OUTBOUND_TYPES = (
-    "alert",
-    "recommendation",
-    "recommendation_status",
-    "geofences",
-    "geofence_event",
-    "traffic",
-    "error",
-    "bridge_status",
-)
-MESSAGE_TYPES = INBOUND_TYPES + OUTBOUND_TYPES
-
-_OPERATOR_RE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
-
-
-class MqttMessageError(ValueError):
-    """A message that cannot be accepted: ``topic`` it came on, ``field`` (dotted path, ``""``
-    for the whole message) and ``reason``."""
-
-    def __init__(self, topic: str, field: str, reason: str) -> None:
-        super().__init__(f"{topic}: {field or '<message>'}: {reason}")
-        self.topic = topic
-        self.field = field
-        self.reason = reason
-
-
-# --------------------------------------------------------------------------------------------
-# Topics
-
-
-class InboundKind(Enum):
-    RPA_STATE = "rpa_state"
-    FLIGHT_PLAN = "flight_plan"
-    FLIGHT_STATUS = "flight_status"
-    PILOT_ANSWER = "pilot_answer"
-    ADSB = "adsb"
-    AIRSPACE_ALERT = "airspace_alert"
-
-
-OUTBOUND_OPERATOR_LEAVES = frozenset({"alerts", "recommendations", "status", "errors"})
-"""Leaves the UTM itself publishes under ``operators/<op>/``: the ``operators/+/+``
-subscription sees them come back, and they are ignored (never answered with an error, which
-would loop)."""
-
-_OPERATOR_SUFFIX = {
-    "state": InboundKind.RPA_STATE,
-    "flight_plans": InboundKind.FLIGHT_PLAN,
-    "flight_status": InboundKind.FLIGHT_STATUS,
-    "answers": InboundKind.PILOT_ANSWER,
-}
-
-
-def valid_operator(name: str) -> bool:
-    """Operator names are topic levels and broker user names: no ``/``, ``+``, ``#``."""
-    return bool(_OPERATOR_RE.match(name))
-
-
-@dataclass(frozen=True, slots=True)
-class Topics:
-    """The topic names under one prefix."""
-
-    prefix: str = "gcs_utm"
-
-    def operator(self, operator: str, leaf: str) -> str:
-        if not valid_operator(operator):
-            raise ValueError(f"operator name {operator!r} is not a valid topic level")
-        return f"{self.prefix}/operators/{operator}/{leaf}"
-
-    def state(self, operator: str) -> str:
-        return self.operator(operator, "state")
-
-    def flight_plans(self, operator: str) -> str:
-        return self.operator(operator, "flight_plans")
-
-    def flight_status(self, operator: str) -> str:
-        return self.operator(operator, "flight_status")
-
-    def answers(self, operator: str) -> str:
-        return self.operator(operator, "answers")
-
-    def alerts_for(self, operator: str) -> str:
-        return self.operator(operator, "alerts")
-
-    def recommendations(self, operator: str) -> str:
-        return self.operator(operator, "recommendations")
-
-    def status(self, operator: str) -> str:
-        return self.operator(operator, "status")
-
-    def errors_for(self, operator: str) -> str:
-        return self.operator(operator, "errors")
-
-    @property
-    def adsb(self) -> str:
-        return f"{self.prefix}/surveillance/adsb"
-
-    @property
-    def airspace_alerts(self) -> str:
-        return f"{self.prefix}/authority/alerts"
-
-    @property
-    def alerts(self) -> str:
-        return f"{self.prefix}/alerts"
-
-    @property
-    def geofences(self) -> str:
-        return f"{self.prefix}/geofences"
-
-    @property
-    def geofence_events(self) -> str:
-        return f"{self.prefix}/geofences/events"
-
-    @property
-    def traffic(self) -> str:
-        return f"{self.prefix}/traffic"
-
-    @property
-    def errors(self) -> str:
-        return f"{self.prefix}/errors"
-
-    @property
-    def bridge(self) -> str:
-        return f"{self.prefix}/bridge"
-
-    def subscriptions(self) -> tuple[str, ...]:
-        """Topic filters the UTM subscribes to. ``operators/+/+`` (not only the four
-        leaves) so a message on an unknown leaf gets an error instead of silence."""
-        return (
-            f"{self.prefix}/operators/+/+",
-            f"{self.prefix}/surveillance/+",
-            f"{self.prefix}/authority/+",
-        )
-
-    def is_own_output(self, topic: str) -> bool:
-        """True for an operator topic the UTM publishes on (echo of its own output)."""
-        parts = topic.split("/")
-        return self.operator_of(topic) is not None and parts[-1] in OUTBOUND_OPERATOR_LEAVES
-
-    def classify(self, topic: str) -> tuple[InboundKind, str | None]:
-        """Map an inbound topic to its kind and operator (None for non-operator topics);
-        raise :class:`MqttMessageError` for a topic that is not an inbound operation."""
-        head = f"{self.prefix}/"
-        if not topic.startswith(head):
-            raise MqttMessageError(topic, "", "topic outside the gcs-utm prefix")
-        parts = topic[len(head) :].split("/")
-        if len(parts) == 3 and parts[0] == "operators":
-            operator, leaf = parts[1], parts[2]
-            if not valid_operator(operator):
-                raise MqttMessageError(topic, "", f"invalid operator name {operator!r}")
-            kind = _OPERATOR_SUFFIX.get(leaf)
-            if kind is None:
-                raise MqttMessageError(
-                    topic,
-                    "",
-                    f"unknown operation {leaf!r}; expected one of {sorted(_OPERATOR_SUFFIX)}",
-                )
-            return kind, operator
-        if topic == self.adsb:
-            return InboundKind.ADSB, None
-        if topic == self.airspace_alerts:
-            return InboundKind.AIRSPACE_ALERT, None
-        raise MqttMessageError(topic, "", "unknown operation (no inbound message on this topic)")
-
-    def operator_of(self, topic: str) -> str | None:
-        """The operator a topic belongs to, or None."""
-        parts = topic.split("/")
-        head = self.prefix.split("/")
-        n = len(head)
-        if len(parts) > n + 1 and parts[:n] == head and parts[n] == "operators":
-            op = parts[n + 1]
-            return op if valid_operator(op) else None
-        return None
-
-
-# --------------------------------------------------------------------------------------------
-# Schemas
-
-
-@cache
-def _registry() -> tuple[Registry[Any], dict[str, dict[str, Any]]]:
-    folder = resources.files("adapters.mqtt") / "schemas"
-    schemas: dict[str, dict[str, Any]] = {}
-    resources_: list[tuple[str, Resource[Any]]] = []
-    for name in ("common", *MESSAGE_TYPES):
-        contents = json.loads((folder / f"{name}.json").read_text(encoding="utf-8"))
-        schemas[name] = contents
-        resources_.append((contents["$id"], Resource.from_contents(contents)))
-    registry: Registry[Any] = Registry().with_resources(resources_)
-    return registry, schemas
-
-
-@cache
-def _validator(message_type: str) -> Any:
-    registry, schemas = _registry()
-    schema = schemas[message_type]
-    cls = jsonschema.validators.validator_for(schema)
-    return cls(schema, registry=registry, format_checker=cls.FORMAT_CHECKER)
-
-
-def schema(message_type: str) -> dict[str, Any]:
-    """The JSON Schema of ``message_type`` (a copy of the packaged file's contents)."""
-    if message_type not in MESSAGE_TYPES:
-        raise KeyError(message_type)
-    return json.loads(json.dumps(_registry()[1][message_type]))  # type: ignore[no-any-return]
-
-
-def _path(error: Any) -> str:
-    return ".".join(str(p) for p in error.absolute_path)
-
-
-def validate(message_type: str, obj: object, topic: str = "") -> None:
-    """Raise :class:`MqttMessageError` when ``obj`` violates the schema of ``message_type``.
-    The reported error is the most specific one (``jsonschema.exceptions.best_match``)."""
-    validator = _validator(message_type)
-    error = jsonschema.exceptions.best_match(validator.iter_errors(obj))
-    if error is None:
-        return
-    # best_match may descend into the wrong oneOf branch: go back to the top error and take
-    # the branch that was meant (the one whose "shape"-like const matched), e.g. report a
-    # circle without a radius rather than "'polygon' was expected"
-    while error.parent is not None:
-        error = error.parent
-    while error.context:
-        branches: dict[object, list[Any]] = {}
-        for e in error.context:
-            branches.setdefault(e.relative_schema_path[0], []).append(e)
-        meant = [b for b in branches.values() if not any(e.validator == "const" for e in b)]
-        pool = meant[0] if len(meant) == 1 else list(error.context)
-        error = max(pool, key=lambda e: len(e.absolute_path))
-    field = _path(error)
-    if error.validator == "required" and isinstance(error.instance, dict):
-        missing = [k for k in error.validator_value if k not in error.instance]
-        if missing:
-            field = f"{field}.{missing[0]}" if field else str(missing[0])
-    raise MqttMessageError(topic, field, _short(error.message))
-
-
-def _short(text: str, limit: int = 200) -> str:
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _reject_constant(name: str) -> float:
-    raise ValueError(f"{name} is not valid JSON")
-
-
-def parse_json(topic: str, payload: bytes | bytearray | str) -> object:
-    """Strict JSON: UTF-8, no NaN/Infinity, at most :data:`MAX_PAYLOAD_BYTES`."""
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise MqttMessageError(
-            topic, "", f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}"
-        )
-    try:
-        text = payload if isinstance(payload, str) else bytes(payload).decode("utf-8")
-        return json.loads(text, parse_constant=_reject_constant)
-    except UnicodeDecodeError as exc:
-        raise MqttMessageError(topic, "", f"payload is not UTF-8: {exc.reason}") from exc
-    except RecursionError as exc:
-        raise MqttMessageError(topic, "", "JSON nested too deeply") from exc
-    except ValueError as exc:  # json.JSONDecodeError and the NaN rejection
-        raise MqttMessageError(topic, "", f"malformed JSON: {_short(str(exc))}") from exc
-
-
-def dumps(obj: Mapping[str, object]) -> bytes:
-    """Compact, valid JSON (raises ValueError on NaN/inf rather than emitting non-JSON)."""
-    return json.dumps(obj, allow_nan=False, separators=(",", ":"), sort_keys=False).encode()
-
-
-# --------------------------------------------------------------------------------------------
-# Inbound messages
+from gcs_utm.validation import altitude_problem, latlon_problem, polygon_problem, radius_problem
 
 
 class FlightStatusKind(Enum):
@@ -538,7 +277,12 @@ def _waypoints(items: Sequence[Mapping[str, Any]]) -> tuple[Waypoint4D, ...]:
 
 
 def _geofence_from(obj: Mapping[str, Any], geofence_id: str, **extra: Any) -> Geofence:
+    """A geofence from a schema-valid object, checked by the rules every input shares
+    (:mod:`gcs_utm.validation`): a polygon must be a simple ring (a bow-tie is refused), the
+    radius and altitudes plausible. A problem is a ModelError naming the field."""
     geometry = obj["geometry"]
+    for key in ("min_alt_amsl_m", "max_alt_amsl_m"):
+        _check(key, altitude_problem(float(obj[key])))
     common: dict[str, Any] = {
         "id": GeofenceId(geofence_id),
         "min_alt_amsl_m": float(obj["min_alt_amsl_m"]),
@@ -549,20 +293,26 @@ def _geofence_from(obj: Mapping[str, Any], geofence_id: str, **extra: Any) -> Ge
     }
     if geometry["shape"] == "circle":
         c = geometry["center"]
+        center = LatLon(lat_deg=float(c["lat_deg"]), lon_deg=float(c["lon_deg"]))
+        _check("geometry.center", latlon_problem(center.lat_deg, center.lon_deg))
+        _check("geometry.radius_m", radius_problem(float(geometry["radius_m"])))
         return Geofence(
             shape=GeofenceShape.CYLINDER,
-            center=LatLon(lat_deg=float(c["lat_deg"]), lon_deg=float(c["lon_deg"])),
+            center=center,
             radius_m=float(geometry["radius_m"]),
             **common,
         )
-    return Geofence(
-        shape=GeofenceShape.POLYGON,
-        vertices=tuple(
-            LatLon(lat_deg=float(v["lat_deg"]), lon_deg=float(v["lon_deg"]))
-            for v in geometry["vertices"]
-        ),
-        **common,
+    vertices = tuple(
+        LatLon(lat_deg=float(v["lat_deg"]), lon_deg=float(v["lon_deg"]))
+        for v in geometry["vertices"]
     )
+    _check("geometry.vertices", polygon_problem([(v.lat_deg, v.lon_deg) for v in vertices]))
+    return Geofence(shape=GeofenceShape.POLYGON, vertices=vertices, **common)
+
+
+def _check(field: str, problem: str | None) -> None:
+    if problem is not None:
+        raise ModelError("geofence", field, problem)
 
 
 def decode_geofence(obj: Mapping[str, Any], topic: str = "") -> Geofence:
@@ -775,182 +525,35 @@ _DECODERS: dict[InboundKind, Callable[[dict[str, Any], str, str, float], Inbound
 }
 
 
-# --------------------------------------------------------------------------------------------
-# Outbound messages
-
-
-def _header(message_type: str) -> dict[str, object]:
-    return {"schema_version": SCHEMA_VERSION, "type": message_type}
-
-
-def _wp(w: Waypoint4D) -> dict[str, object]:
-    return {"lat_deg": w.lat_deg, "lon_deg": w.lon_deg, "alt_amsl_m": w.alt_amsl_m, "t_s": w.t_s}
-
-
-def _pos(p: Position | None) -> dict[str, object] | None:
-    if p is None:
-        return None
-    return {"lat_deg": p.lat_deg, "lon_deg": p.lon_deg, "alt_amsl_m": p.alt_amsl_m}
-
-
-def geofence_json(g: Geofence) -> dict[str, object]:
-    geometry: dict[str, object]
-    if g.shape is GeofenceShape.CYLINDER:
-        assert g.center is not None
-        geometry = {
-            "shape": "circle",
-            "center": {"lat_deg": g.center.lat_deg, "lon_deg": g.center.lon_deg},
-            "radius_m": g.radius_m,
-        }
-    else:
-        geometry = {
-            "shape": "polygon",
-            "vertices": [{"lat_deg": v.lat_deg, "lon_deg": v.lon_deg} for v in g.vertices],
-        }
-    return {
-        "id": g.id,
-        "geometry": geometry,
-        "min_alt_amsl_m": g.min_alt_amsl_m,
-        "max_alt_amsl_m": g.max_alt_amsl_m,
-        "start_t_s": g.start_t_s,
-        "end_t_s": g.end_t_s,
-        "kind": g.kind.value,
-        "reason": g.reason,
-        "source": g.source,
-    }
-
-
-def _alternative(a: Alternative) -> dict[str, object]:
-    return {
-        "maneuver": a.maneuver.value,
-        "cost": a.cost,
-        "risk": a.risk,
-        "detail": a.detail,
-        "plan_version": None if a.plan is None else a.plan.version,
-        "waypoints": [] if a.plan is None else [_wp(w) for w in a.plan.waypoints],
-    }
-
-
-def encode_alert(threat: Threat) -> bytes:
-    return dumps(
-        {
-            **_header("alert"),
-            "alert_id": threat.id,
-            "kind": threat.kind.value,
-            "status": threat.status.value,
-            "operation_ids": list(threat.uas_ids),
-            "detected_at_s": threat.detected_at_s,
-            "predicted_event_at_s": threat.predicted_event_at_s,
-            "updated_at_s": threat.updated_at_s,
-            "geofence_id": threat.geofence_id,
-            "intruder_id": threat.intruder_id,
-            "closest_approach_m": threat.closest_approach_m,
-            "closest_approach_t_s": threat.closest_approach_t_s,
-            "position": _pos(threat.position),
-            "area": None if threat.area is None else geofence_json(threat.area),
-            "message": threat.message,
-        }
-    )
-
-
-def encode_recommendation(rec: Recommendation) -> bytes:
-    cmd = rec.command
-    return dumps(
-        {
-            **_header("recommendation"),
-            "recommendation_id": rec.id,
-            "version": rec.version,
-            "threat_id": rec.threat_id,
-            "threat_kind": rec.threat_kind.value,
-            "operation_id": rec.operation_id,
-            "created_t_s": rec.created_t_s,
-            "deadline_t_s": rec.deadline_t_s,
-            "selected": None if rec.selected is None else _alternative(rec.selected),
-            "alternatives": [_alternative(a) for a in rec.alternatives],
-            "command": None
-            if cmd is None
-            else {"kind": cmd.kind.value, "target": _pos(cmd.target)},
-            "new_geofence": None if rec.new_geofence is None else geofence_json(rec.new_geofence),
-            "reason": rec.reason,
-        }
-    )
-
-
-def encode_recommendation_status(
-    *,
-    recommendation_id: RecommendationId,
-    version: int,
-    t_s: float,
-    state: RecommendationState | None,
-    reason: str = "",
-    answer: Mapping[str, object] | None = None,
-) -> bytes:
-    """``answer`` (when this replies to a pilot answer) is
-    ``{"outcome": accepted|duplicate|refused, "decision": accept|reject, "version": n}``."""
-    return dumps(
-        {
-            **_header("recommendation_status"),
-            "recommendation_id": recommendation_id,
-            "version": version,
-            "t_s": t_s,
-            "state": None if state is None else state.value,
-            "answer": None if answer is None else dict(answer),
-            "reason": reason,
-        }
-    )
-
-
-def encode_geofences(active: Iterable[Geofence], t_s: float) -> bytes:
-    return dumps(
-        {**_header("geofences"), "t_s": t_s, "geofences": [geofence_json(g) for g in active]}
-    )
-
-
-def encode_geofence_event(action: str, g: Geofence, t_s: float) -> bytes:
-    if action not in ("created", "removed"):
-        raise ValueError(f"action must be 'created' or 'removed', got {action!r}")
-    return dumps(
-        {**_header("geofence_event"), "t_s": t_s, "action": action, "geofence": geofence_json(g)}
-    )
-
-
-def encode_traffic(tracks: Iterable[Track], t_s: float) -> bytes:
-    return dumps(
-        {
-            **_header("traffic"),
-            "t_s": t_s,
-            "tracks": [
-                {
-                    "track_id": tr.id,
-                    "t_s": tr.t_s,
-                    "lat_deg": tr.lat_deg,
-                    "lon_deg": tr.lon_deg,
-                    "alt_amsl_m": tr.alt_amsl_m,
-                    "vel_enu_mps": list(tr.vel_enu_mps),
-                    "ground_speed_mps": tr.ground_speed_mps,
-                    "position_sigma_m": tr.position_sigma_m,
-                    "cooperative": tr.cooperative,
-                    "operation_id": tr.operation_id,
-                    "icao24": tr.icao24,
-                    "stale": tr.stale,
-                }
-                for tr in tracks
-            ],
-        }
-    )
-
-
-def encode_error(topic: str, field: str, reason: str, t_s: float) -> bytes:
-    return dumps(
-        {
-            **_header("error"),
-            "t_s": t_s,
-            "topic": _short(topic),
-            "field": _short(field),
-            "reason": _short(reason, 500),
-        }
-    )
-
-
-def encode_bridge_status(online: bool, t_s: float | None) -> bytes:
-    return dumps({**_header("bridge_status"), "t_s": t_s, "online": online})
+__all__ = [
+    "INBOUND_TYPES",
+    "MAX_PAYLOAD_BYTES",
+    "MESSAGE_TYPES",
+    "OUTBOUND_OPERATOR_LEAVES",
+    "OUTBOUND_TYPES",
+    "SCHEMA_VERSION",
+    "FlightPlanSubmission",
+    "FlightStatusKind",
+    "FlightStatusReport",
+    "GnssIntegrity",
+    "InboundKind",
+    "MqttMessageError",
+    "RpaState",
+    "Topics",
+    "decode",
+    "decode_geofence",
+    "dumps",
+    "encode_alert",
+    "encode_bridge_status",
+    "encode_error",
+    "encode_geofence_event",
+    "encode_geofences",
+    "encode_recommendation",
+    "encode_recommendation_status",
+    "encode_traffic",
+    "geofence_json",
+    "parse_json",
+    "schema",
+    "valid_operator",
+    "validate",
+]

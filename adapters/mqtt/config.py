@@ -44,6 +44,14 @@ class MqttConfig:
         "MQTT client id; fixed so the broker keeps the session (queued QoS 1 answers) "
         "across reconnects",
     )
+    session_expiry_s: int = setting(
+        3600,
+        "MQTT 5 session expiry interval: how long the broker keeps the UTM's session "
+        "(subscriptions, queued QoS 1 answers) while the UTM is away",
+        min=0,
+        max=4_294_967_295,
+        unit="s",
+    )
     keepalive_s: int = setting(30, "MQTT keepalive interval", min=5, max=3600, unit="s")
     queue_max: int = setting(
         1000,

@@ -13,6 +13,8 @@ import sys
 from typing import Any
 
 from gcs_utm.config import ConfigError, build, load_toml, render_toml
+from gcs_utm.preflight import check_settings
+from gcs_utm.settings import Settings
 
 # Section -> (module, class), as agreed in docs/HELPERS.md; used only without gcs_utm.settings.
 _KNOWN: dict[str, tuple[str, str]] = {
@@ -62,7 +64,9 @@ def _default(args: argparse.Namespace) -> int:
 
 
 def check_file(path: str) -> dict[str, Any]:
-    """Load and validate every section of ``path``; returns section -> settings object."""
+    """Load and validate every section of ``path``, then check the whole as ``serve`` will
+    use it (:mod:`gcs_utm.preflight`: link strings, signing keys, TLS files, ranges across
+    keys); returns section -> settings object for the sections the file sets."""
     known = sections()
     doc = load_toml(path)
     out: dict[str, Any] = {}
@@ -72,6 +76,10 @@ def check_file(path: str) -> dict[str, Any]:
                 path, name, "unknown section; valid sections are: " + ", ".join(sorted(known))
             )
         out[name] = build(known[name], table, source=path, section=name)
+    check_settings(
+        Settings(**{n: v for n, v in out.items() if n in Settings.__dataclass_fields__}),
+        source=path,
+    )
     return out
 
 

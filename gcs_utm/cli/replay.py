@@ -506,7 +506,7 @@ async def replay_file(
     ``on_progress(bytes_done)`` is called every few hundred records. Raises
     :class:`ReplayError` for a missing file or one without a single valid record."""
     if not path.is_file():
-        raise ReplayError(path, "no such file")
+        raise ReplayError(path, _not_a_file(path))
     pipe = pipeline or ReplayPipeline(link=f"tlog:{path.name}")
     done = 0
 
@@ -556,9 +556,14 @@ def scenario_pipeline(path: Path, scenario_path: Path) -> ReplayPipeline:
     )
 
 
+def _not_a_file(path: Path) -> str:
+    return "is a directory, not a .tlog file" if path.is_dir() else "no such file"
+
+
 def parse_speed(text: str) -> float | None:
-    """``max`` (as fast as possible) or a positive factor (1 = real time)."""
-    if text.strip().lower() in ("max", "inf", "0"):
+    """``max`` (as fast as possible) or a positive factor (1 = real time). ``0`` is refused,
+    not read as ``max``: a factor of 0 would mean a stopped clock."""
+    if text.strip().lower() in ("max", "inf"):
         return None
     try:
         value = float(text)
@@ -616,7 +621,7 @@ def _run(args: argparse.Namespace) -> int:
     path: Path = args.tlog
     out: Path = args.report or Path(f"{path.stem}.replay.json")
     if not path.is_file():
-        print(f"gcs-utm replay: {path}: no such file", file=sys.stderr)
+        print(f"gcs-utm replay: {path}: {_not_a_file(path)}", file=sys.stderr)
         return 2
     pipeline = None
     if args.scenario is not None:

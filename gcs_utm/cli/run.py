@@ -18,7 +18,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "run",
         help="run a scenario end to end (vehicles, UTM services, dashboard) and write a report",
     )
-    run.add_argument("scenario", type=Path, help="scenario TOML, or a GAUSS JSON file")
+    run.add_argument(
+        "scenario", type=Path, help="scenario TOML, or a GAUSS JSON file or scenario YAML"
+    )
     _common(run)
     run.add_argument(
         "--external",
@@ -61,7 +63,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     serve.add_argument("--headless", action="store_true", help="no TUI; log lines")
     serve.add_argument(
         "--speed",
-        type=_positive_speed,
+        type=positive_speed,
         default=1.0,
         help="the vehicles' simulation speed factor (PX4_SIM_SPEED_FACTOR, ArduPilot "
         "--speedup): the service's clock runs this many times faster than the wall clock "
@@ -107,24 +109,32 @@ def positive_speed(text: str) -> float:
     return value
 
 
-def _operator(args: argparse.Namespace) -> str:
+NO_ANSWER_SOURCE = (
+    "gcs-utm: nothing could answer the pilot prompt (stdin is not a terminal and no answer "
+    "source is set); add --auto-accept or --auto-reject for a scripted run, or --mqtt to "
+    "take answers from a remote pilot station"
+)
+
+
+def _operator(args: argparse.Namespace, mqtt: bool) -> str | None:
+    """Who answers recommendations: the dashboard (a terminal both ways), the line prompt
+    (stdin a terminal, --headless or output piped), MQTT only, or --auto-*. None: nobody."""
     from gcs_utm.app import OperatorMode
 
     if args.auto_accept:
         return OperatorMode.AUTO_ACCEPT
     if args.auto_reject:
         return OperatorMode.AUTO_REJECT
-    if args.headless or not sys.stdin.isatty() or not sys.stdout.isatty():
-        # no terminal to answer in: show everything, answer nothing (the USM lets
-        # recommendations expire and records that)
-        return OperatorMode.NONE
-    return OperatorMode.DASHBOARD
+    if sys.stdin.isatty():
+        if not args.headless and sys.stdout.isatty():
+            return OperatorMode.DASHBOARD
+        return OperatorMode.LINE
+    return OperatorMode.NONE if mqtt else None
 
 
-def _options(args: argparse.Namespace) -> Any:
+def _options(args: argparse.Namespace, operator: str) -> Any:
     from gcs_utm.app import RunOptions
 
-    operator = _operator(args)
     return RunOptions(
         speed=args.speed,
         headless=args.headless or operator != "dashboard",
@@ -157,39 +167,60 @@ def _summary(report: dict[str, Any]) -> str:
         f"{len(recs)} recommendations, report {report.get('report_path')}",
     ]
     for r in recs:
+        score = "" if r.get("cost") is None else f" (cost {r['cost']}, risk {r['risk']})"
+        who = f" by {r['answered_by']} ({r['answered_via']})" if r.get("answered_by") else ""
         lines.append(
-            f"  {r['uas']}: {r['threat_kind']} -> {r['maneuver']} "
-            f"(cost {r['cost']}, risk {r['risk']}), {r['decision']}, "
-            f"uploaded={r['uploaded']} verified={r['verified']}"
+            f"  {r['uas']}: {r['threat_kind']} -> {r['maneuver']}{score}, "
+            f"v{r['version']} {r['decision']}{who}, "
+            + ("verified on the vehicle" if r["verified"] else f"{r['state']}")
         )
+    minima = report.get("separation_minimum", {})
     for s in report.get("separation", []):
+        h, v = s.get("min_horizontal_m"), s.get("min_vertical_when_close_m")
         lines.append(
-            f"  separation {s['pair'][0]}-{s['pair'][1]}: min {s['min_distance_m']} m"
-            + (" LOSS" if s["loss_of_separation"] else "")
+            f"  separation {s['pair'][0]}-{s['pair'][1]}: closest horizontal {h} m "
+            f"(minimum {minima.get('horizontal_m')}), vertical when close {v} m "
+            f"(minimum {minima.get('vertical_m')}): "
+            + ("LOSS OF SEPARATION" if s["loss_of_separation"] else "kept")
         )
     for g in report.get("geofence_intrusions", []):
         lines.append(f"  INTRUSION {g['uas']} into {g['geofence']} at {g['first_at_s']} s")
     return "\n".join(lines)
 
 
-def _run_one(path: Path, args: argparse.Namespace) -> int:
-    from gcs_utm.app import run_scenario
+def _run_one(path: Path, args: argparse.Namespace, *, last: bool = True) -> int:
+    """Run one scenario; 0 ok, 2 refused, 3 the operator ended the run (``q``)."""
+    from gcs_utm.app import OperatorMode, run_scenario
     from gcs_utm.scenario import ScenarioError
 
     settings = _settings(args)
     if settings is None:
         return 2
+    operator = _operator(args, args.mqtt or settings.mqtt.enabled)
+    if operator is None:
+        print(NO_ANSWER_SOURCE, file=sys.stderr)
+        return 2
     try:
-        report = asyncio.run(run_scenario(path, settings, _options(args)))
+        report = asyncio.run(run_scenario(path, settings, _options(args, operator)))
     except ScenarioError as exc:
         print(f"gcs-utm: {exc}", file=sys.stderr)
         return 2
-    print(_summary(report))
+    text = _summary(report)
+    print(text)
+    if report.get("operator_quit"):
+        return 3
+    if operator == OperatorMode.DASHBOARD and not args.headless:
+        from gcs_utm.dashboard.summary import SummaryApp
+
+        title = f"gcs-utm: {report['scenario']} done"
+        if not SummaryApp(text, title=title, last=last).run() and not last:
+            return 3
     return 0
 
 
 def _run(args: argparse.Namespace) -> int:
-    return _run_one(args.scenario, args)
+    code = _run_one(args.scenario, args)
+    return 0 if code == 3 else code
 
 
 def demo_scenario(name: str) -> Path:
@@ -199,8 +230,10 @@ def demo_scenario(name: str) -> Path:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    for name in DEMO_SCENARIOS:
-        code = _run_one(demo_scenario(name), args)
+    for i, name in enumerate(DEMO_SCENARIOS):
+        code = _run_one(demo_scenario(name), args, last=i == len(DEMO_SCENARIOS) - 1)
+        if code == 3:  # the operator pressed q: the whole demo ends
+            return 0
         if code != 0:
             return code
     return 0
@@ -218,27 +251,24 @@ def _serve(args: argparse.Namespace) -> int:
         else OperatorMode.AUTO_REJECT
         if args.auto_reject
         else OperatorMode.DASHBOARD
-        if sys.stdout.isatty() and not args.headless
+        if sys.stdout.isatty() and sys.stdin.isatty() and not args.headless
+        else OperatorMode.LINE
+        if sys.stdin.isatty()
         else OperatorMode.NONE
     )
     headless = args.headless or operator != OperatorMode.DASHBOARD
-    return asyncio.run(
-        serve(
-            settings,
-            db_path=args.db,
-            operator=operator,
-            headless=headless,
-            speed=args.speed,
-        )
-    )
+    from gcs_utm.store import StoreError
 
-
-def _positive_speed(text: str) -> float:
-    """argparse type of ``serve --speed``: a finite number above 0."""
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--speed must be a number, got {text!r}") from None
-    if not 0.0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"--speed must be above 0, got {text!r}")
-    return value
+        return asyncio.run(
+            serve(
+                settings,
+                db_path=args.db,
+                operator=operator,
+                headless=headless,
+                speed=args.speed,
+            )
+        )
+    except StoreError as exc:  # a folder, a file that is not a store, a newer schema
+        print(f"gcs-utm: {exc}", file=sys.stderr)
+        return 2

@@ -38,9 +38,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="shift each plan by its vehicle's start_delay_s before checking (as flown)",
     )
     c.add_argument(
-        "--step-s", type=float, default=1.0, help="sampling step of the check (default 1 s)"
+        "--step-s",
+        default="1.0",
+        help=f"sampling step of the check, at least {MIN_STEP_S:g} s (default 1 s)",
     )
     c.set_defaults(func=_check)
+
+
+MIN_STEP_S = 0.01
+"""Finer than any vehicle's position stream (50 Hz is 20 ms); a smaller step only multiplies
+the samples the check holds in memory."""
 
 
 def delayed_operations(scenario: Scenario) -> list[Operation]:
@@ -129,7 +136,32 @@ def _fail(args: argparse.Namespace, error: dict[str, str]) -> int:
     return 2
 
 
+def _step_s(text: str) -> float | None:
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if MIN_STEP_S <= value < math.inf else None
+
+
 def _check(args: argparse.Namespace) -> int:
+    try:
+        return _check_file(args)
+    except Exception as exc:
+        # a bug, not bad input: the --json reader still gets its document, the traceback
+        # goes to stderr
+        if args.json:
+            error = {"file": args.file, "item": "", "field": "", "message": f"internal: {exc!r}"}
+            json.dump({"error": error}, sys.stdout, indent=2)
+            sys.stdout.write("\n")
+        raise
+
+
+def _check_file(args: argparse.Namespace) -> int:
+    step_s = _step_s(args.step_s)
+    if step_s is None:
+        message = f"expected a number of seconds >= {MIN_STEP_S:g}, got {args.step_s!r}"
+        return _fail(args, {"file": "", "item": "", "field": "--step-s", "message": message})
     try:
         scenario = load_any(args.file, args.yaml)
     except ScenarioError as exc:
@@ -137,17 +169,19 @@ def _check(args: argparse.Namespace) -> int:
         return _fail(
             args, {"file": exc.file, "item": exc.item, "field": field, "message": exc.message}
         )
-    if not (args.step_s > 0.0 and math.isfinite(args.step_s)):
-        message = f"must be a positive number of seconds, got {args.step_s}"
-        return _fail(args, {"file": "", "item": "", "field": "--step-s", "message": message})
     ops = delayed_operations(scenario) if args.apply_delays else list(scenario.operations)
     config = scenario.monitoring_for(MonitoringConfig())
-    report = strategic_check(ops, scenario.geofences, scenario.frame, config, step_s=args.step_s)
+    report = strategic_check(ops, scenario.geofences, scenario.frame, config, step_s=step_s)
     doc = report_document(scenario, report)
     if args.json:
         json.dump(doc, sys.stdout, indent=2)
         sys.stdout.write("\n")
         return 0
+    _print(args, scenario, doc)
+    return 0
+
+
+def _print(args: argparse.Namespace, scenario: Scenario, doc: dict[str, Any]) -> None:
     out = sys.stdout
     out.write(f"{scenario.name} ({scenario.source}): valid, {scenario.duration_s:.0f} s\n")
     out.write(f"  {len(doc['operations'])} operations:\n")
@@ -176,4 +210,3 @@ def _check(args: argparse.Namespace) -> int:
             f"  GEOFENCE {label}: {x['operation']} enters {x['geofence']}"
             f" at t={x['entry_s']:.1f} s\n"
         )
-    return 0

@@ -100,7 +100,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "(instance i: UDP 18570+i, sysid = the operation's sys_id) with its filed plan as "
         "its mission, auto-started on schedule, sending to the GCS address. Ctrl-C stops.",
     )
-    p.add_argument("scenario", type=Path, help="scenario file (.toml, or GAUSS .json)")
+    p.add_argument("scenario", type=Path, help="scenario file (.toml, or GAUSS .json or .yaml)")
     p.add_argument("--speed", type=float, default=1.0, help="simulation speed factor (1)")
     p.add_argument(
         "--gcs",

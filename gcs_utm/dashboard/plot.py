@@ -26,16 +26,36 @@ scenario start, as in the report.
 
 from __future__ import annotations
 
-import itertools
 import json
 import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-from xml.sax.saxutils import escape
+
+from gcs_utm.dashboard.export import to_geojson, to_kml
+
+__all__ = [
+    "PlotSummary",
+    "ReportError",
+    "export_all",
+    "flown_pairs",
+    "load_report",
+    "planned_pairs",
+    "plot_report",
+    "to_geojson",
+    "to_kml",
+]
 
 from gcs_utm.dashboard.plotting import PlotsUnavailableError, require_plots
+from gcs_utm.dashboard.series import (
+    Local,
+    PairSeries,
+    flown_pairs,
+    interp_plan,
+    minima,
+    planned_pairs,
+)
 
 _log = logging.getLogger(__name__)
 
@@ -62,6 +82,8 @@ class PlotSummary:
     min_separation_m: dict[str, float] = field(default_factory=dict)
     # "A|B" -> smallest distance of the filed plans flown late without resolution, metres
     min_planned_separation_m: dict[str, float] = field(default_factory=dict)
+    # "A|B" -> the flown pair's verdict, naming both axes against their minima (cylinder rule)
+    separation_verdict: dict[str, str] = field(default_factory=dict)
     # "UAS|geofence" -> smallest signed distance to the edge while active (< 0 = inside)
     min_geofence_distance_m: dict[str, float] = field(default_factory=dict)
 
@@ -79,19 +101,6 @@ def load_report(path: Path) -> dict[str, Any]:
     return data
 
 
-class _Local:
-    """Equirectangular metres around the report origin: exact enough for figures at the
-    scale of one operation area (a few km)."""
-
-    def __init__(self, origin: dict[str, Any]) -> None:
-        self.lat0 = float(origin["lat_deg"])
-        self.lon0 = float(origin["lon_deg"])
-        self.k = math.cos(math.radians(self.lat0))
-
-    def xy(self, lat: float, lon: float) -> tuple[float, float]:
-        return ((lon - self.lon0) * 111_320.0 * self.k, (lat - self.lat0) * 110_540.0)
-
-
 def _circle(cx: float, cy: float, r: float, n: int = 48) -> tuple[list[float], list[float]]:
     xs = [cx + r * math.cos(2 * math.pi * i / n) for i in range(n + 1)]
     ys = [cy + r * math.sin(2 * math.pi * i / n) for i in range(n + 1)]
@@ -107,7 +116,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
     import matplotlib.pyplot as plt
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    local = _Local(report["origin"])
+    local = Local(report["origin"])
     summary = PlotSummary()
     focus = _focus_point(report, local)
     if focus is None:
@@ -149,7 +158,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
             if ov > 0 and j == 0:
                 # the operational volume: the filed plan's path grown by its radius
                 _fill_volume(ax, xs, ys, ov, colour)
-            ax3.plot(xs, ys, zs, style, color=colour, lw=1.5)
+            ax3.plot(xs, ys, zs, style, color=colour, lw=1.5, label=label)
             summary.plans += 1
         track = report.get("tracks", {}).get(op["id"], [])
         if track:
@@ -169,8 +178,18 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
                 ":",
                 color=colour,
                 lw=1,
+                label=f"{op['id']} flown",
             )
             summary.tracks += 1
+
+    labelled: set[str] = set()
+
+    def once(label: str) -> str:
+        """A legend label the first time, none after (one legend entry per kind)."""
+        if label in labelled:
+            return "_nolegend_"
+        labelled.add(label)
+        return label
 
     for rec in report.get("recommendations", []):
         for alt in rec.get("alternatives", []):
@@ -179,6 +198,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
                 continue
             pts = [local.xy(w[0], w[1]) for w in wps]
             chosen = bool(alt.get("selected"))
+            label = once("selected alternative" if chosen else "other TD alternatives")
             ax.plot(
                 [p[0] for p in pts],
                 [p[1] for p in pts],
@@ -186,6 +206,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
                 color="black" if chosen else "grey",
                 lw=1.2 if chosen else 0.6,
                 alpha=1.0 if chosen else 0.6,
+                label=label,
             )
             ax3.plot(
                 [p[0] for p in pts],
@@ -193,6 +214,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
                 [w[2] for w in wps],
                 color="black" if chosen else "grey",
                 lw=0.8,
+                label=label,
             )
             summary.alternatives += 1
 
@@ -200,8 +222,11 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
         pos = t.get("position")
         if pos:
             x, y = local.xy(pos["lat_deg"], pos["lon_deg"])
-            ax.plot([x], [y], "x", color="red", ms=10, mew=2)
-            ax3.scatter([x], [y], [pos.get("alt_amsl_m", 0.0)], marker="x", color="red")
+            label = once("predicted conflict point")
+            ax.plot([x], [y], "x", color="red", ms=10, mew=2, label=label)
+            ax3.scatter(
+                [x], [y], [pos.get("alt_amsl_m", 0.0)], marker="x", color="red", label=label
+            )
             summary.conflict_points += 1
 
     ax.set_xlabel("east [m]")
@@ -221,6 +246,8 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
     ax3.set_ylabel("north [m]")
     ax3.set_zlabel("altitude AMSL [m]")
     ax3.set_title(f"{report.get('scenario', '')}: 3D")
+    if summary.plans:
+        ax3.legend(fontsize=7, loc="upper left")
     top = out_dir / f"{stem}_top.png"
     persp = out_dir / f"{stem}_3d.png"
     fig.savefig(top, dpi=110)
@@ -253,7 +280,7 @@ class _Both:
 
 
 def _focus_point(
-    report: dict[str, Any], local: _Local
+    report: dict[str, Any], local: Local
 ) -> tuple[tuple[float, float], float, str] | None:
     """Where the close-up looks: the first predicted loss of separation or geofence conflict
     (east, north), a half-width that shows the manoeuvre around it, and what it is."""
@@ -275,7 +302,7 @@ def _focus_point(
                 if op["id"] in t.get("uas", []) and op.get("plans"):
                     delay = float(op.get("start_delay_s", 0.0) or 0.0)
                     wps = [[w[0], w[1], w[2], w[3] + delay] for w in op["plans"][0]["waypoints"]]
-                    p = _interp_plan(wps, at)
+                    p = interp_plan(wps, at)
                     if p is not None:
                         pts.append(local.xy(p[0], p[1]))
             if pts:
@@ -302,122 +329,7 @@ def _ground(report: dict[str, Any]) -> float:
     return float(report.get("origin", {}).get("ground_elevation_amsl_m", 0.0) or 0.0)
 
 
-def _interp_plan(wps: list[list[float]], t_s: float) -> tuple[float, float, float] | None:
-    """(lat, lon, alt) of a report plan (``[lat, lon, alt, t]`` rows) at ``t_s``, or None
-    outside its time span."""
-    if not wps or t_s < wps[0][3] or t_s > wps[-1][3]:
-        return None
-    for a, b in itertools.pairwise(wps):
-        if a[3] <= t_s <= b[3]:
-            u = 0.0 if b[3] <= a[3] else (t_s - a[3]) / (b[3] - a[3])
-            return (
-                a[0] + u * (b[0] - a[0]),
-                a[1] + u * (b[1] - a[1]),
-                a[2] + u * (b[2] - a[2]),
-            )
-    return (wps[-1][0], wps[-1][1], wps[-1][2])
-
-
-@dataclass(slots=True)
-class PairSeries:
-    """Distances between two UAS over time (seconds from scenario start, metres)."""
-
-    a: str
-    b: str
-    t_s: list[float] = field(default_factory=list)
-    horizontal_m: list[float] = field(default_factory=list)
-    vertical_m: list[float] = field(default_factory=list)
-
-    @property
-    def distance_m(self) -> list[float]:
-        return [math.hypot(h, v) for h, v in zip(self.horizontal_m, self.vertical_m, strict=True)]
-
-
-def _nearest_sample(samples: list[list[float]], t_s: float, tol_s: float) -> list[float] | None:
-    import bisect
-
-    i = bisect.bisect_left([s[0] for s in samples], t_s)
-    best = None
-    for j in (i - 1, i):
-        if (
-            0 <= j < len(samples)
-            and abs(samples[j][0] - t_s) <= tol_s
-            and (best is None or abs(samples[j][0] - t_s) < abs(best[0] - t_s))
-        ):
-            best = samples[j]
-    return best
-
-
-def flown_pairs(report: dict[str, Any], *, tol_s: float = 0.6) -> list[PairSeries]:
-    """Pairwise distances from the report's tracks, each sample of A matched with B's sample
-    nearest in time (within ``tol_s``), like the report's ``separation``."""
-    local = _Local(report["origin"])
-    tracks = report.get("tracks", {})
-    ids = [op["id"] for op in report.get("operations", []) if len(tracks.get(op["id"], [])) > 1]
-    out = []
-    for i, a in enumerate(ids):
-        for b in ids[i + 1 :]:
-            ps = PairSeries(a=a, b=b)
-            for s in tracks[a]:
-                m = _nearest_sample(tracks[b], s[0], tol_s)
-                if m is None:
-                    continue
-                xa, ya = local.xy(s[1], s[2])
-                xb, yb = local.xy(m[1], m[2])
-                ps.t_s.append(float(s[0]))
-                ps.horizontal_m.append(math.hypot(xa - xb, ya - yb))
-                ps.vertical_m.append(abs(float(s[3]) - float(m[3])))
-            if ps.t_s:
-                out.append(ps)
-    return out
-
-
-def planned_pairs(report: dict[str, Any], *, step_s: float = 0.2) -> list[PairSeries]:
-    """Pairwise distances of the *filed* plans (version 1), each shifted by its vehicle's
-    ``start_delay_s``: what would have been flown without any resolution."""
-    local = _Local(report["origin"])
-    plans = {}
-    for op in report.get("operations", []):
-        if not op.get("plans"):
-            continue
-        delay = float(op.get("start_delay_s", 0.0) or 0.0)
-        wps = [[w[0], w[1], w[2], w[3] + delay] for w in op["plans"][0]["waypoints"]]
-        if len(wps) > 1:
-            plans[op["id"]] = wps
-    ids = list(plans)
-    out = []
-    for i, a in enumerate(ids):
-        for b in ids[i + 1 :]:
-            ps = PairSeries(a=a, b=b)
-            t0 = max(plans[a][0][3], plans[b][0][3])
-            t1 = min(plans[a][-1][3], plans[b][-1][3])
-            n = int((t1 - t0) / step_s) + 1 if t1 >= t0 else 0
-            for k in range(n):
-                t = t0 + k * step_s
-                pa, pb = _interp_plan(plans[a], t), _interp_plan(plans[b], t)
-                if pa is None or pb is None:
-                    continue
-                xa, ya = local.xy(pa[0], pa[1])
-                xb, yb = local.xy(pb[0], pb[1])
-                ps.t_s.append(t)
-                ps.horizontal_m.append(math.hypot(xa - xb, ya - yb))
-                ps.vertical_m.append(abs(pa[2] - pb[2]))
-            if ps.t_s:
-                out.append(ps)
-    return out
-
-
-def _minima(report: dict[str, Any]) -> tuple[str, float, float]:
-    """(mode, horizontal-or-3D minimum, vertical minimum) of the run's separation rule."""
-    sm = report.get("separation_minimum", {})
-    mode = str(sm.get("mode", "cylinder"))
-    if mode == "sphere":
-        d = float(sm.get("safety_distance_m", 0.0) or 0.0)
-        return mode, d, d
-    return mode, float(sm.get("horizontal_m", 0.0) or 0.0), float(sm.get("vertical_m", 0.0) or 0.0)
-
-
-def _fence_signed_distance(local: _Local, g: dict[str, Any], lat: float, lon: float) -> float:
+def _fence_signed_distance(local: Local, g: dict[str, Any], lat: float, lon: float) -> float:
     """Horizontal distance from a point to a geofence edge, negative inside."""
     x, y = local.xy(lat, lon)
     if g.get("shape") == "cylinder":
@@ -441,7 +353,7 @@ def fence_distances(
     """(UAS, geofence) -> (times, signed horizontal distance to the edge) of the UAS's track
     while the geofence is active and within its altitude band; UAS exempt from a geofence
     (the jammed UAS inside its own) are left out."""
-    local = _Local(report["origin"])
+    local = Local(report["origin"])
     out: dict[tuple[str, str], tuple[list[float], list[float]]] = {}
     for g in report.get("geofences", []):
         exempt = set(g.get("exempt", []))
@@ -485,6 +397,10 @@ def _answer_times(report: dict[str, Any], uas: str | None = None) -> list[tuple[
     return out
 
 
+_EVENT_COLOURS = ("red", "darkorange", "purple", "saddlebrown", "magenta", "olive")
+"""One colour per threat kind in the altitude figure (green is for accepted answers)."""
+
+
 def plot_altitude(report: dict[str, Any], out_dir: Path, stem: str, summary: PlotSummary) -> Path:
     """``<stem>_altitude.png``: altitude above ground over time per UAS."""
     import matplotlib.pyplot as plt
@@ -492,7 +408,7 @@ def plot_altitude(report: dict[str, Any], out_dir: Path, stem: str, summary: Plo
     ops = report.get("operations", [])
     ground = _ground(report)
     fig, axes = plt.subplots(
-        max(1, len(ops)), 1, figsize=(9, 2.6 * max(1, len(ops))), squeeze=False
+        max(1, len(ops)), 1, figsize=(12, 2.6 * max(1, len(ops))), squeeze=False
     )
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, op in enumerate(ops):
@@ -521,32 +437,23 @@ def plot_altitude(report: dict[str, Any], out_dir: Path, stem: str, summary: Plo
                 label="flown",
             )
             summary.altitude_profiles += 1
-        labelled: set[str] = set()
+        # events are named in the legend, not in text on the plot: detections a second
+        # apart would print their labels on top of each other
+        kinds: list[str] = []
         for t, kind in _threat_times(report, op["id"]):
-            ax.axvline(t, color="red", lw=0.8, alpha=0.6)
-            if kind not in labelled:
-                labelled.add(kind)
-                ax.annotate(
-                    f"{kind} detected",
-                    (t, ax.get_ylim()[1]),
-                    fontsize=6,
-                    color="red",
-                    rotation=90,
-                    va="top",
-                    ha="right",
-                )
-        for t, man in _answer_times(report, op["id"]):
-            ax.axvline(t, color="green", lw=0.8, ls="--")
-            ax.annotate(
-                f"accepted: {man}",
-                (t, ax.get_ylim()[0]),
-                fontsize=6,
-                color="green",
-                rotation=90,
-                ha="left",
+            first = kind not in kinds
+            kinds += [kind] if first else []
+            ax.axvline(
+                t,
+                color=_EVENT_COLOURS[kinds.index(kind) % len(_EVENT_COLOURS)],
+                lw=1.0,
+                alpha=0.8,
+                label=f"{kind} detected" if first else "_nolegend_",
             )
+        for t, man in _answer_times(report, op["id"]):
+            ax.axvline(t, color="green", lw=0.8, ls="--", label=f"accepted {man} (t={t:.0f} s)")
         ax.set_ylabel(f"{op['id']}\naltitude AGL [m]")
-        ax.legend(fontsize=6, loc="best")
+        ax.legend(fontsize=6, loc="center left", bbox_to_anchor=(1.01, 0.5))
         ax.grid(alpha=0.3)
     axes[-1][0].set_xlabel("time from scenario start [s]")
     return _save(
@@ -566,7 +473,7 @@ def plot_separation(
     planned = planned_pairs(report)
     if not flown and not planned:
         return None
-    mode, d_min, v_min = _minima(report)
+    mode, d_min, v_min = minima(report)
     keys = []
     for series_ab in [*flown, *planned]:
         if (series_ab.a, series_ab.b) not in keys:
@@ -577,6 +484,7 @@ def plot_separation(
     for col, (a, b) in enumerate(keys):
         top, bottom = axes[0][col], axes[1][col]
         key = f"{a}|{b}"
+        verdicts: list[str] = []
         for series, style, label, store in (
             (
                 planned,
@@ -594,25 +502,26 @@ def plot_separation(
             bottom.plot(ps.t_s, ps.vertical_m, style, lw=1.3, label=label)
             k = min(range(len(main)), key=main.__getitem__)
             store[key] = main[k]
-            top.plot([ps.t_s[k]], [main[k]], "o", color="black" if style == "-" else "grey")
-            top.annotate(
-                f"min {main[k]:.1f} m at t={ps.t_s[k]:.0f} s",
-                (ps.t_s[k], main[k]),
-                textcoords="offset points",
-                xytext=(5, 8 if style == "-" else -14),
-                fontsize=7,
+            top.plot(
+                [ps.t_s[k]],
+                [main[k]],
+                "o",
+                color="black" if style == "-" else "grey",
+                label=f"closest {main[k]:.1f} m at t={ps.t_s[k]:.0f} s",
             )
-        top.axhline(d_min, color="red", lw=1, label=f"minimum {d_min:g} m")
+            if style == "-" and mode != "sphere":
+                verdicts.append(_shade_verdict(top, bottom, ps, d_min, v_min))
+        top.axhline(d_min, color="red", lw=1, label=f"horizontal minimum {d_min:g} m")
         if mode != "sphere":
             bottom.axhline(v_min, color="red", lw=1, label=f"vertical minimum {v_min:g} m")
+        first = True
         for t, kind in _threat_times(report):
             if kind == "LOSS_OF_SEPARATION":
-                top.axvline(t, color="orange", lw=0.8, ls=":")
+                label = "loss of separation predicted" if first else "_nolegend_"
+                top.axvline(t, color="orange", lw=0.8, ls=":", label=label)
+                first = False
         for t, man in _answer_times(report):
-            top.axvline(t, color="green", lw=0.8, ls="--")
-            top.annotate(
-                f"accepted: {man}", (t, d_min), fontsize=6, color="green", rotation=90, va="bottom"
-            )
+            top.axvline(t, color="green", lw=0.8, ls="--", label=f"accepted {man} (t={t:.0f} s)")
         # a 10 km transit would hide the close encounter: show up to 6 minima, or a little
         # more than the closest distance drawn when that is further
         closest = [
@@ -623,8 +532,11 @@ def plot_separation(
         top.set_ylabel("3D distance [m]" if mode == "sphere" else "horizontal distance [m]")
         bottom.set_ylabel("vertical distance [m]")
         bottom.set_xlabel("time from scenario start [s]")
-        top.set_title(f"{a} - {b}")
+        if verdicts:
+            summary.separation_verdict[key] = verdicts[0]
+        top.set_title(f"{a} - {b}" + (f": {verdicts[0]}" if verdicts else ""), fontsize=9)
         top.legend(fontsize=6, loc="upper right")
+        bottom.legend(fontsize=6, loc="upper right")
         top.grid(alpha=0.3)
         bottom.grid(alpha=0.3)
     return _save(
@@ -632,6 +544,41 @@ def plot_separation(
         out_dir / f"{stem}_separation.png",
         f"{report.get('scenario', '')}: separation over time ({mode})",
     )
+
+
+def _shade_verdict(top: Any, bottom: Any, ps: PairSeries, h_min_m: float, v_min_m: float) -> str:
+    """Shade where the flown pair was horizontally closer than its minimum: green where the
+    vertical distance kept the minimum (separated), red where both were below (a loss).
+    Returns the verdict for the title, naming both axes against their minima."""
+    close = [h < h_min_m for h in ps.horizontal_m]
+    lost = [c and v < v_min_m for c, v in zip(close, ps.vertical_m, strict=True)]
+    kept = [c and not lo for c, lo in zip(close, lost, strict=True)]
+    for where, colour, label in (
+        (kept, "green", "horizontal below minimum, vertical kept"),
+        (lost, "red", "loss of separation (both below)"),
+    ):
+        if not any(where):
+            continue
+        for ax in (top, bottom):
+            ax.fill_between(
+                ps.t_s,
+                0,
+                1,
+                where=where,
+                color=colour,
+                alpha=0.15,
+                transform=ax.get_xaxis_transform(),
+                label=label if ax is top else "_nolegend_",
+            )
+    if any(lost):
+        return f"LOSS of separation (horizontal < {h_min_m:g} m and vertical < {v_min_m:g} m)"
+    if any(close):
+        v_at = min(v for c, v in zip(close, ps.vertical_m, strict=True) if c)
+        return (
+            f"separated: horizontal below {h_min_m:g} m only while vertical >= "
+            f"{v_min_m:g} m (least {v_at:.1f} m)"
+        )
+    return f"separated: horizontal never below {h_min_m:g} m"
 
 
 def plot_geofences(
@@ -643,7 +590,7 @@ def plot_geofences(
     fences = report.get("geofences", [])
     if not fences:
         return None
-    local = _Local(report["origin"])
+    local = Local(report["origin"])
     fig, (ax, ax_d) = plt.subplots(1, 2, figsize=(14, 6))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     xs_all: list[float] = []
@@ -695,17 +642,10 @@ def plot_geofences(
     ax.set_title("geofences: close-up top view")
     ax.legend(fontsize=6, loc="best")
     for (uas, gid), (ts, ds) in fence_distances(report).items():
-        ax_d.plot(ts, ds, lw=1.3, label=f"{uas} to {gid}")
         k = min(range(len(ds)), key=ds.__getitem__)
+        ax_d.plot(ts, ds, lw=1.3, label=f"{uas} to {gid} (closest {ds[k]:.1f} m)")
         summary.min_geofence_distance_m[f"{uas}|{gid}"] = ds[k]
         ax_d.plot([ts[k]], [ds[k]], "o", color="black")
-        ax_d.annotate(
-            f"min {ds[k]:.1f} m",
-            (ts[k], ds[k]),
-            textcoords="offset points",
-            xytext=(5, 6),
-            fontsize=7,
-        )
     ax_d.axhline(0.0, color="red", lw=1, label="geofence edge")
     ax_d.set_xlabel("time from scenario start [s]")
     ax_d.set_ylabel("horizontal distance to the edge [m] (< 0 inside)")
@@ -713,124 +653,6 @@ def plot_geofences(
     ax_d.legend(fontsize=6, loc="best")
     ax_d.grid(alpha=0.3)
     return _save(fig, out_dir / f"{stem}_geofence.png", f"{report.get('scenario', '')}: geofences")
-
-
-# ---- GeoJSON and KML --------------------------------------------------------------------------
-
-
-def _geofence_ring(g: dict[str, Any]) -> list[tuple[float, float]]:
-    """(lon, lat) ring of a geofence; cylinders as 48-gons."""
-    if g.get("shape") == "cylinder":
-        lat0, lon0 = float(g["center"]["lat_deg"]), float(g["center"]["lon_deg"])
-        r = float(g["radius_m"])
-        k = math.cos(math.radians(lat0))
-        ring = [
-            (lon0 + r * math.cos(a) / (111_320.0 * k), lat0 + r * math.sin(a) / 110_540.0)
-            for a in (2 * math.pi * i / 48 for i in range(48))
-        ]
-    else:
-        ring = [(float(v["lon_deg"]), float(v["lat_deg"])) for v in g["vertices"]]
-    ring.append(ring[0])
-    return ring
-
-
-def to_geojson(report: dict[str, Any]) -> dict[str, Any]:
-    feats: list[dict[str, Any]] = []
-    for op in report.get("operations", []):
-        for plan in op.get("plans", []):
-            feats.append(
-                {
-                    "type": "Feature",
-                    "properties": {
-                        "kind": "plan",
-                        "operation": op["id"],
-                        "version": plan["version"],
-                        "reason": plan.get("reason", ""),
-                    },
-                    "geometry": {
-                        "type": "LineString",
-                        "coordinates": [[w[1], w[0], w[2]] for w in plan["waypoints"]],
-                    },
-                }
-            )
-        track = report.get("tracks", {}).get(op["id"], [])
-        if len(track) >= 2:
-            feats.append(
-                {
-                    "type": "Feature",
-                    "properties": {"kind": "track", "operation": op["id"]},
-                    "geometry": {
-                        "type": "LineString",
-                        "coordinates": [[p[2], p[1], p[3]] for p in track],
-                    },
-                }
-            )
-    for g in report.get("geofences", []):
-        feats.append(
-            {
-                "type": "Feature",
-                "properties": {
-                    "kind": "geofence",
-                    "id": g["id"],
-                    "reason": g.get("reason", ""),
-                    "min_alt_amsl_m": g.get("min_alt_amsl_m"),
-                    "max_alt_amsl_m": g.get("max_alt_amsl_m"),
-                },
-                "geometry": {"type": "Polygon", "coordinates": [_geofence_ring(g)]},
-            }
-        )
-    for rec in report.get("recommendations", []):
-        for alt in rec.get("alternatives", []):
-            wps = alt.get("waypoints") or []
-            if len(wps) >= 2:
-                feats.append(
-                    {
-                        "type": "Feature",
-                        "properties": {
-                            "kind": "alternative",
-                            "operation": rec.get("uas"),
-                            "maneuver": alt.get("maneuver"),
-                            "selected": bool(alt.get("selected")),
-                            "cost": alt.get("cost"),
-                            "risk": alt.get("risk"),
-                        },
-                        "geometry": {
-                            "type": "LineString",
-                            "coordinates": [[w[1], w[0], w[2]] for w in wps],
-                        },
-                    }
-                )
-    return {"type": "FeatureCollection", "features": feats}
-
-
-def to_kml(report: dict[str, Any]) -> str:
-    """KML with absolute (AMSL) altitudes, one Placemark per GeoJSON feature."""
-    out = [
-        '<?xml version="1.0" encoding="UTF-8"?>',
-        '<kml xmlns="http://www.opengis.net/kml/2.2"><Document>',
-        f"<name>{escape(str(report.get('scenario', 'gcs-utm')))}</name>",
-    ]
-    for feat in to_geojson(report)["features"]:
-        props = feat["properties"]
-        name = escape(f"{props['kind']} {props.get('operation') or props.get('id', '')}")
-        geom = feat["geometry"]
-        if geom["type"] == "LineString":
-            coords = " ".join(f"{c[0]},{c[1]},{c[2]}" for c in geom["coordinates"])
-            body = (
-                f"<LineString><altitudeMode>absolute</altitudeMode>"
-                f"<coordinates>{coords}</coordinates></LineString>"
-            )
-        else:
-            alt = props.get("max_alt_amsl_m") or 0.0
-            coords = " ".join(f"{c[0]},{c[1]},{alt}" for c in geom["coordinates"][0])
-            body = (
-                "<Polygon><extrude>1</extrude><altitudeMode>absolute</altitudeMode>"
-                f"<outerBoundaryIs><LinearRing><coordinates>{coords}</coordinates>"
-                "</LinearRing></outerBoundaryIs></Polygon>"
-            )
-        out.append(f"<Placemark><name>{name}</name>{body}</Placemark>")
-    out.append("</Document></kml>")
-    return "\n".join(out)
 
 
 def export_all(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> PlotSummary:

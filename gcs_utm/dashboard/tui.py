@@ -1,13 +1,24 @@
 """The interactive dashboard (Textual, built on rich): live tables and the pilot prompt.
 
 The app is also an operator port of the USM: when a recommendation arrives it is queued and
-shown; single keys answer it through ``Usm.answer`` exactly like an MQTT answer would. The
-deadline is shown counting down and enforced by the USM (a late answer is refused).
+shown; single keys answer it through ``Usm.answer`` exactly like an MQTT answer would.
+
+Binding rule (what a key acts on):
+- ``a`` accepts the highlighted option (``n``/``p`` move the highlight; row 0 is the proposed
+  option) of exactly the recommendation id and version on screen when the key was pressed;
+- a key arriving while the prompt differs from what is on screen, or within ``guard_s`` wall
+  seconds after the prompt changed (a new version, a different recommendation), is ignored and
+  the prompt says so: the pilot reads the new prompt and presses again;
+- the USM refuses an answer to a version that is no longer proposed or past its deadline.
+
+Deadlines are shown in wall-clock seconds (the clock's seconds divided by its speed) and
+counted down at every refresh; under 10 s the prompt turns red.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 from typing import ClassVar
 
@@ -15,13 +26,16 @@ from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
 from textual.css.query import NoMatches
+from textual.events import Resize
 from textual.widgets import Footer, Header, Static
 
 from gcs_utm.dashboard.view import (
     DashboardData,
+    Minima,
     collect,
     events_text,
     geofences_table,
+    map_legend,
     operations_table,
     recommendation_panel,
     threats_table,
@@ -29,22 +43,28 @@ from gcs_utm.dashboard.view import (
 )
 from gcs_utm.messages import PilotAnswer, PilotDecision
 from gcs_utm.model import Recommendation, RecommendationId, RecommendationState, Track, TrackId
+from gcs_utm.services.recommendations import alternative_index_of_row, options_of
 from gcs_utm.services.usm import AnswerOutcome, Usm
 
 _log = logging.getLogger(__name__)
+
+NARROW_COLUMNS = 100
+"""Below this width the map and event columns are hidden while a prompt is shown."""
+
+_Key = tuple[RecommendationId, int]
 
 
 class DashboardApp(App[None]):
     """Live airspace picture with the accept/reject prompt."""
 
     CSS = """
-    #top { height: 1fr; }
+    #top { height: 1fr; min-height: 3; }
     #left { width: 2fr; }
     #right { width: 1fr; }
     #prompt { height: auto; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
-        Binding("a", "accept", "Accept"),
+        Binding("a", "accept", "Accept highlighted"),
         Binding("r", "reject", "Reject"),
         Binding("n", "next_alternative", "Next option"),
         Binding("p", "prev_alternative", "Prev option"),
@@ -59,28 +79,37 @@ class DashboardApp(App[None]):
         *,
         operator: str = "dashboard",
         refresh_s: float = 0.5,
+        minima: Minima | None = None,
+        guard_s: float = 1.0,
+        monotonic: Callable[[], float] = time.monotonic,
     ) -> None:
         super().__init__()
         self._usm = usm
         self._tracks = tracks
         self._operator = operator
         self._refresh_s = refresh_s
+        self._minima = minima
+        self._guard_s = guard_s
+        self._monotonic = monotonic
         self._queue: list[RecommendationId] = []
-        self._viewing = 0
+        self._highlight: dict[_Key, int] = {}
+        self._shown: _Key | None = None
+        self._shown_at = -float("inf")
+        self._note = ""
         self.outcomes: list[AnswerOutcome] = []
+        self.ignored_keys = 0
+        self.quit_requested = False
         self._mounted_once = False
 
     # ---- OperatorPort ----------------------------------------------------------------------
     async def present(self, rec: Recommendation) -> None:
         if rec.id not in self._queue:
             self._queue.append(rec.id)
-        self._viewing = 0
         self._refresh_view()
 
     async def update(self, rec: Recommendation) -> None:
         if rec.state is not RecommendationState.PROPOSED and rec.id in self._queue:
             self._queue.remove(rec.id)
-            self._viewing = 0
         self._refresh_view()
 
     # ---- layout ------------------------------------------------------------------------------
@@ -93,6 +122,7 @@ class DashboardApp(App[None]):
                 yield Static(id="geofences")
             with Vertical(id="right"):
                 yield Static(id="map")
+                yield Static(id="legend")
                 yield Static(id="events")
         yield Static(id="prompt")
         yield Footer()
@@ -101,6 +131,9 @@ class DashboardApp(App[None]):
         self.title = "gcs-utm"
         self._mounted_once = True
         self.set_interval(self._refresh_s, self._refresh_view)
+        self._refresh_view()
+
+    def on_resize(self, _event: Resize) -> None:
         self._refresh_view()
 
     def _current(self, d: DashboardData) -> Recommendation | None:
@@ -119,29 +152,66 @@ class DashboardApp(App[None]):
         except NoMatches:  # the app is shutting down: its widgets are gone
             return
 
+    def _row(self, rec: Recommendation) -> int:
+        n = max(1, len(options_of(rec)))
+        return self._highlight.get((rec.id, rec.version), 0) % n
+
     def _render_all(self) -> None:
-        d = collect(self._usm, self._tracks)
-        self.query_one("#operations", Static).update(operations_table(d))
+        d = collect(self._usm, self._tracks, self._minima)
+        width = self.size.width
+        rec = self._current(d)
+        key = None if rec is None else (rec.id, rec.version)
+        if key != self._shown:
+            self._shown = key
+            self._shown_at = self._monotonic()
+        narrow = width < NARROW_COLUMNS
+        right = self.query_one("#right")
+        right.display = not (narrow and rec is not None)
+        self.query_one("#operations", Static).update(
+            operations_table(d, width=width * 2 // 3 if right.display else width)
+        )
         self.query_one("#threats", Static).update(threats_table(d))
         self.query_one("#geofences", Static).update(geofences_table(d))
-        self.query_one("#map", Static).update(top_view(d, width=44, height=14))
-        self.query_one("#events", Static).update(events_text(d))
-        rec = self._current(d)
+        if right.display:
+            map_w = max(20, width // 3 - 2)
+            map_h = max(6, min(map_w // 2, (self.size.height - 4) // 2))
+            self.query_one("#map", Static).update(top_view(d, width=map_w, height=map_h))
+            self.query_one("#legend", Static).update(map_legend(d))
+            self.query_one("#events", Static).update(events_text(d))
         prompt = self.query_one("#prompt", Static)
         if rec is None:
             prompt.update("")
-        else:
-            prompt.update(
-                recommendation_panel(rec, d, viewing=self._viewing, queue=len(self._queue))
+            prompt.display = False
+            return
+        prompt.display = True
+        prompt.update(
+            recommendation_panel(
+                rec, d, viewing=self._row(rec), queue=len(self._queue), note=self._note
             )
+        )
 
     # ---- actions -----------------------------------------------------------------------------
+    def _ignore(self, why: str) -> None:
+        self.ignored_keys += 1
+        self._note = f"Key ignored: {why}. Read the prompt and press again."
+        self.notify(self._note, severity="warning")
+        self._refresh_view()
+
     async def _answer(self, decision: PilotDecision) -> None:
-        d = collect(self._usm, self._tracks)
+        d = collect(self._usm, self._tracks, self._minima)
         rec = self._current(d)
         if rec is None:
             self.bell()
             return
+        if (rec.id, rec.version) != self._shown:
+            self._ignore(f"the prompt changed to {rec.id} v{rec.version}")
+            return
+        if self._monotonic() - self._shown_at < self._guard_s:
+            self._ignore(f"the prompt changed less than {self._guard_s:g} s ago")
+            return
+        row = self._row(rec)
+        index = alternative_index_of_row(rec, row) if decision is PilotDecision.ACCEPT else None
+        self._note = ""
         outcome = await self._usm.answer(
             PilotAnswer(
                 recommendation_id=rec.id,
@@ -150,11 +220,12 @@ class DashboardApp(App[None]):
                 t_s=self._usm.clock.now_s(),
                 operator=self._operator,
                 source="dashboard",
+                alternative_index=index,
             )
         )
         self.outcomes.append(outcome)
         if outcome.reason:
-            self.notify(f"{rec.id}: {outcome.status.value} ({outcome.reason})")
+            self.notify(f"{rec.id} v{rec.version}: {outcome.status.value} ({outcome.reason})")
         self._refresh_view()
 
     async def action_accept(self) -> None:
@@ -163,21 +234,27 @@ class DashboardApp(App[None]):
     async def action_reject(self) -> None:
         await self._answer(PilotDecision.REJECT)
 
-    def action_next_alternative(self) -> None:
-        self._viewing += 1
-        d = collect(self._usm, self._tracks)
+    def _move(self, step: int) -> None:
+        d = collect(self._usm, self._tracks, self._minima)
         rec = self._current(d)
-        n = (1 if rec and rec.selected else 0) + (len(rec.alternatives) if rec else 0)
-        if n:
-            self._viewing %= n
+        if rec is None:
+            return
+        n = max(1, len(options_of(rec)))
+        self._highlight[(rec.id, rec.version)] = (self._row(rec) + step) % n
         self._refresh_view()
 
+    def action_next_alternative(self) -> None:
+        self._move(1)
+
     def action_prev_alternative(self) -> None:
-        self._viewing = max(0, self._viewing - 1)
-        self._refresh_view()
+        self._move(-1)
 
     def action_next_pending(self) -> None:
         if len(self._queue) > 1:
             self._queue.append(self._queue.pop(0))
-            self._viewing = 0
         self._refresh_view()
+
+    async def action_quit(self) -> None:
+        """End the whole run (``gcs-utm demo`` does not start its next use case)."""
+        self.quit_requested = True
+        self.exit()

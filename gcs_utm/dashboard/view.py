@@ -11,7 +11,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rich.console import Group
+from rich.console import Group, RenderableType
 from rich.panel import Panel
 from rich.table import Table
 from rich.text import Text
@@ -28,12 +28,23 @@ from gcs_utm.model import (
     Track,
     TrackId,
 )
+from gcs_utm.services.recommendations import options_of
 from gcs_utm.services.usm import Usm, UsmEvent
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Minima:
+    """The separation minima the prompt compares predictions with (``[monitoring]``)."""
+
+    horizontal_m: float
+    vertical_m: float
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DashboardData:
     t_s: float
+    speed: float
+    """Clock seconds per wall second: deadlines are shown in wall seconds (what the pilot has)."""
     operations: tuple[Operation, ...]
     tracks: dict[TrackId, Track]
     statuses: dict[SysId, VehicleStatus]
@@ -42,13 +53,19 @@ class DashboardData:
     pending: tuple[Recommendation, ...]
     geofences: tuple[Geofence, ...]
     events: tuple[UsmEvent, ...]
+    minima: Minima | None = None
 
 
-def collect(usm: Usm, tracks: Callable[[], dict[TrackId, Track]]) -> DashboardData:
+def collect(
+    usm: Usm, tracks: Callable[[], dict[TrackId, Track]], minima: Minima | None = None
+) -> DashboardData:
     """Take one snapshot of the USM's picture for rendering."""
     now = usm.clock.now_s()
+    speed = usm.clock.speed
     return DashboardData(
         t_s=now,
+        speed=speed if math.isfinite(speed) and speed > 0 else 1.0,
+        minima=minima,
         operations=tuple(sorted(usm.airspace.operations.values(), key=lambda o: o.id)),
         tracks=tracks(),
         statuses=usm.statuses_by_sys_id(),
@@ -66,62 +83,79 @@ def _fmt(value: float | None, spec: str = ".0f", unit: str = "") -> str:
     return f"{value:{spec}}{unit}"
 
 
-def operations_table(d: DashboardData) -> Table:
+_OPS_COLUMNS = ("UAS", "ConOps", "Prio", "Position", "Alt AMSL", "Speed", "WP", "Link")
+_OPS_COLUMNS_END = ("Batt", "Mode", "State")
+_OPS_NARROW = ("UAS", "Alt AMSL", "Speed", "WP", "Link", "Mode", "State")
+"""The columns kept below ``wide_at`` characters: what the pilot watches in an encounter."""
+
+
+def operations_table(d: DashboardData, *, width: int | None = None, wide_at: int = 120) -> Table:
+    """Operations (and intruders), one row each. Narrower than ``wide_at`` characters the
+    table keeps the :data:`_OPS_NARROW` columns so every value stays readable."""
+    columns: tuple[str, ...] = _OPS_COLUMNS + _OPS_COLUMNS_END
+    if width is not None and width < wide_at:
+        columns = _OPS_NARROW
     table = Table(title="Operations", expand=True, show_lines=False)
-    table.add_column("UAS", no_wrap=True, min_width=6)
-    table.add_column("ConOps", overflow="ellipsis", max_width=14, no_wrap=True)
-    for col in ("Prio", "Position", "Alt AMSL", "Speed", "WP", "Link", "Batt", "Mode", "State"):
-        table.add_column(col, overflow="fold")
+    for col in columns:
+        if col == "ConOps":
+            table.add_column(col, overflow="ellipsis", max_width=14, no_wrap=True)
+        else:
+            table.add_column(col, overflow="fold", no_wrap=col == "UAS")
+    rows: list[dict[str, str]] = []
     for op in d.operations:
         track = d.tracks.get(TrackId(op.id))
         status = d.statuses.get(op.sys_id) if op.sys_id is not None else None
         health = d.health.get(op.sys_id) if op.sys_id is not None else None
-        pos = f"{track.lat_deg:.5f},{track.lon_deg:.5f}" if track else "-"
-        alt = _fmt(track.alt_amsl_m, ".0f", " m") if track else "-"
-        speed = _fmt(track.ground_speed_mps, ".1f", " m/s") if track else "-"
         wp_idx = track.next_waypoint if track and track.next_waypoint is not None else None
-        wp = (
-            f"{wp_idx}/{len(op.plan.waypoints)}"
-            if wp_idx is not None
-            else (f"-/{len(op.plan.waypoints)}")
-        )
         link = "-"
         if health is not None:
             age = d.t_s - health.last_heard_t_s
             link = f"{health.rate_hz:.1f} Hz" + (f" ({age:.0f}s ago)" if age > 3 else "")
         elif track is not None and track.stale:
             link = "stale"
-        batt = _fmt(status.battery_pct, ".0f", "%") if status else "-"
-        mode = status.mode.value if status else "-"
-        table.add_row(
-            op.id,
-            op.conops[:18],
-            str(op.priority),
-            pos,
-            alt,
-            speed,
-            wp,
-            link,
-            batt,
-            mode,
-            op.state.value,
+        rows.append(
+            {
+                "UAS": op.id,
+                "ConOps": op.conops[:18],
+                "Prio": str(op.priority),
+                "Position": f"{track.lat_deg:.5f},{track.lon_deg:.5f}" if track else "-",
+                "Alt AMSL": _fmt(track.alt_amsl_m, ".0f", " m") if track else "-",
+                "Speed": _fmt(track.ground_speed_mps, ".1f", " m/s") if track else "-",
+                "WP": f"{'-' if wp_idx is None else wp_idx}/{len(op.plan.waypoints)}",
+                "Link": link,
+                "Batt": _fmt(status.battery_pct, ".0f", "%") if status else "-",
+                "Mode": status.mode.value if status else "-",
+                "State": op.state.value,
+            }
         )
-    intruders = [t for t in d.tracks.values() if not t.cooperative]
-    for t in intruders:
-        table.add_row(
-            t.id,
-            "intruder (ADS-B)",
-            "-",
-            f"{t.lat_deg:.5f},{t.lon_deg:.5f}",
-            _fmt(t.alt_amsl_m, ".0f", " m"),
-            _fmt(t.ground_speed_mps, ".1f", " m/s"),
-            "-",
-            "stale" if t.stale else "ok",
-            "-",
-            "-",
-            "non-coop",
+    for t in d.tracks.values():
+        if t.cooperative:
+            continue
+        rows.append(
+            {
+                "UAS": t.id,
+                "ConOps": "intruder (ADS-B)",
+                "Prio": "-",
+                "Position": f"{t.lat_deg:.5f},{t.lon_deg:.5f}",
+                "Alt AMSL": _fmt(t.alt_amsl_m, ".0f", " m"),
+                "Speed": _fmt(t.ground_speed_mps, ".1f", " m/s"),
+                "WP": "-",
+                "Link": "stale" if t.stale else "ok",
+                "Batt": "-",
+                "Mode": "-",
+                "State": "non-coop",
+            }
         )
+    for row in rows:
+        table.add_row(*(row[c] for c in columns))
     return table
+
+
+def _closest(t: Threat) -> str:
+    """The predicted closest approach, per axis when known (a vertical pass is not a loss)."""
+    if t.horizontal_m is not None and t.vertical_m is not None:
+        return f"{t.horizontal_m:.0f} m h / {t.vertical_m:.0f} m v"
+    return _fmt(t.closest_approach_m, ".0f", " m")
 
 
 def threats_table(d: DashboardData) -> Table:
@@ -140,7 +174,7 @@ def threats_table(d: DashboardData) -> Table:
             t.geofence_id or "-",
             f"{d.t_s - t.detected_at_s:.0f} s ago",
             event_in,
-            _fmt(t.closest_approach_m, ".0f", " m"),
+            _closest(t),
         )
     return table
 
@@ -167,46 +201,136 @@ def geofences_table(d: DashboardData) -> Table:
     return table
 
 
-def _alt_row(index: int, alt: Alternative, chosen: bool) -> tuple[str, str, str, str, str]:
-    mark = ">" if chosen else " "
-    return (
-        mark + str(index),
-        alt.maneuver.value,
-        f"{alt.cost:.3f}",
-        f"{alt.risk:.3f}",
-        alt.detail[:40],
-    )
+def wall_s(d: DashboardData, clock_s: float) -> float:
+    """Clock seconds as the wall seconds the pilot has (at ``--speed 5``, 15 s are 3 s)."""
+    return clock_s / d.speed
+
+
+def _predicted(rec: Recommendation, d: DashboardData) -> str:
+    """What Monitoring predicts for the threat behind ``rec``: with whom or what, when, and
+    how close against the minima."""
+    threat = next((t for t in d.threats if t.id == rec.threat_id), None)
+    if threat is None:
+        return f"{rec.threat_kind.value.lower().replace('_', ' ')} (threat {rec.threat_id})"
+    others: list[str] = [u for u in threat.uas_ids if u != rec.operation_id]
+    if threat.intruder_id is not None:
+        others.append(f"intruder {threat.intruder_id}")
+    what = threat.kind.value.lower().replace("_", " ")
+    if others:
+        what += " with " + ", ".join(others)
+    if threat.geofence_id is not None:
+        what += f" into geofence {threat.geofence_id}"
+    if threat.predicted_event_at_s is not None:
+        ahead = threat.predicted_event_at_s - d.t_s
+        what += f" in {wall_s(d, ahead):.0f} s" if ahead > 0 else " now"
+    parts = []
+    if threat.horizontal_m is not None:
+        parts.append(
+            f"{threat.horizontal_m:.0f} m horizontal"
+            + (f" (min {d.minima.horizontal_m:.0f})" if d.minima else "")
+        )
+    if threat.vertical_m is not None:
+        parts.append(
+            f"{threat.vertical_m:.0f} m vertical"
+            + (f" (min {d.minima.vertical_m:.0f})" if d.minima else "")
+        )
+    if parts:
+        what += "; predicted closest " + ", ".join(parts)
+    elif threat.closest_approach_m is not None:
+        what += f"; predicted closest {threat.closest_approach_m:.0f} m"
+    if threat.message:
+        what += f"; {threat.message}"
+    return what
+
+
+def changes_text(alt: Alternative) -> str:
+    """What an option changes: the new closest separation and the extra length and time."""
+    parts = []
+    if alt.separation_ratio is not None:
+        parts.append(f"closest {alt.separation_ratio:.1f}x minima")
+    if alt.fence_distance_m is not None:
+        inside = alt.fence_distance_m < 0
+        parts.append("inside geofence" if inside else f"geofence {alt.fence_distance_m:.0f} m away")
+    if alt.extra_length_m is not None:
+        parts.append(f"+{alt.extra_length_m:.0f} m")
+    if alt.extra_time_s is not None:
+        parts.append(f"+{alt.extra_time_s:.0f} s")
+    return ", ".join(parts) or "-"
 
 
 def recommendation_panel(
-    rec: Recommendation, d: DashboardData, *, viewing: int = 0, queue: int = 1
+    rec: Recommendation,
+    d: DashboardData,
+    *,
+    viewing: int = 0,
+    queue: int = 1,
+    keys: str | None = None,
+    note: str = "",
 ) -> Panel:
-    """The pilot prompt: threat, proposed action, alternatives with cost and risk, deadline."""
-    left = rec.deadline_t_s - d.t_s
+    """The pilot prompt: what is predicted, the proposed action, every option with what it
+    changes (row ``viewing`` highlighted: it is what ``a`` accepts), the wall-clock time left
+    and how to answer. ``keys`` replaces the key line (e.g. for a line prompt); an empty
+    string says that nothing on this screen answers. ``note`` is shown in bold (e.g. "key
+    ignored")."""
+    left_s = max(0.0, wall_s(d, rec.deadline_t_s - d.t_s))
     head = Text()
     head.append(f"{rec.threat_kind.value}", style="bold red")
     head.append(f"  UAS {rec.operation_id}  recommendation {rec.id} v{rec.version}\n")
+    head.append("Predicted: ", style="bold")
+    head.append(_predicted(rec, d) + "\n")
     if rec.selected is not None:
         head.append(f"Proposed: {rec.selected.maneuver.value}", style="bold")
-        head.append(f"  cost {rec.selected.cost:.3f}  risk {rec.selected.risk:.3f}\n")
+        changes = changes_text(rec.selected)
+        head.append(f"  ({changes})\n" if changes != "-" else "\n")
     elif rec.command is not None:
         head.append(f"Proposed command: {rec.command.kind.value}\n", style="bold")
+    urgent = left_s < 10.0
+    head.append(
+        f"{'ANSWER NOW: ' if urgent else ''}{left_s:.0f} s left",
+        style="bold white on red" if urgent else "bold yellow",
+    )
+    speed = f", clock x{d.speed:g}" if d.speed != 1.0 else ""
+    head.append(f" (wall clock{speed})   {queue} pending")
+    options = options_of(rec)
+    table = Table(expand=True, box=None, pad_edge=False, show_edge=False)
+    table.add_column("#", no_wrap=True, width=3)
+    table.add_column("Manoeuvre", no_wrap=True)
+    table.add_column("Changes", overflow="fold", ratio=3)
+    table.add_column("Cost", no_wrap=True, justify="right")
+    table.add_column("Risk", no_wrap=True, justify="right")
+    for i, alt in enumerate(options):
+        chosen = i == viewing
+        table.add_row(
+            (">" if chosen else " ") + str(i),
+            alt.maneuver.value + (" (proposed)" if i == 0 and rec.selected is not None else ""),
+            changes_text(alt),
+            f"{alt.cost:.3f}",
+            f"{alt.risk:.3f}",
+            style="reverse" if chosen else None,
+        )
+    parts: list[RenderableType] = [head, table]
+    if options and 0 <= viewing < len(options):
+        alt = options[viewing]
+        detail = Text(f"{viewing} {alt.maneuver.value}: ", style="bold")
+        detail.append(alt.detail or "(no detail)")
+        parts.append(detail)
     if rec.reason:
-        head.append(f"Why: {rec.reason}\n")
-    head.append(f"Deadline: {max(0.0, left):.0f} s left", style="yellow" if left > 10 else "red")
-    head.append(f"   ({queue} pending)\n")
-    options = (
-        [rec.selected, *rec.alternatives] if rec.selected is not None else list(rec.alternatives)
+        parts.append(Text(f"Why: {rec.reason}", style="dim"))
+    if note:
+        parts.append(Text(note, style="bold magenta"))
+    if keys is None:
+        target = options[viewing].maneuver.value if 0 <= viewing < len(options) else "proposal"
+        keys = (
+            f"[a] accept {viewing} {target}   [r] reject   [n]/[p] highlight option   "
+            "[tab] next pending   [q] quit"
+        )
+    if keys:
+        parts.append(Text(keys, style="bold"))
+    return Panel(
+        Group(*parts),
+        title="Pilot confirmation",
+        border_style="red" if urgent else "yellow",
     )
-    table = Table(expand=True)
-    for col in ("#", "Maneuver", "Cost", "Risk", "Detail"):
-        table.add_column(col)
-    for i, alt in enumerate(o for o in options if o is not None):
-        table.add_row(*_alt_row(i, alt, i == viewing))
-    keys = Text(
-        "[a] accept   [r] reject   [n]/[p] view alternatives   [tab] next pending", style="dim"
-    )
-    return Panel(Group(head, table, keys), title="Pilot confirmation", border_style="red")
 
 
 def events_text(d: DashboardData, limit: int = 12) -> Text:
@@ -270,6 +394,18 @@ def top_view(d: DashboardData, *, width: int = 60, height: int = 20) -> Text:
     for i, t in enumerate(sorted(d.tracks.values(), key=lambda t: t.id)):
         put(t.lat_deg, t.lon_deg, chr(ord("A") + i % 26) if t.cooperative else "!")
     return Text("\n".join("".join(r) for r in grid))
+
+
+def map_legend(d: DashboardData) -> Text:
+    """What the map's characters mean: a letter per cooperative track (as drawn by
+    :func:`top_view`), ``!`` intruders, ``.`` plans, ``#`` geofences; and the map's north."""
+    out = Text()
+    for i, t in enumerate(sorted(d.tracks.values(), key=lambda t: t.id)):
+        if t.cooperative:
+            out.append(f"{chr(ord('A') + i % 26)}", style="bold")
+            out.append(f"={t.id}  ")
+    out.append("! intruder  . plan  # geofence  (north up)", style="dim")
+    return out
 
 
 def headless_line(d: DashboardData) -> str:

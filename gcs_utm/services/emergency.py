@@ -4,7 +4,14 @@ One task (:meth:`EmergencyService.run`) takes threats and pilot answers from one
 in arrival order, asks the pure :class:`EmergencyManager` on a fresh snapshot (from the
 injected provider, at the injected clock's time) and hands every :class:`Decision` to
 ``on_decision``. Between items it enforces recommendation deadlines on the clock: a pending
-recommendation past its deadline goes to ``EmergencyManager.on_expired``.
+recommendation past its deadline goes to ``EmergencyManager.on_expired``, and at most every
+``supervise_s`` the accepted plans are supervised (``EmergencyManager.supervise``: a threat
+still predicted after its plan was applied gets a new decision).
+
+Upload outcomes: the service is also an operator port of the USM (``present``/``update``);
+when the USM reports a recommendation APPLIED or FAILED, the outcome is queued for
+``EmergencyManager.on_outcome`` (a failure re-plans once, then the safe command is proposed).
+Wire it with ``usm.attach_operator(emergency)``.
 
 Queue policy: bounded (``queue_size``); submitters wait when it is full (threats and answers
 are never dropped). A failure while deciding is logged and turned into an escalation
@@ -17,12 +24,19 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, replace
 
 from gcs_utm.clock import Clock
 from gcs_utm.core.emergency import Decision, EmergencyManager
-from gcs_utm.model import AirspaceSnapshot, Recommendation, RecommendationId, Threat
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    Recommendation,
+    RecommendationId,
+    RecommendationState,
+    Threat,
+)
 
 _log = logging.getLogger(__name__)
 
@@ -32,6 +46,17 @@ class _Answer:
     rec_id: RecommendationId
     version: int
     accepted: bool
+
+
+@dataclass(frozen=True, slots=True)
+class _Outcome:
+    rec_id: RecommendationId
+    version: int
+    applied: bool
+    reason: str
+
+
+_Item = Threat | _Answer | _Outcome
 
 
 class EmergencyService:
@@ -44,13 +69,16 @@ class EmergencyService:
         *,
         idle_s: float = 1.0,
         queue_size: int = 1000,
+        supervise_s: float = 1.0,
     ) -> None:
         self.em = em
         self._snapshot = snapshot_provider
         self._clock = clock
         self._on_decision = on_decision
         self._idle_s = idle_s
-        self._queue: asyncio.Queue[Threat | _Answer] = asyncio.Queue(maxsize=queue_size)
+        self._queue: asyncio.Queue[_Item] = asyncio.Queue(maxsize=queue_size)
+        self._supervise_s = supervise_s
+        self._supervised_t_s = -math.inf
         self.processed = 0
         self.failures = 0
 
@@ -61,15 +89,31 @@ class EmergencyService:
     async def submit_answer(self, rec_id: RecommendationId, version: int, accepted: bool) -> None:
         await self._queue.put(_Answer(rec_id, version, accepted))
 
+    async def submit_outcome(
+        self, rec_id: RecommendationId, version: int, applied: bool, reason: str
+    ) -> None:
+        await self._queue.put(_Outcome(rec_id, version, applied, reason))
+
+    # The USM's operator port: EM hears how accepted recommendations ended.
+    async def present(self, rec: Recommendation) -> None:
+        return None
+
+    async def update(self, rec: Recommendation) -> None:
+        if rec.state is RecommendationState.APPLIED:
+            await self.submit_outcome(rec.id, rec.version, True, rec.reason)
+        elif rec.state is RecommendationState.FAILED:
+            await self.submit_outcome(rec.id, rec.version, False, rec.reason)
+
     def pending(self) -> list[Recommendation]:
         return self.em.pending()
 
     async def run(self) -> None:
-        getter: asyncio.Future[Threat | _Answer] | None = None
+        getter: asyncio.Future[_Item] | None = None
         sleeper: asyncio.Future[None] | None = None
         try:
             while True:
                 await self._expire_due()
+                await self._supervise_due()
                 if getter is None:
                     getter = asyncio.ensure_future(self._queue.get())
                 now = self._clock.now_s()
@@ -104,9 +148,24 @@ class EmergencyService:
 
             await self._decide(expire, rec.id)
 
-    async def _process(self, item: Threat | _Answer) -> None:
+    async def _supervise_due(self) -> None:
         now = self._clock.now_s()
-        if isinstance(item, _Answer):
+        if now - self._supervised_t_s < self._supervise_s or not self.em.supervising():
+            return  # no snapshot is built when no accepted plan is waiting
+        self._supervised_t_s = now
+        await self._decide(lambda: self.em.supervise(self._snapshot(now)), "supervision")
+
+    async def _process(self, item: _Item) -> None:
+        now = self._clock.now_s()
+        if isinstance(item, _Outcome):
+            out = item
+            await self._decide(
+                lambda: self.em.on_outcome(
+                    out.rec_id, out.version, out.applied, out.reason, self._snapshot(now)
+                ),
+                out.rec_id,
+            )
+        elif isinstance(item, _Answer):
             rec = self.em.recommendation(item.rec_id)
             if rec is None:
                 _log.warning("answer to unknown recommendation %s ignored", item.rec_id)

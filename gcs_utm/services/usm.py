@@ -7,25 +7,22 @@ Out: recommendations to the operator(s); accepted plans uploaded to the vehicle 
 mission (verified by readback) and then installed as a new plan version; commands; new
 geofences into the airspace; everything recorded.
 
-Invariants:
-- a recommendation is marked APPLIED only after the vehicle's readback matched;
-- an answer names the exact recommendation id and version; duplicates are idempotent,
-  answers to a recommendation that is no longer proposed are refused with the reason;
-- nothing is dropped silently: every outcome goes to the record callback and the event log.
+The recommendation and answer lifecycle (proposals, answers, uploads, final states) lives in
+:mod:`gcs_utm.services.recommendations`, a base class of :class:`Usm`; its invariants are
+stated there. Nothing is dropped silently: every outcome goes to the record callback and the
+event log.
 """
 
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import itertools
 import logging
 import math
 from collections import deque
 from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass, field
-from enum import Enum
-from typing import Any, Protocol, TypeVar
+from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -36,13 +33,10 @@ from gcs_utm.messages import (
     FlightMode,
     HazardReport,
     LinkHealth,
-    PilotAnswer,
-    PilotDecision,
     VehicleStatus,
 )
 from gcs_utm.model import (
     LANE_STRIDE,
-    RECOMMENDATION_TRANSITIONS,
     AuditEntry,
     Autopilot,
     Command,
@@ -57,7 +51,6 @@ from gcs_utm.model import (
     PositionLane,
     Recommendation,
     RecommendationId,
-    RecommendationState,
     SysId,
     Threat,
     ThreatId,
@@ -67,6 +60,30 @@ from gcs_utm.model import (
     Waypoint4D,
 )
 from gcs_utm.services.airspace import Airspace, AirspaceError
+from gcs_utm.services.recommendations import (
+    AnswerOutcome,
+    AnswerStatus,
+    CommandOutcome,
+    OperatorPort,
+    RecommendationLifecycle,
+    RecommendationRecord,
+    UploadOutcome,
+    VehiclePort,
+    resume_index,
+)
+
+__all__ = [
+    "AnswerOutcome",
+    "AnswerStatus",
+    "CommandOutcome",
+    "OperatorPort",
+    "RecommendationRecord",
+    "UploadOutcome",
+    "Usm",
+    "UsmConfig",
+    "VehiclePort",
+    "resume_index",
+]
 
 _log = logging.getLogger(__name__)
 
@@ -76,64 +93,6 @@ NumPy, ~0.3 ms; reading :attr:`Usm.telemetry` adds them at once)."""
 _LANE_RECEIPT = 1  # fields of a PositionLane entry (gcs_utm.model.LANE_STRIDE)
 _LANE_CAPTURE = 2
 _LANE_ALT = 5
-
-
-# ---- ports the USM talks to (implemented by adapters and services; fakes in tests) ---------
-
-
-class UploadOutcome(Protocol):
-    @property
-    def ok(self) -> bool: ...
-    @property
-    def verified(self) -> bool: ...
-    @property
-    def error(self) -> str: ...
-
-
-class CommandOutcome(Protocol):
-    @property
-    def ok(self) -> bool: ...
-    @property
-    def error(self) -> str: ...
-
-
-class VehiclePort(Protocol):
-    """What the USM needs from the MAVLink side (adapters.mavlink.MavlinkHub)."""
-
-    async def upload_plan(
-        self,
-        sys_id: SysId,
-        plan: FlightPlan,
-        *,
-        autopilot: Autopilot | None = None,
-        deadline_t_s: float | None = None,
-        start_index: int = 0,
-        climb_rate_mps: float | None = None,
-        descent_rate_mps: float | None = None,
-    ) -> UploadOutcome: ...
-
-    async def send_command(self, sys_id: SysId, command: Command) -> CommandOutcome: ...
-
-
-class OperatorPort(Protocol):
-    """Where recommendations are shown and from where answers come (dashboard, MQTT, auto)."""
-
-    async def present(self, rec: Recommendation) -> None: ...
-
-    async def update(self, rec: Recommendation) -> None: ...
-
-
-def resume_index(plan: FlightPlan, now_s: float) -> int:
-    """The plan waypoint a vehicle flies to first when ``plan`` is uploaded at ``now_s``: the
-    first one still ahead in time. A new plan starts where the UAS was when it was computed;
-    by the time it is accepted and uploaded (seconds later, operator's answer) the vehicle has
-    moved on, and flying to that first point would turn it back (a 28 m/s fixed wing is 55 m
-    past it after 2 s)."""
-    wps = plan.waypoints
-    for k, w in enumerate(wps):
-        if w.t_s > now_s:
-            return k
-    return max(0, len(wps) - 1)
 
 
 _NAV_WAYPOINT = 16
@@ -208,18 +167,6 @@ def mission_to_plan(
     )
 
 
-class AnswerStatus(Enum):
-    ACCEPTED = "accepted"
-    DUPLICATE = "duplicate"
-    REFUSED = "refused"
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class AnswerOutcome:
-    status: AnswerStatus
-    reason: str = ""
-
-
 @dataclass(frozen=True, slots=True, kw_only=True)
 class UsmConfig:
     """USM behaviour (section ``[usm]``)."""
@@ -254,20 +201,6 @@ class UsmConfig:
         min=0.1,
         unit="m/s",
     )
-
-
-@dataclass(slots=True, kw_only=True)
-class RecommendationRecord:
-    """Bookkeeping the report and the dashboard read."""
-
-    rec: Recommendation
-    threat_detected_at_s: float
-    latency_ms: float
-    decision: str = ""
-    uploaded: bool = False
-    verified: bool = False
-    error: str = ""
-    history: list[tuple[float, str]] = field(default_factory=list)
 
 
 @dataclass(slots=True)
@@ -440,7 +373,7 @@ class UsmEvent:
     text: str
 
 
-class Usm:
+class Usm(RecommendationLifecycle):
     """The U-space Service Manager. Construct it, then ``attach_*`` the parts."""
 
     def __init__(
@@ -775,53 +708,6 @@ class Usm:
         for sink in self._threat_sinks:
             await sink(threats)
 
-    # ---- decisions from EM ----------------------------------------------------------------
-    async def on_recommendation(self, rec: Recommendation) -> None:
-        threat = self.threats.get(rec.threat_id)
-        detected = threat.detected_at_s if threat is not None else rec.created_t_s
-        now = self.clock.now_s()
-        old = self.recommendations.get(rec.id)
-        if old is not None and rec.version <= old.rec.version:
-            # EM repeats a proposal it already made (e.g. after an accept): nothing new
-            return
-        record = RecommendationRecord(
-            rec=rec,
-            threat_detected_at_s=detected,
-            latency_ms=max(0.0, (rec.created_t_s - detected) * 1000.0 / self.clock.speed)
-            if self.clock.speed != float("inf")
-            else 0.0,
-        )
-        if old is not None:
-            record.history = old.history
-        record.history.append((now, f"proposed v{rec.version}"))
-        self.recommendations[rec.id] = record
-        self._record(rec)
-        what = (
-            rec.selected.maneuver.value
-            if rec.selected
-            else (rec.command.kind.value if rec.command else "none")
-        )
-        self.log_event(
-            "recommendation",
-            f"{rec.id} v{rec.version} for {rec.operation_id}: {what} "
-            f"({rec.threat_kind.value}), deadline in {rec.deadline_t_s - now:.0f} s",
-        )
-        for op in self._operators:
-            await op.present(rec)
-
-    async def on_superseded(self, rec_id: RecommendationId) -> None:
-        record = self.recommendations.get(rec_id)
-        if record is None or record.rec.state is not RecommendationState.PROPOSED:
-            return
-        await self._set_state(record, RecommendationState.SUPERSEDED, "superseded by EM")
-
-    async def on_expired(self, rec_id: RecommendationId) -> None:
-        record = self.recommendations.get(rec_id)
-        if record is None or record.rec.state is not RecommendationState.PROPOSED:
-            return
-        record.decision = "expired"
-        await self._set_state(record, RecommendationState.EXPIRED, "deadline passed")
-
     async def add_geofences(self, geofences: Sequence[Geofence]) -> None:
         changed = [g for g in geofences if self.airspace.add_geofence(g)]
         for g in changed:
@@ -868,175 +754,6 @@ class Usm:
         if result.ok and command.kind is CommandKind.RESUME:
             self.airspace.set_state(op.id, OperationState.ACTIVE)
         return result.ok
-
-    # ---- pilot answers --------------------------------------------------------------------
-    async def answer(self, a: PilotAnswer) -> AnswerOutcome:
-        """An operator's answer (dashboard or MQTT): matched to the exact id and version."""
-        record = self.recommendations.get(a.recommendation_id)
-        outcome = self._check_answer(record, a)
-        self._record(
-            AuditEntry(
-                t_s=a.t_s,
-                actor=f"operator:{a.operator}",
-                action=f"answer_{a.decision.value}",
-                subject=a.recommendation_id,
-                detail={
-                    "version": a.version,
-                    "source": a.source,
-                    "outcome": outcome.status.value,
-                    "reason": outcome.reason,
-                },
-            )
-        )
-        if outcome.status is not AnswerStatus.ACCEPTED or record is None:
-            if outcome.status is AnswerStatus.REFUSED:
-                self.counters["answers_refused"] += 1
-                self.log_event("answer", f"{a.recommendation_id}: refused ({outcome.reason})")
-            return outcome
-        if a.decision is PilotDecision.REJECT:
-            record.decision = "rejected"
-            await self._set_state(record, RecommendationState.REJECTED, f"by {a.operator}")
-            for sink in self._answer_sinks:
-                await sink(record.rec, False)
-            return outcome
-        record.decision = "accepted"
-        await self._set_state(record, RecommendationState.ACCEPTED, f"by {a.operator}")
-        for sink in self._answer_sinks:
-            await sink(record.rec, True)
-        self._spawn(self._apply(record))
-        return outcome
-
-    def _check_answer(self, record: RecommendationRecord | None, a: PilotAnswer) -> AnswerOutcome:
-        if record is None:
-            return AnswerOutcome(status=AnswerStatus.REFUSED, reason="unknown recommendation")
-        rec = record.rec
-        if a.version != rec.version:
-            return AnswerOutcome(
-                status=AnswerStatus.REFUSED,
-                reason=f"version {a.version} is not the current version {rec.version}",
-            )
-        op = self.airspace.operations.get(rec.operation_id)
-        if op is not None and a.source == "mqtt" and a.operator not in (op.operator, "admin"):
-            return AnswerOutcome(
-                status=AnswerStatus.REFUSED,
-                reason=f"operator {a.operator!r} does not fly {rec.operation_id}",
-            )
-        if rec.state is not RecommendationState.PROPOSED:
-            same = (record.decision == "accepted" and a.decision is PilotDecision.ACCEPT) or (
-                record.decision == "rejected" and a.decision is PilotDecision.REJECT
-            )
-            if same:
-                return AnswerOutcome(status=AnswerStatus.DUPLICATE, reason="already answered")
-            return AnswerOutcome(
-                status=AnswerStatus.REFUSED, reason=f"recommendation is {rec.state.value}"
-            )
-        if a.t_s > rec.deadline_t_s:
-            return AnswerOutcome(status=AnswerStatus.REFUSED, reason="deadline passed")
-        return AnswerOutcome(status=AnswerStatus.ACCEPTED)
-
-    async def _apply(self, record: RecommendationRecord) -> None:
-        """Carry out an accepted recommendation: command, or upload + readback + new plan."""
-        rec = record.rec
-        try:
-            op = self.airspace.operation(rec.operation_id)
-        except AirspaceError as exc:
-            await self._fail(record, str(exc))
-            return
-        if rec.command is not None and (rec.selected is None or rec.selected.plan is None):
-            await self._set_state(record, RecommendationState.UPLOADING, "sending command")
-            ok = await self.execute_command(rec.command, reason=f"recommendation {rec.id}")
-            if ok:
-                record.verified = True
-                await self._set_state(record, RecommendationState.APPLIED, "command acknowledged")
-            else:
-                await self._fail(record, "command not acknowledged")
-            return
-        plan = rec.selected.plan if rec.selected is not None else None
-        if plan is None:
-            # advisory only (e.g. keep plan / warn): nothing to send
-            await self._set_state(record, RecommendationState.APPLIED, "advisory")
-            return
-        if self._vehicles is None or op.sys_id is None:
-            await self._fail(record, "no MAVLink link to this vehicle")
-            return
-        maneuver = rec.selected.maneuver.value if rec.selected is not None else ""
-        new_plan = dataclasses.replace(
-            plan,
-            operation_id=op.id,
-            version=op.plan.version + 1,
-            created_t_s=self.clock.now_s(),
-            reason=f"{rec.threat_kind.value}: {maneuver}",
-        )
-        await self._set_state(record, RecommendationState.UPLOADING, "uploading mission")
-        error = ""
-        for attempt in range(1, self.config.upload_attempts + 1):
-            result = await self._vehicles.upload_plan(
-                op.sys_id,
-                new_plan,
-                autopilot=op.autopilot,
-                deadline_t_s=None,
-                start_index=resume_index(new_plan, self.clock.now_s()),
-                climb_rate_mps=op.max_climb_rate_mps,
-                descent_rate_mps=op.max_climb_rate_mps,
-            )
-            record.uploaded = record.uploaded or result.ok
-            if result.ok and result.verified:
-                record.verified = True
-                break
-            error = result.error or "readback did not match"
-            self.log_event("upload", f"{rec.id} attempt {attempt} failed: {error}")
-        if not record.verified:
-            self.counters["uploads_failed"] += 1
-            await self._fail(record, error)
-            return
-        self.counters["uploads_ok"] += 1
-        try:
-            self.airspace.replace_plan(new_plan)
-        except AirspaceError as exc:  # a newer plan landed meanwhile: keep the newer one
-            _log.warning("plan of %s not installed: %s", op.id, exc)
-        await self._set_state(record, RecommendationState.APPLIED, "mission verified")
-
-    async def _fail(self, record: RecommendationRecord, error: str) -> None:
-        record.error = error
-        await self._set_state(record, RecommendationState.FAILED, error)
-
-    async def _set_state(
-        self, record: RecommendationRecord, state: RecommendationState, reason: str
-    ) -> None:
-        now = self.clock.now_s()
-        rec = record.rec
-        if state not in RECOMMENDATION_TRANSITIONS.get(rec.state, frozenset()):
-            # e.g. ACCEPTED -> APPLIED directly is allowed by the model; anything else is a bug
-            _log.error("recommendation %s: %s -> %s refused", rec.id, rec.state, state)
-            return
-        record.rec = rec.transition(state, now, reason)
-        record.history.append((now, f"{state.value}: {reason}"))
-        self._record(record.rec)
-        self.log_event("recommendation", f"{rec.id} v{rec.version} {state.value}: {reason}")
-        for op in self._operators:
-            await op.update(record.rec)
-
-    async def expire_due(self) -> None:
-        """Mark proposals whose deadline has passed as EXPIRED (EM re-plans on its side)."""
-        now = self.clock.now_s()
-        for record in list(self.recommendations.values()):
-            rec = record.rec
-            if rec.state is RecommendationState.PROPOSED and rec.deadline_t_s <= now:
-                record.decision = "expired"
-                await self._set_state(record, RecommendationState.EXPIRED, "deadline passed")
-
-    async def run(self, period_s: float = 0.5) -> None:
-        """Housekeeping: enforce recommendation deadlines (clock seconds)."""
-        while True:
-            await self.expire_due()
-            await self.clock.sleep(period_s)
-
-    def pending(self) -> list[Recommendation]:
-        return [
-            r.rec
-            for r in self.recommendations.values()
-            if r.rec.state is RecommendationState.PROPOSED
-        ]
 
     def _spawn(self, coro: Awaitable[None]) -> None:
         task = asyncio.ensure_future(coro)

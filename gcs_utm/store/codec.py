@@ -68,53 +68,67 @@ def decode(tp: Any, data: Any) -> Any:
     if tp is Any or tp is object:
         return data
     origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
     if origin in (types.UnionType, typing.Union):
-        if data is None and type(None) in args:
-            return None
-        last: Exception | None = None
-        for member in args:
-            if member is type(None):
-                continue
-            try:
-                return decode(member, data)
-            except (CodecError, TypeError, ValueError, KeyError) as exc:
-                last = exc
-        raise CodecError(f"{data!r} matches none of {tp}") from last
-    if origin is tuple:
-        if not isinstance(data, list):
-            raise CodecError(f"expected an array for {tp}, got {data!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(decode(args[0], v) for v in data)
-        return tuple(decode(a, v) for a, v in zip(args, data, strict=True))
+        return _decode_union(tp, data)
+    if origin in (tuple, list, dict):
+        return _decode_container(tp, origin, data)
+    if isinstance(tp, type):
+        return _decode_class(tp, data)
+    if origin is not None and isinstance(data, dict) and "__ndarray__" in data:
+        # numpy.typing.NDArray[...] annotations are generic aliases of ndarray.
+        return np.asarray(data["__ndarray__"], dtype=data.get("dtype", "float64"))
+    raise CodecError(f"cannot decode into {tp!r}")
+
+
+def _decode_union(tp: Any, data: Any) -> Any:
+    args = typing.get_args(tp)
+    if data is None and type(None) in args:
+        return None
+    last: Exception | None = None
+    for member in args:
+        if member is type(None):
+            continue
+        try:
+            return decode(member, data)
+        except (CodecError, TypeError, ValueError, KeyError) as exc:
+            last = exc
+    raise CodecError(f"{data!r} matches none of {tp}") from last
+
+
+def _decode_container(tp: Any, origin: Any, data: Any) -> Any:
+    args = typing.get_args(tp)
     if origin is list:
         return [decode(args[0] if args else Any, v) for v in data]
     if origin is dict:
         return {k: decode(args[1] if args else Any, v) for k, v in data.items()}
-    if isinstance(tp, type):
-        if issubclass(tp, enum.Enum):
-            return tp(data)
-        if issubclass(tp, np.ndarray) or tp.__name__ == "ndarray":
-            return np.asarray(data["__ndarray__"], dtype=data.get("dtype", "float64"))
-        if dataclasses.is_dataclass(tp):
-            if not isinstance(data, dict):
-                raise CodecError(f"expected an object for {tp.__name__}, got {data!r}")
-            hints = _hints(tp)
-            kwargs = {
-                f.name: decode(hints[f.name], data[f.name])
-                for f in dataclasses.fields(tp)
-                if f.init and f.name in data
-            }
-            return tp(**kwargs)
-        if tp is float:
-            if isinstance(data, bool) or not isinstance(data, int | float):
-                raise CodecError(f"expected a number, got {data!r}")
-            return float(data)
-        if tp in (int, str, bool):
-            if not isinstance(data, tp) or (tp is int and isinstance(data, bool)):
-                raise CodecError(f"expected {tp.__name__}, got {data!r}")
-            return data
-    if origin is not None and isinstance(data, dict) and "__ndarray__" in data:
-        # numpy.typing.NDArray[...] annotations are generic aliases of ndarray.
+    if not isinstance(data, list):
+        raise CodecError(f"expected an array for {tp}, got {data!r}")
+    if len(args) == 2 and args[1] is Ellipsis:
+        return tuple(decode(args[0], v) for v in data)
+    return tuple(decode(a, v) for a, v in zip(args, data, strict=True))
+
+
+def _decode_class(tp: type, data: Any) -> Any:
+    if issubclass(tp, enum.Enum):
+        return tp(data)
+    if issubclass(tp, np.ndarray) or tp.__name__ == "ndarray":
         return np.asarray(data["__ndarray__"], dtype=data.get("dtype", "float64"))
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(data, dict):
+            raise CodecError(f"expected an object for {tp.__name__}, got {data!r}")
+        hints = _hints(tp)
+        kwargs = {
+            f.name: decode(hints[f.name], data[f.name])
+            for f in dataclasses.fields(tp)
+            if f.init and f.name in data
+        }
+        return tp(**kwargs)
+    if tp is float:
+        if isinstance(data, bool) or not isinstance(data, int | float):
+            raise CodecError(f"expected a number, got {data!r}")
+        return float(data)
+    if tp in (int, str, bool):
+        if not isinstance(data, tp) or (tp is int and isinstance(data, bool)):
+            raise CodecError(f"expected {tp.__name__}, got {data!r}")
+        return data
     raise CodecError(f"cannot decode into {tp!r}")

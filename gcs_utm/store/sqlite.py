@@ -108,6 +108,14 @@ class Store:
     ) -> None:
         self.path = Path(path)
         self.readonly = readonly
+        if self.path.is_dir():
+            raise StoreError(f"{self.path}: is a directory, not a store file")
+        try:
+            self._conn = self._open(readonly, synchronous, busy_timeout_s)
+        except sqlite3.DatabaseError as exc:  # OperationalError included: not a database, no access
+            raise StoreError(f"{self.path}: cannot be used as a store: {exc}") from exc
+
+    def _open(self, readonly: bool, synchronous: str, busy_timeout_s: float) -> sqlite3.Connection:
         if readonly:
             uri = f"file:{self.path.resolve()}?mode=ro"
             conn = sqlite3.connect(uri, uri=True, isolation_level=None, check_same_thread=False)
@@ -117,20 +125,26 @@ class Store:
         self._max_vars = conn.getlimit(sqlite3.SQLITE_LIMIT_VARIABLE_NUMBER)
         self._depth = 0
         self._epoch: int | None = None
-        conn.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
-        if not readonly:
-            mode = conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
-            if str(mode).lower() != "wal":
-                raise StoreError(f"{self.path}: cannot switch to WAL (journal_mode={mode})")
-            conn.execute(f"PRAGMA synchronous = {'FULL' if synchronous == 'full' else 'NORMAL'}")
-            conn.execute("PRAGMA foreign_keys = ON")
-            self._migrate()
-        else:
-            version = self.schema_version
-            if version != len(MIGRATIONS):
-                raise StoreError(
-                    f"{self.path}: schema version {version}, this code needs {len(MIGRATIONS)}"
-                )
+        try:
+            conn.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
+            if not readonly:
+                mode = conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+                if str(mode).lower() != "wal":
+                    raise StoreError(f"{self.path}: cannot switch to WAL (journal_mode={mode})")
+                sync = "FULL" if synchronous == "full" else "NORMAL"
+                conn.execute(f"PRAGMA synchronous = {sync}")
+                conn.execute("PRAGMA foreign_keys = ON")
+                self._migrate()
+            else:
+                version = self.schema_version
+                if version != len(MIGRATIONS):
+                    raise StoreError(
+                        f"{self.path}: schema version {version}, this code needs {len(MIGRATIONS)}"
+                    )
+        except BaseException:
+            conn.close()
+            raise
+        return conn
 
     # ---- lifecycle ----------------------------------------------------------------------
     @property

@@ -139,6 +139,7 @@ def test_prompt_shows_threat_options_cost_risk_and_deadline() -> None:
     assert "go_left" in text and "go_down" in text
     assert "0.200" in text and "0.070" in text
     assert "30 s left" in text
+    assert "[a] accept 0 go_left" in text
 
 
 def test_top_view_draws_geofence_plan_and_track() -> None:
@@ -156,7 +157,7 @@ async def _run_keys(keys: list[str]) -> tuple[Usm, list[PilotAnswer], DashboardA
         return await original(a)
 
     usm.answer = spy  # type: ignore[method-assign]
-    app = DashboardApp(usm, _tracks, refresh_s=0.1)
+    app = DashboardApp(usm, _tracks, refresh_s=0.1, guard_s=0.0)
     usm.attach_operator(app)
     async with app.run_test(size=(140, 50)) as pilot:
         await usm.on_recommendation(_rec("r1"))

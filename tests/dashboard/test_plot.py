@@ -213,3 +213,65 @@ def test_series_follow_the_separation_rule_and_skip_what_is_absent(tmp_path: Pat
     )
     assert not (tmp_path / "s_geofence.png").exists()
     assert (tmp_path / "s_separation.png").stat().st_size > 0
+
+
+def _checked_figures(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, str, bool, list[Any]]]:
+    """For every figure the plot module saves, per axes: (figure title, axes title, has a
+    legend, window boxes of its texts), taken as it is saved."""
+    from matplotlib.figure import Figure
+
+    seen: list[tuple[str, str, bool, list[Any]]] = []
+    original = Figure.savefig
+
+    def keep(self: Any, *args: Any, **kwargs: Any) -> Any:
+        out = original(self, *args, **kwargs)
+        renderer = self.canvas.get_renderer()
+        for ax in self.axes:
+            boxes = [t.get_window_extent(renderer) for t in ax.texts if t.get_text()]
+            name = f"{id(self)} {self.get_suptitle()}"
+            seen.append((name, ax.get_title(), ax.get_legend() is not None, boxes))
+        return out
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    return seen
+
+
+def test_every_plot_has_a_legend_and_no_label_overlaps(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    report = _crossing_report()
+    # four detections a second apart and two answers: their labels used to overlap
+    report["threats"] += [
+        {"kind": k, "uas": ["UAS1", "UAS2"], "detected_at_s": t}
+        for k, t in (
+            ("GEOFENCE_CONFLICT", 13.0),
+            ("UAS_OUT_OV", 14.0),
+            ("GEOFENCE_INTRUSION", 15.0),
+            ("LACK_OF_BATTERY", 16.0),
+        )
+    ]
+    report["recommendations"].append(
+        {"uas": "UAS1", "maneuver": "go_up", "decision": "accepted", "created_at_s": 4.5}
+    )
+    seen = _checked_figures(monkeypatch)
+    export_all(report, tmp_path, stem="o")
+    assert len({fig for fig, _, _, _ in seen}) == 5
+    for fig, title, has_legend, boxes in seen:
+        if not title.startswith("close-up"):  # the top view's zoom shares its legend
+            assert has_legend, (fig, title)
+        for i, a in enumerate(boxes):
+            for b in boxes[i + 1 :]:
+                assert not a.overlaps(b), (fig, title, a, b)
+
+
+def test_separation_names_both_axes_so_a_vertical_pass_is_not_a_loss(tmp_path: Path) -> None:
+    report = _crossing_report()
+    summary = export_all(report, tmp_path, stem="l")
+    assert summary.separation_verdict["UAS1|UAS2"].startswith("LOSS of separation")
+    # the same horizontal pass (35 m < 50 m) with UAS2 30 m higher: separated vertically
+    report["tracks"]["UAS2"] = [[s[0], s[1], s[2], 730.0] for s in report["tracks"]["UAS2"]]
+    summary = export_all(report, tmp_path, stem="v")
+    verdict = summary.separation_verdict["UAS1|UAS2"]
+    assert verdict == (
+        "separated: horizontal below 50 m only while vertical >= 15 m (least 30.0 m)"
+    )

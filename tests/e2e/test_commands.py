@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_demo_runs_use_case_1_then_2_from_the_package(monkeypatch: pytest.MonkeyPatch) -> None:
     ran: list[tuple[Path, argparse.Namespace]] = []
 
-    def fake_run_one(path: Path, args: argparse.Namespace) -> int:
+    def fake_run_one(path: Path, args: argparse.Namespace, **_kw: object) -> int:
         ran.append((path, args))
         return 0
 
@@ -45,7 +45,7 @@ def test_demo_runs_use_case_1_then_2_from_the_package(monkeypatch: pytest.Monkey
 def test_demo_stops_at_the_first_failing_use_case(monkeypatch: pytest.MonkeyPatch) -> None:
     ran: list[str] = []
 
-    def failing(path: Path, args: argparse.Namespace) -> int:
+    def failing(path: Path, args: argparse.Namespace, **_kw: object) -> int:
         ran.append(path.name)
         return 2
 

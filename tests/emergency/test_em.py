@@ -63,7 +63,8 @@ def test_loss_of_separation_recommends_a_jointly_conflict_free_plan_and_audits_i
         assert b_sel is not None
         assert _offset_m(snap, b_sel) < _offset_m(snap, rec.selected)
     assert rec.state is RecommendationState.PROPOSED
-    assert rec.deadline_t_s == pytest.approx(threat.predicted_event_at_s - 10.0)  # type: ignore[operator]
+    # The event is 100 s ahead: the deadline is the answer window (20 s), not event - 10 s.
+    assert rec.deadline_t_s - snap.t_s == pytest.approx(20.0, abs=1e-6)
     ops = dict(snap.operations)
     for r in d.recommendations:
         assert r.selected is not None

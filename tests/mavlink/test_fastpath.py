@@ -241,7 +241,7 @@ async def test_hub_fused_position_path_equals_the_general_path(
 
     a, b = ("10.0.0.1", 14550), ("10.0.0.2", 14550)
     e1 = mav2.MAVLink(None, srcSystem=1, srcComponent=1)
-    e2 = mav2.MAVLink(None, srcSystem=1, srcComponent=1)  # same sysid, another address
+    e2 = mav2.MAVLink(None, srcSystem=2, srcComponent=1)  # another vehicle, another address
     hb = bytes(e1.heartbeat_encode(2, 12, 129, 4 << 16, 4, 3).pack(e1))
     e1.seq = 1
 

@@ -109,7 +109,8 @@ async def _run(lane: bool, *, plain_sink: bool = False) -> dict[str, Any]:
         usm.attach_measurement_sink(got.append)
     else:
         usm.attach_measurement_sink(tracking.submit, tracking.submit_lane)
-    hub = MavlinkHub(MavlinkConfig(links=("udpin:127.0.0.1:0",)), clock, usm)
+    # vehicles here share system ids across addresses on purpose: no sysid binding
+    hub = MavlinkHub(MavlinkConfig(links=("udpin:127.0.0.1:0",), sysid_binding=False), clock, usm)
     await hub.start()
     link = next(iter(hub._links.values()))
     for k, (data, addr) in enumerate(_stream()):
@@ -171,7 +172,8 @@ async def test_the_lane_is_handed_over_within_a_long_burst_and_after_it() -> Non
     usm = Usm(Airspace(), clock)
     seen: list[int] = []
     usm.attach_measurement_sink(lambda m: None, lambda values, sources: seen.append(len(values)))
-    hub = MavlinkHub(MavlinkConfig(links=("udpin:127.0.0.1:0",)), clock, usm)
+    # vehicles here share system ids across addresses on purpose: no sysid binding
+    hub = MavlinkHub(MavlinkConfig(links=("udpin:127.0.0.1:0",), sysid_binding=False), clock, usm)
     await hub.start()
     link = next(iter(hub._links.values()))
     enc = mav2.MAVLink(None, srcSystem=5, srcComponent=1)

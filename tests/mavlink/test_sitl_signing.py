@@ -51,12 +51,14 @@ async def test_same_key_upload_verifies_and_commands_are_obeyed() -> None:
         assert w.hub.counters.bad_signature == 0 and w.hub.counters.handler_errors == 0
 
 
-@pytest.mark.parametrize("ground_key", [None, WRONG])
+# With a wrong key the hub drops the vehicle's frames itself (it verifies incoming
+# signatures): tests/mavlink/test_links_security.py
+@pytest.mark.parametrize("ground_key", [None])
 async def test_without_the_key_upload_and_command_are_ignored(ground_key: str | None) -> None:
     keys = {} if ground_key is None else {"1": ground_key}
     async with world(FLYING, signing_keys=keys) as w:
         v = w.vehicle
-        # the vehicle's signed telemetry is still read (the hub does not verify incoming)
+        # without a key the vehicle's signed telemetry is read (nothing to verify it with)
         await until(lambda: len(w.sink.measurements) >= 3, 5.0, "telemetry not accepted")
         await until(lambda: v.mode == "MISSION" and not v.landed, 10.0, "not flying")
         mission_before = v.mission

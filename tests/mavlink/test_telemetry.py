@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import os
 from typing import Any
 
@@ -146,6 +147,11 @@ async def test_battery_and_gnss_hazards(env: Any) -> None:
 
 
 async def test_same_sysid_two_addresses_are_two_vehicles_with_unicast(env: Any) -> None:
+    # a fleet that reuses system ids: without sysid binding (with it, b is a claim:
+    # tests/mavlink/test_links_security.py)
+    env.hub._senders.config = env.hub.config = dataclasses.replace(
+        env.hub.config, sysid_binding=False
+    )
     a = await env.vehicle(7)
     b = await env.vehicle(7)
     assert env.hub.counters.sysid_collisions == 1

@@ -108,8 +108,9 @@ class Broker:
         return MqttConfig(**base)
 
 
-def make_broker(tmp_path: Path) -> Broker:
-    """Configure and start a broker in ``tmp_path`` (skips when mosquitto is missing)."""
+def make_broker(tmp_path: Path, *, persistence: bool = True) -> Broker:
+    """Configure and start a broker in ``tmp_path`` (skips when mosquitto is missing).
+    ``persistence=False`` is mosquitto's default: a restart forgets every session."""
     if MOSQUITTO is None or MOSQUITTO_PASSWD is None:
         pytest.skip("mosquitto / mosquitto_passwd not installed (apt-get install mosquitto)")
     port = _free_port()
@@ -132,7 +133,7 @@ def make_broker(tmp_path: Path) -> Broker:
                 "allow_anonymous false",
                 f"password_file {pwfile}",
                 f"acl_file {acl}",
-                "persistence true",
+                f"persistence {'true' if persistence else 'false'}",
                 # default 1000 per client: the 1000-malformed test answers with 1001 errors
                 "max_queued_messages 10000",
                 f"persistence_location {tmp_path / 'persist'}/",

@@ -247,3 +247,67 @@ def test_outgoing_queue_is_bounded_latest_wins_and_backoff_capped() -> None:
         d = bridge.backoff_s(n)
         ceiling = min(4.0, 0.5 * 2 ** (n - 1))
         assert ceiling / 2 <= d <= ceiling
+
+
+def _alert(geometry: dict[str, object], **over: object) -> bytes:
+    obj: dict[str, object] = {
+        "schema_version": 1,
+        "type": "airspace_alert",
+        "alert_id": "fire-1",
+        "category": "wildfire",
+        "t_s": T0,
+        "min_alt_amsl_m": 0.0,
+        "max_alt_amsl_m": 3000.0,
+        "geometry": geometry,
+        **over,
+    }
+    return json.dumps(obj).encode()
+
+
+def _ring(*lat_lon: tuple[float, float]) -> dict[str, object]:
+    return {
+        "shape": "polygon",
+        "vertices": [{"lat_deg": a, "lon_deg": b} for a, b in lat_lon],
+    }
+
+
+def test_alert_polygons_follow_the_shared_rule() -> None:
+    """An alert with a bow-tie polygon creates no geofence: the same rule as scenario files
+    (gcs_utm.validation.polygon_problem) refuses it, naming the field."""
+    square = ((40.40, -3.70), (40.41, -3.70), (40.41, -3.69), (40.40, -3.69))
+    h = decode(T, T.airspace_alerts, _alert(_ring(*square)), T0)
+    assert isinstance(h, HazardReport) and h.area is not None and len(h.area.vertices) == 4
+    bow_tie = (square[0], square[2], square[1], square[3])
+    with pytest.raises(MqttMessageError) as err:
+        decode(T, T.airspace_alerts, _alert(_ring(*bow_tie)), T0)
+    assert err.value.field == "geometry.vertices" and "intersects itself" in err.value.reason
+    with pytest.raises(MqttMessageError, match="no area"):
+        decode(T, T.airspace_alerts, _alert(_ring((40.4, -3.7), (40.5, -3.7), (40.6, -3.7))), T0)
+    circle = {"shape": "circle", "center": {"lat_deg": 40.4, "lon_deg": -3.7}, "radius_m": 1e9}
+    with pytest.raises(MqttMessageError) as err:
+        decode(T, T.airspace_alerts, _alert(circle), T0)
+    assert err.value.field == "geometry.radius_m"
+    with pytest.raises(MqttMessageError) as err:
+        decode(T, T.airspace_alerts, _alert(_ring(*square), max_alt_amsl_m=1e9), T0)
+    assert err.value.field == "max_alt_amsl_m" and "20000" in err.value.reason
+
+
+def test_codec_modules_split_by_responsibility_and_re_exported() -> None:
+    import adapters.mqtt.codec as codec
+    from adapters.mqtt import encode, topics, wire
+
+    for module in (codec, encode, topics, wire):
+        assert module.__file__ is not None
+        assert len(Path(module.__file__).read_text().splitlines()) < 800
+    assert codec.Topics is topics.Topics and codec.encode_alert is encode.encode_alert
+    assert codec.MqttMessageError is wire.MqttMessageError
+    assert set(codec.__all__) <= set(dir(codec))
+
+
+def test_nesting_is_bounded_like_every_other_input() -> None:
+    deep = '{"a": ' + "[" * 100 + "]" * 100 + "}"
+    with pytest.raises(MqttMessageError, match="nested deeper than 64 levels"):
+        decode(T, T.answers("alice"), deep, 0.0)
+    deeper = "[" * 100_000 + "]" * 100_000
+    with pytest.raises(MqttMessageError, match="nested deeper than 64 levels"):
+        decode(T, T.answers("alice"), deeper, 0.0)

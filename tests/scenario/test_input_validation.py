@@ -165,9 +165,26 @@ def test_check_json_prints_an_error_document(
     out, _ = capsys.readouterr()
     assert json.loads(out)["error"]["message"] == "the file does not exist"
     good = _write(tmp_path, BASE, "good.toml")
-    assert main(["scenario", "check", str(good), "--json", "--step-s", "0"]) == 2
+    for step in ("0", "abc", "1e-9", "nan"):
+        assert main(["scenario", "check", str(good), "--json", "--step-s", step]) == 2
+        out, _ = capsys.readouterr()
+        assert json.loads(out)["error"]["field"] == "--step-s"
+
+
+def test_check_json_prints_an_error_document_even_on_a_bug(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from gcs_utm.cli import scenario as scenario_cli
+
+    def broken(*_args: object, **_kw: object) -> None:
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(scenario_cli, "strategic_check", broken)
+    good = _write(tmp_path, BASE, "good.toml")
+    with pytest.raises(ZeroDivisionError):
+        main(["scenario", "check", str(good), "--json"])
     out, _ = capsys.readouterr()
-    assert json.loads(out)["error"]["field"] == "--step-s"
+    assert "a bug" in json.loads(out)["error"]["message"]
 
 
 def test_a_directory_is_reported_as_a_directory(
@@ -179,6 +196,9 @@ def test_a_directory_is_reported_as_a_directory(
     assert main(["config", "check", str(tmp_path)]) == 2
     _out, err = capsys.readouterr()
     assert "is a directory" in err
+    assert main(["replay", str(tmp_path), "--no-progress"]) == 2
+    _out, err = capsys.readouterr()
+    assert "is a directory" in err and "no such file" not in err
 
 
 @pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
@@ -202,10 +222,31 @@ def test_gauss_yaml_naming_a_missing_json_names_the_key(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("speed", ["0", "-1", "nan", "inf", "fast"])
 def test_speed_factor_must_be_positive(speed: str, capsys: pytest.CaptureFixture[str]) -> None:
-    for cmd in (["run", "s.toml"], ["demo"]):
+    for cmd in (["run", "s.toml"], ["demo"], ["serve"]):
         with pytest.raises(SystemExit) as info:
             build_parser().parse_args([*cmd, "--speed", speed])
         assert info.value.code == 2
         _out, err = capsys.readouterr()
         assert "--speed: expected a positive number" in err
     assert build_parser().parse_args(["run", "s.toml", "--speed", "2.5"]).speed == 2.5
+    if speed != "inf":  # replay reads inf as "max"
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(["replay", "x.tlog", "--speed", speed])
+        assert "expected a positive number or 'max'" in capsys.readouterr().err
+    assert build_parser().parse_args(["replay", "x.tlog", "--speed", "max"]).speed is None
+
+
+def test_a_yaml_alias_bomb_is_walked_in_linear_time(tmp_path: Path) -> None:
+    """Ten levels, each repeating the one below ten times through aliases: 10**10 leaves if
+    expanded, a few hundred containers in memory. Loading stays fast and fails on the
+    missing origin, not on time or memory."""
+    lines = ["l0: &l0 [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]"]
+    for i in range(1, 11):
+        lines.append(f"l{i}: &l{i} [" + ", ".join([f"*l{i - 1}"] * 10) + "]")
+    bomb = _write(tmp_path, "\n".join(lines) + "\n", "bomb.yaml")
+    with pytest.raises(ScenarioError, match="operations_json"):
+        load_any(bomb)
+    shared: list[object] = [1, 2]
+    for _ in range(40):
+        shared = [shared] * 10
+    assert nesting_depth(shared) == 41

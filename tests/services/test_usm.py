@@ -272,6 +272,18 @@ async def test_upload_starts_at_the_first_waypoint_ahead_when_accepted_late() ->
     assert vehicles2.start_indices == [0]
 
 
+async def test_upload_gives_the_vehicle_its_envelope_climb_and_descent_rates() -> None:
+    """A climb or descent on the spot is flown at the vehicle's own rates: the mission's
+    waits are computed with the envelope's descent rate (1.5 m/s for a multirotor), not the
+    climb rate (3 m/s)."""
+    vehicles = FakeVehicles()
+    usm, _clock, _ = _usm(vehicles)
+    await usm.on_recommendation(_rec())
+    await usm.answer(_answer(PilotDecision.ACCEPT))
+    await usm.drain()
+    assert vehicles.rates == [(3.0, 1.5)]
+
+
 def test_measurements_counted_per_vehicle_and_unclaimed_system_ids_counted() -> None:
     from gcs_utm.model import Measurement, MeasurementSource
 

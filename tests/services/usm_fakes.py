@@ -56,6 +56,7 @@ class FakeVehicles:
     def __init__(self, *, verified: bool = True, command_ok: bool = True) -> None:
         self.uploads: list[FlightPlan] = []
         self.start_indices: list[int] = []
+        self.rates: list[tuple[float | None, float | None]] = []
         self.commands: list[Command] = []
         self.verified = verified
         self.command_ok = command_ok
@@ -73,6 +74,7 @@ class FakeVehicles:
     ) -> Result:
         self.uploads.append(plan)
         self.start_indices.append(start_index)
+        self.rates.append((climb_rate_mps, descent_rate_mps))
         return Result(ok=True, verified=self.verified, error="" if self.verified else "mismatch")
 
     async def send_command(self, sys_id: SysId, command: Command) -> Result:

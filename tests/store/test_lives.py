@@ -132,3 +132,20 @@ async def test_each_service_life_makes_its_own_threat_ids(tmp_path: Path) -> Non
     assert ids[0] != ids[1] and [epoch_of(i) for i in ids] == [1, 2]
     with Store(db) as s:
         assert sorted(t.id for t in s.load_threats()) == sorted(ids)
+
+
+def test_a_folder_or_a_foreign_file_is_one_store_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gcs_utm.cli import main
+
+    with pytest.raises(StoreError, match="is a directory"):
+        Store(tmp_path)
+    foreign = tmp_path / "notes.sqlite"
+    foreign.write_text("not a database, just text " * 100)
+    with pytest.raises(StoreError, match="cannot be used as a store: file is not a database"):
+        Store(foreign)
+    for db in (tmp_path, foreign):
+        assert main(["serve", "--db", str(db), "--headless"]) == 2
+        _out, err = capsys.readouterr()
+        assert err.count("\n") == 1 and "Traceback" not in err and str(db) in err

@@ -21,7 +21,15 @@ from tracking_helpers import FRAME, T0, new_tracker
 
 from gcs_utm.core.tracking import Tracker, kernel
 from gcs_utm.core.tracking.layout import C_LAYOUT, NCOL
-from gcs_utm.model import LANE_STRIDE, LaneSource, Measurement, PositionLane, SysId
+from gcs_utm.model import (
+    LANE_STRIDE,
+    Icao24,
+    LaneSource,
+    Measurement,
+    MeasurementSource,
+    PositionLane,
+    SysId,
+)
 
 NAN = math.nan
 INF = math.inf
@@ -210,12 +218,20 @@ def test_the_c_kernel_refuses_arrays_it_was_not_made_for() -> None:
     with pytest.raises(IndexError, match="row 1000"):
         c.update_rows(np.array([1000], dtype=np.intp), a, *args, (1.0, 1.0, 1.0), 1.0, 1.0, 1.0)
     assert np.array_equal(tr._x, x0)
+    dflt = ((1.0, 1.0, 1.0),) * 3
     with pytest.raises(ValueError, match="whole number"):
-        c.lane_records([1.0] * 12, np.zeros((15, 1)), np.zeros(1, dtype=np.intp),
-                       (1.0, 1.0, 1.0), 0.1, 1.0, 1.0, (0.0, 1.0), 0.0, 1.0)  # fmt: skip
+        c.entry_records([1.0] * 12, np.zeros((15, 1)), np.zeros(1, dtype=np.intp),
+                        dflt, 0.1, 1.0, 1.0, (0.0, 1.0), 0.0, 1.0)  # fmt: skip
     with pytest.raises(TypeError):
-        c.lane_records(["x"] * 11, np.zeros((15, 1)), np.zeros(1, dtype=np.intp),
-                       (1.0, 1.0, 1.0), 0.1, 1.0, 1.0, (0.0, 1.0), 0.0, 1.0)  # fmt: skip
+        c.entry_records(["x"] * 11, np.zeros((15, 1)), np.zeros(1, dtype=np.intp),
+                        dflt, 0.1, 1.0, 1.0, (0.0, 1.0), 0.0, 1.0)  # fmt: skip
+    one = [0, T0, T0, 0.0, 0.0, 100.0, 0.0, 0.0, 0.0, NAN, NAN]
+    with pytest.raises(ValueError, match="source kind 3"):
+        c.entry_records(one, np.zeros((15, 1)), np.zeros(1, dtype=np.intp), dflt, 0.1, 1.0,
+                        1.0, (0.0, 1.0), 0.0, 1e4, np.array([3], dtype=np.intp))  # fmt: skip
+    with pytest.raises(ValueError, match="kinds"):
+        c.entry_records(one, np.zeros((15, 1)), np.zeros(1, dtype=np.intp), dflt, 0.1, 1.0,
+                        1.0, (0.0, 1.0), 0.0, 1e4, np.array([0], dtype=np.int8))  # fmt: skip
 
 
 def test_the_c_kernel_is_built_where_it_is_required() -> None:
@@ -223,3 +239,62 @@ def test_the_c_kernel_is_built_where_it_is_required() -> None:
     if not os.environ.get("GCS_UTM_REQUIRE_C"):
         pytest.skip("GCS_UTM_REQUIRE_C is not set (only CI requires the C extension)")
     assert C_BUILT, "gcs_utm.core.tracking._kalman_c was not built (no C compiler?)"
+
+
+# one Measurement: (source, sys id or ICAO, step, east, alt, velocity or None, eph, epv)
+_meas = st.tuples(
+    st.sampled_from(list(MeasurementSource)),
+    st.integers(0, 3),
+    st.integers(0, 5),
+    st.floats(-40.0, 40.0),
+    st.sampled_from([100.0, 100.0, -2_000.0, NAN]),
+    st.one_of(
+        st.none(),
+        st.tuples(st.floats(-20, 20), st.floats(-20, 20), st.floats(-4, 4)),
+        st.just((500.0, 0.0, 0.0)),
+        st.just((NAN, 0.0, 0.0)),
+    ),
+    st.sampled_from([None, None, 0.3, 4.0, -1.0, INF, NAN]),
+    st.sampled_from([None, None, 0.2, 6.0]),
+)
+
+
+MItem = tuple[MeasurementSource, int, int, float, float, object, object, object]
+
+
+def _measurement(t0: float, item: MItem) -> Measurement:
+    source, who, step, east, alt, vel, eph, epv = item
+    lat, lon = FRAME.point_to_wgs84(east + 100.0 * who, 0.5 * east)
+    t = t0 + 0.4 * step
+    adsb = source is MeasurementSource.ADSB
+    return Measurement(
+        source=source,
+        capture_t_s=t,
+        receipt_t_s=t + 0.05,
+        lat_deg=lat,
+        lon_deg=lon,
+        alt_amsl_m=alt,
+        vel_ned_mps=vel,  # type: ignore[arg-type]
+        eph_m=eph,  # type: ignore[arg-type]
+        epv_m=epv,  # type: ignore[arg-type]
+        sys_id=None if adsb else SysId(who + 1),
+        icao24=Icao24(f"a0000{who}") if adsb else None,
+    )
+
+
+@pytest.mark.skipif(not C_BUILT, reason="the C extension _kalman_c is not built here")
+@settings(max_examples=60, deadline=None)
+@given(batches=st.lists(st.lists(_meas, max_size=12), min_size=1, max_size=4))
+def test_measurements_of_every_source_are_checked_alike_in_c_and_numpy(
+    batches: list[list[MItem]],
+) -> None:
+    """Telemetry, ADS-B and MQTT, with and without a velocity, known, unknown and bad
+    accuracies: the C checks and records give the NumPy reference's counts and states."""
+    c_tr = new_tracker(stale_after_s=1.0, gate_reset_count=1)
+    np_tr = new_tracker(stale_after_s=1.0, gate_reset_count=1)
+    for k, items in enumerate(batches):
+        ms = [_measurement(T0 + 3.0 * k, item) for item in items]
+        want = c_tr.ingest(ms)
+        with _no_c():
+            assert np_tr.ingest(ms) == want
+        _same(c_tr, np_tr, {t.id: t for t in np_tr.take_updated()})

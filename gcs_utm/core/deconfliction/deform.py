@@ -15,7 +15,8 @@ import numpy as np
 
 from gcs_utm.core.deconfliction import cords as cd
 from gcs_utm.core.deconfliction.geometry import LocalPlan
-from gcs_utm.model import FloatArray, PerformanceEnvelope
+from gcs_utm.envelope import PerformanceEnvelope
+from gcs_utm.model import FloatArray
 
 
 def deformed(

@@ -9,7 +9,11 @@ A candidate plan of Tactical Deconfliction is dropped (with the reason) when:
 - a segment asks for more than the envelope allows: horizontal speed above its maximum,
   climb above its climb rate, descent above its descent rate, or (a vehicle that cannot
   hover) a speed below its minimum. Each limit is widened to what the filed plan itself
-  already asked, so a filed plan is never judged worse than it was accepted.
+  already asked, so a filed plan is never judged worse than it was accepted;
+- (a vehicle with a turn radius R) a turn at a generated waypoint does not fit: turning by
+  an angle a starts R * tan(a / 2) before the waypoint and ends as far after it, so the two
+  legs must be long enough for it and for the turns at their other ends (a turn back, a
+  = 180 degrees, never fits).
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
-from gcs_utm.model import PerformanceEnvelope
+from gcs_utm.envelope import PerformanceEnvelope
 
 SPEED_TOLERANCE = 1.02
 """Relative slack on the speed checks: re-timing arithmetic and the WGS84 round trip move
@@ -64,6 +68,45 @@ def envelope_flags(new: LocalPlan, old: LocalPlan, envelope: PerformanceEnvelope
                 f"speed {float(v3.min()):.2f} m/s below the envelope's minimum {floor:.2f}"
             )
     return flags
+
+
+def turn_flags(new: LocalPlan, old: LocalPlan, turn_radius_m: float) -> list[str]:
+    """Turns at generated waypoints of ``new`` that a vehicle with this turn radius cannot
+    fly within the legs around them (empty: all fit)."""
+    if turn_radius_m <= 0.0 or len(new) < 3:
+        return []
+    de = new.e[1:] - new.e[:-1]
+    dn = new.n[1:] - new.n[:-1]
+    length = np.hypot(de, dn)
+    keep = length > SAME_POINT_M
+    if int(keep.sum()) < 2:
+        return []
+    # Turns between consecutive legs that move horizontally, at the point between them.
+    legs = np.flatnonzero(keep)
+    heading = np.arctan2(dn[legs], de[legs])
+    turn = np.abs((heading[1:] - heading[:-1] + np.pi) % (2.0 * np.pi) - np.pi)
+    need = turn_radius_m * np.tan(np.minimum(turn, np.pi * 0.999) / 2.0)  # m, each side
+    at = legs[1:]  # waypoint index of each turn
+    filed = old.xyz()
+    pts = new.xyz()[at]
+    generated = np.ones(at.shape[0], dtype=bool)
+    if filed.shape[0]:
+        dist = np.linalg.norm(pts[:, None, :] - filed[None, :, :], axis=2).min(axis=1)
+        generated = dist > SAME_POINT_M
+    used = np.zeros(legs.shape[0])
+    used[:-1] += need  # a turn uses the end of the leg before it...
+    used[1:] += need  # ...and the start of the leg after it
+    short = (used[:-1] > length[legs[:-1]] * SPEED_TOLERANCE) | (
+        used[1:] > length[legs[1:]] * SPEED_TOLERANCE
+    )
+    bad = np.flatnonzero(short & generated & (turn > np.radians(1.0)))
+    if bad.size == 0:
+        return []
+    k = int(bad[np.argmax(turn[bad])])
+    return [
+        f"turn of {np.degrees(turn[k]):.0f} deg at waypoint {int(at[k])} does not fit a "
+        f"{turn_radius_m:.0f} m turn radius"
+    ]
 
 
 def floor_flags(new: LocalPlan, old: LocalPlan, floor_amsl_m: float, *, lands: bool) -> list[str]:

@@ -2,19 +2,25 @@
 
 Two families (paper §4.5):
 
-- multi-UAS loss of separation: charged cords (:mod:`.cords`) in several scenarios: a joint
-  vertical and a joint lateral repulsion where every mobile UAS moves in inverse proportion to
-  its priority (neighbours that the deformation pushes into are part of the problem, which
-  resolves chains), and per involved UAS a single-mover go up / go down / go left / go right;
-  plus a delay and a speed change found by search, and keep-plan (cost 0) for every UAS;
-- single UAS: A* on a visibility graph of inflated geofences (:mod:`.astar`): reroute around a
-  crossing, escape from inside, direct to goal, back to plan, next waypoint, return home,
-  nearest reachable landing site.
+- multi-UAS loss of separation (this module): charged cords (:mod:`.cords`) in several
+  scenarios: a joint vertical and a joint lateral repulsion where every mobile UAS moves in
+  inverse proportion to its priority (neighbours that the deformation pushes into are part of
+  the problem, which resolves chains), and per involved UAS a single-mover go up / go down /
+  go left / go right; plus a delay (only for a vehicle that can hover) and a speed change
+  found by search (:mod:`.timing`), and keep-plan (cost 0) for every UAS;
+- single UAS (:mod:`.single`, routes in :mod:`.router`): A* on a visibility graph of
+  inflated geofences: reroute around a crossing, escape from inside, direct to goal, back to
+  plan, next waypoint, return home, nearest reachable landing site; intruders
+  (:mod:`.intruder`): vertical avoidance.
 
-Every new plan starts at the UAS now, has times from its cruise speed and climb rate (never
-faster than it asked for originally), and is verified by the Monitoring core
-(``plan_vs_geofences`` and ``plan_vs_plans`` against every operation outside the problem)
-before it is returned; dropped candidates are listed in :attr:`TacticalDeconfliction.dropped`.
+Every new plan starts at the *start time* EM passes in (when the vehicle will have the plan:
+decision + expected answer + upload + margin), at the position the UAS will have then on its
+plan as flown: ahead along its path, never a point it has passed. Its times come from the
+vehicle's performance envelope (``Operation.performance()``: climb and descent rates, speed
+range, hover or not; :mod:`.deform`). Before it is returned it is checked against that
+envelope and the safety floor (:mod:`.safety`) and verified by the Monitoring core
+(``plan_vs_geofences`` and ``plan_vs_plans`` against every operation outside the problem);
+dropped candidates are listed in :attr:`TacticalDeconfliction.dropped` with the reason.
 Compatibility between alternatives of UAS in the same problem is checked with the same
 Monitoring function by :meth:`TacticalDeconfliction.compatible` during EM's joint selection.
 """
@@ -40,10 +46,10 @@ from gcs_utm.core.deconfliction.geometry import (
     separation_screen,
 )
 from gcs_utm.core.deconfliction.intruder import intruder_plan, resolve_intruder
-from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags
+from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags, turn_flags
 from gcs_utm.core.deconfliction.scoring import Neighbour, Reference, Score, reference, score_many
 from gcs_utm.core.deconfliction.single import resolve_single
-from gcs_utm.core.deconfliction.timing import Screen, clear_of, first_clear_delay
+from gcs_utm.core.deconfliction.timing import timing_candidates
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import plan_vs_geofences, plan_vs_plans
 from gcs_utm.geo import LocalFrame
@@ -61,6 +67,9 @@ from gcs_utm.model import (
 )
 
 _INACTIVE = (OperationState.LANDED, OperationState.ENDED)
+LEAD_IN_STEP_S = 5.0
+"""Spacing of a new plan's lead-in points: the untimed first leg a vehicle flies after it
+gets the plan is at most this long."""
 _ABANDON = (Maneuver.RETURN_HOME, Maneuver.LANDING_SITE)
 
 
@@ -92,10 +101,28 @@ class _Candidate:
     dest: list[Alternative]
     verify_from: int = 0
     keep: bool = False
+    lead: LocalPlan | None = None
+    """Timed points of the plan as flown before ``new`` starts (see :meth:`.lead_in`):
+    part of the plan the vehicle gets, not of what is scored or envelope-checked."""
+
+    def full(self) -> LocalPlan:
+        if self.lead is None or len(self.lead) == 0:
+            return self.new
+        b = self.new
+        a = self.lead
+        keep = a.t < b.t[0] - 1e-6  # a plan already over starts before the start time
+        if not keep.all():
+            a = LocalPlan(a.e[keep], a.n[keep], a.z[keep], a.t[keep])
+        return LocalPlan(
+            np.concatenate([a.e, b.e]),
+            np.concatenate([a.n, b.n]),
+            np.concatenate([a.z, b.z]),
+            np.concatenate([a.t, b.t]),
+        )
 
 
 @dataclass(slots=True, kw_only=True, eq=False)
-class _Problem:
+class Problem:
     """One charged-cord problem: the members (involved UAS and the neighbours drawn in),
     their plans from the start time on, the common grid and minima, what lies outside the
     problem, and the alternatives collected per member."""
@@ -124,6 +151,9 @@ class TacticalDeconfliction:
         self.config = config
         self.monitoring = monitoring
         self.dropped: list[Dropped] = []
+        # Lead-in of the current call: (from_t_s, start_t_s) and per-UAS offsets.
+        self._lead_window: tuple[float, float] | None = None
+        self._lead_off: dict[OperationId, FloatArray] = {}
         # Candidates and drops of the current call, in the order they were made (_flush).
         self._queue: list[_Candidate | Dropped] = []
         # Local conversions of the plans in the current snapshot, keyed by object identity
@@ -174,6 +204,31 @@ class TacticalDeconfliction:
         upload and margin, from EM), never before the snapshot."""
         return snapshot.t_s if start_t_s is None else max(snapshot.t_s, start_t_s)
 
+    def set_lead_in(self, from_t_s: float | None, start_t_s: float) -> None:
+        """Give every new plan of this call timed lead-in points from ``from_t_s`` (the
+        earliest the vehicle can have the plan) up to ``start_t_s``: see :meth:`lead_in`."""
+        self._lead_off = {}
+        ok = from_t_s is not None and from_t_s < start_t_s - LEAD_IN_STEP_S
+        self._lead_window = (from_t_s, start_t_s) if ok and from_t_s is not None else None
+
+    def lead_in(self, op: Operation) -> LocalPlan | None:
+        """Points of the UAS's plan as flown every LEAD_IN_STEP_S before the start time,
+        back to the earliest time the vehicle can have the plan. Missions carry no time: the
+        vehicle flies to the first waypoint still ahead when it gets the plan, untimed.
+        Without these points that is the start point, up to the whole answer window away
+        (a pilot may answer at once): the vehicle arrives early, holds and manoeuvres early.
+        With them the untimed leg is at most one step and every later leg keeps its time."""
+        if self._lead_window is None:
+            return None
+        t_from, t0 = self._lead_window
+        k = np.arange(int((t0 - t_from) // LEAD_IN_STEP_S), 0, -1, dtype=np.float64)
+        times: FloatArray = t0 - LEAD_IN_STEP_S * k
+        e, n, z = self.local_plan(op.plan).coords(times)
+        off = self._lead_off.get(op.id)
+        if off is not None:
+            e, n, z = e + off[0], n + off[1], z + off[2]
+        return LocalPlan(e, n, z, times)
+
     def start_xyz(self, op: Operation, snapshot: AirspaceSnapshot, t0: float) -> FloatArray:
         """Where the UAS will be at ``t0``: on its plan (as flown) at ``t0``, offset by how far
         it is off the plan now. For a fixed wing that is ahead along its path, never a point
@@ -183,6 +238,7 @@ class TacticalDeconfliction:
         if t0 <= snapshot.t_s:
             return self.current_xyz(op, snapshot)
         off = self.current_xyz(op, snapshot) - lp.position_at(snapshot.t_s)
+        self._lead_off[op.id] = off
         return np.asarray(ahead + off, dtype=np.float64)
 
     def floor_amsl(self, op: Operation) -> float:
@@ -320,6 +376,7 @@ class TacticalDeconfliction:
                 detail=detail,
                 dest=dest,
                 verify_from=verify_from,
+                lead=self.lead_in(op),
             )
         )
 
@@ -335,7 +392,7 @@ class TacticalDeconfliction:
         queue, self._queue = self._queue, []
         moved = [c for c in queue if isinstance(c, _Candidate) and not c.keep]
         converted = local_to_plans(
-            [c.new for c in moved],
+            [c.full() for c in moved],
             [c.op.plan for c in moved],
             self.frame,
             created_t_s=now,
@@ -397,6 +454,14 @@ class TacticalDeconfliction:
                     cost=0.0 if c.keep else sc.cost,
                     risk=sc.risk,
                     detail=f"{c.detail}; {terms}",
+                    extra_length_m=sc.extra_distance_m,
+                    extra_time_s=sc.extra_time_s,
+                    separation_ratio=ratio
+                    if math.isfinite(ratio := sc.min_separation_ratio)
+                    else None,
+                    fence_distance_m=fence
+                    if math.isfinite(fence := sc.min_fence_distance_m)
+                    else None,
                 )
             )
 
@@ -410,15 +475,19 @@ class TacticalDeconfliction:
             flags = self.verify(op.plan, op, c.outsiders, c.geofences)
             return flags, op.plan, [True] * len(c.fences)
         assert plan is not None
-        self._local[id(plan)] = (plan, c.new)  # its local form, without a second conversion
-        unsafe = envelope_flags(c.new, c.old, op.performance()) + floor_flags(
-            c.new, c.old, self.floor_amsl(op), lands=c.maneuver in _ABANDON
+        self._local[id(plan)] = (plan, c.full())  # its local form, without a second conversion
+        env = op.performance()
+        unsafe = (
+            envelope_flags(c.new, c.old, env)
+            + turn_flags(c.new, c.old, env.turn_radius_m)
+            + floor_flags(c.new, c.old, self.floor_amsl(op), lands=c.maneuver in _ABANDON)
         )
         if unsafe:
             return unsafe, plan, []
         checked = plan
+        skip = c.verify_from + len(c.full()) - len(c.new)
         if c.verify_from > 0:
-            checked = replace(plan, waypoints=plan.waypoints[c.verify_from :])
+            checked = replace(plan, waypoints=plan.waypoints[skip:])
         # Monitoring's check is exact but costs a buffer per fence: hand it only the fences
         # whose box comes within the OV radius of the new plan's box (the others cannot be
         # crossed), and score only those within the proximity range.
@@ -443,7 +512,11 @@ class TacticalDeconfliction:
 
     # ---- multi-UAS --------------------------------------------------------------------------
     def resolve_loss_of_separation(
-        self, threat: Threat, snapshot: AirspaceSnapshot, start_t_s: float | None = None
+        self,
+        threat: Threat,
+        snapshot: AirspaceSnapshot,
+        start_t_s: float | None = None,
+        lead_in_from_t_s: float | None = None,
     ) -> dict[OperationId, list[Alternative]]:
         """Alternatives per UAS of the conflict and of the neighbours drawn into it. Every UAS
         gets ``KEEP_PLAN`` (if Monitoring does not flag its plan against outsiders) so that
@@ -452,6 +525,7 @@ class TacticalDeconfliction:
         self.dropped = []
         self._queue = []
         t0 = self.start_time(snapshot, start_t_s)
+        self.set_lead_in(lead_in_from_t_s, t0)
         cfg = self.config
         involved = [snapshot.operations[i] for i in threat.uas_ids if i in snapshot.operations]
         if not involved:
@@ -470,7 +544,7 @@ class TacticalDeconfliction:
                 minima[i, j] = self.monitoring.effective_minima(
                     a.operational_volume_m, b.operational_volume_m
                 )
-        pb = _Problem(
+        pb = Problem(
             members=members,
             involved={op.id for op in involved},
             local=local,
@@ -516,7 +590,7 @@ class TacticalDeconfliction:
         self.flush(snapshot.t_s)
         return {k: _dedupe(v) for k, v in pb.out.items() if v or k in threat.uas_ids}
 
-    def _alone(self, pb: _Problem, k: int, snapshot: AirspaceSnapshot) -> None:
+    def _alone(self, pb: Problem, k: int, snapshot: AirspaceSnapshot) -> None:
         """Single-mover scenarios of member ``k``: up, down, left, right, then timing."""
         u = len(pb.members)
         op = pb.members[k]
@@ -530,7 +604,7 @@ class TacticalDeconfliction:
             signs = [sign if j == k else 0 for j in range(u)]
             self._run(pb, [axis] * u, signs, only, f"{op.id} alone")
         rigid = [o for o in pb.members if o.id != op.id]
-        self._timing(op, pb, rigid, snapshot)
+        timing_candidates(self, op, pb, rigid)
 
     def _cord(self, op: Operation, plan: LocalPlan, axis: str, sign: int, mobile: bool) -> cd.Cord:
         cfg = self.config
@@ -553,7 +627,7 @@ class TacticalDeconfliction:
         )
 
     def _run(
-        self, pb: _Problem, axes: list[str], signs: list[int], mobile: list[bool], label: str
+        self, pb: Problem, axes: list[str], signs: list[int], mobile: list[bool], label: str
     ) -> None:
         """One charged-cord scenario; every deformed member's plan is queued."""
         cfg = self.config
@@ -621,60 +695,6 @@ class TacticalDeconfliction:
         found.sort(key=lambda x: x[0])
         return [op for _, op in found[: self.config.max_neighbours]]
 
-    def _timing(
-        self, op: Operation, pb: _Problem, rigid: Sequence[Operation], snapshot: AirspaceSnapshot
-    ) -> None:
-        """The smallest delay (hold at the start point, then the same plan later: only for a
-        vehicle that can hover) and the mildest slow-down that separate ``op`` from every
-        other plan, if any, queued for its alternatives."""
-        cfg = self.config
-        lp = pb.local[op.id]
-        t0 = float(lp.t[0])
-        others = list(rigid) + list(pb.outsiders)
-        slowest = min([f for f in cfg.slowdown_factors if 0.0 < f < 1.0] or [1.0])
-        span = float(lp.t[-1] - t0)
-        grid_t = np.arange(t0, t0 + max(span / slowest, span + cfg.max_delay_s) + 1.0, 1.0)
-        screens = []
-        for o in others:
-            q, ok = self.local_plan(o.plan).sample(grid_t)
-            h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
-            screens.append(Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, h, v))
-        margin = cfg.separation_margin_fraction
-        spherical = self.monitoring.spherical
-
-        def queue(man: Maneuver, cand: LocalPlan, detail: str) -> None:
-            self.finish(
-                op,
-                man,
-                cand,
-                lp,
-                geofences=pb.geofences,
-                fences=pb.fences,
-                outsiders=others,
-                lowest_priority=pb.lowest,
-                detail=detail,
-                dest=pb.out[op.id],
-            )
-
-        steps = int(cfg.max_delay_s // cfg.delay_step_s)
-        delays = cfg.delay_step_s * np.arange(1, max(steps, 0) + 1, dtype=np.float64)
-        if not op.performance().can_hover:
-            delays = delays[:0]  # a fixed wing cannot stop in place
-        delay = first_clear_delay(lp, t0, grid_t, screens, delays, margin, spherical)
-        if delay is not None:
-            t = np.concatenate([[t0, t0 + delay], lp.t[1:] + delay])
-            e = np.concatenate([[lp.e[0]], lp.e])
-            n = np.concatenate([[lp.n[0]], lp.n])
-            z = np.concatenate([[lp.z[0]], lp.z])
-            queue(Maneuver.DELAY, LocalPlan(e, n, z, t), f"hold {delay:.0f} s, then the plan")
-        for factor in cfg.slowdown_factors:
-            if not 0.0 < factor < 1.0:
-                continue
-            cand = LocalPlan(lp.e, lp.n, lp.z, t0 + (lp.t - t0) / factor)
-            if clear_of(cand, grid_t, screens, margin, spherical):
-                queue(Maneuver.SPEED_CHANGE, cand, f"fly the plan at {factor:.0%} of its speed")
-                break
-
     # ---- intruder ---------------------------------------------------------------------------
     def intruder_plan(self, threat: Threat, snapshot: AirspaceSnapshot) -> LocalPlan | None:
         """The intruder's predicted path (see :func:`.intruder.intruder_plan`)."""
@@ -686,8 +706,10 @@ class TacticalDeconfliction:
         operation_id: OperationId,
         snapshot: AirspaceSnapshot,
         start_t_s: float | None = None,
+        lead_in_from_t_s: float | None = None,
     ) -> list[Alternative]:
         """Vertical avoidance of a non-cooperative intruder (:mod:`.intruder`)."""
+        self.set_lead_in(lead_in_from_t_s, self.start_time(snapshot, start_t_s))
         return resolve_intruder(self, threat, operation_id, snapshot, start_t_s)
 
     # ---- single UAS -------------------------------------------------------------------------
@@ -700,8 +722,10 @@ class TacticalDeconfliction:
         extra_geofences: Sequence[Geofence] = (),
         *,
         start_t_s: float | None = None,
+        lead_in_from_t_s: float | None = None,
     ) -> list[Alternative]:
         """Single-UAS alternatives (A*), verified (:func:`.single.resolve_single`)."""
+        self.set_lead_in(lead_in_from_t_s, self.start_time(snapshot, start_t_s))
         return resolve_single(
             self, threat, operation_id, snapshot, maneuvers, extra_geofences, start_t_s
         )

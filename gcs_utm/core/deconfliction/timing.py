@@ -10,13 +10,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
 from gcs_utm.core.monitoring.loss import separation_ratio
-from gcs_utm.model import FloatArray
+from gcs_utm.model import FloatArray, Maneuver, Operation
+
+if TYPE_CHECKING:
+    from gcs_utm.core.deconfliction.td import Problem, TacticalDeconfliction
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -92,3 +96,58 @@ def clear_of(
         if float(ratio.min()) < scale:
             return False
     return True
+
+
+def timing_candidates(
+    td: TacticalDeconfliction, op: Operation, pb: Problem, rigid: Sequence[Operation]
+) -> None:
+    """The smallest delay (hold at the start point, then the same plan later: only for a
+    vehicle that can hover) and the mildest slow-down that separate ``op`` from every
+    other plan, if any, queued for its alternatives."""
+    cfg = td.config
+    lp = pb.local[op.id]
+    t0 = float(lp.t[0])
+    others = list(rigid) + list(pb.outsiders)
+    slowest = min([f for f in cfg.slowdown_factors if 0.0 < f < 1.0] or [1.0])
+    span = float(lp.t[-1] - t0)
+    grid_t = np.arange(t0, t0 + max(span / slowest, span + cfg.max_delay_s) + 1.0, 1.0)
+    screens = []
+    for o in others:
+        q, ok = td.local_plan(o.plan).sample(grid_t)
+        h, v = td.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
+        screens.append(Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, h, v))
+    margin = cfg.separation_margin_fraction
+    spherical = td.monitoring.spherical
+
+    def queue(man: Maneuver, cand: LocalPlan, detail: str) -> None:
+        td.finish(
+            op,
+            man,
+            cand,
+            lp,
+            geofences=pb.geofences,
+            fences=pb.fences,
+            outsiders=others,
+            lowest_priority=pb.lowest,
+            detail=detail,
+            dest=pb.out[op.id],
+        )
+
+    steps = int(cfg.max_delay_s // cfg.delay_step_s)
+    delays = cfg.delay_step_s * np.arange(1, max(steps, 0) + 1, dtype=np.float64)
+    if not op.performance().can_hover:
+        delays = delays[:0]  # a fixed wing cannot stop in place
+    delay = first_clear_delay(lp, t0, grid_t, screens, delays, margin, spherical)
+    if delay is not None:
+        t = np.concatenate([[t0, t0 + delay], lp.t[1:] + delay])
+        e = np.concatenate([[lp.e[0]], lp.e])
+        n = np.concatenate([[lp.n[0]], lp.n])
+        z = np.concatenate([[lp.z[0]], lp.z])
+        queue(Maneuver.DELAY, LocalPlan(e, n, z, t), f"hold {delay:.0f} s, then the plan")
+    for factor in cfg.slowdown_factors:
+        if not 0.0 < factor < 1.0:
+            continue
+        cand = LocalPlan(lp.e, lp.n, lp.z, t0 + (lp.t - t0) / factor)
+        if clear_of(cand, grid_t, screens, margin, spherical):
+            queue(Maneuver.SPEED_CHANGE, cand, f"fly the plan at {factor:.0%} of its speed")
+            break

@@ -70,6 +70,34 @@ class EmergencyConfig:
     min_response_s: float = setting(
         15.0, "the shortest time an operator is given to answer", min=0.0, unit="s"
     )
+    answer_window_s: float = setting(
+        20.0,
+        "a recommendation's deadline is at most this long after the decision (never less "
+        "than min_response_s): the plan it carries starts after it, so it must come early "
+        "enough for the plan to resolve the threat",
+        min=0.0,
+        unit="s",
+    )
+    upload_time_s: float = setting(
+        3.0,
+        "time expected from an accepted answer to a verified mission on the vehicle",
+        min=0.0,
+        unit="s",
+    )
+    start_margin_s: float = setting(
+        2.0,
+        "a new plan starts this long after the expected answer and upload: the vehicle has "
+        "it before it reaches the plan's first waypoint (ahead of it on its path)",
+        min=0.0,
+        unit="s",
+    )
+    supervision_grace_s: float = setting(
+        10.0,
+        "a threat still open this long after its accepted plan started (and was uploaded) "
+        "gets a new recommendation version, or an escalation after max_replans",
+        min=1.0,
+        unit="s",
+    )
     default_event_horizon_s: float = setting(
         60.0, "assumed time to the event when a threat does not predict one", min=1.0, unit="s"
     )

@@ -17,7 +17,7 @@ Guarantees:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 from gcs_utm.core.deconfliction import TacticalDeconfliction
@@ -33,7 +33,15 @@ from gcs_utm.core.emergency.decision import (
     Decision,
 )
 from gcs_utm.core.emergency.geofences import area, link_loss, suspend
-from gcs_utm.core.emergency.selection import Selection, select_joint, weighted
+from gcs_utm.core.emergency.selection import (
+    STAY_DETAIL,
+    Selection,
+    is_stay,
+    select_by_priority,
+    stay,
+    weighted,
+)
+from gcs_utm.core.emergency.supervision import on_outcome, supervise_case
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
@@ -74,11 +82,16 @@ class EmergencyManager:
         config: EmergencyConfig,
         td: TacticalDeconfliction,
         monitoring: MonitoringConfig,
+        *,
+        answer_delay_s: float | None = None,
     ) -> None:
+        """``answer_delay_s``: when an automatic operator answers (``--auto-accept``), its
+        delay; None when a person answers (then up to the deadline is expected)."""
         self.frame = frame
         self.config = config
         self.td = td
         self.monitoring = monitoring
+        self.answer_delay_s = answer_delay_s
         self._cases: dict[ThreatId, Case] = {}
         self._recs: dict[RecommendationId, Recommendation] = {}
 
@@ -94,19 +107,30 @@ class EmergencyManager:
     def open_threats(self) -> list[ThreatId]:
         return list(self._cases)
 
+    def case(self, threat_id: ThreatId) -> Case | None:
+        return self._cases.get(threat_id)
+
+    def record(self, rec: Recommendation) -> Recommendation:
+        """Store ``rec`` as the current version of its id; returns it."""
+        self._recs[rec.id] = rec
+        return rec
+
     # ---- entry points -----------------------------------------------------------------------
     def on_threat(self, threat: Threat, snapshot: AirspaceSnapshot) -> Decision:
         if threat.status is ThreatStatus.CLOSED:
             return self.on_threat_closed(threat)
         case = self._cases.get(threat.id)
         if case is not None:
-            # The threat persists. A pending or accepted recommendation stands until answered,
-            # expired or the threat closes; one-shot actions (warning, geofence creation) are
-            # done; a case that ended in escalation is retried every retry_after_s with its
-            # refused maneuvers still excluded (no churn every monitoring cycle).
+            # The threat persists. A pending recommendation stands until answered, expired or
+            # the threat closes; an accepted one is supervised (see .supervision); one-shot
+            # actions (warning, geofence creation) are done; a case that ended in escalation
+            # is retried every retry_after_s with its refused maneuvers still excluded (no
+            # churn every monitoring cycle).
             case.threat = threat
-            if self._live(case) or case.action in ONE_SHOT:
+            if case.action in ONE_SHOT or self._pending(case):
                 return Decision()
+            if self._in_force(case):
+                return supervise_case(self, case, snapshot)
             if snapshot.t_s - case.attempt_t_s < self.config.retry_after_s:
                 return Decision()
             case.attempt_t_s = snapshot.t_s
@@ -115,6 +139,34 @@ class EmergencyManager:
         action = self.config.action_for(threat.kind)
         case = Case(threat=threat, action=action, attempt_t_s=snapshot.t_s)
         self._cases[threat.id] = case
+        return self._handle(case, snapshot)
+
+    def supervising(self) -> bool:
+        """Is any open case waiting on an accepted plan (so :meth:`supervise` has work)?"""
+        return any(self._in_force(c) and not self._pending(c) for c in self._cases.values())
+
+    def supervise(self, snapshot: AirspaceSnapshot) -> Decision:
+        """Periodic supervision of every open case with accepted plans (Monitoring reports a
+        persisting threat only when it changes): see :mod:`.supervision`."""
+        d = Decision()
+        for case in list(self._cases.values()):
+            if self._in_force(case) and not self._pending(case):
+                d = d.merge(supervise_case(self, case, snapshot))
+        return d
+
+    def on_outcome(
+        self,
+        rec_id: RecommendationId,
+        version: int,
+        applied: bool,
+        reason: str,
+        snapshot: AirspaceSnapshot,
+    ) -> Decision:
+        """The upload (or command) of an accepted recommendation was verified or failed."""
+        return on_outcome(self, rec_id, version, applied, reason, snapshot)
+
+    def decide_again(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+        """A fresh decision for an open case on the current snapshot (new versions)."""
         return self._handle(case, snapshot)
 
     def on_answer(
@@ -188,9 +240,38 @@ class EmergencyManager:
         )
 
     # ---- internals --------------------------------------------------------------------------
-    def _live(self, case: Case) -> bool:
-        live = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED)
-        return any(self._recs[r].state in live for r in case.rec_ids)
+    def _pending(self, case: Case) -> bool:
+        return any(self._recs[r].state is RecommendationState.PROPOSED for r in case.rec_ids)
+
+    def _in_force(self, case: Case) -> bool:
+        force = (RecommendationState.ACCEPTED, RecommendationState.APPLIED)
+        return any(self._recs[r].state in force for r in case.rec_ids)
+
+    def plan_start(self, threat: Threat, now: float) -> float:
+        """When a plan decided now can start: the expected answer (none in autonomous mode;
+        the automatic operator's delay; else up to the deadline), the upload and a margin.
+        The vehicle has the plan before then, and its first waypoint lies ahead of it."""
+        return self._start(now, self._deadline(threat, now))
+
+    def manoeuvre_start(self, rec: Recommendation) -> float:
+        """When the plan of ``rec`` leaves the UAS's path (its lead-in ends)."""
+        return self._start(rec.created_t_s, rec.deadline_t_s)
+
+    def _start(self, now: float, deadline_t_s: float) -> float:
+        cfg = self.config
+        answer = 0.0 if cfg.autonomous else deadline_t_s - now
+        if self.answer_delay_s is not None:
+            answer = min(answer, self.answer_delay_s)
+        return now + answer + cfg.upload_time_s + cfg.start_margin_s
+
+    def earliest_receipt(self, now: float) -> float:
+        """The earliest the vehicle can have a plan decided now: an immediate answer (or the
+        automatic operator's delay) plus the upload. A new plan carries timed points of the
+        current path from then to its start (TD's lead-in)."""
+        answer = 0.0 if self.answer_delay_s is None else self.answer_delay_s
+        if self.config.autonomous:
+            answer = 0.0
+        return now + answer + self.config.upload_time_s
 
     def audit(self, t_s: float, action: str, subject: str, detail: dict[str, object]) -> AuditEntry:
         return AuditEntry(t_s=t_s, actor=ACTOR, action=action, subject=str(subject), detail=detail)
@@ -199,7 +280,9 @@ class EmergencyManager:
         event = threat.predicted_event_at_s
         if event is None:
             event = now + self.config.default_event_horizon_s
-        return max(now + self.config.min_response_s, event - self.config.deadline_margin_s)
+        cfg = self.config
+        latest = now + max(cfg.min_response_s, cfg.answer_window_s)
+        return min(latest, max(now + cfg.min_response_s, event - cfg.deadline_margin_s))
 
     def issue(
         self,
@@ -280,13 +363,27 @@ class EmergencyManager:
 
     # -- multi-UAS
     def _multi(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+        """Charged cords + joint selection under the priority rule (selection tiers). A UAS
+        without a verified option stays on its plan (escalated for it) while the others
+        move; the case escalates only when no combination resolves the conflict."""
         now = snapshot.t_s
         cfg = self.config
         t = case.threat
-        options = self.td.resolve_loss_of_separation(t, snapshot)
+        options = self.td.resolve_loss_of_separation(
+            t,
+            snapshot,
+            start_t_s=self.plan_start(t, now),
+            lead_in_from_t_s=self.earliest_receipt(now),
+        )
         for op_id, alts in options.items():
             banned = case.excluded.get(op_id, set())
             options[op_id] = [x for x in alts if x.maneuver not in banned]
+        ops = snapshot.operations
+        stays = {
+            k: stay(k, ops[k].plan)
+            for k, alts in options.items()
+            if k in ops and not any(x.maneuver is Maneuver.KEEP_PLAN for x in alts)
+        }
         memo: dict[tuple[int, int], bool] = {}
 
         def compatible(x: Alternative, y: Alternative) -> bool:
@@ -295,15 +392,18 @@ class EmergencyManager:
                 memo[key] = self.td.compatible(x, y, snapshot)
             return memo[key]
 
-        sel = select_joint(
+        tiered = select_by_priority(
             options,
+            {k: ops[k].priority for k in options if k in ops},
+            stays,
             alpha=cfg.alpha,
             beta=cfg.beta,
             compatible=compatible,
             max_nodes=cfg.max_combinations,
         )
+        sel = None if tiered is None else tiered.selection
         detail = self._detail(options, sel, "loss of separation: charged cords + joint selection")
-        if sel is None:
+        if tiered is None:
             msg = (
                 f"{t.id}: no conflict-free combination of alternatives for "
                 f"{', '.join(t.uas_ids)}; operator action needed"
@@ -311,11 +411,28 @@ class EmergencyManager:
             return Decision(
                 escalations=(msg,), audit=(self.audit(now, "escalation", t.id, detail),)
             )
+        detail["moved_up_to_priority"] = tiered.moved_up_to_priority
         d = Decision(audit=(self.audit(now, "decision", t.id, detail),))
+        return d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
+
+    def _issue_joint(
+        self,
+        case: Case,
+        sel: Selection,
+        options: dict[OperationId, list[Alternative]],
+        compatible: Callable[[Alternative, Alternative], bool],
+        now: float,
+    ) -> Decision:
+        """Recommendations for the UAS whose selected option changes their plan."""
+        t = case.threat
+        d = Decision()
         for op_id, alt in sel.chosen.items():
             case.modes[op_id] = MODE_MULTI
             rid = RecommendationId(f"{t.id}/{op_id}")
             prev = self._recs.get(rid)
+            if is_stay(alt):
+                msg = f"{t.id}: {op_id} has {STAY_DETAIL}; the others move around it"
+                d = d.merge(Decision(escalations=(msg,)))
             if alt.maneuver is Maneuver.KEEP_PLAN:
                 if prev is not None and prev.state is RecommendationState.PROPOSED:
                     old = prev.transition(RecommendationState.SUPERSEDED, now, "no longer needed")
@@ -386,7 +503,13 @@ class EmergencyManager:
         case.modes[op_id] = f"single:{','.join(sorted(m.value for m in maneuvers))}"
         allowed = maneuvers - case.excluded.get(op_id, set())
         alts = self.td.resolve_single(
-            t, op_id, snapshot, maneuvers=allowed, extra_geofences=tuple(case.geofences)
+            t,
+            op_id,
+            snapshot,
+            maneuvers=allowed,
+            extra_geofences=tuple(case.geofences),
+            start_t_s=self.plan_start(t, now),
+            lead_in_from_t_s=self.earliest_receipt(now),
         )
         cfg = self.config
         if case.action == "land_or_home":
@@ -443,7 +566,13 @@ class EmergencyManager:
         banned = case.excluded.get(op_id, set())
         alts = [
             x
-            for x in self.td.resolve_intruder(case.threat, op_id, snapshot)
+            for x in self.td.resolve_intruder(
+                case.threat,
+                op_id,
+                snapshot,
+                self.plan_start(case.threat, now),
+                self.earliest_receipt(now),
+            )
             if x.maneuver not in banned
         ]
         alts.sort(key=lambda x: weighted(x, cfg.alpha, cfg.beta))

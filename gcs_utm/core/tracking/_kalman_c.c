@@ -9,7 +9,7 @@
  * would not simply update its track, or a division would be by zero (NumPy's inf/nan): the
  * NumPy round decides then.
  *
- * lane_records(): kernel.check_entries for telemetry entries.
+ * entry_records(): kernel.check_entries.
  *
  * The layouts are those of gcs_utm/core/tracking/layout.py; the module exports its copy as
  * LAYOUT, which kernel.py compares with layout.C_LAYOUT at import.
@@ -208,45 +208,74 @@ done:
 /* lane_records(values, a, idx, defaults, min_sigma, max_future, max_speed2, north_dir,
  *              min_alt, max_alt) -> (m, invalid, gate)
  *
-/* kernel.check_entries for each telemetry entry in ``values`` (a sequence of k entries of
- * STRIDE numbers, layout.py ENT_*), the same conditions in the same order with the same
- * arithmetic: the i-th entry that passes goes to column i of ``a`` (NCOL, k) and its source
- * index to idx[i]; m of them passed. ``defaults``: (eph, epv, velocity sigma) of telemetry;
- * ``north_dir``: (east, north) of true north on the grid. */
+/* entry_records(values, a, idx, defaults, min_sigma, max_future, max_speed2, north_dir,
+ *               min_alt, max_alt[, kinds, has_vel]) -> (m, invalid, gate)
+ *
+ * kernel.check_entries for each entry in ``values`` (a sequence of k entries of STRIDE
+ * numbers, layout.py ENT_*), the same conditions in the same order with the same arithmetic:
+ * the i-th entry that passes goes to column i of ``a`` (NCOL, k) and its ENT_SRC value to
+ * idx[i]; m of them passed. ``defaults``: (eph, epv, velocity sigma) per source kind;
+ * ``kinds`` (intp, k): each entry's source kind (None: all 0); ``has_vel`` (bool, k): whether
+ * a velocity was measured (None: all; a missing one is given as zeros); ``north_dir``: (east,
+ * north) of true north on the grid. */
 enum { L_IDX = 0, L_RCV, L_T, L_LON, L_LAT, L_ALT, L_VN, L_VE, L_VD, L_EPH, L_EPV, STRIDE };
+enum { NSRC = 3 }; /* source kinds: layout.N_SOURCES */
 
-static PyObject *lane_records(PyObject *self, PyObject *args) {
-    PyObject *o_values, *o_a, *o_idx;
-    double eph_d, epv_d, vsig, min_sigma, max_future, max_speed2, nd_e, nd_n, min_alt, max_alt;
+static PyObject *entry_records(PyObject *self, PyObject *args) {
+    PyObject *o_values, *o_a, *o_idx, *o_kinds = Py_None, *o_hv = Py_None;
+    double dflt[NSRC][3], min_sigma, max_future, max_speed2, nd_e, nd_n, min_alt, max_alt;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOO(ddd)ddd(dd)dd:lane_records", &o_values, &o_a, &o_idx,
-                          &eph_d, &epv_d, &vsig, &min_sigma, &max_future, &max_speed2, &nd_e,
-                          &nd_n, &min_alt, &max_alt))
+    if (!PyArg_ParseTuple(args, "OOO((ddd)(ddd)(ddd))ddd(dd)dd|OO:entry_records", &o_values,
+                          &o_a, &o_idx, &dflt[0][0], &dflt[0][1], &dflt[0][2], &dflt[1][0],
+                          &dflt[1][1], &dflt[1][2], &dflt[2][0], &dflt[2][1], &dflt[2][2],
+                          &min_sigma, &max_future, &max_speed2, &nd_e, &nd_n, &min_alt,
+                          &max_alt, &o_kinds, &o_hv))
         return NULL;
-    PyObject *seq = PySequence_Fast(o_values, "lane_records: values must be a sequence");
+    PyObject *seq = PySequence_Fast(o_values, "entry_records: values must be a sequence");
     if (seq == NULL) return NULL;
-    Buf bufs[2] = {{{0}}};
+    Buf bufs[4] = {{{0}}};
     PyObject *result = NULL;
     Py_ssize_t n = PySequence_Fast_GET_SIZE(seq);
     if (n % STRIDE) {
-        PyErr_Format(PyExc_ValueError, "lane_records: %zd numbers is not a whole number of "
+        PyErr_Format(PyExc_ValueError, "entry_records: %zd numbers is not a whole number of "
                      "%d-number entries", n, (int)STRIDE);
         goto done;
     }
     Py_ssize_t k = n / STRIDE;
     if (get(o_a, &bufs[0], "a", 8, NCOL * k, 1) < 0) goto done;
     if (get(o_idx, &bufs[1], "idx", (Py_ssize_t)sizeof(Py_ssize_t), k, 1) < 0) goto done;
+    const Py_ssize_t *kinds = NULL;
+    const char *has_vel = NULL;
+    if (o_kinds != Py_None) {
+        if (get(o_kinds, &bufs[2], "kinds", (Py_ssize_t)sizeof(Py_ssize_t), k, 0) < 0) goto done;
+        kinds = bufs[2].b.buf;
+    }
+    if (o_hv != Py_None) {
+        if (get(o_hv, &bufs[3], "has_vel", 1, k, 0) < 0) goto done;
+        has_vel = bufs[3].b.buf;
+    }
     double *a = bufs[0].b.buf;
     Py_ssize_t *idx = bufs[1].b.buf;
     PyObject **items = PySequence_Fast_ITEMS(seq);
-    double e = min_sigma > eph_d ? min_sigma : eph_d; /* max(eph_d, min_sigma) */
-    double eph2_d = e * e;
-    e = min_sigma > epv_d ? min_sigma : epv_d;
-    double epv2_d = e * e;
-    double vsig2 = vsig * vsig;
+    /* per source: the defaults' variances, max(default, min_sigma)^2, and vsig^2 */
+    double eph2_ds[NSRC], epv2_ds[NSRC], vsig2s[NSRC];
+    for (int s = 0; s < NSRC; s++) {
+        double e = min_sigma > dflt[s][0] ? min_sigma : dflt[s][0];
+        eph2_ds[s] = e * e;
+        e = min_sigma > dflt[s][1] ? min_sigma : dflt[s][1];
+        epv2_ds[s] = e * e;
+        vsig2s[s] = dflt[s][2] * dflt[s][2];
+    }
     Py_ssize_t m = 0, invalid = 0, gate = 0;
     for (Py_ssize_t j = 0; j < k; j++) {
         PyObject **it = items + j * STRIDE;
+        Py_ssize_t kind = kinds != NULL ? kinds[j] : 0;
+        if (kind < 0 || kind >= NSRC) {
+            PyErr_Format(PyExc_ValueError, "entry_records: source kind %zd", kind);
+            goto done;
+        }
+        int hv = has_vel != NULL ? has_vel[j] != 0 : 1;
+        double eph_d = dflt[kind][0], epv_d = dflt[kind][1];
         double v[STRIDE];
         for (int f = 1; f < STRIDE; f++) {
             v[f] = PyFloat_AsDouble(it[f]);
@@ -263,8 +292,8 @@ static PyObject *lane_records(PyObject *self, PyObject *args) {
         double eph2, epv2;
         double eph = v[L_EPH], epv = v[L_EPV]; /* nan: unknown (None) */
         if (isnan(eph) && isnan(epv)) {
-            eph2 = eph2_d;
-            epv2 = epv2_d;
+            eph2 = eph2_ds[kind];
+            epv2 = epv2_ds[kind];
         } else {
             if (isnan(eph)) eph = eph_d;
             if (isnan(epv)) epv = epv_d;
@@ -290,31 +319,31 @@ static PyObject *lane_records(PyObject *self, PyObject *args) {
         rec[C_E] = lon; /* projected to east/north by the tracker */
         rec[C_N] = lat;
         rec[C_U] = alt;
-        rec[C_VE] = vn * nd_e + ve * nd_n;
-        rec[C_VE + 1] = vn * nd_n - ve * nd_e;
-        rec[C_VE + 2] = -vd;
+        rec[C_VE] = hv ? vn * nd_e + ve * nd_n : 0.0;
+        rec[C_VE + 1] = hv ? vn * nd_n - ve * nd_e : 0.0;
+        rec[C_VE + 2] = hv ? -vd : 0.0;
         rec[C_R] = eph2;
         rec[C_R + 1] = eph2;
         rec[C_R + 2] = epv2;
-        rec[C_RV] = rec[C_RV + 1] = rec[C_RV + 2] = vsig2;
-        rec[C_SRC] = 0.0;
-        rec[C_HV] = 1.0;
+        rec[C_RV] = rec[C_RV + 1] = rec[C_RV + 2] = vsig2s[kind];
+        rec[C_SRC] = (double)kind;
+        rec[C_HV] = hv ? 1.0 : 0.0;
         for (int f = 0; f < NCOL; f++) a[(Py_ssize_t)f * k + m] = rec[f];
         idx[m] = src;
         m++;
     }
     result = Py_BuildValue("(nnn)", m, invalid, gate);
 done:
-    release(bufs, 2);
+    release(bufs, 4);
     Py_DECREF(seq);
     return result;
 }
 
 static PyMethodDef methods[] = {
-    {"lane_records", lane_records, METH_VARARGS,
-     "lane_records(values, a, idx, defaults, min_sigma, max_future, max_speed2, north_dir, "
-     "min_alt, max_alt) -> (m, invalid, gate): Tracker.ingest's checks and records for "
-     "PositionLane entries (see the module source)."},
+    {"entry_records", entry_records, METH_VARARGS,
+     "entry_records(values, a, idx, defaults, min_sigma, max_future, max_speed2, north_dir, "
+     "min_alt, max_alt[, kinds, has_vel]) -> (m, invalid, gate): the checks and records of "
+     "entries (see the module source)."},
     {"update_rows", update_rows, METH_VARARGS,
      "update_rows(rw, a, x, p, t, src_t, updates, gate_fails, stale, q, max_jump, margin, "
      "max_speed) -> bool: the common round (see the module source)."},
@@ -332,8 +361,8 @@ PyMODINIT_FUNC PyInit__kalman_c(void) {
     if (mod == NULL) return NULL;
     /* The layouts as this build knows them, in the order of layout.C_LAYOUT. */
     PyObject *layout = Py_BuildValue(
-        "(iiiiiiiiiiiiiiiiiiiiii)", C_T, C_E, C_N, C_U, C_VE, C_R, C_RV, C_SRC, C_HV, NCOL,
-        L_IDX, L_RCV, L_T, L_LON, L_LAT, L_ALT, L_VN, L_VE, L_VD, L_EPH, L_EPV, STRIDE);
+        "(iiiiiiiiiiiiiiiiiiiiiii)", C_T, C_E, C_N, C_U, C_VE, C_R, C_RV, C_SRC, C_HV, NCOL,
+        L_IDX, L_RCV, L_T, L_LON, L_LAT, L_ALT, L_VN, L_VE, L_VD, L_EPH, L_EPV, STRIDE, NSRC);
     if (layout == NULL || PyModule_AddObject(mod, "LAYOUT", layout) < 0) {
         Py_XDECREF(layout);
         Py_DECREF(mod);

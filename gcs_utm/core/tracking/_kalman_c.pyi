@@ -22,16 +22,18 @@ def update_rows(
     max_speed: float,
     /,
 ) -> bool: ...
-def lane_records(
+def entry_records(
     values: Sequence[float],
     a: npt.NDArray[np.float64],
     idx: npt.NDArray[np.intp],
-    defaults: tuple[float, float, float],
+    defaults: tuple[tuple[float, float, float], ...],
     min_sigma: float,
     max_future: float,
     max_speed2: float,
     north_dir: tuple[float, float],
     min_alt: float,
     max_alt: float,
+    kinds: npt.NDArray[np.intp] | None = None,
+    has_vel: npt.NDArray[np.bool_] | None = None,
     /,
 ) -> tuple[int, int, int]: ...

@@ -20,7 +20,7 @@ import numpy.typing as npt
 
 from gcs_utm.core.tracking import kernel
 from gcs_utm.core.tracking.config import TrackingConfig
-from gcs_utm.core.tracking.layout import ENTRY_STRIDE, N_SOURCES, SOURCE_INDEX
+from gcs_utm.core.tracking.layout import SOURCE_INDEX
 from gcs_utm.model import (
     Icao24,
     LaneSource,
@@ -58,14 +58,11 @@ class Intake:
         self._config = config
         # true north on the UTM grid at the origin: measured NED velocities -> grid velocities
         self._north_dir = north_dir
-        self._default_sigma = {
-            0: (config.telemetry_eph_m, config.telemetry_epv_m, config.telemetry_vel_sigma_mps),
-            1: (config.adsb_eph_m, config.adsb_epv_m, config.adsb_vel_sigma_mps),
-            2: (config.mqtt_eph_m, config.mqtt_epv_m, config.telemetry_vel_sigma_mps),
-        }
-        # (eph, epv, velocity sigma) per source index, for kernel.check_entries
-        self._defaults = np.array(
-            [self._default_sigma[i] for i in range(N_SOURCES)], dtype=np.float64
+        # (eph, epv, velocity sigma) per source index (layout.SOURCE_INDEX)
+        self._defaults = (
+            (config.telemetry_eph_m, config.telemetry_epv_m, config.telemetry_vel_sigma_mps),
+            (config.adsb_eph_m, config.adsb_epv_m, config.adsb_vel_sigma_mps),
+            (config.mqtt_eph_m, config.mqtt_epv_m, config.telemetry_vel_sigma_mps),
         )
         self.ops: dict[OperationId, Operation] = {}
         self._by_sys: dict[SysId, OperationId] = {}
@@ -132,7 +129,7 @@ class Intake:
     ) -> tuple[IntArray, FloatArray]:
         """Rows and records (NCOL, M) of the measurements that reach a track: each is
         written as an entry (:mod:`.layout`) and checked with the lane entries' checks
-        (:func:`.kernel.check_entries`); then the identity of those that passed finds or
+        (:func:`.kernel.entry_records`); then the identity of those that passed finds or
         makes their track, in batch order. Rejections are added to ``counts``."""
         cache = self._row_of_key
         values: list[float] = []
@@ -174,11 +171,12 @@ class Intake:
                 row = -1
             rows.append(row)
         cfg = self._config
-        idx, a, invalid, gate = kernel.check_entries(
-            np.array(values, dtype=np.float64).reshape(-1, ENTRY_STRIDE).T.copy(),
+        idx, a, invalid, gate = kernel.entry_records(
+            values,
             self._defaults,
-            np.array(kinds, dtype=np.intp),
-            np.array(has_vel, dtype=bool),
+            # (None: all telemetry, all with a velocity, as lane entries)
+            np.array(kinds, dtype=np.intp) if any(kinds) else None,
+            None if all(has_vel) else np.array(has_vel, dtype=bool),
             cfg.min_sigma_m,
             cfg.max_future_s,
             cfg.max_speed_mps,
@@ -219,7 +217,9 @@ class Intake:
         cfg = self._config
         idx, a, invalid, gate = kernel.entry_records(
             lane,
-            self._default_sigma[SOURCE_INDEX[MeasurementSource.TELEMETRY]],
+            self._defaults,
+            None,  # telemetry
+            None,  # with a velocity
             cfg.min_sigma_m,
             cfg.max_future_s,
             cfg.max_speed_mps,

@@ -2,8 +2,9 @@
 optional C implementation (``_kalman_c.c``, built by ``pip install`` where a C compiler is
 present) that computes the same thing bit for bit (the tests compare them):
 
-- :func:`entry_records`: the checks of each entry (finite, in range, capture time not after
-  receipt + ``max_future_s``, measured speed) and its record (:mod:`.layout`);
+- :func:`entry_records` (reference :func:`check_entries`): the checks of each entry (finite,
+  in range, capture time not after receipt + ``max_future_s``, measured speed) and its record
+  (:mod:`.layout`);
 - :func:`update_rows`: the common round, in which every measurement simply updates its own
   track (no gate, duplicate or out-of-order rejection, no new track). Its NumPy reference is
   the tracker's general round (``Tracker._round`` with :func:`.kalman.step`); the C kernel
@@ -68,31 +69,34 @@ def name() -> str:
 
 
 def entry_records(  # noqa: PLR0917 (the checks' parameters, as the C function takes them)
-    values: Sequence[float] | FloatArray,
-    defaults: tuple[float, float, float],
+    values: Sequence[float],
+    defaults: tuple[tuple[float, float, float], ...],
+    kinds: IntArray | None,
+    has_vel: BoolArray | None,
     min_sigma_m: float,
     max_future_s: float,
     max_speed_mps: float,
     north_dir: tuple[float, float],
 ) -> tuple[IntArray, FloatArray, int, int]:
-    """Checks and records of telemetry entries (a flat sequence of :data:`ENTRY_STRIDE`
-    numbers per entry, every one with a velocity), ``defaults`` = (eph, epv, velocity sigma)
-    of telemetry. Returns the passing entries' ``ENT_SRC`` values, their records (NCOL, M),
-    and how many were invalid and gated. In C when it is built, else :func:`check_entries`."""
-    if _c is not None and not isinstance(values, np.ndarray):
+    """Checks and records of entries (a flat sequence of :data:`ENTRY_STRIDE` numbers per
+    entry); ``defaults``: (eph, epv, velocity sigma) per source index; the other arguments as
+    :func:`check_entries` takes them. In C when it is built, else :func:`check_entries`."""
+    if _c is not None:
         k = len(values) // ENTRY_STRIDE
         a = np.empty((NCOL, k))
         idx = np.empty(k, dtype=np.intp)
-        m, invalid, gate = _c.lane_records(
+        m, invalid, gate = _c.entry_records(
             values, a, idx, defaults, min_sigma_m, max_future_s, max_speed_mps**2, north_dir,
-            MIN_ALT_AMSL_M, MAX_ALT_AMSL_M,
+            MIN_ALT_AMSL_M, MAX_ALT_AMSL_M, kinds, has_vel,
         )  # fmt: skip
         if m < k:
             return idx[:m], a[:, :m].copy(), invalid, gate
         return idx, a, invalid, gate
-    v = np.asarray(values, dtype=np.float64).reshape(-1, ENTRY_STRIDE).T.copy()
-    table = np.array([defaults], dtype=np.float64)
-    return check_entries(v, table, None, None, min_sigma_m, max_future_s, max_speed_mps, north_dir)
+    v = np.array(values, dtype=np.float64).reshape(-1, ENTRY_STRIDE).T.copy()
+    table = np.array(defaults, dtype=np.float64)
+    return check_entries(
+        v, table, kinds, has_vel, min_sigma_m, max_future_s, max_speed_mps, north_dir
+    )
 
 
 def check_entries(  # noqa: PLR0917

@@ -58,7 +58,7 @@ N_SOURCES = 3
 C_LAYOUT = (
     REC_T, REC_EAST, REC_NORTH, REC_ALT, REC_VE, REC_R, REC_RV, REC_SRC, REC_HAS_VEL, NCOL,
     ENT_SRC, ENT_RCV, ENT_T, ENT_LON, ENT_LAT, ENT_ALT, ENT_VN, ENT_VE, ENT_VD, ENT_EPH,
-    ENT_EPV, ENTRY_STRIDE,
+    ENT_EPV, ENTRY_STRIDE, N_SOURCES,
 )  # fmt: skip
 
 # Altitudes outside this band are not an aircraft: below the Dead Sea shore (-430 m) with

@@ -1,0 +1,145 @@
+"""Supervision of what was decided: a threat that stays open after its plan was applied, and
+an upload that failed, each lead to a new decision (paper §4.4: nothing is dropped).
+
+- **Persisting threat.** A recommendation accepted (and, when the service reports it,
+  applied) is *settled* once its plan has started and ``supervision_grace_s`` has passed
+  (for a command: once it was accepted, plus the upload time and the grace). When every
+  accepted recommendation of a case is settled and Monitoring still reports the threat (the
+  case is open: Monitoring closes a threat only after it cleared for ``close_cycles``), EM
+  decides again on the current snapshot (which holds the applied plans): a new version of
+  the recommendation, up to ``max_replans`` times; then it escalates with the reason,
+  proposing the threat's safe command. Further supervision of the case waits
+  ``retry_after_s``.
+- **Failed upload or verification.** The first failure for a UAS re-plans once; the next
+  escalates and proposes the safe command for the threat kind (:func:`safe_command`): the
+  UAS is never left with a failed plan and no pending decision.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from gcs_utm.core.emergency.decision import MODE_COMMAND, ONE_SHOT, Case, Decision
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    Command,
+    CommandKind,
+    OperationId,
+    Recommendation,
+    RecommendationId,
+    RecommendationState,
+    ThreatKind,
+)
+
+if TYPE_CHECKING:
+    from gcs_utm.core.emergency.manager import EmergencyManager
+
+_LAND_KINDS = frozenset(
+    {ThreatKind.LACK_OF_BATTERY, ThreatKind.TECHNICAL_FAILURE, ThreatKind.GNSS_DEGRADATION}
+)
+_RTL_KINDS = frozenset({ThreatKind.COMMUNICATION_FAILURE})
+_IN_FORCE = (RecommendationState.ACCEPTED, RecommendationState.APPLIED)
+
+
+def safe_command(kind: ThreatKind) -> CommandKind:
+    """The command that keeps a UAS safe when no plan can be flown: land when energy or the
+    vehicle is failing, return to launch when the link is, else hold (a multirotor holds
+    position, a fixed wing loiters: the autopilot mapping does that)."""
+    if kind in _LAND_KINDS:
+        return CommandKind.LAND
+    if kind in _RTL_KINDS:
+        return CommandKind.RTL
+    return CommandKind.HOLD
+
+
+def settled_at(em: EmergencyManager, rec: Recommendation) -> float:
+    """When an accepted or applied recommendation should show its effect on the threat."""
+    cfg = em.config
+    t = rec.state_t_s if rec.state_t_s is not None else rec.created_t_s
+    if rec.state is RecommendationState.ACCEPTED:
+        t += cfg.upload_time_s  # the service may not report the outcome
+    if rec.selected is not None and rec.selected.plan is not None:
+        t = max(t, em.manoeuvre_start(rec))
+    return t + cfg.supervision_grace_s
+
+
+def supervise_case(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+    """A new decision when the case's accepted plans are settled and the threat persists."""
+    now = snapshot.t_s
+    recs = [em.recommendation(r) for r in sorted(case.rec_ids)]
+    live = [r for r in recs if r is not None and r.state in _IN_FORCE]
+    if (
+        case.action in ONE_SHOT
+        or not live
+        or any(r is not None and r.state is RecommendationState.PROPOSED for r in recs)
+    ):
+        return Decision()
+    if now < max(settled_at(em, r) for r in live):
+        return Decision()
+    if case.supervised and now - case.attempt_t_s < em.config.retry_after_s:
+        return Decision()
+    case.supervised += 1
+    case.attempt_t_s = now
+    versions = ", ".join(f"{r.id} v{r.version}" for r in live)
+    why = f"{case.threat.id} ({case.threat.kind.value}) still predicted after {versions}"
+    if case.supervised > em.config.max_replans:
+        return escalate_safe(em, case, [r.operation_id for r in live], now, why)
+    d = em.decide_again(case, snapshot)
+    audit = em.audit(now, "supervision", case.threat.id, {"reason": why})
+    if not d.recommendations:
+        return d.merge(escalate_safe(em, case, [r.operation_id for r in live], now, why))
+    return Decision(audit=(audit,)).merge(d)
+
+
+def escalate_safe(
+    em: EmergencyManager, case: Case, op_ids: list[OperationId], now: float, why: str
+) -> Decision:
+    """Escalate with ``why`` and propose the threat's safe command to each UAS in ``op_ids``."""
+    kind = safe_command(case.threat.kind)
+    msg = f"{why}; operator action needed: {kind.value} proposed"
+    d = Decision(
+        escalations=(msg,),
+        audit=(em.audit(now, "escalation", case.threat.id, {"reason": msg}),),
+    )
+    for op_id in dict.fromkeys(op_ids):
+        case.modes[op_id] = MODE_COMMAND
+        cmd = Command(kind=kind, operation_id=op_id)
+        d = d.merge(em.issue(case, op_id, now, command=cmd, reason=msg))
+    return d
+
+
+def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answer
+    em: EmergencyManager,
+    rec_id: RecommendationId,
+    version: int,
+    applied: bool,
+    reason: str,
+    snapshot: AirspaceSnapshot,
+) -> Decision:
+    """The service reports whether an accepted recommendation was applied (verified) or
+    failed: record it; after a failure re-plan once, then escalate with the safe command."""
+    now = snapshot.t_s
+    cur = em.recommendation(rec_id)
+    if cur is None or cur.version != version or cur.state is not RecommendationState.ACCEPTED:
+        return Decision()
+    state = RecommendationState.APPLIED if applied else RecommendationState.FAILED
+    new = em.record(cur.transition(state, now, reason))
+    d = Decision(
+        recommendations=(new,),
+        audit=(em.audit(now, state.value, rec_id, {"version": version, "reason": reason}),),
+    )
+    case = em.case(new.threat_id)
+    if applied or case is None:
+        return d
+    op_id = new.operation_id
+    n = case.failures.get(op_id, 0) + 1
+    case.failures[op_id] = n
+    why = f"{rec_id} v{version} for {op_id} failed ({reason})"
+    if n > 1 or case.modes.get(op_id) == MODE_COMMAND:
+        return d.merge(escalate_safe(em, case, [op_id], now, why))
+    again = em.decide_again(case, snapshot)
+    mine = [r for r in again.recommendations if r.operation_id == op_id]
+    if not any(r.state in (RecommendationState.PROPOSED, *_IN_FORCE) for r in mine):
+        again = again.merge(escalate_safe(em, case, [op_id], now, why))
+    audit = em.audit(now, "replan_after_failure", case.threat.id, {"reason": why})
+    return d.merge(Decision(audit=(audit,))).merge(again)

@@ -1,0 +1,82 @@
+"""The performance envelope of a vehicle: what it can fly.
+
+Tactical Deconfliction proposes only manoeuvres inside it (see docs/resolution.md). It comes
+from the operation's description (:func:`implied`) unless one is given
+(``gcs_utm.model.Operation.envelope``: a scenario file, or the autopilot's parameters where
+the vehicle reports them). Re-exported by :mod:`gcs_utm.model`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+class EnvelopeError(ValueError):
+    """An envelope value that cannot describe a vehicle; ``field_name`` says which."""
+
+    def __init__(self, field_name: str, message: str) -> None:
+        super().__init__(f"performance envelope: {field_name}: {message}")
+        self.field_name = field_name
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PerformanceEnvelope:
+    """Vertical rates (m/s), horizontal speed range (m/s), turn radius (m), and whether the
+    vehicle can hover (hold in place): a fixed wing cannot slow below its minimum speed nor
+    stop."""
+
+    climb_rate_mps: float
+    descent_rate_mps: float
+    min_speed_mps: float
+    max_speed_mps: float
+    turn_radius_m: float
+    can_hover: bool
+
+    def __post_init__(self) -> None:
+        for name in (
+            "climb_rate_mps",
+            "descent_rate_mps",
+            "min_speed_mps",
+            "max_speed_mps",
+            "turn_radius_m",
+        ):
+            if not math.isfinite(getattr(self, name)):
+                raise EnvelopeError(name, f"must be a finite number, got {getattr(self, name)!r}")
+        for name in ("climb_rate_mps", "descent_rate_mps", "max_speed_mps"):
+            if getattr(self, name) <= 0.0:
+                raise EnvelopeError(name, "must be positive")
+        if self.min_speed_mps < 0.0:
+            raise EnvelopeError("min_speed_mps", "must be >= 0")
+        if self.turn_radius_m < 0.0:
+            raise EnvelopeError("turn_radius_m", "must be >= 0")
+        if self.min_speed_mps > self.max_speed_mps:
+            raise EnvelopeError("min_speed_mps", "is above max_speed_mps")
+
+
+MULTIROTOR_DESCENT_RATE_MPS = 1.5
+"""PX4's MPC_Z_V_AUTO_DN and ArduCopter's WPNAV_SPEED_DN default to 1.5 m/s."""
+FIXED_WING_DESCENT_RATE_MPS = 3.0
+"""Well inside PX4's FW_T_SINK_MAX and ArduPlane's TECS_SINK_MAX (5 m/s)."""
+MAX_SPEED_FACTOR = 1.2
+"""A vehicle described by its cruise speed alone is assumed to fly up to 20 % faster."""
+FIXED_WING_MIN_SPEED_FACTOR = 0.7
+"""...and a fixed wing no slower than 70 % of its cruise speed (the stall margin)."""
+FIXED_WING_TURN_RADIUS_M = 80.0
+"""PX4's NAV_LOITER_RAD default, a turn a small fixed wing flies at cruise speed."""
+
+
+def implied(
+    fixed_wing: bool, cruise_speed_mps: float, climb_rate_mps: float
+) -> PerformanceEnvelope:
+    """The envelope a description (kind, cruise speed, climb rate) implies; the descent rate
+    is never above the climb rate."""
+    descent = FIXED_WING_DESCENT_RATE_MPS if fixed_wing else MULTIROTOR_DESCENT_RATE_MPS
+    return PerformanceEnvelope(
+        climb_rate_mps=climb_rate_mps,
+        descent_rate_mps=min(climb_rate_mps, descent),
+        min_speed_mps=FIXED_WING_MIN_SPEED_FACTOR * cruise_speed_mps if fixed_wing else 0.0,
+        max_speed_mps=MAX_SPEED_FACTOR * cruise_speed_mps,
+        turn_radius_m=FIXED_WING_TURN_RADIUS_M if fixed_wing else 0.0,
+        can_hover=not fixed_wing,
+    )

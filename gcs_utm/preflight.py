@@ -1,0 +1,130 @@
+"""Checks of a whole configuration that need more than one field's type and range: what
+``serve`` would otherwise find only when it starts (or later, on the first reconnect).
+
+- ``[mavlink] links``: each connection string parses (the same parser the hub uses);
+- ``[mavlink] signing_keys``: each key is 64 hex digits under a system id 1..255;
+- ``[mqtt] tls``: the CA, certificate and key files exist and load (the same ``ssl`` calls
+  the MQTT client makes when it connects), a certificate comes with its key;
+- ``[mqtt] topic_prefix``: a valid topic name without wildcards;
+- reconnect backoffs: the first delay is not above the cap;
+- ``[airspace]``: the origin makes a local frame.
+
+Every problem is a :class:`gcs_utm.config.ConfigError` naming the file, the dotted key and
+what was expected. ``gcs-utm config check`` and every command that loads a configuration
+file run these checks, so "ok" means ``serve`` will start with it.
+"""
+
+from __future__ import annotations
+
+import ssl
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from adapters.mavlink.endpoint import EndpointError, parse_endpoint
+from adapters.mavlink.wire import parse_key
+from gcs_utm.config import ConfigError
+from gcs_utm.geo import FrameError, LocalFrame
+
+
+def check_settings(settings: Any, *, source: str) -> None:
+    """Raise :class:`ConfigError` for the first problem of ``settings`` (a
+    :class:`gcs_utm.settings.Settings`), in section order."""
+    for key, problem in _problems(settings):
+        raise ConfigError(source, key, problem)
+
+
+def problems(settings: Any) -> list[tuple[str, str]]:
+    """Every (dotted key, what was expected) problem of ``settings``."""
+    return list(_problems(settings))
+
+
+def _problems(settings: Any) -> Iterator[tuple[str, str]]:
+    yield from _airspace(settings.airspace)
+    yield from _mavlink(settings.mavlink)
+    yield from _ordered(
+        "adsb.reconnect_initial_s",
+        settings.adsb.reconnect_initial_s,
+        "adsb.reconnect_max_s",
+        settings.adsb.reconnect_max_s,
+    )
+    yield from _mqtt(settings.mqtt)
+
+
+def _airspace(air: Any) -> Iterator[tuple[str, str]]:
+    try:
+        LocalFrame(air.origin_lat_deg, air.origin_lon_deg, air.ground_elevation_amsl_m)
+    except (FrameError, ValueError) as exc:
+        yield "airspace.origin_lat_deg", f"the origin makes no local frame: {exc}"
+
+
+def _mavlink(cfg: Any) -> Iterator[tuple[str, str]]:
+    for i, text in enumerate(cfg.links):
+        try:
+            parse_endpoint(text)
+        except EndpointError as exc:
+            yield f"mavlink.links[{i}]", f"not a connection string: {exc}"
+    for sid, hexkey in cfg.signing_keys.items():
+        key = f"mavlink.signing_keys.{sid}"
+        if not (sid.isdigit() and 1 <= int(sid) <= 255):
+            yield key, f"expected a system id 1..255 as the key, got {sid!r}"
+            continue
+        try:
+            parse_key(hexkey)
+        except ValueError as exc:
+            yield key, f"expected 64 hex digits (a 32-byte MAVLink 2 signing key): {exc}"
+
+
+def _ordered(lo_key: str, lo: float, hi_key: str, hi: float) -> Iterator[tuple[str, str]]:
+    if lo > hi:
+        yield lo_key, f"expected at most {hi_key} ({hi!r}), got {lo!r}"
+
+
+def _mqtt(cfg: Any) -> Iterator[tuple[str, str]]:
+    yield from _ordered(
+        "mqtt.backoff_initial_s", cfg.backoff_initial_s, "mqtt.backoff_max_s", cfg.backoff_max_s
+    )
+    prefix = cfg.topic_prefix
+    if (
+        not prefix
+        or any(c in prefix for c in "+#\0")
+        or prefix.startswith("/")
+        or prefix.endswith("/")
+    ):
+        yield (
+            "mqtt.topic_prefix",
+            (
+                f"expected topic levels without wildcards (+, #) or a leading or trailing /, "
+                f"got {prefix!r}"
+            ),
+        )
+    if cfg.tls.enabled:
+        yield from _tls(cfg.tls)
+
+
+def _tls(tls: Any) -> Iterator[tuple[str, str]]:
+    for name in ("ca_path", "cert_path", "key_path"):
+        path = getattr(tls, name)
+        if path and not Path(path).is_file():
+            what = "is a directory" if Path(path).is_dir() else "does not exist"
+            yield f"mqtt.tls.{name}", f"expected a readable PEM file; {path} {what}"
+            return
+    if bool(tls.cert_path) != bool(tls.key_path):
+        missing = "key_path" if tls.cert_path else "cert_path"
+        yield f"mqtt.tls.{missing}", "mutual TLS needs both cert_path and key_path"
+        return
+    ctx = ssl.create_default_context()
+    if tls.ca_path:
+        try:
+            ctx.load_verify_locations(cafile=tls.ca_path)
+        except (ssl.SSLError, OSError, ValueError) as exc:
+            yield "mqtt.tls.ca_path", f"expected a PEM CA certificate file: {exc}"
+            return
+    if tls.cert_path:
+        try:
+            ctx.load_cert_chain(tls.cert_path, tls.key_path)
+        except (ssl.SSLError, OSError, ValueError) as exc:
+            yield "mqtt.tls.cert_path", f"the certificate and key do not load together: {exc}"
+
+
+__all__ = ["check_settings", "problems"]

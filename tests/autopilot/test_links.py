@@ -1,0 +1,88 @@
+"""A TCP link to real ArduCopter SITL survives the autopilot (issue 26 item 5): the hub
+starts before SITL listens and connects when it does; SITL is killed (SIGKILL) and the
+vehicle is reported lost (COMMUNICATION_FAILURE, link down) without a flood of send
+warnings; SITL restarted in the same working directory is reconnected to, asked for its
+streams again, and the vehicle is live again (positions, its reboot seen)."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import signal
+import time
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from adapters.mavlink import MavlinkConfig, MavlinkHub
+from gcs_utm.clock import RealClock
+from gcs_utm.model import SysId, ThreatKind
+from tests.autopilot.autopilots import SitlProcess
+from tests.mavlink.conftest import Sink
+
+SPEED = 5.0
+
+
+async def _until(cond: Callable[[], bool], timeout_s: float, what: str) -> None:
+    end = time.monotonic() + timeout_s
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out after {timeout_s} s: {what}")
+        await asyncio.sleep(0.05)
+
+
+@pytest.mark.timeout(240)
+async def test_hub_before_sitl_then_sitl_killed_and_restarted(
+    ardupilot: Callable[..., SitlProcess], caplog: pytest.LogCaptureFixture
+) -> None:
+    sink = Sink()
+    cfg = MavlinkConfig(
+        links=("tcp:127.0.0.1:5760",),
+        reconnect_min_s=0.2,
+        reconnect_max_s=1.0,
+        health_period_s=0.5,
+    )
+    caplog.set_level(logging.INFO)
+    async with MavlinkHub(cfg, RealClock(), sink) as hub:
+        # serve starts although SITL is not listening yet: a clear line, then retries
+        [ls] = hub.links()
+        assert not ls.up and ls.failures >= 1
+        assert any("not up" in r.getMessage() for r in caplog.records)
+        await asyncio.sleep(1.0)
+        p = ardupilot(instance=0, vehicle="copter", speed=SPEED)
+        await _until(lambda: hub.links()[0].up, 30.0, "no connection once SITL listens")
+        await _until(lambda: bool(sink.vehicles), 30.0, "ArduCopter not discovered")
+        await _until(lambda: bool(sink.measurements), 90.0, "no position from ArduCopter")
+        assert sink.vehicles[0].key.sys_id == 1
+
+        # SITL dies: the vehicle is lost, the link is down, nothing floods the log
+        os.killpg(p.proc.pid, signal.SIGKILL)
+        p.proc.wait(timeout=10.0)
+        await _until(lambda: not hub.links()[0].up, 10.0, "link not seen down")
+        lost = [h for h in sink.hazards if h.kind is ThreatKind.COMMUNICATION_FAILURE]
+        assert [h.sys_id for h in lost] == [1], lost
+        await asyncio.sleep(3.0)  # heartbeats keep being due while it is down
+        assert hub.links()[0].dropped_down >= 2
+
+        # restarted in the same working directory: reconnected, streams asked again, live
+        t_restart = time.time()
+        n_before = len(sink.measurements)
+        ardupilot(instance=0, vehicle="copter", speed=SPEED, workdir=p.workdir)
+        await _until(lambda: hub.links()[0].connects == 2, 30.0, "no reconnect")
+        await _until(
+            lambda: any(m.receipt_t_s > t_restart for m in sink.measurements[n_before:]),
+            90.0,
+            "no position after the restart",
+        )
+        assert hub.links()[0].up
+        st = hub.state(SysId(1))
+        assert st.reboots >= 1  # time_boot_ms started again
+        assert hub.counters.links_down == 1 and hub.counters.handler_errors == 0
+        health = hub.health()[0]
+        assert time.time() - health.last_heard_t_s < 5.0
+    noisy = [r for r in caplog.records if "socket.send() raised exception" in r.getMessage()]
+    assert not noisy
+    warnings: list[Any] = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(warnings) < 20, [r.getMessage() for r in warnings]

@@ -1,0 +1,296 @@
+"""EM after a decision (issue 19 item 3, issue 18.5): plans start when the UAS gets them,
+an accepted plan that leaves the threat open is re-planned or escalated, a failed upload is
+re-planned once and then the safe command is proposed, the joint selection respects
+priority and does not escalate because one UAS has no clean option."""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import replace
+
+import pytest
+
+from gcs_utm.bench import deconfliction as sc
+from gcs_utm.clock import ManualClock
+from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
+from gcs_utm.core.emergency import Decision, EmergencyConfig, EmergencyManager
+from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    Alternative,
+    CommandKind,
+    Maneuver,
+    OperationId,
+    Recommendation,
+    RecommendationState,
+    Threat,
+    ThreatKind,
+    ThreatStatus,
+)
+from gcs_utm.services.emergency import EmergencyService
+
+MON = MonitoringConfig()
+
+
+def make_em(answer_delay_s: float | None = None, **cfg: object) -> EmergencyManager:
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MON)
+    return EmergencyManager(
+        sc.FRAME,
+        EmergencyConfig(**cfg),  # type: ignore[arg-type]
+        td,
+        MON,
+        answer_delay_s=answer_delay_s,
+    )
+
+
+def at(snap: AirspaceSnapshot, dt_s: float) -> AirspaceSnapshot:
+    return replace(snap, t_s=sc.T0_S + dt_s)
+
+
+def plans(d: Decision) -> list[Recommendation]:
+    return [r for r in d.recommendations if r.state is RecommendationState.PROPOSED]
+
+
+@pytest.mark.parametrize(
+    ("delay", "autonomous", "start_in_s"),
+    [(None, False, 25.0), (2.0, False, 7.0), (None, True, 5.0)],
+    ids=["pilot", "auto-answer", "autonomous"],
+)
+def test_a_plan_starts_after_the_answer_the_upload_and_a_margin(
+    delay: float | None, autonomous: bool, start_in_s: float
+) -> None:
+    """Pilot: up to the deadline (20 s) + upload 3 s + margin 2 s; an automatic operator:
+    its delay; autonomous: no answer at all. The plan EM proposes leaves the UAS's path then;
+    before that it carries the path's points every 5 s back to the earliest the vehicle can
+    have it (an immediate answer plus the upload), so no leg but the first is untimed."""
+    snap, threat = sc.scenario_los_2uas()
+    em = make_em(delay, autonomous=autonomous)
+    assert em.plan_start(threat, snap.t_s) == pytest.approx(snap.t_s + start_in_s)
+    d = em.on_threat(threat, snap)
+    (rec,) = d.recommendations
+    assert rec.selected is not None and rec.selected.plan is not None
+    times = [w.t_s - snap.t_s for w in rec.selected.plan.waypoints]
+    assert any(abs(t - start_in_s) < 1e-3 for t in times)
+    earliest = 3.0 + (delay or 0.0)
+    lead = [t for t in times if t < start_in_s - 1e-3]
+    assert lead == pytest.approx([start_in_s - 5.0 * k for k in range(len(lead), 0, -1)])
+    assert all(t >= earliest - 1e-6 for t in lead)
+    assert len(lead) == int((start_in_s - earliest) // 5.0)
+    assert em.manoeuvre_start(rec) == pytest.approx(snap.t_s + start_in_s)
+
+
+def accept_all(em: EmergencyManager, d: Decision, snap: AirspaceSnapshot) -> list[Recommendation]:
+    out = []
+    for r in plans(d):
+        (acc,) = em.on_answer(r, True, snap).recommendations
+        out.append(acc)
+    return out
+
+
+def test_a_threat_still_predicted_after_the_accepted_plan_gets_a_new_version() -> None:
+    """Used to be blocked for as long as the accepted recommendation lived."""
+    snap, threat = sc.scenario_los_2uas()
+    em = make_em(max_replans=1)
+    (acc,) = accept_all(em, em.on_threat(threat, snap), at(snap, 1.0))
+    assert acc.selected is not None and acc.selected.plan is not None
+    settled = em.manoeuvre_start(acc) + em.config.supervision_grace_s - sc.T0_S
+    updated = replace(threat, status=ThreatStatus.UPDATED, updated_at_s=sc.T0_S + 5.0)
+    assert em.on_threat(updated, at(snap, 5.0)) == Decision()  # plan not started yet
+    assert em.supervise(at(snap, settled - 1.0)) == Decision()
+    d = em.on_threat(updated, at(snap, settled + 0.5))
+    (v2,) = plans(d)
+    assert v2.id == acc.id and v2.version == acc.version + 1
+    assert any(a.action == "supervision" for a in d.audit)
+    # Accepted again, and the threat still does not close: escalate with the safe command.
+    (acc2,) = accept_all(em, d, at(snap, settled + 1.0))
+    assert acc2.selected is not None and acc2.selected.plan is not None
+    later = em.manoeuvre_start(acc2) + em.config.supervision_grace_s - sc.T0_S + 1.0
+    later = max(later, settled + 0.5 + em.config.retry_after_s + 1.0)
+    d3 = em.supervise(at(snap, later))
+    assert d3.escalations and "still predicted" in d3.escalations[0]
+    (cmd,) = plans(d3)
+    assert cmd.command is not None and cmd.command.kind is CommandKind.HOLD
+
+
+def test_a_failed_upload_replans_once_then_proposes_the_safe_command() -> None:
+    snap, threat = sc.scenario_los_2uas()
+    em = make_em()
+    (acc,) = accept_all(em, em.on_threat(threat, snap), at(snap, 1.0))
+    d = em.on_outcome(acc.id, acc.version, False, "readback item 1 differs", at(snap, 4.0))
+    assert d.recommendations[0].state is RecommendationState.FAILED
+    (v2,) = [r for r in plans(d) if r.operation_id == acc.operation_id]
+    assert v2.version == acc.version + 1 and v2.selected is not None
+    assert not d.escalations
+    (acc2,) = accept_all(em, Decision(recommendations=(v2,)), at(snap, 5.0))
+    d2 = em.on_outcome(acc2.id, acc2.version, False, "MISSION_ACK error", at(snap, 8.0))
+    assert d2.escalations and "failed" in d2.escalations[0]
+    (cmd,) = plans(d2)
+    assert cmd.command is not None and cmd.command.kind is CommandKind.HOLD
+    assert em.pending() == [cmd]  # the threat is never left without a pending decision
+    # A verified upload is recorded as applied, nothing else happens.
+    ok = em.on_outcome(acc.id, acc.version, True, "mission verified", at(snap, 9.0))
+    assert ok == Decision()  # stale version: ignored
+
+
+def test_battery_failure_escalates_with_land() -> None:
+    op = sc.make_operation(
+        "A", [(0, 0, 100), (3000, 0, 100)], landing_sites=[(1400, 300, 60)], endurance_s=300.0
+    )
+    t = sc.T0_S + 100.0
+    threat = sc.threat(ThreatKind.LACK_OF_BATTERY, ["A"], t_s=t)
+    em = make_em()
+    snap = sc.snapshot([op], t_s=t)
+    (rec,) = em.on_threat(threat, snap).recommendations
+    for _ in range(2):
+        (acc,) = em.on_answer(rec, True, snap).recommendations
+        d = em.on_outcome(acc.id, acc.version, False, "no link", snap)
+        (rec,) = plans(d)
+    assert rec.command is not None and rec.command.kind is CommandKind.LAND
+
+
+class _FakeTD(TacticalDeconfliction):
+    """Fixed options and compatibilities, to test the selection rule alone."""
+
+    def __init__(self, options: dict[OperationId, list[Alternative]], ok: set[frozenset[str]]):
+        super().__init__(sc.FRAME, DeconflictionConfig(), MON)
+        self.options = options
+        self.ok = ok
+
+    def resolve_loss_of_separation(
+        self,
+        threat: Threat,
+        snapshot: AirspaceSnapshot,
+        start_t_s: float | None = None,
+        lead_in_from_t_s: float | None = None,
+    ) -> dict[OperationId, list[Alternative]]:
+        return {k: list(v) for k, v in self.options.items()}
+
+    def compatible(self, a: Alternative, b: Alternative, snapshot: AirspaceSnapshot) -> bool:
+        return frozenset({a.detail, b.detail}) in self.ok
+
+
+def _alt(snap: AirspaceSnapshot, op: str, man: Maneuver, cost: float) -> Alternative:
+    plan = snap.operations[OperationId(op)].plan
+    return Alternative(
+        operation_id=OperationId(op),
+        maneuver=man,
+        plan=plan if man is Maneuver.KEEP_PLAN else replace(plan, version=2),
+        cost=cost,
+        risk=0.0,
+        detail=f"{op}:{man.value}",
+    )
+
+
+def test_the_higher_priority_uas_moves_only_when_the_lower_cannot() -> None:
+    """A (priority 1) can climb at cost 0.5, B (priority 2) at cost 0.01: B used to be moved
+    because it was cheaper (madrid_loss_separation moved the fixed wing)."""
+    snap, threat = sc.scenario_los_2uas()
+    opts: dict[OperationId, list[Alternative]] = {
+        OperationId("A"): [
+            _alt(snap, "A", Maneuver.KEEP_PLAN, 0.0),
+            _alt(snap, "A", Maneuver.GO_UP, 0.5),
+        ],
+        OperationId("B"): [
+            _alt(snap, "B", Maneuver.KEEP_PLAN, 0.0),
+            _alt(snap, "B", Maneuver.GO_UP, 0.01),
+        ],
+    }
+    ok = {
+        frozenset({"A:keep_plan", "B:go_up"}),
+        frozenset({"A:go_up", "B:keep_plan"}),
+        frozenset({"A:go_up", "B:go_up"}),
+    }
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), _FakeTD(opts, ok), MON)
+    d = em.on_threat(threat, snap)
+    (rec,) = plans(d)
+    assert rec.operation_id == "A" and rec.selected is not None
+    assert rec.selected.maneuver is Maneuver.GO_UP
+    # Only when A has nothing compatible with B keeping its plan, B moves.
+    ok2 = {frozenset({"A:keep_plan", "B:go_up"})}
+    d2 = EmergencyManager(sc.FRAME, EmergencyConfig(), _FakeTD(opts, ok2), MON).on_threat(
+        threat, snap
+    )
+    (rec2,) = plans(d2)
+    assert rec2.operation_id == "B"
+
+
+def test_one_uas_without_a_clean_option_does_not_block_the_other() -> None:
+    """X flies inside a geofence (its every option, its current plan included, is flagged);
+    Y crosses it and can move: Y gets a recommendation, X is escalated on its own; the case
+    used to escalate with no recommendation at all."""
+    x = sc.make_operation("X", [(-1000, 0, 100), (1000, 0, 100)])
+    y = sc.make_operation("Y", [(0, -1000, 100), (0, 1000, 100)], priority=2)
+    fence = replace(sc.cylinder("zone", 0.0, 0.0, 3000.0), exempt=(OperationId("Y"),))
+    snap = sc.snapshot([x, y], [fence])
+    threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["X", "Y"], event_in_s=100)
+    em = make_em()
+    d = em.on_threat(threat, snap)
+    recs = plans(d)
+    assert [r.operation_id for r in recs] == ["Y"]
+    assert recs[0].selected is not None and recs[0].selected.maneuver is not Maneuver.KEEP_PLAN
+    assert d.escalations and "X has no conflict-free option" in d.escalations[0]
+    assert not any("no conflict-free combination" in e for e in d.escalations)
+
+
+async def test_the_service_hears_upload_outcomes_and_supervises() -> None:
+    snap, threat = sc.scenario_los_2uas()
+    clock = ManualClock(snap.t_s)
+    em = make_em()
+    got: list[Decision] = []
+
+    async def sink(d: Decision) -> None:
+        got.append(d)
+
+    svc = EmergencyService(em, lambda t: replace(snap, t_s=t), clock, sink)
+    task = asyncio.create_task(svc.run())
+    try:
+        await svc.submit_threats([threat])
+        await _until(lambda: bool(svc.pending()))
+        (rec,) = svc.pending()
+        await svc.submit_answer(rec.id, rec.version, True)
+        await _until(lambda: em.pending() == [] and len(got) >= 2)
+        acc = em.recommendation(rec.id)
+        assert acc is not None
+        await svc.update(acc.transition(RecommendationState.FAILED, snap.t_s, "nack"))
+        await _until(lambda: bool(svc.pending()))
+        assert svc.pending()[0].version == rec.version + 1
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+
+
+async def _until(cond: object, steps: int = 2000) -> None:
+    for _ in range(steps):
+        if callable(cond) and cond():
+            return
+        await asyncio.sleep(0)
+    raise AssertionError("condition not reached")
+
+
+async def test_the_service_supervises_on_its_own_clock() -> None:
+    """Monitoring reports a persisting threat only when it changes: the service's tick asks
+    EM to supervise, and the accepted plan that left the threat open gets a new version."""
+    snap, threat = sc.scenario_los_2uas()
+    clock = ManualClock(snap.t_s)
+    em = make_em()
+    got: list[Decision] = []
+
+    async def sink(d: Decision) -> None:
+        got.append(d)
+
+    svc = EmergencyService(em, lambda t: replace(snap, t_s=t), clock, sink)
+    task = asyncio.create_task(svc.run())
+    try:
+        await svc.submit_threats([threat])
+        await _until(lambda: bool(svc.pending()))
+        (rec,) = svc.pending()
+        await svc.submit_answer(rec.id, rec.version, True)
+        await _until(lambda: em.pending() == [] and em.supervising())
+        acc = em.recommendation(rec.id)
+        assert acc is not None
+        clock.advance(em.manoeuvre_start(acc) + em.config.supervision_grace_s - snap.t_s + 1.0)
+        await _until(lambda: bool(svc.pending()))
+        assert svc.pending()[0].version == rec.version + 1
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
