@@ -2,9 +2,12 @@
 
 Threading model: everything runs on the asyncio loop; receive callbacks parse and dispatch
 synchronously (no per-frame task), protocol exchanges (upload, download, commands) are
-coroutines that wait on a per-vehicle mailbox with timeouts. A bad frame is counted in
-:attr:`MavlinkHub.counters` and logged at debug level; nothing from the wire raises into the
-loop.
+coroutines that wait on a per-vehicle mailbox with timeouts; they live in the base classes
+:class:`~adapters.mavlink.transfer.Transfers` (mission protocol, commands),
+:class:`~adapters.mavlink.upload.Uploads` (upload, readback, current item, mission mode) and
+:class:`~adapters.mavlink.commands.Commands` (per-autopilot command mapping). A bad frame
+is counted in :attr:`MavlinkHub.counters` and logged at debug level; nothing from the wire
+raises into the loop.
 
 Identity: a vehicle is (link, source address, sysid, compid) = :class:`VehicleKey`; API calls
 take a ``SysId`` (resolved to its most recently heard component) or a ``VehicleKey``. Replies
