@@ -24,7 +24,9 @@ PX4 refuses an item without a position (DO_*) in a global frame (MAV_MISSION_UNS
 reports them in frame 0, stores a NaN param as 0, and keeps of a NAV_WAYPOINT only what its
 packed command holds: ArduCopter the hold time in whole seconds (param1), ArduPlane the
 acceptance and pass-by radii in whole metres up to 255 (param2/param3); of a NAV_LAND it
-keeps the sign of param4 (-1 or 1).
+keeps the sign of param4 (-1 or 1). An upload is refused with MAV_MISSION_NO_SPACE while the
+host's mission storage is not ready (``MissionHost.storage_ready``: ArduPilot for about 1.5
+simulated seconds after boot).
 
 The server never touches sockets: it calls `MissionHost.send(peer, name, **fields)`; `peer`
 is opaque (the vehicle's link object) and `now_s` is passed in.
@@ -211,6 +213,7 @@ class MissionHost(Protocol):
     def statustext(self, severity: int, text: str) -> None: ...
     def send(self, peer: object, name: str, **fields: Any) -> None: ...
     def count(self, counter: str) -> None: ...
+    def storage_ready(self) -> bool: ...
 
 
 @dataclass(slots=True)
@@ -326,7 +329,7 @@ class MissionServer:
             self._ack(peer, src, comp, ERROR)  # PX4: "WPM: REJ. CMD: Busy", transfer goes on
             return
         count = msg.i("count")
-        if count > self._max_items:
+        if count > self._max_items or not self._host.storage_ready():
             self._host.count("uploads_failed")
             self._ack(peer, src, comp, NO_SPACE)
             return

@@ -35,6 +35,8 @@ from sitl.spec import (
 
 _log = logging.getLogger(__name__)
 
+AP_STORAGE_READY_S = 1.5  # simulated s after boot before ArduPilot takes an upload
+
 __all__ = ["PHYSICS_DT_S", "PLANE_MODES", "Vehicle", "mission_items_from_specs", "stream_msg_id"]
 
 
@@ -201,6 +203,11 @@ class Vehicle(CommandHandling):
             handler(self, link, m)
         elif t not in ("SYSTEM_TIME", "COMMAND_ACK", "STATUSTEXT", "PING"):
             self.counters["unhandled_msg"] += 1
+
+    def storage_ready(self) -> bool:
+        """ArduPilot refuses uploads (MAV_MISSION_NO_SPACE) until its mission storage is up,
+        about 1.5 simulated s after it starts (measured at speed 1 and 5); PX4 at once."""
+        return not self.is_ardupilot or self._t - self.spec.boot_at_s >= AP_STORAGE_READY_S
 
     def _on_command_message(self, link: Link, m: Inbound) -> None:
         self.counters["commands"] += 1

@@ -118,3 +118,23 @@ def test_land_start_fails_without_a_landing_sequence() -> None:
     v.accept_mission([wp(0, 0.0, 488.0), wp(1, 0.01, 550.0), land_start], None)
     assert v._cmd_land_start(None, None, [0.0] * 7) == 0  # type: ignore[arg-type]
     assert v.mode == "MISSION" and v.mission_current_seq == 2
+
+
+def test_ardupilot_refuses_uploads_until_its_storage_is_up() -> None:
+    from sitl._mav import Inbound
+    from tests.sitl.conftest import mav
+
+    sent: list[tuple[str, dict[str, object]]] = []
+    count = mav.MAVLink_mission_count_message(1, 1, 2, 0)
+    msg = Inbound("MISSION_COUNT", 255, 190, count.get_msgId(), count)
+    for autopilot, refused in (("ardupilot", True), ("px4", False)):
+        v = make(autopilot=autopilot)
+        v.send = lambda _peer, name, **f: sent.append((name, f))  # type: ignore[method-assign]
+        v.advance(1.0)  # 1 simulated s after boot
+        sent.clear()
+        v.mission_server.handle(None, msg, 0.0)
+        refusal = ("MISSION_ACK", sent[0][1]["type"]) if sent[0][0] == "MISSION_ACK" else None
+        assert (refusal == ("MISSION_ACK", mp.NO_SPACE)) is refused, sent
+    v = make(autopilot="ardupilot")
+    v.advance(2.0)
+    assert v.storage_ready()
