@@ -1,13 +1,14 @@
 """Checks of a whole configuration that need more than one field's type and range: what
 ``serve`` would otherwise find only when it starts (or later, on the first reconnect).
 
-- ``[mavlink] links``: each connection string parses (the same parser the hub uses);
-- ``[mavlink] signing_keys``: each key is 64 hex digits under a system id 1..255;
 - ``[mqtt] tls``: the CA, certificate and key files exist and load (the same ``ssl`` calls
   the MQTT client makes when it connects), a certificate comes with its key;
 - ``[mqtt] topic_prefix``: a valid topic name without wildcards;
 - reconnect backoffs: the first delay is not above the cap;
 - ``[airspace]``: the origin makes a local frame.
+
+``[mavlink]`` links and signing keys are checked by ``MavlinkConfig`` itself when the file is
+loaded (the hub's own parser; 64 hex digits under a system id 1..255).
 
 Every problem is a :class:`gcs_utm.config.ConfigError` naming the file, the dotted key and
 what was expected. ``gcs-utm config check`` and every command that loads a configuration
@@ -21,8 +22,6 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from adapters.mavlink.endpoint import EndpointError, parse_endpoint
-from adapters.mavlink.wire import parse_key
 from gcs_utm.config import ConfigError
 from gcs_utm.geo import FrameError, LocalFrame
 
@@ -41,7 +40,6 @@ def problems(settings: Any) -> list[tuple[str, str]]:
 
 def _problems(settings: Any) -> Iterator[tuple[str, str]]:
     yield from _airspace(settings.airspace)
-    yield from _mavlink(settings.mavlink)
     yield from _ordered(
         "adsb.reconnect_initial_s",
         settings.adsb.reconnect_initial_s,
@@ -56,23 +54,6 @@ def _airspace(air: Any) -> Iterator[tuple[str, str]]:
         LocalFrame(air.origin_lat_deg, air.origin_lon_deg, air.ground_elevation_amsl_m)
     except (FrameError, ValueError) as exc:
         yield "airspace.origin_lat_deg", f"the origin makes no local frame: {exc}"
-
-
-def _mavlink(cfg: Any) -> Iterator[tuple[str, str]]:
-    for i, text in enumerate(cfg.links):
-        try:
-            parse_endpoint(text)
-        except EndpointError as exc:
-            yield f"mavlink.links[{i}]", f"not a connection string: {exc}"
-    for sid, hexkey in cfg.signing_keys.items():
-        key = f"mavlink.signing_keys.{sid}"
-        if not (sid.isdigit() and 1 <= int(sid) <= 255):
-            yield key, f"expected a system id 1..255 as the key, got {sid!r}"
-            continue
-        try:
-            parse_key(hexkey)
-        except ValueError as exc:
-            yield key, f"expected 64 hex digits (a 32-byte MAVLink 2 signing key): {exc}"
 
 
 def _ordered(lo_key: str, lo: float, hi_key: str, hi: float) -> Iterator[tuple[str, str]]:

@@ -91,6 +91,7 @@ _ARDUPILOT_STREAM_MSGS = (
     wire.SYSTEM_TIME,
     wire.MISSION_CURRENT,
     wire.EXTENDED_SYS_STATE,
+    wire.HOME_POSITION,
 )
 
 
@@ -98,6 +99,13 @@ _LANE_HANDOVER = 16 * LANE_STRIDE
 """Lane entries are handed to the sink after each read burst, and also once this many
 numbers (16 reports) wait: a burst of 64 datagrams takes 1-3 ms to read, and tracking should
 not wait for its end (see MavlinkHub.flush_positions)."""
+
+
+_DROPS_REPORT_S = 60.0  # a summary of refused and forgotten senders at most this often
+_REFUSALS = frozenset(
+    {"bad_signature", "unsigned", "replayed", "sysid_zero", "sysid_claims", "address_changes"}
+)
+_DROP_COUNTERS = (*sorted(_REFUSALS), "senders_evicted", "vehicles_evicted", "links_down")
 
 
 class TelemetrySink(Protocol):
@@ -210,6 +218,7 @@ class MavlinkHub(Commands):
         self._verify = SignatureCheck(self._keys, now=clock.now_s) if self._keys else None
         self._claim_alerts: dict[int, float] = {}  # sysid -> when its last claim was reported
         self._restream: set[int] = set()  # id(state) of ArduPilot vehicles to ask for streams
+        self._drops_reported: tuple[float, dict[str, int]] = (clock.now_s(), {})
         self._tasks: list[asyncio.Task[None]] = []
         self._handlers = {
             wire.HEARTBEAT: VehicleState.on_heartbeat,
@@ -221,6 +230,7 @@ class MavlinkHub(Commands):
             wire.EXTENDED_SYS_STATE: VehicleState.on_extended_sys_state,
             wire.STATUSTEXT: VehicleState.on_statustext,
             wire.SYSTEM_TIME: VehicleState.on_system_time,
+            wire.HOME_POSITION: VehicleState.on_home_position,
         }
 
     # --- lifecycle ------------------------------------------------------------------------
@@ -587,6 +597,21 @@ class MavlinkHub(Commands):
         for sys_id in idle_keys(self._claim_alerts, t, idle_s):
             del self._claim_alerts[sys_id]
         self._ratelog.flush()
+        self._report_drops(t)
+
+    def _report_drops(self, t: float) -> None:
+        """Once per minute of clock time at most: one line with what senders had dropped or
+        forgotten since the last one (a WARNING when a check refused frames)."""
+        if t - self._drops_reported[0] < _DROPS_REPORT_S:
+            return
+        snap = self.counters.snapshot()
+        last = self._drops_reported[1]
+        moved = {k: snap[k] - last.get(k, 0) for k in _DROP_COUNTERS if snap[k] != last.get(k, 0)}
+        self._drops_reported = (t, {k: snap[k] for k in _DROP_COUNTERS})
+        if moved:
+            level = logging.WARNING if set(moved) & _REFUSALS else logging.INFO
+            text = ", ".join(f"{k} {n:,}" for k, n in moved.items())
+            _log.log(level, "mavlink senders in the last %.0f s: %s", _DROPS_REPORT_S, text)
 
     def _on_reboot(self, st: VehicleState) -> None:
         box = self._mailbox.get(id(st))

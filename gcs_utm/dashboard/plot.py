@@ -16,7 +16,7 @@
 
 Also GeoJSON and KML exports of the same data for QGIS / Google Earth.
 
-Input is the JSON report of ``gcs-utm run`` (see the README for its fields). Figures use
+Input is the JSON report of ``gcs-utm run`` (docs/use-cases.md lists its fields). Figures use
 matplotlib's non-interactive Agg backend; matplotlib is the optional extra ``[plots]``,
 imported only when a figure is drawn (without it ``gcs-utm run`` writes GeoJSON and KML
 only). Each function returns what it drew (counts and the minima it computed from the report),

@@ -62,7 +62,14 @@ def test_serve_defaults() -> None:
 
 
 def test_bench_collects_every_benchmark() -> None:
-    assert set(discover()) == {"tracking", "monitoring", "deconfliction", "ingest", "upload"}
+    assert set(discover()) == {
+        "tracking",
+        "monitoring",
+        "deconfliction",
+        "ingest",
+        "upload",
+        "fuzz",
+    }
     # each one is also reachable by name
     for name in discover():
         assert build_parser().parse_args(["bench", name, "--json"]).bench_name == name

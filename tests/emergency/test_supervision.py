@@ -93,7 +93,11 @@ def test_a_threat_still_predicted_after_the_accepted_plan_gets_a_new_version() -
     em = make_em(max_replans=1)
     (acc,) = accept_all(em, em.on_threat(threat, snap), at(snap, 1.0))
     assert acc.selected is not None and acc.selected.plan is not None
-    settled = em.manoeuvre_start(acc) + em.config.supervision_grace_s - sc.T0_S
+    due = em.supervision_due(acc)
+    assert due is not None
+    # Settled once the plan has left the old one (by the flight geometry) plus the grace.
+    assert due > em.manoeuvre_start(acc) + em.config.supervision_grace_s
+    settled = due - sc.T0_S
     updated = replace(threat, status=ThreatStatus.UPDATED, updated_at_s=sc.T0_S + 5.0)
     assert em.on_threat(updated, at(snap, 5.0)) == Decision()  # plan not started yet
     assert em.supervise(at(snap, settled - 1.0)) == Decision()
@@ -104,7 +108,9 @@ def test_a_threat_still_predicted_after_the_accepted_plan_gets_a_new_version() -
     # Accepted again, and the threat still does not close: escalate with the safe command.
     (acc2,) = accept_all(em, d, at(snap, settled + 1.0))
     assert acc2.selected is not None and acc2.selected.plan is not None
-    later = em.manoeuvre_start(acc2) + em.config.supervision_grace_s - sc.T0_S + 1.0
+    due2 = em.supervision_due(acc2)
+    assert due2 is not None
+    later = due2 - sc.T0_S + 1.0
     later = max(later, settled + 0.5 + em.config.retry_after_s + 1.0)
     d3 = em.supervise(at(snap, later))
     assert d3.escalations and "still predicted" in d3.escalations[0]
@@ -288,9 +294,95 @@ async def test_the_service_supervises_on_its_own_clock() -> None:
         await _until(lambda: em.pending() == [] and em.supervising())
         acc = em.recommendation(rec.id)
         assert acc is not None
-        clock.advance(em.manoeuvre_start(acc) + em.config.supervision_grace_s - snap.t_s + 1.0)
+        due = em.supervision_due(acc)
+        assert due is not None
+        clock.advance(due - snap.t_s + 1.0)
         await _until(lambda: bool(svc.pending()))
         assert svc.pending()[0].version == rec.version + 1
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
+
+
+def test_supervision_keeps_a_standing_plan_that_is_still_the_choice() -> None:
+    """Once the applied plan is in the airspace and keeping it is conflict-free, a threat
+    that Monitoring has not closed yet (its predictor extrapolates the track until the UAS
+    turns) gets no new version and no escalation: the standing plan is kept (it used to be
+    replaced by a hold command, stopping a multirotor in the path of the other)."""
+    snap, threat = sc.scenario_los_2uas()
+    em = make_em()
+    (acc,) = accept_all(em, em.on_threat(threat, snap), at(snap, 1.0))
+    assert acc.selected is not None and acc.selected.plan is not None
+    ops = dict(snap.operations)
+    ops[acc.operation_id] = replace(ops[acc.operation_id], plan=acc.selected.plan)
+    flown = replace(snap, operations=ops)
+    due = em.supervision_due(acc)
+    assert due is not None
+    d = em.supervise(replace(flown, t_s=due + 0.5))
+    assert not d.escalations and not plans(d)
+    assert any(a.action == "supervision" for a in d.audit)
+
+
+def test_overlapping_threats_build_on_each_others_recommended_plans() -> None:
+    """Three UAS meet at one point: the pairwise threats are decided one after the other,
+    before any plan is uploaded. Each decision builds on the plans the earlier ones
+    recommended, so the plans that end up recommended keep all three apart."""
+    from gcs_utm.core.monitoring.strategic import strategic_check
+
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], priority=1)
+    b = sc.make_operation("B", [(1000, 0, 100), (-1000, 0, 100)], priority=2)
+    c = sc.make_operation("C", [(0, -1000, 100), (0, 1000, 100)], priority=3)
+    snap = sc.snapshot([a, b, c])
+    em = make_em()
+    latest: dict[OperationId, Recommendation] = {}
+    for tid, pair in (("t1", ["A", "B"]), ("t2", ["A", "C"]), ("t3", ["B", "C"])):
+        threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, pair, tid=tid, event_in_s=100)
+        for r in plans(em.on_threat(threat, snap)):
+            latest[r.operation_id] = r
+    ops = dict(snap.operations)
+    for k, r in latest.items():
+        assert r.selected is not None and r.selected.plan is not None
+        ops[k] = replace(ops[k], plan=r.selected.plan)
+    assert latest
+    assert strategic_check(list(ops.values()), (), sc.FRAME, MON).conflicts == ()
+
+
+def test_an_escalated_case_is_retried_on_the_supervision_tick() -> None:
+    """Monitoring sends no update while a threat stays the same: the tick retries a case
+    that ended in escalation every retry_after_s (it used to wait for an update forever)."""
+    snap, threat = sc.scenario_los_2uas()
+    opts: dict[OperationId, list[Alternative]] = {
+        OperationId("A"): [
+            _alt(snap, "A", Maneuver.KEEP_PLAN, 0.0),
+            _alt(snap, "A", Maneuver.GO_UP, 0.5),
+        ],
+        OperationId("B"): [_alt(snap, "B", Maneuver.KEEP_PLAN, 0.0)],
+    }
+    td = _FakeTD(opts, set())
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
+    d = em.on_threat(threat, snap)
+    assert d.escalations and not plans(d)
+    assert em.supervising()
+    assert em.supervise(at(snap, 10.0)) == Decision()  # not before retry_after_s
+    td.ok = {frozenset({"A:go_up", "B:keep_plan"})}  # the airspace changed meanwhile
+    d2 = em.supervise(at(snap, em.config.retry_after_s + 1.0))
+    (rec,) = plans(d2)
+    assert rec.operation_id == "A" and rec.selected is not None
+    assert rec.selected.maneuver is Maneuver.GO_UP
+
+
+def test_a_predicted_loss_with_clean_plans_is_reported_not_ignored() -> None:
+    """Every plan already keeps separation (the UAS fly off them): nothing to re-plan, but
+    the decision says so instead of staying silent."""
+    snap, threat = sc.scenario_los_2uas()
+    opts = {
+        OperationId("A"): [_alt(snap, "A", Maneuver.KEEP_PLAN, 0.0)],
+        OperationId("B"): [_alt(snap, "B", Maneuver.KEEP_PLAN, 0.0)],
+    }
+    td = _FakeTD(opts, {frozenset({"A:keep_plan", "B:keep_plan"})})
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
+    d = em.on_threat(threat, snap)
+    assert not plans(d)
+    assert d.warnings and "off their plans" in d.warnings[0]
+    again = em.supervise(at(snap, em.config.retry_after_s + 1.0))
+    assert not again.warnings  # said once per case

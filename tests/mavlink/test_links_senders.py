@@ -232,3 +232,27 @@ async def test_config_rejects_inverted_backoff_and_bad_links() -> None:
     with pytest.raises(ConfigError, match="32 bytes"):
         build(MavlinkConfig, {"signing_keys": {"1": "ab"}}, source="x.toml", section="mavlink")
     await asyncio.sleep(0)
+
+
+async def test_refused_and_forgotten_senders_are_summed_up_once_a_minute(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    hub, link, clock, _sink = await _hub(sender_idle_s=30.0)
+    try:
+        hub._on_chunk(link, _hb(_enc(1)), ("10.0.0.1", 1))
+        with caplog.at_level(logging.INFO):
+            for i in range(50):
+                hub._on_chunk(link, _hb(_enc(1)), ("10.6.6.6", 100 + i))  # claims
+                hub._on_chunk(link, _hb(_enc(0)), ("10.6.6.7", 100 + i))  # sysid 0
+            hub.evict_idle()
+            assert not [r for r in caplog.records if "in the last" in r.getMessage()]
+            clock.advance(61.0)
+            hub.evict_idle()
+            hub.evict_idle()  # nothing new, and within the minute: no second line
+            [line] = [r for r in caplog.records if "in the last" in r.getMessage()]
+            assert line.levelno == logging.WARNING
+            text = line.getMessage()
+            assert "sysid_claims 50" in text and "sysid_zero 50" in text
+            assert "senders_evicted 101" in text and "vehicles_evicted 1" in text
+    finally:
+        await hub.close()

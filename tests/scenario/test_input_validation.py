@@ -201,7 +201,6 @@ def test_a_directory_is_reported_as_a_directory(
     assert "is a directory" in err and "no such file" not in err
 
 
-@pytest.mark.skipif(not GAUSS.is_dir(), reason="../shared/data/gauss is absent")
 def test_gauss_yaml_is_the_entry_point_of_its_scenario(capsys: pytest.CaptureFixture[str]) -> None:
     yaml_path = GAUSS / "paper_dev/madrid_geo_conflict.yaml"
     by_yaml = load_any(yaml_path, t0_s=100.0)

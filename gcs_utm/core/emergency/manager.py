@@ -41,7 +41,12 @@ from gcs_utm.core.emergency.selection import (
     stay,
     weighted,
 )
-from gcs_utm.core.emergency.supervision import on_outcome, supervise_case
+from gcs_utm.core.emergency.supervision import (
+    deviation_start,
+    on_outcome,
+    settled_at,
+    supervise_case,
+)
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
@@ -121,37 +126,41 @@ class EmergencyManager:
             return self.on_threat_closed(threat)
         case = self._cases.get(threat.id)
         if case is not None:
-            # The threat persists. A pending recommendation stands until answered, expired or
-            # the threat closes; an accepted one is supervised (see .supervision); one-shot
-            # actions (warning, geofence creation) are done; a case that ended in escalation
-            # is retried every retry_after_s with its refused maneuvers still excluded (no
-            # churn every monitoring cycle).
             case.threat = threat
-            if case.action in ONE_SHOT or self._pending(case):
-                return Decision()
-            if self._in_force(case):
-                return supervise_case(self, case, snapshot)
-            if snapshot.t_s - case.attempt_t_s < self.config.retry_after_s:
-                return Decision()
-            case.attempt_t_s = snapshot.t_s
-            case.replans.clear()
-            return self._handle(case, snapshot)
+            return self._persisting(case, snapshot)
         action = self.config.action_for(threat.kind)
         case = Case(threat=threat, action=action, attempt_t_s=snapshot.t_s)
         self._cases[threat.id] = case
         return self._handle(case, snapshot)
 
+    def _persisting(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+        """The threat of ``case`` persists. A pending recommendation stands until answered,
+        expired or the threat closes; an accepted one is supervised (see .supervision);
+        one-shot actions (warning, geofence creation) are done; a case that ended in
+        escalation is retried every retry_after_s with its refused maneuvers still excluded
+        (no churn every monitoring cycle)."""
+        if case.action in ONE_SHOT or self._pending(case):
+            return Decision()
+        if self._in_force(case):
+            return supervise_case(self, case, snapshot)
+        if snapshot.t_s - case.attempt_t_s < self.config.retry_after_s:
+            return Decision()
+        case.attempt_t_s = snapshot.t_s
+        case.replans.clear()
+        return self._handle(case, snapshot)
+
     def supervising(self) -> bool:
-        """Is any open case waiting on an accepted plan (so :meth:`supervise` has work)?"""
-        return any(self._in_force(c) and not self._pending(c) for c in self._cases.values())
+        """Is any open case waiting on an accepted plan or on a retry after an escalation
+        (so :meth:`supervise` has work)?"""
+        return any(c.action not in ONE_SHOT and not self._pending(c) for c in self._cases.values())
 
     def supervise(self, snapshot: AirspaceSnapshot) -> Decision:
-        """Periodic supervision of every open case with accepted plans (Monitoring reports a
-        persisting threat only when it changes): see :mod:`.supervision`."""
+        """Periodic supervision of every open case (Monitoring reports a persisting threat
+        only when it changes): accepted plans are supervised (see :mod:`.supervision`) and a
+        case that ended in escalation is retried every retry_after_s."""
         d = Decision()
         for case in list(self._cases.values()):
-            if self._in_force(case) and not self._pending(case):
-                d = d.merge(supervise_case(self, case, snapshot))
+            d = d.merge(self._persisting(case, snapshot))
         return d
 
     def on_outcome(
@@ -240,6 +249,31 @@ class EmergencyManager:
         )
 
     # ---- internals --------------------------------------------------------------------------
+    def _intended(self, snapshot: AirspaceSnapshot, case: Case) -> AirspaceSnapshot:
+        """``snapshot`` with every plan another case has recommended and that is not in the
+        airspace yet (proposed or accepted) in place of the UAS's plan: overlapping threats
+        decided one after the other build on each other's plans (three pairwise threats
+        among three UAS, each decided on the filed plans, gave two of them plans that met)."""
+        live = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED)
+        latest: dict[OperationId, Recommendation] = {}
+        for r in self._recs.values():
+            if r.threat_id == case.threat.id or r.state not in live:
+                continue
+            if r.selected is None or r.selected.plan is None:
+                continue
+            prev = latest.get(r.operation_id)
+            if prev is None or r.created_t_s >= prev.created_t_s:
+                latest[r.operation_id] = r
+        ops = snapshot.operations
+        changed = {
+            k: replace(ops[k], plan=replace(r.selected.plan, operation_id=k))
+            for k, r in latest.items()
+            if k in ops and r.selected is not None and r.selected.plan is not None
+        }
+        if not changed:
+            return snapshot
+        return replace(snapshot, operations={**ops, **changed})
+
     def _pending(self, case: Case) -> bool:
         return any(self._recs[r].state is RecommendationState.PROPOSED for r in case.rec_ids)
 
@@ -252,6 +286,12 @@ class EmergencyManager:
         the automatic operator's delay; else up to the deadline), the upload and a margin.
         The vehicle has the plan before then, and its first waypoint lies ahead of it."""
         return self._start(now, self._deadline(threat, now))
+
+    def supervision_due(self, rec: Recommendation) -> float | None:
+        """When an accepted ``rec`` is settled (see :mod:`.supervision`); None when its case
+        is closed."""
+        case = self._cases.get(rec.threat_id)
+        return None if case is None else settled_at(self, case, rec)
 
     def manoeuvre_start(self, rec: Recommendation) -> float:
         """When the plan of ``rec`` leaves the UAS's path (its lead-in ends)."""
@@ -305,6 +345,11 @@ class EmergencyManager:
             old = prev.transition(RecommendationState.SUPERSEDED, now, "replaced by a new version")
             recs.append(old)
             superseded.append(rid)
+        op = case.operations.get(op_id)
+        if selected is not None and selected.plan is not None and op is not None:
+            t_dev = deviation_start(self.frame, selected.plan, op.plan, op.flight_geometry_m)
+            if t_dev is not None:
+                case.deviates_at[rid] = t_dev
         rec = Recommendation(
             id=rid,
             version=1 if prev is None else prev.version + 1,
@@ -366,6 +411,8 @@ class EmergencyManager:
         """Charged cords + joint selection under the priority rule (selection tiers). A UAS
         without a verified option stays on its plan (escalated for it) while the others
         move; the case escalates only when no combination resolves the conflict."""
+        snapshot = self._intended(snapshot, case)
+        case.operations = dict(snapshot.operations)
         now = snapshot.t_s
         cfg = self.config
         t = case.threat
@@ -413,7 +460,21 @@ class EmergencyManager:
             )
         detail["moved_up_to_priority"] = tiered.moved_up_to_priority
         d = Decision(audit=(self.audit(now, "decision", t.id, detail),))
-        return d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
+        d = d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
+        kept = all(a.maneuver is Maneuver.KEEP_PLAN for a in tiered.selection.chosen.values())
+        if kept and not self._in_force(case) and not case.off_plan_escalated:
+            case.off_plan_escalated = True
+            # Monitoring predicts the loss from the tracks, yet every plan is clear of it: the
+            # UAS are not where their plans say. Nothing to re-plan; the operator is warned
+            # (conformance threats handle the deviation itself).
+            # (With plans of this case in force, keeping them is supervision's normal answer
+            # while the UAS turn onto them.)
+            msg = (
+                f"{t.id}: loss of separation predicted for {', '.join(t.uas_ids)} although "
+                "their plans keep separation (off their plans?)"
+            )
+            d = d.merge(Decision(warnings=(msg,)))
+        return d
 
     def _issue_joint(
         self,
@@ -500,6 +561,8 @@ class EmergencyManager:
     ) -> Decision:
         now = snapshot.t_s
         t = threat or case.threat
+        snapshot = self._intended(snapshot, case)
+        case.operations = dict(snapshot.operations)
         case.modes[op_id] = f"single:{','.join(sorted(m.value for m in maneuvers))}"
         allowed = maneuvers - case.excluded.get(op_id, set())
         alts = self.td.resolve_single(
@@ -560,6 +623,8 @@ class EmergencyManager:
         )
 
     def _intruder(self, case: Case, op_id: OperationId, snapshot: AirspaceSnapshot) -> Decision:
+        snapshot = self._intended(snapshot, case)
+        case.operations = dict(snapshot.operations)
         now = snapshot.t_s
         cfg = self.config
         case.modes[op_id] = MODE_INTRUDER

@@ -2,14 +2,18 @@
 an upload that failed, each lead to a new decision (paper §4.4: nothing is dropped).
 
 - **Persisting threat.** A recommendation accepted (and, when the service reports it,
-  applied) is *settled* once its plan has started and ``supervision_grace_s`` has passed
-  (for a command: once it was accepted, plus the upload time and the grace). When every
+  applied) is *settled* ``supervision_grace_s`` after its plan leaves the plan it replaces
+  by more than the flight geometry (a deformation ramps away only where it is needed, and a
+  predictor that extrapolates the track sees the conflict until the UAS turns), and never
+  before the plan started (for a command: once it was accepted, plus the upload time and
+  the grace). When every
   accepted recommendation of a case is settled and Monitoring still reports the threat (the
   case is open: Monitoring closes a threat only after it cleared for ``close_cycles``), EM
   decides again on the current snapshot (which holds the applied plans): a new version of
   the recommendation, up to ``max_replans`` times; then it escalates with the reason,
-  proposing the threat's safe command. Further supervision of the case waits
-  ``retry_after_s``.
+  proposing the threat's safe command. When the new decision keeps the standing plans (it
+  chooses them again) nothing is sent; when it finds no combination at all it escalates
+  likewise. Further supervision of the case waits ``retry_after_s``.
 - **Failed upload or verification.** The first failure for a UAS re-plans once; the next
   escalates and proposes the safe command for the threat kind (:func:`safe_command`): the
   UAS is never left with a failed plan and no pending decision.
@@ -19,11 +23,16 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
+from gcs_utm.core.deconfliction.geometry import plan_to_local
 from gcs_utm.core.emergency.decision import MODE_COMMAND, ONE_SHOT, Case, Decision
+from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AirspaceSnapshot,
     Command,
     CommandKind,
+    FlightPlan,
     OperationId,
     Recommendation,
     RecommendationId,
@@ -52,14 +61,26 @@ def safe_command(kind: ThreatKind) -> CommandKind:
     return CommandKind.HOLD
 
 
-def settled_at(em: EmergencyManager, rec: Recommendation) -> float:
+def deviation_start(
+    frame: LocalFrame, new: FlightPlan, old: FlightPlan, threshold_m: float
+) -> float | None:
+    """The first time (1 s steps) ``new`` is more than ``threshold_m`` (3D) from where
+    ``old`` has the UAS at the same time; None when it never is."""
+    times = np.arange(new.start_t_s, new.end_t_s + 1.0, 1.0)
+    a, _ = plan_to_local(new, frame).sample(times)
+    b, _ = plan_to_local(old, frame).sample(times)
+    far = np.flatnonzero(np.linalg.norm(a - b, axis=1) > threshold_m)
+    return float(times[far[0]]) if far.size else None
+
+
+def settled_at(em: EmergencyManager, case: Case, rec: Recommendation) -> float:
     """When an accepted or applied recommendation should show its effect on the threat."""
     cfg = em.config
     t = rec.state_t_s if rec.state_t_s is not None else rec.created_t_s
     if rec.state is RecommendationState.ACCEPTED:
         t += cfg.upload_time_s  # the service may not report the outcome
     if rec.selected is not None and rec.selected.plan is not None:
-        t = max(t, em.manoeuvre_start(rec))
+        t = max(t, em.manoeuvre_start(rec), case.deviates_at.get(rec.id, -np.inf))
     return t + cfg.supervision_grace_s
 
 
@@ -74,7 +95,7 @@ def supervise_case(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot)
         or any(r is not None and r.state is RecommendationState.PROPOSED for r in recs)
     ):
         return Decision()
-    if now < max(settled_at(em, r) for r in live):
+    if now < max(settled_at(em, case, r) for r in live):
         return Decision()
     if case.supervised and now - case.attempt_t_s < em.config.retry_after_s:
         return Decision()
@@ -86,7 +107,7 @@ def supervise_case(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot)
         return escalate_safe(em, case, [r.operation_id for r in live], now, why)
     d = em.decide_again(case, snapshot)
     audit = em.audit(now, "supervision", case.threat.id, {"reason": why})
-    if not d.recommendations:
+    if d.escalations and not d.recommendations:
         return d.merge(escalate_safe(em, case, [r.operation_id for r in live], now, why))
     return Decision(audit=(audit,)).merge(d)
 
