@@ -59,6 +59,7 @@ from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.emergency import EmergencyService
 from gcs_utm.services.monitoring import MonitoringService
 from gcs_utm.services.operator import AutoOperator
+from gcs_utm.services.surveillance import SurveillanceService
 from gcs_utm.services.tracking import TrackingService
 from gcs_utm.services.usm import Usm
 from gcs_utm.settings import Settings
@@ -155,6 +156,7 @@ class Runtime:
     monitoring: MonitoringService
     emergency: EmergencyService
     hub: MavlinkHub
+    surveillance: SurveillanceService  # [adsb] receiver feeds (none unless enabled)
     plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[tuple[float, float, float, float, float, float]]] = field(
@@ -266,6 +268,7 @@ def build_runtime(
         monitoring=monitoring,
         emergency=emergency,
         hub=hub,
+        surveillance=SurveillanceService(settings.adsb, clock, usm.on_measurement),
         plan_history=plan_history,
         geofence_history=geofence_history,
     )
@@ -512,6 +515,7 @@ async def run_scenario(
                     tg.create_task(rt.usm.run(), name="usm"),
                     tg.create_task(_play_alerts(rt, scenario, lead_s), name="alerts"),
                     tg.create_task(_sample_tracks(rt, 0.5), name="samples"),
+                    tg.create_task(rt.surveillance.run(), name="adsb"),
                 ]
                 if options.headless:
                     tasks.append(tg.create_task(_headless_status(rt), name="status"))
@@ -955,6 +959,7 @@ async def serve(
                 tg.create_task(rt.monitoring.run(), name="monitoring"),
                 tg.create_task(rt.emergency.run(), name="emergency"),
                 tg.create_task(rt.usm.run(), name="usm"),
+                tg.create_task(rt.surveillance.run(), name="adsb"),
             ]
             if headless:
                 tasks.append(tg.create_task(_headless_status(rt), name="status"))

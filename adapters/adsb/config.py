@@ -14,6 +14,11 @@ from gcs_utm.config import setting
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class AdsbConfig:
+    enabled: bool = setting(
+        False,
+        "serve and run connect to the receiver feeds below (dump1090/readsb) and track what "
+        "they decode; MAVLink ADSB_VEHICLE is tracked whatever this says",
+    )
     receiver_position_known: bool = setting(
         False,
         "true: decode each airborne position frame at once against the receiver position; "

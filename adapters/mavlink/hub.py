@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from adapters.mavlink import wire
+from adapters.mavlink.adsb_relay import AdsbRelay, MessageHandler
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.endpoint import parse_endpoint
 from adapters.mavlink.mission import MissionItem, current_seq, plan_to_mission_items, same_item
@@ -283,7 +284,7 @@ class MavlinkHub:
         self._restream: set[int] = set()  # id(state) of ArduPilot vehicles to ask for streams
         self._drops_reported: tuple[float, dict[str, int]] = (clock.now_s(), {})
         self._tasks: list[asyncio.Task[None]] = []
-        self._handlers = {
+        self._handlers: dict[int, MessageHandler] = {
             wire.HEARTBEAT: VehicleState.on_heartbeat,
             wire.GLOBAL_POSITION_INT: VehicleState.on_global_position,
             wire.GPS_RAW_INT: VehicleState.on_gps_raw,
@@ -294,6 +295,8 @@ class MavlinkHub:
             wire.STATUSTEXT: VehicleState.on_statustext,
             wire.SYSTEM_TIME: VehicleState.on_system_time,
         }
+        self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE relayed by a vehicle -> ADS-B measurement
+        self._handlers[wire.ADSB_VEHICLE] = self.adsb_relay.on_adsb_vehicle
 
     # --- lifecycle ------------------------------------------------------------------------
     async def __aenter__(self) -> MavlinkHub:
