@@ -714,6 +714,7 @@ def build_report(
         },
         "telemetry": {k: v.as_dict(speed) for k, v in rt.usm.telemetry.items()},
         "counters": dict(rt.usm.counters),
+        "adsb": rt.surveillance.report(rt.hub.adsb_relay.counters),
     }
     for record in rt.usm.recommendations.values():
         rec = record.rec

@@ -19,11 +19,13 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import AsyncIterator, Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 from adapters.adsb import ModeSDecoder, SbsDecoder
 from adapters.adsb.config import AdsbConfig
 from adapters.adsb.net import Backoff, ConnectionStats, read_avr, read_beast, read_sbs
+from adapters.mavlink.adsb_relay import AdsbRelayCounters
 from gcs_utm.clock import Clock
 from gcs_utm.model import Measurement
 
@@ -111,6 +113,10 @@ class SurveillanceService:
         """Per feed (``kind:host:port``): see :meth:`FeedStats.as_dict`."""
         return {f.name: f.as_dict() for f in self.feeds}
 
+    def report(self, relay: AdsbRelayCounters) -> dict[str, Any]:
+        """For the run report: every feed's counts and the MAVLink ``ADSB_VEHICLE`` relay's."""
+        return {"feeds": self.stats(), "mavlink_relay": asdict(relay)}
+
     def _reader(self, feed: FeedStats) -> AsyncIterator[Measurement]:
         backoff = Backoff(
             initial_s=self.config.reconnect_initial_s, max_s=self.config.reconnect_max_s
@@ -142,6 +148,18 @@ class SurveillanceService:
         if not self.feeds:
             return
         _log.info("ADS-B feeds: %s", ", ".join(f.name for f in self.feeds))
-        async with asyncio.TaskGroup() as tg:
-            for feed in self.feeds:
-                tg.create_task(self._run_feed(feed), name=f"adsb-{feed.kind}")
+        try:
+            async with asyncio.TaskGroup() as tg:
+                for feed in self.feeds:
+                    tg.create_task(self._run_feed(feed), name=f"adsb-{feed.kind}")
+        finally:
+            for name, c in self.stats().items():
+                _log.info(
+                    "ADS-B feed %s: %d frames, %d positions, %d rejects, %d connects, %d outages",
+                    name,
+                    c["frames"],
+                    c["positions"],
+                    c["rejects"],
+                    c["connects"],
+                    c["outages"],
+                )

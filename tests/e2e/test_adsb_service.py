@@ -202,10 +202,10 @@ async def test_sbs_and_relayed_adsb_become_intruders_and_raise_intruder(tmp_path
     finally:
         store.close()
     # the feed was counted
-    (feed,) = rt.surveillance.stats().values()
+    (feed,) = report["adsb"]["feeds"].values()
     assert feed["positions"] >= 10 and feed["rejects"] == 0 and feed["connects"] == 1
-    relay = rt.hub.adsb_relay.counters
-    assert relay.measurements >= 20 and relay.invalid == 0
+    relay = report["adsb"]["mavlink_relay"]
+    assert relay["measurements"] >= 20 and relay["invalid"] == 0
     # head-on at the same altitude: predicted inside the intruder minima -> INTRUDER, raised
     # before the aircraft is within them (it closes at ~25 m/s from 1.5 km)
     intruder = [t for t in rt.usm.threat_log if t.kind is ThreatKind.INTRUDER]
