@@ -21,7 +21,8 @@ import pytest
 from pymavlink.dialects.v20 import common as mav
 
 from adapters.adsb.config import AdsbConfig
-from gcs_utm.app import OperatorMode, RunOptions, Runtime, run_scenario
+from adapters.mavlink.config import MavlinkConfig
+from gcs_utm.app import OperatorMode, RunOptions, Runtime, run_scenario, serve
 from gcs_utm.model import ThreatKind
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store
@@ -216,3 +217,57 @@ async def test_sbs_and_relayed_adsb_become_intruders_and_raise_intruder(tmp_path
     assert first.closest_approach_m is not None and first.closest_approach_m < 150.0
     assert first.predicted_event_at_s is not None
     assert first.predicted_event_at_s - first.detected_at_s >= 10.0
+
+
+async def test_serve_tracks_an_sbs_aircraft_as_an_intruder(tmp_path: Path) -> None:
+    sbs = SbsReceiver()
+    await sbs.start()
+    settings = dataclasses.replace(
+        Settings(),
+        mavlink=MavlinkConfig(links=("udpin:127.0.0.1:0",)),
+        adsb=AdsbConfig(
+            enabled=True, host="127.0.0.1", sbs_port=sbs.port, avr_port=0, beast_port=0
+        ),
+    )
+    stop = asyncio.Event()
+    seen: dict[str, Any] = {}
+
+    async def feed(rt: Runtime) -> None:
+        lon_deg = 8.5456
+        while f"icao:{HEADON_ICAO}" not in rt.tracks():
+            lon_deg += 0.0002
+            sbs.send(sbs_position(HEADON_ICAO, 47.3977, lon_deg, 1500.0))
+            await asyncio.sleep(0.1)
+        seen["track"] = rt.tracks()[f"icao:{HEADON_ICAO}"]  # type: ignore[index]
+        seen["stats"] = rt.surveillance.stats()
+        stop.set()
+
+    tasks: list[asyncio.Task[None]] = []
+
+    async def on_runtime(rt: Runtime) -> None:
+        tasks.append(asyncio.create_task(feed(rt)))
+
+    try:
+        code = await asyncio.wait_for(
+            serve(
+                settings,
+                db_path=tmp_path / "utm.sqlite",
+                operator=OperatorMode.NONE,
+                headless=False,
+                stop=stop,
+                on_runtime=on_runtime,
+            ),
+            timeout=20.0,
+        )
+    finally:
+        for t in tasks:
+            t.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await t
+        await sbs.close()
+    assert code == 0
+    track = seen["track"]
+    assert not track.cooperative and track.icao24 == HEADON_ICAO
+    assert track.alt_amsl_m == pytest.approx(1500.0 * 0.3048, abs=5.0)
+    (feed_stats,) = seen["stats"].values()
+    assert feed_stats["positions"] >= 1 and feed_stats["up"] == 1
