@@ -59,6 +59,7 @@ from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.emergency import EmergencyService
 from gcs_utm.services.monitoring import MonitoringService
 from gcs_utm.services.operator import AutoOperator
+from gcs_utm.services.recorder import record_links
 from gcs_utm.services.surveillance import SurveillanceService
 from gcs_utm.services.tracking import TrackingService
 from gcs_utm.services.usm import Usm
@@ -92,6 +93,7 @@ class RunOptions:
     duration_s: float | None = None
     figures: bool = True
     lead_s: float | None = None
+    record_dir: Path | None = None  # record every MAVLink link as a .tlog here
 
 
 # ---- the running system ----------------------------------------------------------------------
@@ -449,6 +451,7 @@ async def run_scenario(
         Path(str(db_path) + suffix).unlink(missing_ok=True)
     store = Persistence(StoreWriter(db_path, settings.store))
     rt = build_runtime(settings, clock, scenario.frame, store)
+    recorder = record_links(rt.hub, options.record_dir)
     rt.airspace.load(scenario.operations, scenario.geofences)
     for op in scenario.operations:
         store.save_operation(op)
@@ -534,6 +537,8 @@ async def run_scenario(
         await rt.usm.drain()
         await rt.usm.close()
         await rt.hub.close()
+        if recorder is not None:
+            recorder.close()
         wall_s = time.perf_counter() - wall0
     report = build_report(
         rt,
@@ -903,6 +908,7 @@ async def serve(
     stop: asyncio.Event | None = None,
     on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
     speed: float = 1.0,
+    record_dir: Path | None = None,
 ) -> int:
     """Long-running service: links from config, persistent store; restart resumes. Runs until
     SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
@@ -919,6 +925,7 @@ async def serve(
     reader.close()
     store = Persistence(StoreWriter(db_path, settings.store))
     rt = build_runtime(settings, clock, frame, store)
+    recorder = record_links(rt.hub, record_dir)
     rt.airspace.load(operations, geofences)
     rt.tracking.set_operations(operations)
     _log.info(
@@ -980,6 +987,8 @@ async def serve(
                 loop.remove_signal_handler(sig)
         await rt.usm.close()
         await rt.hub.close()
+        if recorder is not None:
+            recorder.close()
         store.close()
     print("gcs-utm serve: stopped", file=sys.stderr)
     return 0

@@ -23,6 +23,7 @@ from pymavlink.dialects.v20 import common as mav
 from adapters.adsb.config import AdsbConfig
 from adapters.mavlink.config import MavlinkConfig
 from gcs_utm.app import OperatorMode, RunOptions, Runtime, run_scenario, serve
+from gcs_utm.cli.replay import replay_file
 from gcs_utm.model import ThreatKind
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store
@@ -179,6 +180,7 @@ async def test_sbs_and_relayed_adsb_become_intruders_and_raise_intruder(tmp_path
         out_dir=tmp_path,
         figures=False,
         lead_s=10.0,
+        record_dir=tmp_path / "rec",
     )
     try:
         report = await run_scenario(path, settings, options, on_runtime=on_runtime)
@@ -207,6 +209,12 @@ async def test_sbs_and_relayed_adsb_become_intruders_and_raise_intruder(tmp_path
     assert feed["positions"] >= 10 and feed["rejects"] == 0 and feed["connects"] == 1
     relay = report["adsb"]["mavlink_relay"]
     assert relay["measurements"] >= 20 and relay["invalid"] == 0
+    # run --record: the link recorded as a .tlog; its replay tracks the relayed aircraft too
+    (tlog,) = (tmp_path / "rec").glob("*.tlog")
+    replayed = await replay_file(tlog)
+    assert distant in replayed["tracks"] and not replayed["tracks"][distant]["cooperative"]
+    assert "sysid:1" in replayed["tracks"], list(replayed["tracks"])
+    assert replayed["counters"]["adsb_relay"]["measurements"] == relay["measurements"]
     # head-on at the same altitude: predicted inside the intruder minima -> INTRUDER, raised
     # before the aircraft is within them (it closes at ~25 m/s from 1.5 km)
     intruder = [t for t in rt.usm.threat_log if t.kind is ThreatKind.INTRUDER]
