@@ -22,6 +22,7 @@ from pymavlink.dialects.v20 import common as mav
 
 from adapters.adsb.config import AdsbConfig
 from adapters.mavlink.config import MavlinkConfig
+from adapters.tlog import iter_messages
 from gcs_utm.app import OperatorMode, RunOptions, Runtime, run_scenario, serve
 from gcs_utm.cli.replay import replay_file
 from gcs_utm.model import ThreatKind
@@ -227,7 +228,7 @@ async def test_sbs_and_relayed_adsb_become_intruders_and_raise_intruder(tmp_path
     assert first.predicted_event_at_s - first.detected_at_s >= 10.0
 
 
-async def test_serve_tracks_an_sbs_aircraft_as_an_intruder(tmp_path: Path) -> None:
+async def test_serve_tracks_sbs_and_relayed_aircraft_and_records_the_link(tmp_path: Path) -> None:
     sbs = SbsReceiver()
     await sbs.start()
     settings = dataclasses.replace(
@@ -241,8 +242,12 @@ async def test_serve_tracks_an_sbs_aircraft_as_an_intruder(tmp_path: Path) -> No
     seen: dict[str, Any] = {}
 
     async def feed(rt: Runtime) -> None:
+        relay = mav.MAVLink(None, srcSystem=42, srcComponent=1)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            port = rt.hub.local_port(rt.hub.link_names()[0])
+            sock.sendto(adsb_vehicle(relay, int(DISTANT_ICAO, 16), 47.5, 8.6), ("127.0.0.1", port))
         lon_deg = 8.5456
-        while f"icao:{HEADON_ICAO}" not in rt.tracks():
+        while f"icao:{HEADON_ICAO}" not in rt.tracks() or f"icao:{DISTANT_ICAO}" not in rt.tracks():
             lon_deg += 0.0002
             sbs.send(sbs_position(HEADON_ICAO, 47.3977, lon_deg, 1500.0))
             await asyncio.sleep(0.1)
@@ -264,6 +269,7 @@ async def test_serve_tracks_an_sbs_aircraft_as_an_intruder(tmp_path: Path) -> No
                 headless=False,
                 stop=stop,
                 on_runtime=on_runtime,
+                record_dir=tmp_path / "rec",
             ),
             timeout=20.0,
         )
@@ -279,3 +285,7 @@ async def test_serve_tracks_an_sbs_aircraft_as_an_intruder(tmp_path: Path) -> No
     assert track.alt_amsl_m == pytest.approx(1500.0 * 0.3048, abs=5.0)
     (feed_stats,) = seen["stats"].values()
     assert feed_stats["positions"] >= 1 and feed_stats["up"] == 1
+    # serve --record: the relayed frame is in the link's tlog (with our heartbeats, if any)
+    (tlog,) = (tmp_path / "rec").glob("*.tlog")
+    types = [m.get_type() for _, m in iter_messages(tlog)]
+    assert types.count("ADSB_VEHICLE") == 1 and set(types) <= {"ADSB_VEHICLE", "HEARTBEAT"}
