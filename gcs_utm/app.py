@@ -216,7 +216,14 @@ def build_runtime(
 
     airspace = Airspace(on_operation=on_operation, on_plan=on_plan, on_geofence=on_geofence)
     id_prefix = life_prefix(store.epoch)
-    usm = Usm(airspace, clock, config=settings.usm, record=store.record, id_prefix=id_prefix)
+    usm = Usm(
+        airspace,
+        clock,
+        config=settings.usm,
+        record=store.record,
+        id_prefix=id_prefix,
+        ground_elevation_amsl_m=frame.ground_elevation_amsl_m,
+    )
 
     async def tracking_hazard(h: HazardReport) -> None:
         usm.on_hazard(h)

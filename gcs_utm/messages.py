@@ -68,6 +68,9 @@ class VehicleStatus:
     mission_seq: int | None = None
     mission_total: int | None = None
     vehicle: str = ""  # where it was first heard (as LinkHealth.vehicle)
+    home: Position | None = None  # HOME_POSITION (AMSL), None until the vehicle sets one
+    mission_id: int | None = None  # MISSION_CURRENT's opaque mission id, when it sends one
+    position: Position | None = None  # the last reported position (GLOBAL_POSITION_INT)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -85,6 +88,8 @@ class LinkHealth:
     bad_frames: int
     reboots: int
     vehicle: str = ""
+    clock_jumps: int = 0  # re-anchors of the vehicle clock mapping (docs/vehicle-time.md)
+    system_time_rejected: int = 0  # SYSTEM_TIME that disagreed with arrival times
 
     @property
     def loss_ratio(self) -> float:

@@ -92,6 +92,30 @@ class MavlinkConfig:
         min=0,
         unit="ms",
     )
+    clock_max_drift: float = setting(
+        0.1,
+        "fastest rate (s/s) at which a vehicle clock is assumed to fall behind ours: the "
+        "capture-time offset may rise this fast without evidence (it falls at once)",
+        min=0.0,
+        max=1.0,
+    )
+    clock_jump_s: float = setting(
+        0.5,
+        "all reports of a clock window (clock_window_s) arriving this much later than the "
+        "offset predicts re-anchor it (a clock jump, or a drift beyond clock_max_drift)",
+        min=0.01,
+        unit="s",
+    )
+    clock_window_s: float = setting(
+        2.0, "vehicle-time window over which clock jumps are judged", min=0.1, unit="s"
+    )
+    system_time_max_lag_s: float = setting(
+        1.0,
+        "SYSTEM_TIME is used only when its UTC is at most this much older than its arrival "
+        "(and not later): otherwise the vehicle's clock is corrected from arrival times",
+        min=0.0,
+        unit="s",
+    )
     address_move_s: float = setting(
         3.0,
         "a sysid heard from a new address after this silence has moved (else: a 2nd "

@@ -106,6 +106,7 @@ _ARDUPILOT_STREAM_MSGS = (
     wire.SYSTEM_TIME,
     wire.MISSION_CURRENT,
     wire.EXTENDED_SYS_STATE,
+    wire.HOME_POSITION,
 )
 
 
@@ -294,6 +295,7 @@ class MavlinkHub:
             wire.EXTENDED_SYS_STATE: VehicleState.on_extended_sys_state,
             wire.STATUSTEXT: VehicleState.on_statustext,
             wire.SYSTEM_TIME: VehicleState.on_system_time,
+            wire.HOME_POSITION: VehicleState.on_home_position,
         }
         self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE relayed by a vehicle -> ADS-B measurement
         self._handlers[wire.ADSB_VEHICLE] = self.adsb_relay.on_adsb_vehicle

@@ -6,9 +6,18 @@ vehicle clock -> UTC mapping, and the hazard debouncing, and turns messages into
 :class:`Measurement`, :class:`VehicleStatus` and :class:`HazardReport` through an
 :class:`Events` sink.
 
-Vehicle clock -> UTC: SYSTEM_TIME gives ``unix - boot`` directly once the vehicle has GNSS
-time; until then the offset is learned as the minimum of ``receipt - boot`` over samples (the
-least-delayed sample is closest to the truth), reset on reboot.
+Vehicle clock -> our clock (capture time = ``offset_s + time_boot_ms / 1000``): every report
+with ``time_boot_ms`` gives a sample ``receipt - boot``, the true offset plus its transport
+delay. The offset is a bounded-rate lower envelope of the samples: it falls to any sample
+below it at once (a capture time is never later than its receipt) and rises by at most
+``clock_max_drift`` x the vehicle time elapsed (a vehicle clock that runs slow, as PX4 SIH's
+by ~1 %, is followed; one delayed report moves nothing). When every sample of a
+``clock_window_s`` window is more than ``clock_jump_s`` above the offset, the clock jumped (or
+drifts faster than the bound): the offset is re-anchored to that window's lowest sample and
+the jump is counted. A reboot (``time_boot_ms`` going back) starts over. SYSTEM_TIME (``unix -
+boot``, once the vehicle has GNSS time) is used only when it agrees with its own arrival
+(not later, at most ``system_time_max_lag_s`` earlier); otherwise it is counted as rejected
+and the arrival-based offset stays. See docs/vehicle-time.md.
 """
 
 from __future__ import annotations
@@ -36,6 +45,7 @@ from gcs_utm.ratelog import RateLimitedLog
 _log = logging.getLogger(__name__)
 
 _NAN = float("nan")
+_INF = float("inf")
 _MIN_UNIX_S = 1.5e9  # SYSTEM_TIME before 2017 means "no GNSS time yet"
 _JAM_RE = re.compile(r"jam", re.IGNORECASE)
 _SPOOF_RE = re.compile(r"spoof", re.IGNORECASE)
@@ -100,10 +110,21 @@ class VehicleState:
         self._last_seq = -1
         self._rate_mark = (t_s, 0)
         self.rate_hz = 0.0
-        # clock
+        # clock (see the module docstring)
         self.last_boot_ms = -1
-        self.offset_s: float | None = None  # UTC - boot time
+        self.offset_s: float | None = None  # our clock - boot time
         self.offset_from_system_time = False
+        self.clock_jumps = 0  # re-anchors of the offset (jumps, drift beyond the bound)
+        self.system_time_used = 0
+        self.system_time_rejected = 0  # SYSTEM_TIME that disagreed with arrival times
+        self._drift_per_ms = cfg.clock_max_drift / 1000.0
+        self._window_ms = max(1, round(cfg.clock_window_s * 1000.0))
+        self._window_end_ms = 0
+        self._window_min = _INF
+        self._system_time_boot_ms = -1
+        # home (HOME_POSITION) and the mission's opaque id (MISSION_CURRENT, MAVLink >= 2023)
+        self.home: Position | None = None
+        self.mission_id: int | None = None
         # GNSS / battery / mission
         self.fix_type: int | None = None
         self.satellites: int | None = None
@@ -152,39 +173,119 @@ class VehicleState:
             bad_frames=bad_frames,
             reboots=self.reboots,
             vehicle=self.tag,
+            clock_jumps=self.clock_jumps,
+            system_time_rejected=self.system_time_rejected,
         )
 
     # --- clock ----------------------------------------------------------------------------
     def boot_time(self, boot_ms: int, receipt_t_s: float) -> bool:
-        """Track time_boot_ms; True when it shows a reboot."""
-        rebooted = False
-        last = self.last_boot_ms
-        if last >= 0 and boot_ms + self.cfg.reboot_tolerance_ms < last:
-            self.reboots += 1
-            self.offset_s = None
-            self.offset_from_system_time = False
-            self._last_seq = -1
-            rebooted = True
-            self._ratelog.warning(
-                f"reboot:{self.sys_id}",
-                "%s rebooted (time_boot_ms %d -> %d)",
-                self.key,
-                last,
-                boot_ms,
-            )
-        if boot_ms > last or rebooted:
+        """One ``time_boot_ms`` sample received at ``receipt_t_s``: the offset filter (module
+        docstring). True when it shows a reboot. On the position hot path: a few operations."""
+        sample = receipt_t_s - boot_ms * 0.001
+        off = self.offset_s
+        d_ms = boot_ms - self.last_boot_ms
+        if d_ms > 0:
             self.last_boot_ms = boot_ms
-        if not self.offset_from_system_time:
-            sample = receipt_t_s - boot_ms / 1000.0
-            if self.offset_s is None or sample < self.offset_s:
-                self.offset_s = sample
-        return rebooted
+            if off is not None:
+                off += self._drift_per_ms * d_ms  # the bounded rise
+        elif d_ms < -self.cfg.reboot_tolerance_ms:
+            self._rebooted(boot_ms)
+            self._anchor(boot_ms, sample)
+            return True
+        if off is None:
+            self._anchor(boot_ms, sample)
+            return False
+        if sample < off:  # noqa: PLR1730 (a compare is cheaper than min() on the hot path)
+            off = sample
+        self.offset_s = off
+        if sample < self._window_min:  # noqa: PLR1730 (as above)
+            self._window_min = sample
+        if boot_ms >= self._window_end_ms:
+            self._close_window(boot_ms)
+        return False
 
-    def system_time(self, unix_us: int, boot_ms: int) -> None:
+    def _anchor(self, boot_ms: int, sample: float) -> None:
+        self.last_boot_ms = boot_ms
+        self.offset_s = sample
+        self.offset_from_system_time = False
+        self._drift_per_ms = self.cfg.clock_max_drift / 1000.0
+        self._window_min = _INF
+        self._window_end_ms = boot_ms + self._window_ms
+
+    def _rebooted(self, boot_ms: int) -> None:
+        self.reboots += 1
+        self._last_seq = -1
+        self._system_time_boot_ms = -1
+        self._ratelog.warning(
+            f"reboot:{self.sys_id}",
+            "%s rebooted (time_boot_ms %d -> %d)",
+            self.key,
+            self.last_boot_ms,
+            boot_ms,
+        )
+
+    def _close_window(self, boot_ms: int) -> None:
+        """End of a clock window: a SYSTEM_TIME anchor that went quiet stops holding the
+        offset; without one, a jump when all of the window's samples sat more than
+        ``clock_jump_s`` above the offset."""
+        if (
+            self.offset_from_system_time
+            and boot_ms - self._system_time_boot_ms > 3 * self._window_ms
+        ):
+            self.offset_from_system_time = False  # no SYSTEM_TIME lately: follow arrivals
+            self._drift_per_ms = self.cfg.clock_max_drift / 1000.0
+        off = self.offset_s
+        low = self._window_min
+        if (
+            not self.offset_from_system_time
+            and off is not None
+            and low - off > self.cfg.clock_jump_s
+        ):
+            self.clock_jumps += 1
+            self.offset_s = low
+            # counted (LinkHealth.clock_jumps) and rate-limited: a simulator that cannot
+            # keep its speed factor jumps often
+            self._ratelog.warning(
+                "clock",
+                "%s clock re-anchored: arrivals %.3f s later than its time_boot_ms predicted "
+                "(clock jump or drift above %.0f %%)",
+                self.key,
+                low - off,
+                100.0 * self.cfg.clock_max_drift,
+            )
+        self._window_min = _INF
+        self._window_end_ms = boot_ms + self._window_ms
+
+    def system_time(self, unix_us: int, boot_ms: int, receipt_t_s: float) -> bool:
+        """SYSTEM_TIME (after :meth:`boot_time` of the same message): used as the offset only
+        when it agrees with its own arrival; True when used."""
         unix_s = unix_us / 1e6
-        if unix_s > _MIN_UNIX_S:
-            self.offset_s = unix_s - boot_ms / 1000.0
-            self.offset_from_system_time = True
+        if unix_s <= _MIN_UNIX_S or self.offset_s is None:
+            return False  # no GNSS time yet
+        candidate = unix_s - boot_ms * 0.001
+        arrival = receipt_t_s - boot_ms * 0.001
+        lag_s = arrival - candidate  # how much older than its arrival the vehicle says it is
+        if not 0.0 <= lag_s <= self.cfg.system_time_max_lag_s:
+            self.system_time_rejected += 1
+            if self.system_time_rejected == 1 or self.offset_from_system_time:
+                self._ratelog.warning(
+                    "system_time",
+                    "%s SYSTEM_TIME disagrees with arrival times by %.3f s (allowed: 0 to "
+                    "%.3f s earlier): corrected from arrival times",
+                    self.key,
+                    lag_s,
+                    self.cfg.system_time_max_lag_s,
+                )
+            if self.offset_from_system_time:
+                self.offset_from_system_time = False
+                self._drift_per_ms = self.cfg.clock_max_drift / 1000.0
+            return False
+        self.system_time_used += 1
+        self.offset_s = candidate
+        self.offset_from_system_time = True
+        self._system_time_boot_ms = boot_ms
+        self._drift_per_ms = 0.0  # the vehicle's UTC holds the offset; arrivals only lower it
+        return True
 
     def capture_t_s(self, boot_ms: int, receipt_t_s: float) -> float:
         if self.offset_s is None:
@@ -219,6 +320,9 @@ class VehicleState:
             mission_seq=self.mission_seq,
             mission_total=self.mission_total,
             vehicle=self.tag,
+            home=self.home,
+            mission_id=self.mission_id,
+            position=self.last_position,
         )
 
     def hazard(self, kind: ThreatKind, t_s: float, message: str) -> HazardReport:
@@ -384,14 +488,42 @@ class VehicleState:
         self._battery(None if m.battery_remaining < 0 else float(m.battery_remaining), t_s, ev)
 
     def on_mission_current(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        """The current item, and what shows that the mission changed: its item count (0 when
+        there is none) and its opaque id (PX4 >= 1.14). A status goes out on any change."""
         seq = int(m.seq)
         total = int(getattr(m, "total", 0) or 0)
-        changed = seq != self.mission_seq
+        known = total != 0xFFFF and (total or getattr(m, "mission_state", 0))
+        mission_id = wire.mission_current_id(m)
+        changed = seq != self.mission_seq or mission_id != self.mission_id
         self.mission_seq = seq
-        if total and total != 0xFFFF:
+        self.mission_id = mission_id
+        if known and total != self.mission_total:
+            # (0xFFFF: "not supported"; 0 with mission_state UNKNOWN: a frame without the
+            # extension fields, as MAVLink 1 or an older autopilot sends it)
             self.mission_total = total
+            changed = True
         if changed:
             ev.on_status(self.status(t_s))
+
+    def on_home_position(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
+        """HOME_POSITION: the vehicle's home (AMSL); a status goes out when it moves."""
+        lat_e7, lon_e7 = int(m.latitude), int(m.longitude)
+        if lat_e7 == 0 and lon_e7 == 0:
+            return  # not set yet
+        lat, lon, alt = lat_e7 / 1e7, lon_e7 / 1e7, m.altitude / 1000.0
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            return
+        old = self.home
+        if (
+            old is not None
+            and abs(old.lat_deg - lat) < 1e-7
+            and abs(old.lon_deg - lon) < 1e-7
+            and abs(old.alt_amsl_m - alt) < 0.01
+        ):
+            return
+        self.home = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=alt)
+        _log.info("%s home %.7f %.7f %.2f m AMSL", self.key, lat, lon, alt)
+        ev.on_status(self.status(t_s))
 
     def on_extended_sys_state(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
         state = int(m.landed_state)
@@ -409,4 +541,4 @@ class VehicleState:
     def on_system_time(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
         boot_ms = int(m.time_boot_ms)
         self.boot_time(boot_ms, t_s)
-        self.system_time(int(m.time_unix_usec), boot_ms)
+        self.system_time(int(m.time_unix_usec), boot_ms, t_s)

@@ -75,6 +75,7 @@ COMMAND_ACK = mav.MAVLINK_MSG_ID_COMMAND_ACK
 BATTERY_STATUS = mav.MAVLINK_MSG_ID_BATTERY_STATUS
 EXTENDED_SYS_STATE = mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE
 STATUSTEXT = mav.MAVLINK_MSG_ID_STATUSTEXT
+HOME_POSITION = mav.MAVLINK_MSG_ID_HOME_POSITION
 
 ATTITUDE = mav.MAVLINK_MSG_ID_ATTITUDE
 VFR_HUD = mav.MAVLINK_MSG_ID_VFR_HUD
@@ -173,6 +174,21 @@ def global_position(data: bytes) -> tuple[int, int, int, GlobalPosition] | None:
         payload = payload + bytes(_GPI_SIZE - n + 12) if n - 12 < _GPI_SIZE else payload[:_GPI_SIZE]
     fields: GlobalPosition = _GPI_UNPACK(payload)
     return data[5], data[6], data[4], fields
+
+
+def mission_current_id(m: MavMsg) -> int | None:
+    """MISSION_CURRENT's ``mission_id`` (an opaque id of the vehicle's mission, MAVLink
+    extension of 2023, payload bytes 6-9), read from the raw frame: pymavlink's bundled dialect
+    stops at ``mission_mode``. None when the frame does not carry it (MAVLink 1, an older
+    autopilot) or it is 0 (the vehicle does not compute one)."""
+    buf = bytes(m.get_msgbuf())
+    if len(buf) < 12 or buf[0] != _V2:
+        return None
+    payload = buf[10 : 10 + buf[1]]
+    if len(payload) <= 6:
+        return None
+    value = int.from_bytes((payload[6:10] + bytes(4))[:4], "little")
+    return value or None
 
 
 def msg_name(mid: int) -> str:

@@ -319,9 +319,12 @@ def recommendation_panel(
     if note:
         parts.append(Text(note, style="bold magenta"))
     if keys is None:
-        target = options[viewing].maneuver.value if 0 <= viewing < len(options) else "proposal"
+        if 0 <= viewing < len(options):
+            target = f"{viewing} {options[viewing].maneuver.value}"
+        else:
+            target = rec.command.kind.value if rec.command is not None else "the proposal"
         keys = (
-            f"[a] accept {viewing} {target}   [r] reject   [n]/[p] highlight option   "
+            f"[a] accept {target}   [r] reject   [n]/[p] highlight option   "
             "[tab] next pending   [q] quit"
         )
     if keys:

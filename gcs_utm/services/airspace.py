@@ -21,6 +21,7 @@ from gcs_utm.model import (
     Operation,
     OperationId,
     OperationState,
+    Position,
     PredictedTrajectories,
     SysId,
     Track,
@@ -121,15 +122,16 @@ class Airspace:
             self._on_operation(new)
         return new
 
-    def replace_plan(self, plan: FlightPlan) -> Operation:
-        """Install ``plan`` as the operation's current plan. Its version must be newer."""
+    def replace_plan(self, plan: FlightPlan, *, home: Position | None = None) -> Operation:
+        """Install ``plan`` as the operation's current plan (and ``home`` as its home, when
+        given: a vehicle that reported a new one). Its version must be newer."""
         op = self.operation(plan.operation_id)
         if plan.version <= op.plan.version:
             raise AirspaceError(
                 f"operation {op.id}: plan version {plan.version} is not newer than "
                 f"{op.plan.version}"
             )
-        new = dataclasses.replace(op, plan=plan, next_waypoint=0)
+        new = dataclasses.replace(op, plan=plan, next_waypoint=0, home=home or op.home)
         self._operations[op.id] = new
         self.version += 1
         if self._on_plan:

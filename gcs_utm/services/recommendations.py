@@ -230,7 +230,10 @@ class RecommendationLifecycle:
             ):
                 if rec.state is RecommendationState.EXPIRED:
                     old.decision = "expired"
-                await self._set_state(old, rec.state, rec.reason or rec.state.value)
+                    why = "without an answer (deadline passed)"
+                else:
+                    why = f"by EM ({rec.reason})" if rec.reason else "by EM"
+                await self._set_state(old, rec.state, why)
             return
         if old is not None and old.rec.state is RecommendationState.PROPOSED:
             await self._set_state(old, RecommendationState.SUPERSEDED, f"by v{rec.version}")
@@ -268,7 +271,9 @@ class RecommendationLifecycle:
         if record is None or record.rec.state is not RecommendationState.PROPOSED:
             return
         record.decision = "expired"
-        await self._set_state(record, RecommendationState.EXPIRED, "deadline passed")
+        await self._set_state(
+            record, RecommendationState.EXPIRED, "without an answer (deadline passed)"
+        )
 
     # ---- pilot answers --------------------------------------------------------------------
     async def answer(self, a: PilotAnswer) -> AnswerOutcome:
@@ -455,7 +460,7 @@ class RecommendationLifecycle:
             _log.error("recommendation %s: %s -> %s refused", rec.id, rec.state, state)
             return
         record.rec = rec.transition(state, now, reason)
-        record.history.append((now, f"v{rec.version} {state.value}: {reason}"))
+        record.history.append((now, f"{state.value} v{rec.version}: {reason}"))
         self._record(record.rec)
         self.log_event("recommendation", f"{rec.id} v{rec.version} {state.value} {reason}")
         for op in self._operators:

@@ -162,7 +162,8 @@ def start_px4(
         env["PX4_HOME_LAT"] = str(round(home[0] * 1e7))
         env["PX4_HOME_LON"] = str(round(home[1] * 1e7))
     out, err = wd / "out.log", wd / "err.log"
-    binary = px4_bin_dir(owned or root) / "px4"
+    # (PX4 gets a fresh /tmp: a caller's workdir, and the binary beside it, must be elsewhere)
+    binary = px4_bin_dir(owned or (wd.parent if workdir and private_tmp else root)) / "px4"
     argv = [str(binary), "-i", str(instance), "-d", str(PX4_DIR / "etc")]
     if private_tmp:
         argv = [*_PRIVATE_TMP, *argv]

@@ -251,3 +251,25 @@ async def test_summary_screen_between_use_cases(key: str, last: bool, expected: 
         await pilot.press(key)
         await pilot.pause()
     assert app.return_value is expected
+
+
+def test_a_command_proposal_names_the_command_it_accepts() -> None:
+    from io import StringIO
+
+    from rich.console import Console
+
+    from gcs_utm.dashboard.view import collect, recommendation_panel
+    from gcs_utm.model import Command, CommandKind
+
+    rec = replace(
+        _rec(),
+        selected=None,
+        alternatives=(),
+        command=Command(kind=CommandKind.HOLD, operation_id=OP),
+    )
+    buf = StringIO()
+    Console(file=buf, width=80, color_system=None).print(
+        recommendation_panel(rec, collect(_usm(), _tracks))
+    )
+    text = buf.getvalue()
+    assert "Proposed command: hold" in text and "[a] accept hold" in text

@@ -20,7 +20,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.network, pytest.mark.timeout(240)]
 
 
 class ChoosingPilot:
-    """Accepts the first alternative (the prompt's row 1) of the first proposal with one."""
+    """Accepts the first alternative with a plan and another manoeuvre than the proposed
+    one, on the first proposal that has such an alternative."""
 
     def __init__(self, rt: Runtime) -> None:
         self.rt = rt
@@ -29,8 +30,12 @@ class ChoosingPilot:
     async def present(self, rec: Recommendation) -> None:
         if self.chosen or not rec.alternatives or rec.selected is None:
             return
-        pick = next((a for a in rec.alternatives if a.plan is not None), None)
-        if pick is None or pick.maneuver is rec.selected.maneuver:
+        proposed = rec.selected.maneuver
+        pick = next(
+            (a for a in rec.alternatives if a.plan is not None and a.maneuver is not proposed),
+            None,
+        )
+        if pick is None:
             return
         self.chosen.append((rec, pick.maneuver.value))
         await self.rt.usm.answer(

@@ -371,7 +371,7 @@ def test_an_escalated_case_is_retried_on_the_supervision_tick() -> None:
     assert rec.selected.maneuver is Maneuver.GO_UP
 
 
-def test_a_predicted_loss_with_clean_plans_is_escalated_not_ignored() -> None:
+def test_a_predicted_loss_with_clean_plans_is_reported_not_ignored() -> None:
     """Every plan already keeps separation (the UAS fly off them): nothing to re-plan, but
     the decision says so instead of staying silent."""
     snap, threat = sc.scenario_los_2uas()
@@ -380,6 +380,9 @@ def test_a_predicted_loss_with_clean_plans_is_escalated_not_ignored() -> None:
         OperationId("B"): [_alt(snap, "B", Maneuver.KEEP_PLAN, 0.0)],
     }
     td = _FakeTD(opts, {frozenset({"A:keep_plan", "B:keep_plan"})})
-    d = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON).on_threat(threat, snap)
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
+    d = em.on_threat(threat, snap)
     assert not plans(d)
-    assert d.escalations and "off their plans" in d.escalations[0]
+    assert d.warnings and "off their plans" in d.warnings[0]
+    again = em.supervise(at(snap, em.config.retry_after_s + 1.0))
+    assert not again.warnings  # said once per case

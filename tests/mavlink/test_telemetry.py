@@ -5,14 +5,22 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import os
+import random
+import time
 from typing import Any
 
 import pytest
 
 os.environ["MAVLINK20"] = "1"
 
-from adapters.mavlink import EndpointError, EndpointKind, parse_endpoint
+from fastcrc import crc16
+from pymavlink.dialects.v20 import common as mav_common
+from pymavlink.dialects.v20.common import MAVLINK_MSG_ID_MISSION_CURRENT
+
+from adapters.mavlink import EndpointError, EndpointKind, MavlinkConfig, parse_endpoint
+from adapters.mavlink.vehicle import VehicleState
 from adapters.mavlink.wire import Encoder, Parser
+from gcs_utm.messages import VehicleKey
 from gcs_utm.model import Autopilot, SysId, ThreatKind, VehicleKind
 
 
@@ -73,17 +81,18 @@ async def test_discovery_position_capture_time_and_health(env: Any) -> None:
     v = await env.vehicle(1)
     info = env.sink.vehicles[0]
     assert info.autopilot is Autopilot.PX4 and info.vehicle_kind is VehicleKind.MULTIROTOR
-    # SYSTEM_TIME maps vehicle boot time to UTC
-    unix_s = 1_700_000_000.0
+    # SYSTEM_TIME that agrees with its arrival (0.3 s old) maps vehicle boot time to UTC
+    unix_s = time.time() - 0.3
     v.send(v.mav.system_time_encode(int(unix_s * 1e6), 60_000), lossy=False)
     v.send(
         v.mav.gps_raw_int_encode(0, 3, 0, 0, 0, 80, 120, 0, 0, 12, 0, 1500, 2500, 0, 0), lossy=False
     )
-    v.position(boot_ms=61_000)
+    v.position(boot_ms=60_050)
     await _settle()
     m = env.sink.measurements[-1]
     assert m.sys_id == 1 and m.lat_deg == pytest.approx(47.3977) and m.alt_amsl_m == 488.0
-    assert m.capture_t_s == pytest.approx(unix_s + 1.0)
+    assert m.capture_t_s == pytest.approx(unix_s + 0.05, abs=1e-6)
+    assert env.hub.state(SysId(1)).system_time_used == 1
     assert m.vel_ned_mps == (1.0, -2.0, 0.5) and m.eph_m == 1.5 and m.epv_m == 2.5
     # sequence gap -> loss; our heartbeats are unicast to the vehicle
     v.mav.seq = (v.mav.seq + 5) % 256
@@ -175,4 +184,187 @@ async def test_ardupilot_streams_requested(env: Any, fake_vehicle_cls: Any) -> N
     assert {int(c.param1) for c in intervals} >= {33, 24, 1, 2}
     assert any(m.get_type() == "REQUEST_DATA_STREAM" for m in v.received)
     assert env.hub.state(SysId(11)).autopilot is Autopilot.ARDUPILOT
+    v.close()
+
+
+# ---- the vehicle clock filter (VehicleState, no sockets) -----------------------------------
+
+
+class _Events:
+    def __init__(self) -> None:
+        self.measurements: list[Any] = []
+
+    def on_measurement(self, m: Any) -> None:
+        self.measurements.append(m)
+
+    def on_status(self, s: Any) -> None:
+        pass
+
+    def on_hazard(self, h: Any) -> None:
+        pass
+
+    def on_vehicle(self, v: Any) -> None:
+        pass
+
+    def on_link_health(self, h: Any) -> None:
+        pass
+
+
+def _clock_state(**cfg: Any) -> tuple[VehicleState, _Events]:
+    key = VehicleKey(link="test", address="127.0.0.1:1", sys_id=SysId(1))
+    return VehicleState(key, MavlinkConfig(**cfg), 0.0), _Events()
+
+
+def _report(st: VehicleState, ev: _Events, boot_ms: int, receipt_t_s: float) -> Any:
+    st.on_position((boot_ms, 473977000, 85456000, 488000, 0, 0, 0, 0, 0), receipt_t_s, ev)
+    return ev.measurements[-1]
+
+
+def _fly(
+    st: VehicleState,
+    ev: _Events,
+    *,
+    seconds: float,
+    rate: float,
+    t0_s: float = 1000.0,
+    boot0_ms: int = 30_000,
+    seed: int = 1,
+) -> list[float]:
+    """Positions at 50 Hz from a vehicle whose clock runs at ``rate`` x ours, each delayed
+    0-20 ms (and one in 100 by 300 ms); returns receipt - capture of every report."""
+    rng = random.Random(seed)
+    lags: list[float] = []
+    for k in range(int(seconds * 50)):
+        true_t = t0_s + k * 0.02
+        boot_ms = boot0_ms + round(k * 20 * rate)
+        delay = 0.3 if k % 100 == 37 else rng.uniform(0.0, 0.02)
+        m = _report(st, ev, boot_ms, true_t + delay)
+        lags.append(m.receipt_t_s - m.capture_t_s)
+    return lags
+
+
+@pytest.mark.parametrize("rate", [0.99, 0.97, 1.0, 1.01])
+def test_clock_drift_followed_capture_never_after_receipt(rate: float) -> None:
+    """PX4 SIH's clock runs ~1 % slow: an offset anchored once (the minimum of receipt - boot)
+    lags by 1 s per 100 s and the track goes stale after ~8 min; the filter follows drift of
+    a few % in either direction and never dates a report after its arrival."""
+    st, ev = _clock_state()
+    lags = _fly(st, ev, seconds=900.0, rate=rate)
+    assert min(lags) >= -1e-9  # (float rounding of receipt - boot + boot)
+    tail = sorted(lags[-3000:])  # the last minute
+    assert tail[len(tail) // 2] < 0.03  # median: within the transport jitter
+    assert tail[-1] < 0.35  # at worst the 300 ms delayed report
+    assert st.clock_jumps == 0
+
+
+def test_clock_drift_beyond_the_bound_re_anchored() -> None:
+    """A simulator that cannot keep its speed factor (its clock at 0.8 x ours): the rise is
+    too slow, so whole windows arrive late and the offset is re-anchored (counted); reports
+    stay within clock_jump_s + two windows of excess drift (0.5 + 2 x 2 s x 0.15) and the
+    300 ms late reports of their arrival, never after it."""
+    st, ev = _clock_state()
+    lags = _fly(st, ev, seconds=300.0, rate=0.8)
+    assert min(lags) >= -1e-9
+    assert max(lags[50 * 10 :]) < 1.5
+    assert st.clock_jumps > 10
+
+
+def test_clock_one_late_report_does_not_move_the_offset() -> None:
+    st, ev = _clock_state()
+    _fly(st, ev, seconds=10.0, rate=1.0)
+    off = st.offset_s
+    assert off is not None
+    m = _report(st, ev, st.last_boot_ms + 20, 1010.0 + 0.8)  # 0.8 s late
+    assert m.receipt_t_s - m.capture_t_s == pytest.approx(0.8, abs=0.03)
+    assert st.offset_s == pytest.approx(off, abs=0.002)
+
+
+def test_clock_jump_back_re_anchored_and_counted() -> None:
+    """time_boot_ms steps back 1.5 s (less than a reboot): reports would be dated 1.5 s early
+    (stale tracks); within two clock windows the offset is re-anchored."""
+    st, ev = _clock_state()
+    _fly(st, ev, seconds=20.0, rate=1.0)
+    lags = _fly(st, ev, seconds=20.0, rate=1.0, t0_s=1020.0, boot0_ms=30_000 + 20_000 - 1500)
+    assert st.clock_jumps == 1 and st.reboots == 0
+    assert max(lags[50 * 5 :]) < 0.35  # after 5 s
+    assert max(lags[:50]) > 1.4  # it did jump
+
+
+def test_clock_jump_forward_never_dates_after_receipt() -> None:
+    st, ev = _clock_state()
+    _fly(st, ev, seconds=5.0, rate=1.0)
+    lags = _fly(st, ev, seconds=5.0, rate=1.0, t0_s=1005.0, boot0_ms=30_000 + 5_000 + 7_000)
+    assert min(lags) >= -1e-9  # (float rounding of receipt - boot + boot) and max(lags[1:]) < 0.35
+
+
+def test_clock_reboot_starts_over() -> None:
+    st, ev = _clock_state()
+    _fly(st, ev, seconds=100.0, rate=0.99)
+    m = _report(st, ev, 300, 1100.0)
+    assert st.reboots == 1
+    assert m.capture_t_s == pytest.approx(1100.0)
+    lags = _fly(st, ev, seconds=30.0, rate=1.0, t0_s=1100.02, boot0_ms=320)
+    assert (
+        min(lags) >= -1e-9
+    )  # (float rounding of receipt - boot + boot) and sorted(lags)[len(lags) // 2] < 0.03
+
+
+@pytest.mark.parametrize(("lag_s", "used"), [(0.2, True), (3.84, False), (-0.5, False)])
+def test_system_time_used_only_when_it_agrees_with_arrivals(lag_s: float, used: bool) -> None:
+    """ArduPilot SITL's SYSTEM_TIME lagged the host clock by 3.84 s; trusted, its track ran
+    ~4 s ahead. A SYSTEM_TIME at most system_time_max_lag_s older than its arrival is used
+    (it removes the transport delay); otherwise counted and corrected from arrivals."""
+    st, ev = _clock_state()
+    t0 = 1_700_000_000.0  # SYSTEM_TIME before 2017 means "no GNSS time yet"
+    _fly(st, ev, seconds=5.0, rate=1.0, t0_s=t0)
+    boot_ms = st.last_boot_ms + 10
+    receipt = t0 + (boot_ms - 30_000) / 1000.0 + 0.01
+    st.boot_time(boot_ms, receipt)
+    assert st.system_time(round((receipt - lag_s) * 1e6), boot_ms, receipt) is used
+    assert (st.system_time_used, st.system_time_rejected) == ((1, 0) if used else (0, 1))
+    m = _report(st, ev, boot_ms + 10, receipt + 0.01)
+    delay = m.receipt_t_s - m.capture_t_s
+    if used:
+        assert delay == pytest.approx(lag_s, abs=1e-5)
+    else:
+        assert -1e-6 <= delay < 0.03
+
+
+def _mission_current_frame(seq: int, total: int, state: int, mission_id: int, n: int) -> bytes:
+    """MISSION_CURRENT as PX4 >= 1.14 sends it: with the 2023 extension fields (mission_id,
+    fence_id, rally_points_id), which pymavlink's bundled dialect cannot encode."""
+    payload = (
+        seq.to_bytes(2, "little")
+        + total.to_bytes(2, "little")
+        + bytes([state, 0])
+        + mission_id.to_bytes(4, "little")
+        + bytes(8)
+    )
+    mid = MAVLINK_MSG_ID_MISSION_CURRENT
+    hdr = bytes([0xFD, len(payload), 0, 0, n, 1, 1]) + mid.to_bytes(3, "little")
+    extra = bytes([mav_common.MAVLink_mission_current_message.crc_extra])
+    crc = crc16.mcrf4xx(extra, crc16.mcrf4xx(hdr[1:] + payload))
+    return hdr + payload + crc.to_bytes(2, "little")
+
+
+async def test_home_position_and_mission_changes_reach_the_status(env: Any) -> None:
+    v = await env.vehicle(1)
+    v.send(v.mav.home_position_encode(454671160, -737578370, 32340, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0))
+    await _settle()
+    home = env.sink.statuses[-1].home
+    assert (home.lat_deg, home.lon_deg, home.alt_amsl_m) == (45.467116, -73.757837, 32.34)
+    n = len(env.sink.statuses)
+    v.send(v.mav.home_position_encode(454671160, -737578370, 32340, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0))
+    await _settle()
+    assert len(env.sink.statuses) == n  # the same home: no status
+    v.send_raw(_mission_current_frame(0, 4, 2, 0xA1B2C3D4, 7))
+    await _settle()
+    s = env.sink.statuses[-1]
+    assert (s.mission_total, s.mission_id, s.mission_seq) == (4, 0xA1B2C3D4, 0)
+    v.send_raw(_mission_current_frame(0, 4, 2, 0x0BADF00D, 8))  # same length, new mission
+    await _settle()
+    assert env.sink.statuses[-1].mission_id == 0x0BADF00D
+    v.send_raw(_mission_current_frame(0, 0xFFFF, 0, 0, 9))  # PX4 with no mission
+    await _settle()
+    assert env.sink.statuses[-1].mission_id is None
     v.close()

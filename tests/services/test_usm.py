@@ -193,30 +193,6 @@ class _Info:
     vehicle_kind: VehicleKind = VehicleKind.MULTIROTOR
 
 
-def test_mission_to_plan_times_from_speed_items_and_relative_altitudes() -> None:
-    from gcs_utm.services.usm import mission_to_plan
-
-    items = [
-        _Item(command=22, z=10.0, frame=3),  # takeoff "here": no position, skipped first
-        _Item(command=16, x=400000000, y=-30000000, z=20.0, frame=3),
-        _Item(command=178, param2=10.0),
-        _Item(command=16, x=400009000, y=-30000000, z=20.0, frame=3),  # ~99.5 m north
-        _Item(command=21, frame=3),  # land at the previous position
-    ]
-    plan = mission_to_plan(
-        items, OperationId("sys7"), t0_s=100.0, cruise_speed_mps=5.0, home_alt_amsl_m=600.0
-    )
-    assert plan is not None
-    assert [w.alt_amsl_m for w in plan.waypoints] == [620.0, 620.0, 600.0]
-    assert plan.waypoints[1].t_s == pytest.approx(100.0 + 99.486 / 10.0, abs=0.01)
-    assert (
-        mission_to_plan(
-            items, OperationId("x"), t0_s=0.0, cruise_speed_mps=5.0, home_alt_amsl_m=None
-        )
-        is None
-    )
-
-
 async def test_vehicle_without_operation_gets_one_from_its_mission() -> None:
     class Port(FakeVehicles):
         async def download_mission(self, sys_id: SysId) -> list[_Item]:

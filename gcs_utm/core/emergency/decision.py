@@ -84,5 +84,7 @@ class Case:
     supervised: int = 0
     operations: dict[OperationId, Operation] = field(default_factory=dict)
     """The operations as they were at the last decision (their plans then)."""
+    off_plan_escalated: bool = False
+    """The "plans clear, tracks predict a loss" warning was given (once per case)."""
     deviates_at: dict[RecommendationId, float] = field(default_factory=dict)
     """When each recommended plan first leaves the plan it replaces (see .supervision)."""

@@ -462,16 +462,18 @@ class EmergencyManager:
         d = Decision(audit=(self.audit(now, "decision", t.id, detail),))
         d = d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
         kept = all(a.maneuver is Maneuver.KEEP_PLAN for a in tiered.selection.chosen.values())
-        if kept and not self._in_force(case):
+        if kept and not self._in_force(case) and not case.off_plan_escalated:
+            case.off_plan_escalated = True
             # Monitoring predicts the loss from the tracks, yet every plan is clear of it: the
-            # UAS are not where their plans say. Nothing to re-plan; the operator must know.
+            # UAS are not where their plans say. Nothing to re-plan; the operator is warned
+            # (conformance threats handle the deviation itself).
             # (With plans of this case in force, keeping them is supervision's normal answer
             # while the UAS turn onto them.)
             msg = (
                 f"{t.id}: loss of separation predicted for {', '.join(t.uas_ids)} although "
-                "their plans keep separation (off their plans?); operator attention"
+                "their plans keep separation (off their plans?)"
             )
-            d = d.merge(Decision(escalations=(msg,)))
+            d = d.merge(Decision(warnings=(msg,)))
         return d
 
     def _issue_joint(

@@ -1,0 +1,591 @@
+"""Operations from vehicles (paper: operations come from the pilots' ground stations): a vehicle
+that flies a mission is an operation, filed from the mission it has, kept in step with it.
+
+- Filed when a vehicle with no operation has a mission, and re-filed (a new plan version)
+  whenever its mission changes: a change shows as a new item count or opaque mission id in
+  MISSION_CURRENT, or on arming; the mission is then downloaded again and compared with the
+  plan by position (a mission that is the plan, e.g. one the UTM uploaded, changes nothing).
+  A mission present before the first position fix waits for the home it needs.
+- Home from HOME_POSITION (ArduPilot: else mission item 0), never from the first reported
+  altitude (a vehicle that connects airborne would put every waypoint that much too high);
+  waypoints in a relative-altitude frame are resolved against it; a vehicle-filed operation
+  is re-filed when its home moves.
+- Timed from the vehicle's progress, not from the download: the plan starts at the vehicle's
+  position, flies to the current item (MISSION_CURRENT) and on at the mission's speeds
+  (DO_CHANGE_SPEED, else the cruise speed); it is re-timed when the vehicle starts the mission
+  and when, at a new current item, it is more than a flight-geometry's worth of time off.
+- A warning, once per vehicle, when its home is far from the airspace's ground elevation
+  (AGL inputs would then be converted with the wrong ground).
+
+Only operations this module filed (``conops`` = :data:`CONOPS`) are re-timed or follow home
+moves; an operation filed elsewhere (scenario, MQTT) is re-filed only when the vehicle's
+mission changes after discovery to something other than its plan.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+from gcs_utm.clock import Clock
+from gcs_utm.messages import FlightMode, VehicleStatus
+from gcs_utm.model import (
+    Autopilot,
+    FlightPlan,
+    Operation,
+    OperationId,
+    Position,
+    SysId,
+    VehicleKind,
+    Waypoint4D,
+)
+from gcs_utm.services.airspace import Airspace, AirspaceError
+
+_log = logging.getLogger(__name__)
+
+CONOPS = "from vehicle mission"
+"""``Operation.conops`` of an operation filed from a vehicle's mission."""
+
+_NAV_WAYPOINT = 16
+_NAV_LOITER_TIME = 19
+_NAV_LAND = 21
+_NAV_TAKEOFF = 22
+_DO_CHANGE_SPEED = 178
+_NAV_COMMANDS = frozenset({_NAV_WAYPOINT, _NAV_LOITER_TIME, _NAV_LAND, _NAV_TAKEOFF})
+_ABSOLUTE_FRAMES = frozenset({0, 5})  # MAV_FRAME_GLOBAL(_INT): metres AMSL
+_RELATIVE_FRAMES = frozenset({3, 6})  # MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT): metres above home
+_MATCH_H_M = 0.5  # a mission point within this of a plan waypoint is that waypoint (float32 z)
+_MATCH_V_M = 0.5
+_HOME_MOVE_M = 2.0
+"""A home that moved less than this is the same home: PX4's HOME_POSITION wanders by about a
+metre while its estimator converges (measured on SIH), which would re-file every few seconds."""
+_FLYING_MODES = frozenset({FlightMode.MISSION, FlightMode.TAKEOFF})
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class VehicleOpsSettings:
+    """The operation defaults (from ``[usm]``) and the airspace ground for the warning."""
+
+    priority: int
+    flight_geometry_m: float
+    operational_volume_m: float
+    cruise_speed_mps: float
+    ground_warning_m: float
+    ground_elevation_amsl_m: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class NavPoint:
+    """A positional mission item: its mission seq, position (AMSL) and the speed it is flown
+    to at (the last DO_CHANGE_SPEED before it)."""
+
+    seq: int
+    lat_deg: float
+    lon_deg: float
+    alt_amsl_m: float
+    speed_mps: float
+    explicit: bool  # its own lat/lon (not "here": a takeoff or land at 0, 0)
+    command: int = _NAV_WAYPOINT
+
+
+def mission_points(
+    items: Sequence[object],
+    *,
+    home: Position | None,
+    cruise_speed_mps: float,
+    skip_first: bool = False,
+) -> list[NavPoint] | None:
+    """The positional items of a downloaded mission, AMSL; None when an item is relative to a
+    home that is not known yet. ``skip_first``: ArduPilot's seq 0 is home, not a waypoint.
+    A takeoff or land without a position is where the previous point (else home) is."""
+    speed = cruise_speed_mps
+    out: list[NavPoint] = []
+    for i, it in enumerate(items):
+        if skip_first and i == 0:
+            continue
+        command = int(getattr(it, "command", -1))
+        if command == _DO_CHANGE_SPEED:
+            value = float(getattr(it, "param2", 0.0))
+            if value > 0.0:
+                speed = value
+            continue
+        if command not in _NAV_COMMANDS:
+            continue
+        frame = int(getattr(it, "frame", 0))
+        alt = float(getattr(it, "z", 0.0))
+        if frame in _RELATIVE_FRAMES:
+            if home is None:
+                return None
+            alt += home.alt_amsl_m
+        elif frame not in _ABSOLUTE_FRAMES:
+            continue  # terrain or local frames: not resolvable here
+        lat = float(getattr(it, "x", 0)) / 1e7
+        lon = float(getattr(it, "y", 0)) / 1e7
+        explicit = (lat, lon) != (0.0, 0.0)
+        if not explicit:
+            where = out[-1] if out else home
+            if where is None:
+                continue
+            lat, lon = where.lat_deg, where.lon_deg
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and math.isfinite(alt)):
+            continue  # a malformed item is skipped, not fatal
+        seq = int(getattr(it, "seq", i))
+        out.append(NavPoint(seq, lat, lon, alt, speed, explicit, command))
+    return out
+
+
+class _Point(Protocol):
+    @property
+    def lat_deg(self) -> float: ...
+    @property
+    def lon_deg(self) -> float: ...
+    @property
+    def alt_amsl_m(self) -> float: ...
+
+
+def _dist_m(a: _Point, b: _Point) -> float:
+    """3D distance (flat earth: mission legs are short)."""
+    k = math.cos(math.radians(a.lat_deg))
+    return math.hypot(
+        (b.lat_deg - a.lat_deg) * 110_540.0,
+        (b.lon_deg - a.lon_deg) * 111_320.0 * k,
+        b.alt_amsl_m - a.alt_amsl_m,
+    )
+
+
+def plan_from_points(
+    points: Sequence[NavPoint],
+    op_id: OperationId,
+    *,
+    t_s: float,
+    current_seq: int | None = None,
+    position: Position | None = None,
+    version: int = 1,
+    reason: str = "from the vehicle's mission",
+) -> FlightPlan | None:
+    """The 4D plan of a vehicle flying ``points`` from ``position`` at ``t_s``: the items
+    from ``current_seq`` on (MISSION_CURRENT; all when None), each reached at the speed it is
+    flown to. None when there is no point."""
+    rest = [p for p in points if current_seq is None or p.seq >= current_seq]
+    if not rest and points:
+        rest = [points[-1]]  # mission flown: the last point
+    if not rest:
+        return None
+    wps: list[Waypoint4D] = []
+    if position is not None:
+        first = rest[0]
+        if _dist_m(position, first) > _MATCH_H_M:
+            wps.append(
+                Waypoint4D(
+                    lat_deg=position.lat_deg,
+                    lon_deg=position.lon_deg,
+                    alt_amsl_m=position.alt_amsl_m,
+                    t_s=t_s,
+                )
+            )
+    for p in rest:
+        t = t_s
+        if wps:
+            a = wps[-1]
+            dist = _dist_m(a, p)
+            t = a.t_s + dist / max(p.speed_mps, 0.1)
+        wps.append(Waypoint4D(lat_deg=p.lat_deg, lon_deg=p.lon_deg, alt_amsl_m=p.alt_amsl_m, t_s=t))
+    return FlightPlan(
+        operation_id=op_id, version=version, waypoints=tuple(wps), created_t_s=t_s, reason=reason
+    )
+
+
+def mission_is_plan(points: Sequence[NavPoint], plan: FlightPlan) -> bool:
+    """True when every waypoint of the mission (with its own position; takeoff and land
+    items, which uploaders add around a plan, are not compared) is, in order, a waypoint of
+    ``plan`` (within half a metre): the vehicle flies the plan (e.g. the UTM uploaded it,
+    from some waypoint on)."""
+    wps = plan.waypoints
+    k = 0
+    for p in points:
+        if not p.explicit or p.command in (_NAV_TAKEOFF, _NAV_LAND):
+            continue
+        while k < len(wps) and not _same_place(p, wps[k]):
+            k += 1
+        if k == len(wps):
+            return False
+        k += 1
+    return True
+
+
+def _same_place(p: NavPoint, w: Waypoint4D) -> bool:
+    k = math.cos(math.radians(p.lat_deg))
+    return (
+        math.hypot((w.lat_deg - p.lat_deg) * 110_540.0, (w.lon_deg - p.lon_deg) * 111_320.0 * k)
+        <= _MATCH_H_M
+        and abs(w.alt_amsl_m - p.alt_amsl_m) <= _MATCH_V_M
+    )
+
+
+def _moved(a: Position | None, b: Position | None) -> bool:
+    if a is None or b is None:
+        return a is not b
+    return _dist_m(a, b) > _HOME_MOVE_M
+
+
+@dataclass(slots=True)
+class _Vehicle:
+    sys_id: SysId
+    autopilot: Autopilot
+    kind: VehicleKind
+    items: Sequence[object] | None = None  # the last downloaded mission
+    # MISSION_CURRENT's item count and mission id: as last reported, and as they were when
+    # the last download started (a difference is a mission change)
+    total: int | None = None
+    mission_id: int | None = None
+    items_total: int | None = None
+    items_mission_id: int | None = None
+    home: Position | None = None  # HOME_POSITION, else ArduPilot's item 0
+    home_from_status: bool = False
+    seq: int | None = None
+    position: Position | None = None
+    armed: bool = False
+    flying: bool = False  # armed in a mission mode
+    downloading: bool = False
+    again: bool = False  # the mission changed during a download: download once more
+    changes: int = 0  # downloads triggered by a change after discovery
+    start_pending: bool = False  # the mission started during a download: re-time after it
+    waiting_logged: bool = False
+    ground_warned: bool = False
+
+
+class VehicleOps:
+    """See the module docstring. ``log_event`` and ``spawn`` are the USM's."""
+
+    def __init__(
+        self,
+        airspace: Airspace,
+        clock: Clock,
+        settings: VehicleOpsSettings,
+        *,
+        log_event: Callable[[str, str], None],
+        spawn: Callable[[Awaitable[None]], None],
+    ) -> None:
+        self.airspace = airspace
+        self.clock = clock
+        self.settings = settings
+        self._log_event = log_event
+        self._spawn = spawn
+        self._port: Callable[[SysId], Awaitable[Sequence[object]]] | None = None
+        self._vehicles: dict[SysId, _Vehicle] = {}
+        self.counters: dict[str, int] = {
+            "filed": 0,
+            "refiled": 0,
+            "retimed": 0,
+            "downloads": 0,
+            "download_failures": 0,
+        }
+
+    def attach(self, port: object) -> None:
+        """The MAVLink side; without ``download_mission`` no operation is filed."""
+        self._port = getattr(port, "download_mission", None)
+
+    # ---- events -------------------------------------------------------------------------
+    def on_vehicle(self, v: object) -> None:
+        """A newly heard vehicle: download its mission (and file it when it has one)."""
+        key = getattr(v, "key", None)
+        raw = getattr(key, "sys_id", None)
+        if raw is None:
+            return
+        sys_id = SysId(int(raw))
+        if sys_id in self._vehicles:
+            return  # heard again (a moved address): the same vehicle
+        self._vehicles[sys_id] = _Vehicle(
+            sys_id=sys_id,
+            autopilot=getattr(v, "autopilot", Autopilot.UNKNOWN),
+            kind=getattr(v, "vehicle_kind", None) or VehicleKind.MULTIROTOR,
+        )
+        self._download(sys_id)
+
+    def on_status(self, s: VehicleStatus) -> None:
+        v = self._vehicles.get(s.sys_id)
+        if v is None:
+            return
+        if s.position is not None:
+            v.position = s.position
+        v.total = s.mission_total
+        v.mission_id = s.mission_id
+        if s.home is not None and _moved(v.home, s.home):
+            self._home(v, s.home, from_status=True)
+        if self._mission_changed(v, s) or (s.armed and not v.armed):
+            v.changes += 1
+            self._download(v.sys_id)
+        v.armed = s.armed
+        flying = s.armed and s.mode in _FLYING_MODES
+        started = flying and not v.flying
+        advanced = s.mission_seq is not None and s.mission_seq != v.seq
+        v.flying = flying
+        if s.mission_seq is not None:
+            v.seq = s.mission_seq
+        if flying and (started or advanced):
+            self._retime(v, started=started)
+
+    @staticmethod
+    def _mission_changed(v: _Vehicle, s: VehicleStatus) -> bool:
+        """MISSION_CURRENT's count or id differ from what they were when the last download
+        started (while a download runs, the check waits for its end). Compared with itself,
+        not with the downloaded count: ArduPilot's count leaves out its home item."""
+        if v.downloading:
+            return False
+        if s.mission_total is not None and s.mission_total != v.items_total:
+            return True
+        return s.mission_id is not None and s.mission_id != v.items_mission_id
+
+    # ---- mission download -----------------------------------------------------------------
+    def _download(self, sys_id: SysId) -> None:
+        v = self._vehicles[sys_id]
+        if self._port is None:
+            return
+        if v.downloading:
+            v.again = True
+            return
+        v.downloading = True
+        self._spawn(self._download_task(v))
+
+    async def _download_task(self, v: _Vehicle) -> None:
+        download = self._port
+        assert download is not None
+        try:
+            while True:
+                v.again = False
+                v.items_total, v.items_mission_id = v.total, v.mission_id
+                self.counters["downloads"] += 1
+                try:
+                    items = list(await download(v.sys_id))
+                except Exception as exc:  # the link's own error types; it may not answer
+                    self.counters["download_failures"] += 1
+                    self._log_event("vehicle", f"sysid {v.sys_id}: mission download failed: {exc}")
+                    return
+                v.items = items
+                if not v.again:
+                    break
+        finally:
+            v.downloading = False
+        self._item0_home(v)
+        self._file(v, changed=v.changes > 0)
+        if v.start_pending:
+            v.start_pending = False
+            if v.flying:
+                self._retime(v, started=True)
+
+    def _item0_home(self, v: _Vehicle) -> None:
+        """ArduPilot keeps its home in mission item 0 (absolute altitude): the home until
+        HOME_POSITION gives one."""
+        if v.home_from_status or v.autopilot is not Autopilot.ARDUPILOT or not v.items:
+            return
+        it = v.items[0]
+        lat, lon = float(getattr(it, "x", 0)) / 1e7, float(getattr(it, "y", 0)) / 1e7
+        if (lat, lon) == (0.0, 0.0) or int(getattr(it, "frame", 0)) not in _ABSOLUTE_FRAMES:
+            return
+        home = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=float(getattr(it, "z", 0.0)))
+        if _moved(v.home, home):
+            self._home(v, home, from_status=False)
+
+    # ---- home ---------------------------------------------------------------------------
+    def _home(self, v: _Vehicle, home: Position, *, from_status: bool) -> None:
+        first = v.home is None
+        v.home = home
+        v.home_from_status = v.home_from_status or from_status
+        where = "HOME_POSITION" if from_status else "mission item 0"
+        self._log_event(
+            "vehicle",
+            f"sysid {v.sys_id}: home {home.lat_deg:.7f}, {home.lon_deg:.7f}, "
+            f"{home.alt_amsl_m:.2f} m AMSL (from {where})",
+        )
+        self._warn_ground(v, home)
+        if v.items is None:
+            return
+        op = self.airspace.by_sys_id(v.sys_id)
+        if op is None:
+            self._file(v, changed=False)  # a mission that waited for its home
+        elif op.conops == CONOPS:
+            why = "the vehicle reported its home" if first else "the vehicle's home moved"
+            self._file(v, changed=True, reason=why)
+
+    def _warn_ground(self, v: _Vehicle, home: Position) -> None:
+        ground = self.settings.ground_elevation_amsl_m
+        if ground is None or v.ground_warned:
+            return
+        gap = home.alt_amsl_m - ground
+        if abs(gap) <= self.settings.ground_warning_m:
+            return
+        v.ground_warned = True
+        self._log_event(
+            "warning",
+            f"sysid {v.sys_id}: home altitude {home.alt_amsl_m:.2f} m AMSL is {gap:+.1f} m from "
+            f"the airspace ground elevation {ground:.2f} m AMSL: set "
+            "[airspace] ground_elevation_amsl_m (and the origin) to the vehicles' home, or AGL "
+            "heights are converted with the wrong ground",
+        )
+
+    # ---- filing ---------------------------------------------------------------------------
+    def _points(self, v: _Vehicle) -> list[NavPoint] | None:
+        """The vehicle's last mission as points; None (logged once) while a relative altitude
+        waits for the home."""
+        points = mission_points(
+            v.items or (),
+            home=v.home,
+            cruise_speed_mps=self.settings.cruise_speed_mps,
+            skip_first=v.autopilot is Autopilot.ARDUPILOT,
+        )
+        if points is None and not v.waiting_logged:
+            v.waiting_logged = True
+            self._log_event(
+                "vehicle",
+                f"sysid {v.sys_id}: mission altitudes are relative to a home the vehicle has "
+                "not reported yet: the operation is filed when it does",
+            )
+        return points
+
+    def _plan(
+        self, v: _Vehicle, points: list[NavPoint], op_id: OperationId, version: int, reason: str
+    ) -> FlightPlan | None:
+        """The plan of ``points``, timed from the vehicle's current item and position now."""
+        try:
+            return plan_from_points(
+                points,
+                op_id,
+                t_s=self.clock.now_s(),
+                current_seq=v.seq,
+                position=v.position,
+                version=version,
+                reason=reason,
+            )
+        except ValueError as exc:  # a plan the model refuses (malformed positions)
+            self._log_event("vehicle", f"sysid {v.sys_id}: mission not usable: {exc}")
+            return None
+
+    def _file(self, v: _Vehicle, *, changed: bool, reason: str = "") -> None:
+        """File the vehicle's mission as an operation, or as a new plan version of its
+        operation when ``changed`` (or it filed that operation) and the mission is not already
+        its plan (or the home moved)."""
+        if v.items is None:
+            return
+        op = self.airspace.by_sys_id(v.sys_id)
+        if op is not None and not changed and op.conops != CONOPS:
+            return  # filed elsewhere (scenario, MQTT, store): its plan stands
+        points = self._points(v)
+        if points is None:
+            return  # waits for the home
+        if not points:
+            if op is None and v.items:
+                self._log_event(
+                    "vehicle", f"sysid {v.sys_id}: no waypoints in its mission: no operation"
+                )
+            return
+        if op is None:
+            plan = self._plan(
+                v, points, OperationId(f"sys{v.sys_id}"), 1, "from the vehicle's mission"
+            )
+            if plan is not None:
+                self._add(v, plan)
+            return
+        home_moved = op.conops == CONOPS and v.home is not None and _moved(op.home, v.home)
+        if _flies_plan(v, points, op.plan) and not home_moved:
+            return
+        why = reason or "the vehicle's mission changed"
+        plan = self._plan(
+            v, points, op.id, op.plan.version + 1, f"from the vehicle's mission ({why})"
+        )
+        if plan is not None:
+            self._replace(v, op, plan, why, counter="refiled")
+
+    def _add(self, v: _Vehicle, plan: FlightPlan) -> None:
+        s = self.settings
+        op = Operation(
+            id=plan.operation_id,
+            icao24=None,
+            sys_id=v.sys_id,
+            priority=s.priority,
+            plan=plan,
+            vehicle_kind=v.kind,
+            cruise_speed_mps=s.cruise_speed_mps,
+            flight_geometry_m=s.flight_geometry_m,
+            operational_volume_m=s.operational_volume_m,
+            conops=CONOPS,
+            home=v.home,
+            autopilot=v.autopilot,
+        )
+        try:
+            self.airspace.add_operation(op)
+        except AirspaceError as exc:
+            self._log_event("vehicle", f"sysid {v.sys_id}: {exc}")
+            return
+        self.counters["filed"] += 1
+        self._log_event(
+            "operation",
+            f"{op.id} filed from sysid {v.sys_id}'s mission ({len(plan.waypoints)} wp)",
+        )
+
+    def _replace(
+        self, v: _Vehicle, op: Operation, plan: FlightPlan, why: str, counter: str
+    ) -> None:
+        try:
+            self.airspace.replace_plan(plan, home=v.home if op.conops == CONOPS else None)
+        except AirspaceError as exc:
+            self._log_event("vehicle", f"sysid {v.sys_id}: plan not installed: {exc}")
+            return
+        self.counters[counter] += 1
+        self._log_event(
+            "operation",
+            f"{op.id} plan v{plan.version} from sysid {v.sys_id}'s mission: {why} "
+            f"({len(plan.waypoints)} wp)",
+        )
+
+    # ---- timing -------------------------------------------------------------------------
+    def _retime(self, v: _Vehicle, *, started: bool) -> None:
+        """Re-time a vehicle-filed plan from the vehicle's progress: when it starts the
+        mission, and at a new current item when the plan is more than flight_geometry_m /
+        cruise speed off at that item."""
+        op = self.airspace.by_sys_id(v.sys_id)
+        if v.downloading:
+            v.start_pending = v.start_pending or started
+            return  # (the arming that started it also downloads the mission: after that)
+        if op is None or op.conops != CONOPS or v.items is None:
+            return
+        points = self._points(v)
+        if not points or not _flies_plan(v, points, op.plan):
+            return  # a mission that is not the plan (yet): the mission check re-files it
+        plan = self._plan(
+            v, points, op.id, op.plan.version + 1, "re-timed from the vehicle's progress"
+        )
+        if plan is None:
+            return
+        if not started:
+            # the first waypoint of the new plan that the old one has (the position the
+            # plan starts from is not one of them): how far off in time the old plan is there
+            gap = next(
+                (
+                    w.t_s - o.t_s
+                    for w in plan.waypoints
+                    for o in op.plan.waypoints
+                    if _same_wp(w, o)
+                ),
+                None,
+            )
+            if gap is None:
+                return  # no item of it is in the plan: the mission check re-files it
+            tolerance_s = op.flight_geometry_m / max(op.cruise_speed_mps, 0.1)
+            if abs(gap) <= tolerance_s:
+                return
+        why = "the vehicle started the mission" if started else "re-timed at a new current item"
+        self._replace(v, op, plan, why, counter="retimed")
+
+
+def _flies_plan(v: _Vehicle, points: Sequence[NavPoint], plan: FlightPlan) -> bool:
+    """The mission's points from the current item on are the plan's (a plan filed or re-timed
+    at an earlier item has them all; the items already flown are not compared)."""
+    rest = [p for p in points if v.seq is None or p.seq >= v.seq]
+    return mission_is_plan(rest, plan)
+
+
+def _same_wp(a: Waypoint4D, b: Waypoint4D) -> bool:
+    return _dist_m(a, b) <= _MATCH_H_M
