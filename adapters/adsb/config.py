@@ -46,9 +46,11 @@ class AdsbConfig:
         unit="s",
     )
     host: str = setting("127.0.0.1", "host of the dump1090-style receiver feeds")
+    # One feed per receiver: its SBS-1, AVR and Beast outputs carry the same aircraft, and
+    # duplicated reports would make the tracker over-confident.
     sbs_port: int = setting(30003, "SBS-1 BaseStation text port (0: off)", min=0, max=65535)
-    avr_port: int = setting(30002, "AVR raw text port (0: off)", min=0, max=65535)
-    beast_port: int = setting(30005, "Beast binary port (0: off)", min=0, max=65535)
+    avr_port: int = setting(0, "AVR raw text port, 30002 on dump1090 (0: off)", min=0, max=65535)
+    beast_port: int = setting(0, "Beast binary port, 30005 on dump1090 (0: off)", min=0, max=65535)
     reconnect_initial_s: float = setting(
         0.5, "first reconnect delay; doubles after each failure", min=0.01, max=60.0, unit="s"
     )

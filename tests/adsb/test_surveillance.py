@@ -54,8 +54,10 @@ async def _until(cond: Callable[[], bool], timeout_s: float = 10.0) -> None:
 def test_disabled_or_port_zero_means_no_feed() -> None:
     got: list[Measurement] = []
     assert SurveillanceService(AdsbConfig(), RealClock(), got.append).feeds == []
-    on = AdsbConfig(enabled=True, avr_port=0, beast_port=0)
+    on = AdsbConfig(enabled=True)  # by default the SBS-1 feed alone (one per receiver)
     assert [f.kind for f in SurveillanceService(on, RealClock(), got.append).feeds] == ["sbs"]
+    raw = AdsbConfig(enabled=True, sbs_port=0, beast_port=30005)
+    assert [f.kind for f in SurveillanceService(raw, RealClock(), got.append).feeds] == ["beast"]
 
 
 async def test_feeds_are_decoded_counted_and_a_down_feed_is_logged_once(
