@@ -7,19 +7,32 @@ streams again, and the vehicle is live again (positions, its reboot seen)."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import os
 import signal
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
 
 from adapters.mavlink import MavlinkConfig, MavlinkHub
+from gcs_utm.app import OperatorMode, Runtime, serve
 from gcs_utm.clock import RealClock
-from gcs_utm.model import SysId, ThreatKind
-from tests.autopilot.autopilots import SitlProcess
+from gcs_utm.model import (
+    FlightPlan,
+    Operation,
+    OperationId,
+    SysId,
+    ThreatKind,
+    VehicleKind,
+    Waypoint4D,
+)
+from gcs_utm.settings import Settings
+from gcs_utm.store import Store
+from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess
 from tests.mavlink.conftest import Sink
 
 SPEED = 5.0
@@ -86,3 +99,92 @@ async def test_hub_before_sitl_then_sitl_killed_and_restarted(
     assert not noisy
     warnings: list[Any] = [r for r in caplog.records if r.levelno >= logging.WARNING]
     assert len(warnings) < 20, [r.getMessage() for r in warnings]
+
+
+@pytest.mark.timeout(240)
+async def test_serve_keeps_an_operation_across_a_sitl_restart(
+    ardupilot: Callable[..., SitlProcess], tmp_path: Path
+) -> None:
+    """The same through ``serve`` (USM, tracking, store): it starts before SITL, the
+    operation flying sysid 1 gets a COMMUNICATION_FAILURE threat when SITL dies, and its
+    link health and track are live again after the restart."""
+    db = tmp_path / "utm.sqlite"
+    op = _operation()
+    store = Store(db)
+    store.save_operation(op)
+    store.save_plan(op.plan)
+    store.close()
+    settings = dataclasses.replace(
+        Settings(),
+        mavlink=MavlinkConfig(
+            links=("tcp:127.0.0.1:5760",), reconnect_min_s=0.2, reconnect_max_s=1.0
+        ),
+    )
+    stop = asyncio.Event()
+    done: dict[str, Any] = {}
+
+    def lost(rt: Runtime) -> bool:
+        return any(
+            t.kind is ThreatKind.COMMUNICATION_FAILURE and op.id in t.uas_ids
+            for t in rt.usm.threats.values()
+        )
+
+    async def scenario(rt: Runtime) -> None:
+        try:
+            p = ardupilot(instance=0, vehicle="copter", speed=SPEED)
+            await _until(lambda: SysId(1) in rt.usm.health_by_sys_id(), 60.0, "not heard")
+            await _until(lambda: op.id in rt.tracks(), 90.0, "no track of the operation")
+            os.killpg(p.proc.pid, signal.SIGKILL)
+            p.proc.wait(timeout=10.0)
+            await _until(lambda: lost(rt), 20.0, "no COMMUNICATION_FAILURE threat")
+            t_restart = rt.clock.now_s()
+            ardupilot(instance=0, vehicle="copter", speed=SPEED, workdir=p.workdir)
+            await _until(
+                lambda: rt.usm.health_by_sys_id()[SysId(1)].last_heard_t_s > t_restart,
+                60.0,
+                "not heard after the restart",
+            )
+            await _until(lambda: rt.tracks()[op.id].t_s > t_restart, 90.0, "track not live again")
+            done["ok"] = True
+        finally:
+            stop.set()
+
+    async def on_runtime(rt: Runtime) -> None:
+        assert not rt.hub.links()[0].up  # serve starts without its link
+        done["task"] = asyncio.create_task(scenario(rt))
+
+    code = await serve(
+        settings,
+        db_path=db,
+        operator=OperatorMode.NONE,
+        headless=False,
+        stop=stop,
+        on_runtime=on_runtime,
+        speed=SPEED,
+    )
+    await done["task"]  # its assertion, if any
+    assert code == 0 and done.get("ok")
+
+
+def _operation() -> Operation:
+    lat, lon, ground_m, _ = ARDUPILOT_DEFAULT_HOME
+    t0 = time.time()
+    plan = FlightPlan(
+        operation_id=OperationId("AP1"),
+        version=1,
+        waypoints=(
+            Waypoint4D(lat_deg=lat, lon_deg=lon, alt_amsl_m=ground_m + 20.0, t_s=t0),
+            Waypoint4D(lat_deg=lat + 0.001, lon_deg=lon, alt_amsl_m=ground_m + 20.0, t_s=t0 + 3600),
+        ),
+    )
+    return Operation(
+        id=plan.operation_id,
+        icao24=None,
+        sys_id=SysId(1),
+        priority=1,
+        plan=plan,
+        vehicle_kind=VehicleKind.MULTIROTOR,
+        cruise_speed_mps=5.0,
+        flight_geometry_m=5.0,
+        operational_volume_m=50.0,
+    )
