@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from adapters.mavlink import wire
+from adapters.mavlink.adsb_relay import AdsbRelay, MessageHandler
 from adapters.mavlink.commands import Commands
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.endpoint import parse_endpoint
@@ -220,7 +221,7 @@ class MavlinkHub(Commands):
         self._restream: set[int] = set()  # id(state) of ArduPilot vehicles to ask for streams
         self._drops_reported: tuple[float, dict[str, int]] = (clock.now_s(), {})
         self._tasks: list[asyncio.Task[None]] = []
-        self._handlers = {
+        self._handlers: dict[int, MessageHandler] = {
             wire.HEARTBEAT: VehicleState.on_heartbeat,
             wire.GLOBAL_POSITION_INT: VehicleState.on_global_position,
             wire.GPS_RAW_INT: VehicleState.on_gps_raw,
@@ -232,6 +233,8 @@ class MavlinkHub(Commands):
             wire.SYSTEM_TIME: VehicleState.on_system_time,
             wire.HOME_POSITION: VehicleState.on_home_position,
         }
+        self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE relayed by a vehicle -> ADS-B measurement
+        self._handlers[wire.ADSB_VEHICLE] = self.adsb_relay.on_adsb_vehicle
 
     # --- lifecycle ------------------------------------------------------------------------
     async def __aenter__(self) -> MavlinkHub:
