@@ -107,7 +107,11 @@ class MavlinkConfig:
         unit="s",
     )
     clock_window_s: float = setting(
-        2.0, "vehicle-time window over which clock jumps are judged", min=0.1, unit="s"
+        1.0,
+        "vehicle-time window whose least delayed report the offset rises to (within "
+        "clock_max_drift) and over which clock jumps are judged",
+        min=0.1,
+        unit="s",
     )
     system_time_max_lag_s: float = setting(
         1.0,
