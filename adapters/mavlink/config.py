@@ -95,7 +95,7 @@ class MavlinkConfig:
     clock_max_drift: float = setting(
         0.1,
         "fastest rate (s/s) at which a vehicle clock is assumed to fall behind ours: the "
-        "capture-time offset may rise this fast without evidence (it falls at once)",
+        "capture-time offset rises at most this fast (once per clock window; it falls at once)",
         min=0.0,
         max=1.0,
     )

@@ -8,16 +8,16 @@ vehicle clock -> UTC mapping, and the hazard debouncing, and turns messages into
 
 Vehicle clock -> our clock (capture time = ``offset_s + time_boot_ms / 1000``): every report
 with ``time_boot_ms`` gives a sample ``receipt - boot``, the true offset plus its transport
-delay. The offset is a bounded-rate lower envelope of the samples: it falls to any sample
-below it at once (a capture time is never later than its receipt) and rises by at most
-``clock_max_drift`` x the vehicle time elapsed (a vehicle clock that runs slow, as PX4 SIH's
-by ~1 %, is followed; one delayed report moves nothing). When every sample of a
-``clock_window_s`` window is more than ``clock_jump_s`` above the offset, the clock jumped (or
-drifts faster than the bound): the offset is re-anchored to that window's lowest sample and
-the jump is counted. A reboot (``time_boot_ms`` going back) starts over. SYSTEM_TIME (``unix -
-boot``, once the vehicle has GNSS time) is used only when it agrees with its own arrival
-(not later, at most ``system_time_max_lag_s`` earlier); otherwise it is counted as rejected
-and the arrival-based offset stays. See docs/vehicle-time.md.
+delay. The offset is a bounded-rate lower envelope of the samples: a sample below it lowers it
+at once (a capture time is never later than its receipt); at the end of each
+``clock_window_s`` of vehicle time it rises towards that window's lowest sample by at most
+``clock_max_drift`` x the window (a vehicle clock that runs slow, as PX4 SIH's by ~1 %, is
+followed; jitter and delayed reports move nothing), or is re-anchored there, and the jump
+counted, when that sample is more than ``clock_jump_s`` above it (a clock jump, or a drift
+beyond the bound). A reboot (``time_boot_ms`` going back) starts over. SYSTEM_TIME (``unix -
+boot``, once the vehicle has GNSS time) is used only when it agrees with its own arrival (not
+later, at most ``system_time_max_lag_s`` earlier); otherwise it is counted as rejected and the
+arrival-based offset stays. See docs/vehicle-time.md.
 """
 
 from __future__ import annotations
