@@ -218,6 +218,7 @@ class Report:
     tracks: Mapping[str, tuple[TrackRow, ...]]
     telemetry: Mapping[str, Mapping[str, float | int]]
     counters: Mapping[str, int]
+    adsb: Mapping[str, Any]  # ADS-B feeds' and the MAVLink ADSB_VEHICLE relay's counts
     separation: tuple[SeparationReport, ...]
     geofence_intrusions: tuple[IntrusionReport, ...]
     escalations: tuple[EscalationReport, ...] = ()
@@ -440,6 +441,7 @@ def build_report(
         },
         telemetry={k: v.as_dict(telemetry_speed) for k, v in rt.usm.telemetry.items()},
         counters=dict(rt.usm.counters),
+        adsb=rt.surveillance.report(rt.hub.adsb_relay.counters),
         separation=separation(rt.samples, ops, mon),
         geofence_intrusions=intrusions(rt.samples, rt.geofence_history, rt.frame, t0),
         escalations=tuple(

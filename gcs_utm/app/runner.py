@@ -28,6 +28,7 @@ from gcs_utm.messages import HazardReport
 from gcs_utm.model import ThreatKind
 from gcs_utm.scenario import Scenario
 from gcs_utm.scenario.types import EventKind, ScenarioEvent
+from gcs_utm.services.recorder import record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreWriter
 
@@ -73,6 +74,7 @@ class RunOptions:
     duration_s: float | None = None
     figures: bool = True
     lead_s: float | None = None
+    record_dir: Path | None = None  # record every MAVLink link as a .tlog here
 
     def __post_init__(self) -> None:
         if not self.speed > 0.0:
@@ -294,6 +296,7 @@ async def run_scenario(
     scenario, settings = _load(scenario_path, settings, start_utc + lead_s)
     store = _open_store(options, scenario, settings)
     rt = build_runtime(settings, clock, scenario.frame, store)
+    recorder = record_links(rt.hub, options.record_dir)
     _file_scenario(rt, scenario)
 
     end_t_s = scenario.t0_s + (options.duration_s or scenario.duration_s)
@@ -348,6 +351,8 @@ async def run_scenario(
         await rt.usm.drain()
         await rt.usm.close()
         await rt.hub.close()
+        if recorder is not None:
+            recorder.close()
         wall_s = time.perf_counter() - wall0
     report = build_report(
         rt,

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from gcs_utm.clock import Clock, RealClock, ScaledClock
 from gcs_utm.geo import LocalFrame
+from gcs_utm.services.recorder import record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store, StoreWriter
 
@@ -37,6 +38,7 @@ async def serve(
     stop: asyncio.Event | None = None,
     on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
     speed: float = 1.0,
+    record_dir: Path | None = None,
 ) -> int:
     """Long-running service: links from config, persistent store; restart resumes. Runs until
     SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
@@ -53,6 +55,7 @@ async def serve(
     reader.close()
     store = Persistence(StoreWriter(db_path, settings.store))
     rt = build_runtime(settings, clock, frame, store)
+    recorder = record_links(rt.hub, record_dir)
     rt.airspace.load(operations, geofences)
     rt.tracking.set_operations(operations)
     _log.info(
@@ -83,6 +86,8 @@ async def serve(
                 loop.remove_signal_handler(sig)
         await rt.usm.close()
         await rt.hub.close()
+        if recorder is not None:
+            recorder.close()
         store.close()
     print("gcs-utm serve: stopped", file=sys.stderr)
     return 0

@@ -45,6 +45,7 @@ from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.emergency import EmergencyService
 from gcs_utm.services.monitoring import MonitoringService
 from gcs_utm.services.operator import AutoOperator
+from gcs_utm.services.surveillance import SurveillanceService
 from gcs_utm.services.tracking import TrackingService
 from gcs_utm.services.usm import Usm
 from gcs_utm.settings import Settings
@@ -128,6 +129,7 @@ class Runtime:
     monitoring: MonitoringService
     emergency: EmergencyService
     hub: MavlinkHub
+    surveillance: SurveillanceService  # [adsb] receiver feeds (none unless enabled)
     plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
@@ -223,6 +225,7 @@ def build_runtime(
         monitoring=monitoring,
         emergency=emergency,
         hub=hub,
+        surveillance=SurveillanceService(settings.adsb, clock, usm.on_measurement),
         plan_history=plan_history,
         geofence_history=geofence_history,
     )
@@ -336,6 +339,7 @@ def start_service_tasks(
         tg.create_task(rt.monitoring.run(), name="monitoring"),
         tg.create_task(rt.emergency.run(), name="emergency"),
         tg.create_task(rt.usm.run(), name="usm"),
+        tg.create_task(rt.surveillance.run(), name="adsb"),
     ]
     if frontends.headless is not None:
         tasks.append(tg.create_task(_headless_status(rt, frontends.headless), name="status"))

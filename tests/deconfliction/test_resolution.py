@@ -263,3 +263,18 @@ def test_a_fixed_wing_turn_must_fit_its_turn_radius() -> None:
     assert turn_flags(tight, old, 80.0)
     assert turn_flags(tight, tight, 80.0) == []  # the filed plan's own corners are not judged
     assert turn_flags(back, old, 0.0) == []  # a multirotor turns on the spot
+
+
+def test_the_lead_in_is_verified_against_geofences_too() -> None:
+    """The vehicle flies the lead-in (its current path) until the plan starts: a fence on that
+    stretch makes the plan unsafe even when the manoeuvre after it is clear."""
+    op = sc.make_operation("A", [(0, 0, 100), (3000, 0, 100)])
+    fence = sc.cylinder("f", 100.0, 0.0, 50.0)
+    snap = sc.snapshot([op], [fence])
+    threat = sc.threat(ThreatKind.GEOFENCE_CONFLICT, ["A"], geofence_id=fence.id)
+    td = make_td()
+    kw = {"maneuvers": {Maneuver.DIRECT_TO_GOAL}, "start_t_s": sc.T0_S + 25.0}
+    clear = td.resolve_single(threat, op.id, snap, **kw)  # type: ignore[arg-type]
+    assert [a.maneuver for a in clear] == [Maneuver.DIRECT_TO_GOAL]
+    led = td.resolve_single(threat, op.id, snap, lead_in_from_t_s=sc.T0_S + 3.0, **kw)  # type: ignore[arg-type]
+    assert led == [] and any("geofence f" in d.reason for d in td.dropped)

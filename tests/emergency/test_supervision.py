@@ -52,19 +52,25 @@ def plans(d: Decision) -> list[Recommendation]:
 
 
 @pytest.mark.parametrize(
-    ("delay", "autonomous", "start_in_s"),
-    [(None, False, 25.0), (2.0, False, 7.0), (None, True, 5.0)],
-    ids=["pilot", "auto-answer", "autonomous"],
+    ("delay", "autonomous", "expected", "start_in_s"),
+    [
+        (None, False, 5.0, 10.0),
+        (None, False, 60.0, 25.0),
+        (2.0, False, 5.0, 7.0),
+        (None, True, 5.0, 5.0),
+    ],
+    ids=["pilot", "pilot-at-deadline", "auto-answer", "autonomous"],
 )
 def test_a_plan_starts_after_the_answer_the_upload_and_a_margin(
-    delay: float | None, autonomous: bool, start_in_s: float
+    delay: float | None, autonomous: bool, expected: float, start_in_s: float
 ) -> None:
-    """Pilot: up to the deadline (20 s) + upload 3 s + margin 2 s; an automatic operator:
-    its delay; autonomous: no answer at all. The plan EM proposes leaves the UAS's path then;
-    before that it carries the path's points every 5 s back to the earliest the vehicle can
-    have it (an immediate answer plus the upload), so no leg but the first is untimed."""
+    """Pilot: the expected answer (5 s; never past the deadline, 20 s) + upload 3 s + margin
+    2 s; an automatic operator: its delay; autonomous: no answer at all. The plan EM proposes
+    leaves the UAS's path then; before that it carries the path's points every 5 s back to
+    the earliest the vehicle can have it (an immediate answer plus the upload), so no leg
+    but the first is untimed."""
     snap, threat = sc.scenario_los_2uas()
-    em = make_em(delay, autonomous=autonomous)
+    em = make_em(delay, autonomous=autonomous, expected_answer_s=expected)
     assert em.plan_start(threat, snap.t_s) == pytest.approx(snap.t_s + start_in_s)
     d = em.on_threat(threat, snap)
     (rec,) = d.recommendations

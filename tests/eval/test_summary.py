@@ -135,6 +135,7 @@ def _report() -> Report:
         tracks={},
         telemetry={},
         counters={},
+        adsb={},
         separation=(),
         geofence_intrusions=(),
         truth=TruthReport(

@@ -494,7 +494,7 @@ class TacticalDeconfliction:
         ov = op.operational_volume_m
         near_g = [
             g
-            for g, near in zip(c.geofences, _near(c.fences, c.new, ov + 1.0), strict=True)
+            for g, near in zip(c.geofences, _near(c.fences, c.full(), ov + 1.0), strict=True)
             if near and g.applies_to(op.id)
         ]
         flags = self.verify(checked, op, c.outsiders, near_g)

@@ -78,6 +78,17 @@ class EmergencyConfig:
         min=0.0,
         unit="s",
     )
+    expected_answer_s: float = setting(
+        2.0,
+        "time the operator is expected to take to answer (never more than up to the "
+        "deadline); a plan starts after it plus upload_time_s and start_margin_s, and carries "
+        "the current path before that (an earlier answer); a later answer joins the plan at "
+        "its first waypoint still ahead in time. At least answer_window_s: plan for an answer "
+        "at the deadline. An automatic operator's delay replaces it (the default equals "
+        "dashboard.auto_answer_delay_s)",
+        min=0.0,
+        unit="s",
+    )
     upload_time_s: float = setting(
         3.0,
         "time expected from an accepted answer to a verified mission on the vehicle",

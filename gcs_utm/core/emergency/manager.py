@@ -91,7 +91,7 @@ class EmergencyManager:
         answer_delay_s: float | None = None,
     ) -> None:
         """``answer_delay_s``: when an automatic operator answers (``--auto-accept``), its
-        delay; None when a person answers (then up to the deadline is expected)."""
+        delay; None when a person answers (then ``emergency.expected_answer_s``)."""
         self.frame = frame
         self.config = config
         self.td = td
@@ -283,8 +283,9 @@ class EmergencyManager:
 
     def plan_start(self, threat: Threat, now: float) -> float:
         """When a plan decided now can start: the expected answer (none in autonomous mode;
-        the automatic operator's delay; else up to the deadline), the upload and a margin.
-        The vehicle has the plan before then, and its first waypoint lies ahead of it."""
+        the automatic operator's delay; else ``expected_answer_s``, never past the deadline),
+        the upload and a margin. The vehicle has the plan before then, and its first waypoint
+        lies ahead of it."""
         return self._start(now, self._deadline(threat, now))
 
     def supervision_due(self, rec: Recommendation) -> float | None:
@@ -299,9 +300,8 @@ class EmergencyManager:
 
     def _start(self, now: float, deadline_t_s: float) -> float:
         cfg = self.config
-        answer = 0.0 if cfg.autonomous else deadline_t_s - now
-        if self.answer_delay_s is not None:
-            answer = min(answer, self.answer_delay_s)
+        expected = cfg.expected_answer_s if self.answer_delay_s is None else self.answer_delay_s
+        answer = 0.0 if cfg.autonomous else min(deadline_t_s - now, expected)
         return now + answer + cfg.upload_time_s + cfg.start_margin_s
 
     def earliest_receipt(self, now: float) -> float:
