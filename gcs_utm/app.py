@@ -59,6 +59,8 @@ from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.emergency import EmergencyService
 from gcs_utm.services.monitoring import MonitoringService
 from gcs_utm.services.operator import AutoOperator
+from gcs_utm.services.recorder import record_links
+from gcs_utm.services.surveillance import SurveillanceService
 from gcs_utm.services.tracking import TrackingService
 from gcs_utm.services.usm import Usm
 from gcs_utm.settings import Settings
@@ -91,6 +93,7 @@ class RunOptions:
     duration_s: float | None = None
     figures: bool = True
     lead_s: float | None = None
+    record_dir: Path | None = None  # record every MAVLink link as a .tlog here
 
 
 # ---- the running system ----------------------------------------------------------------------
@@ -155,6 +158,7 @@ class Runtime:
     monitoring: MonitoringService
     emergency: EmergencyService
     hub: MavlinkHub
+    surveillance: SurveillanceService  # [adsb] receiver feeds (none unless enabled)
     plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[tuple[float, float, float, float, float, float]]] = field(
@@ -273,6 +277,7 @@ def build_runtime(
         monitoring=monitoring,
         emergency=emergency,
         hub=hub,
+        surveillance=SurveillanceService(settings.adsb, clock, usm.on_measurement),
         plan_history=plan_history,
         geofence_history=geofence_history,
     )
@@ -453,6 +458,7 @@ async def run_scenario(
         Path(str(db_path) + suffix).unlink(missing_ok=True)
     store = Persistence(StoreWriter(db_path, settings.store))
     rt = build_runtime(settings, clock, scenario.frame, store)
+    recorder = record_links(rt.hub, options.record_dir)
     rt.airspace.load(scenario.operations, scenario.geofences)
     for op in scenario.operations:
         store.save_operation(op)
@@ -519,6 +525,7 @@ async def run_scenario(
                     tg.create_task(rt.usm.run(), name="usm"),
                     tg.create_task(_play_alerts(rt, scenario, lead_s), name="alerts"),
                     tg.create_task(_sample_tracks(rt, 0.5), name="samples"),
+                    tg.create_task(rt.surveillance.run(), name="adsb"),
                 ]
                 if options.headless:
                     tasks.append(tg.create_task(_headless_status(rt), name="status"))
@@ -537,6 +544,8 @@ async def run_scenario(
         await rt.usm.drain()
         await rt.usm.close()
         await rt.hub.close()
+        if recorder is not None:
+            recorder.close()
         wall_s = time.perf_counter() - wall0
     report = build_report(
         rt,
@@ -717,6 +726,7 @@ def build_report(
         },
         "telemetry": {k: v.as_dict(speed) for k, v in rt.usm.telemetry.items()},
         "counters": dict(rt.usm.counters),
+        "adsb": rt.surveillance.report(rt.hub.adsb_relay.counters),
     }
     for record in rt.usm.recommendations.values():
         rec = record.rec
@@ -905,6 +915,7 @@ async def serve(
     stop: asyncio.Event | None = None,
     on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
     speed: float = 1.0,
+    record_dir: Path | None = None,
 ) -> int:
     """Long-running service: links from config, persistent store; restart resumes. Runs until
     SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
@@ -921,6 +932,7 @@ async def serve(
     reader.close()
     store = Persistence(StoreWriter(db_path, settings.store))
     rt = build_runtime(settings, clock, frame, store)
+    recorder = record_links(rt.hub, record_dir)
     rt.airspace.load(operations, geofences)
     rt.tracking.set_operations(operations)
     _log.info(
@@ -962,6 +974,7 @@ async def serve(
                 tg.create_task(rt.monitoring.run(), name="monitoring"),
                 tg.create_task(rt.emergency.run(), name="emergency"),
                 tg.create_task(rt.usm.run(), name="usm"),
+                tg.create_task(rt.surveillance.run(), name="adsb"),
             ]
             if headless:
                 tasks.append(tg.create_task(_headless_status(rt), name="status"))
@@ -981,6 +994,8 @@ async def serve(
                 loop.remove_signal_handler(sig)
         await rt.usm.close()
         await rt.hub.close()
+        if recorder is not None:
+            recorder.close()
         store.close()
     print("gcs-utm serve: stopped", file=sys.stderr)
     return 0

@@ -30,11 +30,11 @@ class AirspaceConfig:
     """The airspace ``gcs-utm serve`` manages (scenario runs take it from the scenario)."""
 
     origin_lat_deg: float = setting(
-        47.397742, "origin latitude (default: PX4 SITL's default home)", min=-80.0, max=84.0
+        45.467116, "origin latitude (default: PX4 v1.15 SIH's default home)", min=-80.0, max=84.0
     )
-    origin_lon_deg: float = setting(8.545594, "origin longitude", min=-180.0, max=180.0)
+    origin_lon_deg: float = setting(-73.757837, "origin longitude", min=-180.0, max=180.0)
     ground_elevation_amsl_m: float = setting(
-        488.0, "ground elevation used to convert AGL to AMSL", min=-500.0, max=9000.0, unit="m"
+        32.34, "ground elevation used to convert AGL to AMSL", min=-500.0, max=9000.0, unit="m"
     )
 
 

@@ -17,6 +17,17 @@ MAV_MISSION_INVALID_SEQUENCE and keeps receiving, answers an item outside an upl
 MAV_MISSION_ERROR, restarts on a repeated MISSION_COUNT, denies downloads during an upload and
 answers any in-range download request.
 
+What each autopilot keeps of an accepted item (:func:`px4_stored`, :func:`ardupilot_stored`):
+PX4 refuses an item without a position (DO_*) in a global frame (MAV_MISSION_UNSUPPORTED,
+"IGN MISSION_ITEM: Invalid item") and keeps global items in their INT frames (0 -> 5,
+3 -> 6), every param as sent (NaN included). ArduPilot takes DO items in any frame and
+reports them in frame 0, stores a NaN param as 0, and keeps of a NAV_WAYPOINT only what its
+packed command holds: ArduCopter the hold time in whole seconds (param1), ArduPlane the
+acceptance and pass-by radii in whole metres up to 255 (param2/param3); of a NAV_LAND it
+keeps the sign of param4 (-1 or 1). An upload is refused with MAV_MISSION_NO_SPACE while the
+host's mission storage is not ready (``MissionHost.storage_ready``: ArduPilot for about 1.5
+simulated seconds after boot).
+
 The server never touches sockets: it calls `MissionHost.send(peer, name, **fields)`; `peer`
 is opaque (the vehicle's link object) and `now_s` is passed in.
 """
@@ -63,11 +74,14 @@ CMD_LAND = const("MAV_CMD_NAV_LAND")
 CMD_TAKEOFF = const("MAV_CMD_NAV_TAKEOFF")
 CMD_CHANGE_SPEED = const("MAV_CMD_DO_CHANGE_SPEED")
 CMD_JUMP = const("MAV_CMD_DO_JUMP")
+CMD_LAND_START = const("MAV_CMD_DO_LAND_START")
 NAV_COMMANDS = frozenset(
     {CMD_WAYPOINT, CMD_LOITER_UNLIM, CMD_LOITER_TIME, CMD_RTL, CMD_LAND, CMD_TAKEOFF}
 )
 POSITIONAL = frozenset({CMD_WAYPOINT, CMD_LOITER_UNLIM, CMD_LOITER_TIME, CMD_LAND, CMD_TAKEOFF})
-SUPPORTED_COMMANDS = NAV_COMMANDS | {CMD_CHANGE_SPEED}
+SUPPORTED_COMMANDS = NAV_COMMANDS | {CMD_CHANGE_SPEED, CMD_LAND_START}
+DO_COMMANDS = SUPPORTED_COMMANDS - NAV_COMMANDS
+_INT_FRAME = {FRAME_GLOBAL: FRAME_GLOBAL_INT, FRAME_GLOBAL_REL: FRAME_GLOBAL_REL_INT}
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,7 +142,8 @@ def item_from_message(msg: Inbound) -> RawItem:
 
 
 def validate_item(item: RawItem) -> int:
-    """MAV_MISSION_RESULT for one item, as PX4's mission feasibility checks would answer."""
+    """MAV_MISSION_RESULT for one item, as ArduPilot's checks would answer (the frame of an
+    item without a position is not looked at)."""
     if item.command not in SUPPORTED_COMMANDS:
         return UNSUPPORTED
     if item.command in POSITIONAL or (item.command == CMD_RTL and item.frame != FRAME_MISSION):
@@ -147,6 +162,49 @@ def validate_item(item: RawItem) -> int:
     return ACCEPTED
 
 
+def validate_px4_item(item: RawItem) -> int:
+    """MAV_MISSION_RESULT for one item as PX4 answers: ArduPilot's checks, and an item
+    without a position must be in MAV_FRAME_MISSION."""
+    if item.command in DO_COMMANDS and item.frame != FRAME_MISSION:
+        return UNSUPPORTED
+    return validate_item(item)
+
+
+def px4_stored(item: RawItem) -> RawItem:
+    """What PX4 keeps of an accepted item: global frames become their INT variants."""
+    return replace(item, frame=_INT_FRAME.get(item.frame, item.frame))
+
+
+def _zero_nan(v: float) -> float:
+    return 0.0 if math.isnan(v) else v
+
+
+def ardupilot_stored(item: RawItem, *, fixed_wing: bool) -> RawItem:
+    """What ArduPilot keeps of an accepted item (see the module docstring)."""
+    it = replace(
+        item,
+        param1=_zero_nan(item.param1),
+        param2=_zero_nan(item.param2),
+        param3=_zero_nan(item.param3),
+        param4=_zero_nan(item.param4),
+    )
+    if it.command not in POSITIONAL:
+        it = replace(it, frame=FRAME_GLOBAL)
+    elif it.frame in (FRAME_GLOBAL_INT, FRAME_GLOBAL_REL_INT):
+        it = replace(it, frame=FRAME_GLOBAL if it.frame == FRAME_GLOBAL_INT else FRAME_GLOBAL_REL)
+    if it.command == CMD_LAND:  # only the sign of param4 is kept (deep-stall direction)
+        it = replace(it, param4=-1.0 if it.param4 < 0.0 else 1.0)
+    if it.command == CMD_WAYPOINT:
+        if fixed_wing:
+            acc = float(min(255, max(0, int(it.param2))))
+            passby = float(min(255, max(0, int(it.param3))))
+            it = replace(it, param1=0.0, param2=acc, param3=passby, param4=0.0)
+        else:
+            hold = float(min(65535, max(0, int(it.param1))))
+            it = replace(it, param1=hold, param2=0.0, param3=0.0, param4=0.0)
+    return it
+
+
 class MissionHost(Protocol):
     def mission_items(self) -> list[RawItem]: ...
     def accept_mission(self, items: list[RawItem], flagged_current: int | None) -> None: ...
@@ -155,6 +213,7 @@ class MissionHost(Protocol):
     def statustext(self, severity: int, text: str) -> None: ...
     def send(self, peer: object, name: str, **fields: Any) -> None: ...
     def count(self, counter: str) -> None: ...
+    def storage_ready(self) -> bool: ...
 
 
 @dataclass(slots=True)
@@ -188,14 +247,14 @@ class MissionServer:
         host: MissionHost,
         *,
         max_items: int,
-        validator: Callable[[RawItem], int] = validate_item,
+        validator: Callable[[RawItem], int] | None = None,
         ardupilot: bool = False,
     ) -> None:
         self._host = host
         self._ap = ardupilot
         self._rerequest_s = AP_REREQUEST_S if ardupilot else REREQUEST_S
         self._max_items = max_items
-        self._validate = validator
+        self._validate = validator or (validate_item if ardupilot else validate_px4_item)
         self._up: _Upload | None = None
         self._down: _Download | None = None
         # (peer, sys, comp, count, t) of the last finished upload, for repeated last items
@@ -270,7 +329,7 @@ class MissionServer:
             self._ack(peer, src, comp, ERROR)  # PX4: "WPM: REJ. CMD: Busy", transfer goes on
             return
         count = msg.i("count")
-        if count > self._max_items:
+        if count > self._max_items or not self._host.storage_ready():
             self._host.count("uploads_failed")
             self._ack(peer, src, comp, NO_SPACE)
             return

@@ -14,6 +14,11 @@ from gcs_utm.config import setting
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class AdsbConfig:
+    enabled: bool = setting(
+        False,
+        "serve and run connect to the receiver feeds below (dump1090/readsb) and track what "
+        "they decode; MAVLink ADSB_VEHICLE is tracked whatever this says",
+    )
     receiver_position_known: bool = setting(
         False,
         "true: decode each airborne position frame at once against the receiver position; "
@@ -41,9 +46,11 @@ class AdsbConfig:
         unit="s",
     )
     host: str = setting("127.0.0.1", "host of the dump1090-style receiver feeds")
+    # One feed per receiver: its SBS-1, AVR and Beast outputs carry the same aircraft, and
+    # duplicated reports would make the tracker over-confident.
     sbs_port: int = setting(30003, "SBS-1 BaseStation text port (0: off)", min=0, max=65535)
-    avr_port: int = setting(30002, "AVR raw text port (0: off)", min=0, max=65535)
-    beast_port: int = setting(30005, "Beast binary port (0: off)", min=0, max=65535)
+    avr_port: int = setting(0, "AVR raw text port, 30002 on dump1090 (0: off)", min=0, max=65535)
+    beast_port: int = setting(0, "Beast binary port, 30005 on dump1090 (0: off)", min=0, max=65535)
     reconnect_initial_s: float = setting(
         0.5, "first reconnect delay; doubles after each failure", min=0.01, max=60.0, unit="s"
     )

@@ -36,10 +36,42 @@ class Backoff:
 
 @dataclass(slots=True)
 class ConnectionStats:
+    """One feed's connection: ``failures`` counts refused connects and dropped connections;
+    ``up`` is true while connected; ``outages`` counts transitions to down (each logged once,
+    however many retries it takes)."""
+
     connects: int = 0
     failures: int = 0
     bytes: int = 0
     overlong_lines: int = 0
+    up: bool = False
+    outages: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {
+            "connects": self.connects,
+            "failures": self.failures,
+            "bytes": self.bytes,
+            "overlong_lines": self.overlong_lines,
+            "up": int(self.up),
+            "outages": self.outages,
+        }
+
+
+def _down(host: str, port: int, stats: ConnectionStats, why: str, delay_s: float) -> None:
+    """Count a failure; the first of an outage is logged as a warning, its retries at debug."""
+    stats.failures += 1
+    if stats.up or stats.outages == 0:
+        stats.outages += 1
+        _log.warning(
+            "ADS-B feed %s:%d down: %s; reconnecting with backoff (logged once per outage)",
+            host,
+            port,
+            why,
+        )
+    else:
+        _log.debug("ADS-B feed %s:%d: %s; retry in %.1f s", host, port, why, delay_s)
+    stats.up = False
 
 
 async def _chunks(
@@ -51,20 +83,21 @@ async def _chunks(
         try:
             reader, writer = await asyncio.open_connection(host, port)
         except OSError as exc:
-            stats.failures += 1
-            _log.warning("ADS-B feed %s:%d: %s; retry in %.1f s", host, port, exc, delay)
+            _down(host, port, stats, str(exc) or type(exc).__name__, delay)
             await asyncio.sleep(delay)
             delay = min(delay * 2.0, backoff.max_s)
             continue
         stats.connects += 1
-        _log.info("ADS-B feed %s:%d connected", host, port)
+        stats.up = True
+        _log.info("ADS-B feed %s:%d connected (%d failures before)", host, port, stats.failures)
         got_data = False
+        why = "closed by the receiver"
         try:
             while True:
                 try:
                     data = await reader.read(_CHUNK)
                 except OSError as exc:
-                    _log.warning("ADS-B feed %s:%d: %s", host, port, exc)
+                    why = str(exc) or type(exc).__name__
                     break
                 if not data:
                     break
@@ -75,10 +108,9 @@ async def _chunks(
             writer.close()
             with contextlib.suppress(OSError):
                 await writer.wait_closed()
-        stats.failures += 1
         if got_data:
             delay = backoff.initial_s
-        _log.warning("ADS-B feed %s:%d closed; reconnect in %.1f s", host, port, delay)
+        _down(host, port, stats, why, delay)
         await asyncio.sleep(delay)
         delay = min(delay * 2.0, backoff.max_s)
 

@@ -3,15 +3,9 @@ readback verification, commands, MAVLink 2 signing. See docs/usm.md."""
 
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.endpoint import Endpoint, EndpointError, EndpointKind, parse_endpoint
-from adapters.mavlink.hub import (
-    CommandResult,
-    HubCounters,
-    MavlinkError,
-    MavlinkHub,
-    TelemetrySink,
-    UploadResult,
-)
+from adapters.mavlink.hub import HubCounters, MavlinkHub, TelemetrySink
 from adapters.mavlink.mission import MissionItem, plan_to_mission_items
+from adapters.mavlink.transfer import CommandResult, MavlinkError, UploadFailure, UploadResult
 from adapters.mavlink.transport import LinkError
 from adapters.mavlink.vehicle import VehicleInfo
 
@@ -27,6 +21,7 @@ __all__ = [
     "MavlinkHub",
     "MissionItem",
     "TelemetrySink",
+    "UploadFailure",
     "UploadResult",
     "VehicleInfo",
     "parse_endpoint",

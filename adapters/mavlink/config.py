@@ -95,7 +95,7 @@ class MavlinkConfig:
     clock_max_drift: float = setting(
         0.1,
         "fastest rate (s/s) at which a vehicle clock is assumed to fall behind ours: the "
-        "capture-time offset may rise this fast without evidence (it falls at once)",
+        "capture-time offset rises at most this fast (once per clock window; it falls at once)",
         min=0.0,
         max=1.0,
     )
@@ -107,7 +107,11 @@ class MavlinkConfig:
         unit="s",
     )
     clock_window_s: float = setting(
-        2.0, "vehicle-time window over which clock jumps are judged", min=0.1, unit="s"
+        1.0,
+        "vehicle-time window whose least delayed report the offset rises to (within "
+        "clock_max_drift) and over which clock jumps are judged",
+        min=0.1,
+        unit="s",
     )
     system_time_max_lag_s: float = setting(
         1.0,

@@ -2,9 +2,12 @@
 
 Threading model: everything runs on the asyncio loop; receive callbacks parse and dispatch
 synchronously (no per-frame task), protocol exchanges (upload, download, commands) are
-coroutines that wait on a per-vehicle mailbox with timeouts. A bad frame is counted in
-:attr:`MavlinkHub.counters` and logged at debug level; nothing from the wire raises into the
-loop.
+coroutines that wait on a per-vehicle mailbox with timeouts; they live in the base classes
+:class:`~adapters.mavlink.transfer.Transfers` (mission protocol, commands),
+:class:`~adapters.mavlink.upload.Uploads` (upload, readback, current item, mission mode) and
+:class:`~adapters.mavlink.commands.Commands` (per-autopilot command mapping). A bad frame
+is counted in :attr:`MavlinkHub.counters` and logged at debug level; nothing from the wire
+raises into the loop.
 
 Identity: a vehicle is (link, source address, sysid, compid) = :class:`VehicleKey`; API calls
 take a ``SysId`` (resolved to its most recently heard component) or a ``VehicleKey``. Replies
@@ -33,34 +36,32 @@ import contextlib
 import functools
 import logging
 import math
-import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
 from adapters.mavlink import wire
+from adapters.mavlink.adsb_relay import AdsbRelay, MessageHandler
+from adapters.mavlink.commands import Commands
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.endpoint import parse_endpoint
-from adapters.mavlink.mission import MissionItem, current_seq, plan_to_mission_items, same_item
-from adapters.mavlink.modes import set_mode_params
 from adapters.mavlink.senders import Senders, idle_keys, over_cap_keys
 from adapters.mavlink.signing import SignatureCheck
+from adapters.mavlink.transfer import (
+    MavlinkError,
+    TransferError,
+)
 from adapters.mavlink.transport import Address, Backoff, Transport
 from adapters.mavlink.vehicle import VehicleInfo, VehicleState
 from gcs_utm.clock import Clock
-from gcs_utm.messages import FlightMode, HazardReport, LinkHealth, VehicleKey, VehicleStatus
+from gcs_utm.messages import HazardReport, LinkHealth, VehicleKey, VehicleStatus
 from gcs_utm.model import (
     LANE_STRIDE,
     Autopilot,
-    Command,
-    CommandKind,
-    FlightPlan,
     Measurement,
-    Position,
     PositionLane,
     SysId,
     ThreatKind,
-    VehicleKind,
 )
 from gcs_utm.ratelog import RateLimitedLog
 
@@ -68,22 +69,8 @@ _log = logging.getLogger(__name__)
 
 RawTap = Callable[[str, bytes, float], None]
 
-MAV_MISSION_ACCEPTED = 0
-MAV_MISSION_ERROR = 1
-MAV_MISSION_INVALID_SEQUENCE = 13
-MAV_MISSION_OPERATION_CANCELLED = 15
-MAV_CMD_NAV_LAND = 21
-MAV_CMD_DO_SET_MODE = 176
-MAV_CMD_DO_LAND_START = 189
-MAV_CMD_DO_REPOSITION = 192
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
-MAV_RESULT_ACCEPTED = 0
-MAV_RESULT_IN_PROGRESS = 5
-MAV_FRAME_GLOBAL = 0
 MAV_DATA_STREAM_ALL = 0
-_NAN = math.nan
-_UPLOAD_WINDOW = 8  # at most this many items go out on one upload retry
-_DOWNLOAD_RESTARTS = 2  # a download restarts on a refusal (MISSION_ACK) at most this often
 _PROTOCOL_IDS = frozenset(
     {
         wire.MISSION_REQUEST,
@@ -122,38 +109,12 @@ _REFUSALS = frozenset(
 _DROP_COUNTERS = (*sorted(_REFUSALS), "senders_evicted", "vehicles_evicted", "links_down")
 
 
-class MavlinkError(RuntimeError):
-    """A MAVLink operation that cannot start (unknown vehicle, hub closed)."""
-
-
 class TelemetrySink(Protocol):
     def on_measurement(self, m: Measurement) -> None: ...
     def on_status(self, s: VehicleStatus) -> None: ...
     def on_hazard(self, h: HazardReport) -> None: ...
     def on_vehicle(self, v: VehicleInfo) -> None: ...
     def on_link_health(self, h: LinkHealth) -> None: ...
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class UploadResult:
-    """``verified`` only when the vehicle's copy, downloaded back, matched item by item."""
-
-    ok: bool
-    verified: bool
-    attempts: int
-    items: int
-    duration_s: float
-    error: str = ""
-    current_set: bool = False
-    mode_set: bool = False
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class CommandResult:
-    ok: bool
-    result: int | None
-    attempts: int
-    error: str = ""
 
 
 @dataclass(slots=True)
@@ -213,31 +174,7 @@ class LinkState:
     last_error: str
 
 
-class _Step:
-    """Adaptive retransmission timeout of one transfer: starts at ``min_retry_s``, grows by
-    half on every silent retry up to ``item_timeout_s``, back to 3 x the smoothed RTT (at least
-    ``min_retry_s``) on progress. Loss on a radio link is mostly random, not congestion: a
-    doubling backoff made a few consecutive losses cost more than the rest of the transfer."""
-
-    def __init__(self, cfg: MavlinkConfig) -> None:
-        self.lo = cfg.min_retry_s
-        self.hi = max(cfg.item_timeout_s, cfg.min_retry_s)
-        self.rto = self.lo
-        self.srtt: float | None = None
-
-    def progress(self, rtt_s: float) -> None:
-        self.srtt = rtt_s if self.srtt is None else 0.875 * self.srtt + 0.125 * rtt_s
-        self.rto = min(self.hi, max(self.lo, 3.0 * self.srtt))
-
-    def backoff(self) -> None:
-        self.rto = min(self.hi, self.rto * 1.5)
-
-
-class _TransferError(Exception):
-    pass
-
-
-class MavlinkHub:
+class MavlinkHub(Commands):
     """See the module docstring. Use ``async with MavlinkHub(...)`` or start()/close()."""
 
     def __init__(
@@ -251,7 +188,7 @@ class MavlinkHub:
         self.clock = clock
         self.sink = sink
         self.raw_tap = raw_tap
-        self.counters = HubCounters()
+        self.counters: HubCounters = HubCounters()
         # A sink that takes positions in columns (the USM: ``position_lane`` and
         # ``on_position_lane``) gets GLOBAL_POSITION_INT as lane entries, handed over after
         # each read (a UDP burst, a stream chunk) instead of one Measurement call per report.
@@ -284,7 +221,7 @@ class MavlinkHub:
         self._restream: set[int] = set()  # id(state) of ArduPilot vehicles to ask for streams
         self._drops_reported: tuple[float, dict[str, int]] = (clock.now_s(), {})
         self._tasks: list[asyncio.Task[None]] = []
-        self._handlers = {
+        self._handlers: dict[int, MessageHandler] = {
             wire.HEARTBEAT: VehicleState.on_heartbeat,
             wire.GLOBAL_POSITION_INT: VehicleState.on_global_position,
             wire.GPS_RAW_INT: VehicleState.on_gps_raw,
@@ -296,6 +233,8 @@ class MavlinkHub:
             wire.SYSTEM_TIME: VehicleState.on_system_time,
             wire.HOME_POSITION: VehicleState.on_home_position,
         }
+        self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE relayed by a vehicle -> ADS-B measurement
+        self._handlers[wire.ADSB_VEHICLE] = self.adsb_relay.on_adsb_vehicle
 
     # --- lifecycle ------------------------------------------------------------------------
     async def __aenter__(self) -> MavlinkHub:
@@ -706,7 +645,7 @@ class MavlinkHub:
     def _to(self, st: VehicleState, frame: bytes) -> None:
         link = self._links.get(st.key.link)
         if link is None:
-            raise _TransferError(f"link {st.key.link} closed")
+            raise TransferError(f"link {st.key.link} closed")
         self._send(link, frame, self._addr.get(id(st)))
 
     def _request_streams(self, st: VehicleState) -> None:
@@ -770,494 +709,6 @@ class MavlinkHub:
                 if i + chunk < len(states):
                     await asyncio.sleep(0)
 
-    # --- protocol exchanges -----------------------------------------------------------------
-    def _budget_s(self, deadline_t_s: float | None) -> float:
-        """Real (loop) seconds left for a transfer."""
-        budget = self.config.transfer_timeout_s
-        if deadline_t_s is not None:
-            left = deadline_t_s - self.clock.now_s()
-            speed = self.clock.speed
-            if left <= 0.0:
-                return 0.0
-            if math.isfinite(speed):
-                budget = min(budget, left / speed)
-        return budget
-
-    @contextlib.asynccontextmanager
-    async def _exchange(self, st: VehicleState) -> AsyncIterator[asyncio.Queue[wire.MavMsg]]:
-        lock = self._locks.setdefault(id(st), asyncio.Lock())
-        async with lock:
-            box: asyncio.Queue[wire.MavMsg] = asyncio.Queue()
-            self._mailbox[id(st)] = box
-            try:
-                yield box
-            finally:
-                self._mailbox.pop(id(st), None)
-
-    @staticmethod
-    async def _get(box: asyncio.Queue[wire.MavMsg], timeout_s: float) -> wire.MavMsg | None:
-        try:
-            return await asyncio.wait_for(box.get(), max(0.0, timeout_s))
-        except TimeoutError:
-            return None
-
-    async def upload_plan(
-        self,
-        sys_id: SysId | VehicleKey,
-        plan: FlightPlan,
-        *,
-        autopilot: Autopilot | None = None,
-        start_index: int = 0,
-        home: Position | None = None,
-        deadline_t_s: float | None = None,
-        set_mission_mode: bool = True,
-        climb_rate_mps: float | None = None,
-        descent_rate_mps: float | None = None,
-    ) -> UploadResult:
-        """Upload ``plan`` as a mission, read it back, set the current item and mission mode.
-        ``start_index`` is the plan waypoint flown first (flagged current); the vertical speeds
-        let a climb on the spot keep the plan's time (see :func:`plan_to_mission_items`).
-        Never raises for vehicle behaviour: failures are in the result."""
-        t0 = time.monotonic()
-        try:
-            st = self.state(sys_id)
-        except MavlinkError as exc:
-            return UploadResult(
-                ok=False, verified=False, attempts=0, items=0, duration_s=0.0, error=str(exc)
-            )
-        ap = autopilot or st.autopilot
-        items = plan_to_mission_items(
-            plan,
-            ap,
-            home,
-            start_index=start_index,
-            max_speed_mps=self.config.max_speed_mps,
-            climb_rate_mps=climb_rate_mps,
-            descent_rate_mps=descent_rate_mps,
-        )
-        return await self.upload_items(
-            st.key, items, deadline_t_s=deadline_t_s, set_mission_mode=set_mission_mode, _t0=t0
-        )
-
-    async def upload_items(
-        self,
-        vehicle: SysId | VehicleKey,
-        items: list[MissionItem],
-        *,
-        deadline_t_s: float | None = None,
-        set_mission_mode: bool = True,
-        _t0: float | None = None,
-    ) -> UploadResult:
-        """Upload raw mission items (see :meth:`upload_plan`)."""
-        t0 = time.monotonic() if _t0 is None else _t0
-        attempts = 0
-        try:
-            st = self.state(vehicle)
-            end = t0 + self._budget_s(deadline_t_s)
-            async with self._exchange(st) as box:
-                reboots = st.reboots
-                attempts = await self._upload(st, box, items, end, reboots)
-                got = await self._download(st, box, end, reboots)
-                for sent, back in zip(items, got, strict=False):
-                    if sent.seq == 0 and st.autopilot is Autopilot.ARDUPILOT:
-                        continue  # ArduPilot reports its own home at seq 0, not what we sent
-                    diff = same_item(sent, back)
-                    if diff:
-                        raise _TransferError(f"readback item {sent.seq} differs: {diff}")
-                if len(got) != len(items):
-                    raise _TransferError(f"readback has {len(got)} items, sent {len(items)}")
-                cur = current_seq(items)
-                current_set = await self._set_current(st, box, cur, end, reboots)
-            mode_set = True
-            if set_mission_mode and st.mode is not FlightMode.MISSION:
-                res = await self.send_mode(st.key, FlightMode.MISSION, deadline_t_s=deadline_t_s)
-                mode_set = res.ok
-        except _TransferError as exc:
-            self.counters.uploads_failed += 1
-            _log.warning("upload to %s failed: %s", vehicle, exc)
-            return UploadResult(
-                ok=False,
-                verified=False,
-                attempts=attempts,
-                items=len(items),
-                duration_s=time.monotonic() - t0,
-                error=str(exc),
-            )
-        except MavlinkError as exc:
-            return UploadResult(
-                ok=False,
-                verified=False,
-                attempts=attempts,
-                items=len(items),
-                duration_s=time.monotonic() - t0,
-                error=str(exc),
-            )
-        self.counters.uploads_verified += 1
-        err = (
-            ""
-            if current_set and mode_set
-            else ("current item not confirmed" if not current_set else "mission mode not confirmed")
-        )
-        return UploadResult(
-            ok=True,
-            verified=True,
-            attempts=attempts,
-            items=len(items),
-            duration_s=time.monotonic() - t0,
-            error=err,
-            current_set=current_set,
-            mode_set=mode_set,
-        )
-
-    def _check(self, st: VehicleState, reboots: int, end: float) -> None:
-        if st.reboots != reboots:
-            raise _TransferError("vehicle rebooted during the transfer")
-        if time.monotonic() >= end:
-            raise _TransferError("deadline passed")
-
-    def _cancel(self, st: VehicleState) -> None:
-        with contextlib.suppress(_TransferError):
-            self._to(
-                st,
-                self._encoder(st).mission_ack(
-                    st.sys_id, st.key.comp_id, MAV_MISSION_OPERATION_CANCELLED
-                ),
-            )
-
-    async def _upload(
-        self,
-        st: VehicleState,
-        box: asyncio.Queue[wire.MavMsg],
-        items: list[MissionItem],
-        end: float,
-        reboots: int,
-    ) -> int:
-        """The vehicle drives an upload (it requests item by item and re-requests on its own
-        timer: PX4 every 250 ms, ArduPilot every second), so on a lossy link a lost request
-        would cost a whole vehicle timeout. On our own (RTT-adapted) timeout we therefore send
-        every item the vehicle may be waiting for: from the last one it asked for (our answer
-        may be the lost datagram) to one past the highest we sent (its request may be lost,
-        and items sent ahead may have been taken), twice:
-        PX4 silently ignores an item it did not expect, ArduPilot NACKs it with
-        MAV_MISSION_INVALID_SEQUENCE and keeps receiving, so that NACK is not an error. The
-        first answer to each request goes out once: a clean link sees no extra traffic.
-        Returns 1 + the number of our timeouts."""
-        enc = self._encoder(st)
-        ts, tc = st.sys_id, st.key.comp_id
-        n = len(items)
-        step = _Step(self.config)
-        attempts = 1
-        self._to(st, enc.mission_count(ts, tc, n))
-        sent_t = time.monotonic()
-        highest = -1  # highest item the vehicle has requested
-        sent_hi = -1  # highest item we have sent (asked for or sent ahead)
-        last_sent = False  # item n-1 went out
-        silent = 0
-        try:
-            while True:
-                self._check(st, reboots, end)
-                m = await self._get(box, min(sent_t + step.rto, end) - time.monotonic())
-                self._check(st, reboots, end)
-                if m is None:
-                    silent += 1
-                    if silent > self.config.max_retries:
-                        if last_sent:
-                            # the vehicle may have taken the last item and its ACK be lost (and
-                            # not every vehicle repeats it): the readback decides
-                            _log.debug("%s: no ACK of the last item; verifying", st.key)
-                            return attempts
-                        raise _TransferError(
-                            f"no answer after {silent - 1} retries (last item requested "
-                            f"{highest if highest >= 0 else None})"
-                        )
-                    step.backoff()
-                    attempts += 1
-                    self.counters.mission_retries += 1
-                    if highest < 0:
-                        self._to(st, enc.mission_count(ts, tc, n))
-                    else:
-                        # the vehicle expects one of highest .. sent_hi + 1
-                        top = min(n - 1, sent_hi + 1, highest + _UPLOAD_WINDOW - 1)
-                        for _ in range(2):  # twice, as the retries of _download
-                            for seq in range(highest, top + 1):
-                                self._to(st, enc.mission_item_int(ts, tc, items[seq]))
-                        sent_hi = max(sent_hi, top)
-                        last_sent = sent_hi == n - 1
-                    sent_t = time.monotonic()
-                    continue
-                mid = m._header.msgId
-                if mid in (wire.MISSION_REQUEST_INT, wire.MISSION_REQUEST):
-                    if getattr(m, "mission_type", 0) != 0:
-                        continue
-                    seq = int(m.seq)
-                    if not 0 <= seq < n:
-                        _log.debug("vehicle asked for item %d of %d", seq, n)
-                        continue
-                    if seq < highest:
-                        continue  # overtaken by a later request (reordered or re-requested)
-                    if seq > highest:
-                        step.progress(time.monotonic() - sent_t)
-                        highest = seq
-                        silent = 0
-                    self._to(st, enc.mission_item_int(ts, tc, items[seq]))
-                    sent_hi = max(sent_hi, seq)
-                    last_sent = sent_hi == n - 1
-                    sent_t = time.monotonic()
-                elif mid == wire.MISSION_ACK:
-                    if getattr(m, "mission_type", 0) != 0:
-                        continue
-                    if m.type == MAV_MISSION_ACCEPTED:
-                        if last_sent:
-                            return attempts
-                        continue  # a stale ACK of an earlier transfer
-                    if m.type == MAV_MISSION_INVALID_SEQUENCE:
-                        continue  # ArduPilot's answer to an item it did not ask for
-                    if m.type == MAV_MISSION_ERROR and last_sent:
-                        # ArduPilot answers a repeated last item with ERROR once the upload
-                        # is complete (its ACCEPTED was lost): the readback decides
-                        _log.debug("%s: ERROR after the last item; verifying by readback", st.key)
-                        return attempts
-                    raise _TransferError(f"vehicle rejected the mission: {_mission_result(m.type)}")
-        except _TransferError:
-            self._cancel(st)
-            raise
-
-    async def download_mission(
-        self, sys_id: SysId | VehicleKey, *, deadline_t_s: float | None = None
-    ) -> list[MissionItem]:
-        """The vehicle's mission (MISSION_REQUEST_LIST). Raises :class:`MavlinkError`."""
-        st = self.state(sys_id)
-        end = time.monotonic() + self._budget_s(deadline_t_s)
-        async with self._exchange(st) as box:
-            try:
-                return await self._download(st, box, end, st.reboots)
-            except _TransferError as exc:
-                raise MavlinkError(f"download from {sys_id} failed: {exc}") from exc
-
-    async def _download(
-        self, st: VehicleState, box: asyncio.Queue[wire.MavMsg], end: float, reboots: int
-    ) -> list[MissionItem]:
-        enc = self._encoder(st)
-        ts, tc = st.sys_id, st.key.comp_id
-        step = _Step(self.config)
-        # drain protocol leftovers of the upload (late re-requests, duplicate ACKs)
-        while not box.empty():
-            box.get_nowait()
-        count: int | None = None
-        got: list[MissionItem] = []
-        silent = 0
-        refusals = 0
-
-        def request() -> bytes:
-            if count is None:
-                return enc.mission_request_list(ts, tc)
-            return enc.mission_request_int(ts, tc, len(got))
-
-        self._to(st, request())
-        sent_t = time.monotonic()
-        try:
-            while True:
-                self._check(st, reboots, end)
-                m = await self._get(box, min(sent_t + step.rto, end) - time.monotonic())
-                self._check(st, reboots, end)
-                if m is None:
-                    silent += 1
-                    if silent > self.config.max_retries:
-                        raise _TransferError(f"no answer to download after {silent - 1} retries")
-                    step.backoff()
-                    self.counters.mission_retries += 1
-                    # a retry goes out twice: a lost request or a lost answer costs a whole
-                    # timeout, a duplicate costs one datagram (PX4 answers a repeated request
-                    # for the item it just sent, ArduPilot answers any request)
-                    self._to(st, request())
-                    self._to(st, request())  # encoded anew: a signed frame is never replayed
-                    sent_t = time.monotonic()
-                    continue
-                mid = m._header.msgId
-                if getattr(m, "mission_type", 0) != 0:
-                    continue
-                if mid == wire.MISSION_COUNT and count is None:
-                    count = int(m.count)
-                elif mid == wire.MISSION_ITEM_INT and count is not None and m.seq == len(got):
-                    got.append(_item_from(m))
-                elif mid == wire.MISSION_ACK and m.type != MAV_MISSION_ACCEPTED:
-                    # a late answer to an upload item repeated after the upload ended, or the
-                    # vehicle dropped the transfer (PX4 does on a request it did not expect):
-                    # start over; a vehicle that keeps refusing fails the download
-                    refusals += 1
-                    if refusals > _DOWNLOAD_RESTARTS:
-                        raise _TransferError(
-                            f"vehicle refused the download: {_mission_result(m.type)}"
-                        )
-                    count = None
-                    got.clear()
-                    self._to(st, request())
-                    sent_t = time.monotonic()
-                    continue
-                else:
-                    continue
-                step.progress(time.monotonic() - sent_t)
-                silent = 0
-                if count is not None and len(got) >= count:
-                    self._to(st, enc.mission_ack(ts, tc, MAV_MISSION_ACCEPTED))
-                    return got
-                self._to(st, request())
-                sent_t = time.monotonic()
-        except _TransferError:
-            self._cancel(st)
-            raise
-
-    async def _set_current(
-        self,
-        st: VehicleState,
-        box: asyncio.Queue[wire.MavMsg],
-        seq: int,
-        end: float,
-        reboots: int,
-    ) -> bool:
-        """MISSION_SET_CURRENT until MISSION_CURRENT reports ``seq``; resent on the same
-        adaptive timeout as mission items (not the 0.5 s command timeout: on a lossy link
-        that one wait would cost more than the whole transfer)."""
-        enc = self._encoder(st)
-        step = _Step(self.config)
-        for attempt in range(self.config.max_retries + 1):
-            for _ in range(1 if attempt == 0 else 2):  # retries twice, as in _download
-                self._to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seq))
-            wait_end = min(end, time.monotonic() + step.rto)
-            while (left := wait_end - time.monotonic()) > 0:
-                self._check(st, reboots, end)
-                m = await self._get(box, left)
-                if m is not None and m._header.msgId == wire.MISSION_CURRENT and m.seq == seq:
-                    return True
-            self._check(st, reboots, end)
-            step.backoff()
-        return False
-
-    # --- commands -------------------------------------------------------------------------
-    async def send_command(
-        self,
-        sys_id: SysId | VehicleKey,
-        command: Command,
-        *,
-        deadline_t_s: float | None = None,
-    ) -> CommandResult:
-        """HOLD / RESUME / RTL / LAND / GOTO mapped to the vehicle's autopilot."""
-        try:
-            st = self.state(sys_id)
-        except MavlinkError as exc:
-            return CommandResult(ok=False, result=None, attempts=0, error=str(exc))
-        kind = command.kind
-        mode = {
-            CommandKind.HOLD: FlightMode.HOLD,
-            CommandKind.RESUME: FlightMode.MISSION,
-            CommandKind.RTL: FlightMode.RTL,
-        }.get(kind)
-        if mode is not None:
-            return await self.send_mode(st.key, mode, deadline_t_s=deadline_t_s)
-        if kind is CommandKind.LAND:
-            if st.autopilot is Autopilot.ARDUPILOT and st.kind is VehicleKind.FIXED_WING:
-                params = (0.0,) * 7
-                return await self._command_long(st, MAV_CMD_DO_LAND_START, params, deadline_t_s)
-            if st.autopilot is Autopilot.ARDUPILOT:
-                return await self.send_mode(st.key, FlightMode.LAND, deadline_t_s=deadline_t_s)
-            params = (0.0, 0.0, 0.0, _NAN, _NAN, _NAN, _NAN)
-            return await self._command_long(st, MAV_CMD_NAV_LAND, params, deadline_t_s)
-        target = command.target
-        if target is None:
-            return CommandResult(ok=False, result=None, attempts=0, error="GOTO needs a target")
-        return await self._command_int(st, MAV_CMD_DO_REPOSITION, target, deadline_t_s)
-
-    async def send_mode(
-        self, sys_id: SysId | VehicleKey, mode: FlightMode, *, deadline_t_s: float | None = None
-    ) -> CommandResult:
-        st = self.state(sys_id)
-        p = set_mode_params(st.autopilot, st.kind, mode)
-        if p is None:
-            return CommandResult(
-                ok=False,
-                result=None,
-                attempts=0,
-                error=f"{st.autopilot.value} has no mode {mode.value}",
-            )
-        params = (p[0], p[1], p[2], 0.0, 0.0, 0.0, 0.0)
-        return await self._command_long(st, MAV_CMD_DO_SET_MODE, params, deadline_t_s)
-
-    async def _command_long(
-        self,
-        st: VehicleState,
-        cmd: int,
-        params: tuple[float, float, float, float, float, float, float],
-        deadline_t_s: float | None,
-    ) -> CommandResult:
-        enc = self._encoder(st)
-        return await self._command(
-            st,
-            cmd,
-            lambda conf: enc.command_long(st.sys_id, st.key.comp_id, cmd, conf, params),
-            deadline_t_s,
-        )
-
-    async def _command_int(
-        self, st: VehicleState, cmd: int, target: Position, deadline_t_s: float | None
-    ) -> CommandResult:
-        enc = self._encoder(st)
-        # DO_REPOSITION: speed -1 (default), flag CHANGE_MODE (switch to guided/hold), yaw NaN
-        frame = enc.command_int(
-            st.sys_id,
-            st.key.comp_id,
-            MAV_FRAME_GLOBAL,
-            cmd,
-            (-1.0, 1.0, 0.0, _NAN),
-            round(target.lat_deg * 1e7),
-            round(target.lon_deg * 1e7),
-            target.alt_amsl_m,
-        )
-        return await self._command(st, cmd, lambda _conf: frame, deadline_t_s)
-
-    async def _command(
-        self,
-        st: VehicleState,
-        cmd: int,
-        build: Callable[[int], bytes],
-        deadline_t_s: float | None,
-    ) -> CommandResult:
-        end = time.monotonic() + self._budget_s(deadline_t_s)
-        attempts = 0
-        result: int | None = None
-        async with self._exchange(st) as box:
-            reboots = st.reboots
-            try:
-                for conf in range(self.config.command_retries + 1):
-                    if time.monotonic() >= end:
-                        break
-                    attempts += 1
-                    self._to(st, build(min(conf, 255)))
-                    wait_end = min(end, time.monotonic() + self.config.command_timeout_s)
-                    while (left := wait_end - time.monotonic()) > 0:
-                        self._check(st, reboots, end + 1.0)
-                        m = await self._get(box, left)
-                        if m is None or m._header.msgId != wire.COMMAND_ACK or m.command != cmd:
-                            continue
-                        result = int(m.result)
-                        if result == MAV_RESULT_IN_PROGRESS:
-                            wait_end = min(end, time.monotonic() + self.config.command_timeout_s)
-                            continue
-                        ok = result == MAV_RESULT_ACCEPTED
-                        return CommandResult(
-                            ok=ok,
-                            result=result,
-                            attempts=attempts,
-                            error="" if ok else _command_result(result),
-                        )
-            except _TransferError as exc:
-                return CommandResult(ok=False, result=result, attempts=attempts, error=str(exc))
-        return CommandResult(
-            ok=False,
-            result=result,
-            attempts=attempts,
-            error=f"no COMMAND_ACK after {attempts} attempts",
-        )
-
 
 def _parse_addr(text: str) -> Address | None:
     if not text:
@@ -1267,56 +718,3 @@ def _parse_addr(text: str) -> Address | None:
         return (host, int(port))
     except ValueError:
         return (host, 0)
-
-
-def _item_from(m: wire.MavMsg) -> MissionItem:
-    return MissionItem(
-        seq=int(m.seq),
-        command=int(m.command),
-        frame=int(m.frame),
-        current=int(m.current),
-        autocontinue=int(m.autocontinue),
-        param1=float(m.param1),
-        param2=float(m.param2),
-        param3=float(m.param3),
-        param4=float(m.param4),
-        x=int(m.x),
-        y=int(m.y),
-        z=float(m.z),
-        mission_type=int(getattr(m, "mission_type", 0)),
-    )
-
-
-_MISSION_RESULTS = {
-    1: "ERROR",
-    2: "UNSUPPORTED_FRAME",
-    3: "UNSUPPORTED",
-    4: "NO_SPACE",
-    5: "INVALID",
-    6: "INVALID_PARAM1",
-    7: "INVALID_PARAM2",
-    8: "INVALID_PARAM3",
-    9: "INVALID_PARAM4",
-    10: "INVALID_PARAM5_X",
-    11: "INVALID_PARAM6_Y",
-    12: "INVALID_PARAM7",
-    13: "INVALID_SEQUENCE",
-    14: "DENIED",
-    15: "OPERATION_CANCELLED",
-}
-_COMMAND_RESULTS = {
-    1: "TEMPORARILY_REJECTED",
-    2: "DENIED",
-    3: "UNSUPPORTED",
-    4: "FAILED",
-    5: "IN_PROGRESS",
-    6: "CANCELLED",
-}
-
-
-def _mission_result(code: int) -> str:
-    return f"MAV_MISSION_{_MISSION_RESULTS.get(code, str(code))}"
-
-
-def _command_result(code: int) -> str:
-    return f"MAV_RESULT_{_COMMAND_RESULTS.get(code, str(code))}"

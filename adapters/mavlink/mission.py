@@ -1,5 +1,5 @@
 """Plan <-> MAVLink mission (pure): :class:`MissionItem`, :func:`plan_to_mission_items`,
-:func:`same_item`.
+:func:`same_item` (readback verification by meaning), :func:`start_item`.
 
 Encoding of a 4D :class:`FlightPlan` (MAVLink waypoints carry no time):
 - every plan waypoint k becomes a NAV_WAYPOINT (MISSION_ITEM_INT, frame MAV_FRAME_GLOBAL,
@@ -13,7 +13,23 @@ Encoding of a 4D :class:`FlightPlan` (MAVLink waypoints carry no time):
   the vehicle late by the whole climb);
 - the first item of plan waypoint ``start_index`` (its speed item, if any) has current=1:
   PX4 otherwise keeps the old index when a mission is replaced in flight;
-- ArduPilot: seq 0 is home (``home`` or the first waypoint), so items shift by one.
+- ArduPilot: seq 0 is home (``home`` or the first waypoint), so items shift by one;
+  hold times are whole seconds (ArduCopter keeps ``param1`` as an integer).
+- items without a position (DO_CHANGE_SPEED) are in MAV_FRAME_MISSION (2): PX4 refuses
+  them in a global frame (MAV_MISSION_UNSUPPORTED), ArduPilot takes either.
+
+Readback (:func:`stored_form`, :func:`same_item`) compares what each autopilot is documented
+to keep, not the bytes sent:
+- positions to 1e-7 deg (one unit of ``x``/``y``), altitude ``z`` to 1 cm;
+- frame by family: global 0/5, relative-altitude 3/6, terrain 10/11, mission 2. PX4 returns
+  global items in their INT frames (0 -> 5, 3 -> 6). ArduPilot keeps no frame for an item
+  without a position and returns it in frame 0;
+- PX4 keeps every param as float32, NaN included;
+- ArduPilot keeps a NaN param as 0.0; NAV_WAYPOINT keeps only what its 15-byte command
+  holds: ArduCopter the hold time (param1, whole seconds), ArduPlane the acceptance and
+  pass-by radii (param2/param3, whole metres up to 255); the other params read back 0;
+  NAV_LAND keeps of param4 only its sign (-1 or 1: ArduPlane's deep-stall direction);
+- ArduPilot's seq 0 is its own home, not compared.
 """
 
 from __future__ import annotations
@@ -22,11 +38,18 @@ import math
 from dataclasses import dataclass, replace
 
 from gcs_utm.geo import haversine_m
-from gcs_utm.model import Autopilot, FlightPlan, Position
+from gcs_utm.model import Autopilot, FlightPlan, Position, VehicleKind
 
 MAV_FRAME_GLOBAL = 0
+MAV_FRAME_MISSION = 2
 MAV_CMD_NAV_WAYPOINT = 16
+MAV_CMD_NAV_LAND = 21
+MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_DO_LAND_START = 189
 MAV_CMD_DO_CHANGE_SPEED = 178
+NAV_COMMAND_MAX = 95  # MAV_CMD ids up to MAV_CMD_NAV_LAST (95) are navigation commands
+# Frame families: the same meaning under another number (the _INT variants of MAVLink 1).
+_FRAME_FAMILY = {0: 0, 5: 0, 3: 3, 6: 3, 10: 10, 11: 10, 2: 2}
 SPEED_TYPE_GROUND = 1.0
 _MIN_SEGMENT_M = 0.5  # below this a segment is "no horizontal motion": GNSS noise scale
 
@@ -60,6 +83,11 @@ class MissionItem:
 
 def _e7(deg: float) -> int:
     return round(deg * 1e7)
+
+
+def is_nav(command: int) -> bool:
+    """True for a navigation command (it moves the vehicle; DO_* items do not)."""
+    return command <= NAV_COMMAND_MAX
 
 
 def _waypoint(lat: float, lon: float, alt: float) -> MissionItem:
@@ -125,6 +153,7 @@ def plan_to_mission_items(
                     MissionItem(
                         seq=0,
                         command=MAV_CMD_DO_CHANGE_SPEED,
+                        frame=MAV_FRAME_MISSION,
                         param1=SPEED_TYPE_GROUND,
                         param2=round(min(speed, max_speed_mps), 3),
                         param3=-1.0,
@@ -137,6 +166,14 @@ def plan_to_mission_items(
         vertical_hold = 0.0
         if k == start_index:
             current = first_of_wp
+    if autopilot is Autopilot.ARDUPILOT:
+        # ArduCopter stores the hold time as whole seconds: send what it keeps
+        items = [
+            replace(it, param1=float(round(it.param1)))
+            if it.command == MAV_CMD_NAV_WAYPOINT
+            else it
+            for it in items
+        ]
     out = [replace(it, seq=i, current=int(i == current)) for i, it in enumerate(items)]
     return out
 
@@ -149,23 +186,94 @@ def current_seq(items: list[MissionItem]) -> int:
     return 0
 
 
+def start_item(items: list[MissionItem], autopilot: Autopilot) -> tuple[int, MissionItem | None]:
+    """(seq to make current, speed item skipped by it or None). PX4 starts at the flagged
+    item (a DO_CHANGE_SPEED runs, then its waypoint). ArduPilot cannot restart a DO item
+    when a mission is replaced in flight ("failed to restart command"): it starts at the
+    next navigation item, and the skipped speed item is returned so that the caller can
+    send it as a command."""
+    seq = current_seq(items)
+    if autopilot is not Autopilot.ARDUPILOT or not items:
+        return seq, None
+    seq = max(seq, 1)  # seq 0 is home
+    skipped: MissionItem | None = None
+    while seq < len(items) and not is_nav(items[seq].command):
+        if items[seq].command == MAV_CMD_DO_CHANGE_SPEED:
+            skipped = items[seq]
+        seq += 1
+    return min(seq, len(items) - 1), skipped
+
+
+def frame_family(frame: int) -> int:
+    """Frames that mean the same thing map to one number (0/5 global, 3/6 relative, ...)."""
+    return _FRAME_FAMILY.get(frame, frame)
+
+
+def _positional(it: MissionItem) -> bool:
+    return is_nav(it.command) and frame_family(it.frame) != MAV_FRAME_MISSION
+
+
+def _ap_param(v: float) -> float:
+    return 0.0 if math.isnan(v) else v
+
+
+def stored_form(
+    sent: MissionItem, autopilot: Autopilot, kind: VehicleKind | None = None
+) -> MissionItem:
+    """What the autopilot keeps of ``sent`` and reports back (see the module docstring)."""
+    if autopilot is not Autopilot.ARDUPILOT:
+        return sent  # PX4 keeps floats and NaN; frames compared by family
+    it = replace(
+        sent,
+        param1=_ap_param(sent.param1),
+        param2=_ap_param(sent.param2),
+        param3=_ap_param(sent.param3),
+        param4=_ap_param(sent.param4),
+    )
+    if not _positional(it):
+        it = replace(it, frame=MAV_FRAME_GLOBAL)  # no frame kept for a DO item
+    if it.command == MAV_CMD_NAV_LAND:  # param4 keeps only a direction: -1 or 1
+        it = replace(it, param4=-1.0 if it.param4 < 0.0 else 1.0)
+    if it.command == MAV_CMD_NAV_WAYPOINT:
+        if kind is VehicleKind.FIXED_WING:
+            acc = float(min(255, max(0, int(it.param2))))
+            passby = float(min(255, max(0, int(it.param3))))
+            it = replace(it, param1=0.0, param2=acc, param3=passby, param4=0.0)
+        else:
+            hold = float(min(65535, max(0, int(it.param1))))
+            it = replace(it, param1=hold, param2=0.0, param3=0.0, param4=0.0)
+    return it
+
+
 def _same_float(a: float, b: float, tol: float) -> bool:
     if math.isnan(a) or math.isnan(b):
         return math.isnan(a) and math.isnan(b)
     return abs(a - b) <= tol
 
 
-def same_item(sent: MissionItem, got: MissionItem) -> str:
-    """'' when the vehicle's copy ``got`` matches ``sent``, else what differs. The current
-    flag is not compared (vehicles report their own), floats to their float32 precision."""
+def same_item(
+    sent: MissionItem,
+    got: MissionItem,
+    autopilot: Autopilot = Autopilot.PX4,
+    kind: VehicleKind | None = None,
+) -> str:
+    """'' when the vehicle's copy ``got`` means what ``sent`` meant on ``autopilot``, else
+    what differs. The current flag is not compared (vehicles report their own); params to
+    their float32 precision."""
+    want = stored_form(sent, autopilot, kind)
     diffs: list[str] = []
-    for name in ("seq", "command", "frame", "autocontinue", "x", "y", "mission_type"):
-        if getattr(sent, name) != getattr(got, name):
-            diffs.append(f"{name} {getattr(sent, name)} != {getattr(got, name)}")
+    for name in ("seq", "command", "autocontinue", "mission_type"):
+        if getattr(want, name) != getattr(got, name):
+            diffs.append(f"{name} {getattr(want, name)} != {getattr(got, name)}")
+    if frame_family(want.frame) != frame_family(got.frame):
+        diffs.append(f"frame {want.frame} != {got.frame}")
+    for name in ("x", "y"):  # degrees * 1e7: one unit is 1e-7 deg
+        if abs(getattr(want, name) - getattr(got, name)) > 1:
+            diffs.append(f"{name} {getattr(want, name)} != {getattr(got, name)}")
     for name in ("param1", "param2", "param3", "param4"):
-        a, b = getattr(sent, name), getattr(got, name)
+        a, b = getattr(want, name), getattr(got, name)
         if not _same_float(a, b, 1e-3 * max(1.0, abs(a))):
-            diffs.append(f"{name} {a} != {b}")
-    if not _same_float(sent.z, got.z, 0.01):
+            diffs.append(f"{name} {getattr(sent, name)} != {b}")
+    if not _same_float(want.z, got.z, 0.01):
         diffs.append(f"z {sent.z} != {got.z}")
     return "; ".join(diffs)

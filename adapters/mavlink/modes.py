@@ -4,6 +4,10 @@ types, and the commands that put a vehicle in a mode.
 PX4 packs its mode in HEARTBEAT.custom_mode as ``main << 16 | sub << 24`` (measured on PX4
 v1.15.4); DO_SET_MODE takes (param1 = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, param2 = main,
 param3 = sub). ArduPilot puts its mode number in custom_mode and DO_SET_MODE param2.
+
+Hold is the mode that keeps the vehicle where it is without a pilot: PX4 AUTO.LOITER;
+ArduCopter BRAKE (LOITER follows the RC throttle, which sits at its minimum without a
+transmitter: the copter descends to the ground); ArduPlane LOITER (circles at altitude).
 """
 
 from __future__ import annotations
@@ -46,7 +50,7 @@ _PX4_AUTO_SUB: dict[int, FlightMode] = {
 COPTER_MODES: dict[FlightMode, int] = {
     FlightMode.MISSION: 3,  # AUTO
     FlightMode.GUIDED: 4,
-    FlightMode.HOLD: 5,  # LOITER
+    FlightMode.HOLD: 17,  # BRAKE: LOITER would descend without RC throttle
     FlightMode.RTL: 6,
     FlightMode.LAND: 9,
 }
@@ -61,8 +65,8 @@ _COPTER_FROM: dict[int, FlightMode] = {v: k for k, v in COPTER_MODES.items()} | 
     0: FlightMode.MANUAL,
     1: FlightMode.MANUAL,
     2: FlightMode.MANUAL,
+    5: FlightMode.HOLD,  # LOITER
     16: FlightMode.MANUAL,
-    17: FlightMode.HOLD,
     21: FlightMode.RTL,
 }
 _PLANE_FROM: dict[int, FlightMode] = {v: k for k, v in PLANE_MODES.items()} | {

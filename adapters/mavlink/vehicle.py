@@ -8,16 +8,16 @@ vehicle clock -> UTC mapping, and the hazard debouncing, and turns messages into
 
 Vehicle clock -> our clock (capture time = ``offset_s + time_boot_ms / 1000``): every report
 with ``time_boot_ms`` gives a sample ``receipt - boot``, the true offset plus its transport
-delay. The offset is a bounded-rate lower envelope of the samples: it falls to any sample
-below it at once (a capture time is never later than its receipt) and rises by at most
-``clock_max_drift`` x the vehicle time elapsed (a vehicle clock that runs slow, as PX4 SIH's
-by ~1 %, is followed; one delayed report moves nothing). When every sample of a
-``clock_window_s`` window is more than ``clock_jump_s`` above the offset, the clock jumped (or
-drifts faster than the bound): the offset is re-anchored to that window's lowest sample and
-the jump is counted. A reboot (``time_boot_ms`` going back) starts over. SYSTEM_TIME (``unix -
-boot``, once the vehicle has GNSS time) is used only when it agrees with its own arrival
-(not later, at most ``system_time_max_lag_s`` earlier); otherwise it is counted as rejected
-and the arrival-based offset stays. See docs/vehicle-time.md.
+delay. The offset is a bounded-rate lower envelope of the samples: a sample below it lowers it
+at once (a capture time is never later than its receipt); at the end of each
+``clock_window_s`` of vehicle time it rises towards that window's lowest sample by at most
+``clock_max_drift`` x the window (a vehicle clock that runs slow, as PX4 SIH's by ~1 %, is
+followed; jitter and delayed reports move nothing), or is re-anchored there, and the jump
+counted, when that sample is more than ``clock_jump_s`` above it (a clock jump, or a drift
+beyond the bound). A reboot (``time_boot_ms`` going back) starts over. SYSTEM_TIME (``unix -
+boot``, once the vehicle has GNSS time) is used only when it agrees with its own arrival (not
+later, at most ``system_time_max_lag_s`` earlier); otherwise it is counted as rejected and the
+arrival-based offset stays. See docs/vehicle-time.md.
 """
 
 from __future__ import annotations
@@ -119,6 +119,7 @@ class VehicleState:
         self.system_time_rejected = 0  # SYSTEM_TIME that disagreed with arrival times
         self._drift_per_ms = cfg.clock_max_drift / 1000.0
         self._window_ms = max(1, round(cfg.clock_window_s * 1000.0))
+        self._window_start_ms = 0
         self._window_end_ms = 0
         self._window_min = _INF
         self._system_time_boot_ms = -1
@@ -186,8 +187,6 @@ class VehicleState:
         d_ms = boot_ms - self.last_boot_ms
         if d_ms > 0:
             self.last_boot_ms = boot_ms
-            if off is not None:
-                off += self._drift_per_ms * d_ms  # the bounded rise
         elif d_ms < -self.cfg.reboot_tolerance_ms:
             self._rebooted(boot_ms)
             self._anchor(boot_ms, sample)
@@ -195,10 +194,9 @@ class VehicleState:
         if off is None:
             self._anchor(boot_ms, sample)
             return False
-        if sample < off:  # noqa: PLR1730 (a compare is cheaper than min() on the hot path)
-            off = sample
-        self.offset_s = off
-        if sample < self._window_min:  # noqa: PLR1730 (as above)
+        if sample < off:  # never dated after its arrival: down at once
+            self.offset_s = sample
+        if sample < self._window_min:  # noqa: PLR1730 (a compare is cheaper than min() here)
             self._window_min = sample
         if boot_ms >= self._window_end_ms:
             self._close_window(boot_ms)
@@ -208,8 +206,8 @@ class VehicleState:
         self.last_boot_ms = boot_ms
         self.offset_s = sample
         self.offset_from_system_time = False
-        self._drift_per_ms = self.cfg.clock_max_drift / 1000.0
         self._window_min = _INF
+        self._window_start_ms = boot_ms
         self._window_end_ms = boot_ms + self._window_ms
 
     def _rebooted(self, boot_ms: int) -> None:
@@ -225,35 +223,37 @@ class VehicleState:
         )
 
     def _close_window(self, boot_ms: int) -> None:
-        """End of a clock window: a SYSTEM_TIME anchor that went quiet stops holding the
-        offset; without one, a jump when all of the window's samples sat more than
-        ``clock_jump_s`` above the offset."""
+        """End of a clock window: the offset rises towards the window's lowest sample (its
+        least delayed report) by at most ``clock_max_drift`` x the window's vehicle time, or
+        is re-anchored there when that sample is more than ``clock_jump_s`` above it (a jump,
+        or a drift beyond the bound). Rising only to a window's best sample keeps transport
+        jitter out of the offset. A SYSTEM_TIME anchor holds the offset until it goes quiet."""
         if (
             self.offset_from_system_time
             and boot_ms - self._system_time_boot_ms > 3 * self._window_ms
         ):
             self.offset_from_system_time = False  # no SYSTEM_TIME lately: follow arrivals
-            self._drift_per_ms = self.cfg.clock_max_drift / 1000.0
         off = self.offset_s
         low = self._window_min
-        if (
-            not self.offset_from_system_time
-            and off is not None
-            and low - off > self.cfg.clock_jump_s
-        ):
-            self.clock_jumps += 1
-            self.offset_s = low
-            # counted (LinkHealth.clock_jumps) and rate-limited: a simulator that cannot
-            # keep its speed factor jumps often
-            self._ratelog.warning(
-                "clock",
-                "%s clock re-anchored: arrivals %.3f s later than its time_boot_ms predicted "
-                "(clock jump or drift above %.0f %%)",
-                self.key,
-                low - off,
-                100.0 * self.cfg.clock_max_drift,
-            )
+        if not self.offset_from_system_time and off is not None and low > off:
+            if low - off > self.cfg.clock_jump_s:
+                self.clock_jumps += 1
+                self.offset_s = low
+                # counted (LinkHealth.clock_jumps) and rate-limited: a simulator that cannot
+                # keep its speed factor jumps often
+                self._ratelog.warning(
+                    "clock",
+                    "%s clock re-anchored: arrivals %.3f s later than its time_boot_ms "
+                    "predicted (clock jump or drift above %.0f %%)",
+                    self.key,
+                    low - off,
+                    100.0 * self.cfg.clock_max_drift,
+                )
+            else:
+                rise = self._drift_per_ms * (boot_ms - self._window_start_ms)
+                self.offset_s = low if low < off + rise else off + rise
         self._window_min = _INF
+        self._window_start_ms = boot_ms
         self._window_end_ms = boot_ms + self._window_ms
 
     def system_time(self, unix_us: int, boot_ms: int, receipt_t_s: float) -> bool:
@@ -276,15 +276,12 @@ class VehicleState:
                     lag_s,
                     self.cfg.system_time_max_lag_s,
                 )
-            if self.offset_from_system_time:
-                self.offset_from_system_time = False
-                self._drift_per_ms = self.cfg.clock_max_drift / 1000.0
+            self.offset_from_system_time = False
             return False
         self.system_time_used += 1
         self.offset_s = candidate
         self.offset_from_system_time = True
-        self._system_time_boot_ms = boot_ms
-        self._drift_per_ms = 0.0  # the vehicle's UTC holds the offset; arrivals only lower it
+        self._system_time_boot_ms = boot_ms  # (it holds the offset; arrivals only lower it)
         return True
 
     def capture_t_s(self, boot_ms: int, receipt_t_s: float) -> float:

@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from adapters.mavlink import wire
+from adapters.mavlink.adsb_relay import AdsbRelay
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.vehicle import VehicleInfo, VehicleState
 from adapters.tlog import ReplayStats, TlogCounters, TlogReader, replay
@@ -185,6 +186,7 @@ class ReplayPipeline:
         self.tracks: dict[TrackId, _TrackStats] = {}
         self.threats: dict[str, _ThreatStats] = {}
         self._states: dict[tuple[int, int], VehicleState] = {}
+        self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE -> ADS-B measurements, as on a live link
         self._pending: list[Measurement] = []
         self._t = 0.0
         self._next_cycle_t_s: float | None = None
@@ -256,6 +258,9 @@ class ReplayPipeline:
         v.messages += 1
         v.last_t_s = t_s
         st.count_frame(seq, t_s)
+        if mid == wire.ADSB_VEHICLE:
+            self.adsb_relay.on_adsb_vehicle(st, m, t_s, self)
+            return
         handler = _HANDLERS.get(mid)
         if handler is not None:
             handler(st, m, t_s, self)
@@ -464,6 +469,7 @@ class ReplayPipeline:
             "counters": {
                 "corrupt_records": counters.corrupt_chunks + counters.truncated_tail,
                 "tlog": counters.as_dict(),
+                "adsb_relay": dataclasses.asdict(self.adsb_relay.counters),
                 "bad_frames": {
                     "bad_crc": pc.bad_crc,
                     "garbage": pc.garbage,

@@ -69,6 +69,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--speedup): the service's clock runs this many times faster than the wall clock "
         "(default 1: real vehicles)",
     )
+    serve.add_argument(
+        "--record",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="record every MAVLink link (received and sent) as a .tlog file in DIR",
+    )
     group = serve.add_mutually_exclusive_group()
     group.add_argument("--auto-accept", action="store_true")
     group.add_argument("--auto-reject", action="store_true")
@@ -95,6 +102,13 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG/GeoJSON/KML output")
     p.add_argument("--mqtt", action="store_true", help="start the MQTT bridge of the config")
+    p.add_argument(
+        "--record",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="record every MAVLink link (received and sent) as a .tlog file in DIR",
+    )
 
 
 def positive_speed(text: str) -> float:
@@ -146,6 +160,7 @@ def _options(args: argparse.Namespace, operator: str) -> Any:
         out_dir=args.out,
         duration_s=args.duration,
         figures=not args.no_figures,
+        record_dir=args.record,
     )
 
 
@@ -267,6 +282,7 @@ def _serve(args: argparse.Namespace) -> int:
                 operator=operator,
                 headless=headless,
                 speed=args.speed,
+                record_dir=args.record,
             )
         )
     except StoreError as exc:  # a folder, a file that is not a store, a newer schema

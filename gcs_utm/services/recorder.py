@@ -25,6 +25,7 @@ import time
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+from adapters.mavlink import MavlinkHub
 from adapters.tlog import TlogWriter
 from adapters.tlog._mavlink import crc_extra, x25
 
@@ -106,6 +107,17 @@ def sanitise(link: str) -> str:
     ``udpin_127.0.0.1_14550``)."""
     text = re.sub(r"[^A-Za-z0-9.\-]+", "_", link).strip("_.")
     return text or "link"
+
+
+def record_links(hub: MavlinkHub, folder: Path | None) -> LinkRecorder | None:
+    """``serve``/``run --record DIR``: every link of ``hub``, received and sent, recorded to
+    ``folder`` (None: nothing recorded). The caller closes the recorder after the hub."""
+    if folder is None:
+        return None
+    recorder = LinkRecorder(folder)
+    hub.raw_tap = recorder.tap
+    _log.info("recording every MAVLink link to %s", folder)
+    return recorder
 
 
 class LinkRecorder:

@@ -139,6 +139,9 @@ def fly(
     db = tmp_path / "store.sqlite"
     log_path = tmp_path / "serve.log"
     cfg = _config(tmp_path / "serve.toml", crossing, links)
+    for p in pilots:  # the mission size the pilot uploaded, as the autopilot reports it
+        p.poll(1.0)
+    before = [_total(p) for p in pilots]
     with log_path.open("wb") as log:
         serve = subprocess.Popen(
             [sys.executable, "-m", "gcs_utm", "serve", "--headless", "--auto-accept",
@@ -149,7 +152,6 @@ def fly(
             _wait_operations(db, 2, 40.0, serve)
             for p in pilots:
                 p.arm_and_start(takeoff_agl_m=crossing.cruise_agl_m)
-            before = [_total(p) for p in pilots]
             _follow(pilots, crossing, flight_timeout_s)
             assert serve.poll() is None, "gcs-utm serve exited during the flight"
         except AssertionError as exc:

@@ -22,11 +22,6 @@ from tests.autopilot.pilot import PilotLink
 SPEED = 4.0  # ArduPilot --speedup; serve --speed matches it
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 26: no operation is filed for a freshly booted copter, and readback of "
-    "ArduPilot's stored yaw (NaN sent, 0.0 kept) fails verification; remove with the fix",
-)
 @pytest.mark.timeout(420)
 def test_crossing_arducopter_pair_is_resolved_and_flown(
     ardupilot: Callable[..., SitlProcess], tmp_path: Path

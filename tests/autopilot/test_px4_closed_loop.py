@@ -20,11 +20,6 @@ from tests.autopilot.pilot import PilotLink
 SPEED = 4.0  # PX4_SIM_SPEED_FACTOR; serve --speed matches it
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 18: PX4 refuses the uploaded resolution (DO_CHANGE_SPEED in frame 0); "
-    "remove this mark with the fix",
-)
 @pytest.mark.timeout(420)
 def test_crossing_px4_pair_is_resolved_and_flown(
     px4: Callable[..., SitlProcess], tmp_path: Path

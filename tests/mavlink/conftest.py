@@ -234,6 +234,7 @@ class FakeVehicle(asyncio.DatagramProtocol):
                 return
             if m.command == 176 and self.faults.command_result == 0:
                 self.custom_mode = (int(m.param2) << 16) | (int(m.param3) << 24)
+                self.heartbeat()  # (a real vehicle's next 1 Hz heartbeat shows the mode)
             self.send(self.mav.command_ack_encode(m.command, self.faults.command_result))
 
 

@@ -6,7 +6,6 @@ inside its deadline. Simulation speed 5, loopback, ephemeral ports."""
 from __future__ import annotations
 
 import asyncio
-import math
 import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -17,7 +16,7 @@ import pytest
 
 import sitl
 from adapters.mavlink import MavlinkConfig, MavlinkHub, plan_to_mission_items
-from adapters.mavlink.mission import MissionItem
+from adapters.mavlink.mission import MissionItem, same_item
 from gcs_utm.clock import ScaledClock
 from gcs_utm.geo import haversine_m
 from gcs_utm.model import (
@@ -117,22 +116,33 @@ def _plan(
     return FlightPlan(operation_id=OperationId("op-sitl"), version=1, waypoints=wps)
 
 
-def _assert_same(vehicle_items: tuple[Any, ...], sent: list[MissionItem], *, skip0: bool) -> None:
+def _assert_same(
+    vehicle_items: tuple[Any, ...],
+    sent: list[MissionItem],
+    *,
+    skip0: bool,
+    autopilot: Autopilot = Autopilot.PX4,
+) -> None:
+    """The vehicle holds what was sent, by meaning (see mission.same_item): the vehicle's
+    own frames and stored defaults (PX4 INT frames, ArduPilot NaN -> 0) are its rules."""
     assert len(vehicle_items) == len(sent)
     for got, want in zip(vehicle_items, sent, strict=True):
         if skip0 and want.seq == 0:
             continue
-        assert (got.seq, got.command, got.frame, got.x, got.y) == (
-            want.seq,
-            want.command,
-            want.frame,
-            want.x,
-            want.y,
+        back = MissionItem(
+            seq=got.seq,
+            command=got.command,
+            frame=got.frame,
+            autocontinue=got.autocontinue,
+            param1=got.param1,
+            param2=got.param2,
+            param3=got.param3,
+            param4=got.param4,
+            x=got.x,
+            y=got.y,
+            z=got.z,
         )
-        assert got.z == pytest.approx(want.z, abs=1e-3)
-        for name in ("param1", "param2", "param3", "param4"):
-            a, b = getattr(got, name), getattr(want, name)
-            assert (math.isnan(a) and math.isnan(b)) or a == pytest.approx(b, abs=1e-3), name
+        assert same_item(want, back, autopilot) == "", (want, got)
 
 
 async def test_px4_discovery_measurements_and_verified_upload() -> None:
@@ -169,7 +179,7 @@ async def test_ardupilot_over_tcp_home_is_seq0() -> None:
         assert res.ok and res.verified, res
         sent = plan_to_mission_items(plan, Autopilot.ARDUPILOT)
         assert sent[0].x == round(plan.waypoints[0].lat_deg * 1e7)  # home placeholder
-        _assert_same(w.vehicle.mission, sent, skip0=True)
+        _assert_same(w.vehicle.mission, sent, skip0=True, autopilot=Autopilot.ARDUPILOT)
         assert w.vehicle.mission_current_seq >= 1
 
 
@@ -313,6 +323,6 @@ async def test_uploads_verify_through_20_percent_loss_each_way(autopilot: str) -
             res = await w.hub.upload_plan(SysId(1), plan, set_mission_mode=False)
             assert res.ok and res.verified and res.current_set, res
             sent = plan_to_mission_items(plan, ap)
-            _assert_same(w.vehicle.mission, sent, skip0=ap is Autopilot.ARDUPILOT)
+            _assert_same(w.vehicle.mission, sent, skip0=ap is Autopilot.ARDUPILOT, autopilot=ap)
         assert w.hub.counters.mission_retries > 0  # the loss was real
         assert w.hub.counters.uploads_failed == 0

@@ -252,20 +252,21 @@ def test_clock_drift_followed_capture_never_after_receipt(rate: float) -> None:
     lags = _fly(st, ev, seconds=900.0, rate=rate)
     assert min(lags) >= -1e-9  # (float rounding of receipt - boot + boot)
     tail = sorted(lags[-3000:])  # the last minute
-    assert tail[len(tail) // 2] < 0.03  # median: within the transport jitter
-    assert tail[-1] < 0.35  # at worst the 300 ms delayed report
+    # median: the transport jitter plus at most two windows of drift (1 s x 3 % x 2)
+    assert tail[len(tail) // 2] < 0.08
+    assert tail[-1] < 0.4  # at worst the 300 ms delayed report (+ the drift lag)
     assert st.clock_jumps == 0
 
 
 def test_clock_drift_beyond_the_bound_re_anchored() -> None:
     """A simulator that cannot keep its speed factor (its clock at 0.8 x ours): the rise is
     too slow, so whole windows arrive late and the offset is re-anchored (counted); reports
-    stay within clock_jump_s + two windows of excess drift (0.5 + 2 x 2 s x 0.15) and the
+    stay within clock_jump_s + two windows of excess drift (0.5 + 2 x 1 s x 0.15) and the
     300 ms late reports of their arrival, never after it."""
     st, ev = _clock_state()
     lags = _fly(st, ev, seconds=300.0, rate=0.8)
     assert min(lags) >= -1e-9
-    assert max(lags[50 * 10 :]) < 1.5
+    assert max(lags[50 * 10 :]) < 1.2
     assert st.clock_jumps > 10
 
 

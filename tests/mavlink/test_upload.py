@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from adapters.mavlink import plan_to_mission_items
+from adapters.mavlink import UploadFailure, plan_to_mission_items
 from gcs_utm.messages import FlightMode
 from gcs_utm.model import (
     Command,
@@ -150,4 +150,26 @@ async def test_heartbeat_mode_becomes_status(env: Any) -> None:
     await asyncio.sleep(0.05)
     last = [s for s in env.sink.statuses if s.sys_id == 10][-1]
     assert last.mode is FlightMode.MISSION and last.armed
+    v.close()
+
+
+async def test_failed_upload_is_retried_once_and_says_why(env: Any) -> None:
+    v = await env.vehicle(11)
+    v.faults.nack = 4  # MAV_MISSION_NO_SPACE, as ArduPilot answers just after boot
+    asyncio.get_running_loop().call_later(0.3, setattr, v.faults, "nack", None)
+    res = await env.hub.upload_plan(SysId(11), _plan(4))
+    assert res.ok and res.verified and res.tries == 2 and res.failure is None, res
+    v.faults.nack = 3  # MAV_MISSION_UNSUPPORTED every time
+    res = await env.hub.upload_plan(SysId(11), _plan(4))
+    assert not res.ok and res.tries == 2 and res.failure is UploadFailure.REFUSED
+    assert "try 1" in res.error and "try 2" in res.error and "UNSUPPORTED" in res.error
+    v.close()
+
+
+async def test_mode_not_shown_in_heartbeat_fails_the_upload(env: Any) -> None:
+    v = await env.vehicle(12)
+    v.faults.command_result = 4  # FAILED: the vehicle stays where it is
+    res = await env.hub.upload_plan(SysId(12), _plan(4))
+    assert res.verified and res.current_set and not res.ok
+    assert res.failure is UploadFailure.MODE_NOT_SET and "FAILED" in res.error
     v.close()

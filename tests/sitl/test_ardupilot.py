@@ -33,7 +33,8 @@ async def test_ardupilot_copter_over_tcp() -> None:
         kinds = {m.get_type() for m in msgs}
         assert "HEARTBEAT" in kinds and "GLOBAL_POSITION_INT" not in kinds
         hb = next(m for m in msgs if m.get_type() == "HEARTBEAT")
-        assert hb.autopilot == mav.MAV_AUTOPILOT_ARDUPILOTMEGA and hb.custom_mode == 5  # LOITER
+        # STABILIZE (0): real ArduCopter boots in it
+        assert hb.autopilot == mav.MAV_AUTOPILOT_ARDUPILOTMEGA and hb.custom_mode == 0
         assert hb.get_srcSystem() == 3
         writer.write(mav.MAVLink_request_data_stream_message(3, 1, 0, 4, 1).pack(enc))
         writer.write(

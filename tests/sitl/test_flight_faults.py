@@ -84,9 +84,6 @@ def test_gnss_jamming_degrades_fix_and_drifts() -> None:
     run(v, 1.0)
     assert v._gps_fix_type() == 3
     t = run(v, 20.0, 1.0)
-    for _ in range(30):
-        v._send_stream(v._links[0], "GPS_RAW_INT") if v._links else v._noisy_reported()
-        v._jam_offset = (v._jam_offset[0] + 1.0, v._jam_offset[1])  # drift happens per report
     assert v._gps_fix_type() < 3 and v._health() & 32 == 0
     lat, _, _ = v.reported_position()
     assert abs(lat - v.lat_deg) * 111_000 > 10.0
@@ -94,6 +91,32 @@ def test_gnss_jamming_degrades_fix_and_drifts() -> None:
     assert v.arm() != 0  # no arming without a 3D fix
     run(v, 40.0, t)
     assert v._gps_fix_type() == 3 and any("recovered" in s for _, _, s in v.statustexts)
+
+
+def test_jamming_drift_advances_per_simulated_second_not_per_message() -> None:
+    """The documented drift rate (the fault's value, m/s at full jamming level) holds per
+    simulated second; reports sent in between do not move it."""
+    rate_mps = 1.0  # the default
+    v = make(faults=(sitl.FaultSpec(kind=sitl.FaultKind.GNSS_JAMMING, at_s=0.0),))
+    run(v, 12.0)  # jamming level 1 after 9 s
+    before = v._jam_offset
+    sent: list[str] = []
+
+    class _Sink:
+        def send(self, name: str, **_fields: object) -> None:
+            sent.append(name)
+
+    for _ in range(250):  # many reports, no simulated time
+        v._send_stream(_Sink(), "GPS_RAW_INT")  # type: ignore[arg-type]
+        v._send_stream(_Sink(), "GLOBAL_POSITION_INT")  # type: ignore[arg-type]
+    assert len(sent) == 500 and v._jam_offset == before
+    t, t_end = 12.0, 32.0
+    while t < t_end:  # 20 simulated seconds in physics steps
+        t += 0.05
+        v.advance(t)
+    moved_m = math.hypot(v._jam_offset[0] - before[0], v._jam_offset[1] - before[1])
+    # the path is rate * 20 s; the straight-line displacement a little less (direction wanders)
+    assert 0.85 * rate_mps * 20.0 < moved_m <= rate_mps * 20.0 + 1e-6
 
 
 def test_spoofing_battery_and_motor_failure() -> None:

@@ -172,6 +172,12 @@ async def test_clear_set_current_and_inflight_upload_keeps_index(gcs: RawGcs) ->
         assert v.mission == () and v.mode == "HOLD"
 
 
+async def storage_up(v: sitl.Vehicle) -> None:
+    """ArduPilot refuses uploads (NO_SPACE) for ~1.5 simulated s after boot."""
+    while not v.storage_ready():
+        await asyncio.sleep(0.05)
+
+
 async def test_ardupilot_upload_nacks_unexpected_items_and_keeps_receiving(gcs: RawGcs) -> None:
     """ArduPilot's MissionItemProtocol: an item it did not ask for gets
     MAV_MISSION_INVALID_SEQUENCE and the transfer goes on; once the upload is complete a
@@ -179,6 +185,7 @@ async def test_ardupilot_upload_nacks_unexpected_items_and_keeps_receiving(gcs: 
     spec = px4_spec(gcs.port, autopilot="ardupilot")
     async with sitl.Fleet([spec], sitl.SimTime()) as fleet:
         v = fleet.vehicles[0]
+        await storage_up(v)
         items = square(3)
         s = len(gcs.msgs)
         gcs.send(v.local_port, mav.MAVLink_mission_count_message(1, 1, 3, 0))
@@ -215,6 +222,7 @@ async def test_ardupilot_rerequests_every_second(gcs: RawGcs) -> None:
     spec = px4_spec(gcs.port, autopilot="ardupilot")
     async with sitl.Fleet([spec], sitl.SimTime()) as fleet:
         v = fleet.vehicles[0]
+        await storage_up(v)
         s = len(gcs.msgs)
         gcs.send(v.local_port, mav.MAVLink_mission_count_message(1, 1, 2, 0))
         await gcs.wait_type("MISSION_REQUEST_INT", start=s, seq=0)

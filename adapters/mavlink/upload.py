@@ -1,0 +1,238 @@
+"""Uploading a plan so that the vehicle flies it: transfer, readback verification by meaning,
+current item, mission mode, one retry.
+
+One upload (:meth:`Uploads.upload_items`) is, for each try:
+1. the mission protocol (:meth:`Transfers._upload`) until MISSION_ACK ACCEPTED;
+2. the vehicle's copy downloaded back and compared item by item by what the autopilot is
+   documented to keep (:func:`~adapters.mavlink.mission.same_item`);
+3. the intended current item set with MISSION_SET_CURRENT and confirmed by MISSION_CURRENT
+   (both PX4 and ArduPilot honour it; ArduPilot ignores the ``current`` flag of an upload).
+   PX4 starts at the flagged item, a DO_CHANGE_SPEED included; ArduPilot at the navigation
+   item after it (a DO item as current fails to restart), and the skipped speed item is then
+   sent as a DO_CHANGE_SPEED command;
+4. with ``set_mission_mode``, DO_SET_MODE to the autopilot's mission mode (PX4 AUTO.MISSION,
+   ArduPilot AUTO) until HEARTBEAT shows it.
+A try that fails at any step is repeated once (ArduPilot refuses uploads with NO_SPACE for a
+moment after boot; a lost datagram can fail a readback), unless the vehicle is unknown or the
+deadline has passed. The result says which step failed (:class:`UploadFailure`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from dataclasses import dataclass
+
+from adapters.mavlink.mission import (
+    MAV_CMD_DO_CHANGE_SPEED,
+    MissionItem,
+    is_nav,
+    plan_to_mission_items,
+    same_item,
+    start_item,
+)
+from adapters.mavlink.transfer import (
+    MODE_CONFIRM_S,
+    MavlinkError,
+    TransferError,
+    Transfers,
+    UploadFailure,
+    UploadResult,
+)
+from adapters.mavlink.vehicle import VehicleState
+from gcs_utm.messages import FlightMode, VehicleKey
+from gcs_utm.model import Autopilot, FlightPlan, Position, SysId
+
+_log = logging.getLogger(__name__)
+
+UPLOAD_TRIES = 2  # a failed upload is retried once
+RETRY_PAUSE_S = 1.0
+"""Real seconds between the two tries: ArduPilot answers NO_SPACE for about a second after
+boot while its mission storage initialises."""
+_NO_RETRY = frozenset({UploadFailure.NO_VEHICLE, UploadFailure.DEADLINE})
+
+
+@dataclass(slots=True)
+class _Try:
+    attempts: int = 0
+    verified: bool = False
+    current_seq: int | None = None
+    mode_set: bool = False
+
+
+class Uploads(Transfers):
+    """Plan and mission uploads (see the module docstring)."""
+
+    async def upload_plan(
+        self,
+        sys_id: SysId | VehicleKey,
+        plan: FlightPlan,
+        *,
+        autopilot: Autopilot | None = None,
+        start_index: int = 0,
+        home: Position | None = None,
+        deadline_t_s: float | None = None,
+        set_mission_mode: bool = True,
+        climb_rate_mps: float | None = None,
+        descent_rate_mps: float | None = None,
+    ) -> UploadResult:
+        """Upload ``plan`` as a mission, verify it, start it at plan waypoint ``start_index``
+        (see :meth:`upload_items`); the vertical speeds let a climb on the spot keep the
+        plan's time (see :func:`plan_to_mission_items`). Never raises for vehicle behaviour:
+        failures are in the result."""
+        t0 = time.monotonic()
+        try:
+            st = self.state(sys_id)
+        except MavlinkError as exc:
+            return _failed(0, 0, t0, (str(exc), UploadFailure.NO_VEHICLE), _Try())
+        items = plan_to_mission_items(
+            plan,
+            autopilot or st.autopilot,
+            home,
+            start_index=start_index,
+            max_speed_mps=self.config.max_speed_mps,
+            climb_rate_mps=climb_rate_mps,
+            descent_rate_mps=descent_rate_mps,
+        )
+        return await self.upload_items(
+            st.key, items, deadline_t_s=deadline_t_s, set_mission_mode=set_mission_mode, _t0=t0
+        )
+
+    async def upload_items(
+        self,
+        vehicle: SysId | VehicleKey,
+        items: list[MissionItem],
+        *,
+        deadline_t_s: float | None = None,
+        set_mission_mode: bool = True,
+        _t0: float | None = None,
+    ) -> UploadResult:
+        """Upload raw mission items; the item flagged ``current`` is the one to start at."""
+        t0 = time.monotonic() if _t0 is None else _t0
+        end = t0 + self._budget_s(deadline_t_s)
+        failure = UploadFailure.NO_VEHICLE
+        errors: list[str] = []
+        tried = _Try()
+        for tries in range(1, UPLOAD_TRIES + 1):
+            tried = _Try()
+            try:
+                st = self.state(vehicle)
+                await self._try_upload(st, items, end, set_mission_mode, tried)
+            except MavlinkError as exc:
+                failure, error = UploadFailure.NO_VEHICLE, str(exc)
+                errors.append(error)
+            except TransferError as exc:
+                failure, error = exc.failure, str(exc)
+                errors.append(f"try {tries}: {error}")
+            else:
+                self.counters.uploads_verified += 1
+                return UploadResult(
+                    ok=True,
+                    verified=True,
+                    attempts=tried.attempts,
+                    items=len(items),
+                    duration_s=time.monotonic() - t0,
+                    current_set=True,
+                    mode_set=tried.mode_set,
+                    tries=tries,
+                    current_seq=tried.current_seq,
+                )
+            _log.warning("upload to %s, try %d failed (%s): %s", vehicle, tries, failure, error)
+            if failure in _NO_RETRY or tries == UPLOAD_TRIES:
+                break
+            await asyncio.sleep(max(0.0, min(RETRY_PAUSE_S, end - time.monotonic() - 1.0)))
+        self.counters.uploads_failed += 1
+        return _failed(len(items), tries, t0, ("; ".join(errors), failure), tried)
+
+    async def _try_upload(
+        self,
+        st: VehicleState,
+        items: list[MissionItem],
+        end: float,
+        set_mission_mode: bool,
+        tried: _Try,
+    ) -> None:
+        """One try; fills ``tried`` as it goes and raises TransferError on a failed step."""
+        start, skipped_speed = start_item(items, st.autopilot)
+        async with self._exchange(st) as box:
+            reboots = st.reboots
+            tried.attempts = await self._upload(st, box, items, end, reboots)
+            got = await self._download(st, box, end, reboots)
+            self._verify_readback(st, items, got)
+            tried.verified = True
+            # PX4 in mission mode runs a DO item at once: MISSION_CURRENT may already show
+            # the navigation item after it
+            last = start
+            while last < len(items) - 1 and not is_nav(items[last].command):
+                last += 1
+            seq = await self._set_current(st, box, range(start, last + 1), end, reboots)
+            if seq is None:
+                raise TransferError(
+                    f"MISSION_CURRENT never showed item {start} (last seen {st.mission_seq})",
+                    UploadFailure.CURRENT_NOT_SET,
+                )
+            tried.current_seq = seq
+        if set_mission_mode:
+            await self._ensure_mission_mode(st, end)
+            tried.mode_set = True
+        if skipped_speed is not None:
+            p = skipped_speed
+            res = await self._command_long(
+                st,
+                MAV_CMD_DO_CHANGE_SPEED,
+                (p.param1, p.param2, p.param3, 0.0, 0.0, 0.0, 0.0),
+                None,
+            )
+            if not res.ok:  # the leg is flown at the previous speed: late or early, not unsafe
+                _log.warning("%s: leg speed of item %d not set: %s", st.key, p.seq, res.error)
+
+    def _verify_readback(
+        self, st: VehicleState, items: list[MissionItem], got: list[MissionItem]
+    ) -> None:
+        if len(got) != len(items):
+            raise TransferError(
+                f"readback has {len(got)} items, sent {len(items)}",
+                UploadFailure.READBACK_MISMATCH,
+            )
+        for sent, back in zip(items, got, strict=True):
+            if sent.seq == 0 and st.autopilot is Autopilot.ARDUPILOT:
+                continue  # ArduPilot reports its own home at seq 0, not what we sent
+            diff = same_item(sent, back, st.autopilot, st.kind)
+            if diff:
+                raise TransferError(
+                    f"readback item {sent.seq} differs: {diff}", UploadFailure.READBACK_MISMATCH
+                )
+
+    async def _ensure_mission_mode(self, st: VehicleState, end: float) -> None:
+        if st.mode is not FlightMode.MISSION:
+            res = await self.send_mode(st.key, FlightMode.MISSION)
+            if not res.ok:
+                raise TransferError(
+                    f"mission mode refused: {res.error}", UploadFailure.MODE_NOT_SET
+                )
+        wait_s = max(0.0, min(MODE_CONFIRM_S, end - time.monotonic()))
+        if not await self.wait_mode(st, FlightMode.MISSION, wait_s):
+            raise TransferError(
+                f"HEARTBEAT still shows {st.mode.value} after the mission mode was accepted",
+                UploadFailure.MODE_NOT_SET,
+            )
+
+
+def _failed(
+    n_items: int, tries: int, t0: float, why: tuple[str, UploadFailure], tried: _Try
+) -> UploadResult:
+    error, failure = why
+    return UploadResult(
+        ok=False,
+        verified=tried.verified,
+        attempts=tried.attempts,
+        items=n_items,
+        duration_s=time.monotonic() - t0,
+        error=error,
+        current_set=tried.current_seq is not None,
+        mode_set=tried.mode_set,
+        failure=failure,
+        tries=tries,
+        current_seq=tried.current_seq,
+    )

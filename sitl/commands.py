@@ -1,0 +1,236 @@
+"""Commands of a simulated vehicle: COMMAND_LONG / COMMAND_INT answered as PX4 or ArduPilot
+answer them (mode numbers, arming checks, take-off, landing, DO_LAND_START), and parameters."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+
+from sitl import mission as mp
+from sitl._mav import Inbound, const
+from sitl.core import (
+    COPTER_NUM_TO_MODE,
+    FORCE_DISARM_MAGIC,
+    GUIDED,
+    HOLD,
+    LAND,
+    MISSION,
+    PLANE_NUM_TO_MODE,
+    POSCTL,
+    PX4_MAIN_ALTCTL,
+    PX4_MAIN_AUTO,
+    PX4_MAIN_MANUAL,
+    PX4_MAIN_POSCTL,
+    PX4_SUB_TO_MODE,
+    R_ACCEPTED,
+    R_DENIED,
+    R_FAILED,
+    R_UNSUPPORTED,
+    RTL,
+    SEV_CRITICAL,
+    SEV_WARNING,
+    TAKEOFF,
+)
+from sitl.links import Link
+from sitl.telemetry import Telemetry
+
+_log = logging.getLogger(__name__)
+
+
+class CommandHandling(Telemetry):
+    """Command and parameter handlers (see the module docstring)."""
+
+    def _send_param(self, link: Link, name: str, index: int) -> None:
+        link.send(
+            "PARAM_VALUE",
+            param_id=name.encode(),
+            param_value=float(self._params[name]),
+            param_type=const("MAV_PARAM_TYPE_REAL32"),
+            param_count=len(self._params),
+            param_index=index,
+        )
+
+    def _on_param_read(self, link: Link, m: Inbound) -> None:
+        names = list(self._params)
+        idx = m.i("param_index")
+        name = m.text("param_id")
+        if idx >= 0 and idx < len(names) and idx != 65535 and not name:
+            name = names[idx]
+        if name in self._params:
+            self._send_param(link, name, names.index(name))
+
+    def _on_param_set(self, link: Link, m: Inbound) -> None:
+        name = m.text("param_id")
+        if name not in self._params:
+            return
+        value = m.f("param_value")
+        self._params[name] = value
+        if name == "MIS_TAKEOFF_ALT":
+            self.takeoff_alt_rel_m = value
+        elif name == "RTL_RETURN_ALT":
+            self.rtl_alt_rel_m = value
+        elif name in ("MPC_XY_CRUISE", "FW_AIRSPD_TRIM"):
+            self.cruise_mps = value
+        self._send_param(link, name, list(self._params).index(name))
+
+    def _on_command(self, link: Link, m: Inbound) -> None:
+        cmd = m.i("command")
+        p = (
+            [m.f(f"param{i}") for i in range(1, 8)]
+            if m.type == "COMMAND_LONG"
+            else [
+                m.f("param1"),
+                m.f("param2"),
+                m.f("param3"),
+                m.f("param4"),
+                m.i("x") / 1e7,
+                m.i("y") / 1e7,
+                m.f("z"),
+            ]
+        )
+        handler = self._command_table().get(cmd)
+        if handler is None:
+            self.counters["unsupported_cmd"] += 1
+            self._ack(link, m, cmd, R_UNSUPPORTED)
+            return
+        result = handler(link, m, p)
+        if result is not None:
+            self._ack(link, m, cmd, result)
+
+    def _command_table(self) -> dict[int, Callable[[Link, Inbound, list[float]], int | None]]:
+        return {
+            const("MAV_CMD_DO_SET_MODE"): self._cmd_set_mode,
+            const("MAV_CMD_COMPONENT_ARM_DISARM"): self._cmd_arm,
+            const("MAV_CMD_NAV_TAKEOFF"): self._cmd_takeoff,
+            const("MAV_CMD_NAV_LAND"): self._cmd_land,
+            const("MAV_CMD_DO_LAND_START"): self._cmd_land_start,
+            const("MAV_CMD_NAV_RETURN_TO_LAUNCH"): lambda _l, _m, _p: self._request_mode(RTL),
+            const("MAV_CMD_MISSION_START"): self._cmd_mission_start,
+            const("MAV_CMD_DO_REPOSITION"): self._cmd_reposition,
+            const("MAV_CMD_DO_CHANGE_SPEED"): self._cmd_change_speed,
+            const("MAV_CMD_REQUEST_MESSAGE"): self._cmd_request_message,
+            const("MAV_CMD_SET_MESSAGE_INTERVAL"): self._cmd_set_interval,
+            const("MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES"): self._cmd_capabilities,
+            const("MAV_CMD_DO_SET_MISSION_CURRENT"): lambda _l, _m, p: (
+                R_ACCEPTED if self.set_current(int(p[0])) else R_DENIED
+            ),
+            const("MAV_CMD_GET_HOME_POSITION"): self._cmd_home,
+            const("MAV_CMD_INJECT_FAILURE"): self._cmd_inject_failure,
+        }
+
+    def _cmd_set_mode(self, _l: Link, _m: Inbound, p: list[float]) -> int:
+        base = int(p[0])
+        if self.is_ardupilot:
+            return self._set_mode_numbers(base, int(p[1]))
+        return self._set_mode_numbers(base, (int(p[1]) << 16) | (int(p[2]) << 24))
+
+    def _set_mode_numbers(self, base_mode: int, custom_mode: int) -> int:
+        if self.is_ardupilot:
+            table = PLANE_NUM_TO_MODE if self.is_fixed_wing else COPTER_NUM_TO_MODE
+            target = table.get(custom_mode)
+        else:
+            main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+            if main == PX4_MAIN_AUTO:
+                target = PX4_SUB_TO_MODE.get(sub)
+            elif main in (PX4_MAIN_MANUAL, PX4_MAIN_ALTCTL, PX4_MAIN_POSCTL):
+                target = POSCTL
+            else:
+                target = None
+        if target is None:
+            return R_UNSUPPORTED
+        return self._request_mode(target)
+
+    def _request_mode(self, target: str) -> int:
+        if self._motor_failed and target != LAND:
+            self.statustext(SEV_CRITICAL, "Mode change denied: motor failure")
+            return R_DENIED
+        if target == MISSION and not self._items:
+            self.statustext(SEV_CRITICAL, "Mode change denied: no valid mission")
+            return R_DENIED
+        if target == TAKEOFF and not self._armed:
+            self.statustext(SEV_CRITICAL, "Takeoff denied: disarmed")
+            return R_DENIED
+        self._enter_mode(target)
+        return R_ACCEPTED
+
+    def _cmd_arm(self, _l: Link, _m: Inbound, p: list[float]) -> int:
+        force = p[1] == FORCE_DISARM_MAGIC
+        if p[0] >= 0.5:
+            return self.arm(force=force)
+        if not self._landed and not force:
+            self.statustext(SEV_CRITICAL, "Disarming denied: not landed")
+            return R_DENIED
+        self._disarm()
+        return R_ACCEPTED
+
+    def _cmd_takeoff(self, _l: Link, _m: Inbound, p: list[float]) -> int:
+        # param7: PX4 takes the altitude AMSL, ArduPilot metres above home
+        alt = p[6] + self.ground_alt_m if self.is_ardupilot else p[6]
+        if math.isfinite(alt) and alt > self.ground_alt_m:
+            self._takeoff_alt = alt
+        else:
+            self._takeoff_alt = self.ground_alt_m + self.takeoff_alt_rel_m
+        if not self._armed:
+            self.statustext(SEV_CRITICAL, "Takeoff denied: disarmed")
+            return R_DENIED
+        return self._request_mode(TAKEOFF)
+
+    def _cmd_land(self, _l: Link, _m: Inbound, _p: list[float]) -> int:
+        if self.is_ardupilot and self.is_fixed_wing:
+            return R_UNSUPPORTED  # ArduPlane lands through a mission (DO_LAND_START)
+        return self._request_mode(LAND)
+
+    def _cmd_land_start(self, _l: Link, _m: Inbound, _p: list[float]) -> int:
+        """Jump to the mission's landing sequence (its DO_LAND_START item) in mission mode;
+        FAILED without one, as ArduPlane."""
+        first = 1 if self.is_ardupilot else 0
+        seq = next(
+            (
+                i
+                for i in range(first, len(self._items))
+                if self._items[i].command == mp.CMD_LAND_START
+            ),
+            None,
+        )
+        if seq is None:
+            self.statustext(SEV_WARNING, "Unable to start landing sequence")
+            return R_FAILED
+        result = self._request_mode(MISSION)
+        if result == R_ACCEPTED:
+            self.set_current(seq)
+        return result
+
+    def _cmd_mission_start(self, _l: Link, _m: Inbound, p: list[float]) -> int:
+        if not self._items:
+            return R_DENIED
+        first = int(p[0])
+        if 0 < first < len(self._items):
+            self._seq = first
+        return self._request_mode(MISSION)
+
+    def _cmd_reposition(self, _l: Link, _m: Inbound, p: list[float]) -> int:
+        if self._motor_failed:
+            return R_DENIED
+        lat, lon, alt = p[4], p[5], p[6]
+        if not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0 and lon == 0):
+            n, e = self.k.north_m, self.k.east_m
+        elif not (-90 <= lat <= 90 and -180 <= lon <= 180):
+            return R_DENIED
+        else:
+            n, e = self._frame.to_ne(lat, lon)
+        if p[0] > 0:
+            self._speed_override = p[0]
+        self._enter_mode(GUIDED if self.is_ardupilot else HOLD)
+        self._goal_ne = (n, e)
+        self._goal_alt = alt if math.isfinite(alt) else self.k.alt_amsl_m
+        return R_ACCEPTED
+
+    def _cmd_change_speed(self, _l: Link, _m: Inbound, p: list[float]) -> int:
+        if p[1] == -2:
+            self._speed_override = None
+            self._mission_speed = None
+        elif p[1] > 0:
+            self._speed_override = p[1]
+            self._mission_speed = p[1]
+        return R_ACCEPTED

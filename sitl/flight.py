@@ -1,0 +1,463 @@
+"""Flight of a simulated vehicle: modes, mission execution (the MissionHost side of
+:mod:`sitl.mission`), take-off/landing detection, battery, and one physics step."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+from sitl import mission as mp
+from sitl._mav import const
+from sitl.core import (
+    BAT_CRIT_PCT,
+    BAT_EMERG_PCT,
+    BAT_LOW_PCT,
+    DISARM_AFTER_LAND_S,
+    DISARM_PREFLIGHT_S,
+    GUIDED,
+    HOLD,
+    LAND,
+    LOITER,
+    MISSION,
+    POSCTL,
+    R_ACCEPTED,
+    R_DENIED,
+    RTL,
+    SEV_CRITICAL,
+    SEV_EMERGENCY,
+    SEV_INFO,
+    SEV_WARNING,
+    TAKEOFF,
+    VehicleCore,
+)
+from sitl.physics import Goal, step_fixed_wing, step_multirotor
+
+_log = logging.getLogger(__name__)
+
+
+class Flight(VehicleCore):
+    """Modes and mission execution (see the module docstring)."""
+
+    def mission_items(self) -> list[mp.RawItem]:
+        if self.is_ardupilot and self._items:
+            home = mp.RawItem(
+                0,
+                mp.FRAME_GLOBAL_INT,
+                mp.CMD_WAYPOINT,
+                0,
+                1,
+                0,
+                0,
+                0,
+                0,
+                round(self.home[0] * 1e7),
+                round(self.home[1] * 1e7),
+                self.home[2],
+            )
+            return [home, *self._items[1:]]
+        return list(self._items)
+
+    def accept_mission(self, items: list[mp.RawItem], flagged_current: int | None) -> None:
+        flying_mission = self._mode == MISSION and self._armed and not self._landed
+        old_seq = self._seq
+        if self.is_ardupilot:
+            items = [mp.ardupilot_stored(it, fixed_wing=self.is_fixed_wing) for it in items]
+            flagged_current = None  # ArduPilot ignores the current flag of an upload
+        else:
+            items = [mp.px4_stored(it) for it in items]
+        self._items = items
+        first = 1 if self.is_ardupilot else 0
+        self._stalled = False
+        if flagged_current is not None:
+            self._seq = max(first, flagged_current)
+        elif flying_mission:
+            # PX4 keeps the current index; ArduPilot restarts the command at the same index,
+            # which fails on a DO item: the vehicle then holds until told another item
+            self._seq = min(old_seq, len(items) - 1)
+            if self.is_ardupilot and items[self._seq].command not in mp.NAV_COMMANDS:
+                self._stalled = True  # it stops where it is and hovers
+                self._goal_ne = (self.k.north_m, self.k.east_m)
+                self._goal_alt = self.k.alt_amsl_m
+                self.statustext(SEV_WARNING, "Auto mission changed but failed to restart command")
+            elif self.is_ardupilot:
+                self.statustext(SEV_INFO, "Auto mission changed, restarted command")
+        else:
+            self._seq = first
+        self._seq = max(0, min(self._seq, len(items) - 1))
+        self._item_reached_at = None
+        self._mission_state = (
+            const("MISSION_STATE_ACTIVE") if flying_mission else const("MISSION_STATE_NOT_STARTED")
+        )
+        self._send_mission_current()
+
+    def clear_mission(self) -> None:
+        self._items = []
+        self._seq = 0
+        self._mission_state = const("MISSION_STATE_NO_MISSION")
+        if self._mode == MISSION and not self._landed:
+            self._enter_hold()
+        self._send_mission_current()
+
+    def set_current(self, seq: int) -> bool:
+        if not 0 <= seq < len(self._items) or (self.is_ardupilot and seq == 0):
+            return False
+        self._seq = seq
+        self._item_reached_at = None
+        self._stalled = False
+        self._send_mission_current()
+        return True
+
+    def _enter_hold(self) -> None:
+        self._mode = GUIDED if self.is_ardupilot and self._mode == GUIDED else HOLD
+        self._goal_ne = (self.k.north_m, self.k.east_m)
+        self._goal_alt = self.k.alt_amsl_m if not self._landed else self.ground_alt_m
+
+    def _enter_mode(self, target: str) -> None:
+        prev = self._mode
+        self._mode = target
+        if target in (HOLD, POSCTL, GUIDED):
+            self._goal_ne = (self.k.north_m, self.k.east_m)
+            self._goal_alt = self.k.alt_amsl_m
+        elif target in (LAND, LOITER):
+            self._goal_ne = (self.k.north_m, self.k.east_m)
+        elif target == RTL:
+            self._rtl_phase = 0
+        elif target == TAKEOFF:
+            self._goal_ne = (self.k.north_m, self.k.east_m)
+        elif target == MISSION:
+            if self.is_ardupilot and self._seq == 0:
+                self._seq = 1 if len(self._items) > 1 else 0
+            self._mission_state = const("MISSION_STATE_ACTIVE")
+            self._item_reached_at = None
+            self._mission_climb = self._landed
+        if target != MISSION and prev == MISSION and self._items:
+            self._mission_state = const("MISSION_STATE_PAUSED")
+        if prev != target:
+            _log.info("sysid %d: mode %s -> %s", self.sys_id, prev, target)
+
+    def _auto_start(self) -> None:
+        at = self.spec.auto_start_at_s
+        if self._auto_started or at is None or self._t < at:
+            return
+        self._auto_started = True
+        if self.arm() != R_ACCEPTED:
+            return
+        if self._items and self.spec.start_airborne:
+            self._place_airborne()
+        if self._items:
+            self._enter_mode(MISSION)
+        else:
+            self._takeoff_alt = self.ground_alt_m + self.takeoff_alt_rel_m
+            self._enter_mode(TAKEOFF)
+
+    def _place_airborne(self) -> None:
+        """Scenario start in flight: put the vehicle at its first mission waypoint, at its
+        altitude, already moving towards the next one at the mission speed (see
+        VehicleSpec.start_airborne)."""
+        items = self._items
+        first = 1 if self.is_ardupilot else 0
+        navs = [i for i in range(first, len(items)) if items[i].command in mp.NAV_COMMANDS]
+        if not navs:
+            return
+        i0 = navs[0]
+        n0, e0, alt0 = self._item_target(items[i0])
+        self.k.north_m, self.k.east_m, self.k.alt_amsl_m = n0, e0, alt0
+        self._landed = False
+        self._seq = i0
+        speed = self.cruise_mps
+        if len(navs) > 1:
+            for it in items[i0 + 1 : navs[1]]:
+                if it.command == mp.CMD_CHANGE_SPEED and it.param2 > 0:
+                    speed = it.param2
+            n1, e1, _alt1 = self._item_target(items[navs[1]])
+            dist = math.hypot(n1 - n0, e1 - e0)
+            if dist > 0.0:
+                speed = min(speed, self.lim.max_speed_mps)
+                self.k.yaw_rad = math.atan2(e1 - e0, n1 - n0)
+                self.k.vn_mps = speed * (n1 - n0) / dist
+                self.k.ve_mps = speed * (e1 - e0) / dist
+                self.k.airspeed_mps = speed
+        self.statustext(SEV_INFO, "Scenario start in flight")
+
+    def _speed(self) -> float:
+        v = self._speed_override or self._mission_speed or self.cruise_mps
+        return min(v, self.lim.max_speed_mps)
+
+    def _step(self, dt: float) -> None:
+        self._battery(dt)
+        if not self._armed:
+            if not self._landed:  # disarmed in the air: falls
+                self.k.vup_mps = max(self.k.vup_mps - 9.81 * dt, -30.0)
+                self.k.alt_amsl_m += self.k.vup_mps * dt
+                self._touchdown_check()
+            return
+        if (
+            self._landed
+            and self._t - self._armed_at > DISARM_PREFLIGHT_S
+            and self._mode not in (TAKEOFF, MISSION)
+        ):
+            self.statustext(SEV_INFO, "Disarmed by auto preflight disarming")
+            self._armed = False
+            return
+        goal = self._mode_goal()
+        if goal is None:
+            return
+        if self._landed:
+            if goal.alt_amsl_m <= self.ground_alt_m + 0.3:
+                if self._t - self._landed_at > DISARM_AFTER_LAND_S and self._mode == LAND:
+                    self._armed = False
+                    self.statustext(SEV_INFO, "Landing detected, disarmed")
+                return
+            self._landed = False
+            self.statustext(SEV_INFO, "Takeoff detected")
+            if self.is_fixed_wing:
+                self.k.airspeed_mps = self.lim.min_airspeed_mps
+        if self.is_fixed_wing:
+            step_fixed_wing(
+                self.k, goal, self.lim, dt, (self.spec.wind_north_mps, self.spec.wind_east_mps)
+            )
+        else:
+            step_multirotor(self.k, goal, self.lim, dt)
+        self._touchdown_check()
+
+    def _touchdown_check(self) -> None:
+        if self.k.alt_amsl_m <= self.ground_alt_m and self.k.vup_mps <= 0.0:
+            self.k.alt_amsl_m = self.ground_alt_m
+            self.k.vn_mps = self.k.ve_mps = self.k.vup_mps = 0.0
+            self.k.roll_rad = self.k.pitch_rad = 0.0
+            self.k.airspeed_mps = 0.0
+            if not self._landed:
+                self._landed = True
+                self._landed_at = self._t
+                if self._mode == MISSION:
+                    self._mission_state = const("MISSION_STATE_COMPLETE")
+                    self._mode = LAND  # lands are finished by the land logic (auto-disarm)
+
+    def _battery(self, dt: float) -> None:
+        rate = 0.0
+        if self._armed:
+            rate = 100.0 / self.spec.battery_capacity_s * (1.0 if not self._landed else 0.3)
+        self.battery_pct = max(0.0, self.battery_pct - (rate + self._drain_pct_s) * dt)
+        level = (
+            3
+            if self.battery_pct < BAT_EMERG_PCT
+            else 2
+            if self.battery_pct < BAT_CRIT_PCT
+            else 1
+            if self.battery_pct < BAT_LOW_PCT
+            else 0
+        )
+        if level > self._bat_level:
+            self._bat_level = level
+            flying = self._armed and not self._landed
+            if level == 1:
+                self.statustext(SEV_WARNING, "Low battery level! Return advised")
+            elif level == 2:
+                self.statustext(SEV_CRITICAL, "Critical battery level! Executing RTL")
+                if flying and self._mode not in (LAND, RTL):
+                    self._enter_mode(RTL)
+            else:
+                self.statustext(SEV_EMERGENCY, "Emergency battery level! Landing immediately")
+                if flying and self._mode != LAND:
+                    self._enter_mode(LAND)
+
+    def _goal(
+        self,
+        n: float,
+        e: float,
+        alt: float,
+        *,
+        stop: bool,
+        speed: float | None = None,
+        descent: float | None = None,
+    ) -> Goal:
+        return Goal(n, e, alt, self._speed() if speed is None else speed, stop, descent)
+
+    def _mode_goal(self) -> Goal | None:
+        mode = self._mode
+        if mode in (HOLD, POSCTL, GUIDED):
+            return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
+        if mode == TAKEOFF:
+            alt = self._takeoff_alt
+            if self.k.alt_amsl_m >= alt - 0.5:
+                self._enter_mode(GUIDED if self.is_ardupilot else HOLD)
+                self.statustext(SEV_INFO, "Takeoff complete")
+                return self._mode_goal()
+            if self.is_fixed_wing:
+                # climb out straight ahead, far target along the heading
+                n = self.k.north_m + 1000.0 * math.cos(self.k.yaw_rad)
+                e = self.k.east_m + 1000.0 * math.sin(self.k.yaw_rad)
+                return self._goal(n, e, alt + 1.0, stop=False)
+            return self._goal(self._goal_ne[0], self._goal_ne[1], alt + 0.6, stop=True)
+        if mode == LOITER:  # ArduCopter LOITER at minimum RC throttle: straight down
+            return self._goal(
+                self._goal_ne[0],
+                self._goal_ne[1],
+                self.ground_alt_m - 1.0,
+                stop=True,
+                descent=self.lim.descent_rate_mps,
+            )
+        if mode == LAND:
+            descent = self.lim.descent_rate_mps * (1.7 if self._motor_failed else 1.0)
+            speed = self.lim.min_airspeed_mps if self.is_fixed_wing else self._speed()
+            return self._goal(
+                self._goal_ne[0],
+                self._goal_ne[1],
+                self.ground_alt_m - 1.0,
+                stop=True,
+                speed=speed,
+                descent=descent,
+            )
+        if mode == RTL:
+            return self._rtl_goal()
+        if mode == MISSION:
+            return self._mission_goal()
+        return None
+
+    def _rtl_goal(self) -> Goal:
+        rtl_alt = max(self.k.alt_amsl_m, self.ground_alt_m + self.rtl_alt_rel_m)
+        if self._rtl_phase == 0:
+            self._rtl_alt = rtl_alt
+            self._rtl_phase = 1
+        if self._rtl_phase == 1:
+            if self.k.alt_amsl_m < self._rtl_alt - 1.0 and not self.is_fixed_wing:
+                return self._goal(self.k.north_m, self.k.east_m, self._rtl_alt, stop=True)
+            self._rtl_phase = 2
+        dist = math.hypot(self.k.north_m, self.k.east_m)
+        if self.is_fixed_wing:
+            return self._goal(0.0, 0.0, self._rtl_alt, stop=True)  # loiter over home
+        if self._rtl_phase == 2 and dist > 1.0:
+            return self._goal(0.0, 0.0, self._rtl_alt, stop=True)
+        self._rtl_phase = 3
+        return self._goal(0.0, 0.0, self.ground_alt_m - 1.0, stop=True)
+
+    def _item_target(self, it: mp.RawItem) -> tuple[float, float, float]:
+        if it.x == 0 and it.y == 0:
+            n, e = self.k.north_m, self.k.east_m
+        else:
+            n, e = self._frame.to_ne(it.lat_deg, it.lon_deg)
+        alt = it.z if math.isfinite(it.z) else self.k.alt_amsl_m
+        if it.frame in mp.RELATIVE_FRAMES:
+            alt += self.home[2]
+        return n, e, alt
+
+    def _mission_goal(self) -> Goal:
+        items = self._items
+        first = 1 if self.is_ardupilot else 0
+        if self._mission_state == const("MISSION_STATE_COMPLETE") or self._stalled:
+            return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
+        self._run_do_items()
+        if self._seq >= len(items) or self._seq < first:
+            self._seq = max(first, min(self._seq, len(items) - 1))
+            self._mission_state = const("MISSION_STATE_COMPLETE")
+            return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
+        it = items[self._seq]
+        n, e, alt = self._item_target(it)
+        if it.command == mp.CMD_TAKEOFF:
+            n, e = self.k.north_m, self.k.east_m
+            if not math.isfinite(it.z):
+                alt = self.ground_alt_m + self.takeoff_alt_rel_m
+        special = self._special_goal(it, n, e, alt)
+        if special is not None:
+            return special
+        self._goal_ne, self._goal_alt = (n, e), alt
+        last_nav = not any(x.command in mp.NAV_COMMANDS for x in items[self._seq + 1 :])
+        hold_s = it.param1 if it.command in (mp.CMD_WAYPOINT, mp.CMD_LOITER_TIME) else 0.0
+        if self._reached(it, n, e, alt) and self._done_with(hold_s, last_nav):
+            return self._goal(n, e, alt, stop=True)  # mission finished: stay on the last point
+        stop = last_nav or hold_s > 0 or it.command in (mp.CMD_LOITER_UNLIM, mp.CMD_LOITER_TIME)
+        return self._goal(n, e, alt, stop=stop)
+
+    def _run_do_items(self) -> None:
+        """Execute DO items from the current index up to the next navigation item."""
+        items = self._items
+        guard = 0
+        while (
+            self._seq < len(items)
+            and items[self._seq].command not in mp.NAV_COMMANDS
+            and guard < len(items)
+        ):
+            it = items[self._seq]
+            if it.command == mp.CMD_CHANGE_SPEED and it.param2 > 0:
+                self._mission_speed = it.param2
+            self._seq += 1
+            guard += 1
+            self._send_mission_current()
+
+    def _special_goal(self, it: mp.RawItem, n: float, e: float, alt: float) -> Goal | None:
+        """The goal of the initial climb, of an RTL item or of a LAND item (else None)."""
+        if self._mission_climb:
+            climb_alt = max(alt, self.ground_alt_m + self.takeoff_alt_rel_m)
+            if self.k.alt_amsl_m < climb_alt - 1.0:
+                if self.is_fixed_wing:
+                    return self._goal(n, e, climb_alt, stop=False)
+                return self._goal(self.k.north_m, self.k.east_m, climb_alt, stop=True)
+            self._mission_climb = False
+        if it.command == mp.CMD_RTL:
+            self._enter_mode(RTL)
+            return self._rtl_goal()
+        if it.command == mp.CMD_LAND:
+            dist = math.hypot(n - self.k.north_m, e - self.k.east_m)
+            if dist > self._acceptance(it) and not self.is_fixed_wing:
+                return self._goal(n, e, self.k.alt_amsl_m, stop=True)
+            return self._goal(
+                n, e, self.ground_alt_m - 1.0, stop=True, descent=self.lim.descent_rate_mps
+            )
+        return None
+
+    def _reached(self, it: mp.RawItem, n: float, e: float, alt: float) -> bool:
+        if it.command == mp.CMD_LOITER_UNLIM:
+            return False
+        if it.command == mp.CMD_TAKEOFF:
+            return self.k.alt_amsl_m >= alt - 1.0
+        dist = math.hypot(n - self.k.north_m, e - self.k.east_m)
+        alt_ok = abs(alt - self.k.alt_amsl_m) <= (1.5 if not self.is_fixed_wing else 10.0)
+        return dist <= self._acceptance(it) and alt_ok
+
+    def _done_with(self, hold_s: float, last_nav: bool) -> bool:
+        """The current item is reached: after its hold time go on to the next item; True when
+        that ends the mission."""
+        if self._item_reached_at is None:
+            self._item_reached_at = self._t
+            self._broadcast("MISSION_ITEM_REACHED", seq=self._seq)
+        if self._t - self._item_reached_at < max(0.0, hold_s):
+            return False
+        self._item_reached_at = None
+        if last_nav:
+            self._mission_state = const("MISSION_STATE_COMPLETE")
+            self._seq = max(self._seq, len(self._items) - 1)
+            self.statustext(SEV_INFO, "Mission finished, loitering")
+            return True
+        self._seq += 1
+        self._send_mission_current()
+        return False
+
+    def _acceptance(self, it: mp.RawItem) -> float:
+        if it.command == mp.CMD_WAYPOINT and it.param2 > 0:
+            return it.param2
+        return self.lim.acceptance_radius_m
+
+    def arm(self, *, force: bool = False) -> int:
+        if self._armed:
+            return R_ACCEPTED
+        if not force:
+            if self._motor_failed:
+                self.statustext(SEV_CRITICAL, "Preflight Fail: motor failure")
+                return R_DENIED
+            if self._gps_fix_type() < 3:
+                self.statustext(SEV_CRITICAL, "Preflight Fail: GPS fix too low")
+                return R_DENIED
+            if self.battery_pct < BAT_EMERG_PCT:
+                self.statustext(SEV_CRITICAL, "Preflight Fail: battery unhealthy")
+                return R_DENIED
+        self._armed = True
+        self._armed_at = self._t
+        self.statustext(SEV_INFO, "Armed by external command")
+        return R_ACCEPTED
+
+    def _disarm(self) -> None:
+        if self._armed:
+            self._armed = False
+            self.statustext(
+                SEV_INFO, "Disarmed by external command" if not self._landed else "Disarmed"
+            )
