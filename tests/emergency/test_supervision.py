@@ -392,3 +392,29 @@ def test_a_predicted_loss_with_clean_plans_is_reported_not_ignored() -> None:
     assert d.warnings and "off their plans" in d.warnings[0]
     again = em.supervise(at(snap, em.config.retry_after_s + 1.0))
     assert not again.warnings  # said once per case
+
+
+def test_an_accepted_plan_older_than_the_airspace_plan_is_not_put_back() -> None:
+    """Without outcome reports an accepted recommendation stays ACCEPTED: once the airspace
+    holds a newer plan for that UAS, a later decision must not decide on the older one."""
+    snap, threat = sc.scenario_los_2uas()
+    em = make_em()
+    (acc,) = accept_all(em, em.on_threat(threat, snap), at(snap, 1.0))
+    assert acc.selected is not None and acc.selected.plan is not None
+    uas = acc.operation_id
+    other = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], tid="t9", event_in_s=100)
+    case = em.case(threat.id)
+    assert case is not None
+    later = at(snap, 30.0)
+    newer = replace(snap.operations[uas].plan, version=7, created_t_s=later.t_s)
+    ops = {**later.operations, uas: replace(later.operations[uas], plan=newer)}
+    em.on_threat(other, replace(later, operations=ops))
+    seen = em.case(other.id)
+    assert seen is not None and seen.operations[uas].plan.version == 7
+    # ...while an accepted plan newer than the airspace's is what the next decision uses.
+    em2 = make_em()
+    (acc2,) = accept_all(em2, em2.on_threat(threat, snap), at(snap, 1.0))
+    em2.on_threat(other, at(snap, 2.0))
+    seen2 = em2.case(other.id)
+    assert seen2 is not None and acc2.selected is not None
+    assert seen2.operations[acc2.operation_id].plan.waypoints == acc2.selected.plan.waypoints

@@ -265,10 +265,15 @@ class EmergencyManager:
             if prev is None or r.created_t_s >= prev.created_t_s:
                 latest[r.operation_id] = r
         ops = snapshot.operations
+        # An accepted plan the airspace already holds (or a newer one: uploads stamp the plan
+        # they install with their time) is not replaced; the outcome may not be reported.
         changed = {
             k: replace(ops[k], plan=replace(r.selected.plan, operation_id=k))
             for k, r in latest.items()
-            if k in ops and r.selected is not None and r.selected.plan is not None
+            if k in ops
+            and r.selected is not None
+            and r.selected.plan is not None
+            and ops[k].plan.created_t_s < r.created_t_s
         }
         if not changed:
             return snapshot
