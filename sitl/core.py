@@ -28,7 +28,7 @@ from sitl.spec import (
     FaultKind,
     FaultSpec,
     MissionItemSpec,
-    SimTime,
+    SimClock,
     VehicleSpec,
 )
 
@@ -221,7 +221,7 @@ class FaultState:
 class VehicleCore:
     """The state of a PX4-like (or ArduPilot-like) vehicle; read-only views for tests."""
 
-    def __init__(self, spec: VehicleSpec, sim_time: SimTime, *, t0_elapsed_s: float = 0.0) -> None:
+    def __init__(self, spec: VehicleSpec, sim_time: SimClock, *, t0_elapsed_s: float = 0.0) -> None:
         self.spec = spec
         self._clock = sim_time
         self._t0 = t0_elapsed_s

@@ -14,7 +14,7 @@ import logging
 from collections.abc import Sequence
 from types import TracebackType
 
-from sitl.spec import SimTime, VehicleSpec
+from sitl.spec import SimClock, VehicleSpec
 from sitl.vehicle import PHYSICS_DT_S, Vehicle
 
 _log = logging.getLogger(__name__)
@@ -25,7 +25,7 @@ MIN_TICK_REAL_S = 0.01  # at most 100 wake-ups per second, whatever the speed
 class Fleet:
     """`async with Fleet(specs, sim_time) as fleet:` binds all sockets and runs the vehicles."""
 
-    def __init__(self, specs: Sequence[VehicleSpec], sim_time: SimTime) -> None:
+    def __init__(self, specs: Sequence[VehicleSpec], sim_time: SimClock) -> None:
         ids = [s.system_id for s in specs]
         if len(set(ids)) != len(ids):
             raise ValueError(f"Fleet: duplicate system ids {sorted(ids)}")
@@ -92,7 +92,7 @@ class Fleet:
             await asyncio.sleep(period)
 
 
-async def run_fleet(specs: Sequence[VehicleSpec], sim_time: SimTime, stop: asyncio.Event) -> None:
+async def run_fleet(specs: Sequence[VehicleSpec], sim_time: SimClock, stop: asyncio.Event) -> None:
     """Run the fleet until `stop` is set."""
     async with Fleet(specs, sim_time) as fleet:
         _log.info(

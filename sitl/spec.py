@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from enum import Enum
+from typing import Protocol
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -213,6 +214,30 @@ class Limits:
     max_bank_deg: float
     loiter_radius_m: float
     acceptance_radius_m: float
+
+
+class SimClock(Protocol):
+    """What the vehicles need of a clock. :class:`SimTime` is the wall-clock one; a ground
+    service that runs the vehicles on its own simulated clock (fast time) passes any object
+    with these members, so both sides read one clock."""
+
+    @property
+    def speed(self) -> float:
+        """Simulated seconds per second of the event loop's time."""
+        ...
+
+    @property
+    def start_utc_s(self) -> float: ...
+
+    def elapsed_s(self) -> float:
+        """Simulated seconds since the clock's start."""
+        ...
+
+    def now_s(self) -> float: ...
+
+    def real_delay_s(self, sim_s: float) -> float:
+        """Event-loop seconds that `sim_s` simulated seconds take."""
+        ...
 
 
 class SimTime:

@@ -29,7 +29,7 @@ from sitl.core import (
 from sitl.links import Link, TcpLink, UdpLink
 from sitl.spec import (
     ARDUPILOT,
-    SimTime,
+    SimClock,
     VehicleSpec,
 )
 
@@ -43,7 +43,7 @@ __all__ = ["PHYSICS_DT_S", "PLANE_MODES", "Vehicle", "mission_items_from_specs",
 class Vehicle(CommandHandling):
     """A PX4-like (or ArduPilot-like) vehicle. Read-only state is exposed for tests/reports."""
 
-    def __init__(self, spec: VehicleSpec, sim_time: SimTime, *, t0_elapsed_s: float = 0.0) -> None:
+    def __init__(self, spec: VehicleSpec, sim_time: SimClock, *, t0_elapsed_s: float = 0.0) -> None:
         super().__init__(spec, sim_time, t0_elapsed_s=t0_elapsed_s)
         self.mission_server = mp.MissionServer(
             self, max_items=spec.max_mission_items, ardupilot=spec.autopilot == ARDUPILOT

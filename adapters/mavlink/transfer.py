@@ -32,6 +32,16 @@ from gcs_utm.model import Position, SysId
 
 _log = logging.getLogger(__name__)
 
+
+def _loop_time() -> float:
+    """The running loop's time: exchange timeouts are counted in the units the loop waits in
+    (``time.monotonic()`` on an ordinary loop, simulated seconds on a fast-time loop)."""
+    try:
+        return asyncio.get_running_loop().time()
+    except RuntimeError:  # no loop running (a synchronous caller): the same clock
+        return time.monotonic()
+
+
 MAV_MISSION_ACCEPTED = 0
 MAV_MISSION_ERROR = 1
 MAV_MISSION_INVALID_SEQUENCE = 13
@@ -183,7 +193,7 @@ class Transfers:
     def _check(self, st: VehicleState, reboots: int, end: float) -> None:
         if st.reboots != reboots:
             raise TransferError("vehicle rebooted during the transfer", UploadFailure.REBOOTED)
-        if time.monotonic() >= end:
+        if _loop_time() >= end:
             raise TransferError("deadline passed", UploadFailure.DEADLINE)
 
     def _cancel(self, st: VehicleState) -> None:
@@ -218,7 +228,7 @@ class Transfers:
         try:
             while True:
                 self._check(st, reboots, end)
-                m = await self._get(box, min(up.sent_t + up.step.rto, end) - time.monotonic())
+                m = await self._get(box, min(up.sent_t + up.step.rto, end) - _loop_time())
                 self._check(st, reboots, end)
                 if m is None:
                     if up.on_silence():
@@ -240,7 +250,7 @@ class Transfers:
     ) -> list[MissionItem]:
         """The vehicle's mission (MISSION_REQUEST_LIST). Raises :class:`MavlinkError`."""
         st = self.state(sys_id)
-        end = time.monotonic() + self._budget_s(deadline_t_s)
+        end = _loop_time() + self._budget_s(deadline_t_s)
         async with self._exchange(st) as box:
             try:
                 return await self._download(st, box, end, st.reboots)
@@ -267,11 +277,11 @@ class Transfers:
             return enc.mission_request_int(ts, tc, len(got))
 
         self._to(st, request())
-        sent_t = time.monotonic()
+        sent_t = _loop_time()
         try:
             while True:
                 self._check(st, reboots, end)
-                m = await self._get(box, min(sent_t + step.rto, end) - time.monotonic())
+                m = await self._get(box, min(sent_t + step.rto, end) - _loop_time())
                 self._check(st, reboots, end)
                 if m is None:
                     silent += 1
@@ -284,7 +294,7 @@ class Transfers:
                     # for the item it just sent, ArduPilot answers any request)
                     self._to(st, request())
                     self._to(st, request())  # encoded anew: a signed frame is never replayed
-                    sent_t = time.monotonic()
+                    sent_t = _loop_time()
                     continue
                 mid = m._header.msgId
                 if getattr(m, "mission_type", 0) != 0:
@@ -305,17 +315,17 @@ class Transfers:
                     count = None
                     got.clear()
                     self._to(st, request())
-                    sent_t = time.monotonic()
+                    sent_t = _loop_time()
                     continue
                 else:
                     continue
-                step.progress(time.monotonic() - sent_t)
+                step.progress(_loop_time() - sent_t)
                 silent = 0
                 if count is not None and len(got) >= count:
                     self._to(st, enc.mission_ack(ts, tc, MAV_MISSION_ACCEPTED))
                     return got
                 self._to(st, request())
-                sent_t = time.monotonic()
+                sent_t = _loop_time()
         except TransferError:
             self._cancel(st)
             raise
@@ -338,8 +348,8 @@ class Transfers:
         for attempt in range(self.config.max_retries + 1):
             for _ in range(1 if attempt == 0 else 2):  # retries twice, as in _download
                 self._to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seqs.start))
-            wait_end = min(end, time.monotonic() + step.rto)
-            while (left := wait_end - time.monotonic()) > 0:
+            wait_end = min(end, _loop_time() + step.rto)
+            while (left := wait_end - _loop_time()) > 0:
                 self._check(st, reboots, end)
                 m = await self._get(box, left)
                 if m is not None and m._header.msgId == wire.MISSION_CURRENT and m.seq in seqs:
@@ -417,9 +427,9 @@ class Transfers:
 
     async def wait_mode(self, st: VehicleState, mode: FlightMode, timeout_s: float) -> bool:
         """True once the vehicle's HEARTBEAT shows ``mode`` (within ``timeout_s`` real s)."""
-        end = time.monotonic() + timeout_s
+        end = _loop_time() + timeout_s
         while st.mode is not mode:
-            if time.monotonic() >= end:
+            if _loop_time() >= end:
                 return False
             await asyncio.sleep(0.02)
         return True
@@ -431,26 +441,26 @@ class Transfers:
         build: Callable[[int], bytes],
         deadline_t_s: float | None,
     ) -> CommandResult:
-        end = time.monotonic() + self._budget_s(deadline_t_s)
+        end = _loop_time() + self._budget_s(deadline_t_s)
         attempts = 0
         result: int | None = None
         async with self._exchange(st) as box:
             reboots = st.reboots
             try:
                 for conf in range(self.config.command_retries + 1):
-                    if time.monotonic() >= end:
+                    if _loop_time() >= end:
                         break
                     attempts += 1
                     self._to(st, build(min(conf, 255)))
-                    wait_end = min(end, time.monotonic() + self.config.command_timeout_s)
-                    while (left := wait_end - time.monotonic()) > 0:
+                    wait_end = min(end, _loop_time() + self.config.command_timeout_s)
+                    while (left := wait_end - _loop_time()) > 0:
                         self._check(st, reboots, end + 1.0)
                         m = await self._get(box, left)
                         if m is None or m._header.msgId != wire.COMMAND_ACK or m.command != cmd:
                             continue
                         result = int(m.result)
                         if result == MAV_RESULT_IN_PROGRESS:
-                            wait_end = min(end, time.monotonic() + self.config.command_timeout_s)
+                            wait_end = min(end, _loop_time() + self.config.command_timeout_s)
                             continue
                         ok = result == MAV_RESULT_ACCEPTED
                         return CommandResult(
@@ -479,7 +489,7 @@ class _UploadState:
         self.enc = owner._encoder(st)
         self.step = _Step(owner.config)
         self.attempts = 1
-        self.sent_t = time.monotonic()
+        self.sent_t = _loop_time()
         self.highest = -1  # highest item the vehicle has requested
         self.sent_hi = -1  # highest item we have sent (asked for or sent ahead)
         self.last_sent = False  # item n-1 went out
@@ -492,7 +502,7 @@ class _UploadState:
     def send_count(self) -> None:
         st = self.st
         self.owner._to(st, self.enc.mission_count(st.sys_id, st.key.comp_id, len(self.items)))
-        self.sent_t = time.monotonic()
+        self.sent_t = _loop_time()
 
     def on_silence(self) -> bool:
         """Our timeout: resend what the vehicle may wait for. True when the transfer should
@@ -522,7 +532,7 @@ class _UploadState:
                 self._send_item(seq)
         self.sent_hi = max(self.sent_hi, top)
         self.last_sent = self.sent_hi == n - 1
-        self.sent_t = time.monotonic()
+        self.sent_t = _loop_time()
         return False
 
     def on_request(self, seq: int) -> None:
@@ -533,13 +543,13 @@ class _UploadState:
         if seq < self.highest:
             return  # overtaken by a later request (reordered or re-requested)
         if seq > self.highest:
-            self.step.progress(time.monotonic() - self.sent_t)
+            self.step.progress(_loop_time() - self.sent_t)
             self.highest = seq
             self.silent = 0
         self._send_item(seq)
         self.sent_hi = max(self.sent_hi, seq)
         self.last_sent = self.sent_hi == n - 1
-        self.sent_t = time.monotonic()
+        self.sent_t = _loop_time()
 
 
 def _upload_done(st: VehicleState, result: int, last_sent: bool) -> bool:

@@ -47,6 +47,8 @@ def _run(args: argparse.Namespace) -> int:
     # All benchmarks, each with its own defaults, as one JSON document.
     out: dict[str, Any] = {"machine": _machine(), "benchmarks": []}
     for mod_name, module in modules.items():
+        if not getattr(module, "IN_ALL", True):
+            continue  # a long benchmark runs only when named
         parser = argparse.ArgumentParser()
         module.add_arguments(parser)
         sub_args = parser.parse_args([])

@@ -8,7 +8,10 @@ import math
 import sys
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from gcs_utm.app import Report
 
 DEMO_SCENARIOS = ("use_case_1.toml", "use_case_2.toml")
 
@@ -86,9 +89,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, default=None, help="settings TOML")
     p.add_argument(
         "--speed",
-        type=positive_speed,
+        type=parse_speed,
         default=1.0,
-        help="run N times faster than real time (vehicles and UTM share the factor)",
+        help="run N times faster than real time (vehicles and UTM share the factor), or "
+        "'max': fast time, as fast as the computation allows, deterministic",
     )
     p.add_argument("--headless", action="store_true", help="no TUI; rich log lines on stderr")
     group = p.add_mutually_exclusive_group()
@@ -121,6 +125,19 @@ def positive_speed(text: str) -> float:
     if not (value > 0.0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
     return value
+
+
+def parse_speed(text: str) -> float:
+    """``run``/``demo --speed``: a speed factor (see :func:`positive_speed`), or ``max`` for
+    fast time (``math.inf``: as fast as the computation allows)."""
+    if text.strip().lower() == "max":
+        return math.inf
+    try:
+        return positive_speed(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive number or 'max', got {text!r}"
+        ) from None
 
 
 NO_ANSWER_SOURCE = (
@@ -175,37 +192,42 @@ def _settings(args: argparse.Namespace) -> Any:
         return None
 
 
-def _summary(report: dict[str, Any]) -> str:
-    recs = report.get("recommendations", [])
+def summary_text(report: Report, path: Path) -> str:
+    """A few lines about a run: threats, decisions, flown separation, intrusions."""
     lines = [
-        f"scenario {report['scenario']}: {len(report.get('threats', []))} threats, "
-        f"{len(recs)} recommendations, report {report.get('report_path')}",
+        f"scenario {report.scenario}: {len(report.threats)} threats, "
+        f"{len(report.recommendations)} recommendations, report {path} "
+        f"({report.wall_clock_s:.1f} s wall clock)",
     ]
-    for r in recs:
-        score = "" if r.get("cost") is None else f" (cost {r['cost']}, risk {r['risk']})"
-        who = f" by {r['answered_by']} ({r['answered_via']})" if r.get("answered_by") else ""
+    for r in report.recommendations:
+        score = "" if r.cost is None else f" (cost {r.cost}, risk {r.risk})"
+        who = f" by {r.answered_by} ({r.answered_via})" if r.answered_by else ""
         lines.append(
-            f"  {r['uas']}: {r['threat_kind']} -> {r['maneuver']}{score}, "
-            f"v{r['version']} {r['decision']}{who}, "
-            + ("verified on the vehicle" if r["verified"] else f"{r['state']}")
+            f"  {r.uas}: {r.threat_kind} -> {r.maneuver}{score}, "
+            f"v{r.version} {r.decision}{who}, "
+            + ("verified on the vehicle" if r.verified else f"{r.state}")
         )
-    minima = report.get("separation_minimum", {})
-    for s in report.get("separation", []):
-        h, v = s.get("min_horizontal_m"), s.get("min_vertical_when_close_m")
+    minima = report.separation_minimum
+    for s in report.separation:
         lines.append(
-            f"  separation {s['pair'][0]}-{s['pair'][1]}: closest horizontal {h} m "
-            f"(minimum {minima.get('horizontal_m')}), vertical when close {v} m "
-            f"(minimum {minima.get('vertical_m')}): "
-            + ("LOSS OF SEPARATION" if s["loss_of_separation"] else "kept")
+            f"  separation {s.pair[0]}-{s.pair[1]}: closest horizontal {s.min_horizontal_m} m "
+            f"(minimum {minima.horizontal_m}), vertical when close "
+            f"{s.min_vertical_when_close_m} m (minimum {minima.vertical_m}): "
+            + ("LOSS OF SEPARATION" if s.loss_of_separation else "kept")
         )
-    for g in report.get("geofence_intrusions", []):
-        lines.append(f"  INTRUSION {g['uas']} into {g['geofence']} at {g['first_at_s']} s")
+    for g in report.geofence_intrusions:
+        lines.append(f"  INTRUSION {g.uas} into {g.geofence} at {g.first_at_s} s")
     return "\n".join(lines)
 
 
 def _run_one(path: Path, args: argparse.Namespace, *, last: bool = True) -> int:
     """Run one scenario; 0 ok, 2 refused, 3 the operator ended the run (``q``)."""
-    from gcs_utm.app import OperatorMode, run_scenario
+    from gcs_utm.app import (
+        OperatorMode,
+        configure_interpreter,
+        report_path,
+        run_scenario_blocking,
+    )
     from gcs_utm.scenario import ScenarioError
 
     settings = _settings(args)
@@ -216,18 +238,24 @@ def _run_one(path: Path, args: argparse.Namespace, *, last: bool = True) -> int:
         print(NO_ANSWER_SOURCE, file=sys.stderr)
         return 2
     try:
-        report = asyncio.run(run_scenario(path, settings, _options(args, operator)))
+        options = _options(args, operator)
+    except ValueError as exc:
+        print(f"gcs-utm: {exc}", file=sys.stderr)
+        return 2
+    configure_interpreter()
+    try:
+        report = run_scenario_blocking(path, settings, options)
     except ScenarioError as exc:
         print(f"gcs-utm: {exc}", file=sys.stderr)
         return 2
-    text = _summary(report)
+    text = summary_text(report, report_path(options.out_dir, report.scenario))
     print(text)
-    if report.get("operator_quit"):
+    if report.operator_quit:
         return 3
     if operator == OperatorMode.DASHBOARD and not args.headless:
         from gcs_utm.dashboard.summary import SummaryApp
 
-        title = f"gcs-utm: {report['scenario']} done"
+        title = f"gcs-utm: {report.scenario} done"
         if not SummaryApp(text, title=title, last=last).run() and not last:
             return 3
     return 0
@@ -255,7 +283,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    from gcs_utm.app import OperatorMode, serve
+    from gcs_utm.app import OperatorMode, configure_interpreter, serve
 
     settings = _settings(args)
     if settings is None:
@@ -274,6 +302,7 @@ def _serve(args: argparse.Namespace) -> int:
     headless = args.headless or operator != OperatorMode.DASHBOARD
     from gcs_utm.store import StoreError
 
+    configure_interpreter()
     try:
         return asyncio.run(
             serve(

@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import time
 from collections.abc import Awaitable, Callable, Iterable, Sequence
 
 from gcs_utm.clock import Clock
@@ -187,7 +186,7 @@ class TrackingService:
             else:
                 self._ingest_handle = loop.call_soon(self._ingest_now)
         else:
-            now = time.monotonic()  # = loop.time()
+            now = asyncio.get_running_loop().time()
             if now - self._first_pending_s >= delay and now >= self._next_ingest_s:
                 # the loop is still busy (a long read burst): the timer cannot fire, ingest now
                 self._timed_ingest()  # (cancels the timer)
@@ -233,14 +232,17 @@ class TrackingService:
         self._timed_ingest()
 
     def _timed_ingest(self) -> None:
-        t0 = time.monotonic()
+        # loop time, not time.monotonic(): on a fast-time loop the two differ, and the busy
+        # back-off must be in the units of the timers it schedules
+        loop = asyncio.get_running_loop()
+        t0 = loop.time()
         n = len(self._pending) + self._lane_n
         try:
             self._ingest_pending()
         except Exception:  # a tracker bug must not stop the hub's reading (this runs inside it)
             self.stats["ingest_errors"] += 1
             _log.exception("tracking ingest failed: %d measurements not used", n)
-        t1 = time.monotonic()
+        t1 = loop.time()
         self._next_ingest_s = t1 + _BUSY_FACTOR * (t1 - t0)
 
     def set_operations(self, operations: Iterable[Operation]) -> None:

@@ -184,7 +184,7 @@ async def test_sbs_and_relayed_adsb_become_intruders_and_raise_intruder(tmp_path
         record_dir=tmp_path / "rec",
     )
     try:
-        report = await run_scenario(path, settings, options, on_runtime=on_runtime)
+        report = (await run_scenario(path, settings, options, on_runtime=on_runtime)).to_json()
     finally:
         for t in tasks:
             t.cancel()

@@ -1,16 +1,18 @@
 """The paper's two use cases end to end: built-in PX4-like vehicles over real UDP on loopback,
-all UTM services, an automatic operator, at a speed-up. Assertions are on the run report:
-the chain of threats, decisions and uploads, and the separation / geofence outcome measured
-on the vehicles' true positions."""
+all UTM services, an automatic operator, in fast time (one simulated clock for the UTM and
+the vehicles, as fast as the computation allows: ``gcs-utm run --speed max``). Assertions are
+on the run report: the chain of threats, decisions and uploads, and the separation / geofence
+outcome measured on the vehicles' true positions."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from gcs_utm.app import OperatorMode, RunOptions, run_scenario
+from gcs_utm.app import OperatorMode, RunOptions, run_scenario_blocking
 from gcs_utm.dashboard.plot import export_all
 from gcs_utm.settings import Settings
 
@@ -18,33 +20,27 @@ ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "config" / "scenarios"
 GAUSS = ROOT / "tests" / "data" / "gauss"
 FIGURES = ("top", "3d", "altitude", "separation")
-# 5x, not faster: a vehicle is stale after 5 s without a position (tracking.stale_after_s),
-# which at 10x is 0.5 s of wall time; on a loaded 2-core machine a stalled loop plus the
-# telemetry delay (~250 ms at 10x) then raised false COMMUNICATION_FAILURE threats (seen once
-# while another scenario ran alongside). At 5x the same margin is 1 s.
-SPEED = 5.0
-
-pytestmark = [pytest.mark.slow, pytest.mark.network, pytest.mark.timeout(240)]
+pytestmark = [pytest.mark.network, pytest.mark.timeout(120)]
 
 
-async def _run(path: Path, out: Path, **kw: Any) -> dict[str, Any]:
+def _run(path: Path, out: Path, **kw: Any) -> dict[str, Any]:
     options = RunOptions(
-        speed=SPEED,
+        speed=math.inf,
         headless=True,
         operator=kw.pop("operator", OperatorMode.AUTO_ACCEPT),
         out_dir=out,
         figures=kw.pop("figures", False),
         **kw,
     )
-    return await run_scenario(path, Settings(), options)
+    return run_scenario_blocking(path, Settings(), options).to_json()
 
 
 def _recs(report: dict[str, Any], kind: str) -> list[dict[str, Any]]:
     return [r for r in report["recommendations"] if r["threat_kind"] == kind]
 
 
-async def test_use_case_1_late_start_loss_of_separation_resolved(tmp_path: Path) -> None:
-    report = await _run(SCENARIOS / "use_case_1.toml", tmp_path, figures=True)
+def test_use_case_1_late_start_loss_of_separation_resolved(tmp_path: Path) -> None:
+    report = _run(SCENARIOS / "use_case_1.toml", tmp_path, figures=True)
     los = [t for t in report["threats"] if t["kind"] == "LOSS_OF_SEPARATION"]
     assert los, report["threats"]
     first = los[0]
@@ -77,8 +73,8 @@ async def test_use_case_1_late_start_loss_of_separation_resolved(tmp_path: Path)
     assert again.altitude_profiles == 2
 
 
-async def test_use_case_2_jamming_suspends_and_neighbour_reroutes(tmp_path: Path) -> None:
-    report = await _run(SCENARIOS / "use_case_2.toml", tmp_path, figures=True)
+def test_use_case_2_jamming_suspends_and_neighbour_reroutes(tmp_path: Path) -> None:
+    report = _run(SCENARIOS / "use_case_2.toml", tmp_path, figures=True)
     kinds = [(t["kind"], t["uas"]) for t in report["threats"]]
     assert ("JAMMING_ATTACK", ["UAS1"]) in kinds
     jam = next(t for t in report["threats"] if t["kind"] == "JAMMING_ATTACK")
@@ -104,14 +100,14 @@ async def test_use_case_2_jamming_suspends_and_neighbour_reroutes(tmp_path: Path
     assert f"UAS1|{fence}" not in again.min_geofence_distance_m  # exempt: suspended inside
 
 
-async def test_rejected_recommendation_leads_to_a_different_accepted_one(tmp_path: Path) -> None:
-    report = await _run(SCENARIOS / "use_case_1.toml", tmp_path, reject_first=1)
+def test_rejected_recommendation_leads_to_a_different_accepted_one(tmp_path: Path) -> None:
+    report = _run(SCENARIOS / "use_case_1.toml", tmp_path, reject_first=1)
     recs = _recs(report, "LOSS_OF_SEPARATION")
     decisions = [(r["id"], r["version"], r["maneuver"], r["decision"]) for r in recs]
     # The rejected version is either its own entry (another UAS was moved instead) or, when
     # the same UAS got a new version, in the history of the entry that replaced it.
     rejected = [r for r in recs if r["decision"] == "rejected"] + [
-        r for r in recs if any(text.startswith("rejected") for _, text in r["history"])
+        r for r in recs if any("rejected" in text for _, text in r["history"])
     ]
     assert rejected, (decisions, [r["history"] for r in recs])
     accepted = [r for r in recs if r["decision"] == "accepted"]
@@ -121,12 +117,12 @@ async def test_rejected_recommendation_leads_to_a_different_accepted_one(tmp_pat
     assert accepted[0]["verified"]
 
 
-async def test_vehicle_that_never_answers_ends_with_failed_upload(tmp_path: Path) -> None:
+def test_vehicle_that_never_answers_ends_with_failed_upload(tmp_path: Path) -> None:
     text = (SCENARIOS / "use_case_2.toml").read_text()
     text += '\n[[events]]\nat_s = 11.0\nkind = "link_loss"\nuas = "UAS2"\n'
     path = tmp_path / "use_case_2_link_loss.toml"
     path.write_text(text)
-    report = await _run(path, tmp_path, duration_s=90.0)
+    report = _run(path, tmp_path, duration_s=90.0)
     uas2 = [r for r in report["recommendations"] if r["uas"] == "UAS2" and r["uploaded"] is False]
     failed = [r for r in report["recommendations"] if r["state"] == "failed"]
     assert failed, report["recommendations"]
@@ -136,16 +132,19 @@ async def test_vehicle_that_never_answers_ends_with_failed_upload(tmp_path: Path
 
 
 @pytest.mark.data
-async def test_gauss_use_case_loss_separation_is_detected_and_resolved(tmp_path: Path) -> None:
+def test_gauss_use_case_loss_separation_is_detected_and_resolved(tmp_path: Path) -> None:
     """The paper repository's own loss-of-separation scenario: its 15 m safetyDistance is the
     3D minimum; the plans meet at t ~ 76 s (10.5 m); the lower-priority UAS is moved."""
-    report = await _run(GAUSS / "paper_dev" / "use_case_loss_separation.json", tmp_path)
+    report = _run(GAUSS / "paper_dev" / "use_case_loss_separation.json", tmp_path)
     assert report["separation_minimum"]["mode"] == "sphere"
     assert report["separation_minimum"]["safety_distance_m"] == 15.0
     los = [t for t in report["threats"] if t["kind"] == "LOSS_OF_SEPARATION"]
     assert los and los[0]["predicted_event_at_s"] - los[0]["detected_at_s"] >= 20.0
     rec = _recs(report, "LOSS_OF_SEPARATION")[0]
     assert rec["uas"] == "3434000"  # priority 0 against 1
-    assert (rec["decision"], rec["uploaded"], rec["verified"]) == ("accepted", True, True)
+    assert (rec["decision"], rec["verified"]) == ("accepted", True)
+    # the first version's manoeuvre went up as a mission, verified by readback (a later
+    # version of the same recommendation may be a command, e.g. hold, with nothing uploaded)
+    assert any("mission verified" in text for _, text in rec["history"]), rec["history"]
     (pair,) = report["truth"]["pairs"]
     assert not pair["loss_of_separation"] and pair["min_distance_m"] > 15.0, pair

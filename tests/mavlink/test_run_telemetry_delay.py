@@ -32,7 +32,7 @@ async def test_run_report_telemetry_delay_is_the_loopback_latency(
         figures=False,
         lead_s=1.0,
     )
-    report = await run_scenario(SCENARIO, Settings(), options)
+    report = (await run_scenario(SCENARIO, Settings(), options)).to_json()
     tele = report["telemetry"]
     assert tele, report
     for name, t in tele.items():

@@ -3,7 +3,6 @@ run report agree, with the effective minima (operational volumes included)."""
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -11,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs_utm.app import _is_loss
+from gcs_utm.app.report import separation
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.geometry import segment_loss
 from gcs_utm.core.monitoring.loss import is_loss, minima_arrays, separation_ratio
@@ -21,18 +20,22 @@ CYL = MonitoringConfig()
 SPH = MonitoringConfig(separation_mode="sphere")
 
 
-def _rt(config: MonitoringConfig) -> Any:
-    return SimpleNamespace(settings=SimpleNamespace(monitoring=config))
-
-
 def test_report_uses_the_effective_minima_not_the_bare_ones() -> None:
     # The flown pair of issue 19: 48.8 m / 35.0 m apart with operational volumes of 17.875 m
     # each (effective minima 50 / 35.75 m) is a loss, as Monitoring alerts it.
     a = operation("A", [(0, 0, 100, 0), (10, 0, 100, 1)], fg=5.0, ov=17.875)
     b = operation("B", [(0, 60, 100, 0), (10, 60, 100, 1)], fg=5.0, ov=17.875)
     assert CYL.effective_minima(17.875, 17.875) == (50.0, 35.75)
-    assert _is_loss(_rt(CYL), 48.8, 35.0, a, b)
-    assert not _is_loss(_rt(CYL), 48.8, 35.8, a, b)
+    ops = {a.id: a, b.id: b}
+
+    def samples(dv_m: float) -> Any:  # (t_s, lat, lon, alt_amsl_m, east_m, north_m)
+        return {
+            "A": [(0.0, 0.0, 0.0, 100.0, 0.0, 0.0)],
+            "B": [(0.0, 0.0, 0.0, 100.0 + dv_m, 0.0, 48.8)],
+        }
+
+    assert separation(samples(35.0), ops, CYL)[0].loss_of_separation
+    assert not separation(samples(35.8), ops, CYL)[0].loss_of_separation
     assert is_loss(CYL, 48.8, 35.0, 17.875, 17.875)
     assert not is_loss(CYL, 48.8, 35.0)  # bare minima: 35 m > 15 m
 

@@ -1,0 +1,93 @@
+"""``serve``: the long-running service. Links from the settings, a persistent store (what one
+run filed is the airspace of the next), wired by the same builder as scenario runs."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import signal
+import sys
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+
+from gcs_utm.clock import Clock, RealClock, ScaledClock
+from gcs_utm.geo import LocalFrame
+from gcs_utm.services.recorder import record_links
+from gcs_utm.settings import Settings
+from gcs_utm.store import Store, StoreWriter
+
+from .wiring import (
+    FrontendOptions,
+    Persistence,
+    Runtime,
+    attach_frontends,
+    build_runtime,
+    start_service_tasks,
+)
+
+_log = logging.getLogger(__name__)
+
+
+async def serve(
+    settings: Settings,
+    *,
+    db_path: Path,
+    operator: str,
+    headless: bool,
+    stop: asyncio.Event | None = None,
+    on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
+    speed: float = 1.0,
+    record_dir: Path | None = None,
+) -> int:
+    """Long-running service: links from config, persistent store; restart resumes. Runs until
+    SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
+    than real time: the service's clock then advances ``speed`` simulated seconds per second."""
+    clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
+    frame = LocalFrame(
+        settings.airspace.origin_lat_deg,
+        settings.airspace.origin_lon_deg,
+        settings.airspace.ground_elevation_amsl_m,
+    )
+    reader = Store(db_path)
+    operations = reader.load_operations()
+    geofences = reader.load_geofences(active_only=True)
+    reader.close()
+    store = Persistence(StoreWriter(db_path, settings.store))
+    rt = build_runtime(settings, clock, frame, store)
+    recorder = record_links(rt.hub, record_dir)
+    rt.airspace.load(operations, geofences)
+    rt.tracking.set_operations(operations)
+    _log.info(
+        "resumed %d operations and %d geofences from %s", len(operations), len(geofences), db_path
+    )
+    for link in settings.mavlink.links:
+        await rt.hub.add_link(link)
+    frontends = attach_frontends(rt, FrontendOptions(operator=operator, headless=headless))
+    stop = stop or asyncio.Event()
+    if on_runtime is not None:
+        await on_runtime(rt)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError):
+            loop.add_signal_handler(sig, stop.set)
+    try:
+        async with asyncio.TaskGroup() as tg:
+            tasks = start_service_tasks(tg, rt, frontends)
+            for t in tasks:
+                if t.get_name() == "dashboard":
+                    t.add_done_callback(lambda _t: stop.set())
+            await stop.wait()
+            for t in tasks:
+                t.cancel()
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(NotImplementedError, RuntimeError):
+                loop.remove_signal_handler(sig)
+        await rt.usm.close()
+        await rt.hub.close()
+        if recorder is not None:
+            recorder.close()
+        store.close()
+    print("gcs-utm serve: stopped", file=sys.stderr)
+    return 0

@@ -1,0 +1,358 @@
+"""The one builder of the running service, used by ``serve`` and by scenario runs alike.
+
+    MAVLink hub --(TelemetrySink)--> USM --> TrackingService --> snapshot
+    MonitoringService (periodic, on Airspace.snapshot) --threats--> USM --> EmergencyService
+    EmergencyService --Decision--> USM: geofences into the airspace, recommendations to the
+    operator (dashboard / headless+auto / MQTT), commands; answers --> USM --> upload --> plan
+
+:func:`build_runtime` builds and connects the parts (no task started, no socket opened);
+:func:`attach_frontends` connects whoever answers recommendations (dashboard with the
+configured operator name, headless view, automatic operator, MQTT gateway);
+:func:`start_service_tasks` starts the named tasks of one ``asyncio.TaskGroup``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from adapters.mavlink import MavlinkHub
+from gcs_utm.clock import Clock
+from gcs_utm.core.deconfliction import TacticalDeconfliction
+from gcs_utm.core.deconfliction.retime import retime_snapshot
+from gcs_utm.core.emergency import Decision, EmergencyManager
+from gcs_utm.core.monitoring import Monitor
+from gcs_utm.core.tracking import Tracker
+from gcs_utm.dashboard.headless import HeadlessView
+from gcs_utm.dashboard.line import LinePrompt
+from gcs_utm.dashboard.view import Minima
+from gcs_utm.geo import LocalFrame
+from gcs_utm.messages import HazardReport, PilotAnswer, PilotDecision
+from gcs_utm.model import (
+    AuditEntry,
+    FlightPlan,
+    Geofence,
+    Operation,
+    OperationId,
+    Recommendation,
+    Threat,
+    Track,
+    TrackId,
+)
+from gcs_utm.services.airspace import Airspace
+from gcs_utm.services.emergency import EmergencyService
+from gcs_utm.services.monitoring import MonitoringService
+from gcs_utm.services.operator import AutoOperator
+from gcs_utm.services.surveillance import SurveillanceService
+from gcs_utm.services.tracking import TrackingService
+from gcs_utm.services.usm import Usm
+from gcs_utm.settings import Settings
+from gcs_utm.store import StoreWriter
+from gcs_utm.store.ids import life_prefix
+
+if TYPE_CHECKING:
+    from gcs_utm.dashboard.tui import DashboardApp
+    from gcs_utm.services.mqtt_gateway import MqttGateway
+
+_log = logging.getLogger(__name__)
+
+TrackSample = tuple[float, float, float, float, float, float]
+"""(t_s, lat_deg, lon_deg, alt_amsl_m, east_m, north_m) of one track at one sampling."""
+
+
+class OperatorMode:
+    DASHBOARD = "dashboard"
+    AUTO_ACCEPT = "auto-accept"
+    AUTO_REJECT = "auto-reject"
+    LINE = "line"  # headless, answers typed on stdin (gcs_utm.dashboard.line)
+    NONE = "none"  # answers only from MQTT
+
+
+class Persistence:
+    """The store as the services see it: every write goes to the one writer thread (nothing
+    blocks the event loop); track batches may be dropped when the queue is full (counted),
+    decisions and audit never are."""
+
+    def __init__(self, writer: StoreWriter) -> None:
+        self.writer = writer
+
+    def record(self, obj: object) -> None:
+        if isinstance(obj, Threat):
+            self.writer.save_threat(obj)
+        elif isinstance(obj, Recommendation):
+            self.writer.save_recommendation(obj)
+        elif isinstance(obj, AuditEntry):
+            self.writer.audit(obj)
+        elif isinstance(obj, PilotAnswer):
+            self.writer.record_answer(obj)
+        else:
+            _log.error("nothing stores a %s", type(obj).__name__)
+
+    def save_plan(self, plan: FlightPlan) -> None:
+        self.writer.save_plan(plan)
+
+    def save_operation(self, op: Operation) -> None:
+        self.writer.save_operation(op)
+
+    def save_geofence(self, g: Geofence) -> None:
+        self.writer.save_geofence(g)
+
+    def deactivate_geofence(self, geofence_id: str) -> None:
+        self.writer.deactivate_geofence(geofence_id)
+
+    def write_tracks(self, tracks: list[Track]) -> None:
+        self.writer.write_tracks(tracks)
+
+    @property
+    def epoch(self) -> int:
+        """The store life this process writes in (ids carry it, see gcs_utm.store.ids)."""
+        return self.writer.epoch
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+@dataclass
+class Runtime:
+    """Every built part, so the CLI, the report and tests can look inside."""
+
+    settings: Settings
+    clock: Clock
+    frame: LocalFrame
+    store: Persistence
+    airspace: Airspace
+    usm: Usm
+    tracker: Tracker
+    tracking: TrackingService
+    monitoring: MonitoringService
+    emergency: EmergencyService
+    hub: MavlinkHub
+    surveillance: SurveillanceService  # [adsb] receiver feeds (none unless enabled)
+    plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
+    geofence_history: dict[str, Geofence] = field(default_factory=dict)
+    samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
+
+    def tracks(self) -> dict[TrackId, Track]:
+        tracks: dict[TrackId, Track] = self.tracking.snapshot()[0]
+        return tracks
+
+
+def build_runtime(
+    settings: Settings, clock: Clock, frame: LocalFrame, store: Persistence
+) -> Runtime:
+    """Build and connect the parts (no task started, no socket opened, nothing process-wide
+    changed: see :func:`gcs_utm.app.configure_interpreter` for that)."""
+    plan_history: dict[OperationId, list[FlightPlan]] = {}
+    geofence_history: dict[str, Geofence] = {}
+    tracker = Tracker(frame, settings.tracking)
+    tracking_ref: list[TrackingService] = []
+
+    def on_plan(plan: FlightPlan) -> None:
+        plan_history.setdefault(plan.operation_id, []).append(plan)
+        store.save_plan(plan)
+        for tracking_service in tracking_ref:
+            tracking_service.set_operations(airspace.operations.values())
+
+    def on_geofence(g: Geofence, active: bool) -> None:
+        geofence_history[g.id] = g
+        if active:
+            store.save_geofence(g)
+        else:
+            store.deactivate_geofence(g.id)
+
+    airspace = Airspace(on_operation=store.save_operation, on_plan=on_plan, on_geofence=on_geofence)
+    id_prefix = life_prefix(store.epoch)
+    usm = Usm(
+        airspace,
+        clock,
+        config=settings.usm,
+        record=store.record,
+        id_prefix=id_prefix,
+        ground_elevation_amsl_m=frame.ground_elevation_amsl_m,
+    )
+
+    async def tracking_hazard(h: HazardReport) -> None:
+        usm.on_hazard(h)
+
+    tracking = TrackingService(
+        tracker,
+        clock,
+        on_hazard=tracking_hazard,
+        track_sink=store.write_tracks,
+        ingest_delay_s=settings.tracking.ingest_delay_s,
+    )
+    tracking_ref.append(tracking)
+
+    def snapshot(t_s: float) -> Any:
+        return airspace.snapshot(t_s, tracking.snapshot)
+
+    monitor = Monitor(frame, settings.monitoring, id_prefix=id_prefix)
+    monitoring = MonitoringService(
+        monitor, snapshot, clock, usm.on_threats, period_s=settings.monitoring.period_s
+    )
+    td = TacticalDeconfliction(frame, settings.deconfliction, settings.monitoring)
+    em = EmergencyManager(frame, settings.emergency, td, settings.monitoring)
+
+    async def on_decision(decision: Decision) -> None:
+        await apply_decision(usm, decision, store)
+
+    def em_snapshot(t_s: float) -> Any:
+        # EM/TD decide on the plans as they are being flown (re-timed by each UAS's delay),
+        # the same timing Monitoring predicted the threat with
+        return retime_snapshot(snapshot(t_s), frame)
+
+    emergency = EmergencyService(em, em_snapshot, clock, on_decision)
+    usm.attach_measurement_sink(tracking.submit, tracking.submit_lane)
+    usm.attach_threat_sink(emergency.submit_threats)
+
+    async def answer_sink(rec: Recommendation, accepted: bool) -> None:
+        await emergency.submit_answer(rec.id, rec.version, accepted)
+
+    usm.attach_answer_sink(answer_sink)
+    hub = MavlinkHub(settings.mavlink, clock, usm)
+    usm.attach_vehicles(hub)
+    return Runtime(
+        settings=settings,
+        clock=clock,
+        frame=frame,
+        store=store,
+        airspace=airspace,
+        usm=usm,
+        tracker=tracker,
+        tracking=tracking,
+        monitoring=monitoring,
+        emergency=emergency,
+        hub=hub,
+        surveillance=SurveillanceService(settings.adsb, clock, usm.on_measurement),
+        plan_history=plan_history,
+        geofence_history=geofence_history,
+    )
+
+
+async def apply_decision(usm: Usm, decision: Decision, store: Persistence) -> None:
+    """Carry an EM decision to the world through the USM. Order matters: geofences first so
+    the operator sees why, then superseded proposals, then new recommendations."""
+    for entry in decision.audit:
+        store.record(entry)
+    if decision.geofences:
+        await usm.add_geofences(decision.geofences)
+    for rec_id in decision.superseded:
+        await usm.on_superseded(rec_id)
+    for rec in decision.recommendations:
+        await usm.on_recommendation(rec)
+    for command in decision.commands:
+        await usm.execute_command(command, reason="autonomous mode")
+    for text in decision.escalations:
+        await usm.escalate(text)
+    for text in decision.warnings:
+        usm.log_event("warning", text)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FrontendOptions:
+    """Who sees and answers recommendations. ``headless``: no TUI; ``quiet``: not even the
+    headless log lines (batch evaluation); ``mqtt``: start the MQTT gateway even when the
+    settings leave it off."""
+
+    operator: str = OperatorMode.DASHBOARD
+    headless: bool = False
+    quiet: bool = False
+    mqtt: bool = False
+    reject_first: int = 0
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Frontends:
+    """What :func:`attach_frontends` attached, for the tasks that run them."""
+
+    headless: HeadlessView | None
+    dashboard: DashboardApp | None
+    gateway: MqttGateway | None
+    line: LinePrompt | None = None
+
+
+def minima(settings: Settings) -> Minima:
+    """The separation minima the operator's views show."""
+    mon = settings.monitoring
+    return Minima(horizontal_m=mon.separation_horizontal_m, vertical_m=mon.separation_vertical_m)
+
+
+def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
+    """Attach the operator ports to the USM, the same way for ``serve`` and ``run``: the
+    dashboard and the line prompt answer under the configured operator name
+    (``dashboard.operator``)."""
+    settings = rt.settings
+    shown = minima(settings)
+    dashboard = None
+    if options.operator == OperatorMode.DASHBOARD and not options.headless:
+        from gcs_utm.dashboard.tui import DashboardApp
+
+        dashboard = DashboardApp(
+            rt.usm,
+            rt.tracks,
+            refresh_s=settings.dashboard.refresh_s,
+            operator=settings.dashboard.operator,
+            minima=shown,
+        )
+        rt.usm.attach_operator(dashboard)
+    mqtt = options.mqtt or settings.mqtt.enabled
+    headless = line = None
+    if options.operator == OperatorMode.LINE:
+        line = LinePrompt(rt.usm, rt.tracks, operator=settings.dashboard.operator, minima=shown)
+        rt.usm.attach_operator(line)
+    elif dashboard is None and not options.quiet:
+        by = options.operator if options.operator != OperatorMode.NONE else ""
+        by = by or ("MQTT (remote pilot station)" if mqtt else "")
+        headless = HeadlessView(rt.usm, rt.tracks, answered_by=by, minima=shown)
+        rt.usm.attach_operator(headless)
+    if options.operator in (OperatorMode.AUTO_ACCEPT, OperatorMode.AUTO_REJECT):
+        rt.usm.attach_operator(
+            AutoOperator(
+                rt.usm.answer,
+                rt.clock,
+                decision=PilotDecision.ACCEPT
+                if options.operator == OperatorMode.AUTO_ACCEPT
+                else PilotDecision.REJECT,
+                delay_s=settings.dashboard.auto_answer_delay_s,
+                reject_first=options.reject_first,
+            )
+        )
+    gateway = None
+    if mqtt:
+        from gcs_utm.services.mqtt_gateway import MqttGateway
+
+        gateway = MqttGateway(rt.usm, settings.mqtt, tracks=rt.tracks)
+        rt.usm.attach_operator(gateway)
+        rt.usm.attach_threat_sink(gateway.on_threats)
+        rt.usm.attach_geofence_listener(gateway.on_geofences)
+    return Frontends(headless=headless, dashboard=dashboard, gateway=gateway, line=line)
+
+
+def start_service_tasks(
+    tg: asyncio.TaskGroup, rt: Runtime, frontends: Frontends
+) -> list[asyncio.Task[Any]]:
+    """The service's named tasks; the dashboard's task is the last one when there is one."""
+    tasks: list[asyncio.Task[Any]] = [
+        tg.create_task(rt.tracking.run(), name="tracking"),
+        tg.create_task(rt.monitoring.run(), name="monitoring"),
+        tg.create_task(rt.emergency.run(), name="emergency"),
+        tg.create_task(rt.usm.run(), name="usm"),
+        tg.create_task(rt.surveillance.run(), name="adsb"),
+    ]
+    if frontends.headless is not None:
+        tasks.append(tg.create_task(_headless_status(rt, frontends.headless), name="status"))
+    if frontends.line is not None:
+        tasks.append(tg.create_task(frontends.line.run(), name="line"))
+    if frontends.gateway is not None:
+        tasks.append(tg.create_task(frontends.gateway.run(), name="mqtt"))
+    if frontends.dashboard is not None:
+        tasks.append(tg.create_task(frontends.dashboard.run_async(), name="dashboard"))
+    return tasks
+
+
+async def _headless_status(rt: Runtime, view: HeadlessView) -> None:
+    while True:
+        await asyncio.sleep(rt.settings.dashboard.headless_status_s)
+        view.status()

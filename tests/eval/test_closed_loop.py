@@ -1,0 +1,41 @@
+"""Resolutions that hold in flight: a seeded set of generated encounters (every kind, 2-6 UAS,
+multirotors and fixed wings, geofences) flown end to end in fast time with every
+recommendation accepted. Every predicted loss of separation must be avoided, no accepted plan
+may create a loss, and no UAS may enter a geofence (``gcs-utm eval --generate 20 --seed 7``
+reproduces the set; docs/evaluation.md explains the counts)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gcs_utm.eval.generator import KINDS, generate, write_encounters
+from gcs_utm.eval.run import EvalOptions, run_eval
+from gcs_utm.eval.summary import markdown
+from gcs_utm.settings import Settings
+
+SEED = 7
+N = 20
+
+pytestmark = [pytest.mark.slow, pytest.mark.network, pytest.mark.timeout(900)]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 19: the resolutions do not yet hold in flight. Measured on this set (main "
+    "at bcd071e, fast time, deterministic): 46 predicted losses, 38 avoided (82.6 %), 8 "
+    "flown under the effective minima, 2 created by accepted plans, 0 geofence intrusions, "
+    "7 escalations. docs/evaluation.md has the figures.",
+)
+def test_every_predicted_loss_is_avoided_in_closed_loop(tmp_path: Path) -> None:
+    assert {e.kind for e in generate(N, SEED)} == set(KINDS)
+    paths = write_encounters(tmp_path / "scenarios", N, SEED)
+    s = run_eval(paths, Settings(), EvalOptions(out_dir=tmp_path, jobs=2))
+    table = markdown(s)
+    assert s.failed_runs == 0, table
+    assert s.predicted_losses >= N, table  # the set does bring UAS into conflict
+    assert s.geofence_intrusions == 0, table
+    assert s.losses_created_by_accepted_plans == 0, table
+    assert s.predicted_losses_flown == 0, table
+    assert s.share_avoided == 1.0, table
