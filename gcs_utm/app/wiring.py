@@ -211,6 +211,9 @@ def build_runtime(
         await emergency.submit_answer(rec.id, rec.version, accepted)
 
     usm.attach_answer_sink(answer_sink)
+    # EM hears how each accepted recommendation ended (applied, or failed: re-plan, then the
+    # safe command), so a failed upload never leaves its threat without a pending decision.
+    usm.attach_operator(emergency)
     hub = MavlinkHub(settings.mavlink, clock, usm)
     usm.attach_vehicles(hub)
     return Runtime(
@@ -308,6 +311,8 @@ def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
         headless = HeadlessView(rt.usm, rt.tracks, answered_by=by, minima=shown)
         rt.usm.attach_operator(headless)
     if options.operator in (OperatorMode.AUTO_ACCEPT, OperatorMode.AUTO_REJECT):
+        # New plans start where the UAS will be when the answer comes: after this delay.
+        rt.emergency.em.answer_delay_s = settings.dashboard.auto_answer_delay_s
         rt.usm.attach_operator(
             AutoOperator(
                 rt.usm.answer,

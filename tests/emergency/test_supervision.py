@@ -144,6 +144,21 @@ def test_a_failed_upload_replans_once_then_proposes_the_safe_command() -> None:
     assert ok == Decision()  # stale version: ignored
 
 
+def test_a_failed_safe_command_is_escalated_not_proposed_again() -> None:
+    snap, threat = sc.scenario_los_2uas()
+    em = make_em()
+    (acc,) = accept_all(em, em.on_threat(threat, snap), at(snap, 1.0))
+    d = em.on_outcome(acc.id, acc.version, False, "no answer", at(snap, 4.0))
+    (v2,) = [r for r in plans(d) if r.operation_id == acc.operation_id]
+    (acc2,) = accept_all(em, Decision(recommendations=(v2,)), at(snap, 5.0))
+    (cmd,) = plans(em.on_outcome(acc2.id, acc2.version, False, "no answer", at(snap, 8.0)))
+    (acc3,) = accept_all(em, Decision(recommendations=(cmd,)), at(snap, 9.0))
+    d3 = em.on_outcome(acc3.id, acc3.version, False, "command not acknowledged", at(snap, 12.0))
+    assert d3.recommendations[0].state is RecommendationState.FAILED
+    assert not plans(d3)  # the same hold again would fail again, forever
+    assert d3.escalations and "safe command failed" in d3.escalations[0]
+
+
 def test_battery_failure_escalates_with_land() -> None:
     op = sc.make_operation(
         "A", [(0, 0, 100), (3000, 0, 100)], landing_sites=[(1400, 300, 60)], endurance_s=300.0

@@ -156,6 +156,12 @@ def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answ
     n = case.failures.get(op_id, 0) + 1
     case.failures[op_id] = n
     why = f"{rec_id} v{version} for {op_id} failed ({reason})"
+    if new.command is not None and case.modes.get(op_id) == MODE_COMMAND:
+        # The safe command itself failed (e.g. the link is down): proposing it again would
+        # only fail again, in a loop; the escalation leaves the decision to the operator.
+        msg = f"{why}; the safe command failed too: operator action needed"
+        audit = em.audit(now, "escalation", case.threat.id, {"reason": msg})
+        return d.merge(Decision(escalations=(msg,), audit=(audit,)))
     if n > 1 or case.modes.get(op_id) == MODE_COMMAND:
         return d.merge(escalate_safe(em, case, [op_id], now, why))
     again = em.decide_again(case, snapshot)
