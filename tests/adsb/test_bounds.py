@@ -3,9 +3,12 @@ capped at ``max_aircraft`` while the flood lasts, empty after ``aircraft_idle_s`
 
 from __future__ import annotations
 
+import pytest
+
 from adapters.adsb import ModeSDecoder, SbsDecoder
 from adapters.adsb.config import AdsbConfig
 from gcs_utm.clock import ManualClock
+from gcs_utm.config import ConfigError, build
 from gcs_utm.services.surveillance import SurveillanceService
 from tests.adsb.sbs_lines import sbs_position
 
@@ -101,3 +104,10 @@ def test_service_sweeps_every_feed_with_its_clock():
     assert svc.evict_idle() > 0
     assert sbs.state_size() == 0 and avr.state_size() == 0
     assert svc.stats()["sbs:127.0.0.1:30003"]["aircraft_evicted"] >= CAP
+
+
+def test_bounds_out_of_range_are_refused_naming_the_key():
+    with pytest.raises(ConfigError, match=r"adsb\.max_aircraft"):
+        build(AdsbConfig, {"max_aircraft": 0}, source="site.toml", section="adsb")
+    with pytest.raises(ConfigError, match=r"adsb\.aircraft_idle_s"):
+        build(AdsbConfig, {"aircraft_idle_s": 0.0}, source="site.toml", section="adsb")
