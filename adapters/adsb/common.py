@@ -99,6 +99,7 @@ class AdsbCounters:
     identifications: int = 0
     out_of_range: int = 0
     pending_cpr: int = 0
+    aircraft_evicted: int = 0  # per-aircraft states forgotten (max_aircraft or idle)
 
     @property
     def corrupt(self) -> int:

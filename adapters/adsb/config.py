@@ -45,6 +45,23 @@ class AdsbConfig:
         max=120.0,
         unit="s",
     )
+    # Anybody in radio range (or on the feed's port) can send frames with any ICAO address,
+    # so the decoders' per-aircraft state is bounded like the MAVLink hub's per-sender state.
+    max_aircraft: int = setting(
+        4096,
+        "per feed: aircraft (ICAO addresses) whose decoder state is kept; when full, the "
+        "least recently heard eighth is forgotten (counted in aircraft_evicted)",
+        min=8,
+        max=1_000_000,
+    )
+    aircraft_idle_s: float = setting(
+        120.0,
+        "per feed: an aircraft not heard for this long is forgotten (callsign, velocity, "
+        "NACp, pending CPR frames; counted in aircraft_evicted)",
+        min=1.0,
+        max=86_400.0,
+        unit="s",
+    )
     host: str = setting("127.0.0.1", "host of the dump1090-style receiver feeds")
     # One feed per receiver: its SBS-1, AVR and Beast outputs carry the same aircraft, and
     # duplicated reports would make the tracker over-confident.

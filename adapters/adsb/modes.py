@@ -21,6 +21,12 @@ Only CRC-valid DF17/18 frames are used; other downlink formats are counted as ``
   ``adsb_eph_m`` default only when neither is known (TC 18/22).
 - Surface positions (TC 5-8) are counted in ``not_adsb`` only when undecodable; otherwise
   skipped: their altitude is the unknown ground elevation.
+- Bounded state: anybody can send frames with any ICAO address, so the per-aircraft state
+  (here and in the pair decoder) is capped at ``max_aircraft`` (when full, the least recently
+  heard eighth is forgotten) and an aircraft not heard for ``aircraft_idle_s`` is forgotten,
+  by a sweep run as frames come (at most every eighth of ``aircraft_idle_s``) and by
+  :meth:`ModeSDecoder.evict_idle` (the service calls it when no frame comes). Both are counted
+  in ``aircraft_evicted``; the rules are those of :mod:`adapters.mavlink.senders`.
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ from adapters.adsb.common import (
 )
 from adapters.adsb.config import AdsbConfig
 from adapters.adsb.errors import ModeSFrameError
+from adapters.mavlink.senders import idle_keys, over_cap_keys
 from gcs_utm.geo import haversine_m
 from gcs_utm.model import Icao24, Measurement, MeasurementSource, ModelError, normalise_icao24
 
@@ -56,6 +63,7 @@ class _Aircraft:
     vel_t_s: float = 0.0
     eph_m: float | None = None
     positions: int = 0
+    last_t_s: float = 0.0  # last valid frame (for the idle sweep and the cap)
 
 
 @dataclass(slots=True)
@@ -93,6 +101,8 @@ class ModeSDecoder:
         max_range_m: float = 333_360.0,
         velocity_max_age_s: float = 10.0,
         link: str = "adsb",
+        max_aircraft: int = 4096,
+        aircraft_idle_s: float = 120.0,
     ) -> None:
         if (reference_lat_deg is None) != (reference_lon_deg is None):
             raise ValueError("give both reference_lat_deg and reference_lon_deg, or neither")
@@ -101,7 +111,10 @@ class ModeSDecoder:
             if reference_lat_deg is None or reference_lon_deg is None
             else (reference_lat_deg, reference_lon_deg)
         )
-        self._pairs = PairDecoder() if self._reference is None else None
+        self._pairs = PairDecoder(aircraft_idle_s) if self._reference is None else None
+        self._max_aircraft = max_aircraft
+        self._idle_s = aircraft_idle_s
+        self._next_sweep_t_s = float("-inf")
         self._max_range_m = max_range_m
         self._velocity_max_age_s = velocity_max_age_s
         self._link = link
@@ -118,6 +131,8 @@ class ModeSDecoder:
             max_range_m=config.max_range_m,
             velocity_max_age_s=config.velocity_max_age_s,
             link=link,
+            max_aircraft=config.max_aircraft,
+            aircraft_idle_s=config.aircraft_idle_s,
         )
 
     @property
@@ -131,6 +146,40 @@ class ModeSDecoder:
 
     def positions_by_aircraft(self) -> dict[Icao24, int]:
         return {icao: a.positions for icao, a in self._state.aircraft.items()}
+
+    def state_size(self) -> int:
+        """Addresses with state kept: this decoder's or its pair decoder's, the larger."""
+        pairs = 0 if self._pairs is None else self._pairs.size()
+        return max(len(self._state.aircraft), pairs)
+
+    # ---- bounds (module docstring: bounded state) ----------------------------------------
+    def evict_idle(self, now_s: float) -> int:
+        """Forget the aircraft not heard for ``aircraft_idle_s``; returns how many."""
+        self._next_sweep_t_s = now_s + self._idle_s / 8.0
+        table = self._state.aircraft
+        idle = idle_keys({k: a.last_t_s for k, a in table.items()}, now_s, self._idle_s)
+        for icao in idle:
+            del table[icao]
+        evicted = len(idle)
+        if self._pairs is not None:
+            evicted = max(evicted, self._pairs.evict_idle(now_s))
+        self.counters.aircraft_evicted += evicted
+        return evicted
+
+    def _trim(self) -> None:
+        """Make room for one more aircraft here and in the pair decoder."""
+        table = self._state.aircraft
+        if len(table) >= self._max_aircraft:
+            old = over_cap_keys({k: a.last_t_s for k, a in table.items()}, self._max_aircraft)
+            for icao in old:
+                del table[icao]
+            if self._pairs is not None:
+                self._pairs.forget([str(k) for k in old])
+            self.counters.aircraft_evicted += len(old)
+        if self._pairs is not None and self._pairs.size() >= self._max_aircraft:
+            old_pairs = over_cap_keys(self._pairs.last_heard_t_s(), self._max_aircraft)
+            self._pairs.forget(old_pairs)
+            self.counters.aircraft_evicted += len(old_pairs)
 
     # ---- inputs -------------------------------------------------------------------------
     def feed_avr(self, line: str, t_s: float) -> Measurement | None:
@@ -161,6 +210,10 @@ class ModeSDecoder:
         """One Mode-S frame (14 or 28 hex digits) captured at ``t_s``."""
         c = self.counters
         c.frames += 1
+        if t_s >= self._next_sweep_t_s:
+            self.evict_idle(t_s)
+        if self._pairs is not None and self._pairs.size() >= self._max_aircraft:
+            self._trim()
         try:
             if self._pairs is not None:
                 d = self._pairs.decode(frame, t_s)
@@ -183,7 +236,10 @@ class ModeSDecoder:
             return None
         ac = self._state.aircraft.get(icao)
         if ac is None:
+            if len(self._state.aircraft) >= self._max_aircraft:
+                self._trim()
             ac = self._state.aircraft[icao] = _Aircraft()
+        ac.last_t_s = t_s
         return self._apply(icao, ac, d, t_s)
 
     # ---- per message kind ---------------------------------------------------------------

@@ -28,6 +28,7 @@ from adapters.adsb.common import (
     ground_velocity_ned_mps,
 )
 from adapters.adsb.errors import SbsFormatError
+from adapters.mavlink.senders import idle_keys, over_cap_keys
 from gcs_utm.model import Icao24, Measurement, MeasurementSource, ModelError, normalise_icao24
 
 _N_FIELDS = 22
@@ -152,7 +153,11 @@ def decode_sbs_line(
 
 class SbsDecoder:
     """Stateful SBS decoder: merges callsign (type 1) and velocity (type 4) into positions.
-    Never raises on bad input; see :attr:`counters`."""
+    Never raises on bad input; see :attr:`counters`.
+
+    Its per-aircraft state is bounded as :class:`adapters.adsb.modes.ModeSDecoder`'s is
+    (``max_aircraft``, ``aircraft_idle_s``, counted in ``aircraft_evicted``); "heard" is the
+    receipt time, never the line's own (sender-chosen) time."""
 
     def __init__(
         self,
@@ -160,6 +165,8 @@ class SbsDecoder:
         use_generated_time: bool = True,
         velocity_max_age_s: float = 10.0,
         link: str = "sbs",
+        max_aircraft: int = 4096,
+        aircraft_idle_s: float = 120.0,
     ) -> None:
         self._use_generated_time = use_generated_time
         self._velocity_max_age_s = velocity_max_age_s
@@ -167,7 +174,29 @@ class SbsDecoder:
         self._callsign: dict[Icao24, str] = {}
         self._vel: dict[Icao24, tuple[float, tuple[float, float, float]]] = {}
         self._positions: dict[Icao24, int] = {}
+        self._heard_t_s: dict[Icao24, float] = {}  # receipt time of the last valid line
+        self._max_aircraft = max_aircraft
+        self._idle_s = aircraft_idle_s
+        self._next_sweep_t_s = float("-inf")
         self.counters = AdsbCounters()
+
+    def state_size(self) -> int:
+        """Addresses with state kept."""
+        return len(self._heard_t_s)
+
+    def _forget(self, icaos: list[Icao24]) -> int:
+        for icao in icaos:
+            self._heard_t_s.pop(icao, None)
+            self._positions.pop(icao, None)
+            self._callsign.pop(icao, None)
+            self._vel.pop(icao, None)
+        self.counters.aircraft_evicted += len(icaos)
+        return len(icaos)
+
+    def evict_idle(self, now_s: float) -> int:
+        """Forget the aircraft not heard for ``aircraft_idle_s``; returns how many."""
+        self._next_sweep_t_s = now_s + self._idle_s / 8.0
+        return self._forget(idle_keys(self._heard_t_s, now_s, self._idle_s))
 
     def aircraft(self) -> dict[Icao24, str]:
         """ICAO address -> callsign of every aircraft seen in a valid line."""
@@ -184,6 +213,11 @@ class SbsDecoder:
             c.malformed += 1
             return None
         icao = rec.icao24
+        if receipt_t_s >= self._next_sweep_t_s:
+            self.evict_idle(receipt_t_s)
+        if icao not in self._heard_t_s and len(self._heard_t_s) >= self._max_aircraft:
+            self._forget(over_cap_keys(self._heard_t_s, self._max_aircraft))
+        self._heard_t_s[icao] = receipt_t_s
         self._positions.setdefault(icao, 0)
         t_s = rec.generated_t_s if self._use_generated_time and rec.generated_t_s else receipt_t_s
         if rec.callsign:

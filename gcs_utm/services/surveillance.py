@@ -10,6 +10,12 @@ frame cut short). The measurements go to ``on_measurement`` -- the USM's
 and from there to Tracking: an ICAO address bound to an operation fuses with its track,
 anything else becomes the intruder track ``icao:<hex>``.
 
+Bounded state: each feed's decoder keeps per-aircraft state for at most ``max_aircraft``
+ICAO addresses and forgets one not heard for ``aircraft_idle_s`` (counted in
+``aircraft_evicted``); :meth:`SurveillanceService.evict_idle` runs that sweep every eighth of
+``aircraft_idle_s`` while the feeds run, so a flood that stopped leaves nothing behind even
+when no frame comes after it.
+
 Times: receipt time is the service clock (so a sped-up ``run`` keeps its time base); SBS
 capture time is the line's "generated" time when ``sbs_times_are_utc``, else receipt.
 """
@@ -104,6 +110,8 @@ class SurveillanceService:
                     use_generated_time=config.sbs_times_are_utc,
                     velocity_max_age_s=config.velocity_max_age_s,
                     link=link,
+                    max_aircraft=config.max_aircraft,
+                    aircraft_idle_s=config.aircraft_idle_s,
                 )
             else:
                 feed.modes = ModeSDecoder.from_config(config, link=link)
@@ -131,6 +139,21 @@ class SurveillanceService:
             feed.host, feed.port, decoder=feed.modes, backoff=backoff, stats=stats, now_s=now_s
         )
 
+    def evict_idle(self) -> int:
+        """Forget, in every feed's decoder, the aircraft not heard for ``aircraft_idle_s``."""
+        now_s = self.clock.now_s()
+        evicted = 0
+        for feed in self.feeds:
+            decoder = feed.sbs if feed.sbs is not None else feed.modes
+            assert decoder is not None
+            evicted += decoder.evict_idle(now_s)
+        return evicted
+
+    async def _sweep(self) -> None:
+        while True:
+            await self.clock.sleep(self.config.aircraft_idle_s / 8.0)
+            self.evict_idle()
+
     async def _run_feed(self, feed: FeedStats) -> None:
         gen = self._reader(feed)
         try:
@@ -152,6 +175,7 @@ class SurveillanceService:
             async with asyncio.TaskGroup() as tg:
                 for feed in self.feeds:
                     tg.create_task(self._run_feed(feed), name=f"adsb-{feed.kind}")
+                tg.create_task(self._sweep(), name="adsb-sweep")
         finally:
             for name, c in self.stats().items():
                 _log.info(

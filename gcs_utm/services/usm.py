@@ -22,6 +22,7 @@ from collections import deque
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 
+from adapters.mavlink.senders import idle_keys, over_cap_keys
 from gcs_utm.clock import Clock
 from gcs_utm.config import setting
 from gcs_utm.messages import (
@@ -38,6 +39,7 @@ from gcs_utm.model import (
     Geofence,
     LaneSource,
     Measurement,
+    MeasurementSource,
     OperationState,
     PositionLane,
     Recommendation,
@@ -126,6 +128,21 @@ class UsmConfig:
         min=0.0,
         unit="m",
     )
+    # Bounds of state keyed by identities a sender chooses (ICAO addresses, alert ids).
+    max_adsb_sources: int = setting(
+        4096,
+        "ADS-B sources (ICAO addresses) with statistics of their own; when full, the least "
+        "recently heard eighth is folded into 'adsb:evicted' (counted in adsb_sources_evicted)",
+        min=8,
+        max=1_000_000,
+    )
+    max_hazard_keys: int = setting(
+        4096,
+        "hazard coalescing keys kept (one per kind and UAS or alert); a key older than "
+        "hazard_cooldown_s is forgotten, and when full the oldest eighth (hazard_keys_evicted)",
+        min=8,
+        max=1_000_000,
+    )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -183,6 +200,7 @@ class Usm(RecommendationLifecycle):
         self._sources: dict[tuple[object, ...], SourceStats] = {}
         self.events: deque[UsmEvent] = deque(maxlen=self.config.event_log_size)
         self._hazard_seen: dict[tuple[ThreatKind, str], float] = {}
+        self._hazard_sweep_t_s = float("-inf")
         self._hazard_seq = itertools.count(1)
         self._tasks: set[asyncio.Task[None]] = set()
         self.counters: dict[str, int] = {
@@ -193,6 +211,8 @@ class Usm(RecommendationLifecycle):
             "answers_refused": 0,
             "uploads_ok": 0,
             "uploads_failed": 0,
+            "adsb_sources_evicted": 0,
+            "hazard_keys_evicted": 0,
         }
         cfg = self.config
         self.vehicle_ops = VehicleOps(
@@ -260,6 +280,8 @@ class Usm(RecommendationLifecycle):
         src = (m.source, sys_id, m.icao24, m.operation_id, m.vehicle)
         seen = self._sources.get(src)
         if seen is None:
+            if m.source is MeasurementSource.ADSB:
+                self._trim_adsb_sources()
             key = f"{m.source.value}:" + (
                 str(sys_id) if sys_id is not None else (m.icao24 or m.operation_id or "?")
             )
@@ -279,6 +301,44 @@ class Usm(RecommendationLifecycle):
                 counters["unknown_vehicle_measurements"] += 1
         for sink in self._measurement_sinks:
             sink(m)
+
+    def _trim_adsb_sources(self) -> None:
+        """Room for one more ADS-B source: over ``max_adsb_sources``, the least recently
+        heard eighth is folded into ``adsb:evicted`` (totals kept, detail forgotten)."""
+        adsb = {
+            k: st.stats.last_capture_t_s
+            for k, st in self._sources.items()
+            if k[0] is MeasurementSource.ADSB
+        }
+        old = over_cap_keys(adsb, self.config.max_adsb_sources)
+        if not old:
+            return
+        gone = {id(self._sources[k].stats) for k in old}
+        folded = self._telemetry.get("adsb:evicted", TelemetryStats())
+        for name, stats in list(self._telemetry.items()):
+            if id(stats) in gone:
+                del self._telemetry[name]
+                folded = folded.combined(stats)
+        # (a statistics entry shared by two sources goes with both)
+        for k in [k for k, st in self._sources.items() if id(st.stats) in gone]:
+            del self._sources[k]
+        self._telemetry["adsb:evicted"] = folded
+        self.counters["adsb_sources_evicted"] += len(old)
+
+    def _trim_hazard_keys(self, t_s: float) -> None:
+        """Forget coalescing keys past their cooldown (they coalesce nothing any more; swept
+        as hazards come) and, over ``max_hazard_keys``, the oldest eighth."""
+        seen = self._hazard_seen
+        cooldown_s = self.config.hazard_cooldown_s
+        if len(seen) < self.config.max_hazard_keys and t_s < self._hazard_sweep_t_s:
+            return
+        self._hazard_sweep_t_s = t_s + cooldown_s / 8.0  # a sweep per eighth of the cooldown
+        old = idle_keys(seen, t_s, cooldown_s)
+        if len(seen) - len(old) >= self.config.max_hazard_keys:
+            old = over_cap_keys(seen, self.config.max_hazard_keys)
+        for k in old:
+            del seen[k]
+        self.counters["hazard_keys_evicted"] += len(old)
 
     @property
     def telemetry(self) -> dict[str, TelemetryStats]:
@@ -382,6 +442,8 @@ class Usm(RecommendationLifecycle):
             op = self.airspace.by_sys_id(h.sys_id)
             op_id = op.id if op is not None else None
         key = (h.kind, op_id or (h.source or "airspace") + ":" + (h.area.id if h.area else ""))
+        if key not in self._hazard_seen:
+            self._trim_hazard_keys(h.t_s)
         last = self._hazard_seen.get(key)
         if last is not None and h.t_s - last < self.config.hazard_cooldown_s:
             self.counters["hazards_coalesced"] += 1

@@ -1,0 +1,54 @@
+"""State the USM keeps per sender-chosen identity stays bounded (issue 21 item 3): ADS-B
+statistics per ICAO address (feeds, MQTT ``adsb`` topic, MAVLink ADSB_VEHICLE) and hazard
+coalescing keys (MQTT alerts, RPA-reported hazards)."""
+
+from __future__ import annotations
+
+from gcs_utm.clock import ManualClock
+from gcs_utm.messages import HazardReport
+from gcs_utm.model import Icao24, Measurement, MeasurementSource, ThreatKind
+from gcs_utm.services.airspace import Airspace
+from gcs_utm.services.usm import Usm, UsmConfig
+
+SPOOFED = 12_000
+CAP = 1_000
+
+
+def _adsb(icao: int, t_s: float) -> Measurement:
+    return Measurement(
+        source=MeasurementSource.ADSB,
+        capture_t_s=t_s,
+        receipt_t_s=t_s,
+        lat_deg=52.0,
+        lon_deg=4.4,
+        alt_amsl_m=900.0,
+        icao24=Icao24(f"{icao:06x}"),
+        link="mqtt:adsb",
+    )
+
+
+def test_adsb_statistics_capped_with_totals_kept() -> None:
+    usm = Usm(Airspace(), ManualClock(0.0), config=UsmConfig(max_adsb_sources=CAP))
+    for i in range(SPOOFED):
+        usm.on_measurement(_adsb(0x100000 + i, i * 0.001))
+    telemetry = usm.telemetry
+    assert len(telemetry) <= CAP + 1  # + "adsb:evicted"
+    assert usm.counters["adsb_sources_evicted"] >= SPOOFED - CAP
+    assert sum(s.count for s in telemetry.values()) == SPOOFED
+    # the most recent aircraft keep their own statistics
+    assert telemetry[f"adsb:{0x100000 + SPOOFED - 1:06x}"].count == 1
+
+
+async def test_hazard_keys_capped_then_forgotten_after_cooldown() -> None:
+    config = UsmConfig(max_hazard_keys=CAP, hazard_cooldown_s=30.0)
+    usm = Usm(Airspace(), ManualClock(0.0), config=config)
+    for i in range(SPOOFED):  # within one cooldown: only the cap bounds them
+        usm.on_hazard(HazardReport(kind=ThreatKind.ALERT_WARNING, t_s=i * 0.0001, source=f"x{i}"))
+        assert len(usm._hazard_seen) <= CAP
+    await usm.drain()
+    assert usm.counters["hazard_keys_evicted"] >= SPOOFED - CAP
+    # after the cooldown a new key finds the old ones forgotten
+    assert len(usm._hazard_seen) > 1
+    usm.on_hazard(HazardReport(kind=ThreatKind.ALERT_WARNING, t_s=100.0, source="late"))
+    await usm.drain()
+    assert len(usm._hazard_seen) == 1
