@@ -708,7 +708,7 @@ class TacticalDeconfliction:
         start_t_s: float | None = None,
         lead_in_from_t_s: float | None = None,
     ) -> list[Alternative]:
-        """Vertical avoidance of a non-cooperative intruder (:mod:`.intruder`)."""
+        """Vertical or lateral avoidance of a non-cooperative intruder (:mod:`.intruder`)."""
         self.set_lead_in(lead_in_from_t_s, self.start_time(snapshot, start_t_s))
         return resolve_intruder(self, threat, operation_id, snapshot, start_t_s)
 
