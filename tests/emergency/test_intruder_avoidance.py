@@ -10,11 +10,13 @@ import numpy as np
 
 from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
-from gcs_utm.core.deconfliction.geometry import plan_to_local
+from gcs_utm.core.deconfliction.geometry import LocalPlan, plan_to_local
+from gcs_utm.core.deconfliction.intruder import loses_minima
 from gcs_utm.core.emergency import Decision, EmergencyConfig, EmergencyManager
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.model import (
     AirspaceSnapshot,
+    Alternative,
     CommandKind,
     Maneuver,
     Operation,
@@ -105,3 +107,24 @@ def test_intruder_too_close_for_any_avoidance_gets_the_safe_command() -> None:
     (msg,) = d.escalations
     assert "no avoidance" in msg and "hold proposed" in msg
     assert any(a.action == "escalation" for a in d.audit)
+
+
+def test_loses_minima_finds_the_first_step_inside_the_intruder_minima() -> None:
+    # The safety net behind every candidate: the re-timed plan itself against the intruder.
+    t0 = sc.T0_S
+    intruder = LocalPlan(
+        np.array([1000.0, 0.0]), np.array([0.0, 0.0]), np.array([100.0, 100.0]),
+        np.array([t0, t0 + 50.0]),
+    )  # fmt: skip
+
+    def alt(alt_amsl_m: float) -> Alternative:
+        op = sc.make_operation("A", [(0, 0, alt_amsl_m), (1000, 0, alt_amsl_m)])
+        return Alternative(operation_id=op.id, maneuver=Maneuver.GO_UP, plan=op.plan, cost=0.0,
+                           risk=0.0)  # fmt: skip
+
+    minima = (MON.intruder_horizontal_m, MON.intruder_vertical_m)
+    # same altitude, closing at 30 m/s: inside 150 m when 850 m have closed (28.3 s)
+    lost = loses_minima(alt(100.0), intruder, sc.FRAME, t0, minima)
+    assert lost is not None and lost - t0 == 29.0
+    assert loses_minima(alt(151.0), intruder, sc.FRAME, t0, minima) is None
+    assert loses_minima(alt(149.0), intruder, sc.FRAME, t0, minima) is not None
