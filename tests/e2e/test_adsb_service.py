@@ -1,11 +1,12 @@
 """ADS-B in the running service: a built-in vehicle flies a plan while an SBS-1 receiver feed
 (a TCP server on loopback, ephemeral port) reports an aircraft approaching it head-on at its
-altitude, and a fake relay on the vehicle's MAVLink link forwards ADSB_VEHICLE
-reports (pymavlink-encoded) of a distant aircraft and of the vehicle's own transponder.
+altitude (it follows the UAS's altitude, as a pursuing aircraft would), and a fake relay on
+the vehicle's MAVLink link forwards ADSB_VEHICLE reports (pymavlink-encoded) of a distant
+aircraft and of the vehicle's own transponder.
 
 Expected: intruder tracks named by ICAO address (in the runtime and in the store), an
-INTRUDER threat against the operation, and the vehicle's own ADS-B fused with its track
-instead of becoming an intruder."""
+INTRUDER threat against the operation and EM's avoidance recommendation for it, and the
+vehicle's own ADS-B fused with its track instead of becoming an intruder."""
 
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ HEADON_ICAO = "a1b2c3"  # SBS-1: head-on towards UAS1 at its altitude
 DISTANT_ICAO = "c0ffee"  # relayed ADSB_VEHICLE, ~3 km away
 M_PER_DEG_LAT = 111_320.0
 HEADON_AHEAD_M = 1500.0
-HEADON_SPEED_MPS = 20.0
+HEADON_SPEED_MPS = 40.0
 
 
 def m_per_deg_lon(track: Any) -> float:
@@ -217,7 +218,7 @@ async def test_sbs_and_relayed_adsb_become_intruders_and_raise_intruder(tmp_path
     assert "sysid:1" in replayed["tracks"], list(replayed["tracks"])
     assert replayed["counters"]["adsb_relay"]["measurements"] == relay["measurements"]
     # head-on at the same altitude: predicted inside the intruder minima -> INTRUDER, raised
-    # before the aircraft is within them (it closes at ~25 m/s from 1.5 km)
+    # before the aircraft is within them (it closes at ~45 m/s from 1.5 km)
     intruder = [t for t in rt.usm.threat_log if t.kind is ThreatKind.INTRUDER]
     assert intruder, [t.kind for t in rt.usm.threat_log]
     assert {t.intruder_id for t in intruder} == {headon}
@@ -226,6 +227,17 @@ async def test_sbs_and_relayed_adsb_become_intruders_and_raise_intruder(tmp_path
     assert first.closest_approach_m is not None and first.closest_approach_m < 150.0
     assert first.predicted_event_at_s is not None
     assert first.predicted_event_at_s - first.detected_at_s >= 10.0
+    # EM proposes an avoidance through the prompt: closing at 45 m/s from 1.5 km leaves ~33 s,
+    # enough to climb the intruder minima at the vehicle's climb rate (auto-accepted, flown)
+    recs = [r for r in report["recommendations"] if r["threat_kind"] == "INTRUDER"]
+    assert recs, report["escalations"]
+    avoid = ("go_up", "go_down", "go_left", "go_right")
+    accepted = [t for r in recs for _, t in r["history"] if t.startswith("accepted")]
+    assert accepted and accepted[0].split(": ")[1].split(" ")[0] in avoid, accepted
+    # the aircraft follows UAS1's altitude: whatever EM cannot avoid any more, it proposes
+    # the safe command for; no escalation comes with nothing proposed
+    for esc in report["escalations"]:
+        assert "intruder" not in esc["text"] or "proposed" in esc["text"], esc
 
 
 async def test_serve_tracks_sbs_and_relayed_aircraft_and_records_the_link(tmp_path: Path) -> None:

@@ -1,5 +1,8 @@
-"""Vertical avoidance of a non-cooperative intruder (paper §4.5): the UAS's cord alone climbs
-or descends (the intruder is a rigid cord) until the intruder minima hold. Pure."""
+"""Avoidance of a non-cooperative intruder (paper §4.5): the UAS's cord alone climbs,
+descends or moves left or right (the intruder is a rigid cord on its predicted path) until the
+intruder minima hold, within the vehicle's envelope (climb share, lateral angle, altitude band
+and safety floor). Every candidate is then checked against the intruder's predicted path at
+1 s steps: a re-timed plan that no longer keeps the minima is dropped. Pure."""
 
 from __future__ import annotations
 
@@ -9,14 +12,23 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gcs_utm.core.deconfliction import cords as cd
-from gcs_utm.core.deconfliction.geometry import LocalPlan
+from gcs_utm.core.deconfliction.geometry import LocalPlan, plan_to_local
+from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AirspaceSnapshot,
     Alternative,
     FloatArray,
     Maneuver,
+    Operation,
     OperationId,
     Threat,
+)
+
+_CANDIDATES = (
+    (cd.AXIS_VERTICAL, 1, Maneuver.GO_UP),
+    (cd.AXIS_VERTICAL, -1, Maneuver.GO_DOWN),
+    (cd.AXIS_LATERAL, 1, Maneuver.GO_LEFT),
+    (cd.AXIS_LATERAL, -1, Maneuver.GO_RIGHT),
 )
 
 if TYPE_CHECKING:
@@ -52,8 +64,10 @@ def resolve_intruder(
     snapshot: AirspaceSnapshot,
     start_t_s: float | None = None,
 ) -> list[Alternative]:
-    """Go up and go down candidates for ``operation_id``, verified and scored by ``td``; the
-    new plan starts at ``start_t_s`` (see :meth:`TacticalDeconfliction.start_time`)."""
+    """Go up, go down, go left and go right candidates for ``operation_id``, verified and
+    scored by ``td`` and kept only when they hold the intruder minima against its predicted
+    path (:func:`loses_minima`); the new plan starts at ``start_t_s`` (see
+    :meth:`TacticalDeconfliction.start_time`)."""
     td.dropped = []
     td.reset_queue()
     op = snapshot.operations.get(operation_id)
@@ -74,24 +88,27 @@ def resolve_intruder(
     outsiders = td.others(snapshot, {op.id})
     fences = td.local_fences(snapshot.geofences)
     out: list[Alternative] = []
-    for sign in (1, -1):
+    rigid = cd.Cord(
+        plan=intruder,
+        axis=cd.AXIS_NONE,
+        sign=0,
+        mobility=0.0,
+        slope_m_per_step=0.0,
+        max_offset_m=0.0,
+        min_alt_amsl_m=lo,
+        max_alt_amsl_m=hi,
+    )
+    for axis, sign, man in _CANDIDATES:
+        vertical = axis == cd.AXIS_VERTICAL
         mine = cd.Cord(
             plan=lp,
-            axis=cd.AXIS_VERTICAL,
+            axis=axis,
             sign=sign,
             mobility=1.0,
-            slope_m_per_step=td.vertical_slope(op),
-            max_offset_m=cfg.max_vertical_offset_m,
-            min_alt_amsl_m=lo,
-            max_alt_amsl_m=hi,
-        )
-        rigid = cd.Cord(
-            plan=intruder,
-            axis=cd.AXIS_NONE,
-            sign=0,
-            mobility=0.0,
-            slope_m_per_step=0.0,
-            max_offset_m=0.0,
+            slope_m_per_step=_vertical_slope(op, sign, cfg.cord_dt_s)
+            if vertical
+            else cd.lateral_slope(op.cruise_speed_mps, cfg.cord_dt_s, cfg.max_lateral_angle_deg),
+            max_offset_m=cfg.max_vertical_offset_m if vertical else cfg.max_lateral_offset_m,
             min_alt_amsl_m=lo,
             max_alt_amsl_m=hi,
         )
@@ -103,23 +120,71 @@ def resolve_intruder(
             margin_fraction=cfg.separation_margin_fraction,
             max_iterations=cfg.max_iterations,
         )
-        man = Maneuver.GO_UP if sign > 0 else Maneuver.GO_DOWN
         if res is None:
-            td.drop(op.id, man, "no convergence")
+            td.drop(op.id, man, "no convergence within the envelope")
             continue
         dk = res.displacement_m[0]
         td.finish(
             op,
             man,
-            td.deform(op, lp, grid, dk, cd.AXIS_VERTICAL, sign),
+            td.deform(op, lp, grid, dk, axis, sign),
             lp,
             geofences=snapshot.geofences,
             fences=fences,
             outsiders=outsiders,
             lowest_priority=op.priority,
-            detail=f"vertical avoidance of intruder {threat.intruder_id}: "
+            detail=f"avoidance of intruder {threat.intruder_id}: "
             f"{man.value} {float(dk.max()):.0f} m",
             dest=out,
         )
     td.flush(snapshot.t_s)
-    return out
+    from gcs_utm.core.deconfliction.td import Dropped  # td imports this module
+
+    kept: list[Alternative] = []
+    for alt in out:
+        lost = loses_minima(alt, intruder, td.frame, t0, (h_min, v_min))
+        if lost is None:
+            kept.append(alt)
+        else:
+            td.dropped.append(
+                Dropped(
+                    operation_id=op.id,
+                    maneuver=alt.maneuver,
+                    reason=f"intruder minima lost at t={lost - snapshot.t_s:+.1f} s",
+                )
+            )
+    return kept
+
+
+def _vertical_slope(op: Operation, sign: int, dt_s: float) -> float:
+    """Metres per cord step of an intruder avoidance: the vehicle's full climb (or descent)
+    rate, not the share left by other deformations (an intruder leaves no time to spare; the
+    re-timed plan stays inside the envelope and :func:`loses_minima` checks its timing)."""
+    env = op.performance()
+    return (env.climb_rate_mps if sign > 0 else env.descent_rate_mps) * dt_s
+
+
+def loses_minima(
+    alt: Alternative,
+    intruder: LocalPlan,
+    frame: LocalFrame,
+    from_t_s: float,
+    minima_m: tuple[float, float],
+) -> float | None:
+    """The first time (1 s steps from ``from_t_s``) ``alt``'s plan is inside the intruder
+    minima (horizontal and vertical at once) of the intruder's predicted path; None when it
+    never is."""
+    if alt.plan is None:
+        return None
+    mine = plan_to_local(alt.plan, frame)
+    end = min(float(mine.t[-1]), float(intruder.t[-1]))
+    if end <= from_t_s:
+        return None
+    times: FloatArray = np.arange(from_t_s, end + 1e-9, 1.0)
+    a, ok_a = mine.sample(times)
+    b, ok_b = intruder.sample(times)
+    dh = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1])
+    dv = np.abs(a[:, 2] - b[:, 2])
+    inside = ok_a & ok_b & (dh < minima_m[0]) & (dv < minima_m[1])
+    hit = np.flatnonzero(inside)
+    return float(times[hit[0]]) if hit.size else None

@@ -11,7 +11,7 @@ Two families (paper §4.5):
 - single UAS (:mod:`.single`, routes in :mod:`.router`): A* on a visibility graph of
   inflated geofences: reroute around a crossing, escape from inside, direct to goal, back to
   plan, next waypoint, return home, nearest reachable landing site; intruders
-  (:mod:`.intruder`): vertical avoidance.
+  (:mod:`.intruder`): vertical or lateral avoidance.
 
 Every new plan starts at the *start time* EM passes in (when the vehicle will have the plan:
 decision + expected answer + upload + margin), at the position the UAS will have then on its
@@ -708,7 +708,7 @@ class TacticalDeconfliction:
         start_t_s: float | None = None,
         lead_in_from_t_s: float | None = None,
     ) -> list[Alternative]:
-        """Vertical avoidance of a non-cooperative intruder (:mod:`.intruder`)."""
+        """Vertical or lateral avoidance of a non-cooperative intruder (:mod:`.intruder`)."""
         self.set_lead_in(lead_in_from_t_s, self.start_time(snapshot, start_t_s))
         return resolve_intruder(self, threat, operation_id, snapshot, start_t_s)
 

@@ -44,6 +44,7 @@ from gcs_utm.core.emergency.selection import (
 from gcs_utm.core.emergency.supervision import (
     deviation_start,
     on_outcome,
+    safe_command,
     settled_at,
     supervise_case,
 )
@@ -656,15 +657,18 @@ class EmergencyManager:
                 truncated=False,
             )
         )
-        detail = self._detail({op_id: alts}, sel, "intruder: vertical avoidance")
+        detail = self._detail({op_id: alts}, sel, "intruder: avoidance")
         if not alts:
+            # Nothing flyable keeps the minima: propose the safe command (hold) and escalate.
+            cmd = Command(kind=safe_command(case.threat.kind), operation_id=op_id)
+            case.modes[op_id] = MODE_COMMAND
             msg = (
-                f"{case.threat.id}: no vertical avoidance for {op_id} "
-                f"from intruder {case.threat.intruder_id}"
+                f"{case.threat.id}: no avoidance for {op_id} from intruder "
+                f"{case.threat.intruder_id}: {cmd.kind.value} proposed"
             )
-            return Decision(
-                escalations=(msg,), audit=(self.audit(now, "escalation", case.threat.id, detail),)
-            )
+            audit = (self.audit(now, "escalation", case.threat.id, detail),)
+            d = self.issue(case, op_id, now, command=cmd, reason=msg)
+            return d.merge(Decision(escalations=(msg,), audit=audit))
         d = Decision(audit=(self.audit(now, "decision", case.threat.id, detail),))
         return d.merge(
             self.issue(
