@@ -23,9 +23,10 @@ from typing import Any
 
 from adapters.mavlink import MavlinkHub
 from adapters.mavlink.transfer import MavlinkError
+from adapters.mavlink.vehicle import VehicleState
 from gcs_utm.clock import Clock
 from gcs_utm.messages import FlightMode
-from gcs_utm.model import Autopilot
+from gcs_utm.model import Autopilot, SysId
 from gcs_utm.scenario import Scenario
 from gcs_utm.scenario.types import VehicleSetup
 
@@ -35,12 +36,16 @@ MAV_CMD_NAV_TAKEOFF = 22
 MAV_CMD_COMPONENT_ARM_DISARM = 400
 DISCOVERY_GRACE_S = 60.0
 """Clock seconds after the first waypoint's time a vehicle may still be discovered."""
+HOME_WAIT_S = 20.0  # clock seconds to wait for HOME_POSITION after the first fix
 ARM_TRY_S = 60.0  # clock seconds of arming tries (pre-flight checks refuse after boot)
 ARM_RETRY_S = 2.0  # clock seconds between two arming tries
 TAKEOFF_CLIMB_MPS = 1.0
 """Climb rate assumed to schedule the take-off (PX4's MPC_TKO_SPEED default is 1.5 m/s)."""
 TAKEOFF_MARGIN_S = 15.0  # clock seconds for arming and spool-up before the climb
 TAKEOFF_TOLERANCE_M = 3.0  # below the first waypoint's altitude: the climb is done
+TAKEOFF_TRIES = 3  # arm and NAV_TAKEOFF again when the vehicle disarmed or did not climb
+TAKEOFF_CHECK_S = 10.0  # clock seconds after NAV_TAKEOFF by which the climb must show
+TAKEOFF_MIN_CLIMB_M = 1.0  # above the ground: the vehicle has left it
 MODE_CONFIRM_S = 3.0  # real seconds for HEARTBEAT to show the mission mode
 
 
@@ -109,6 +114,8 @@ async def _fly_one(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutco
     first = wps[0]
     await _wait_fix(hub, clock, v, first.t_s + DISCOVERY_GRACE_S)
     _step(out, clock, "discovered with a position fix")
+    if not await _wait_home(hub, clock, v.sys_id):
+        _step(out, clock, f"no HOME_POSITION within {HOME_WAIT_S:.0f} s: going on without")
     res = await hub.upload_plan(
         v.sys_id,
         v.plan,
@@ -126,7 +133,6 @@ async def _fly_one(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutco
     climb_m = max(0.0, first.alt_amsl_m - ground_m)
     takeoff_t_s = first.t_s - climb_m / TAKEOFF_CLIMB_MPS - TAKEOFF_MARGIN_S
     await clock.sleep(max(0.0, takeoff_t_s - clock.now_s()))
-    await _arm(hub, clock, v, out)
     await _takeoff(hub, clock, v, out, ground_m=ground_m)
     await clock.sleep(max(0.0, first.t_s - clock.now_s()))
     mode = await hub.send_mode(v.sys_id, FlightMode.MISSION)
@@ -151,6 +157,17 @@ async def _wait_fix(hub: MavlinkHub, clock: Clock, v: VehicleSetup, until_t_s: f
             return
         await clock.sleep(0.5)
     raise FlyRefusedError("never discovered with a position fix")
+
+
+async def _wait_home(hub: MavlinkHub, clock: Clock, sys_id: int) -> bool:
+    """Until the vehicle reports its home (PX4 sets it once its position is valid; a take-off
+    sent before may be accepted and never flown)."""
+    end_t_s = clock.now_s() + HOME_WAIT_S
+    while clock.now_s() < end_t_s:
+        if hub.state(SysId(sys_id)).home is not None:
+            return True
+        await clock.sleep(0.5)
+    return False
 
 
 async def _arm(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome) -> None:
@@ -184,22 +201,51 @@ async def _takeoff(
 ) -> None:
     """NAV_TAKEOFF to the first waypoint's altitude (PX4: AMSL; ArduPilot: above home),
     then wait for the climb until the first waypoint's time (the mission mode then finishes
-    any climb left)."""
+    any climb left). A vehicle that disarms or does not climb (an autopilot may accept the
+    command and still stay on the ground right after boot) is armed and sent it again."""
     assert v.sys_id is not None
     alt_amsl_m, first_t_s = v.plan.waypoints[0].alt_amsl_m, v.plan.waypoints[0].t_s
     st = hub.state(v.sys_id)
     alt = alt_amsl_m if st.autopilot is not Autopilot.ARDUPILOT else alt_amsl_m - ground_m
     nan = math.nan
-    res = await hub.command_long(v.sys_id, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, nan, nan, nan, alt))
-    if not res.ok:
-        raise FlyRefusedError(f"take-off refused: {res.error}")
-    _step(out, clock, f"taking off to {alt_amsl_m:.1f} m AMSL")
+    why = ""
+    for attempt in range(1, TAKEOFF_TRIES + 1):
+        if attempt == 1 or not st.armed:
+            await _arm(hub, clock, v, out)
+        res = await hub.command_long(
+            v.sys_id, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, nan, nan, nan, alt)
+        )
+        if not res.ok:
+            raise FlyRefusedError(f"take-off refused: {res.error}")
+        _step(out, clock, f"taking off to {alt_amsl_m:.1f} m AMSL (try {attempt})")
+        why = await _climb(clock, st, alt_amsl_m, ground_m, first_t_s)
+        if not why:
+            pos = st.last_position
+            _step(out, clock, f"climbed to {pos.alt_amsl_m if pos else alt_amsl_m:.1f} m AMSL")
+            return
+        _step(out, clock, why)
+        if why.startswith("first waypoint"):
+            return
+    raise FlyRefusedError(f"take-off failed {TAKEOFF_TRIES} times: {why}")
+
+
+async def _climb(
+    clock: Clock, st: VehicleState, alt_amsl_m: float, ground_m: float, first_t_s: float
+) -> str:
+    """Watch a take-off: "" once near ``alt_amsl_m``, else why it stopped watching."""
+    check_t_s = clock.now_s() + TAKEOFF_CHECK_S
+    seen_armed = False  # HEARTBEAT shows the arming a moment after its COMMAND_ACK
     while clock.now_s() < first_t_s:
         pos = st.last_position
-        if pos is not None and pos.alt_amsl_m >= alt_amsl_m - TAKEOFF_TOLERANCE_M:
-            _step(out, clock, f"at {pos.alt_amsl_m:.1f} m AMSL")
-            return
+        alt_m = pos.alt_amsl_m if pos is not None else ground_m
+        if alt_m >= alt_amsl_m - TAKEOFF_TOLERANCE_M:
+            return ""
+        seen_armed = seen_armed or st.armed
+        if seen_armed and not st.armed:
+            return f"disarmed during the take-off at {alt_m:.1f} m AMSL"
+        if clock.now_s() >= check_t_s and alt_m < ground_m + TAKEOFF_MIN_CLIMB_M:
+            return f"no climb {TAKEOFF_CHECK_S:.0f} s after the take-off ({alt_m:.1f} m AMSL)"
         await clock.sleep(0.5)
     pos = st.last_position
     height = "unknown" if pos is None else f"{pos.alt_amsl_m:.1f} m AMSL"
-    _step(out, clock, f"first waypoint's time reached during the climb ({height})")
+    return f"first waypoint's time reached during the climb ({height})"
