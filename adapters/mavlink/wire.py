@@ -288,7 +288,7 @@ class Parser:
             out.append(Frame(h.msgId, h.srcSystem, h.srcComponent, h.seq, m))
         return out
 
-    def feed_frames(self, data: bytes) -> list[Frame]:
+    def feed_frames(self, data: bytes) -> list[Frame]:  # noqa: C901 - per-byte framing loop, kept whole: it is the hot path
         """Decode one datagram: hot telemetry on the fast path (see the module docstring),
         everything else through pymavlink. Never raises; rejects are counted."""
         if not self.fast:

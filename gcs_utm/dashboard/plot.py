@@ -129,6 +129,60 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
     ax3 = fig3.add_subplot(projection="3d")
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 
+    _draw_geofences(report, local, ax, ax3, summary)
+    _draw_operations(report, local, ax, ax3, summary, colours)
+    labelled: set[str] = set()  # one legend entry per kind
+    _draw_alternatives(report, local, ax, ax3, summary, labelled)
+    _draw_threats(report, local, ax, ax3, summary, labelled)
+
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    ax_all.set_aspect("equal", adjustable="datalim")
+    ax_all.set_title(f"{report.get('scenario', '')}: top view")
+    if summary.plans:
+        ax_all.legend(fontsize=7, loc="best")
+    if focus is not None:
+        (fx, fy), half, what = focus
+        ax_zoom.set_xlim(fx - half, fx + half)
+        ax_zoom.set_ylim(fy - half, fy + half)
+        ax_zoom.plot([fx], [fy], "x", color="red", ms=12, mew=2)
+        ax_zoom.set_aspect("equal", adjustable="box")
+        ax_zoom.set_title(f"close-up: {what} (x), alternatives grey, selected black")
+    ax3.set_xlabel("east [m]")
+    ax3.set_ylabel("north [m]")
+    ax3.set_zlabel("altitude AMSL [m]")
+    ax3.set_title(f"{report.get('scenario', '')}: 3D")
+    if summary.plans:
+        ax3.legend(fontsize=7, loc="upper left")
+    top = out_dir / f"{stem}_top.png"
+    persp = out_dir / f"{stem}_3d.png"
+    fig.savefig(top, dpi=110)
+    fig3.savefig(persp, dpi=110)
+    plt.close(fig)
+    plt.close(fig3)
+    summary.files += [top, persp]
+    summary.files.append(plot_altitude(report, out_dir, stem, summary))
+    for extra in (
+        plot_separation(report, out_dir, stem, summary),
+        plot_geofences(report, out_dir, stem, summary),
+    ):
+        if extra is not None:
+            summary.files.append(extra)
+    return summary
+
+
+def _once(labelled: set[str], label: str) -> str:
+    """A legend label the first time, none after (one legend entry per kind)."""
+    if label in labelled:
+        return "_nolegend_"
+    labelled.add(label)
+    return label
+
+
+def _draw_geofences(
+    report: dict[str, Any], local: Local, ax: Any, ax3: Any, summary: PlotSummary
+) -> None:
+    """Each geofence filled on the top view, its floor and ceiling outlined in 3D."""
     for g in report.get("geofences", []):
         summary.geofences += 1
         lo, hi = float(g.get("min_alt_amsl_m", 0.0)), float(g.get("max_alt_amsl_m", 0.0))
@@ -145,6 +199,16 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
         for z in (lo, hi):
             ax3.plot(xs, ys, [z] * len(xs), color="red", alpha=0.5, lw=0.8)
 
+
+def _draw_operations(  # noqa: PLR0917 - private helper, positional like its siblings
+    report: dict[str, Any],
+    local: Local,
+    ax: Any,
+    ax3: Any,
+    summary: PlotSummary,
+    colours: list[str],
+) -> None:
+    """Each operation's plan versions (the filed one with its operational volume) and track."""
     for i, op in enumerate(report.get("operations", [])):
         colour = colours[i % len(colours)]
         ov = float(op.get("operational_volume_m", 0.0))
@@ -182,15 +246,16 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
             )
             summary.tracks += 1
 
-    labelled: set[str] = set()
 
-    def once(label: str) -> str:
-        """A legend label the first time, none after (one legend entry per kind)."""
-        if label in labelled:
-            return "_nolegend_"
-        labelled.add(label)
-        return label
-
+def _draw_alternatives(  # noqa: PLR0917 - private helper, positional like its siblings
+    report: dict[str, Any],
+    local: Local,
+    ax: Any,
+    ax3: Any,
+    summary: PlotSummary,
+    labelled: set[str],
+) -> None:
+    """TD's alternatives of every recommendation: the selected one black, the others grey."""
     for rec in report.get("recommendations", []):
         for alt in rec.get("alternatives", []):
             wps = alt.get("waypoints") or []
@@ -198,7 +263,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
                 continue
             pts = [local.xy(w[0], w[1]) for w in wps]
             chosen = bool(alt.get("selected"))
-            label = once("selected alternative" if chosen else "other TD alternatives")
+            label = _once(labelled, "selected alternative" if chosen else "other TD alternatives")
             ax.plot(
                 [p[0] for p in pts],
                 [p[1] for p in pts],
@@ -218,51 +283,26 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
             )
             summary.alternatives += 1
 
+
+def _draw_threats(  # noqa: PLR0917 - private helper, positional like its siblings
+    report: dict[str, Any],
+    local: Local,
+    ax: Any,
+    ax3: Any,
+    summary: PlotSummary,
+    labelled: set[str],
+) -> None:
+    """The predicted conflict point of every threat that has one."""
     for t in report.get("threats", []):
         pos = t.get("position")
         if pos:
             x, y = local.xy(pos["lat_deg"], pos["lon_deg"])
-            label = once("predicted conflict point")
+            label = _once(labelled, "predicted conflict point")
             ax.plot([x], [y], "x", color="red", ms=10, mew=2, label=label)
             ax3.scatter(
                 [x], [y], [pos.get("alt_amsl_m", 0.0)], marker="x", color="red", label=label
             )
             summary.conflict_points += 1
-
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
-    ax_all.set_aspect("equal", adjustable="datalim")
-    ax_all.set_title(f"{report.get('scenario', '')}: top view")
-    if summary.plans:
-        ax_all.legend(fontsize=7, loc="best")
-    if focus is not None:
-        (fx, fy), half, what = focus
-        ax_zoom.set_xlim(fx - half, fx + half)
-        ax_zoom.set_ylim(fy - half, fy + half)
-        ax_zoom.plot([fx], [fy], "x", color="red", ms=12, mew=2)
-        ax_zoom.set_aspect("equal", adjustable="box")
-        ax_zoom.set_title(f"close-up: {what} (x), alternatives grey, selected black")
-    ax3.set_xlabel("east [m]")
-    ax3.set_ylabel("north [m]")
-    ax3.set_zlabel("altitude AMSL [m]")
-    ax3.set_title(f"{report.get('scenario', '')}: 3D")
-    if summary.plans:
-        ax3.legend(fontsize=7, loc="upper left")
-    top = out_dir / f"{stem}_top.png"
-    persp = out_dir / f"{stem}_3d.png"
-    fig.savefig(top, dpi=110)
-    fig3.savefig(persp, dpi=110)
-    plt.close(fig)
-    plt.close(fig3)
-    summary.files += [top, persp]
-    summary.files.append(plot_altitude(report, out_dir, stem, summary))
-    for extra in (
-        plot_separation(report, out_dir, stem, summary),
-        plot_geofences(report, out_dir, stem, summary),
-    ):
-        if extra is not None:
-            summary.files.append(extra)
-    return summary
 
 
 class _Both:

@@ -192,7 +192,7 @@ def score(
     )[0]
 
 
-def score_many(
+def score_many(  # noqa: C901 - every candidate scored in one vectorised pass
     news: Sequence[LocalPlan],
     ref: Reference,
     *,
