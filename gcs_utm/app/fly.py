@@ -98,7 +98,7 @@ async def _fly_guarded(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyO
         if v.sys_id is None:
             raise FlyRefusedError("the operation has no sys_id: no vehicle to fly it")
         await _fly_one(hub, clock, v, out)
-    except FlyRefusedError as exc:
+    except (FlyRefusedError, MavlinkError) as exc:  # MavlinkError: the vehicle was lost
         out.error = str(exc)
         _log.error("fly %s (sys_id %s): %s", v.operation_id, v.sys_id, exc)
 
