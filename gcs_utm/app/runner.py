@@ -32,6 +32,7 @@ from gcs_utm.services.recorder import record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreWriter
 
+from .fly import FlyOutcome, fly_scenario
 from .report import Report, build_report
 from .wiring import (
     FrontendOptions,
@@ -68,6 +69,7 @@ class RunOptions:
     operator: str = OperatorMode.DASHBOARD
     reject_first: int = 0
     external: bool = False
+    fly: bool = False  # with external: upload, arm, take off and start each plan (fly.py)
     link: str | None = None
     mqtt: bool = False
     out_dir: Path = Path("runs")
@@ -83,6 +85,11 @@ class RunOptions:
             raise ValueError(
                 "RunOptions: fast time (speed max) runs the built-in vehicles on the UTM's "
                 "clock; external autopilots run on their own clock (use a speed factor)"
+            )
+        if self.fly and not self.external:
+            raise ValueError(
+                "RunOptions: fly makes external autopilots fly the plans; the built-in "
+                "vehicles already fly them (add external)"
             )
 
     @property
@@ -328,6 +335,7 @@ async def run_scenario(
     )
     wall0 = time.perf_counter()
     quit_requested = False
+    flown: list[FlyOutcome] = []
     try:
         async with contextlib.AsyncExitStack() as stack:
             if fleet is not None:
@@ -338,6 +346,9 @@ async def run_scenario(
                 tasks = start_service_tasks(tg, rt, frontends)
                 tasks.append(tg.create_task(_play_alerts(rt, scenario, lead_s), name="alerts"))
                 tasks.append(tg.create_task(_sample_tracks(rt, SAMPLE_PERIOD_S), name="samples"))
+                if options.fly:
+                    fly = fly_scenario(rt.hub, rt.clock, scenario, flown)
+                    tasks.append(tg.create_task(fly, name="fly"))
                 dash = next((t for t in tasks if t.get_name() == "dashboard"), None)
                 await _until(rt.clock, end_t_s, dash)
                 if frontends.dashboard is not None and dash is not None and not dash.done():
@@ -364,6 +375,8 @@ async def run_scenario(
     )
     store.close()
     data = report.to_json()
+    if options.fly:
+        data["fly"] = [o.to_json() for o in flown]
     report_path(options.out_dir, scenario.name).write_text(json.dumps(data, indent=1))
     if options.figures:
         from gcs_utm.dashboard.plot import export_all

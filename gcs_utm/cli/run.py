@@ -32,6 +32,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "and listen on --link (default: the first link of the config)",
     )
     run.add_argument(
+        "--fly",
+        action="store_true",
+        help="with --external: upload each operation's plan to the vehicle with its sys_id, "
+        "arm, take off and start the mission at the plan's first waypoint time",
+    )
+    run.add_argument(
         "--link",
         default=None,
         help="MAVLink connection string to listen on (default: an ephemeral "
@@ -172,6 +178,7 @@ def _options(args: argparse.Namespace, operator: str) -> Any:
         operator=operator,
         reject_first=args.reject_first,
         external=args.external,
+        fly=getattr(args, "fly", False),
         link=args.link,
         mqtt=args.mqtt,
         out_dir=args.out,
