@@ -45,6 +45,10 @@ from gcs_utm.ratelog import RateLimitedLog
 _log = logging.getLogger(__name__)
 
 _NAN = float("nan")
+# A reported altitude outside this range (m AMSL) is no altitude: the same plausibility bounds
+# as scenario and configuration input (gcs_utm.validation).
+_MIN_ALT_AMSL_M = -500.0
+_MAX_ALT_AMSL_M = 20_000.0
 _INF = float("inf")
 _MIN_UNIX_S = 1.5e9  # SYSTEM_TIME before 2017 means "no GNSS time yet"
 _JAM_RE = re.compile(r"jam", re.IGNORECASE)
@@ -375,8 +379,12 @@ class VehicleState:
         lat = lat_e7 / 1e7
         lon = lon_e7 / 1e7
         alt = alt_mm / 1000.0
-        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
-            return
+        if not (
+            -90.0 <= lat <= 90.0
+            and -180.0 <= lon <= 180.0
+            and _MIN_ALT_AMSL_M <= alt <= _MAX_ALT_AMSL_M
+        ):
+            return  # PX4 fills alt with INT32_MIN (-2147483.648 m) when it has no altitude
         self._last_fix = (lat, lon, alt)
         offset = self.offset_s  # capture_t_s(), inline
         put = self._lane_put

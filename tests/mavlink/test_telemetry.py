@@ -258,6 +258,15 @@ def test_clock_drift_followed_capture_never_after_receipt(rate: float) -> None:
     assert st.clock_jumps == 0
 
 
+def test_position_without_altitude_is_no_measurement() -> None:
+    """PX4 reports alt = INT32_MIN (-2147483.648 m) when it has no altitude: not a position."""
+    st, ev = _clock_state()
+    st.on_position((30_000, 473977000, 85456000, -(2**31), 0, 0, 0, 0, 0), 1000.0, ev)
+    assert ev.measurements == []
+    assert st.last_position is None
+    assert _report(st, ev, 30_020, 1000.02).alt_amsl_m == 488.0
+
+
 def test_clock_drift_beyond_the_bound_re_anchored() -> None:
     """A simulator that cannot keep its speed factor (its clock at 0.8 x ours): the rise is
     too slow, so whole windows arrive late and the offset is re-anchored (counted); reports
