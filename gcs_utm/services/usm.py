@@ -98,6 +98,12 @@ class UsmConfig:
         unit="s",
     )
     event_log_size: int = setting(500, "events kept for the dashboard", min=10)
+    threat_log_size: int = setting(
+        10_000,
+        "threat openings and closings kept in memory for the run report (the store keeps "
+        "every one); the oldest are dropped and counted beyond it",
+        min=10,
+    )
     upload_attempts: int = setting(
         2,
         "whole-mission upload attempts (each with the link's own per-item retries) before a "
@@ -194,7 +200,7 @@ class Usm(RecommendationLifecycle):
         # per vehicle: (system id, where it was first heard), see LinkHealth.vehicle
         self.health: dict[tuple[SysId, str], LinkHealth] = {}
         self.threats: dict[ThreatId, Threat] = {}
-        self.threat_log: list[Threat] = []
+        self.threat_log: deque[Threat] = deque(maxlen=self.config.threat_log_size)
         self.recommendations: dict[RecommendationId, RecommendationRecord] = {}
         self._telemetry: dict[str, TelemetryStats] = {}
         self._sources: dict[tuple[object, ...], SourceStats] = {}
@@ -213,6 +219,7 @@ class Usm(RecommendationLifecycle):
             "uploads_failed": 0,
             "adsb_sources_evicted": 0,
             "hazard_keys_evicted": 0,
+            "threat_log_dropped": 0,
         }
         cfg = self.config
         self.vehicle_ops = VehicleOps(
@@ -472,6 +479,8 @@ class Usm(RecommendationLifecycle):
             else:
                 self.threats[t.id] = t
             if first or t.status is ThreatStatus.CLOSED:
+                if len(self.threat_log) == self.threat_log.maxlen:
+                    self.counters["threat_log_dropped"] += 1
                 self.threat_log.append(t)
                 self._record(t)
                 uas = ",".join(t.uas_ids) or "-"

@@ -52,3 +52,13 @@ async def test_hazard_keys_capped_then_forgotten_after_cooldown() -> None:
     usm.on_hazard(HazardReport(kind=ThreatKind.ALERT_WARNING, t_s=100.0, source="late"))
     await usm.drain()
     assert len(usm._hazard_seen) == 1
+
+
+async def test_threat_log_bounded_with_the_dropped_counted() -> None:
+    """Spoofed MQTT alert ids each open a threat: memory keeps the newest, the store all."""
+    usm = Usm(Airspace(), ManualClock(0.0), config=UsmConfig(threat_log_size=CAP))
+    for i in range(SPOOFED // 4):
+        usm.on_hazard(HazardReport(kind=ThreatKind.ALERT_WARNING, t_s=i * 0.0001, source=f"x{i}"))
+    await usm.drain()
+    assert len(usm.threat_log) == CAP
+    assert usm.counters["threat_log_dropped"] == SPOOFED // 4 - CAP
