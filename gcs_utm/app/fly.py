@@ -36,6 +36,7 @@ MAV_CMD_NAV_TAKEOFF = 22
 MAV_CMD_COMPONENT_ARM_DISARM = 400
 DISCOVERY_GRACE_S = 60.0
 """Clock seconds after the first waypoint's time a vehicle may still be discovered."""
+UPLOAD_RETRY_S = 5.0  # clock seconds between two uploads of the plan
 HOME_WAIT_S = 20.0  # clock seconds to wait for HOME_POSITION after the first fix
 ARM_TRY_S = 60.0  # clock seconds of arming tries (pre-flight checks refuse after boot)
 ARM_RETRY_S = 2.0  # clock seconds between two arming tries
@@ -116,22 +117,12 @@ async def _fly_one(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutco
     _step(out, clock, "discovered with a position fix")
     if not await _wait_home(hub, clock, v.sys_id):
         _step(out, clock, f"no HOME_POSITION within {HOME_WAIT_S:.0f} s: going on without")
-    res = await hub.upload_plan(
-        v.sys_id,
-        v.plan,
-        home=v.home,
-        set_mission_mode=False,
-        climb_rate_mps=v.max_climb_rate_mps,
-    )
-    out.uploaded, out.verified = res.ok, res.verified
-    if not res.ok:
-        raise FlyRefusedError(f"plan upload failed ({res.failure}): {res.error}")
-    _step(out, clock, f"plan uploaded and verified ({res.items} items, current {res.current_seq})")
     st = hub.state(v.sys_id)
     pos = st.last_position
     ground_m = pos.alt_amsl_m if pos is not None else v.home.alt_amsl_m
     climb_m = max(0.0, first.alt_amsl_m - ground_m)
     takeoff_t_s = first.t_s - climb_m / TAKEOFF_CLIMB_MPS - TAKEOFF_MARGIN_S
+    await _upload(hub, clock, v, out, until_t_s=takeoff_t_s)
     await clock.sleep(max(0.0, takeoff_t_s - clock.now_s()))
     await _takeoff(hub, clock, v, out, ground_m=ground_m)
     await clock.sleep(max(0.0, first.t_s - clock.now_s()))
@@ -144,6 +135,32 @@ async def _fly_one(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutco
     out.started = True
     out.late_s = max(0.0, clock.now_s() - first.t_s)
     _step(out, clock, f"mission started ({out.late_s:.1f} s after the first waypoint's time)")
+
+
+async def _upload(
+    hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome, *, until_t_s: float
+) -> None:
+    """Upload the filed plan (readback verified, first waypoint current); a failed upload
+    (each is already tried twice) is tried again every ``UPLOAD_RETRY_S`` until the take-off
+    time: on a loaded machine a transfer can overrun its budget."""
+    assert v.sys_id is not None
+    while True:
+        res = await hub.upload_plan(
+            v.sys_id,
+            v.plan,
+            home=v.home,
+            set_mission_mode=False,
+            climb_rate_mps=v.max_climb_rate_mps,
+        )
+        out.uploaded, out.verified = res.ok, res.verified
+        if res.ok:
+            break
+        why = f"plan upload failed ({res.failure}): {res.error}"
+        if clock.now_s() + UPLOAD_RETRY_S >= until_t_s:
+            raise FlyRefusedError(why)
+        _step(out, clock, f"{why}; trying again")
+        await clock.sleep(UPLOAD_RETRY_S)
+    _step(out, clock, f"plan uploaded and verified ({res.items} items, current {res.current_seq})")
 
 
 async def _wait_fix(hub: MavlinkHub, clock: Clock, v: VehicleSetup, until_t_s: float) -> None:
