@@ -6,7 +6,8 @@ For each operation of the scenario, on the vehicle with the operation's ``sys_id
    waypoint made current; the mission mode is not set yet: the vehicle is on the ground);
 3. at the first waypoint's time minus the climb time, arm (retried while the autopilot's
    pre-flight checks refuse) and take off to the first waypoint's altitude (PX4: NAV_TAKEOFF
-   to an AMSL altitude; ArduPilot: GUIDED, then NAV_TAKEOFF above home);
+   to an AMSL altitude, then a fixed wing is sent to loiter at the first waypoint;
+   ArduPilot: GUIDED, then NAV_TAKEOFF above home);
 4. at the first waypoint's time, switch to mission mode and confirm it on HEARTBEAT.
 
 A vehicle that refuses a step is left as it is: the refusal is logged as one error naming the
@@ -26,7 +27,7 @@ from adapters.mavlink.transfer import MavlinkError
 from adapters.mavlink.vehicle import VehicleState
 from gcs_utm.clock import Clock
 from gcs_utm.messages import FlightMode
-from gcs_utm.model import Autopilot, SysId
+from gcs_utm.model import Autopilot, Command, CommandKind, SysId, VehicleKind
 from gcs_utm.scenario import Scenario
 from gcs_utm.scenario.types import VehicleSetup
 
@@ -221,7 +222,8 @@ async def _takeoff(
     any climb left). A vehicle that disarms or does not climb (an autopilot may accept the
     command and still stay on the ground right after boot) is armed and sent it again."""
     assert v.sys_id is not None
-    alt_amsl_m, first_t_s = v.plan.waypoints[0].alt_amsl_m, v.plan.waypoints[0].t_s
+    first = v.plan.waypoints[0]
+    alt_amsl_m, first_t_s = first.alt_amsl_m, first.t_s
     st = hub.state(v.sys_id)
     alt = alt_amsl_m if st.autopilot is not Autopilot.ARDUPILOT else alt_amsl_m - ground_m
     nan = math.nan
@@ -239,11 +241,30 @@ async def _takeoff(
         if not why:
             pos = st.last_position
             _step(out, clock, f"climbed to {pos.alt_amsl_m if pos else alt_amsl_m:.1f} m AMSL")
+            if st.kind is VehicleKind.FIXED_WING:
+                await _wait_at_first_waypoint(hub, clock, v, out)
             return
         _step(out, clock, why)
         if why.startswith("first waypoint"):
             return
     raise FlyRefusedError(f"take-off failed {TAKEOFF_TRIES} times: {why}")
+
+
+async def _wait_at_first_waypoint(
+    hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome
+) -> None:
+    """A fixed wing cannot wait above its home: after the take-off PX4 loiters where its climb
+    ended, hundreds of metres out on the runway heading, and would reach the first waypoint
+    late. Sent there (DO_REPOSITION, as a ground station's "go to"), it loiters around it."""
+    assert v.sys_id is not None
+    first = v.plan.waypoints[0]
+    res = await hub.send_command(
+        v.sys_id,
+        Command(kind=CommandKind.GOTO, operation_id=v.operation_id, target=first.position),
+    )
+    if not res.ok:
+        raise FlyRefusedError(f"go-to the first waypoint refused: {res.error}")
+    _step(out, clock, "sent to loiter at the first waypoint")
 
 
 async def _climb(
