@@ -6,8 +6,8 @@ For each operation of the scenario, on the vehicle with the operation's ``sys_id
    waypoint made current; the mission mode is not set yet: the vehicle is on the ground);
 3. at the first waypoint's time minus the climb time, arm (retried while the autopilot's
    pre-flight checks refuse) and take off to the first waypoint's altitude (PX4: NAV_TAKEOFF
-   to an AMSL altitude, then a fixed wing is sent to loiter at the first waypoint;
-   ArduPilot: GUIDED, then NAV_TAKEOFF above home);
+   to an AMSL altitude; ArduCopter: GUIDED, then NAV_TAKEOFF above home; ArduPlane: armed in
+   TAKEOFF mode); a fixed wing is then sent to loiter at the first waypoint;
 4. at the first waypoint's time, switch to mission mode and confirm it on HEARTBEAT.
 
 A vehicle that refuses a step is left as it is: the refusal is logged as one error naming the
@@ -35,6 +35,10 @@ _log = logging.getLogger(__name__)
 
 MAV_CMD_NAV_TAKEOFF = 22
 MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_DO_SET_MODE = 176
+ARDUPLANE_TAKEOFF = 13.0  # ArduPlane's TAKEOFF custom mode
+PLANE_SAFE_M = 30.0
+"""Height above ground from which an ArduPlane is sent on to its first waypoint."""
 DISCOVERY_GRACE_S = 60.0
 """Clock seconds after the first waypoint's time a vehicle may still be discovered."""
 UPLOAD_RETRY_S = 5.0  # clock seconds between two uploads of the plan
@@ -119,7 +123,9 @@ async def _fly_one(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutco
     if not await _wait_home(hub, clock, v.sys_id):
         _step(out, clock, f"no HOME_POSITION within {HOME_WAIT_S:.0f} s: going on without")
     st = hub.state(v.sys_id)
-    pos = st.last_position
+    # the vehicle's own home (ArduPilot's take-off altitude is relative to it); a first
+    # position can precede the autopilot's altitude origin (ArduPlane reported ~0 m AMSL)
+    pos = st.home or st.last_position
     ground_m = pos.alt_amsl_m if pos is not None else v.home.alt_amsl_m
     climb_m = max(0.0, first.alt_amsl_m - ground_m)
     takeoff_t_s = first.t_s - climb_m / TAKEOFF_CLIMB_MPS - TAKEOFF_MARGIN_S
@@ -190,8 +196,15 @@ async def _wait_home(hub: MavlinkHub, clock: Clock, sys_id: int) -> bool:
 
 async def _arm(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome) -> None:
     assert v.sys_id is not None
-    if hub.state(v.sys_id).autopilot is Autopilot.ARDUPILOT:
-        res = await hub.send_mode(v.sys_id, FlightMode.GUIDED)  # ArduPilot takes off in GUIDED
+    st = hub.state(v.sys_id)
+    if _arduplane(st):  # armed in TAKEOFF mode, it takes off (NAV_TAKEOFF is for quadplanes)
+        res = await hub.command_long(
+            v.sys_id, MAV_CMD_DO_SET_MODE, (1.0, ARDUPLANE_TAKEOFF, 0.0, 0.0, 0.0, 0.0, 0.0)
+        )
+        if not res.ok:
+            raise FlyRefusedError(f"TAKEOFF mode refused: {res.error}")
+    elif st.autopilot is Autopilot.ARDUPILOT:
+        res = await hub.send_mode(v.sys_id, FlightMode.GUIDED)  # ArduCopter takes off in GUIDED
         if not res.ok:
             raise FlyRefusedError(f"GUIDED refused: {res.error}")
     end_t_s = clock.now_s() + ARM_TRY_S
@@ -231,13 +244,16 @@ async def _takeoff(
     for attempt in range(1, TAKEOFF_TRIES + 1):
         if attempt == 1 or not st.armed:
             await _arm(hub, clock, v, out)
-        res = await hub.command_long(
-            v.sys_id, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, nan, nan, nan, alt)
-        )
-        if not res.ok:
-            raise FlyRefusedError(f"take-off refused: {res.error}")
+        if not _arduplane(st):
+            res = await hub.command_long(
+                v.sys_id, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, nan, nan, nan, alt)
+            )
+            if not res.ok:
+                raise FlyRefusedError(f"take-off refused: {res.error}")
         _step(out, clock, f"taking off to {alt_amsl_m:.1f} m AMSL (try {attempt})")
-        why = await _climb(clock, st, alt_amsl_m, ground_m, first_t_s)
+        # ArduPlane climbs to its own TKOFF_ALT: sent on from a safe height, it climbs the rest
+        climb_to_m = min(alt_amsl_m, ground_m + PLANE_SAFE_M) if _arduplane(st) else alt_amsl_m
+        why = await _climb(clock, st, climb_to_m, ground_m, first_t_s)
         if not why:
             pos = st.last_position
             _step(out, clock, f"climbed to {pos.alt_amsl_m if pos else alt_amsl_m:.1f} m AMSL")
@@ -248,6 +264,10 @@ async def _takeoff(
         if why.startswith("first waypoint"):
             return
     raise FlyRefusedError(f"take-off failed {TAKEOFF_TRIES} times: {why}")
+
+
+def _arduplane(st: VehicleState) -> bool:
+    return st.autopilot is Autopilot.ARDUPILOT and st.kind is VehicleKind.FIXED_WING
 
 
 async def _wait_at_first_waypoint(

@@ -10,11 +10,13 @@ COMMUNICATION_FAILURE threat, no link-loss geofence, no stale track, and capture
 bounded: never after their arrival, and at the end dated within 2 s of the vehicle's own clock
 (a fixed offset would lag ~80 s).
 
-The staleness limit is scaled with the speed factor: 15 simulated seconds are 1.9 s of wall
-time at 8x (the default 5 s would be 0.6 s, within a loaded machine's scheduling hiccups); a
-real vehicle at speed 1 keeps the default. At 12x (15 s = 1.25 s of wall time) a machine
-loaded by other jobs (load average 10-18 on 2 cores) had a 1.4 s stall: one false
-COMMUNICATION_FAILURE; PX4 then kept only 0.90 x the factor.
+The staleness limit is scaled with the speed factor: 30 simulated seconds are 3.75 s of wall
+time at 8x (the default 5 s would be 0.6 s). On the shared 2-core machine the runs were
+measured on (load average about 10 from other jobs), the worst capture delay over 30 minutes
+was 3.0 and 21.2 simulated s (0.4 and 2.65 s of wall time) in two runs: with a 15 s limit the
+second raised three false COMMUNICATION_FAILUREs from a scheduling stall, not from the link.
+At 12x PX4 kept only 0.90 x the factor under that load. A real vehicle at speed 1 keeps the
+default 5 s.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from tests.autopilot.pilot import PilotLink, mission_items, offset_deg
 
 SOAK_SPEED = 8.0  # PX4_SIM_SPEED_FACTOR and serve --speed
 SOAK_SIM_S = 1800.0
-STALE_AFTER_S = 15.0
+STALE_AFTER_S = 30.0
 
 
 @pytest.mark.timeout(420)
