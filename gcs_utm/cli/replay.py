@@ -20,6 +20,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from adapters.adsb.config import AdsbConfig
 from gcs_utm.cli.replay_inputs import Inputs, discover, first_t_s, replay_inputs
 from gcs_utm.cli.replay_pipeline import ReplayError, ReplayPipeline
 from gcs_utm.scenario import ScenarioError
@@ -41,15 +42,18 @@ async def replay_paths(
     speed: float | None = None,
     pipeline: ReplayPipeline | None = None,
     on_progress: Callable[[int], None] | None = None,
+    adsb: AdsbConfig | None = None,
     adsb_start_t_s: float | None = None,
 ) -> dict[str, Any]:
     """Replay ``paths`` (tlogs, captures, recorded folders) merged by time and return the
-    report. Raises :class:`ReplayError`."""
+    report; ``adsb`` configures the capture decoders (receiver position). Raises
+    :class:`ReplayError`."""
     return await replay_inputs(
         discover(paths),
         speed=speed,
         pipeline=pipeline,
         on_progress=on_progress,
+        adsb=adsb,
         adsb_start_t_s=adsb_start_t_s,
     )
 
