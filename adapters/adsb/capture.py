@@ -18,8 +18,8 @@ event time):
   the Beast framer reset at each new connection, exactly as the live feed decoded it: the
   measurements are the ones the live service had;
 - **SBS-1 without it**: a line's "message generated" date/time (fields 7-8, read as UTC) is
-  its receipt time; a line without one takes the previous line's time; a capture without any
-  time is refused (:class:`CaptureError`);
+  its receipt time; a line without one takes the previous line's time (the first time, for
+  lines before it); a capture without any time is refused (:class:`CaptureError`);
 - **Beast without it**: the receiver's 12 MHz MLAT counter gives times relative to the first
   frame: ``start_t_s + (ticks - first ticks) / 12 MHz``; a counter that goes backwards or
   stops (a receiver restart, a receiver that sends 0) keeps the previous frame's time and
@@ -39,7 +39,6 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
-from adapters.adsb.beast import BeastFramer
 from adapters.adsb.modes import ModeSDecoder
 from adapters.adsb.sbs import SbsDecoder, sbs_line_time
 from gcs_utm.model import Measurement
@@ -47,6 +46,8 @@ from gcs_utm.model import Measurement
 MLAT_HZ = 12_000_000.0  # dump1090/readsb Beast and AVR '@' timestamps: a 12 MHz counter
 MAX_LINE_BYTES = 4096  # longer than any SBS/AVR line: a stream without newlines is not text
 TIMES_SUFFIX = ".times"
+_BLOCK = 64 * 1024  # bytes read at a time: memory stays bounded whatever the capture's size
+_MAX_UNTIMED_HEAD = 10_000  # SBS lines waiting for a first date/time before giving up
 
 
 class CaptureKind(enum.Enum):
@@ -162,24 +163,26 @@ class CaptureCounters:
 
 
 def read_chunks(path: Path, counters: CaptureCounters | None = None) -> Iterator[Chunk]:
-    """The chunks of a capture piece recorded with its sidecar (see the module docstring).
-    Raises :class:`CaptureError` naming the sidecar line that is malformed."""
+    """The chunks of a capture piece recorded with its sidecar (see the module docstring),
+    read as they are handed on (memory: one chunk). Raises :class:`CaptureError` naming the
+    sidecar line that is malformed."""
     c = counters if counters is not None else CaptureCounters()
-    data = path.read_bytes()
     side = times_path(path)
+    size = path.stat().st_size
     start = 0
     t_s = 0.0
-    with side.open(encoding="ascii", errors="replace") as f:
+    with path.open("rb") as data, side.open(encoding="ascii", errors="replace") as f:
         for lineno, line in enumerate(f, 1):
-            t_s, end, new = _times_line(side, lineno, line, start, len(data))
+            t_s, end, new = _times_line(side, lineno, line, start, size)
             c.chunks += 1
             c.bytes += end - start
-            yield Chunk(t_s, data[start:end], new)
+            yield Chunk(t_s, data.read(end - start), new)
             start = end
-    if start < len(data):
-        c.untimed_tail_bytes += len(data) - start
-        c.bytes += len(data) - start
-        yield Chunk(t_s, data[start:], start == 0)
+        while tail := data.read(_BLOCK):
+            c.untimed_tail_bytes += len(tail)
+            c.bytes += len(tail)
+            yield Chunk(t_s, tail, start == 0)
+            start += len(tail)
 
 
 def _times_line(
@@ -216,6 +219,11 @@ class LineSplitter:
             self.overlong_lines += 1
             self._buf = b""
         return [raw.decode("ascii", "replace").rstrip("\r") for raw in lines]
+
+    def flush(self) -> list[str]:
+        """The last line of a stream that ended without its newline."""
+        rest, self._buf = self._buf, b""
+        return [rest.decode("ascii", "replace").rstrip("\r")] if rest.strip() else []
 
 
 class CaptureDecoder:
@@ -275,18 +283,33 @@ def iter_capture(
                 yield t_s, m
 
 
+def _blocks(path: Path) -> Iterator[bytes]:
+    with path.open("rb") as f:
+        while block := f.read(_BLOCK):
+            yield block
+
+
+def _lines(path: Path, counters: CaptureCounters) -> Iterator[str]:
+    """The lines of a text capture, split as the live reader splits them (the last line
+    may lack its newline)."""
+    splitter = LineSplitter()
+    for block in _blocks(path):
+        yield from splitter.feed(block)
+    yield from splitter.flush()
+    counters.overlong_lines += splitter.overlong_lines
+
+
 def _untimed(
     path: Path, decoder: CaptureDecoder, start_t_s: float
 ) -> Iterator[tuple[float, Measurement]]:
-    data = path.read_bytes()
     decoder.counters.chunks += 1
-    decoder.counters.bytes += len(data)
+    decoder.counters.bytes += path.stat().st_size
     if decoder.kind is CaptureKind.BEAST:
-        yield from _beast_by_mlat(data, decoder, start_t_s)
+        yield from _beast_by_mlat(path, decoder, start_t_s)
     elif decoder.kind is CaptureKind.SBS:
-        yield from _sbs_by_line_time(path, data, decoder, start_t_s)
+        yield from _sbs_by_line_time(path, decoder)
     else:
-        yield from _avr_by_mlat(data, decoder, start_t_s)
+        yield from _avr_by_mlat(path, decoder, start_t_s)
 
 
 class _MlatClock:
@@ -311,53 +334,62 @@ class _MlatClock:
 
 
 def _beast_by_mlat(
-    data: bytes, decoder: CaptureDecoder, start_t_s: float
+    path: Path, decoder: CaptureDecoder, start_t_s: float
 ) -> Iterator[tuple[float, Measurement]]:
     dec = decoder.decoder
     assert isinstance(dec, ModeSDecoder)
-    framer = BeastFramer()
     clock = _MlatClock(start_t_s, decoder.counters)
-    for frame in framer.feed(data):
-        t_s = clock.at(frame.mlat_ticks)
-        m = dec.feed_hex(frame.hex, t_s)
-        if m is not None:
-            yield t_s, m
-    # the framing counts go where the live decoder keeps them
-    for name in ("frames", "mode_ac", "status", "truncated", "bad_type", "skipped_bytes"):
-        setattr(dec.beast_counters, name, getattr(framer.counters, name))
+    for block in _blocks(path):
+        for frame in dec.beast_frames(block):  # framed by the decoder: counted where live
+            t_s = clock.at(frame.mlat_ticks)
+            m = dec.feed_hex(frame.hex, t_s)
+            if m is not None:
+                yield t_s, m
 
 
-def _lines_of(data: bytes) -> list[str]:
-    return [raw.decode("ascii", "replace").rstrip("\r") for raw in data.split(b"\n")]
-
-
-def _sbs_by_line_time(
-    path: Path, data: bytes, decoder: CaptureDecoder, start_t_s: float
-) -> Iterator[tuple[float, Measurement]]:
-    lines = _lines_of(data)
-    if not any(sbs_line_time(line) is not None for line in lines):
+def _sbs_by_line_time(path: Path, decoder: CaptureDecoder) -> Iterator[tuple[float, Measurement]]:
+    """Lines before the first line with a date/time take that first time."""
+    c = decoder.counters
+    t_s: float | None = None
+    pending: list[str] = []
+    for line in _lines(path, c):
+        own = sbs_line_time(line)
+        if own is None and line.strip():
+            c.untimed_lines += 1
+        if own is not None:
+            if t_s is None:  # the lines waiting for a first time get it
+                yield from _feed_lines(decoder, pending, own)
+                pending = []
+            t_s = own
+        if t_s is None:
+            if len(pending) >= _MAX_UNTIMED_HEAD:
+                break
+            pending.append(line)
+            continue
+        yield from _feed_lines(decoder, (line,), t_s)
+    if t_s is None:
         raise CaptureError(
             path,
-            "no SBS-1 line carries a date/time and there is no .times sidecar: "
-            "nothing to time the capture by",
+            "no SBS-1 line carries a date/time (in the first "
+            f"{_MAX_UNTIMED_HEAD} lines) and there is no .times sidecar: nothing to time "
+            "the capture by",
         )
-    t_s = start_t_s
+
+
+def _feed_lines(
+    decoder: CaptureDecoder, lines: Sequence[str], t_s: float
+) -> Iterator[tuple[float, Measurement]]:
     for line in lines:
-        own = sbs_line_time(line)
-        if own is not None:
-            t_s = own
-        elif line.strip():
-            decoder.counters.untimed_lines += 1
         m = decoder.feed_line(line, t_s)
         if m is not None:
             yield t_s, m
 
 
 def _avr_by_mlat(
-    data: bytes, decoder: CaptureDecoder, start_t_s: float
+    path: Path, decoder: CaptureDecoder, start_t_s: float
 ) -> Iterator[tuple[float, Measurement]]:
     clock = _MlatClock(start_t_s, decoder.counters)
-    for line in _lines_of(data):
+    for line in _lines(path, decoder.counters):
         text = line.strip()
         if text.startswith("@") and len(text) > 13:
             try:

@@ -45,6 +45,15 @@ def df11(icao: str) -> str:
     return (body + parity(body).to_bytes(3, "big")).hex().upper()
 
 
+def beast(frame_hex: str, mlat_ticks: int, signal: int = 0x80) -> bytes:
+    """One frame as dump1090 writes it on its Beast port: 0x1a, type '2' (short) or '3'
+    (long), 6-byte MLAT counter, signal byte, payload; every 0x1a of the body doubled."""
+    payload = bytes.fromhex(frame_hex)
+    body = mlat_ticks.to_bytes(6, "big") + bytes([signal]) + payload
+    kind = b"3" if len(payload) == 14 else b"2"
+    return b"\x1a" + kind + body.replace(b"\x1a", b"\x1a\x1a")
+
+
 def identification(icao: str, callsign: str) -> str:
     me = (4 << 51) | (0 << 48)  # TC 4, category 0
     for i, ch in enumerate(callsign.upper().ljust(8)[:8]):
