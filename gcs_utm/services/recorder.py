@@ -387,25 +387,28 @@ class LinkRecorder:
             else:
                 stream.write(t_s, data, new_connection=new_connection)
                 self.counters.feed_chunks += 1
-        except OSError as exc:
+        except Exception as exc:  # disk full, folder gone (OSError), or a bug: never raised
             self._fail(stream, exc)
 
-    def _fail(self, stream: _Stream, exc: OSError) -> None:
+    def _fail(self, stream: _Stream, exc: Exception) -> None:
         stream.failed = True
         self.counters.write_errors += 1
-        with contextlib.suppress(OSError):
+        with contextlib.suppress(Exception):
             stream.close()
+        what = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+        where = getattr(exc, "filename", None)
         text = (
-            f"recording of {stream.name} stopped: {exc.strerror or exc}"
-            f"{f' ({exc.filename})' if exc.filename else ''}; the service carries on"
+            f"recording of {stream.name} stopped: {what}"
+            f"{f' ({where})' if where else ''}; the service carries on"
         )
-        _log.error("%s", text)
+        _log.error("%s", text, exc_info=not isinstance(exc, OSError))
         self.failures.append(text)
         if self._on_failure is not None and len(self.failures) == 1:
-            if self._loop is not None and not self._loop.is_closed():
-                self._loop.call_soon_threadsafe(self._on_failure, text)
-            else:
+            if self._loop is None:
                 self._on_failure(text)
+            else:  # the service's event loop owns what on_failure touches
+                with contextlib.suppress(RuntimeError):  # that loop is already closed
+                    self._loop.call_soon_threadsafe(self._on_failure, text)
 
     def _run(self) -> None:
         try:
