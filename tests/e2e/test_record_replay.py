@@ -13,13 +13,15 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import shutil
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from adapters.adsb.config import AdsbConfig
-from gcs_utm.app import OperatorMode, RunOptions, Runtime, run_scenario
+from adapters.mavlink.config import MavlinkConfig
+from gcs_utm.app import OperatorMode, RunOptions, Runtime, run_scenario, serve
 from gcs_utm.cli.replay import scenario_pipeline
 from gcs_utm.cli.replay_inputs import discover, replay_inputs
 from gcs_utm.geo import haversine_m
@@ -109,3 +111,71 @@ async def test_recorded_run_replays_to_the_same_tracks(tmp_path: Path) -> None:
         assert got["alt_amsl_m"] == pytest.approx(want.alt_amsl_m, abs=tol_m), tid
     assert not report["tracks"][f"icao:{ICAO}"]["cooperative"]
     assert report["tracks"]["UAS1"]["cooperative"]
+
+
+async def test_serve_survives_its_recording_folder_vanishing(tmp_path: Path) -> None:
+    """Mid-run the recording folder disappears (as a full or unmounted disk would fail the
+    next file): the failure is logged and written to the USM's event log, and ``serve``
+    carries on tracking the feed."""
+    rec_dir = tmp_path / "rec"
+    sbs = SbsReceiver()
+    await sbs.start()
+    settings = dataclasses.replace(
+        Settings(),
+        mavlink=MavlinkConfig(links=("udpin:127.0.0.1:0",)),
+        adsb=AdsbConfig(
+            enabled=True, host="127.0.0.1", sbs_port=sbs.port, avr_port=0, beast_port=0
+        ),
+        record=RecordConfig(max_file_mb=0.001),  # a new file every few lines
+    )
+    stop = asyncio.Event()
+    seen: dict[str, Any] = {}
+
+    async def feed(rt: Runtime) -> None:
+        lon_deg = 8.5456
+        for i in range(400):
+            lon_deg += 0.0002
+            sbs.send(sbs_position(ICAO, 47.3977, lon_deg, 1500.0))
+            if i == 20:
+                shutil.rmtree(rec_dir)
+            failed = [e for e in rt.usm.events if e.kind == "recording"]
+            if failed and "updates" not in seen:
+                seen["event"] = failed[0].text
+                seen["updates"] = rt.tracking.tracker.tracks()[f"icao:{ICAO}"].updates
+            elif (
+                failed
+                and rt.tracking.tracker.tracks()[f"icao:{ICAO}"].updates > seen["updates"] + 5
+            ):
+                break  # still tracking after the failure
+            await asyncio.sleep(0.05)
+        seen["final"] = rt.tracking.tracker.tracks()[f"icao:{ICAO}"].updates
+        stop.set()
+
+    tasks: list[asyncio.Task[None]] = []
+
+    async def on_runtime(rt: Runtime) -> None:
+        tasks.append(asyncio.create_task(feed(rt)))
+
+    try:
+        code = await asyncio.wait_for(
+            serve(
+                settings,
+                db_path=tmp_path / "utm.sqlite",
+                operator=OperatorMode.NONE,
+                headless=False,
+                stop=stop,
+                on_runtime=on_runtime,
+                record_dir=rec_dir,
+            ),
+            timeout=40.0,
+        )
+    finally:
+        for t in tasks:
+            t.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await t
+        await sbs.close()
+    assert code == 0
+    assert "recording of adsb-sbs:127.0.0.1:" in seen["event"]
+    assert seen["event"].endswith("the service carries on")
+    assert seen["final"] > seen["updates"] + 5  # tracked on after the failure
