@@ -4,8 +4,9 @@ run through the same pipeline as live links and feeds (MAVLink telemetry decoder
 decoders -> Tracking -> Monitoring), with a progress bar on stderr and a JSON report.
 
 The pipeline: :mod:`gcs_utm.cli.replay_pipeline`; reading and merging the inputs:
-:mod:`gcs_utm.cli.replay_inputs`. Bad input: a missing path is exit 2, inputs without a
-single valid record (or a capture that cannot be timed) exit 1, one line on stderr.
+:mod:`gcs_utm.cli.replay_inputs`. Bad input, one line on stderr: a missing path, a file of
+unknown kind or a folder without recordings is exit 2; inputs without a single valid record
+(or a capture that cannot be timed) exit 1.
 """
 
 from __future__ import annotations
@@ -199,8 +200,12 @@ def _prepare(args: argparse.Namespace) -> tuple[Inputs, ReplayPipeline | None, A
             print(f"gcs-utm replay: {path}: no such file", file=sys.stderr)
             return 2
     try:
-        settings = load_settings(args.config)
         inputs = discover(paths)
+    except ReplayError as exc:  # an input that is no recording at all: a usage error
+        print(f"gcs-utm replay: {exc}", file=sys.stderr)
+        return 2
+    try:
+        settings = load_settings(args.config)
         pipeline = ReplayPipeline(
             link=f"tlog:{inputs.files[0].name}",
             mavlink=settings.mavlink,

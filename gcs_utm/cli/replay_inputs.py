@@ -102,7 +102,9 @@ def _folder(path: Path) -> tuple[list[Path], list[Feed]]:
         for (name, kind), pieces in sorted(groups.items(), key=lambda kv: kv[0][0])
     ]
     if not tlogs and not feeds:
-        raise ReplayError(path, "no .tlog or ADS-B capture (.sbs, .avr, .bin) in this folder")
+        raise ReplayError(
+            path, "is a directory without any .tlog or ADS-B capture (.sbs, .avr, .bin)"
+        )
     return tlogs, feeds
 
 

@@ -5,8 +5,9 @@ replay DIR`` (with the scenario, so the vehicle is associated with its operation
 the same tracks: the same track ids and last update times (within 1 s), the aircraft's last
 position within 1 cm (the replay decodes the recorded bytes at their recorded receipt times,
 so its measurements are the live ones; measured: 2e-5 m, the microsecond rounding of the
-times), the vehicle's within 0.5 m (the live service times telemetry by the vehicle's clock,
-the replay by record time; measured: 7-9 mm)."""
+times), the vehicle's within 5 m, one second of its flight at 5 m/s (the live service times
+telemetry by the vehicle's clock, the replay by record time, i.e. receipt: they differ by the
+receive delay; measured: 7-9 mm on an idle machine, 1.5 m with the whole suite running)."""
 
 from __future__ import annotations
 
@@ -102,7 +103,7 @@ async def test_recorded_run_replays_to_the_same_tracks(tmp_path: Path) -> None:
     live_feed = seen["rt"].surveillance.stats()[f"sbs:127.0.0.1:{sbs.port}"]
     assert feed["positions"] == live_feed["positions"] >= 20  # ~5 a simulated second
     assert feed["rejects"] == live_feed["rejects"] == 0
-    for tid, tol_m in ((f"icao:{ICAO}", 0.01), ("UAS1", 0.5)):
+    for tid, tol_m in ((f"icao:{ICAO}", 0.01), ("UAS1", 5.0)):
         got = report["tracks"][tid]["last_position"]
         want = live[tid]
         error_m = haversine_m(got["lat_deg"], got["lon_deg"], want.lat_deg, want.lon_deg)

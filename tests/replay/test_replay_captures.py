@@ -116,11 +116,11 @@ def test_bad_inputs_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert "no such file" in capsys.readouterr().err
     other = tmp_path / "notes.txt"
     other.write_text("hello")
-    assert main(["replay", str(SBS), str(other), "--no-progress"]) == 1
+    assert main(["replay", str(SBS), str(other), "--no-progress"]) == 2
     assert "unknown kind: expected .tlog, .sbs, .avr, .bin" in capsys.readouterr().err
     empty = tmp_path / "empty"
     empty.mkdir()
-    with pytest.raises(ReplayError, match=r"no \.tlog or ADS-B capture"):
+    with pytest.raises(ReplayError, match=r"is a directory without any \.tlog or ADS-B"):
         asyncio.run(replay_paths([empty]))
     bad = tmp_path / "feed.sbs"
     bad.write_text("MSG,3,1,1,A1B2C3,1,,,,,,3000,,,47.4,8.5,,,0,0,0,0\n")
