@@ -229,13 +229,14 @@ def start_ardupilot(
     home: tuple[float, float, float, float] = ARDUPILOT_DEFAULT_HOME,
     speed: float = 1.0,
     workdir: Path | None = None,
-    serial0: str | None = None,
+    defaults: tuple[Path, ...] = (),
+    extra_args: tuple[str, ...] = (),
 ) -> SitlProcess:
     """Start ArduPilot SITL instance ``instance`` (SYSID_THISMAV instance+1; MAVLink on TCP
     5760+10*instance). It waits for a client on that port before its clock starts.
-    ``home`` is (lat_deg, lon_deg, ground_amsl_m, heading_deg). ``serial0`` replaces that
-    port, e.g. ``udpclient:127.0.0.1:14550`` (sends to a ground station there, no wait);
-    SERIAL1 stays on TCP 5762+10*instance."""
+    ``home`` is (lat_deg, lon_deg, ground_amsl_m, heading_deg); ``defaults`` are parameter
+    files loaded after the vehicle's, ``extra_args`` more command-line options (e.g.
+    ``--serial5=sim:adsb``)."""
     if vehicle not in ARDUPILOT_VEHICLES:
         raise ValueError(
             f"ArduPilot vehicle must be one of {sorted(ARDUPILOT_VEHICLES)}, got {vehicle!r}"
@@ -254,14 +255,14 @@ def start_ardupilot(
                 "--speedup",
                 f"{speed:g}",
                 "--defaults",
-                str(ARDUPILOT_DIR / parm),
+                ",".join([str(ARDUPILOT_DIR / parm), *map(str, defaults)]),
                 "--home",
                 home_text,
                 "-I",
                 str(instance),
                 "--sysid",
                 str(instance + 1),
-                *(["--serial0", serial0] if serial0 else []),
+                *extra_args,
             ],
             cwd=wd,
             stdin=subprocess.DEVNULL,

@@ -125,7 +125,7 @@ def _fly(ardupilot: Callable[..., SitlProcess], tmp_path: Path, plans: Plans, ve
             vehicle=vehicle,
             home=(lat, lon, GROUND_M, 0.0),
             speed=SPEED,
-            serial0="udpclient:127.0.0.1:14550",
+            extra_args=("--serial0", "udpclient:127.0.0.1:14550"),
         )
         wait_tcp_listening(5762 + 10 * i)
         pilots[uas] = PilotLink(i, autopilot="ardupilot", tcp_port=5762 + 10 * i)
