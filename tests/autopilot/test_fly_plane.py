@@ -27,7 +27,7 @@ from tests.autopilot.pilot import PilotLink, Sample, local_m, offset_deg
 
 SPEED = 4.0  # PX4_SIM_SPEED_FACTOR; run --speed matches it
 LAT0, LON0, GROUND_M = PX4_DEFAULT_HOME
-START_S = 90.0  # the plane's first waypoint time: take-off and climb fit before it
+START_S = 120.0  # first waypoint time: take-off, climb and a slow upload (80 s) fit before
 # (sys_id, vehicle, home east/north m, cruise m/s, waypoints east/north/alt AGL m); the plane's
 # operational volume (100 m) holds the loiter it waits in at its first waypoint
 PLANS = {
@@ -72,7 +72,7 @@ waypoints = [{points}]
 [scenario]
 name = "fly_plane"
 description = "a PX4 SIH plane and a PX4 quad fly their filed plans (--external --fly)"
-duration_s = 215.0
+duration_s = 250.0
 
 [airspace]
 origin_lat_deg = {LAT0}
