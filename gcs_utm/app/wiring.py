@@ -136,8 +136,7 @@ class Runtime:
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
 
     def tracks(self) -> dict[TrackId, Track]:
-        tracks: dict[TrackId, Track] = self.tracking.snapshot()[0]
-        return tracks
+        return self.tracking.tracks_now()
 
 
 def build_runtime(
