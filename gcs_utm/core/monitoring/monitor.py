@@ -82,6 +82,9 @@ class _State:
     present: int = 0
     clear: int = 0
     threat: Threat | None = None
+    # The latest figures (observation, prediction, time) when they changed nothing material:
+    # the Threat object is built from them only when it is read (active(), closing).
+    pending: tuple[_Observation, PredictedTrajectories | None, float] | None = None
 
 
 @dataclass(slots=True)
@@ -115,7 +118,19 @@ class Monitor:
 
     # ---- public -------------------------------------------------------------------------
     def active(self) -> list[Threat]:
-        return [s.threat for s in self._states.values() if s.threat is not None]
+        return [self._current(s) for s in self._states.values() if s.threat is not None]
+
+    def _current(self, st: _State) -> Threat:
+        """The open threat of ``st`` with its latest figures."""
+        assert st.threat is not None
+        if st.pending is not None:
+            obs, pred, t = st.pending
+            old = st.threat
+            st.threat = self._make(
+                old.id, obs, old.detected_at_s, pred, updated=t, status=old.status
+            )
+            st.pending = None
+        return st.threat
 
     def cycle(self, snapshot: AirspaceSnapshot) -> list[Threat]:
         ev = self._evaluate(snapshot)
@@ -399,11 +414,15 @@ class Monitor:
                     st.threat = self._make(tid, obs, t, pred)
                     out.append(st.threat)
                 continue
-            changed = self._material_change(old, obs)
-            status = ThreatStatus.UPDATED if changed else old.status
-            st.threat = self._make(old.id, obs, old.detected_at_s, pred, updated=t, status=status)
-            if changed:
+            if self._material_change(st, obs):
+                status = ThreatStatus.UPDATED
+                st.threat = self._make(
+                    old.id, obs, old.detected_at_s, pred, updated=t, status=status
+                )
+                st.pending = None
                 out.append(st.threat)
+            else:
+                st.pending = (obs, pred, t)
         return out
 
     def _update_unseen(self, snapshot: AirspaceSnapshot, ev: _Evaluation) -> list[Threat]:
@@ -430,7 +449,8 @@ class Monitor:
             if st.threat is None:
                 del self._states[key]
             elif ended or st.clear >= cfg.close_cycles:
-                out.append(replace(st.threat, status=ThreatStatus.CLOSED, updated_at_s=t))
+                closed = self._current(st)
+                out.append(replace(closed, status=ThreatStatus.CLOSED, updated_at_s=t))
                 del self._states[key]
         return out
 
@@ -438,23 +458,33 @@ class Monitor:
     def _op_ids(key: Key) -> tuple[str, ...]:
         return (key[1], key[2]) if key[0] == "LOS" else (key[1],)
 
-    def _material_change(self, old: Threat, new: _Observation) -> bool:
-        """Whether the threat built from ``new`` would differ materially from ``old``."""
-        if old.kind is not new.kind:
+    def _material_change(self, st: _State, new: _Observation) -> bool:
+        """Whether ``new`` differs materially from the open threat's latest figures."""
+        assert st.threat is not None
+        if st.pending is not None:
+            kind, event, closest = (
+                st.pending[0].kind,
+                st.pending[0].event_t_s,
+                st.pending[0].closest_m,
+            )
+        else:
+            old = st.threat
+            kind, event, closest = old.kind, old.predicted_event_at_s, old.closest_approach_m
+        if kind is not new.kind:
             return True
-        if (old.predicted_event_at_s is None) != (new.event_t_s is None):
+        if (event is None) != (new.event_t_s is None):
             return True
         if (
-            old.predicted_event_at_s is not None
+            event is not None
             and new.event_t_s is not None
-            and abs(old.predicted_event_at_s - new.event_t_s) > self.config.period_s
-            and old.kind not in (ThreatKind.UAS_IN_CV, ThreatKind.UAS_OUT_OV)
+            and abs(event - new.event_t_s) > self.config.period_s
+            and kind not in (ThreatKind.UAS_IN_CV, ThreatKind.UAS_OUT_OV)
         ):
             return True
         return (
-            old.closest_approach_m is not None
+            closest is not None
             and new.closest_m is not None
-            and abs(old.closest_approach_m - new.closest_m) > self.config.separation_close_margin_m
+            and abs(closest - new.closest_m) > self.config.separation_close_margin_m
         )
 
     @staticmethod
