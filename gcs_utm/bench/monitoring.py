@@ -233,7 +233,8 @@ class _Setup:
             prediction=prediction,
         )
         self.monitor.cycle(snap)
-        self.found["threats"] = len(self.monitor.active())
+        # counted, not built: the service itself never reads them all each cycle
+        self.found["threats"] = self.monitor.open_count()
 
     def prepare_service(self) -> None:
         self.operations = {o.id: o for o in self.ops}

@@ -22,6 +22,7 @@ changes; ``active()`` always holds the latest figures.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -92,10 +93,24 @@ class _Evaluation:
     seen: dict[Key, _Observation] = field(default_factory=dict)
     # Keys whose condition is not met but not clear by the margin either (no close count).
     marginal: set[Key] = field(default_factory=set)
-    # Operations with a fresh track (conformance evidence) this cycle.
-    fresh: set[str] = field(default_factory=set)
-    # Operations and intruder track ids with a fresh prediction row (predictive evidence).
-    pred_fresh: set[str] = field(default_factory=set)
+    # Operations with a fresh track (conformance evidence) this cycle, and operations and
+    # intruder track ids with a fresh prediction row (predictive evidence): as collected,
+    # turned into sets only if a condition not seen this cycle asks (fresh_sets()).
+    fresh_parts: list[Sequence[str]] = field(default_factory=list)
+    pred_parts: list[Sequence[str]] = field(default_factory=list)
+    _sets: tuple[set[str], set[str]] | None = None
+
+    def fresh_sets(self) -> tuple[set[str], set[str]]:
+        """(operations with conformance evidence, ids with predictive evidence)."""
+        if self._sets is None:
+            fresh: set[str] = set()
+            pred: set[str] = set()
+            for part in self.fresh_parts:
+                fresh.update(part)
+            for part in self.pred_parts:
+                pred.update(part)
+            self._sets = (fresh, pred)
+        return self._sets
 
 
 class Monitor:
@@ -119,6 +134,10 @@ class Monitor:
     # ---- public -------------------------------------------------------------------------
     def active(self) -> list[Threat]:
         return [self._current(s) for s in self._states.values() if s.threat is not None]
+
+    def open_count(self) -> int:
+        """How many threats are open (without building them: see :meth:`active`)."""
+        return sum(1 for s in self._states.values() if s.threat is not None)
 
     def _current(self, st: _State) -> Threat:
         """The open threat of ``st`` with its latest figures."""
@@ -163,7 +182,6 @@ class Monitor:
         known = np.fromiter((o in ops for o in op_ids), bool, len(op_ids))
         usable = known & cols.cooperative
         fresh = np.flatnonzero(usable & ~cols.stale)
-        ev.fresh.update(str(op_ids[i]) for i in fresh.tolist())
         self._conformance(snapshot, cols, fresh, ev)
         pred = snapshot.prediction
         if pred is None or len(pred.track_ids) == 0:
@@ -205,8 +223,8 @@ class Monitor:
         rows_coop, rows_intr, col = self._prediction_rows(pred, cols, usable)
         # The operation of each cooperative prediction row, by position in rows_coop.
         op_of: list[OperationId] = [cols.operation_ids[i] for i in col[rows_coop].tolist()]
-        ev.pred_fresh.update(map(str, op_of))
-        ev.pred_fresh.update(str(pred.track_ids[i]) for i in rows_intr.tolist())
+        ev.pred_parts.append(op_of)
+        ev.pred_parts.append([pred.track_ids[i] for i in rows_intr.tolist()])
         if len(rows_coop) == len(pred.track_ids):
             pts = pred.points  # every row: no copy
         else:
@@ -323,7 +341,9 @@ class Monitor:
         cfg = self.config
         if not len(rows):
             return
-        ops = [snapshot.operations[cols.operation_ids[i]] for i in rows.tolist()]
+        fresh_ids = [cols.operation_ids[i] for i in rows.tolist()]
+        ev.fresh_parts.append(fresh_ids)
+        ops = [snapshot.operations[o] for o in fresh_ids]
         table, anchors, (fg, ovol, start, end) = self._conformance_table(ops)
         pos = cols.pos[rows]  # m
         ts = cols.t_s[rows]  # s
@@ -384,11 +404,12 @@ class Monitor:
 
     # ---- life cycle ---------------------------------------------------------------------
     def _fresh(self, key: Key, ev: _Evaluation) -> bool:
+        fresh, pred_fresh = ev.fresh_sets()
         if key[0] == "CONF":
-            return key[1] in ev.fresh
+            return key[1] in fresh
         if key[0] in ("INTR", "LOS"):
-            return key[1] in ev.pred_fresh and key[2] in ev.pred_fresh
-        return key[1] in ev.pred_fresh
+            return key[1] in pred_fresh and key[2] in pred_fresh
+        return key[1] in pred_fresh
 
     def _update(self, snapshot: AirspaceSnapshot, ev: _Evaluation) -> list[Threat]:
         out = self._update_seen(snapshot, ev)
