@@ -45,14 +45,22 @@ class FilingCheck:
         self._log_event = log_event
         self.conflicts: dict[OperationId, list[PlanConflict]] = {}
         """The conflicts found when each operation's current plan was filed."""
-        self.counters = {"checked": 0, "in_conflict": 0}
+        self.counters = {"checked": 0, "in_conflict": 0, "errors": 0}
         self._synced = False
 
     def __len__(self) -> int:
         return len(self._filed)
 
     def on_operation(self, op: Operation) -> None:
-        """An operation was filed or changed: (re)check its plan if it is new to the index."""
+        """An operation was filed or changed: (re)check its plan if it is new to the index.
+        A failure of the check is logged and counted; it never stops the filing."""
+        try:
+            self._on_operation(op)
+        except Exception:  # a bug here must not refuse a plan the airspace accepted
+            self.counters["errors"] += 1
+            _log.exception("strategic check of %s failed", op.id)
+
+    def _on_operation(self, op: Operation) -> None:
         self._sync(skip=op.id)
         if op.state in _OVER:
             if self._plan.pop(op.id, None) is not None:

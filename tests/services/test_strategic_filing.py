@@ -7,6 +7,8 @@ import dataclasses
 import sys
 from pathlib import Path
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).parents[1] / "monitoring"))
 from helpers import FRAME, operation
 from strategic_oracle import plan_vs_plans_allpairs
@@ -61,7 +63,7 @@ def test_each_filing_is_checked_against_the_filed_plans() -> None:
     airspace.replace_plan(later)
     assert check.conflicts["B"] == []
     airspace.set_state(b.id, OperationState.ACTIVE)
-    assert check.counters == {"checked": 3, "in_conflict": 1}
+    assert check.counters == {"checked": 3, "in_conflict": 1, "errors": 0}
     # L ends: it leaves the index, so C on L's line conflicts with nobody.
     airspace.set_state(loaded.id, OperationState.ENDED)
     airspace.add_operation(_line("C", 0.0, reverse=True))
@@ -89,3 +91,16 @@ def test_the_service_checks_a_plan_when_it_is_filed() -> None:
     rt.airspace.add_operation(_line("B", 0.0, reverse=True))
     texts = [e.text for e in rt.usm.events if e.kind == "strategic"]
     assert len(texts) == 1 and texts[0].startswith("B plan v1 conflicts with A")
+
+
+def test_a_failing_check_never_refuses_a_filing(monkeypatch: pytest.MonkeyPatch) -> None:
+    airspace = Airspace()
+    check = FilingCheck(FRAME, MonitoringConfig(), operations=lambda: airspace.operations)
+    airspace._on_operation = check.on_operation
+
+    def broken(*_a: object) -> None:
+        raise RuntimeError("bug")
+
+    monkeypatch.setattr(check._filed, "check", broken)
+    airspace.add_operation(_line("A", 0.0))
+    assert "A" in airspace.operations and check.counters["errors"] == 1
