@@ -26,7 +26,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "resolutions (JSON and markdown)",
     ),
     "plot": ("plot", "draw figures and GeoJSON/KML from a run report"),
-    "replay": ("replay", "replay a .tlog through tracking and monitoring and write a JSON report"),
+    "replay": (
+        "replay",
+        "replay tlogs, ADS-B captures or a --record folder through tracking and monitoring "
+        "and write a JSON report",
+    ),
     "run": (
         "run",
         "run a scenario end to end (vehicles, UTM services, dashboard) and write a report",
