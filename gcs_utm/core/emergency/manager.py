@@ -36,6 +36,7 @@ from gcs_utm.core.emergency.geofences import area, link_loss, suspend
 from gcs_utm.core.emergency.selection import (
     STAY_DETAIL,
     Selection,
+    TieredSelection,
     is_stay,
     select_by_priority,
     stay,
@@ -420,40 +421,12 @@ class EmergencyManager:
         snapshot = self._intended(snapshot, case)
         case.operations = dict(snapshot.operations)
         now = snapshot.t_s
-        cfg = self.config
         t = case.threat
-        options = self.td.resolve_loss_of_separation(
-            t,
-            snapshot,
-            start_t_s=self.plan_start(t, now),
-            lead_in_from_t_s=self.earliest_receipt(now),
-        )
-        for op_id, alts in options.items():
-            banned = case.excluded.get(op_id, set())
-            options[op_id] = [x for x in alts if x.maneuver not in banned]
-        ops = snapshot.operations
-        stays = {
-            k: stay(k, ops[k].plan)
-            for k, alts in options.items()
-            if k in ops and not any(x.maneuver is Maneuver.KEEP_PLAN for x in alts)
-        }
-        memo: dict[tuple[int, int], bool] = {}
-
-        def compatible(x: Alternative, y: Alternative) -> bool:
-            key = (id(x), id(y)) if id(x) < id(y) else (id(y), id(x))
-            if key not in memo:
-                memo[key] = self.td.compatible(x, y, snapshot)
-            return memo[key]
-
-        tiered = select_by_priority(
-            options,
-            {k: ops[k].priority for k in options if k in ops},
-            stays,
-            alpha=cfg.alpha,
-            beta=cfg.beta,
-            compatible=compatible,
-            max_nodes=cfg.max_combinations,
-        )
+        options, tiered, compatible = self._joint(case, snapshot, buffered=True)
+        if tiered is None:
+            # No combination keeps the vehicles' tracking tolerances free: the best one that
+            # keeps the bare minima beats no decision at all.
+            options, tiered, compatible = self._joint(case, snapshot, buffered=False)
         sel = None if tiered is None else tiered.selection
         detail = self._detail(options, sel, "loss of separation: charged cords + joint selection")
         if tiered is None:
@@ -481,6 +454,61 @@ class EmergencyManager:
             )
             d = d.merge(Decision(warnings=(msg,)))
         return d
+
+    def _joint(
+        self, case: Case, snapshot: AirspaceSnapshot, *, buffered: bool
+    ) -> tuple[
+        dict[OperationId, list[Alternative]],
+        TieredSelection | None,
+        Callable[[Alternative, Alternative], bool],
+    ]:
+        """TD's options for the case (with or without the tracking tolerances, see
+        ``TacticalDeconfliction.pair_minima``) and their joint selection by priority."""
+        now = snapshot.t_s
+        cfg = self.config
+        t = case.threat
+        self.td.tracking_buffers = buffered
+        try:
+            options = self.td.resolve_loss_of_separation(
+                t,
+                snapshot,
+                start_t_s=self.plan_start(t, now),
+                lead_in_from_t_s=self.earliest_receipt(now),
+            )
+            for op_id, alts in options.items():
+                banned = case.excluded.get(op_id, set())
+                options[op_id] = [x for x in alts if x.maneuver not in banned]
+            ops = snapshot.operations
+            stays = {
+                k: stay(k, ops[k].plan)
+                for k, alts in options.items()
+                if k in ops and not any(x.maneuver is Maneuver.KEEP_PLAN for x in alts)
+            }
+            memo: dict[tuple[int, int], bool] = {}
+
+            def compatible(x: Alternative, y: Alternative) -> bool:
+                key = (id(x), id(y)) if id(x) < id(y) else (id(y), id(x))
+                if key not in memo:
+                    was = self.td.tracking_buffers
+                    self.td.tracking_buffers = buffered  # also when called after the search
+                    try:
+                        memo[key] = self.td.compatible(x, y, snapshot)
+                    finally:
+                        self.td.tracking_buffers = was
+                return memo[key]
+
+            tiered = select_by_priority(
+                options,
+                {k: ops[k].priority for k in options if k in ops},
+                stays,
+                alpha=cfg.alpha,
+                beta=cfg.beta,
+                compatible=compatible,
+                max_nodes=cfg.max_combinations,
+            )
+        finally:
+            self.td.tracking_buffers = True
+        return options, tiered, compatible
 
     def _issue_joint(
         self,
