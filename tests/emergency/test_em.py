@@ -356,3 +356,24 @@ def test_config_rejects_unknown_actions_and_kinds() -> None:
     with pytest.raises(ValueError, match="unknown threat kind"):
         EmergencyConfig(policy={"ALIENS": "warn"})
     assert EmergencyConfig().beta > EmergencyConfig().alpha
+
+
+def test_when_no_combination_keeps_the_tracking_tolerances_the_bare_minima_decide() -> None:
+    # Head-on at a fixed altitude (no vertical room) with tolerances no lateral manoeuvre can
+    # keep (600 m each, beyond the 1000 m lateral limit): rather than escalating with
+    # nothing, EM searches again on the effective minima alone and recommends a plan.
+    from gcs_utm.envelope import implied
+
+    env = replace(implied(False, 10.0, 3.0), tracking_error_m=600.0)
+    snap, threat = sc.scenario_los_2uas()
+    ops = {
+        k: replace(o, envelope=env, min_alt_amsl_m=100.0, max_alt_amsl_m=100.0)
+        for k, o in snap.operations.items()
+    }
+    snap = replace(snap, operations=ops)
+    em = make_em()
+    d = em.on_threat(threat, snap)
+    assert not any("no conflict-free combination" in e for e in d.escalations)
+    moved = [r.selected for r in d.recommendations if r.selected is not None]
+    assert moved and all(x.maneuver is not Maneuver.KEEP_PLAN for x in moved)
+    assert em.td.tracking_buffers  # restored after the second search
