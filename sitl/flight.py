@@ -285,18 +285,31 @@ class Flight(VehicleCore):
         if mode in (HOLD, POSCTL, GUIDED):
             return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
         if mode == TAKEOFF:
-            alt = self._takeoff_alt
-            if self.k.alt_amsl_m >= alt - 0.5:
-                self._enter_mode(GUIDED if self.is_ardupilot else HOLD)
-                self.statustext(SEV_INFO, "Takeoff complete")
-                return self._mode_goal()
-            if self.is_fixed_wing:
-                # climb out straight ahead, far target along the heading
-                n = self.k.north_m + 1000.0 * math.cos(self.k.yaw_rad)
-                e = self.k.east_m + 1000.0 * math.sin(self.k.yaw_rad)
-                return self._goal(n, e, alt + 1.0, stop=False)
-            return self._goal(self._goal_ne[0], self._goal_ne[1], alt + 0.6, stop=True)
-        if mode == LOITER:  # ArduCopter LOITER at minimum RC throttle: straight down
+            return self._takeoff_goal()
+        if mode in (LOITER, LAND):
+            return self._descent_goal(mode)
+        if mode == RTL:
+            return self._rtl_goal()
+        if mode == MISSION:
+            return self._mission_goal()
+        return None
+
+    def _takeoff_goal(self) -> Goal | None:
+        alt = self._takeoff_alt
+        if self.k.alt_amsl_m >= alt - 0.5:
+            self._enter_mode(GUIDED if self.is_ardupilot else HOLD)
+            self.statustext(SEV_INFO, "Takeoff complete")
+            return self._mode_goal()
+        if self.is_fixed_wing:
+            # climb out straight ahead, far target along the heading
+            n = self.k.north_m + 1000.0 * math.cos(self.k.yaw_rad)
+            e = self.k.east_m + 1000.0 * math.sin(self.k.yaw_rad)
+            return self._goal(n, e, alt + 1.0, stop=False)
+        return self._goal(self._goal_ne[0], self._goal_ne[1], alt + 0.6, stop=True)
+
+    def _descent_goal(self, mode: str) -> Goal:
+        """LAND, or ArduCopter's LOITER at minimum RC throttle (straight down)."""
+        if mode == LOITER:
             return self._goal(
                 self._goal_ne[0],
                 self._goal_ne[1],
@@ -304,22 +317,16 @@ class Flight(VehicleCore):
                 stop=True,
                 descent=self.lim.descent_rate_mps,
             )
-        if mode == LAND:
-            descent = self.lim.descent_rate_mps * (1.7 if self._motor_failed else 1.0)
-            speed = self.lim.min_airspeed_mps if self.is_fixed_wing else self._speed()
-            return self._goal(
-                self._goal_ne[0],
-                self._goal_ne[1],
-                self.ground_alt_m - 1.0,
-                stop=True,
-                speed=speed,
-                descent=descent,
-            )
-        if mode == RTL:
-            return self._rtl_goal()
-        if mode == MISSION:
-            return self._mission_goal()
-        return None
+        descent = self.lim.descent_rate_mps * (1.7 if self._motor_failed else 1.0)
+        speed = self.lim.min_airspeed_mps if self.is_fixed_wing else self._speed()
+        return self._goal(
+            self._goal_ne[0],
+            self._goal_ne[1],
+            self.ground_alt_m - 1.0,
+            stop=True,
+            speed=speed,
+            descent=descent,
+        )
 
     def _rtl_goal(self) -> Goal:
         rtl_alt = max(self.k.alt_amsl_m, self.ground_alt_m + self.rtl_alt_rel_m)

@@ -386,32 +386,39 @@ class EmergencyManager:
 
     def _handle(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
         t = case.threat
-        now = snapshot.t_s
         a = case.action
         if a == "alternative_plans":
             return self._multi(case, snapshot)
-        if a in SINGLE_MANEUVERS:
-            d = Decision()
-            for op_id in t.uas_ids:
-                d = d.merge(self.single(case, op_id, snapshot, SINGLE_MANEUVERS[a]))
-            return d
         if a == "warn":
             msg = f"{t.kind.value}: {', '.join(t.uas_ids)} {t.message}".strip()
             return Decision(
-                warnings=(msg,), audit=(self.audit(now, "warn", t.id, {"message": msg}),)
+                warnings=(msg,), audit=(self.audit(snapshot.t_s, "warn", t.id, {"message": msg}),)
             )
-        if a == "vertical_avoidance":
-            d = Decision()
-            for op_id in t.uas_ids:
-                d = d.merge(self._intruder(case, op_id, snapshot))
-            return d
-        if a == "suspend_and_geofence":
-            return suspend(self, case, snapshot)
-        if a == "alert_and_geofence":
-            return link_loss(self, case, snapshot)
-        if a == "geofence_from_area":
-            return area(self, case, snapshot)
-        raise AssertionError(f"unhandled action {a!r}")  # EmergencyConfig validates actions
+        geofencing = {
+            "suspend_and_geofence": suspend,
+            "alert_and_geofence": link_loss,
+            "geofence_from_area": area,
+        }
+        if a in geofencing:
+            return geofencing[a](self, case, snapshot)
+        # one decision per UAS of the threat
+        if a in SINGLE_MANEUVERS:
+            maneuvers = SINGLE_MANEUVERS[a]
+
+            def per_uas(op_id: OperationId) -> Decision:
+                return self.single(case, op_id, snapshot, maneuvers)
+
+        elif a == "vertical_avoidance":
+
+            def per_uas(op_id: OperationId) -> Decision:
+                return self._intruder(case, op_id, snapshot)
+
+        else:
+            raise AssertionError(f"unhandled action {a!r}")  # EmergencyConfig validates actions
+        d = Decision()
+        for op_id in t.uas_ids:
+            d = d.merge(per_uas(op_id))
+        return d
 
     # -- multi-UAS
     def _multi(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
