@@ -682,3 +682,29 @@ def test_new_plans_keep_both_vehicles_tracking_tolerances_free() -> None:
     # switched off (EM's second search), the bare minima are what counts
     td.tracking_buffers = False
     assert td.pair_minima(a, b) == MON.effective_minima(10.0, 10.0)
+
+
+def test_a_lateral_deformation_goes_out_along_and_back_without_dips() -> None:
+    # A converged cord that dips between two peaks (two conflicts, or a crossing UAS whose
+    # demand moves along the cord) made plans that zigzag every few seconds: a multirotor
+    # slowed at each corner and fell 20-50 m behind its plan, into the loss it was to avoid.
+    from gcs_utm.core.deconfliction import cords as cd
+    from gcs_utm.core.deconfliction.deform import unimodal_hull
+
+    a = sc.make_operation("A", [(0, 0, 100), (2000, 0, 100)])
+    td = make_td()
+    lp = td.local_plan(a.plan)
+    grid = float(lp.t[0]) + 2.0 * np.arange(100, dtype=np.float64)
+    demand = np.zeros(100)
+    demand[[40, 44, 47, 52]] = [20.0, 12.0, 25.0, 9.0]
+    d = np.minimum(cd.envelope(demand, 3.6), 3.6 * np.arange(100))
+    assert (np.diff(np.sign(np.diff(d))) != 0).sum() > 3  # the cord zigzags
+    hull = unimodal_hull(d)
+    assert np.all(hull >= d) and float(hull.max()) == float(d.max())
+    assert float(np.abs(np.diff(hull)).max()) <= float(np.abs(np.diff(d)).max()) + 1e-9
+    new = td.deform(a, lp, grid, d, cd.AXIS_LATERAL, 1)
+    # the plan flies east along n = 0, so its lateral offset is n (left is north): it
+    # rises, then falls (one turn back, not one per dip)
+    step = np.diff(new.n)
+    falls = np.flatnonzero(step < -1e-6)
+    assert falls.size and not (step[falls[0] :] > 1e-6).any()

@@ -30,7 +30,9 @@ def deformed(
     envelope: PerformanceEnvelope,
     max_speed_factor: float,
 ) -> LocalPlan:
-    """The plan ``lp`` displaced by ``sign * d`` (on ``grid``) along ``axis``, re-timed."""
+    """The plan ``lp`` displaced by ``sign * d`` (on ``grid``) along ``axis``, re-timed. The
+    displacement flown is :func:`unimodal_hull` of ``d``: out, along, back."""
+    d = unimodal_hull(d)
     times = _kink_times(lp, grid, d)
     be, bn, bz = lp.coords(times)
     disp = sign * np.interp(times, grid, d)
@@ -72,6 +74,22 @@ def deformed(
         xz = np.append(xz, lp.z[-1])
         t = np.append(t, t[-1] + dt_back)
     return LocalPlan(xe, xn, xz, t)
+
+
+def unimodal_hull(d: FloatArray) -> FloatArray:
+    """The smallest displacement at least ``d`` that only grows up to its maximum and only
+    shrinks after it: ``min(running max from the start, running max from the end)``. A
+    converged cord can dip between two peaks (two conflicts, or a crossing UAS whose demand
+    moves along the cord), and every dip is two more corners a short leg apart: a multirotor
+    slows down at each and falls metres behind its plan (time its mission's speeds never make
+    up), a fixed wing cannot turn inside them. The hull keeps the cord's slope limit (a
+    running maximum of a slope-limited profile is slope-limited) and at least the separation
+    the cord found (Monitoring verifies the plan either way)."""
+    if d.shape[0] < 3:
+        return d
+    left = np.maximum.accumulate(d)
+    right = np.maximum.accumulate(d[::-1])[::-1]
+    return np.asarray(np.minimum(left, right), dtype=np.float64)
 
 
 def _kink_times(lp: LocalPlan, grid: FloatArray, d: FloatArray) -> FloatArray:
