@@ -377,3 +377,25 @@ def test_when_no_combination_keeps_the_tracking_tolerances_the_bare_minima_decid
     moved = [r.selected for r in d.recommendations if r.selected is not None]
     assert moved and all(x.maneuver is not Maneuver.KEEP_PLAN for x in moved)
     assert em.td.tracking_buffers  # restored after the second search
+
+
+def test_a_conflict_between_two_unchanged_neighbours_does_not_block_the_decision() -> None:
+    # A crosses B; C flies 20 m beside B (their own conflict, another threat) and is drawn
+    # into A-B's problem as a neighbour. B and C may not move. Requiring B's and C's
+    # unchanged plans to be compatible made every combination fail: nothing moved and A flew
+    # into B. Only the threat's own pair, and every changed plan, must be conflict-free.
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)])
+    b = sc.make_operation("B", [(0, -1000, 100), (0, 1000, 100)], priority=2000)
+    c = sc.make_operation("C", [(20, -1000, 100), (20, 1000, 100)], priority=2000)
+    snap = sc.snapshot([a, b, c])
+    em = make_em()
+    d = em.on_threat(sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"]), snap)
+    assert not d.escalations
+    (rec,) = [r for r in d.recommendations if r.operation_id == "A"]
+    assert rec.selected is not None and rec.selected.plan is not None
+    assert rec.selected.maneuver is not Maneuver.KEEP_PLAN
+    # A's new plan is clear of both B and C
+    mon = MonitoringConfig()
+    from gcs_utm.core.monitoring.strategic import plan_vs_plans
+
+    assert plan_vs_plans(rec.selected.plan, a, [b, c], sc.FRAME, mon) == []

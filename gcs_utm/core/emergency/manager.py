@@ -492,8 +492,18 @@ class EmergencyManager:
                 if k in ops and not any(x.maneuver is Maneuver.KEEP_PLAN for x in alts)
             }
             memo: dict[tuple[int, int], bool] = {}
+            pair = set(t.uas_ids)
 
             def compatible(x: Alternative, y: Alternative) -> bool:
+                if (
+                    x.maneuver is Maneuver.KEEP_PLAN
+                    and y.maneuver is Maneuver.KEEP_PLAN
+                    and not {x.operation_id, y.operation_id} <= pair
+                ):
+                    # Two unchanged plans outside this threat's pair: their conflict, if
+                    # any, is another threat's, and this decision neither causes nor can
+                    # fix it (requiring it made every combination fail, and nothing moved).
+                    return True
                 key = (id(x), id(y)) if id(x) < id(y) else (id(y), id(x))
                 if key not in memo:
                     was = self.td.tracking_buffers
