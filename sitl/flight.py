@@ -381,7 +381,8 @@ class Flight(VehicleCore):
             return self._goal(n, e, alt, stop=True)  # mission finished: stay on the last point
         stop = last_nav or hold_s > 0 or it.command in (mp.CMD_LOITER_UNLIM, mp.CMD_LOITER_TIME)
         goal = self._goal(n, e, alt, stop=stop)
-        if self.is_fixed_wing:
+        if self.is_fixed_wing and it.command == mp.CMD_WAYPOINT and self._item_reached_at is None:
+            # on the way to a waypoint (a hold at it, and a loiter item, circle the point)
             goal.line_from_ne = self._leg_start(n, e)
         return goal
 

@@ -72,7 +72,8 @@ class Goal:
     descent_rate_mps: float | None = None  # override (forced descent)
     # Fixed wing in a mission: the start (north, east) of the leg that ends at the point. The
     # aircraft then tracks the line from there (L1 / NPFG path following), as PX4 and
-    # ArduPlane do, instead of flying straight at the point from wherever it is.
+    # ArduPlane do, instead of flying straight at the point from wherever it is; a point to
+    # stop at is loitered around once reached (the goal then has no line).
     line_from_ne: tuple[float, float] | None = None
 
 
@@ -181,7 +182,7 @@ def step_fixed_wing(
     dist = math.hypot(dn, de)
     r = lim.loiter_radius_m
     max_rate = G_MPS2 * math.tan(math.radians(lim.max_bank_deg)) / max(v, 1.0)
-    if goal.stop and dist < 3.0 * r:
+    if goal.stop and goal.line_from_ne is None and dist < 3.0 * r:
         # Loiter clockwise: tangent course plus a radial correction proportional to the error.
         radial = math.atan2(-de, -dn)  # bearing from centre to aircraft
         tangent = radial + math.pi / 2.0

@@ -82,3 +82,16 @@ def test_a_waypoint_too_close_to_turn_onto_is_passed_not_circled() -> None:
     assert e_end > 500.0, (n_end, e_end)  # well along the last leg, not circling the corner
     # back on the line after the corner it could not make (before the final loiter)
     assert max(_dist_to_path((n, e), pts) for _, n, e in track if 300.0 < e < 540.0) < 3.0
+
+
+def test_the_last_waypoint_is_flown_to_on_the_line_then_loitered_around() -> None:
+    # PX4 and ArduPlane fly to the mission's last waypoint and loiter around it once there;
+    # leaving the line three loiter radii (12 s) early put two fixed wings whose plans end
+    # near each other on overlapping circles before their plans ended.
+    pts = [(0.0, 0.0), (800.0, 0.0)]
+    track = _fly(pts, 60.0)
+    before = [(n, e) for t, n, e in track if n < 800.0 - 20.0 and t < 38.0]
+    assert max(abs(e) for _, e in before) < 1.0
+    # then it circles the point at its loiter radius (80 m by default)
+    late = [math.hypot(n - 800.0, e) for t, n, e in track if t > 55.0]
+    assert all(60.0 < r < 100.0 for r in late), late
