@@ -38,7 +38,6 @@ from gcs_utm.model import (
     PositionLane,
     ThreatKind,
     VehicleKind,
-    telemetry_measurement,
 )
 from gcs_utm.ratelog import RateLimitedLog
 
@@ -105,8 +104,7 @@ class VehicleState:
         self.armed = False
         self.landed: bool | None = None
         # link statistics
-        self.first_t_s = t_s
-        self.last_heard_t_s = t_s
+        self.first_t_s = self.last_heard_t_s = t_s
         self.received = 0
         self.lost = 0
         self.duplicates = 0
@@ -144,11 +142,12 @@ class VehicleState:
         self._eph_bad = False
         # the last reported (lat, lon, alt AMSL); a Position is built only for a hazard report
         self._last_fix: tuple[float, float, float] | None = None
-        # positions go to ``lane`` as entries when there is one, else as Measurements
-        self._lane_put = lane.values.extend if lane is not None else None
-        self._lane_index = (
-            lane.register(LaneSource(key.sys_id, key.link, self.tag)) if lane is not None else 0
-        )
+        # Positions become entries of ``lane`` (the sink's); without one, of a lane of this
+        # vehicle's own, each entry handed on at once as the Measurement it stands for.
+        self._own_lane = lane is None
+        self._lane = PositionLane() if lane is None else lane
+        self._lane_put = self._lane.values.extend
+        self._lane_index = self._lane.register(LaneSource(key.sys_id, key.link, self.tag))
 
     # --- link statistics ------------------------------------------------------------------
     def count_frame(self, seq: int, t_s: float) -> None:
@@ -387,36 +386,20 @@ class VehicleState:
             return  # PX4 fills alt with INT32_MIN (-2147483.648 m) when it has no altitude
         self._last_fix = (lat, lon, alt)
         offset = self.offset_s  # capture_t_s(), inline
-        put = self._lane_put
-        if put is not None:  # the same report as the Measurement below, as a lane entry
-            eph = self.eph_m
-            epv = self.epv_m
-            put(
-                (
-                    self._lane_index,
-                    t_s,
-                    t_s if offset is None else offset + boot_ms / 1000.0,
-                    lon, lat, alt, vx / 100.0, vy / 100.0, vz / 100.0,
-                    _NAN if eph is None else eph,
-                    _NAN if epv is None else epv,
-                )
-            )  # fmt: skip
-            return
-        ev.on_measurement(
-            telemetry_measurement(
-                t_s if offset is None else offset + boot_ms / 1000.0,
+        eph = self.eph_m
+        epv = self.epv_m
+        self._lane_put(
+            (
+                self._lane_index,
                 t_s,
-                lat,
-                lon,
-                alt,
-                (vx / 100.0, vy / 100.0, vz / 100.0),
-                self.eph_m,
-                self.epv_m,
-                self.sys_id,
-                self.key.link,
-                self.tag,
+                t_s if offset is None else offset + boot_ms / 1000.0,
+                lon, lat, alt, vx / 100.0, vy / 100.0, vz / 100.0,
+                _NAN if eph is None else eph,
+                _NAN if epv is None else epv,
             )
-        )
+        )  # fmt: skip
+        if self._own_lane:
+            ev.on_measurement(self._lane.measurement(self._lane.take(), 0))
 
     def on_gps_raw(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
         cfg = self.cfg
