@@ -37,8 +37,9 @@ from typing import TYPE_CHECKING
 from gcs_utm.bench.timing import summary
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Callable, Iterable, Sequence
 
+    from adapters.mavlink import MavlinkHub
     from gcs_utm.clock import Clock
     from gcs_utm.model import LaneSource, Measurement, Track
     from gcs_utm.services.usm import Usm
@@ -297,34 +298,54 @@ def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int 
                 for f, a in zip(frames, addrs, strict=True):
                     receive(f, a)
             else:
-                step = pipe.tracking.step
-                flush = hub.flush_positions
-                burst = cfg.udp_batch
-                for i, (f, a) in enumerate(zip(frames, addrs, strict=True)):
-                    receive(f, a)
-                    if (i + 1) % burst == 0:
-                        flush()  # as the UDP transport does after each burst of reads
-                    if (i + 1) % tracker_batch == 0:
-                        flush()
-                        await step()
-                flush()
-                await step()
+                await _push_tracked(
+                    hub, receive, pipe, zip(frames, addrs, strict=True), tracker_batch
+                )
             if r:  # the first run discovers the vehicles (and creates the tracks): warm-up
                 out.append((time.perf_counter() - t0) * 1000.0)
         await hub.close()
         if pipe is not None:
             pipe.close()
         got = sink.n if isinstance(sink, _Sink) else pipe.n if pipe is not None else 0
-        if got != n * (runs + 1):
-            raise RuntimeError(f"{got} measurements of {n * (runs + 1)}")
-        if pipe is not None:
-            if pipe.updated != pipe.n:
-                raise RuntimeError(f"{pipe.updated} track updates of {pipe.n} measurements")
-            if pipe.tracks != vehicles:
-                raise RuntimeError(f"{pipe.tracks} tracks for {vehicles} vehicles")
+        _check_inprocess(got, n * (runs + 1), pipe, vehicles)
         return out
 
     return asyncio.run(go())
+
+
+async def _push_tracked(
+    hub: MavlinkHub,
+    receive: Callable[[bytes, tuple[str, int]], None],
+    pipe: _Pipeline,
+    datagrams: Iterable[tuple[bytes, tuple[str, int]]],
+    tracker_batch: int,
+) -> None:
+    """Receive ``datagrams``, handing positions over after every ``udp_batch`` (as the UDP
+    transport does after each burst of reads) and stepping tracking every ``tracker_batch``."""
+    step = pipe.tracking.step
+    flush = hub.flush_positions
+    burst = hub.config.udp_batch
+    for i, (f, a) in enumerate(datagrams):
+        receive(f, a)
+        if (i + 1) % burst == 0:
+            flush()
+        if (i + 1) % tracker_batch == 0:
+            flush()
+            await step()
+    flush()
+    await step()
+
+
+def _check_inprocess(got: int, expected: int, pipe: _Pipeline | None, vehicles: int) -> None:
+    """Every datagram became a measurement, and with tracking a track update, one track per
+    vehicle; RuntimeError otherwise."""
+    if got != expected:
+        raise RuntimeError(f"{got} measurements of {expected}")
+    if pipe is not None:
+        if pipe.updated != pipe.n:
+            raise RuntimeError(f"{pipe.updated} track updates of {pipe.n} measurements")
+        if pipe.tracks != vehicles:
+            raise RuntimeError(f"{pipe.tracks} tracks for {vehicles} vehicles")
 
 
 @dataclass
