@@ -97,8 +97,8 @@ _ARDUPILOT_STREAM_MSGS = (
 
 _LANE_HANDOVER = 16 * LANE_STRIDE
 """Lane entries are handed to the sink after each read burst, and also once this many
-numbers (16 reports) wait: a burst of 64 datagrams takes 1-3 ms to read, and tracking should
-not wait for its end (see MavlinkHub.flush_positions)."""
+numbers (16 reports) wait: tracking should not wait for the end of a long burst of reads (see
+MavlinkHub.flush_positions)."""
 
 
 _DROPS_REPORT_S = 60.0  # a summary of refused and forgotten senders at most this often
@@ -188,8 +188,9 @@ class MavlinkHub(Commands):
         self.raw_tap = raw_tap
         self.counters: HubCounters = HubCounters()
         # A sink that takes positions in columns (the USM: ``position_lane`` and
-        # ``on_position_lane``) gets GLOBAL_POSITION_INT as lane entries, handed over after
-        # each read (a UDP burst, a stream chunk) instead of one Measurement call per report.
+        # ``on_position_lane``) gets GLOBAL_POSITION_INT as entries of its lane, handed over
+        # after each read (a UDP burst, a stream chunk); other sinks get each entry as its
+        # Measurement at once (VehicleState.on_position).
         self._lane: PositionLane | None = getattr(sink, "position_lane", None)
         self._lane_ready: Callable[[], None] | None = getattr(sink, "on_position_lane", None)
         if self._lane is None or self._lane_ready is None:
@@ -677,7 +678,7 @@ class MavlinkHub(Commands):
             await asyncio.sleep(self.config.heartbeat_period_s)
 
     async def _health_loop(self) -> None:
-        chunk = 50  # vehicles per loop turn (~0.5 ms here): a large fleet must not stall reading
+        chunk = 50  # vehicles per loop turn: a large fleet must not stall reading
         while True:
             await asyncio.sleep(self.config.health_period_s)
             self.evict_idle()
