@@ -292,10 +292,10 @@ class Parser:
         while i < n:
             head = _header(data, i, n)
             if head is None:
-                break  # pymavlink classifies (or verifies a signed frame) from here
+                break  # garbage or a frame cut short: pymavlink classifies it from here
             end, mid, hdr, plen, sys_id, comp_id, seq = head
             ft = FAST_TYPES.get(mid)
-            if ft is None:
+            if ft is None:  # another message, or a signed frame: pymavlink decodes this one
                 out.extend(self.frames(data[i:end], datagram=True))
             else:
                 crc = data[end - 2] | (data[end - 1] << 8)
