@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, NewType
@@ -419,7 +419,7 @@ class PositionLane:
         self.values.clear()
         return out
 
-    def measurement(self, values: list[float], at: int) -> Measurement:
+    def measurement(self, values: Sequence[float], at: int) -> Measurement:
         """The :class:`Measurement` that the entry starting at ``values[at]`` stands for."""
         (i, rcv, cap, lon, lat, alt, vn, ve, vd, eph, epv) = values[at : at + LANE_STRIDE]
         src = self.sources[int(i)]

@@ -142,8 +142,8 @@ class VehicleState:
         self._eph_bad = False
         # the last reported (lat, lon, alt AMSL); a Position is built only for a hazard report
         self._last_fix: tuple[float, float, float] | None = None
-        # Positions become entries of ``lane`` (the sink's); without one, of a lane of this
-        # vehicle's own, each entry handed on at once as the Measurement it stands for.
+        # Positions become entries of ``lane`` (the sink's); without one, each entry is handed
+        # on at once as the Measurement it stands for (a lane of this vehicle's own names it).
         self._own_lane = lane is None
         self._lane = PositionLane() if lane is None else lane
         self._lane_put = self._lane.values.extend
@@ -388,18 +388,18 @@ class VehicleState:
         offset = self.offset_s  # capture_t_s(), inline
         eph = self.eph_m
         epv = self.epv_m
-        self._lane_put(
-            (
-                self._lane_index,
-                t_s,
-                t_s if offset is None else offset + boot_ms / 1000.0,
-                lon, lat, alt, vx / 100.0, vy / 100.0, vz / 100.0,
-                _NAN if eph is None else eph,
-                _NAN if epv is None else epv,
-            )
+        entry = (
+            self._lane_index,
+            t_s,
+            t_s if offset is None else offset + boot_ms / 1000.0,
+            lon, lat, alt, vx / 100.0, vy / 100.0, vz / 100.0,
+            _NAN if eph is None else eph,
+            _NAN if epv is None else epv,
         )  # fmt: skip
         if self._own_lane:
-            ev.on_measurement(self._lane.measurement(self._lane.take(), 0))
+            ev.on_measurement(self._lane.measurement(entry, 0))
+        else:
+            self._lane_put(entry)
 
     def on_gps_raw(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
         cfg = self.cfg
