@@ -157,6 +157,7 @@ class _Link:
     encoder: wire.Encoder | None = None
     peers: dict[Address, float] = field(default_factory=dict)  # vehicles' addresses
     seen: dict[Address | None, float] = field(default_factory=dict)  # any sender's last chunk
+    datagram: bool = False  # UDP: each chunk a datagram, parsed on its own
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -268,7 +269,7 @@ class MavlinkHub(Commands):
         while name in self._links:
             n += 1
             name = f"{base}#{n}"
-        link = _Link(name=name, transport=transport)
+        link = _Link(name=name, transport=transport, datagram=transport.datagram)
         link.encoder = wire.Encoder(self.config.gcs_sys_id, self.config.gcs_comp_id)
         self._links[name] = link
         try:
@@ -392,10 +393,8 @@ class MavlinkHub(Commands):
         link.seen[addr] = t
         parser = link.parsers.get(addr) or self._new_parser(link, addr)
         before = link.counters.rejects
-        if link.transport.datagram:
-            frames = parser.feed_frames(data)
-        else:
-            frames = parser.frames(data, datagram=False)
+        # one datagram: the fast decoder (pymavlink for the rest); a stream chunk: pymavlink
+        frames = parser.feed_frames(data) if link.datagram else parser.frames(data, datagram=False)
         if link.counters.rejects != before:
             self._sync_bad(link)
             _log.debug("bad frame on %s from %s: %s", link.name, addr, link.counters.last_error)
@@ -405,7 +404,7 @@ class MavlinkHub(Commands):
             except Exception:  # a handler bug must not kill the link
                 c.handler_errors += 1
                 _log.exception("handler failed on %s", wire.msg_name(f.msg_id))
-        if not link.transport.datagram or len(self._lane_values) >= _LANE_HANDOVER:
+        if not link.datagram or len(self._lane_values) >= _LANE_HANDOVER:
             # a UDP link's transport calls it after each burst, and within a long one here
             self.flush_positions()
 
@@ -444,7 +443,9 @@ class MavlinkHub(Commands):
             st = self._new_state(link, addr, sys_id, comp_id, t)
             if st is None:
                 return
-        self._heard(link, addr, st, seq, t)
+        st.count_frame(seq, t)  # link statistics
+        if addr is not None:
+            link.peers[addr] = t  # where to reply
         handler = self._handlers.get(mid)
         if handler is not None:
             reboots = st.reboots
@@ -481,14 +482,6 @@ class MavlinkHub(Commands):
         box = self._mailbox.get(id(st))
         if box is not None:
             box.put_nowait(m)
-
-    def _heard(
-        self, link: _Link, addr: Address | None, st: VehicleState, seq: int, t: float
-    ) -> None:
-        """A frame from ``st`` at ``addr``: link statistics, and where to reply."""
-        st.count_frame(seq, t)
-        if addr is not None:
-            link.peers[addr] = t
 
     def _new_state(
         self, link: _Link, addr: Address | None, sys_id: int, comp_id: int, t: float
