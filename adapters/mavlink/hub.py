@@ -191,7 +191,7 @@ class MavlinkHub(Commands):
         # A sink that takes positions in columns (the USM: ``position_lane`` and
         # ``on_position_lane``) gets GLOBAL_POSITION_INT as entries of its lane, handed over
         # after each read (a UDP burst, a stream chunk); other sinks get each entry as its
-        # Measurement at once (VehicleState.on_position).
+        # Measurement at once (VehicleState.on_global_position).
         self._lane: PositionLane | None = getattr(sink, "position_lane", None)
         self._lane_ready: Callable[[], None] | None = getattr(sink, "on_position_lane", None)
         if self._lane is None or self._lane_ready is None:

@@ -360,18 +360,13 @@ class VehicleState:
         return new
 
     def on_global_position(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
-        if isinstance(m, tuple):  # the fast path's named tuple is in wire order
-            self.on_position(m, t_s, ev)
+        """GLOBAL_POSITION_INT -- the fast decoder's named tuple (any tuple of its fields in
+        wire order) or a pymavlink message: a position report for tracking."""
+        if isinstance(m, tuple):
+            boot_ms, lat_e7, lon_e7, alt_mm, _, vx, vy, vz, _ = m
         else:
-            self.on_position(
-                (m.time_boot_ms, m.lat, m.lon, m.alt, m.relative_alt, m.vx, m.vy, m.vz, m.hdg),
-                t_s,
-                ev,
-            )
-
-    def on_position(self, f: wire.GlobalPosition, t_s: float, ev: Events) -> None:
-        """GLOBAL_POSITION_INT, its fields in wire order: a measurement for tracking."""
-        boot_ms, lat_e7, lon_e7, alt_mm, _, vx, vy, vz, _ = f
+            boot_ms, lat_e7, lon_e7, alt_mm = m.time_boot_ms, m.lat, m.lon, m.alt
+            vx, vy, vz = m.vx, m.vy, m.vz
         if lat_e7 == 0 and lon_e7 == 0:
             return  # no estimate yet
         self.boot_time(boot_ms, t_s)

@@ -139,10 +139,6 @@ _V2 = 0xFD
 _V1 = 0xFE
 _IFLAG_SIGNED = 0x01
 
-GlobalPosition = tuple[int, int, int, int, int, int, int, int, int]
-"""GLOBAL_POSITION_INT fields in wire order: time_boot_ms, lat, lon, alt, relative_alt, vx,
-vy, vz, hdg (the order of the fast path's named tuple)."""
-
 
 _Header = tuple[int, int, int, int, int, int, int]
 """A frame's header as the fast path reads it: (end, msg_id, payload offset, payload length,
