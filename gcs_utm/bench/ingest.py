@@ -1,11 +1,12 @@
-"""MAVLink ingest: GLOBAL_POSITION_INT datagrams through a udpin link into Measurements and
-tracks.
+"""MAVLink ingest: GLOBAL_POSITION_INT datagrams through a udpin link into position reports
+and tracks.
 
 End to end (``ingest_socket``): a sender *process* offers a fixed rate (``--offered-rate``,
 default 30,000 msg/s; 0 = as fast as it can) from 4 sockets (sysids 1..250 on each: 1,000
-vehicles) to 127.0.0.1; the hub (this process, one core) turns them into Measurements. The
+vehicles) to 127.0.0.1; the hub (this process, one core) turns them into position reports
+(entries of a counting sink's lane, the form the USM takes them in). The
 sender paces in 1 ms slots and reports what it really sent and how fast (``sent_per_s``: on a
-loaded box it may fall short of the offer). Reported: delivered = measurements,
+loaded box it may fall short of the offer). Reported: delivered = position reports,
 ``delivered_per_s`` = delivered / the sender's sending time, ``lost`` = sent - delivered with
 the kernel's own count of receive-buffer drops for the socket (/proc/net/udp) and the
 effective receive buffer (getsockopt). ``ingest_socket_tracked``: the same into tracks through
@@ -13,10 +14,10 @@ the app's receive path (hub -> USM -> tracking service -> tracker, :class:`_Pipe
 one process. Latency (``ingest_latency_10k``): the sender paces 10,000 msg/s; latency = end of
 the ``Tracker.ingest`` that used a measurement - its receipt time, stamped when its datagram
 was read (receipt-to-track), p99 over all messages of a run. In-process: the link's receiver on
-pre-encoded datagrams without a socket, fast path vs pymavlink for everything
-(``fast_decode`` false), the per-core decode + dispatch cost; ``ingest_inprocess_tracked``
-adds the app's receive path with a tracking step every 3,000 datagrams (0.1 s at 30,000
-msg/s): datagram to updated track on one core."""
+pre-encoded datagrams without a socket, the fast decoder vs pymavlink for everything
+(``fast_decode`` false), the per-core decode + dispatch cost into the counting sink;
+``ingest_inprocess_tracked`` adds the app's receive path with a tracking step every 3,000
+datagrams (0.1 s at 30,000 msg/s): datagram to updated track on one core."""
 
 from __future__ import annotations
 
@@ -144,9 +145,23 @@ def _kernel_drops(port: int) -> int | None:
 
 
 class _Sink:
+    """Counts what the hub delivers: position reports as entries of its lane, as the USM
+    takes them, each with its latency from receipt to hand-over."""
+
     def __init__(self) -> None:
+        from gcs_utm.model import PositionLane
+
         self.n = 0
         self.lat: list[float] = []
+        self.position_lane = PositionLane()
+
+    def on_position_lane(self) -> None:
+        from gcs_utm.model import LANE_STRIDE
+
+        now = time.time()
+        receipts = self.position_lane.take()[1::LANE_STRIDE]
+        self.n += len(receipts)
+        self.lat.extend([now - t for t in receipts])
 
     def on_measurement(self, m: object) -> None:
         now = time.time()
@@ -297,6 +312,7 @@ def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int 
             if pipe is None:
                 for f, a in zip(frames, addrs, strict=True):
                     receive(f, a)
+                hub.flush_positions()
             else:
                 await _push_tracked(
                     hub, receive, pipe, zip(frames, addrs, strict=True), tracker_batch
