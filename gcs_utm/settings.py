@@ -21,6 +21,7 @@ from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.tracking.config import TrackingConfig
 from gcs_utm.dashboard.config import DashboardConfig
 from gcs_utm.preflight import check_settings
+from gcs_utm.services.record_config import RecordConfig
 from gcs_utm.services.usm import UsmConfig
 from gcs_utm.store.config import StoreConfig
 
@@ -55,6 +56,7 @@ class Settings:
     mqtt: MqttConfig = _section(MqttConfig, "mqtt")
     store: StoreConfig = _section(StoreConfig, "store")
     dashboard: DashboardConfig = _section(DashboardConfig, "dashboard")
+    record: RecordConfig = _section(RecordConfig, "record")
 
 
 SECTIONS: dict[str, type[Any]] = {
@@ -69,6 +71,7 @@ SECTIONS: dict[str, type[Any]] = {
     "mqtt": MqttConfig,
     "store": StoreConfig,
     "dashboard": DashboardConfig,
+    "record": RecordConfig,
 }
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from gcs_utm.clock import Clock, RealClock, ScaledClock
 from gcs_utm.geo import LocalFrame
-from gcs_utm.services.recorder import record_links
+from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store, StoreWriter
 
@@ -43,6 +43,8 @@ async def serve(
     """Long-running service: links from config, persistent store; restart resumes. Runs until
     SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
     than real time: the service's clock then advances ``speed`` simulated seconds per second."""
+    if record_dir is not None:  # refused before anything starts (RecordError)
+        check_folder(record_dir, settings.record)
     clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
     frame = LocalFrame(
         settings.airspace.origin_lat_deg,
@@ -55,7 +57,13 @@ async def serve(
     reader.close()
     store = Persistence(StoreWriter(db_path, settings.store))
     rt = build_runtime(settings, clock, frame, store)
-    recorder = record_links(rt.hub, record_dir)
+    recorder = record_links(
+        rt.hub,
+        record_dir,
+        settings.record,
+        surveillance=rt.surveillance,
+        on_failure=lambda text: rt.usm.log_event("recording", text),
+    )
     rt.airspace.load(operations, geofences)
     rt.tracking.set_operations(operations)
     _log.info(
