@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, NewType
@@ -691,6 +691,6 @@ class AirspaceSnapshot:
 
     t_s: float
     operations: dict[OperationId, Operation]
-    tracks: dict[TrackId, Track]
+    tracks: Mapping[TrackId, Track]
     geofences: tuple[Geofence, ...]
     prediction: PredictedTrajectories | None = None
