@@ -15,7 +15,7 @@ from gcs_utm.clock import Clock, RealClock, ScaledClock
 from gcs_utm.geo import LocalFrame
 from gcs_utm.services.recorder import record_links
 from gcs_utm.settings import Settings
-from gcs_utm.store import Store, StoreWriter
+from gcs_utm.store import StoreWriter, describe, open_store
 
 from .wiring import (
     FrontendOptions,
@@ -49,17 +49,22 @@ async def serve(
         settings.airspace.origin_lon_deg,
         settings.airspace.ground_elevation_amsl_m,
     )
-    reader = Store(db_path)
+    # [store] url (a shared PostgreSQL database) replaces the SQLite file when set
+    location: str | Path = settings.store.url or db_path
+    reader = open_store(location, busy_timeout_s=settings.store.busy_timeout_s)
     operations = reader.load_operations()
     geofences = reader.load_geofences(active_only=True)
     reader.close()
-    store = Persistence(StoreWriter(db_path, settings.store))
+    store = Persistence(StoreWriter(location, settings.store))
     rt = build_runtime(settings, clock, frame, store)
     recorder = record_links(rt.hub, record_dir)
     rt.airspace.load(operations, geofences)
     rt.tracking.set_operations(operations)
     _log.info(
-        "resumed %d operations and %d geofences from %s", len(operations), len(geofences), db_path
+        "resumed %d operations and %d geofences from %s",
+        len(operations),
+        len(geofences),
+        describe(location),
     )
     for link in settings.mavlink.links:
         await rt.hub.add_link(link)
