@@ -134,6 +134,13 @@ class StoreBase:
     def integrity_check(self) -> str:
         raise NotImplementedError
 
+    # the database's clock in POSIX seconds (leases expire on it, not on an instance's clock)
+    _now_sql = ""
+
+    def now_unix_s(self) -> float:
+        """The database server's wall clock, POSIX seconds: one clock for every instance."""
+        return float(self._conn.execute(self._now_sql).fetchone()[0])
+
     def close(self) -> None:
         self._conn.close()
 
@@ -542,6 +549,8 @@ TABLES = frozenset(
         "answers",
         "audit",
         "lives",
+        "regions",
+        "region_leases",
     }
 )
 

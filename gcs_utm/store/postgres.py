@@ -82,6 +82,7 @@ class PgStore(StoreBase):
     session read-only (the schema must already be current)."""
 
     _conn: _PgConnection
+    _now_sql = "SELECT extract(epoch FROM clock_timestamp())::float8"
 
     def __init__(
         self, url: str, *, readonly: bool = False, connect_timeout_s: float = 10.0

@@ -95,6 +95,24 @@ MIGRATIONS: tuple[str, ...] = (
     ALTER TABLE threats ADD COLUMN epoch INTEGER NOT NULL DEFAULT 0;
     ALTER TABLE recommendations ADD COLUMN epoch INTEGER NOT NULL DEFAULT 0;
     """,
+    # 3: regions of a cluster (docs/scale-out.md): the region map every instance shares (one
+    # row per region, its definition as JSON) and the lease by which one instance owns each
+    # region (holder = instance name and life; generation counts changes of holder, a fencing
+    # number; times are the database's clock, so the instances' clocks need not agree).
+    """
+    CREATE TABLE regions (
+        id TEXT PRIMARY KEY,
+        doc TEXT NOT NULL
+    );
+    CREATE TABLE region_leases (
+        region_id TEXT PRIMARY KEY,
+        holder TEXT NOT NULL,
+        epoch INTEGER NOT NULL,
+        generation INTEGER NOT NULL,
+        acquired_unix_s REAL NOT NULL,
+        expires_unix_s REAL NOT NULL
+    );
+    """,
 )
 
 # The same schema in PostgreSQL, migration for migration (number n here is number n above):
@@ -184,5 +202,19 @@ PG_MIGRATIONS: tuple[str, ...] = (
     );
     ALTER TABLE threats ADD COLUMN epoch INTEGER NOT NULL DEFAULT 0;
     ALTER TABLE recommendations ADD COLUMN epoch INTEGER NOT NULL DEFAULT 0;
+    """,
+    """
+    CREATE TABLE regions (
+        id TEXT PRIMARY KEY,
+        doc TEXT NOT NULL
+    );
+    CREATE TABLE region_leases (
+        region_id TEXT PRIMARY KEY,
+        holder TEXT NOT NULL,
+        epoch INTEGER NOT NULL,
+        generation INTEGER NOT NULL,
+        acquired_unix_s DOUBLE PRECISION NOT NULL,
+        expires_unix_s DOUBLE PRECISION NOT NULL
+    );
     """,
 )

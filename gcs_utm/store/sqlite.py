@@ -25,6 +25,7 @@ class Store(StoreBase):
     must already exist and be migrated)."""
 
     _begin_sql = "BEGIN IMMEDIATE"
+    _now_sql = "SELECT (julianday('now') - 2440587.5) * 86400.0"
 
     def __init__(
         self,
