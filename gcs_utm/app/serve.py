@@ -6,16 +6,20 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import signal
+import socket
 import sys
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 from gcs_utm.clock import Clock, RealClock, ScaledClock
+from gcs_utm.cluster.node import ClusterNode
+from gcs_utm.cluster.regions import RegionError
 from gcs_utm.geo import LocalFrame
 from gcs_utm.services.recorder import record_links
 from gcs_utm.settings import Settings
-from gcs_utm.store import StoreWriter, describe, open_store
+from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
 
 from .wiring import (
     FrontendOptions,
@@ -29,6 +33,39 @@ from .wiring import (
 _log = logging.getLogger(__name__)
 
 
+async def join_cluster(
+    rt: Runtime, location: str | Path, stop: asyncio.Event, failed: list[str]
+) -> ClusterNode:
+    """This runtime as a cluster member: checks the region map (a differing one is refused);
+    the member task starts with the service tasks."""
+    settings = rt.settings.cluster
+    instance = settings.instance or f"{socket.gethostname()}-{os.getpid()}"
+
+    def fail(why: str) -> None:
+        failed.append(why)
+        stop.set()
+
+    node = ClusterNode(
+        location,
+        settings,
+        instance=instance,
+        epoch=rt.store.epoch,
+        frame=rt.frame,
+        clock=rt.clock,
+        airspace=rt.airspace,
+        tracking=rt.tracking,
+        usm=rt.usm,
+        record=rt.store.record,
+        on_fail=fail,
+    )
+    try:
+        await node.member.start()
+    except RegionError as exc:
+        await node.member.close()
+        raise StoreError(str(exc)) from exc
+    return node
+
+
 async def serve(
     settings: Settings,
     *,
@@ -39,10 +76,13 @@ async def serve(
     on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
     speed: float = 1.0,
     record_dir: Path | None = None,
+    cluster: bool = False,
 ) -> int:
     """Long-running service: links from config, persistent store; restart resumes. Runs until
     SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
-    than real time: the service's clock then advances ``speed`` simulated seconds per second."""
+    than real time: the service's clock then advances ``speed`` simulated seconds per second.
+    ``cluster``: a member of several instances sharing the ``[store] url`` database
+    (docs/scale-out.md); returns 3 when a region is lost (fail-stop)."""
     clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
     frame = LocalFrame(
         settings.airspace.origin_lat_deg,
@@ -51,8 +91,11 @@ async def serve(
     )
     # [store] url (a shared PostgreSQL database) replaces the SQLite file when set
     location: str | Path = settings.store.url or db_path
+    if cluster and not is_postgres(location):
+        raise StoreError("serve --cluster: set [store] url to the shared postgresql:// database")
     reader = open_store(location, busy_timeout_s=settings.store.busy_timeout_s)
-    operations = reader.load_operations()
+    # a cluster member's operations come with the regions it gains (gcs_utm.cluster.node)
+    operations = [] if cluster else reader.load_operations()
     geofences = reader.load_geofences(active_only=True)
     reader.close()
     store = Persistence(StoreWriter(location, settings.store))
@@ -70,6 +113,8 @@ async def serve(
         await rt.hub.add_link(link)
     frontends = attach_frontends(rt, FrontendOptions(operator=operator, headless=headless))
     stop = stop or asyncio.Event()
+    failed: list[str] = []
+    node = await join_cluster(rt, location, stop, failed) if cluster else None
     if on_runtime is not None:
         await on_runtime(rt)
     loop = asyncio.get_running_loop()
@@ -79,6 +124,8 @@ async def serve(
     try:
         async with asyncio.TaskGroup() as tg:
             tasks = start_service_tasks(tg, rt, frontends)
+            if node is not None:
+                tasks.append(tg.create_task(node.member.run(), name="cluster"))
             for t in tasks:
                 if t.get_name() == "dashboard":
                     t.add_done_callback(lambda _t: stop.set())
@@ -94,5 +141,5 @@ async def serve(
         if recorder is not None:
             recorder.close()
         store.close()
-    print("gcs-utm serve: stopped", file=sys.stderr)
-    return 0
+    print("gcs-utm serve: stopped", *failed, file=sys.stderr)
+    return 3 if failed else 0

@@ -85,6 +85,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar="DIR",
         help="record every MAVLink link (received and sent) as a .tlog file in DIR",
     )
+    serve.add_argument(
+        "--cluster",
+        action="store_true",
+        help="one of several instances sharing the [store] url PostgreSQL database: owns "
+        "the [cluster] region, takes over orphaned ones (docs/scale-out.md)",
+    )
     group = serve.add_mutually_exclusive_group()
     group.add_argument("--auto-accept", action="store_true")
     group.add_argument("--auto-reject", action="store_true")
@@ -319,6 +325,7 @@ def _serve(args: argparse.Namespace) -> int:
                 headless=headless,
                 speed=args.speed,
                 record_dir=args.record,
+                cluster=args.cluster,
             )
         )
     except StoreError as exc:  # a folder, a file that is not a store, a newer schema

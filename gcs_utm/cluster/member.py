@@ -90,6 +90,10 @@ class ClusterMember:
         loop = asyncio.get_running_loop()
         return await loop.run_in_executor(self._pool, lambda: fn(self._store()))
 
+    async def read(self, fn: Callable[[StoreBase], object]) -> object:
+        """Run ``fn`` on the member's connection (off the loop)."""
+        return await self._call(fn)
+
     async def start(self) -> None:
         """Check (or file) the region map; raises RegionError when the store's differs."""
         await self._call(lambda s: leases_.publish_map(s, self.map))
