@@ -9,6 +9,9 @@ throughput on SQLite and PostgreSQL, and broker throughput of region traffic mes
   at once and flushed: the writer's capacity, what one instance can persist.
 - ``cluster.store_decisions`` (per backend): must-keep audit rows committed per second, each
   awaited (one commit round trip each when nothing else is queued).
+- ``cluster.store_tracks_shared``: ``--writers`` processes (instances), each with its own
+  writer and its own track ids, writing to the one PostgreSQL database at once: the rows per
+  second all of them commit together (what a shared store gives N instances).
 - ``cluster.broker``: a mosquitto on loopback (when installed), one publisher and one
   subscriber: region traffic messages (``--tracks-per-msg`` tracks in the existing traffic
   encoding) through the broker per second, QoS 0.
@@ -60,6 +63,25 @@ asyncio.run(main())
 """
 
 
+_WRITER = """
+import sys, time
+from gcs_utm.bench.cluster import _track
+from gcs_utm.store import StoreConfig, StoreWriter
+url, k, tracks, batches = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+w = StoreWriter(url, StoreConfig(queue_size=10000))
+data = [[_track(k * 1_000_000 + i, float(b)) for i in range(tracks)] for b in range(batches)]
+w.write_tracks(data[0]); w.flush(60)
+print("ready", flush=True)
+sys.stdin.readline()
+t0 = time.perf_counter()
+for batch in data[1:]:
+    assert w.write_tracks(batch) is not None
+w.flush(600)
+print(time.perf_counter() - t0, flush=True)
+w.close()
+"""
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--url", default="", help="postgresql:// URL (default: a private server)")
     p.add_argument("--runs", type=int, default=3, help="failovers timed")
@@ -68,6 +90,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tracks", type=int, default=1000, help="tracks per store batch")
     p.add_argument("--batches", type=int, default=30, help="store batches per backend")
     p.add_argument("--decisions", type=int, default=300, help="awaited audit rows per backend")
+    p.add_argument("--writers", type=int, default=2, help="instances writing the shared store")
     p.add_argument("--messages", type=int, default=5000, help="broker messages")
     p.add_argument("--tracks-per-msg", type=int, default=50, help="tracks per traffic message")
 
@@ -133,6 +156,44 @@ def _store_records(
             note="each audit row awaited before the next",
         ),
     ]
+
+
+def _shared_store_record(url: str, args: argparse.Namespace) -> dict[str, object]:
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", _WRITER, url, str(k), str(args.tracks), str(args.batches)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        for k in range(args.writers)
+    ]
+    try:
+        for p in procs:
+            assert p.stdout is not None and p.stdout.readline().strip() == "ready"
+        for p in procs:  # all start together
+            assert p.stdin is not None
+            p.stdin.write("go\n")
+            p.stdin.flush()
+        elapsed_s = [float(p.stdout.readline()) for p in procs if p.stdout is not None]
+        for p in procs:
+            p.wait(60)
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait(10)
+    n = args.writers * args.tracks * (args.batches - 1)
+    return summary(
+        "cluster.store_tracks_shared",
+        n,
+        [max(elapsed_s) * 1000.0],
+        items_per_run=n,
+        backend="postgresql",
+        writers=args.writers,
+        tracks_per_batch=args.tracks,
+        per_writer_s=[round(e, 3) for e in elapsed_s],
+    )
 
 
 async def _failover_once(url: str, args: argparse.Namespace, epoch: int) -> float:
@@ -305,6 +366,8 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         with tempfile.TemporaryDirectory() as d:
             records += _store_records(Path(d) / "bench.sqlite3", "sqlite", args)
         records += _store_records(url, "postgresql", args)
+        if args.writers > 1:
+            records.append(_shared_store_record(url, args))
         broker = _broker_record(args)
         if broker is not None:
             records.append(broker)
