@@ -14,6 +14,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 from gcs_utm.clock import Clock, RealClock, ScaledClock
+from gcs_utm.cluster.member import region_map_of
 from gcs_utm.cluster.node import ClusterNode
 from gcs_utm.cluster.regions import RegionError
 from gcs_utm.geo import LocalFrame
@@ -31,6 +32,17 @@ from .wiring import (
 )
 
 _log = logging.getLogger(__name__)
+
+
+def check_cluster(settings: Settings, location: str | Path) -> None:
+    """``serve --cluster`` needs the shared database and a region on the grid."""
+    if not is_postgres(location):
+        raise StoreError("serve --cluster: set [store] url to the shared postgresql:// database")
+    if settings.cluster.region:
+        try:
+            region_map_of(settings.cluster).cell(settings.cluster.region)
+        except RegionError as exc:
+            raise StoreError(f"[cluster] {exc}") from exc
 
 
 async def join_cluster(
@@ -91,8 +103,8 @@ async def serve(
     )
     # [store] url (a shared PostgreSQL database) replaces the SQLite file when set
     location: str | Path = settings.store.url or db_path
-    if cluster and not is_postgres(location):
-        raise StoreError("serve --cluster: set [store] url to the shared postgresql:// database")
+    if cluster:
+        check_cluster(settings, location)
     reader = open_store(location, busy_timeout_s=settings.store.busy_timeout_s)
     # a cluster member's operations come with the regions it gains (gcs_utm.cluster.node)
     operations = [] if cluster else reader.load_operations()
@@ -114,7 +126,12 @@ async def serve(
     frontends = attach_frontends(rt, FrontendOptions(operator=operator, headless=headless))
     stop = stop or asyncio.Event()
     failed: list[str] = []
-    node = await join_cluster(rt, location, stop, failed) if cluster else None
+    try:
+        node = await join_cluster(rt, location, stop, failed) if cluster else None
+    except StoreError:
+        await rt.hub.close()
+        store.close()
+        raise
     if on_runtime is not None:
         await on_runtime(rt)
     loop = asyncio.get_running_loop()

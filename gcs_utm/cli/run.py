@@ -89,7 +89,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--cluster",
         action="store_true",
         help="one of several instances sharing the [store] url PostgreSQL database: owns "
-        "the [cluster] region, takes over orphaned ones (docs/scale-out.md)",
+        "the [cluster] region, takes over orphaned ones; conflicts between regions of "
+        "different instances are not exchanged yet (docs/scale-out.md)",
     )
     group = serve.add_mutually_exclusive_group()
     group.add_argument("--auto-accept", action="store_true")

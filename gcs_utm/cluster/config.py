@@ -32,13 +32,6 @@ class ClusterConfig:
     cell_m: float = setting(5000.0, "side of one square region", min=1.0, unit="m")
     columns: int = setting(2, "regions west to east", min=1, max=1000)
     rows: int = setting(2, "regions south to north", min=1, max=1000)
-    halo_m: float = setting(
-        1000.0,
-        "margin around a region within which its owner also watches the neighbours' traffic: "
-        "at least the separation minimum plus what a UAS flies in the look-ahead",
-        min=0.0,
-        unit="m",
-    )
     lease_s: float = setting(
         3.0,
         "a region lease expires this long after its last renewal; a standby takes the region "

@@ -43,7 +43,9 @@ def region_map_of(config: ClusterConfig) -> RegionMap:
         cell_m=config.cell_m,
         columns=config.columns,
         rows=config.rows,
-        halo_m=config.halo_m,
+        # the halo (what a region's owner watches beyond its border) belongs to the region
+        # exchange, which is not built yet (docs/scale-out.md): none until then
+        halo_m=0.0,
     )
 
 

@@ -2,7 +2,7 @@
 
 An operation belongs to the region of its departure (its plan's first waypoint) for its whole
 flight: the region's owner holds its vehicle link, uploads its plans and answers for it, and
-a border crossing does not move it (the neighbours see it through the halo exchange). The
+a border crossing does not move it. The
 airspace's geofences are everyone's: all active ones are loaded. A *pending* recommendation
 is the latest version of one of the region's operations that is still PROPOSED: the dead
 owner's prompt, which the new owner proposes again as the next version in its own life (a

@@ -36,6 +36,11 @@ _MIGRATE_LOCK = 0x67637375746D
 _MAX_PARAMS = 65_535
 
 
+def one_line(exc: BaseException) -> str:
+    """libpq's message on one line (it spreads a failure and its hint over several)."""
+    return "; ".join(part.strip() for part in str(exc).splitlines() if part.strip())
+
+
 def redact(url: str) -> str:
     """``url`` without its password, for messages and logs."""
     parts = urlsplit(url)
@@ -63,7 +68,7 @@ class _PgConnection:
         try:
             return self.raw.execute(_paramstyle(sql), params)
         except psycopg.Error as exc:  # lost connection, constraint, bad SQL: one error type
-            raise StoreError(f"{self._where}: {exc}".rstrip()) from exc
+            raise StoreError(f"{self._where}: {one_line(exc)}") from exc
 
     def script(self, sql: str) -> None:
         """Several statements, no parameters (migrations)."""
@@ -97,7 +102,7 @@ class PgStore(StoreBase):
                 url, autocommit=True, connect_timeout=max(1, round(connect_timeout_s))
             )
         except psycopg.Error as exc:
-            raise StoreError(f"{self.where}: cannot connect: {exc}".rstrip()) from exc
+            raise StoreError(f"{self.where}: cannot connect: {one_line(exc)}") from exc
         self._conn = _PgConnection(raw, self.where)
         try:
             if readonly:

@@ -52,7 +52,6 @@ south_m = -5000.0
 cell_m = 2000.0
 columns = 2
 rows = 1
-halo_m = 200.0
 lease_s = {LEASE_S}
 renew_s = {RENEW_S}
 """
@@ -150,3 +149,26 @@ def test_kill_9_of_an_owner_hands_its_region_and_prompt_to_the_survivor(
 def _versions(url: str) -> list[int]:
     rows = raw_execute(url, "SELECT version FROM recommendations ORDER BY version")
     return [int(v) for (v,) in rows]  # type: ignore[call-overload]
+
+
+def test_cluster_needs_a_postgresql_store_and_a_sane_lease(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gcs_utm.cli import main
+
+    assert main(["serve", "--cluster", "--headless", "--db", str(tmp_path / "x.sqlite")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "serve --cluster" in err and "postgresql://" in err
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[cluster]\nlease_s = 1.0\nrenew_s = 0.8\n")
+    assert main(["config", "check", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "cluster.renew_s" in err and "half of lease_s" in err
+    bad.write_text('[cluster]\nregion = "c5r0"\n[store]\nurl = "postgresql://x@/y?host=/none"\n')
+    assert main(["serve", "--cluster", "--headless", "--config", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "c5r0" in err and "outside the 2x2 grid" in err
+    bad.write_text('[cluster]\nregion = "c1r1"\n[store]\nurl = "postgresql://x@/y?host=/none"\n')
+    assert main(["serve", "--cluster", "--headless", "--config", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot connect" in err and "/none" in err
