@@ -14,10 +14,13 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 from gcs_utm.clock import Clock, RealClock, ScaledClock
+from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
 from gcs_utm.cluster.member import region_map_of
 from gcs_utm.cluster.node import ClusterNode
+from gcs_utm.cluster.policy import OwnershipPolicy
 from gcs_utm.cluster.regions import RegionError
 from gcs_utm.geo import LocalFrame
+from gcs_utm.model import Geofence, Operation
 from gcs_utm.services.recorder import record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
@@ -46,10 +49,15 @@ def check_cluster(settings: Settings, location: str | Path) -> None:
 
 
 async def join_cluster(
-    rt: Runtime, location: str | Path, stop: asyncio.Event, failed: list[str]
+    rt: Runtime,
+    location: str | Path,
+    stop: asyncio.Event,
+    failed: list[str],
+    policy: OwnershipPolicy,
 ) -> ClusterNode:
     """This runtime as a cluster member: checks the region map (a differing one is refused);
-    the member task starts with the service tasks."""
+    the member task and the region exchange (on the [mqtt] broker) start with the service
+    tasks."""
     settings = rt.settings.cluster
     instance = settings.instance or f"{socket.gethostname()}-{os.getpid()}"
 
@@ -57,6 +65,17 @@ async def join_cluster(
         failed.append(why)
         stop.set()
 
+    node: ClusterNode
+
+    async def on_tracks(tracks: list[RemoteTrack]) -> None:
+        await node.on_remote_tracks(tracks)
+
+    exchange = RegionExchange(
+        rt.settings.mqtt,
+        region_map_of(settings),
+        client_id=f"{rt.settings.mqtt.topic_prefix}-cluster-{instance}",
+        on_tracks=on_tracks,
+    )
     node = ClusterNode(
         location,
         settings,
@@ -69,6 +88,10 @@ async def join_cluster(
         usm=rt.usm,
         record=rt.store.record,
         on_fail=fail,
+        policy=policy,
+        exchange=exchange,
+        tracks=rt.tracks,
+        emergency=rt.emergency,
     )
     try:
         await node.member.start()
@@ -76,6 +99,21 @@ async def join_cluster(
         await node.member.close()
         raise StoreError(str(exc)) from exc
     return node
+
+
+def _stored_airspace(
+    settings: Settings, db_path: Path, *, cluster: bool
+) -> tuple[str | Path, list[Operation], list[Geofence]]:
+    """Where the store is ([store] url, a shared PostgreSQL database, replaces the SQLite
+    file when set), and the operations and active geofences it holds. A cluster member's
+    operations come with the regions it gains (gcs_utm.cluster.node)."""
+    location: str | Path = settings.store.url or db_path
+    if cluster:
+        check_cluster(settings, location)
+    with open_store(location, busy_timeout_s=settings.store.busy_timeout_s) as reader:
+        operations = [] if cluster else reader.load_operations()
+        geofences = reader.load_geofences(active_only=True)
+    return location, operations, geofences
 
 
 async def serve(
@@ -101,17 +139,10 @@ async def serve(
         settings.airspace.origin_lon_deg,
         settings.airspace.ground_elevation_amsl_m,
     )
-    # [store] url (a shared PostgreSQL database) replaces the SQLite file when set
-    location: str | Path = settings.store.url or db_path
-    if cluster:
-        check_cluster(settings, location)
-    reader = open_store(location, busy_timeout_s=settings.store.busy_timeout_s)
-    # a cluster member's operations come with the regions it gains (gcs_utm.cluster.node)
-    operations = [] if cluster else reader.load_operations()
-    geofences = reader.load_geofences(active_only=True)
-    reader.close()
+    location, operations, geofences = _stored_airspace(settings, db_path, cluster=cluster)
     store = Persistence(StoreWriter(location, settings.store))
-    rt = build_runtime(settings, clock, frame, store)
+    policy = OwnershipPolicy() if cluster else None
+    rt = build_runtime(settings, clock, frame, store, policy=policy)
     recorder = record_links(rt.hub, record_dir)
     rt.airspace.load(operations, geofences)
     rt.tracking.set_operations(operations)
@@ -127,7 +158,7 @@ async def serve(
     stop = stop or asyncio.Event()
     failed: list[str] = []
     try:
-        node = await join_cluster(rt, location, stop, failed) if cluster else None
+        node = await join_cluster(rt, location, stop, failed, policy) if policy else None
     except StoreError:
         await rt.hub.close()
         store.close()
@@ -142,7 +173,7 @@ async def serve(
         async with asyncio.TaskGroup() as tg:
             tasks = start_service_tasks(tg, rt, frontends)
             if node is not None:
-                tasks.append(tg.create_task(node.member.run(), name="cluster"))
+                tasks.append(tg.create_task(node.run(), name="cluster"))
             for t in tasks:
                 if t.get_name() == "dashboard":
                     t.add_done_callback(lambda _t: stop.set())

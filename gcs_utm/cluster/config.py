@@ -32,6 +32,14 @@ class ClusterConfig:
     cell_m: float = setting(5000.0, "side of one square region", min=1.0, unit="m")
     columns: int = setting(2, "regions west to east", min=1, max=1000)
     rows: int = setting(2, "regions south to north", min=1, max=1000)
+    halo_m: float = setting(
+        1000.0,
+        "margin around a region within which its owner also watches the neighbours' traffic "
+        "(exchanged over MQTT): at least the separation minimum plus what a UAS flies in the "
+        "monitoring look-ahead",
+        min=0.0,
+        unit="m",
+    )
     lease_s: float = setting(
         3.0,
         "a region lease expires this long after its last renewal; a standby takes the region "
@@ -50,6 +58,11 @@ class ClusterConfig:
         if self.instance and not _NAME.match(self.instance):
             raise ValueError(
                 f"cluster.instance: expected letters, digits, _ . - (1..64), got {self.instance!r}"
+            )
+        if self.halo_m >= self.cell_m:
+            raise ValueError(
+                f"cluster.halo_m: expected less than cell_m ({self.cell_m} m), got "
+                f"{self.halo_m} m: a halo reaches the next region only"
             )
         if self.renew_s * 2 > self.lease_s:
             raise ValueError(

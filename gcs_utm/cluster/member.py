@@ -1,7 +1,8 @@
 """The cluster member task: holds this instance's regions and takes over orphaned ones.
 
 Every ``renew_s`` (its own connection on its own thread, never behind the store writer's
-queue of track batches, so a busy writer cannot cost a lease):
+queue of track batches nor behind the event loop, so neither a busy writer nor a long
+monitoring cycle can cost a lease):
 1. renew each region held; one that cannot be renewed is *lost* (``on_lost``): an instance
    that cannot reach the database for ``lease_s`` stops deciding for its regions, because a
    standby may hold them by then (self-fencing on this instance's monotonic clock, measured
@@ -19,8 +20,8 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
-import functools
 import logging
+import threading
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -43,14 +44,17 @@ def region_map_of(config: ClusterConfig) -> RegionMap:
         cell_m=config.cell_m,
         columns=config.columns,
         rows=config.rows,
-        # the halo (what a region's owner watches beyond its border) belongs to the region
-        # exchange, which is not built yet (docs/scale-out.md): none until then
-        halo_m=0.0,
+        halo_m=config.halo_m,
     )
 
 
 class ClusterMember:
-    """One instance's regions. ``holder`` names this instance life in the lease rows."""
+    """One instance's regions. ``holder`` names this instance life in the lease rows.
+
+    The lease rounds run on a thread of their own with their own connection: a stalled event
+    loop (a long monitoring cycle) must not delay a renewal and cost a region. Gains and
+    losses are handed to the loop, where ``on_gained``/``on_lost`` run in order. ``owned`` is
+    replaced, never mutated, so the loop reads a consistent mapping."""
 
     def __init__(
         self,
@@ -73,48 +77,53 @@ class ClusterMember:
         self._on_gained = on_gained
         self._on_lost = on_lost
         self.owned: dict[str, Lease] = {}
+        self.gained_at_mono: dict[str, float] = {}
         self._renewed_mono: dict[str, float] = {}
         self._free_since_mono: dict[str, float] = {}
-        self._db: StoreBase | None = None
-        self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="cluster-lease")
-        self.gained_at_mono: dict[str, float] = {}
+        self._lease_db: StoreBase | None = None
+        self._read_db: StoreBase | None = None
+        self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="cluster-read")
+        self._stop = threading.Event()
         self._closed = False
 
-    # ---- database calls, on the member's own thread --------------------------------------
-    def _store(self) -> StoreBase:
-        if self._db is None or getattr(self._db, "broken", False):
-            if self._db is not None:
-                self._db.close()
-            self._db = open_store(self._location)
-        return self._db
-
-    async def _call(self, fn: Callable[[StoreBase], object]) -> object:
-        loop = asyncio.get_running_loop()
-        return await loop.run_in_executor(self._pool, lambda: fn(self._store()))
+    # ---- reads for the node, on their own thread and connection ------------------------------
+    def _reader(self) -> StoreBase:
+        if self._read_db is None or getattr(self._read_db, "broken", False):
+            if self._read_db is not None:
+                self._read_db.close()
+            self._read_db = open_store(self._location)
+        return self._read_db
 
     async def read(self, fn: Callable[[StoreBase], object]) -> object:
-        """Run ``fn`` on the member's connection (off the loop)."""
-        return await self._call(fn)
+        """Run ``fn`` on the member's read connection (off the loop)."""
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._pool, lambda: fn(self._reader()))
 
     async def start(self) -> None:
         """Check (or file) the region map; raises RegionError when the store's differs."""
-        await self._call(lambda s: leases_.publish_map(s, self.map))
+        await self.read(lambda s: leases_.publish_map(s, self.map))
 
-    # ---- one round ------------------------------------------------------------------------
-    async def step(self) -> None:
-        """Renew, claim, take over: one round (the loop calls it every ``renew_s``)."""
+    # ---- one round, on the lease thread ---------------------------------------------------------
+    def _leases(self) -> StoreBase:
+        if self._lease_db is None or getattr(self._lease_db, "broken", False):
+            if self._lease_db is not None:
+                self._lease_db.close()
+            self._lease_db = open_store(self._location)
+        return self._lease_db
+
+    def round(self) -> list[tuple[str, str, Lease | None]]:
+        """Renew, claim, take over: one round; returns the (event, region, lease) changes."""
+        events: list[tuple[str, str, Lease | None]] = []
         try:
-            snapshot = await self._call(leases_.leases)
-            now_db = await self._call(lambda s: s.now_unix_s())
+            db = self._leases()
+            snapshot = leases_.leases(db)
+            now_db = db.now_unix_s()
         except StoreError as exc:
             _log.warning("cluster: lease table unreachable: %s", exc)
-            await self._fence()
-            return
-        assert isinstance(snapshot, dict) and isinstance(now_db, float)
-        for region_id in list(self.owned):
-            await self._try(region_id)
-        for region_id in self._candidates(snapshot, now_db):
-            await self._try(region_id)
+            return self._fence()
+        for region_id in [*self.owned, *self._candidates(snapshot, now_db)]:
+            events += self._try(region_id)
+        return events
 
     def _candidates(self, snapshot: dict[str, Lease], now_db: float) -> list[str]:
         out = []
@@ -137,81 +146,96 @@ class ClusterMember:
                     out.append(region_id)
         return out
 
-    async def _try(self, region_id: str) -> None:
+    def _try(self, region_id: str) -> list[tuple[str, str, Lease | None]]:
         try:
-            got = await self._call(
-                lambda s: leases_.acquire(
-                    s, region_id, self.holder, self.epoch, self.config.lease_s
-                )
+            got = leases_.acquire(
+                self._leases(), region_id, self.holder, self.epoch, self.config.lease_s
             )
         except StoreError as exc:
             _log.warning("cluster: lease of %s not renewed: %s", region_id, exc)
-            await self._fence()
-            return
+            return self._fence()
         if got is None:
             if region_id in self.owned:
-                await self._lose(region_id, "held by another instance")
-            return
-        assert isinstance(got, Lease)
+                return self._lose(region_id, "held by another instance")
+            return []
         self._renewed_mono[region_id] = time.monotonic()
-        if region_id not in self.owned:
-            self.owned[region_id] = got
-            self.gained_at_mono[region_id] = time.monotonic()
-            _log.info(
-                "cluster: %s holds region %s (generation %d)",
-                self.holder,
-                region_id,
-                got.generation,
-            )
-            await self._on_gained(region_id, got)
-        else:
-            self.owned[region_id] = got
+        gained = region_id not in self.owned
+        self.owned = {**self.owned, region_id: got}
+        if not gained:
+            return []
+        self.gained_at_mono[region_id] = time.monotonic()
+        _log.info(
+            "cluster: %s holds region %s (generation %d)", self.holder, region_id, got.generation
+        )
+        return [("gained", region_id, got)]
 
-    async def _fence(self) -> None:
+    def _fence(self) -> list[tuple[str, str, Lease | None]]:
         """Regions not renewed for ``lease_s`` are given up here: another may hold them."""
         mono = time.monotonic()
+        out: list[tuple[str, str, Lease | None]] = []
         for region_id in list(self.owned):
             if mono - self._renewed_mono.get(region_id, mono) >= self.config.lease_s:
-                await self._lose(region_id, "lease not renewed in time")
+                out += self._lose(region_id, "lease not renewed in time")
+        return out
 
-    async def _lose(self, region_id: str, why: str) -> None:
-        self.owned.pop(region_id, None)
+    def _lose(self, region_id: str, why: str) -> list[tuple[str, str, Lease | None]]:
+        self.owned = {r: lease for r, lease in self.owned.items() if r != region_id}
         _log.warning("cluster: %s lost region %s: %s", self.holder, region_id, why)
-        await self._on_lost(region_id, None)
+        return [("lost", region_id, None)]
+
+    def _lease_thread(
+        self, loop: asyncio.AbstractEventLoop, events: asyncio.Queue[tuple[str, str, Lease | None]]
+    ) -> None:
+        while not self._stop.is_set():
+            started = time.monotonic()
+            for event in self.round():
+                loop.call_soon_threadsafe(events.put_nowait, event)
+            self._stop.wait(max(0.0, self.config.renew_s - (time.monotonic() - started)))
+        for region_id in list(self.owned):  # a clean stop hands the regions over at once
+            try:
+                leases_.release(self._leases(), region_id, self.holder)
+            except StoreError as exc:
+                _log.warning("cluster: release of %s failed: %s", region_id, exc)
+        self.owned = {}
+        if self._lease_db is not None:
+            self._lease_db.close()
+            self._lease_db = None
 
     # ---- the task -------------------------------------------------------------------------
     async def run(self) -> None:
-        """Rounds every ``renew_s`` until cancelled; then every lease is released."""
+        """Lease rounds every ``renew_s`` on the lease thread, their gains and losses handled
+        here in order, until cancelled; then every lease is released."""
+        loop = asyncio.get_running_loop()
+        events: asyncio.Queue[tuple[str, str, Lease | None]] = asyncio.Queue()
+        self._stop.clear()
+        thread = threading.Thread(
+            target=self._lease_thread, args=(loop, events), name="cluster-lease", daemon=True
+        )
+        thread.start()
         try:
             while True:
-                started = time.monotonic()
-                await self.step()
-                await asyncio.sleep(max(0.0, self.config.renew_s - (time.monotonic() - started)))
+                kind, region_id, lease = await events.get()
+                if kind == "gained":
+                    await self._on_gained(region_id, lease)
+                else:
+                    await self._on_lost(region_id, lease)
         finally:
+            self._stop.set()
+            await asyncio.shield(loop.run_in_executor(None, thread.join))
             await asyncio.shield(self.close())
 
     async def close(self) -> None:
         if self._closed:
             return
         self._closed = True
-        held = list(self.owned)
-        self.owned.clear()
-        for region_id in held:
-            try:
-                await self._call(functools.partial(_release, region_id, self.holder))
-            except StoreError as exc:
-                _log.warning("cluster: release of %s failed: %s", region_id, exc)
-        if self._db is not None:
-            db, self._db = self._db, None
+        self._stop.set()
+        if self._read_db is not None:
+            db, self._read_db = self._read_db, None
             await asyncio.get_running_loop().run_in_executor(self._pool, db.close)
         self._pool.shutdown(wait=False)
 
     def owns(self, region_id: str) -> bool:
         return region_id in self.owned
-
-
-def _release(region_id: str, holder: str, store: StoreBase) -> bool:
-    return leases_.release(store, region_id, holder)
 
 
 __all__ = ["ClusterMember", "RegionCallback", "region_map_of"]

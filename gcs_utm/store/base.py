@@ -473,6 +473,31 @@ class StoreBase:
         sql += " ORDER BY created_t_s, id, version"
         return [self._load(Recommendation, d) for (d,) in self._rows(sql, params)]
 
+    def proposed_with_lives(self) -> list[tuple[Recommendation, int]]:
+        """The latest version of every recommendation that is still PROPOSED, each with the
+        life (epoch) that wrote it (a cluster member adopts the ones another life wrote for
+        its operations)."""
+        rows = self._rows(
+            "SELECT doc, epoch FROM recommendations r WHERE state = ? AND "
+            "version = (SELECT MAX(version) FROM recommendations q WHERE q.id = r.id) "
+            "ORDER BY created_t_s, id",
+            (RecommendationState.PROPOSED.value,),
+        )
+        return [(self._load(Recommendation, d), int(e)) for d, e in rows]
+
+    def versions_touched_by(self, epoch: int) -> list[tuple[str, int, str, int]]:
+        """(id, version, state, epoch) of every version of each recommendation id that life
+        ``epoch`` wrote a version of, in id and version order (a cluster member follows what
+        the owner of another operation did with a recommendation it decided)."""
+        return [
+            (str(i), int(v), str(st), int(e))
+            for i, v, st, e in self._rows(
+                "SELECT id, version, state, epoch FROM recommendations WHERE id IN "
+                "(SELECT id FROM recommendations WHERE epoch = ?) ORDER BY id, version",
+                (epoch,),
+            )
+        ]
+
     def record_answer(self, answer: PilotAnswer) -> None:
         with self.transaction() as c:
             c.execute(

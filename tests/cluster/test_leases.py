@@ -97,7 +97,7 @@ _OWNER = textwrap.dedent(
 
     async def main():
         cfg = ClusterConfig(instance="A", region="c0r0", standby=False, west_m=-1000.0,
-            south_m=0.0, cell_m=1000.0, columns=2, rows=1,
+            south_m=0.0, cell_m=1000.0, columns=2, rows=1, halo_m=100.0,
             lease_s=float(sys.argv[2]), renew_s=float(sys.argv[3]))
         async def gained(region, lease):
             print("gained", region, flush=True)
@@ -140,6 +140,7 @@ async def test_standby_takes_a_region_over_after_kill_9(pg_url: str) -> None:
         cell_m=1000.0,
         columns=2,
         rows=1,
+        halo_m=100.0,
         lease_s=lease_s,
         renew_s=renew_s,
     )

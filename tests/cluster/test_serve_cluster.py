@@ -52,6 +52,7 @@ south_m = -5000.0
 cell_m = 2000.0
 columns = 2
 rows = 1
+halo_m = 200.0
 lease_s = {LEASE_S}
 renew_s = {RENEW_S}
 """
