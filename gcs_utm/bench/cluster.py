@@ -12,13 +12,16 @@ throughput on SQLite and PostgreSQL, and broker throughput of region traffic mes
 - ``cluster.store_tracks_shared``: ``--writers`` processes (instances), each with its own
   writer and its own track ids, writing to the one PostgreSQL database at once: the rows per
   second all of them commit together (what a shared store gives N instances).
+- ``cluster.exchange``: the region exchange itself: one instance publishes its tracks near
+  the border, the neighbour receives them through its halo subscription; milliseconds from
+  the publish call to the neighbour's callback (the cross-region part of detection latency;
+  detection adds at most one publication period and one monitoring period).
 - ``cluster.broker``: a mosquitto on loopback (when installed), one publisher and one
   subscriber: region traffic messages (``--tracks-per-msg`` tracks in the existing traffic
   encoding) through the broker per second, QoS 0.
 
 PostgreSQL: ``--url`` (an existing server), else a private server started for the run with
-its default durability (fsync on). Cross-region detection latency is not measured: the MQTT
-track exchange between regions is not built yet (docs/scale-out.md).
+its default durability (fsync on).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -93,6 +97,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--writers", type=int, default=2, help="instances writing the shared store")
     p.add_argument("--messages", type=int, default=5000, help="broker messages")
     p.add_argument("--tracks-per-msg", type=int, default=50, help="tracks per traffic message")
+    p.add_argument("--exchange-runs", type=int, default=200, help="region messages timed")
 
 
 def _track(i: int, t_s: float) -> Any:
@@ -313,18 +318,21 @@ async def _broker_rate(port: int, args: argparse.Namespace) -> tuple[float, int,
     return elapsed_s, got, len(payload)
 
 
-def _broker_record(args: argparse.Namespace) -> dict[str, object] | None:
-    mosquitto = shutil.which("mosquitto") or (
+@contextlib.contextmanager
+def _mosquitto() -> Iterator[int | None]:
+    """A loopback mosquitto for the run (its port), or None when it is not installed."""
+    binary = shutil.which("mosquitto") or (
         "/usr/sbin/mosquitto" if os.path.exists("/usr/sbin/mosquitto") else None
     )
-    if mosquitto is None:
-        return None
+    if binary is None:
+        yield None
+        return
     port = _free_port()
     with tempfile.TemporaryDirectory() as d:
         conf = Path(d) / "m.conf"
         conf.write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\n")
         proc = subprocess.Popen(
-            [mosquitto, "-c", str(conf)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+            [binary, "-c", str(conf)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
         )
         try:
             deadline = time.monotonic() + 10.0
@@ -334,10 +342,14 @@ def _broker_record(args: argparse.Namespace) -> dict[str, object] | None:
                     break
                 except OSError:
                     time.sleep(0.05)
-            elapsed_s, got, size = asyncio.run(_broker_rate(port, args))
+            yield port
         finally:
             proc.terminate()
             proc.wait(10)
+
+
+def _broker_record(port: int, args: argparse.Namespace) -> dict[str, object]:
+    elapsed_s, got, size = asyncio.run(_broker_rate(port, args))
     return summary(
         "cluster.broker",
         args.messages,
@@ -347,6 +359,65 @@ def _broker_record(args: argparse.Namespace) -> dict[str, object] | None:
         bytes_per_msg=size,
         tracks_per_msg=args.tracks_per_msg,
         tracks_per_s=round(got * args.tracks_per_msg / elapsed_s, 1),
+    )
+
+
+async def _exchange_latencies(port: int, args: argparse.Namespace) -> list[float]:
+    """Instance A publishes its tracks near the border (region c0r0); instance B, owner of
+    c1r0, receives them through its halo subscription: wall time from A's publish call to
+    B's callback, per message."""
+    from dataclasses import replace
+
+    from adapters.mqtt.config import MqttConfig
+    from gcs_utm.cluster.config import ClusterConfig
+    from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
+    from gcs_utm.cluster.member import region_map_of
+
+    region_map = region_map_of(ClusterConfig(columns=2, rows=1))
+    mqtt = MqttConfig(host="127.0.0.1", port=port)
+    got: list[float] = []
+
+    async def on_b(tracks: list[RemoteTrack]) -> None:
+        got.append((time.time() - tracks[0].t_s) * 1000.0)
+
+    async def on_a(tracks: list[RemoteTrack]) -> None:
+        pass
+
+    a = RegionExchange(mqtt, region_map, client_id="bench-a", on_tracks=on_a)
+    b = RegionExchange(mqtt, region_map, client_id="bench-b", on_tracks=on_b)
+    a.watch(["c0r0"])
+    b.watch(["c1r0"])
+    tasks = [asyncio.create_task(a.run()), asyncio.create_task(b.run())]
+    try:
+        await asyncio.wait_for(asyncio.gather(a.connected.wait(), b.connected.wait()), 10.0)
+        await asyncio.sleep(0.5)  # subscriptions in place
+        tracks = [replace(_track(i, 0.0), east_m=-100.0 - i) for i in range(args.tracks_per_msg)]
+        for _ in range(args.exchange_runs):
+            now = time.time()
+            a.publish([replace(t, t_s=now) for t in tracks], now)
+            await asyncio.sleep(0.05)
+        deadline = time.monotonic() + 5.0
+        while len(got) < args.exchange_runs and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)
+    finally:
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+    return got
+
+
+def _exchange_record(port: int, args: argparse.Namespace) -> dict[str, object]:
+    latencies = asyncio.run(_exchange_latencies(port, args))
+    if not latencies:
+        raise RuntimeError("no traffic message crossed the region border")
+    return summary(
+        "cluster.exchange",
+        args.exchange_runs,
+        latencies,
+        received=len(latencies),
+        tracks_per_msg=args.tracks_per_msg,
+        note="publish call in one instance to the neighbour's callback, loopback broker; "
+        "detection adds up to one publication period (0.5 s) and one monitoring period",
     )
 
 
@@ -368,9 +439,10 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
         records += _store_records(url, "postgresql", args)
         if args.writers > 1:
             records.append(_shared_store_record(url, args))
-        broker = _broker_record(args)
-        if broker is not None:
-            records.append(broker)
+        with _mosquitto() as port:
+            if port is not None:
+                records.append(_broker_record(port, args))
+                records.append(_exchange_record(port, args))
     finally:
         if server is not None:
             server.stop()
