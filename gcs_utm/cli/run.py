@@ -88,9 +88,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     serve.add_argument(
         "--cluster",
         action="store_true",
-        help="one of several instances sharing the [store] url PostgreSQL database: owns "
-        "the [cluster] region, takes over orphaned ones; conflicts between regions of "
-        "different instances are not exchanged yet (docs/scale-out.md)",
+        help="one of several instances sharing the [store] url PostgreSQL database and the "
+        "[mqtt] broker: owns the [cluster] region, exchanges border traffic with its "
+        "neighbours, takes over orphaned regions (docs/scale-out.md)",
     )
     group = serve.add_mutually_exclusive_group()
     group.add_argument("--auto-accept", action="store_true")

@@ -97,7 +97,6 @@ class RegionExchange:
         self._outbox: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue(maxsize=outbox_size)
         self._watched: set[str] = set()
         self._subscribed: set[str] = set()
-        self._client: object | None = None
         self.published = 0
         self.received = 0
         self.dropped = 0

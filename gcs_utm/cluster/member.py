@@ -77,7 +77,6 @@ class ClusterMember:
         self._on_gained = on_gained
         self._on_lost = on_lost
         self.owned: dict[str, Lease] = {}
-        self.gained_at_mono: dict[str, float] = {}
         self._renewed_mono: dict[str, float] = {}
         self._free_since_mono: dict[str, float] = {}
         self._lease_db: StoreBase | None = None
@@ -163,7 +162,6 @@ class ClusterMember:
         self.owned = {**self.owned, region_id: got}
         if not gained:
             return []
-        self.gained_at_mono[region_id] = time.monotonic()
         _log.info(
             "cluster: %s holds region %s (generation %d)", self.holder, region_id, got.generation
         )
