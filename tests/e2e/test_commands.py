@@ -70,6 +70,7 @@ def test_bench_collects_every_benchmark() -> None:
         "upload",
         "fuzz",
         "resolution",
+        "cluster",
     }
     # each one is also reachable by name
     for name in discover():
