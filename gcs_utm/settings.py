@@ -22,6 +22,7 @@ from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.tracking.config import TrackingConfig
 from gcs_utm.dashboard.config import DashboardConfig
 from gcs_utm.preflight import check_settings
+from gcs_utm.services.record_config import RecordConfig
 from gcs_utm.services.usm import UsmConfig
 from gcs_utm.store.config import StoreConfig
 
@@ -56,6 +57,7 @@ class Settings:
     mqtt: MqttConfig = _section(MqttConfig, "mqtt")
     store: StoreConfig = _section(StoreConfig, "store")
     dashboard: DashboardConfig = _section(DashboardConfig, "dashboard")
+    record: RecordConfig = _section(RecordConfig, "record")
     cluster: ClusterConfig = _section(ClusterConfig, "cluster")
 
 
@@ -71,6 +73,7 @@ SECTIONS: dict[str, type[Any]] = {
     "mqtt": MqttConfig,
     "store": StoreConfig,
     "dashboard": DashboardConfig,
+    "record": RecordConfig,
     "cluster": ClusterConfig,
 }
 

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from adapters.adsb._pymodes import PairDecoder, decode_reference
-from adapters.adsb.beast import BeastCounters, BeastFramer
+from adapters.adsb.beast import BeastCounters, BeastFrame, BeastFramer
 from adapters.adsb.common import (
     FPM_TO_MPS,
     FT_TO_M,
@@ -201,6 +201,12 @@ class ModeSDecoder:
             if m is not None:
                 out.append(m)
         return out
+
+    def beast_frames(self, data: bytes) -> list[BeastFrame]:
+        """A chunk of a Beast byte stream -> its complete Mode-S frames, framed (and counted)
+        as :meth:`feed_beast` frames them, for a caller that times each frame itself (a
+        capture replayed by its MLAT counter); decode them with :meth:`feed_hex`."""
+        return self._framer.feed(data)
 
     def reset_stream(self) -> None:
         """Forget a partial Beast frame (the connection it came on is gone)."""

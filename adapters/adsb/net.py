@@ -5,8 +5,9 @@ connection failure or EOF reconnects with exponential backoff (``initial_s`` dou
 ``max_s``, reset after a connection that delivered data). It runs until the consumer stops
 iterating or the task is cancelled; the socket is closed in ``finally``.
 
-Receipt (and, lacking better, capture) time is the wall clock when a chunk arrives: Beast MLAT
-counters are receiver-relative, not UTC.
+Receipt (and, lacking better, capture) time is ``now_s()`` when a chunk arrives, one time for
+every line or frame of the chunk: Beast MLAT counters are receiver-relative, not UTC.
+``on_chunk(data, t_s, new_connection)`` sees every chunk as received (the recorder's tap).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 
+from adapters.adsb.capture import LineSplitter
 from adapters.adsb.modes import ModeSDecoder
 from adapters.adsb.sbs import SbsDecoder
 from gcs_utm.model import Measurement
@@ -25,7 +27,6 @@ from gcs_utm.model import Measurement
 _log = logging.getLogger(__name__)
 
 _CHUNK = 64 * 1024
-_MAX_LINE = 4096  # longer than any SBS/AVR line: a stream without newlines is not text
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -115,20 +116,46 @@ async def _chunks(
         delay = min(delay * 2.0, backoff.max_s)
 
 
-async def _lines(
-    host: str, port: int, backoff: Backoff, stats: ConnectionStats
-) -> AsyncIterator[str]:
-    buf = b""
+ChunkTap = Callable[[bytes, float, bool], None]
+"""``(data, receipt t_s, first chunk of a new connection)``: the recorder's view of a feed."""
+
+
+async def _timed_chunks(
+    host: str,
+    port: int,
+    backoff: Backoff,
+    stats: ConnectionStats,
+    *,
+    now_s: Callable[[], float],
+    on_chunk: ChunkTap | None,
+) -> AsyncIterator[tuple[float, bool, bytes]]:
+    """``(receipt t_s, new connection, data)``: one receipt time per chunk, the one the
+    recorder writes, so a replay of the recording decodes at the same times."""
     async for first, data in _chunks(host, port, backoff, stats):
-        if first:
-            buf = b""  # a line cut by the disconnect is dropped
-        buf += data
-        *lines, buf = buf.split(b"\n")
-        if len(buf) > _MAX_LINE:
-            stats.overlong_lines += 1
-            buf = b""
-        for raw in lines:
-            yield raw.decode("ascii", "replace").rstrip("\r")
+        t_s = now_s()
+        if on_chunk is not None:
+            on_chunk(data, t_s, first)
+        yield t_s, first, data
+
+
+async def _lines(
+    host: str,
+    port: int,
+    backoff: Backoff,
+    stats: ConnectionStats,
+    *,
+    now_s: Callable[[], float],
+    on_chunk: ChunkTap | None,
+) -> AsyncIterator[tuple[float, str]]:
+    splitter = LineSplitter()
+    async for t_s, first, data in _timed_chunks(
+        host, port, backoff, stats, now_s=now_s, on_chunk=on_chunk
+    ):
+        before = splitter.overlong_lines
+        lines = splitter.feed(data, new_connection=first)
+        stats.overlong_lines += splitter.overlong_lines - before
+        for line in lines:
+            yield t_s, line
 
 
 async def read_sbs(
@@ -139,11 +166,15 @@ async def read_sbs(
     backoff: Backoff | None = None,
     stats: ConnectionStats | None = None,
     now_s: Callable[[], float] = time.time,
+    on_chunk: ChunkTap | None = None,
 ) -> AsyncIterator[Measurement]:
     """Positions from an SBS-1 BaseStation feed (``decoder.counters`` counts bad lines)."""
     dec = decoder if decoder is not None else SbsDecoder()
-    async for line in _lines(host, port, backoff or Backoff(), stats or ConnectionStats()):
-        m = dec.feed(line, now_s())
+    lines = _lines(
+        host, port, backoff or Backoff(), stats or ConnectionStats(), now_s=now_s, on_chunk=on_chunk
+    )
+    async for t_s, line in lines:
+        m = dec.feed(line, t_s)
         if m is not None:
             yield m
 
@@ -156,13 +187,17 @@ async def read_avr(
     backoff: Backoff | None = None,
     stats: ConnectionStats | None = None,
     now_s: Callable[[], float] = time.time,
+    on_chunk: ChunkTap | None = None,
 ) -> AsyncIterator[Measurement]:
     """Positions from an AVR raw text feed (``*8D...;`` lines)."""
     dec = decoder if decoder is not None else ModeSDecoder()
-    async for line in _lines(host, port, backoff or Backoff(), stats or ConnectionStats()):
+    lines = _lines(
+        host, port, backoff or Backoff(), stats or ConnectionStats(), now_s=now_s, on_chunk=on_chunk
+    )
+    async for t_s, line in lines:
         if not line.strip():
             continue
-        m = dec.feed_avr(line, now_s())
+        m = dec.feed_avr(line, t_s)
         if m is not None:
             yield m
 
@@ -175,12 +210,16 @@ async def read_beast(
     backoff: Backoff | None = None,
     stats: ConnectionStats | None = None,
     now_s: Callable[[], float] = time.time,
+    on_chunk: ChunkTap | None = None,
 ) -> AsyncIterator[Measurement]:
     """Positions from a Beast binary feed. A frame split across TCP reads is reassembled; a
     frame cut by a reconnect is dropped and counted in ``decoder.beast_counters``."""
     dec = decoder if decoder is not None else ModeSDecoder()
-    async for first, data in _chunks(host, port, backoff or Backoff(), stats or ConnectionStats()):
+    chunks = _timed_chunks(
+        host, port, backoff or Backoff(), stats or ConnectionStats(), now_s=now_s, on_chunk=on_chunk
+    )
+    async for t_s, first, data in chunks:
         if first:
             dec.reset_stream()
-        for m in dec.feed_beast(data, now_s()):
+        for m in dec.feed_beast(data, t_s):
             yield m

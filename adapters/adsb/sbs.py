@@ -79,6 +79,15 @@ def _time(date_text: str, time_text: str) -> float | None:
     return stamp.replace(tzinfo=UTC).timestamp()
 
 
+def sbs_line_time(line: str) -> float | None:
+    """The "message generated" date/time of an SBS-1 line (UTC POSIX seconds), None when the
+    line has none or is not an SBS-1 record."""
+    fields = line.split(",")
+    if len(fields) < _N_FIELDS or fields[0].strip() != "MSG":
+        return None
+    return _time(fields[6], fields[7])
+
+
 def parse_sbs_line(line: str) -> SbsRecord:
     """Parse one ``MSG`` line or raise :class:`SbsFormatError` (other record kinds such as
     ``AIR``/``ID``/``STA`` are also reported as errors: they carry no surveillance data)."""

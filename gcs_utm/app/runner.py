@@ -28,7 +28,7 @@ from gcs_utm.messages import HazardReport
 from gcs_utm.model import ThreatKind
 from gcs_utm.scenario import Scenario
 from gcs_utm.scenario.types import EventKind, ScenarioEvent
-from gcs_utm.services.recorder import record_links
+from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreWriter
 
@@ -301,9 +301,17 @@ async def run_scenario(
     lead_s = options.lead_s if options.lead_s is not None else DEFAULT_LEAD_S
     start_utc, clock, sim_clock = _clocks(options)
     scenario, settings = _load(scenario_path, settings, start_utc + lead_s)
+    if options.record_dir is not None:  # refused before anything starts (RecordError)
+        check_folder(options.record_dir, settings.record)
     store = _open_store(options, scenario, settings)
     rt = build_runtime(settings, clock, scenario.frame, store)
-    recorder = record_links(rt.hub, options.record_dir)
+    recorder = record_links(
+        rt.hub,
+        options.record_dir,
+        settings.record,
+        surveillance=rt.surveillance,
+        on_failure=lambda text: rt.usm.log_event("recording", text),
+    )
     _file_scenario(rt, scenario)
 
     end_t_s = scenario.t0_s + (options.duration_s or scenario.duration_s)

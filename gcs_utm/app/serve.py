@@ -21,7 +21,7 @@ from gcs_utm.cluster.policy import OwnershipPolicy
 from gcs_utm.cluster.regions import RegionError
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import Geofence, Operation
-from gcs_utm.services.recorder import record_links
+from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
 
@@ -133,6 +133,8 @@ async def serve(
     than real time: the service's clock then advances ``speed`` simulated seconds per second.
     ``cluster``: a member of several instances sharing the ``[store] url`` database
     (docs/scale-out.md); returns 3 when a region is lost (fail-stop)."""
+    if record_dir is not None:  # refused before anything starts (RecordError)
+        check_folder(record_dir, settings.record)
     clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
     frame = LocalFrame(
         settings.airspace.origin_lat_deg,
@@ -143,7 +145,13 @@ async def serve(
     store = Persistence(StoreWriter(location, settings.store))
     policy = OwnershipPolicy() if cluster else None
     rt = build_runtime(settings, clock, frame, store, policy=policy)
-    recorder = record_links(rt.hub, record_dir)
+    recorder = record_links(
+        rt.hub,
+        record_dir,
+        settings.record,
+        surveillance=rt.surveillance,
+        on_failure=lambda text: rt.usm.log_event("recording", text),
+    )
     rt.airspace.load(operations, geofences)
     rt.tracking.set_operations(operations)
     _log.info(

@@ -319,7 +319,12 @@ class Frontends:
 def minima(settings: Settings) -> Minima:
     """The separation minima the operator's views show."""
     mon = settings.monitoring
-    return Minima(horizontal_m=mon.separation_horizontal_m, vertical_m=mon.separation_vertical_m)
+    return Minima(
+        horizontal_m=mon.separation_horizontal_m,
+        vertical_m=mon.separation_vertical_m,
+        intruder_horizontal_m=mon.intruder_horizontal_m,
+        intruder_vertical_m=mon.intruder_vertical_m,
+    )
 
 
 def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:

@@ -83,7 +83,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         type=Path,
         default=None,
         metavar="DIR",
-        help="record every MAVLink link (received and sent) as a .tlog file in DIR",
+        help="record every MAVLink link (received and sent) as .tlog files and every ADS-B "
+        "feed raw in DIR (rotation: [record]); gcs-utm replay DIR reads it back",
     )
     serve.add_argument(
         "--cluster",
@@ -124,7 +125,8 @@ def _common(p: argparse.ArgumentParser) -> None:
         type=Path,
         default=None,
         metavar="DIR",
-        help="record every MAVLink link (received and sent) as a .tlog file in DIR",
+        help="record every MAVLink link (received and sent) as .tlog files and every ADS-B "
+        "feed raw in DIR (rotation: [record]); gcs-utm replay DIR reads it back",
     )
 
 
@@ -243,6 +245,7 @@ def _run_one(path: Path, args: argparse.Namespace, *, last: bool = True) -> int:
         run_scenario_blocking,
     )
     from gcs_utm.scenario import ScenarioError
+    from gcs_utm.services.recorder import RecordError
 
     settings = _settings(args)
     if settings is None:
@@ -259,7 +262,7 @@ def _run_one(path: Path, args: argparse.Namespace, *, last: bool = True) -> int:
     configure_interpreter()
     try:
         report = run_scenario_blocking(path, settings, options)
-    except ScenarioError as exc:
+    except (ScenarioError, RecordError) as exc:
         print(f"gcs-utm: {exc}", file=sys.stderr)
         return 2
     text = summary_text(report, report_path(options.out_dir, report.scenario))
@@ -314,6 +317,7 @@ def _serve(args: argparse.Namespace) -> int:
         else OperatorMode.NONE
     )
     headless = args.headless or operator != OperatorMode.DASHBOARD
+    from gcs_utm.services.recorder import RecordError
     from gcs_utm.store import StoreError
 
     configure_interpreter()
@@ -329,6 +333,6 @@ def _serve(args: argparse.Namespace) -> int:
                 cluster=args.cluster,
             )
         )
-    except StoreError as exc:  # a folder, a file that is not a store, a newer schema
+    except (StoreError, RecordError) as exc:  # a store or --record DIR that cannot be used
         print(f"gcs-utm: {exc}", file=sys.stderr)
         return 2

@@ -25,6 +25,7 @@ from gcs_utm.model import (
     Recommendation,
     SysId,
     Threat,
+    ThreatKind,
     Track,
     TrackId,
 )
@@ -34,10 +35,20 @@ from gcs_utm.services.usm import Usm, UsmEvent
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Minima:
-    """The separation minima the prompt compares predictions with (``[monitoring]``)."""
+    """The separation minima the prompt compares predictions with (``[monitoring]``): between
+    operations, and between an operation and an intruder (``intruder_*``; None: not known,
+    and an INTRUDER threat is then shown without a minimum rather than with the wrong one)."""
 
     horizontal_m: float
     vertical_m: float
+    intruder_horizontal_m: float | None = None
+    intruder_vertical_m: float | None = None
+
+    def for_threat(self, kind: ThreatKind) -> tuple[float | None, float | None]:
+        """(horizontal, vertical) minima that apply to a threat of ``kind``."""
+        if kind is ThreatKind.INTRUDER:
+            return self.intruder_horizontal_m, self.intruder_vertical_m
+        return self.horizontal_m, self.vertical_m
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -223,16 +234,17 @@ def _predicted(rec: Recommendation, d: DashboardData) -> str:
     if threat.predicted_event_at_s is not None:
         ahead = threat.predicted_event_at_s - d.t_s
         what += f" in {wall_s(d, ahead):.0f} s" if ahead > 0 else " now"
+    min_h, min_v = d.minima.for_threat(threat.kind) if d.minima else (None, None)
     parts = []
     if threat.horizontal_m is not None:
         parts.append(
             f"{threat.horizontal_m:.0f} m horizontal"
-            + (f" (min {d.minima.horizontal_m:.0f})" if d.minima else "")
+            + (f" (min {min_h:.0f})" if min_h is not None else "")
         )
     if threat.vertical_m is not None:
         parts.append(
             f"{threat.vertical_m:.0f} m vertical"
-            + (f" (min {d.minima.vertical_m:.0f})" if d.minima else "")
+            + (f" (min {min_v:.0f})" if min_v is not None else "")
         )
     if parts:
         what += "; predicted closest " + ", ".join(parts)

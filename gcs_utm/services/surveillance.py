@@ -29,8 +29,16 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from adapters.adsb import ModeSDecoder, SbsDecoder
+from adapters.adsb.capture import CaptureKind
 from adapters.adsb.config import AdsbConfig
-from adapters.adsb.net import Backoff, ConnectionStats, read_avr, read_beast, read_sbs
+from adapters.adsb.net import (
+    Backoff,
+    ChunkTap,
+    ConnectionStats,
+    read_avr,
+    read_beast,
+    read_sbs,
+)
 from adapters.mavlink.adsb_relay import AdsbRelayCounters
 from gcs_utm.clock import Clock
 from gcs_utm.model import Measurement
@@ -38,6 +46,10 @@ from gcs_utm.model import Measurement
 _log = logging.getLogger(__name__)
 
 FEED_KINDS = ("sbs", "avr", "beast")
+
+FeedTap = Callable[[str, CaptureKind, bytes, float, bool], None]
+"""``(feed name, kind, data, receipt t_s, new connection)``: the recorder's tap on every feed
+(:meth:`gcs_utm.services.recorder.LinkRecorder.tap_feed`)."""
 
 
 @dataclass(slots=True)
@@ -95,6 +107,7 @@ class SurveillanceService:
         self.config = config
         self.clock = clock
         self._on_measurement = on_measurement
+        self.raw_tap: FeedTap | None = None  # set before run() to record every feed raw
         self.feeds: list[FeedStats] = []
         if not config.enabled:
             return
@@ -130,14 +143,38 @@ class SurveillanceService:
             initial_s=self.config.reconnect_initial_s, max_s=self.config.reconnect_max_s
         )
         stats, now_s = feed.connection, self.clock.now_s
+        on_chunk = self._chunk_tap(feed)
         if feed.sbs is not None:
             return read_sbs(
-                feed.host, feed.port, decoder=feed.sbs, backoff=backoff, stats=stats, now_s=now_s
+                feed.host,
+                feed.port,
+                decoder=feed.sbs,
+                backoff=backoff,
+                stats=stats,
+                now_s=now_s,
+                on_chunk=on_chunk,
             )
         read = read_avr if feed.kind == "avr" else read_beast
         return read(
-            feed.host, feed.port, decoder=feed.modes, backoff=backoff, stats=stats, now_s=now_s
+            feed.host,
+            feed.port,
+            decoder=feed.modes,
+            backoff=backoff,
+            stats=stats,
+            now_s=now_s,
+            on_chunk=on_chunk,
         )
+
+    def _chunk_tap(self, feed: FeedStats) -> ChunkTap | None:
+        tap = self.raw_tap
+        if tap is None:
+            return None
+        name, kind = f"adsb-{feed.name}", CaptureKind(feed.kind)
+
+        def on_chunk(data: bytes, t_s: float, new_connection: bool) -> None:
+            tap(name, kind, data, t_s, new_connection)
+
+        return on_chunk
 
     def evict_idle(self) -> int:
         """Forget, in every feed's decoder, the aircraft not heard for ``aircraft_idle_s``."""

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "adsb"  # provenance: tests/data/SOURCES.md
-CSV_PATH = DATA / "pymodes_sample_data_adsb.csv"
+CSV_PATH = DATA / "synthetic_adsb.csv"  # written by tests/adsb/encode.py
 BEAST_PATH = DATA / "traffic_sample_dump1090_beast.bin"
 
 

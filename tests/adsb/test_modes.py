@@ -1,4 +1,6 @@
-"""Raw Mode-S decoding on the real recordings: counts, plausibility, corruption handling."""
+"""Raw Mode-S decoding: a real Beast recording (Toulouse) and a synthetic DF17 stream written
+by our own encoder (``tests/adsb/encode.py``, so every position is checked against where the
+aircraft was): counts, accuracy, corruption handling."""
 
 from __future__ import annotations
 
@@ -14,11 +16,12 @@ import pytest
 from adapters.adsb import BeastFramer, ModeSDecoder, ModeSFrameError, parse_avr_line
 from gcs_utm.geo import haversine_m
 from gcs_utm.model import Measurement, MeasurementSource
+from tests.adsb.encode import CSV_FLIGHT, CSV_T0_S
 
 pytestmark = pytest.mark.data
 
-# Receivers: the CSV aircraft flies over western Germany / the Netherlands (pyModeS uses
-# 51.99, 4.375 for its frames); the Beast sample was recorded around Toulouse.
+# Receivers: the synthetic CSV aircraft flies over the Netherlands; the Beast sample was
+# recorded around Toulouse.
 CSV_REFERENCE = (51.99, 4.375)
 TOULOUSE = (43.6, 1.44)
 
@@ -35,26 +38,30 @@ def test_csv_with_reference_decodes_every_position_of_the_one_aircraft(csv_rows)
     dec = ModeSDecoder(*CSV_REFERENCE)
     ms = _decode_csv(csv_rows, dec)
     c = dec.counters
-    assert c.frames == 2000
-    assert c.corrupt == 0
-    assert dec.aircraft() == {"406b90": "EZY85MH"}
+    assert c.frames == 1320
+    assert c.corrupt == 0 and c.not_adsb == 60  # the all-call replies
+    assert dec.aircraft() == {"4ca7e9": "GCS1234"}
     # Every airborne-position frame becomes a measurement with a receiver reference.
-    assert c.positions == len(ms) == 937
-    assert c.velocities == 965
+    assert c.positions == len(ms) == 600
+    assert c.velocities == 600
     for m in ms:
         assert m.source is MeasurementSource.ADSB
-        assert m.icao24 == "406b90"
-        assert 50.5 < m.lat_deg < 52.5 and 3.5 < m.lon_deg < 7.5
+        assert m.icao24 == "4ca7e9"
+        # where the encoder put it, within the 17-bit CPR resolution (~5 m)
+        lat, lon = CSV_FLIGHT.at(m.capture_t_s - CSV_T0_S)
+        assert haversine_m(lat, lon, m.lat_deg, m.lon_deg) < 6.0
         assert haversine_m(*CSV_REFERENCE, m.lat_deg, m.lon_deg) < 333_360.0
         # FL360 pressure altitude in metres
-        assert 10_900.0 < m.alt_amsl_m < 11_000.0
+        assert m.alt_amsl_m == pytest.approx(36_000 * 0.3048)
         assert m.capture_t_s == m.receipt_t_s
     with_vel = [m for m in ms if m.vel_ned_mps is not None]
-    assert len(with_vel) > 900
+    assert len(with_vel) == 599  # the first position comes before the first velocity
     n, e, d = with_vel[0].vel_ned_mps  # type: ignore[misc]
-    # ~493 kt heading west-north-west
-    assert 240.0 < math.hypot(n, e) < 270.0 and e < 0 < n and d == 0.0
-    assert ms[-1].callsign == "EZY85MH"
+    # 490 kt (in whole knots per axis) heading 290 degrees: west-north-west
+    assert math.hypot(n, e) == pytest.approx(490.0 * 1852.0 / 3600.0, rel=3e-3)
+    assert math.degrees(math.atan2(e, n)) % 360.0 == pytest.approx(290.0, abs=0.2)
+    assert d == 0.0
+    assert ms[-1].callsign == "GCS1234"
 
 
 def test_consecutive_positions_are_consistent_with_the_reported_speed(csv_rows):
@@ -62,9 +69,8 @@ def test_consecutive_positions_are_consistent_with_the_reported_speed(csv_rows):
     for a, b in itertools.pairwise(ms):
         dt = b.capture_t_s - a.capture_t_s
         dist = haversine_m(a.lat_deg, a.lon_deg, b.lat_deg, b.lon_deg)
-        # 280 m/s max (ground speed ~255 m/s); the recording's timestamps are whole seconds
-        # and not strictly floored, so allow 2 s of quantisation
-        assert dist <= 280.0 * (dt + 2.0), (a, b)
+        # 252 m/s ground speed, +/- the CPR resolution of both positions
+        assert dist == pytest.approx(252.1 * dt, abs=10.0), (a, b)
 
 
 def test_pair_decoding_without_reference_agrees_with_reference_decoding(csv_rows):
@@ -79,8 +85,8 @@ def test_pair_decoding_without_reference_agrees_with_reference_decoding(csv_rows
             # the same frame resolved two ways: CPR resolution is ~5 m at this latitude
             assert haversine_m(r.lat_deg, r.lon_deg, m.lat_deg, m.lon_deg) < 10.0
             compared += 1
-    assert compared > 900
-    assert dec.counters.pending_cpr + compared == 937
+    assert compared > 590
+    assert dec.counters.pending_cpr + compared == 600
 
 
 def test_reference_too_far_drops_and_counts_out_of_range(csv_rows):
@@ -154,7 +160,8 @@ def test_flipped_bits_fail_crc_and_are_counted_not_emitted(csv_rows):
     dec = ModeSDecoder(*CSV_REFERENCE)
     corrupted = 0
     emitted = []
-    for t, original in csv_rows[:500]:
+    extended = [(t, h) for t, h in csv_rows if len(h) == 28]  # DF17, not the DF11 replies
+    for t, original in extended[:500]:
         hex_ = original
         if rng.random() < 0.3:
             # flip a bit outside the DF field so it stays DF17 and must fail the CRC
@@ -164,7 +171,7 @@ def test_flipped_bits_fail_crc_and_are_counted_not_emitted(csv_rows):
         if m is not None:
             emitted.append(m)
     assert dec.counters.crc_failed == corrupted
-    assert all(m.icao24 == "406b90" for m in emitted)
+    assert all(m.icao24 == "4ca7e9" for m in emitted)
     assert dec.counters.frames == 500
 
 
@@ -172,9 +179,9 @@ def test_truncated_and_garbage_avr_lines_are_counted(csv_rows):
     dec = ModeSDecoder(*CSV_REFERENCE)
     lines = [f"*{h};" for _, h in csv_rows[:50]]
     lines[3] = lines[3][:20]  # truncated frame
-    lines[7] = "*ZZZZ8D406B909945DE10000405999BE4;"
+    lines[7] = f"*ZZZZ{csv_rows[7][1][4:]};"
     lines[9] = "hello"
-    lines[11] = "@0000000000008D406B9058B975870B738754F480;"  # MLAT prefix: valid
+    lines[11] = f"@000000000000{csv_rows[11][1]};"  # MLAT prefix: valid
     out = [dec.feed_avr(line, csv_rows[0][0]) for line in lines]
     assert dec.counters.malformed == 3
     assert dec.counters.frames == 50

@@ -69,7 +69,7 @@ async def test_avr_reader(csv_rows):
     async with server:
         ms = await _take(read_avr("127.0.0.1", port, decoder=dec, backoff=FAST), 50)
     assert len(ms) == 50
-    assert all(m.icao24 == "406b90" for m in ms)
+    assert all(m.icao24 == "4ca7e9" for m in ms)
     assert dec.counters.corrupt == 0
 
 

@@ -204,10 +204,14 @@ def start_ardupilot(
     home: tuple[float, float, float, float] = ARDUPILOT_DEFAULT_HOME,
     speed: float = 1.0,
     workdir: Path | None = None,
+    defaults: tuple[Path, ...] = (),
+    extra_args: tuple[str, ...] = (),
 ) -> SitlProcess:
     """Start ArduPilot SITL instance ``instance`` (SYSID_THISMAV instance+1; MAVLink on TCP
     5760+10*instance). It waits for a client on that port before its clock starts.
-    ``home`` is (lat_deg, lon_deg, ground_amsl_m, heading_deg)."""
+    ``home`` is (lat_deg, lon_deg, ground_amsl_m, heading_deg); ``defaults`` are parameter
+    files loaded after the vehicle's, ``extra_args`` more command-line options (e.g.
+    ``--serial5=sim:adsb``)."""
     if vehicle not in ARDUPILOT_VEHICLES:
         raise ValueError(
             f"ArduPilot vehicle must be one of {sorted(ARDUPILOT_VEHICLES)}, got {vehicle!r}"
@@ -226,13 +230,14 @@ def start_ardupilot(
                 "--speedup",
                 f"{speed:g}",
                 "--defaults",
-                str(ARDUPILOT_DIR / parm),
+                ",".join([str(ARDUPILOT_DIR / parm), *map(str, defaults)]),
                 "--home",
                 home_text,
                 "-I",
                 str(instance),
                 "--sysid",
                 str(instance + 1),
+                *extra_args,
             ],
             cwd=wd,
             stdin=subprocess.DEVNULL,
