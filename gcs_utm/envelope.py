@@ -32,6 +32,16 @@ class PerformanceEnvelope:
     max_speed_mps: float
     turn_radius_m: float
     can_hover: bool
+    tracking_error_m: float | None = None
+    """How far (horizontally) the vehicle flies from a new plan's 4D position: lag at its
+    corners (a multirotor slows down, a fixed wing turns on a radius) that its mission's
+    speeds never make up. None: the default of its kind (:meth:`tracking_tolerance_m`)."""
+
+    def tracking_tolerance_m(self) -> float:
+        """The tracking error TD keeps free around a new plan (see :attr:`tracking_error_m`)."""
+        if self.tracking_error_m is not None:
+            return self.tracking_error_m
+        return MULTIROTOR_TRACKING_ERROR_M if self.can_hover else FIXED_WING_TRACKING_ERROR_M
 
     def __post_init__(self) -> None:
         for name in (
@@ -52,6 +62,9 @@ class PerformanceEnvelope:
             raise EnvelopeError("turn_radius_m", "must be >= 0")
         if self.min_speed_mps > self.max_speed_mps:
             raise EnvelopeError("min_speed_mps", "is above max_speed_mps")
+        t = self.tracking_error_m
+        if t is not None and not (math.isfinite(t) and t >= 0.0):
+            raise EnvelopeError("tracking_error_m", f"must be a finite number >= 0, got {t!r}")
 
 
 MULTIROTOR_DESCENT_RATE_MPS = 1.5
@@ -62,6 +75,13 @@ MAX_SPEED_FACTOR = 1.2
 """A vehicle described by its cruise speed alone is assumed to fly up to 20 % faster."""
 FIXED_WING_MIN_SPEED_FACTOR = 0.7
 """...and a fixed wing no slower than 70 % of its cruise speed (the stall margin)."""
+MULTIROTOR_TRACKING_ERROR_M = 5.0
+"""Horizontal 4D tracking error of a multirotor on a manoeuvre: time lost at each corner of
+a lateral deformation (PX4 and ArduCopter slow down to turn; the simulated vehicle loses
+1-2 s at a sharp one) leaves it a few metres behind its plan's position, measured 2-6 m on
+the generated encounters."""
+FIXED_WING_TRACKING_ERROR_M = 10.0
+"""...of a fixed wing: it cuts each corner on its turn radius and lags along the arc."""
 FIXED_WING_TURN_RADIUS_M = 80.0
 """PX4's NAV_LOITER_RAD default, a turn a small fixed wing flies at cruise speed."""
 

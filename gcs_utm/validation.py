@@ -12,8 +12,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from shapely.geometry import Polygon
-
 ALT_AMSL_MIN_M = -500.0
 """Below the lowest dry land (Dead Sea shore, about -430 m): nothing flies lower."""
 ALT_AMSL_MAX_M = 20_000.0
@@ -56,6 +54,8 @@ def planar_polygon_problem(xy: Sequence[tuple[float, float]]) -> str | None:
         return f"a polygon needs at least 3 vertices, got {len(xy)}"
     if not all(math.isfinite(v) for p in xy for v in p):
         return "a polygon's coordinates must be finite numbers"
+    from shapely.geometry import Polygon  # here: only polygons need it (start-up time)
+
     poly = Polygon(list(xy))
     if not poly.convex_hull.area > 0.0:
         return "the polygon has no area (its vertices are on one line or repeated)"

@@ -30,13 +30,17 @@ from sitl.core import (
     TAKEOFF,
     VehicleCore,
 )
-from sitl.physics import Goal, step_fixed_wing, step_multirotor
+from sitl.physics import Goal, l1_distance_m, step_fixed_wing, step_multirotor, turn_radius_m
 
 _log = logging.getLogger(__name__)
 
 
 class Flight(VehicleCore):
     """Modes and mission execution (see the module docstring)."""
+
+    # Fixed wing: where the current mission leg starts (north, east); None until the leg's
+    # first goal, which then starts it at the aircraft (a new current item, a new mission).
+    _leg_from_ne: tuple[float, float] | None = None
 
     def mission_items(self) -> list[mp.RawItem]:
         if self.is_ardupilot and self._items:
@@ -85,6 +89,7 @@ class Flight(VehicleCore):
             self._seq = first
         self._seq = max(0, min(self._seq, len(items) - 1))
         self._item_reached_at = None
+        self._leg_from_ne = None
         self._mission_state = (
             const("MISSION_STATE_ACTIVE") if flying_mission else const("MISSION_STATE_NOT_STARTED")
         )
@@ -103,6 +108,7 @@ class Flight(VehicleCore):
             return False
         self._seq = seq
         self._item_reached_at = None
+        self._leg_from_ne = None
         self._stalled = False
         self._send_mission_current()
         return True
@@ -129,6 +135,7 @@ class Flight(VehicleCore):
                 self._seq = 1 if len(self._items) > 1 else 0
             self._mission_state = const("MISSION_STATE_ACTIVE")
             self._item_reached_at = None
+            self._leg_from_ne = None
             self._mission_climb = self._landed
         if target != MISSION and prev == MISSION and self._items:
             self._mission_state = const("MISSION_STATE_PAUSED")
@@ -278,18 +285,31 @@ class Flight(VehicleCore):
         if mode in (HOLD, POSCTL, GUIDED):
             return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
         if mode == TAKEOFF:
-            alt = self._takeoff_alt
-            if self.k.alt_amsl_m >= alt - 0.5:
-                self._enter_mode(GUIDED if self.is_ardupilot else HOLD)
-                self.statustext(SEV_INFO, "Takeoff complete")
-                return self._mode_goal()
-            if self.is_fixed_wing:
-                # climb out straight ahead, far target along the heading
-                n = self.k.north_m + 1000.0 * math.cos(self.k.yaw_rad)
-                e = self.k.east_m + 1000.0 * math.sin(self.k.yaw_rad)
-                return self._goal(n, e, alt + 1.0, stop=False)
-            return self._goal(self._goal_ne[0], self._goal_ne[1], alt + 0.6, stop=True)
-        if mode == LOITER:  # ArduCopter LOITER at minimum RC throttle: straight down
+            return self._takeoff_goal()
+        if mode in (LOITER, LAND):
+            return self._descent_goal(mode)
+        if mode == RTL:
+            return self._rtl_goal()
+        if mode == MISSION:
+            return self._mission_goal()
+        return None
+
+    def _takeoff_goal(self) -> Goal | None:
+        alt = self._takeoff_alt
+        if self.k.alt_amsl_m >= alt - 0.5:
+            self._enter_mode(GUIDED if self.is_ardupilot else HOLD)
+            self.statustext(SEV_INFO, "Takeoff complete")
+            return self._mode_goal()
+        if self.is_fixed_wing:
+            # climb out straight ahead, far target along the heading
+            n = self.k.north_m + 1000.0 * math.cos(self.k.yaw_rad)
+            e = self.k.east_m + 1000.0 * math.sin(self.k.yaw_rad)
+            return self._goal(n, e, alt + 1.0, stop=False)
+        return self._goal(self._goal_ne[0], self._goal_ne[1], alt + 0.6, stop=True)
+
+    def _descent_goal(self, mode: str) -> Goal:
+        """LAND, or ArduCopter's LOITER at minimum RC throttle (straight down)."""
+        if mode == LOITER:
             return self._goal(
                 self._goal_ne[0],
                 self._goal_ne[1],
@@ -297,22 +317,16 @@ class Flight(VehicleCore):
                 stop=True,
                 descent=self.lim.descent_rate_mps,
             )
-        if mode == LAND:
-            descent = self.lim.descent_rate_mps * (1.7 if self._motor_failed else 1.0)
-            speed = self.lim.min_airspeed_mps if self.is_fixed_wing else self._speed()
-            return self._goal(
-                self._goal_ne[0],
-                self._goal_ne[1],
-                self.ground_alt_m - 1.0,
-                stop=True,
-                speed=speed,
-                descent=descent,
-            )
-        if mode == RTL:
-            return self._rtl_goal()
-        if mode == MISSION:
-            return self._mission_goal()
-        return None
+        descent = self.lim.descent_rate_mps * (1.7 if self._motor_failed else 1.0)
+        speed = self.lim.min_airspeed_mps if self.is_fixed_wing else self._speed()
+        return self._goal(
+            self._goal_ne[0],
+            self._goal_ne[1],
+            self.ground_alt_m - 1.0,
+            stop=True,
+            speed=speed,
+            descent=descent,
+        )
 
     def _rtl_goal(self) -> Goal:
         rtl_alt = max(self.k.alt_amsl_m, self.ground_alt_m + self.rtl_alt_rel_m)
@@ -366,7 +380,22 @@ class Flight(VehicleCore):
         if self._reached(it, n, e, alt) and self._done_with(hold_s, last_nav):
             return self._goal(n, e, alt, stop=True)  # mission finished: stay on the last point
         stop = last_nav or hold_s > 0 or it.command in (mp.CMD_LOITER_UNLIM, mp.CMD_LOITER_TIME)
-        return self._goal(n, e, alt, stop=stop)
+        goal = self._goal(n, e, alt, stop=stop)
+        if self.is_fixed_wing and it.command == mp.CMD_WAYPOINT and self._item_reached_at is None:
+            # on the way to a waypoint (a hold at it, and a loiter item, circle the point)
+            goal.line_from_ne = self._leg_start(n, e)
+        return goal
+
+    def _leg_start(self, n: float, e: float) -> tuple[float, float]:
+        """Start of the line a fixed wing tracks to the point (n, e): the previous mission
+        point, or where the aircraft was when the item became current. As ArduPlane
+        (set_next_WP), an aircraft already past the line's finish starts it where it is."""
+        here = (self.k.north_m, self.k.east_m)
+        frm = self._leg_from_ne
+        if frm is None or _past_finish(frm, (n, e), here):
+            frm = here
+        self._leg_from_ne = frm
+        return frm
 
     def _run_do_items(self) -> None:
         """Execute DO items from the current index up to the next navigation item."""
@@ -411,8 +440,40 @@ class Flight(VehicleCore):
         if it.command == mp.CMD_TAKEOFF:
             return self.k.alt_amsl_m >= alt - 1.0
         dist = math.hypot(n - self.k.north_m, e - self.k.east_m)
-        alt_ok = abs(alt - self.k.alt_amsl_m) <= (1.5 if not self.is_fixed_wing else 10.0)
-        return dist <= self._acceptance(it) and alt_ok
+        if self.is_fixed_wing:
+            return abs(alt - self.k.alt_amsl_m) <= 10.0 and self._fixed_wing_reached(it, n, e, dist)
+        return dist <= self._acceptance(it) and abs(alt - self.k.alt_amsl_m) <= 1.5
+
+    def _fixed_wing_reached(self, it: mp.RawItem, n: float, e: float, dist: float) -> bool:
+        """A fixed wing is done with a waypoint when it is within the acceptance radius or the
+        distance at which the turn onto the next leg begins (its turn radius times
+        tan(turn / 2), at most the look-ahead distance: PX4 and ArduPlane both switch early
+        so that the turn ends on the next line), or when it has passed the waypoint's finish
+        line (ArduPlane's "Passed waypoint"; an overshoot never makes it circle back)."""
+        frm = self._leg_from_ne
+        if frm is not None and _past_finish(frm, (n, e), (self.k.north_m, self.k.east_m)):
+            return True
+        turn = self._next_turn_rad(n, e)
+        v = max(self.k.airspeed_mps, self.lim.min_airspeed_mps)
+        anticipate = min(
+            turn_radius_m(v, self.lim) * math.tan(min(turn, math.radians(150.0)) / 2.0),
+            l1_distance_m(v),
+        )
+        return dist <= max(self._acceptance(it), anticipate)
+
+    def _next_turn_rad(self, n: float, e: float) -> float:
+        """Course change at the point (n, e) from the current leg onto the next one (0 when
+        the mission ends there or the leg has no start yet)."""
+        frm = self._leg_from_ne
+        nxt = next((x for x in self._items[self._seq + 1 :] if x.command == mp.CMD_WAYPOINT), None)
+        if frm is None or nxt is None:
+            return 0.0
+        n2, e2, _ = self._item_target(nxt)
+        a = math.atan2(e - frm[1], n - frm[0])
+        b = math.atan2(e2 - e, n2 - n)
+        if math.hypot(n - frm[0], e - frm[1]) < 1.0 or math.hypot(n2 - n, e2 - e) < 1.0:
+            return 0.0
+        return abs((b - a + math.pi) % (2.0 * math.pi) - math.pi)
 
     def _done_with(self, hold_s: float, last_nav: bool) -> bool:
         """The current item is reached: after its hold time go on to the next item; True when
@@ -423,6 +484,10 @@ class Flight(VehicleCore):
         if self._t - self._item_reached_at < max(0.0, hold_s):
             return False
         self._item_reached_at = None
+        if self.is_fixed_wing:
+            it = self._items[self._seq]
+            n, e, _ = self._item_target(it)
+            self._leg_from_ne = (n, e)  # the next leg starts at this point
         if last_nav:
             self._mission_state = const("MISSION_STATE_COMPLETE")
             self._seq = max(self._seq, len(self._items) - 1)
@@ -461,3 +526,13 @@ class Flight(VehicleCore):
             self.statustext(
                 SEV_INFO, "Disarmed by external command" if not self._landed else "Disarmed"
             )
+
+
+def _past_finish(
+    frm: tuple[float, float], to: tuple[float, float], here: tuple[float, float]
+) -> bool:
+    """Is ``here`` beyond the line through ``to`` perpendicular to the leg ``frm`` -> ``to``?"""
+    ln, le = to[0] - frm[0], to[1] - frm[1]
+    if ln * ln + le * le < 1e-6:
+        return False
+    return (here[0] - to[0]) * ln + (here[1] - to[1]) * le > 0.0

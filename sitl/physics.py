@@ -70,6 +70,28 @@ class Goal:
     speed_mps: float
     stop: bool  # hover (multirotor) / loiter (fixed wing) at the point
     descent_rate_mps: float | None = None  # override (forced descent)
+    # Fixed wing in a mission: the start (north, east) of the leg that ends at the point. The
+    # aircraft then tracks the line from there (L1 / NPFG path following), as PX4 and
+    # ArduPlane do, instead of flying straight at the point from wherever it is; a point to
+    # stop at is loitered around once reached (the goal then has no line).
+    line_from_ne: tuple[float, float] | None = None
+
+
+L1_PERIOD_S = 10.0
+L1_DAMPING = 0.7
+"""Path-following gains of a fixed wing (PX4 NPFG_PERIOD / NPFG_DAMPING defaults; ArduPlane's
+NAVL1_PERIOD / NAVL1_DAMPING play the same role): the look-ahead distance is
+``period * damping / pi * ground speed``."""
+
+
+def l1_distance_m(ground_speed_mps: float) -> float:
+    """Look-ahead distance of the fixed wing's path following at ``ground_speed_mps``."""
+    return max(L1_PERIOD_S * L1_DAMPING / math.pi * ground_speed_mps, 10.0)
+
+
+def turn_radius_m(speed_mps: float, lim: Limits) -> float:
+    """Radius of a coordinated turn at the bank limit."""
+    return speed_mps * speed_mps / (G_MPS2 * math.tan(math.radians(max(lim.max_bank_deg, 1.0))))
 
 
 def _clamp(x: float, lo: float, hi: float) -> float:
@@ -159,17 +181,18 @@ def step_fixed_wing(
     de = goal.east_m - s.east_m
     dist = math.hypot(dn, de)
     r = lim.loiter_radius_m
-    if goal.stop and dist < 3.0 * r:
+    max_rate = G_MPS2 * math.tan(math.radians(lim.max_bank_deg)) / max(v, 1.0)
+    if goal.stop and goal.line_from_ne is None and dist < 3.0 * r:
         # Loiter clockwise: tangent course plus a radial correction proportional to the error.
         radial = math.atan2(-de, -dn)  # bearing from centre to aircraft
         tangent = radial + math.pi / 2.0
         err = _clamp((dist - r) / r, -1.0, 1.0)
         want = tangent + err * (math.pi / 3.0)
+        rate = _clamp(2.0 * _wrap_pi(want - s.yaw_rad), -max_rate, max_rate)  # P gain 2/s
+    elif goal.line_from_ne is not None:
+        rate = _clamp(_l1_rate(s, goal, goal.line_from_ne, v), -max_rate, max_rate)
     else:
-        want = math.atan2(de, dn)
-    turn = _wrap_pi(want - s.yaw_rad)
-    max_rate = G_MPS2 * math.tan(math.radians(lim.max_bank_deg)) / max(v, 1.0)
-    rate = _clamp(2.0 * turn, -max_rate, max_rate)  # P gain 2/s on heading error
+        rate = _clamp(2.0 * _wrap_pi(math.atan2(de, dn) - s.yaw_rad), -max_rate, max_rate)
     s.yaw_rad = _wrap_pi(s.yaw_rad + rate * dt)
     s.roll_rad = math.atan2(rate * v, G_MPS2)
     s.vn_mps = v * math.cos(s.yaw_rad) + wind_ne_mps[0]
@@ -178,3 +201,28 @@ def step_fixed_wing(
     s.east_m += s.ve_mps * dt
     _vertical(s, goal, lim, dt)
     s.pitch_rad = math.atan2(s.vup_mps, max(v, 1.0))
+
+
+def _l1_rate(s: KinState, goal: Goal, line_from_ne: tuple[float, float], v: float) -> float:
+    """Turn rate of L1 path following on the line from ``line_from_ne`` through the goal
+    point (extended beyond it): aim at the point of the line one look-ahead distance away,
+    lateral acceleration ``2 v^2 sin(eta) / L1`` (Park, Deyst and How 2004; ArduPlane's
+    AP_L1_Control, PX4's NPFG keep the same geometry)."""
+    n0, e0 = line_from_ne
+    ln, le = goal.north_m - n0, goal.east_m - e0
+    length = math.hypot(ln, le)
+    if length < 1e-6:
+        bearing = math.atan2(goal.east_m - s.east_m, goal.north_m - s.north_m)
+        return 2.0 * _wrap_pi(bearing - s.yaw_rad)
+    un, ue = ln / length, le / length
+    rn, re = s.north_m - n0, s.east_m - e0
+    along = rn * un + re * ue
+    cross = -rn * ue + re * un  # > 0: right of the line
+    l1 = l1_distance_m(v)
+    # the look-ahead point on the line (a track further than L1 away is joined at 45 deg)
+    ahead = math.sqrt(max(l1 * l1 - cross * cross, 0.0)) if abs(cross) < l1 else abs(cross)
+    tn = n0 + (along + ahead) * un
+    te = e0 + (along + ahead) * ue
+    eta = _wrap_pi(math.atan2(te - s.east_m, tn - s.north_m) - s.yaw_rad)
+    eta = _clamp(eta, -math.pi / 2.0, math.pi / 2.0)
+    return 2.0 * v * math.sin(eta) / l1

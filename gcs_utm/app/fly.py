@@ -6,7 +6,8 @@ For each operation of the scenario, on the vehicle with the operation's ``sys_id
    waypoint made current; the mission mode is not set yet: the vehicle is on the ground);
 3. at the first waypoint's time minus the climb time, arm (retried while the autopilot's
    pre-flight checks refuse) and take off to the first waypoint's altitude (PX4: NAV_TAKEOFF
-   to an AMSL altitude; ArduPilot: GUIDED, then NAV_TAKEOFF above home);
+   to an AMSL altitude; ArduCopter: GUIDED, then NAV_TAKEOFF above home; ArduPlane: armed in
+   TAKEOFF mode); a fixed wing is then sent to loiter at the first waypoint;
 4. at the first waypoint's time, switch to mission mode and confirm it on HEARTBEAT.
 
 A vehicle that refuses a step is left as it is: the refusal is logged as one error naming the
@@ -26,7 +27,7 @@ from adapters.mavlink.transfer import MavlinkError
 from adapters.mavlink.vehicle import VehicleState
 from gcs_utm.clock import Clock
 from gcs_utm.messages import FlightMode
-from gcs_utm.model import Autopilot, SysId
+from gcs_utm.model import Autopilot, Command, CommandKind, SysId, VehicleKind
 from gcs_utm.scenario import Scenario
 from gcs_utm.scenario.types import VehicleSetup
 
@@ -34,8 +35,13 @@ _log = logging.getLogger(__name__)
 
 MAV_CMD_NAV_TAKEOFF = 22
 MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_DO_SET_MODE = 176
+ARDUPLANE_TAKEOFF = 13.0  # ArduPlane's TAKEOFF custom mode
+PLANE_SAFE_M = 30.0
+"""Height above ground from which an ArduPlane is sent on to its first waypoint."""
 DISCOVERY_GRACE_S = 60.0
 """Clock seconds after the first waypoint's time a vehicle may still be discovered."""
+UPLOAD_RETRY_S = 5.0  # clock seconds between two uploads of the plan
 HOME_WAIT_S = 20.0  # clock seconds to wait for HOME_POSITION after the first fix
 ARM_TRY_S = 60.0  # clock seconds of arming tries (pre-flight checks refuse after boot)
 ARM_RETRY_S = 2.0  # clock seconds between two arming tries
@@ -116,22 +122,14 @@ async def _fly_one(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutco
     _step(out, clock, "discovered with a position fix")
     if not await _wait_home(hub, clock, v.sys_id):
         _step(out, clock, f"no HOME_POSITION within {HOME_WAIT_S:.0f} s: going on without")
-    res = await hub.upload_plan(
-        v.sys_id,
-        v.plan,
-        home=v.home,
-        set_mission_mode=False,
-        climb_rate_mps=v.max_climb_rate_mps,
-    )
-    out.uploaded, out.verified = res.ok, res.verified
-    if not res.ok:
-        raise FlyRefusedError(f"plan upload failed ({res.failure}): {res.error}")
-    _step(out, clock, f"plan uploaded and verified ({res.items} items, current {res.current_seq})")
     st = hub.state(v.sys_id)
-    pos = st.last_position
+    # the vehicle's own home (ArduPilot's take-off altitude is relative to it); a first
+    # position can precede the autopilot's altitude origin (ArduPlane reported ~0 m AMSL)
+    pos = st.home or st.last_position
     ground_m = pos.alt_amsl_m if pos is not None else v.home.alt_amsl_m
     climb_m = max(0.0, first.alt_amsl_m - ground_m)
     takeoff_t_s = first.t_s - climb_m / TAKEOFF_CLIMB_MPS - TAKEOFF_MARGIN_S
+    await _upload(hub, clock, v, out, until_t_s=takeoff_t_s)
     await clock.sleep(max(0.0, takeoff_t_s - clock.now_s()))
     await _takeoff(hub, clock, v, out, ground_m=ground_m)
     await clock.sleep(max(0.0, first.t_s - clock.now_s()))
@@ -144,6 +142,32 @@ async def _fly_one(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutco
     out.started = True
     out.late_s = max(0.0, clock.now_s() - first.t_s)
     _step(out, clock, f"mission started ({out.late_s:.1f} s after the first waypoint's time)")
+
+
+async def _upload(
+    hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome, *, until_t_s: float
+) -> None:
+    """Upload the filed plan (readback verified, first waypoint current); a failed upload
+    (each is already tried twice) is tried again every ``UPLOAD_RETRY_S`` until the take-off
+    time: on a loaded machine a transfer can overrun its budget."""
+    assert v.sys_id is not None
+    while True:
+        res = await hub.upload_plan(
+            v.sys_id,
+            v.plan,
+            home=v.home,
+            set_mission_mode=False,
+            climb_rate_mps=v.max_climb_rate_mps,
+        )
+        out.uploaded, out.verified = res.ok, res.verified
+        if res.ok:
+            break
+        why = f"plan upload failed ({res.failure}): {res.error}"
+        if clock.now_s() + UPLOAD_RETRY_S >= until_t_s:
+            raise FlyRefusedError(why)
+        _step(out, clock, f"{why}; trying again")
+        await clock.sleep(UPLOAD_RETRY_S)
+    _step(out, clock, f"plan uploaded and verified ({res.items} items, current {res.current_seq})")
 
 
 async def _wait_fix(hub: MavlinkHub, clock: Clock, v: VehicleSetup, until_t_s: float) -> None:
@@ -172,8 +196,15 @@ async def _wait_home(hub: MavlinkHub, clock: Clock, sys_id: int) -> bool:
 
 async def _arm(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome) -> None:
     assert v.sys_id is not None
-    if hub.state(v.sys_id).autopilot is Autopilot.ARDUPILOT:
-        res = await hub.send_mode(v.sys_id, FlightMode.GUIDED)  # ArduPilot takes off in GUIDED
+    st = hub.state(v.sys_id)
+    if _arduplane(st):  # armed in TAKEOFF mode, it takes off (NAV_TAKEOFF is for quadplanes)
+        res = await hub.command_long(
+            v.sys_id, MAV_CMD_DO_SET_MODE, (1.0, ARDUPLANE_TAKEOFF, 0.0, 0.0, 0.0, 0.0, 0.0)
+        )
+        if not res.ok:
+            raise FlyRefusedError(f"TAKEOFF mode refused: {res.error}")
+    elif st.autopilot is Autopilot.ARDUPILOT:
+        res = await hub.send_mode(v.sys_id, FlightMode.GUIDED)  # ArduCopter takes off in GUIDED
         if not res.ok:
             raise FlyRefusedError(f"GUIDED refused: {res.error}")
     end_t_s = clock.now_s() + ARM_TRY_S
@@ -204,7 +235,8 @@ async def _takeoff(
     any climb left). A vehicle that disarms or does not climb (an autopilot may accept the
     command and still stay on the ground right after boot) is armed and sent it again."""
     assert v.sys_id is not None
-    alt_amsl_m, first_t_s = v.plan.waypoints[0].alt_amsl_m, v.plan.waypoints[0].t_s
+    first = v.plan.waypoints[0]
+    alt_amsl_m, first_t_s = first.alt_amsl_m, first.t_s
     st = hub.state(v.sys_id)
     alt = alt_amsl_m if st.autopilot is not Autopilot.ARDUPILOT else alt_amsl_m - ground_m
     nan = math.nan
@@ -212,21 +244,47 @@ async def _takeoff(
     for attempt in range(1, TAKEOFF_TRIES + 1):
         if attempt == 1 or not st.armed:
             await _arm(hub, clock, v, out)
-        res = await hub.command_long(
-            v.sys_id, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, nan, nan, nan, alt)
-        )
-        if not res.ok:
-            raise FlyRefusedError(f"take-off refused: {res.error}")
+        if not _arduplane(st):
+            res = await hub.command_long(
+                v.sys_id, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, nan, nan, nan, alt)
+            )
+            if not res.ok:
+                raise FlyRefusedError(f"take-off refused: {res.error}")
         _step(out, clock, f"taking off to {alt_amsl_m:.1f} m AMSL (try {attempt})")
-        why = await _climb(clock, st, alt_amsl_m, ground_m, first_t_s)
+        # ArduPlane climbs to its own TKOFF_ALT: sent on from a safe height, it climbs the rest
+        climb_to_m = min(alt_amsl_m, ground_m + PLANE_SAFE_M) if _arduplane(st) else alt_amsl_m
+        why = await _climb(clock, st, climb_to_m, ground_m, first_t_s)
         if not why:
             pos = st.last_position
             _step(out, clock, f"climbed to {pos.alt_amsl_m if pos else alt_amsl_m:.1f} m AMSL")
+            if st.kind is VehicleKind.FIXED_WING:
+                await _wait_at_first_waypoint(hub, clock, v, out)
             return
         _step(out, clock, why)
         if why.startswith("first waypoint"):
             return
     raise FlyRefusedError(f"take-off failed {TAKEOFF_TRIES} times: {why}")
+
+
+def _arduplane(st: VehicleState) -> bool:
+    return st.autopilot is Autopilot.ARDUPILOT and st.kind is VehicleKind.FIXED_WING
+
+
+async def _wait_at_first_waypoint(
+    hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome
+) -> None:
+    """A fixed wing cannot wait above its home: after the take-off PX4 loiters where its climb
+    ended, hundreds of metres out on the runway heading, and would reach the first waypoint
+    late. Sent there (DO_REPOSITION, as a ground station's "go to"), it loiters around it."""
+    assert v.sys_id is not None
+    first = v.plan.waypoints[0]
+    res = await hub.send_command(
+        v.sys_id,
+        Command(kind=CommandKind.GOTO, operation_id=v.operation_id, target=first.position),
+    )
+    if not res.ok:
+        raise FlyRefusedError(f"go-to the first waypoint refused: {res.error}")
+    _step(out, clock, "sent to loiter at the first waypoint")
 
 
 async def _climb(

@@ -46,6 +46,7 @@ from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.emergency import EmergencyService
 from gcs_utm.services.monitoring import MonitoringService
 from gcs_utm.services.operator import AutoOperator
+from gcs_utm.services.strategic import FilingCheck
 from gcs_utm.services.surveillance import SurveillanceService
 from gcs_utm.services.tracking import TrackingService
 from gcs_utm.services.usm import Usm
@@ -137,8 +138,7 @@ class Runtime:
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
 
     def tracks(self) -> dict[TrackId, Track]:
-        tracks: dict[TrackId, Track] = self.tracking.snapshot()[0]
-        return tracks
+        return self.tracking.tracks_now()
 
 
 def build_runtime(
@@ -171,7 +171,11 @@ def build_runtime(
         else:
             store.deactivate_geofence(g.id)
 
-    airspace = Airspace(on_operation=store.save_operation, on_plan=on_plan, on_geofence=on_geofence)
+    def on_operation(op: Operation) -> None:
+        store.save_operation(op)
+        filing.on_operation(op)  # the strategic check of a newly filed plan
+
+    airspace = Airspace(on_operation=on_operation, on_plan=on_plan, on_geofence=on_geofence)
     id_prefix = life_prefix(store.epoch)
     usm = Usm(
         airspace,
@@ -180,6 +184,13 @@ def build_runtime(
         record=store.record,
         id_prefix=id_prefix,
         ground_elevation_amsl_m=frame.ground_elevation_amsl_m,
+    )
+
+    filing = FilingCheck(
+        frame,
+        settings.monitoring,
+        operations=lambda: airspace.operations,
+        log_event=usm.log_event,
     )
 
     async def tracking_hazard(h: HazardReport) -> None:

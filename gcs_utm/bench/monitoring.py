@@ -18,6 +18,9 @@ Records:
   (N ``Track`` objects + prediction), the ``AirspaceSnapshot``, and ``Monitor.cycle`` (the
   same kernels plus the per-operation threat bookkeeping). Each run after the warm-up is
   the steady state: the same threats persist (updated, not re-raised).
+- ``--density-of N0``: the box side grows with sqrt(N / N0) and the number of geofences
+  with N / N0, so every N has the traffic density (and so the conflicts per UAS) of N0 UAS
+  in the 50 km box; without it every N shares the one box, and true conflicts grow as N^2.
 - at N = ``--oracle-n`` the separation stage alone against the brute-force oracle on the same
   prediction (same pairs?, ratio); ``monitoring.scaling``: fitted exponent of each cycle.
 """
@@ -67,6 +70,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-service", action="store_true", help="skip the monitoring.service_cycle records"
     )
+    p.add_argument(
+        "--density-of",
+        type=int,
+        default=0,
+        metavar="N0",
+        help="keep the traffic density of N0 UAS in the 50 km box: the box side grows with "
+        "sqrt(N / N0) and the geofences with N / N0 (default: one 50 km box for every N)",
+    )
 
 
 def _latlon(e: float, n: float) -> LatLon:
@@ -74,10 +85,10 @@ def _latlon(e: float, n: float) -> LatLon:
     return LatLon(lat_deg=lat, lon_deg=lon)
 
 
-def _fences(rng: np.random.Generator) -> list[Geofence]:
+def _fences(rng: np.random.Generator, box_m: float = BOX_M, count: int = 100) -> list[Geofence]:
     out = []
-    half = BOX_M / 2
-    for i in range(100):
+    half = box_m / 2
+    for i in range(count):
         cx, cy = rng.uniform(-half, half, 2)
         zlo = float(rng.uniform(0, 60))
         zhi = zlo + float(rng.uniform(40, 150))
@@ -111,10 +122,12 @@ def _fences(rng: np.random.Generator) -> list[Geofence]:
     return out
 
 
-def _traffic(n: int, rng: np.random.Generator) -> tuple[list[Operation], list[Measurement]]:
+def _traffic(
+    n: int, rng: np.random.Generator, box_m: float = BOX_M
+) -> tuple[list[Operation], list[Measurement]]:
     """N operations on straight 4D plans (from 100 s before to 200 s after the cycle time)
     and two exact position fixes per UAS (1 s and 0 s before the cycle time)."""
-    half = BOX_M / 2
+    half = box_m / 2
     pos = np.column_stack(
         [rng.uniform(-half, half, n), rng.uniform(-half, half, n), rng.uniform(0, 150, n)]
     )
@@ -178,10 +191,12 @@ def _traffic(n: int, rng: np.random.Generator) -> tuple[list[Operation], list[Me
 class _Setup:
     """One fleet in a tracker, the fences, and the inputs of the array path."""
 
-    def __init__(self, n: int, fences: list[Geofence], rng: np.random.Generator) -> None:
+    def __init__(
+        self, n: int, fences: list[Geofence], rng: np.random.Generator, box_m: float = BOX_M
+    ) -> None:
         self.cfg = MonitoringConfig()
         self.fences = fences
-        self.ops, meas = _traffic(n, rng)
+        self.ops, meas = _traffic(n, rng, box_m)
         self.tracker = Tracker(_FRAME, TrackingConfig())
         self.tracker.set_operations(self.ops)
         self.tracker.ingest(meas[0::2])
@@ -218,7 +233,8 @@ class _Setup:
             prediction=prediction,
         )
         self.monitor.cycle(snap)
-        self.found["threats"] = len(self.monitor.active())
+        # counted, not built: the service itself never reads them all each cycle
+        self.found["threats"] = self.monitor.open_count()
 
     def prepare_service(self) -> None:
         self.operations = {o.id: o for o in self.ops}
@@ -234,11 +250,16 @@ def _exponent(medians: dict[int, float]) -> float:
 def run(args: argparse.Namespace) -> list[dict[str, object]]:
     sizes = args.uas or [1000, 2000, 5000, 10000, 20000, 50000]
     rng = np.random.default_rng(args.seed)
-    fences = _fences(rng)
+    base_fences = _fences(rng)
+    n0 = args.density_of
     records: list[dict[str, object]] = []
     medians: dict[str, dict[int, float]] = {"monitoring.cycle": {}, "monitoring.service_cycle": {}}
     for n in sizes:
-        s = _Setup(n, fences, rng)
+        box_m = BOX_M * math.sqrt(n / n0) if n0 and n > n0 else BOX_M
+        fences = base_fences
+        if box_m != BOX_M:
+            fences = _fences(rng, box_m, round(100 * box_m**2 / BOX_M**2))
+        s = _Setup(n, fences, rng, box_m)
         ms = time_runs(s.cycle, runs=args.runs)
         rec = summary(
             "monitoring.cycle",
@@ -248,6 +269,7 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
             prediction="Tracker.predict",
             geofences=len(fences),
             los_pairs=s.found["los"],
+            box_km=round(box_m / 1000.0, 1),
             geofence_hits=s.found["geofence"],
             method="allpairs" if n < s.cfg.allpairs_below else "grid",
         )
@@ -263,6 +285,8 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
                 items_per_run=n,
                 prediction="Tracker.snapshot",
                 threats=s.found["threats"],
+                box_km=round(box_m / 1000.0, 1),
+                geofences=len(fences),
             )
             medians["monitoring.service_cycle"][n] = float(rec["median_ms"])  # type: ignore[arg-type]
             records.append(rec)

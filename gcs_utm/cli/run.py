@@ -238,27 +238,14 @@ def summary_text(report: Report, path: Path) -> str:
 
 def _run_one(path: Path, args: argparse.Namespace, *, last: bool = True) -> int:
     """Run one scenario; 0 ok, 2 refused, 3 the operator ended the run (``q``)."""
-    from gcs_utm.app import (
-        OperatorMode,
-        configure_interpreter,
-        report_path,
-        run_scenario_blocking,
-    )
+    from gcs_utm.app import configure_interpreter, report_path, run_scenario_blocking
     from gcs_utm.scenario import ScenarioError
     from gcs_utm.services.recorder import RecordError
 
-    settings = _settings(args)
-    if settings is None:
+    prepared = _prepare(args)
+    if prepared is None:
         return 2
-    operator = _operator(args, args.mqtt or settings.mqtt.enabled)
-    if operator is None:
-        print(NO_ANSWER_SOURCE, file=sys.stderr)
-        return 2
-    try:
-        options = _options(args, operator)
-    except ValueError as exc:
-        print(f"gcs-utm: {exc}", file=sys.stderr)
-        return 2
+    settings, operator, options = prepared
     configure_interpreter()
     try:
         report = run_scenario_blocking(path, settings, options)
@@ -267,6 +254,34 @@ def _run_one(path: Path, args: argparse.Namespace, *, last: bool = True) -> int:
         return 2
     text = summary_text(report, report_path(options.out_dir, report.scenario))
     print(text)
+    return _after_run(report, text, operator, args, last=last)
+
+
+def _prepare(args: argparse.Namespace) -> tuple[Any, Any, Any] | None:
+    """(settings, operator mode, run options) of a scenario run, or None after printing why
+    the run is refused."""
+    settings = _settings(args)
+    if settings is None:
+        return None
+    operator = _operator(args, args.mqtt or settings.mqtt.enabled)
+    if operator is None:
+        print(NO_ANSWER_SOURCE, file=sys.stderr)
+        return None
+    try:
+        options = _options(args, operator)
+    except ValueError as exc:
+        print(f"gcs-utm: {exc}", file=sys.stderr)
+        return None
+    return settings, operator, options
+
+
+def _after_run(
+    report: Any, text: str, operator: Any, args: argparse.Namespace, *, last: bool
+) -> int:
+    """0, or 3 when the operator ended the run or closed the dashboard's summary before the
+    last scenario of a demo."""
+    from gcs_utm.app import OperatorMode
+
     if report.operator_quit:
         return 3
     if operator == OperatorMode.DASHBOARD and not args.headless:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -35,7 +35,7 @@ class AirspaceError(ValueError):
     """A change the airspace refuses (unknown operation, stale plan version, ...)."""
 
 
-TrackSource = Callable[[], tuple[dict[TrackId, Track], PredictedTrajectories | None]]
+TrackSource = Callable[[], tuple[Mapping[TrackId, Track], PredictedTrajectories | None]]
 
 
 class Airspace:

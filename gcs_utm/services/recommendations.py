@@ -342,16 +342,9 @@ class RecommendationLifecycle:
         if record is None:
             return AnswerOutcome(status=refused, reason="unknown recommendation")
         rec = record.rec
-        if a.version != rec.version:
-            return AnswerOutcome(
-                status=refused,
-                reason=f"version {a.version} is not the current version {rec.version}",
-            )
-        op = self.airspace.operations.get(rec.operation_id)
-        if op is not None and a.source == "mqtt" and a.operator not in (op.operator, "admin"):
-            return AnswerOutcome(
-                status=refused, reason=f"operator {a.operator!r} does not fly {rec.operation_id}"
-            )
+        reason = self._sender_problem(rec, a)
+        if reason:
+            return AnswerOutcome(status=refused, reason=reason)
         if rec.state is not RecommendationState.PROPOSED:
             same = (
                 record.decision == "accepted"
@@ -361,22 +354,37 @@ class RecommendationLifecycle:
             if same:
                 return AnswerOutcome(status=AnswerStatus.DUPLICATE, reason="already answered")
             return AnswerOutcome(status=refused, reason=f"recommendation is {rec.state.value}")
+        reason = self._content_problem(rec, a)
+        if reason:
+            return AnswerOutcome(status=refused, reason=reason)
+        return AnswerOutcome(status=AnswerStatus.ACCEPTED)
+
+    def _sender_problem(self, rec: Recommendation, a: PilotAnswer) -> str:
+        """Why the answer is not for this version or not from its operator ("" if it is)."""
+        if a.version != rec.version:
+            return f"version {a.version} is not the current version {rec.version}"
+        op = self.airspace.operations.get(rec.operation_id)
+        if op is not None and a.source == "mqtt" and a.operator not in (op.operator, "admin"):
+            return f"operator {a.operator!r} does not fly {rec.operation_id}"
+        return ""
+
+    def _content_problem(self, rec: Recommendation, a: PilotAnswer) -> str:
+        """Why a pending recommendation cannot take the answer: too late, or an alternative
+        it does not have ("" if it can)."""
         # the later of the answer's own time and its arrival: a sender whose clock runs
         # behind cannot extend the deadline
         if max(a.t_s, self.clock.now_s()) > rec.deadline_t_s:
-            return AnswerOutcome(status=refused, reason="deadline passed")
+            return "deadline passed"
         index = a.alternative_index
         if (
             a.decision is PilotDecision.ACCEPT
             and index is not None
             and not 0 <= index < len(rec.alternatives)
         ):
-            return AnswerOutcome(
-                status=refused,
-                reason=f"alternative_index {index} does not exist "
-                f"({len(rec.alternatives)} alternatives)",
+            return (
+                f"alternative_index {index} does not exist ({len(rec.alternatives)} alternatives)"
             )
-        return AnswerOutcome(status=AnswerStatus.ACCEPTED)
+        return ""
 
     async def _apply(self, record: RecommendationRecord) -> None:
         """Carry out an accepted recommendation: command, or upload + readback + new plan."""

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Awaitable, Callable, Iterable, Sequence
+from collections.abc import Awaitable, Callable, Iterable, Mapping, Sequence
 
 from gcs_utm.clock import Clock
 from gcs_utm.core.tracking import IngestStats, Tracker
@@ -248,9 +248,15 @@ class TrackingService:
     def set_operations(self, operations: Iterable[Operation]) -> None:
         self.tracker.set_operations(operations)
 
-    def snapshot(self) -> tuple[dict[TrackId, Track], PredictedTrajectories]:
-        """All tracks and their predictions at the clock's current time (one consistent view)."""
+    def snapshot(self) -> tuple[Mapping[TrackId, Track], PredictedTrajectories]:
+        """All tracks and their predictions at the clock's current time (one consistent view;
+        Track objects are built only for the rows read)."""
         return self.tracker.snapshot(self.clock.now_s())
+
+    def tracks_now(self) -> dict[TrackId, Track]:
+        """All tracks propagated to the clock's current time, without a prediction (the
+        dashboard's and the traffic feed's view)."""
+        return self.tracker.tracks_at(self.clock.now_s()).materialise()
 
     async def step(self) -> None:
         """One cycle: ingest the pending batch, check staleness, flush if due."""

@@ -35,6 +35,31 @@ ARDUPILOT_VEHICLES = {
     "plane": ("arduplane", "plane", "plane.parm"),
 }
 
+# What PX4 v1.15.2's SIH plane (airframe 10041) needs to fly, set over MAVLink after boot (each
+# takes effect at once). Measured here, and PX4 PR 24034 (after v1.15.2) names the same faults:
+# - the airframe drives outputs 3-6 (aileron, elevator, rudder, motor) while SIH reads roll,
+#   pitch, yaw and throttle from outputs 1-4: outputs 1-2 stay unassigned (NaN), the simulation
+#   diverges the moment it is armed ("angular velocity no longer valid", flight termination,
+#   "Disarmed by lockdown");
+# - the roll and pitch torques of the aileron and elevator are reversed: it rolls over right
+#   after lift-off ("Attitude failure (roll)", failsafe, "Disarmed by failsafe");
+# - SIH holds a grounded plane's pitch at 0 and, at SIH_T_MAX 6 N, it tops out at 12 m/s on the
+#   runway without lifting off: 12 N gets it airborne at about 15 m/s;
+# - gcs-utm's plans end at their last waypoint (no landing pattern), which PX4's fixed-wing
+#   default MIS_TKO_LAND_REQ 2 refuses ("Landing waypoint/pattern required").
+PX4_SIH_PLANE_PARAMS: dict[str, float | int] = {
+    "PWM_MAIN_FUNC1": 201,  # servo 1: aileron
+    "PWM_MAIN_FUNC2": 202,  # servo 2: elevator
+    "PWM_MAIN_FUNC3": 203,  # servo 3: rudder
+    "PWM_MAIN_FUNC4": 101,  # motor 1
+    "PWM_MAIN_FUNC5": 0,
+    "PWM_MAIN_FUNC6": 0,
+    "CA_SV_CS0_TRQ_R": 0.5,  # was -0.5
+    "CA_SV_CS1_TRQ_P": -1.0,  # was 1
+    "SIH_T_MAX": 12.0,  # the simulated motor's thrust, N (was 6)
+    "MIS_TKO_LAND_REQ": 0,  # no landing required in a mission
+}
+
 SITL_ROOT = Path(os.environ.get("GCS_UTM_SITL_ROOT", "/var/tmp"))
 _serial = itertools.count()
 

@@ -10,9 +10,11 @@ measurement. Blocking calls: run it beside a ``gcs-utm`` subprocess, or in a thr
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import socket
+import struct
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -56,6 +58,7 @@ class PilotLink:
 
     instance: int
     autopilot: str = "px4"
+    tcp_port: int | None = None  # ArduPilot: default SERIAL0, 5760+10i
     sock: socket.socket = field(init=False)
     enc: Any = field(init=False)
     dec: Any = field(init=False)
@@ -69,7 +72,8 @@ class PilotLink:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.sock.bind(("127.0.0.1", 14540 + self.instance))
         else:
-            self.sock = socket.create_connection(("127.0.0.1", 5760 + 10 * self.instance), 10.0)
+            port = self.tcp_port or 5760 + 10 * self.instance
+            self.sock = socket.create_connection(("127.0.0.1", port), 10.0)
         self.sock.settimeout(0.05)
         self.enc = mav.MAVLink(None, srcSystem=254, srcComponent=191)
         self.dec = mav.MAVLink(None)
@@ -146,6 +150,28 @@ class PilotLink:
             raise TimeoutError(
                 f"{self.autopilot} {self.sys_id}: no HOME_POSITION within {timeout_s} s"
             )
+
+    def set_params(self, params: dict[str, float | int], timeout_s: float = 5.0) -> None:
+        """PARAM_SET each (an int as MAV_PARAM_TYPE_INT32, its bits in the float, as PX4 and
+        QGC encode it; a float as REAL32) and check the PARAM_VALUE echo."""
+        for name, value in params.items():
+            if isinstance(value, int):
+                wire = struct.unpack("<f", struct.pack("<i", value))[0]
+                kind = mav.MAV_PARAM_TYPE_INT32
+            else:
+                wire, kind = float(value), mav.MAV_PARAM_TYPE_REAL32
+            echo = None
+            end = time.monotonic() + timeout_s
+            while echo is None:  # resent each second: a datagram can be lost
+                msg = mav.MAVLink_param_set_message(self.sys_id, 1, name.encode(), wire, kind)
+                self.send(msg)
+                with contextlib.suppress(TimeoutError):
+                    echo = self.wait("PARAM_VALUE", 1.0, lambda m, n=name: m.param_id == n)
+                if echo is None and time.monotonic() > end:
+                    raise TimeoutError(f"{self.autopilot} {self.sys_id}: {name} not echoed")
+            if echo.param_value != wire and not (math.isnan(wire) and math.isnan(echo.param_value)):
+                got = echo.param_value
+                raise AssertionError(f"{self.autopilot} {self.sys_id}: {name} is {got}")
 
     def upload(self, items: list[Any], timeout_s: float = 10.0) -> None:
         """MISSION_COUNT, answer each request with MISSION_ITEM_INT, expect an accepted ACK."""

@@ -3,9 +3,10 @@ ArduCopter 4.6 SITL): the ground service's receive stack (hub -> USM -> tracking
 at the autopilot's speed factor.
 
 - PX4: a mission uploaded after discovery becomes an operation with its altitudes from
-  HOME_POSITION; after a restart the mission present before the first fix is filed; 10
+  HOME_POSITION; after a restart the mission present before the first fix is filed; 3
   minutes of sim time at speed 8 (PX4 SIH's clock runs slow, more so under load) with no
-  stale track, no COMMUNICATION_FAILURE and every capture time at or before its receipt.
+  stale track, no COMMUNICATION_FAILURE and every capture time at or before its receipt
+  (30 minutes of the whole service: test_serve_soak.py).
 - ArduCopter: a freshly booted copter with a mission gets an operation (home from mission item
   0 / HOME_POSITION); connected while airborne, its plan altitudes come from home, not from
   the first reported altitude; its SYSTEM_TIME, which lags the host clock by the time SITL
@@ -170,10 +171,11 @@ async def _px4_scenario(px4: Callable[..., SitlProcess], workdir: Path, speed: f
         assert_plan_from_home(op, ground, 25.0)
         assert haversine_m(op.home.lat_deg, op.home.lon_deg, home_lat, home_lon) < 2.0  # type: ignore[union-attr]
     p.stop()
-    # 2. restarted with that mission: filed before the first position fix; then 10 minutes
-    # of sim time without a stale track. Stale after 15 sim s, not 5: at speed 8 that is
-    # 0.6 s of wall time, within the scheduling hiccups of a loaded 2-core machine; a clock
-    # anchored once lags ~4.5 % x 600 s = 27 s by the end and crosses 15 s at ~330 s.
+    # 2. restarted with that mission: filed before the first position fix; then 3 minutes
+    # of sim time without a stale track (30 minutes: test_serve_soak.py). Stale after 15 sim
+    # s, not 5: at speed 8 that is 0.6 s of wall time, within the scheduling hiccups of a
+    # loaded 2-core machine; a clock anchored once lags ~4.5 % x 180 s = 8 s by the end (the
+    # end-lag bound below fails).
     clock = ScaledClock(speed)
     p = px4(instance=0, speed=speed, workdir=workdir)
     stale_s = 15.0
@@ -187,7 +189,7 @@ async def _px4_scenario(px4: Callable[..., SitlProcess], workdir: Path, speed: f
         st = s.hub.state(SysId(1))
         await until(lambda: s.usm.counters["measurements"] > 0, 30.0, "no position fix")
         first_boot_ms, first_t_s = st.last_boot_ms, clock.now_s()
-        sim_s = 600.0
+        sim_s = 180.0
         await until(
             lambda: st.last_boot_ms - first_boot_ms >= sim_s * 1000,
             sim_s / speed * 1.6 + 10,
@@ -208,7 +210,7 @@ async def _px4_scenario(px4: Callable[..., SitlProcess], workdir: Path, speed: f
         assert stats.delay_min_s >= -1e-6  # never dated after its arrival
         assert st.offset_s is not None
         lag_end_s = st.last_heard_t_s - (st.offset_s + st.last_boot_ms / 1000.0)
-        assert lag_end_s < 2.0  # at the end: how late a report is dated (was 27 s)
+        assert lag_end_s < 2.0  # at the end: how late a report is dated (was 8 s at 180 s)
         assert stats.delay_max_s < stale_s
         assert s.communication_failures() == []
         assert s.tracking.tracker.counters["stale_raised"] == 0

@@ -652,3 +652,61 @@ def test_new_plan_waypoints_equal_validated_ones_and_bad_values_are_refused() ->
     bad = LocalPlan(lp.e, lp.n, np.array([100.0, np.nan, 100.0]), lp.t)
     with pytest.raises(ModelError, match="alt_amsl_m"):
         local_to_plan(bad, base, sc.FRAME, created_t_s=sc.T0_S, reason="test")
+
+
+def test_new_plans_keep_both_vehicles_tracking_tolerances_free() -> None:
+    # Two multirotors crossing: every lateral alternative keeps the effective minima plus
+    # both vehicles' tracking tolerances from the other's plan (a vehicle flies metres behind
+    # a deformed plan; keeping the bare minima, ~57 m with the cords' margin, was flown into
+    # a loss by 1-6 m). Tolerances of 20 m each make the difference plain.
+    from gcs_utm.envelope import implied
+
+    assert implied(False, 10.0, 3.0).tracking_tolerance_m() == 5.0  # multirotor default
+    assert implied(True, 20.0, 3.0).tracking_tolerance_m() == 10.0  # fixed wing default
+    env = replace(implied(False, 10.0, 3.0), tracking_error_m=20.0)
+    a = replace(sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)]), envelope=env)
+    b = replace(sc.make_operation("B", [(0, -1000, 100), (0, 1000, 100)]), envelope=env)
+    snap = sc.snapshot([a, b])
+    td = make_td()
+    alts = td.resolve_loss_of_separation(sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"]), snap)
+    buffered = replace(MON, separation_horizontal_m=MON.separation_horizontal_m + 40.0 - 0.5)
+    lateral = [
+        x
+        for x in alts[OperationId("A")]
+        if x.maneuver in (Maneuver.GO_LEFT, Maneuver.GO_RIGHT) and "alone" in x.detail
+    ]
+    assert lateral
+    for x in lateral:
+        assert x.plan is not None
+        assert plan_vs_plans(x.plan, a, [b], sc.FRAME, buffered) == [], x.detail
+    # switched off (EM's second search), the bare minima are what counts
+    td.tracking_buffers = False
+    assert td.pair_minima(a, b) == MON.effective_minima(10.0, 10.0)
+
+
+def test_a_lateral_deformation_goes_out_along_and_back_without_dips() -> None:
+    # A converged cord that dips between two peaks (two conflicts, or a crossing UAS whose
+    # demand moves along the cord) made plans that zigzag every few seconds: a multirotor
+    # slowed at each corner and fell 20-50 m behind its plan, into the loss it was to avoid.
+    from gcs_utm.core.deconfliction import cords as cd
+    from gcs_utm.core.deconfliction.deform import concave_hull
+
+    a = sc.make_operation("A", [(0, 0, 100), (2000, 0, 100)])
+    td = make_td()
+    lp = td.local_plan(a.plan)
+    grid = float(lp.t[0]) + 2.0 * np.arange(100, dtype=np.float64)
+    demand = np.zeros(100)
+    demand[[40, 44, 47, 52]] = [20.0, 12.0, 25.0, 9.0]
+    d = np.minimum(cd.envelope(demand, 3.6), 3.6 * np.arange(100))
+    assert (np.diff(np.sign(np.diff(d))) != 0).sum() > 3  # the cord zigzags
+    hull = concave_hull(d)
+    assert np.all(hull >= d) and float(hull.max()) == float(d.max())
+    assert float(np.abs(np.diff(hull)).max()) <= float(np.abs(np.diff(d)).max()) + 1e-9
+    new = td.deform(a, lp, grid, d, cd.AXIS_LATERAL, 1)
+    # the plan flies east along n = 0, so its lateral offset is n (left is north): it
+    # rises, then falls (one turn back, not one per dip)
+    step = np.diff(new.n)
+    falls = np.flatnonzero(step < -1e-6)
+    assert falls.size and not (step[falls[0] :] > 1e-6).any()
+    # and no staircase either: each corner turns less than the one before up to the peak
+    assert len(new) <= 6, new.n

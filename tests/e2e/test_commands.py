@@ -69,6 +69,7 @@ def test_bench_collects_every_benchmark() -> None:
         "ingest",
         "upload",
         "fuzz",
+        "strategic",
         "resolution",
         "cluster",
     }

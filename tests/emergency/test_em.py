@@ -356,3 +356,46 @@ def test_config_rejects_unknown_actions_and_kinds() -> None:
     with pytest.raises(ValueError, match="unknown threat kind"):
         EmergencyConfig(policy={"ALIENS": "warn"})
     assert EmergencyConfig().beta > EmergencyConfig().alpha
+
+
+def test_when_no_combination_keeps_the_tracking_tolerances_the_bare_minima_decide() -> None:
+    # Head-on at a fixed altitude (no vertical room) with tolerances no lateral manoeuvre can
+    # keep (600 m each, beyond the 1000 m lateral limit): rather than escalating with
+    # nothing, EM searches again on the effective minima alone and recommends a plan.
+    from gcs_utm.envelope import implied
+
+    env = replace(implied(False, 10.0, 3.0), tracking_error_m=600.0)
+    snap, threat = sc.scenario_los_2uas()
+    ops = {
+        k: replace(o, envelope=env, min_alt_amsl_m=100.0, max_alt_amsl_m=100.0)
+        for k, o in snap.operations.items()
+    }
+    snap = replace(snap, operations=ops)
+    em = make_em()
+    d = em.on_threat(threat, snap)
+    assert not any("no conflict-free combination" in e for e in d.escalations)
+    moved = [r.selected for r in d.recommendations if r.selected is not None]
+    assert moved and all(x.maneuver is not Maneuver.KEEP_PLAN for x in moved)
+    assert em.td.tracking_buffers  # restored after the second search
+
+
+def test_a_conflict_between_two_unchanged_neighbours_does_not_block_the_decision() -> None:
+    # A crosses B; C flies 20 m beside B (their own conflict, another threat) and is drawn
+    # into A-B's problem as a neighbour. B and C may not move. Requiring B's and C's
+    # unchanged plans to be compatible made every combination fail: nothing moved and A flew
+    # into B. Only the threat's own pair, and every changed plan, must be conflict-free.
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)])
+    b = sc.make_operation("B", [(0, -1000, 100), (0, 1000, 100)], priority=2000)
+    c = sc.make_operation("C", [(20, -1000, 100), (20, 1000, 100)], priority=2000)
+    snap = sc.snapshot([a, b, c])
+    em = make_em()
+    d = em.on_threat(sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"]), snap)
+    assert not d.escalations
+    (rec,) = [r for r in d.recommendations if r.operation_id == "A"]
+    assert rec.selected is not None and rec.selected.plan is not None
+    assert rec.selected.maneuver is not Maneuver.KEEP_PLAN
+    # A's new plan is clear of both B and C
+    mon = MonitoringConfig()
+    from gcs_utm.core.monitoring.strategic import plan_vs_plans
+
+    assert plan_vs_plans(rec.selected.plan, a, [b, c], sc.FRAME, mon) == []

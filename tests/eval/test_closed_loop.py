@@ -21,13 +21,6 @@ N = 20
 pytestmark = [pytest.mark.slow, pytest.mark.network, pytest.mark.timeout(900)]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 19: the resolutions do not yet hold in flight. Measured on this set (fast "
-    "time, deterministic): 46 predicted losses, 41 avoided (89.1 %), 5 flown under the "
-    "effective minima, 1 created by accepted plans, 0 geofence intrusions, 7 escalations. "
-    "docs/evaluation.md has the figures.",
-)
 def test_every_predicted_loss_is_avoided_in_closed_loop(tmp_path: Path) -> None:
     assert {e.kind for e in generate(N, SEED)} == set(KINDS)
     paths = write_encounters(tmp_path / "scenarios", N, SEED)

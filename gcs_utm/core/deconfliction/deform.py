@@ -30,7 +30,9 @@ def deformed(
     envelope: PerformanceEnvelope,
     max_speed_factor: float,
 ) -> LocalPlan:
-    """The plan ``lp`` displaced by ``sign * d`` (on ``grid``) along ``axis``, re-timed."""
+    """The plan ``lp`` displaced by ``sign * d`` (on ``grid``) along ``axis``, re-timed. The
+    displacement flown is :func:`concave_hull` of ``d``: out, along, back."""
+    d = concave_hull(d)
     times = _kink_times(lp, grid, d)
     be, bn, bz = lp.coords(times)
     disp = sign * np.interp(times, grid, d)
@@ -72,6 +74,37 @@ def deformed(
         xz = np.append(xz, lp.z[-1])
         t = np.append(t, t[-1] + dt_back)
     return LocalPlan(xe, xn, xz, t)
+
+
+def concave_hull(d: FloatArray) -> FloatArray:
+    """The least concave majorant of ``d`` (one value per cord step) over the span where it
+    is not zero: out, along, back with as few corners as a profile at least ``d`` can have.
+    A converged cord wanders (a dip between two conflicts, a staircase where a crossing
+    UAS's demand moves along the cord), and every wiggle is two more corners a short leg
+    apart: a multirotor slows down at each and falls metres behind its plan (time its
+    mission's speeds never make up), a fixed wing cannot turn inside them. Concave, the hull
+    is never steeper than ``d`` (its slopes are chords of ``d``), so it keeps the cord's
+    slope limit, and never below it, so it keeps at least the separation the cord found
+    (Monitoring verifies the plan either way)."""
+    nz = np.flatnonzero(d > 1e-9)
+    if d.shape[0] < 3 or nz.size == 0:
+        return d
+    a = max(int(nz[0]) - 1, 0)
+    b = min(int(nz[-1]) + 1, d.shape[0] - 1)
+    hull: list[int] = []  # upper hull of the points (k, d[k]), k in [a, b]
+    for k in range(a, b + 1):
+        while len(hull) >= 2:
+            i0, i1 = hull[-2], hull[-1]
+            # drop i1 when it lies on or below the chord i0 -> k
+            if (d[i1] - d[i0]) * (k - i0) <= (d[k] - d[i0]) * (i1 - i0):
+                hull.pop()
+            else:
+                break
+        hull.append(k)
+    out = d.copy()
+    ks = np.arange(a, b + 1, dtype=np.float64)
+    out[a : b + 1] = np.interp(ks, np.asarray(hull, dtype=np.float64), d[hull])
+    return np.asarray(np.maximum(out, d), dtype=np.float64)
 
 
 def _kink_times(lp: LocalPlan, grid: FloatArray, d: FloatArray) -> FloatArray:

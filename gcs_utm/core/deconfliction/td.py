@@ -160,6 +160,10 @@ class TacticalDeconfliction:
         # (the plan is kept in the value so its id cannot be reused while cached).
         self._local: dict[int, tuple[FlightPlan, LocalPlan]] = {}
         self._speeds: dict[int, tuple[FlightPlan, tuple[float, float]]] = {}
+        self._pair_configs: dict[tuple[float, float, float], MonitoringConfig] = {}
+        self.tracking_buffers = True
+        """Keep the vehicles' tracking tolerances free around new plans (:meth:`pair_minima`);
+        EM switches them off for a second search when no combination keeps them."""
 
     def local_plan(self, plan: FlightPlan) -> LocalPlan:
         hit = self._local.get(id(plan))
@@ -285,6 +289,33 @@ class TacticalDeconfliction:
             return 0.0
         return 1.0 / max(op.priority, 1)
 
+    def pair_minima(self, a: Operation, b: Operation) -> tuple[float, float]:
+        """(horizontal, vertical) minima TD keeps between the plans of ``a`` and ``b``: the
+        pair's effective minima (one definition of loss, :mod:`..monitoring.loss`) plus the
+        two vehicles' tracking tolerances horizontally (in sphere mode, on the 3D distance).
+        A plan is flown with a lag at its corners; a candidate that keeps only the bare
+        minima is flown into a loss by a few metres."""
+        h, v = self.monitoring.effective_minima(a.operational_volume_m, b.operational_volume_m)
+        if not self.tracking_buffers:
+            return h, v
+        buf = a.performance().tracking_tolerance_m() + b.performance().tracking_tolerance_m()
+        return h + buf, v + buf if self.monitoring.spherical else v
+
+    def _pair_config(self, a: Operation, b: Operation) -> MonitoringConfig:
+        """Monitoring's configuration with :meth:`pair_minima` as the pair's minima (the
+        buffered minima are never below the operational-volume floor, so they are the
+        effective minima Monitoring's checks use)."""
+        h, v = self.pair_minima(a, b)
+        key = (h, v, a.operational_volume_m + b.operational_volume_m)
+        cfg = self._pair_configs.get(key)
+        if cfg is None:
+            if self.monitoring.spherical:
+                cfg = replace(self.monitoring, safety_distance_m=h)
+            else:
+                cfg = replace(self.monitoring, separation_horizontal_m=h, separation_vertical_m=v)
+            self._pair_configs[key] = cfg
+        return cfg
+
     def verify(
         self,
         plan: FlightPlan,
@@ -300,10 +331,16 @@ class TacticalDeconfliction:
                 f"geofence {c.geofence_id} at t={c.entry_t_s:.1f}"
                 for c in plan_vs_geofences(plan, op, geofences, self.frame, self.monitoring)
             ]
-        if any(o.id != op.id for o in others):
+        # one Monitoring call per group of others with the same buffered minima
+        groups: dict[int, tuple[MonitoringConfig, list[Operation]]] = {}
+        for o in others:
+            if o.id != op.id:
+                cfg = self._pair_config(op, o)
+                groups.setdefault(id(cfg), (cfg, []))[1].append(o)
+        for cfg, group in groups.values():
             flags += [
                 f"separation with {c.b} at t={c.first_loss_t_s:.1f} ({c.min_distance_m:.1f} m)"
-                for c in plan_vs_plans(plan, op, others, self.frame, self.monitoring)
+                for c in plan_vs_plans(plan, op, group, self.frame, cfg)
             ]
         return flags
 
@@ -316,9 +353,7 @@ class TacticalDeconfliction:
         op_b = snapshot.operations[b.operation_id]
         # Sound shortcuts either way (see separation_screen); only an undecided pair goes to
         # Monitoring's exact closest-approach check.
-        h, v = self.monitoring.effective_minima(
-            op_a.operational_volume_m, op_b.operational_volume_m
-        )
+        h, v = self.pair_minima(op_a, op_b)
         broken, clear = separation_screen(
             self.local_plan(a.plan),
             self.local_plan(b.plan),
@@ -333,8 +368,9 @@ class TacticalDeconfliction:
         if clear:
             return True
         # Only now the operation with the alternative's plan (the screen needs none).
+        cfg = self._pair_config(op_a, op_b)
         op_b = replace(op_b, plan=b.plan)
-        return not plan_vs_plans(a.plan, op_a, [op_b], self.frame, self.monitoring)
+        return not plan_vs_plans(a.plan, op_a, [op_b], self.frame, cfg)
 
     def _reference(
         self, op: Operation, old: LocalPlan, neighbours: Sequence[Operation]
@@ -541,9 +577,7 @@ class TacticalDeconfliction:
         minima = np.zeros((u, u, 2))
         for i, a in enumerate(members):
             for j, b in enumerate(members):
-                minima[i, j] = self.monitoring.effective_minima(
-                    a.operational_volume_m, b.operational_volume_m
-                )
+                minima[i, j] = self.pair_minima(a, b)
         pb = Problem(
             members=members,
             involved={op.id for op in involved},

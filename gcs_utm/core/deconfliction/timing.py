@@ -114,7 +114,7 @@ def timing_candidates(
     screens = []
     for o in others:
         q, ok = td.local_plan(o.plan).sample(grid_t)
-        h, v = td.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
+        h, v = td.pair_minima(op, o)
         screens.append(Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, h, v))
     margin = cfg.separation_margin_fraction
     spherical = td.monitoring.spherical

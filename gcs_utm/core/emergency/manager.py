@@ -36,6 +36,7 @@ from gcs_utm.core.emergency.geofences import area, link_loss, suspend
 from gcs_utm.core.emergency.selection import (
     STAY_DETAIL,
     Selection,
+    TieredSelection,
     is_stay,
     select_by_priority,
     stay,
@@ -385,32 +386,39 @@ class EmergencyManager:
 
     def _handle(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
         t = case.threat
-        now = snapshot.t_s
         a = case.action
         if a == "alternative_plans":
             return self._multi(case, snapshot)
-        if a in SINGLE_MANEUVERS:
-            d = Decision()
-            for op_id in t.uas_ids:
-                d = d.merge(self.single(case, op_id, snapshot, SINGLE_MANEUVERS[a]))
-            return d
         if a == "warn":
             msg = f"{t.kind.value}: {', '.join(t.uas_ids)} {t.message}".strip()
             return Decision(
-                warnings=(msg,), audit=(self.audit(now, "warn", t.id, {"message": msg}),)
+                warnings=(msg,), audit=(self.audit(snapshot.t_s, "warn", t.id, {"message": msg}),)
             )
-        if a == "vertical_avoidance":
-            d = Decision()
-            for op_id in t.uas_ids:
-                d = d.merge(self._intruder(case, op_id, snapshot))
-            return d
-        if a == "suspend_and_geofence":
-            return suspend(self, case, snapshot)
-        if a == "alert_and_geofence":
-            return link_loss(self, case, snapshot)
-        if a == "geofence_from_area":
-            return area(self, case, snapshot)
-        raise AssertionError(f"unhandled action {a!r}")  # EmergencyConfig validates actions
+        geofencing = {
+            "suspend_and_geofence": suspend,
+            "alert_and_geofence": link_loss,
+            "geofence_from_area": area,
+        }
+        if a in geofencing:
+            return geofencing[a](self, case, snapshot)
+        # one decision per UAS of the threat
+        if a in SINGLE_MANEUVERS:
+            maneuvers = SINGLE_MANEUVERS[a]
+
+            def per_uas(op_id: OperationId) -> Decision:
+                return self.single(case, op_id, snapshot, maneuvers)
+
+        elif a == "vertical_avoidance":
+
+            def per_uas(op_id: OperationId) -> Decision:
+                return self._intruder(case, op_id, snapshot)
+
+        else:
+            raise AssertionError(f"unhandled action {a!r}")  # EmergencyConfig validates actions
+        d = Decision()
+        for op_id in t.uas_ids:
+            d = d.merge(per_uas(op_id))
+        return d
 
     # -- multi-UAS
     def _multi(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
@@ -420,40 +428,12 @@ class EmergencyManager:
         snapshot = self._intended(snapshot, case)
         case.operations = dict(snapshot.operations)
         now = snapshot.t_s
-        cfg = self.config
         t = case.threat
-        options = self.td.resolve_loss_of_separation(
-            t,
-            snapshot,
-            start_t_s=self.plan_start(t, now),
-            lead_in_from_t_s=self.earliest_receipt(now),
-        )
-        for op_id, alts in options.items():
-            banned = case.excluded.get(op_id, set())
-            options[op_id] = [x for x in alts if x.maneuver not in banned]
-        ops = snapshot.operations
-        stays = {
-            k: stay(k, ops[k].plan)
-            for k, alts in options.items()
-            if k in ops and not any(x.maneuver is Maneuver.KEEP_PLAN for x in alts)
-        }
-        memo: dict[tuple[int, int], bool] = {}
-
-        def compatible(x: Alternative, y: Alternative) -> bool:
-            key = (id(x), id(y)) if id(x) < id(y) else (id(y), id(x))
-            if key not in memo:
-                memo[key] = self.td.compatible(x, y, snapshot)
-            return memo[key]
-
-        tiered = select_by_priority(
-            options,
-            {k: ops[k].priority for k in options if k in ops},
-            stays,
-            alpha=cfg.alpha,
-            beta=cfg.beta,
-            compatible=compatible,
-            max_nodes=cfg.max_combinations,
-        )
+        options, tiered, compatible = self._joint(case, snapshot, buffered=True)
+        if tiered is None:
+            # No combination keeps the vehicles' tracking tolerances free: the best one that
+            # keeps the bare minima beats no decision at all.
+            options, tiered, compatible = self._joint(case, snapshot, buffered=False)
         sel = None if tiered is None else tiered.selection
         detail = self._detail(options, sel, "loss of separation: charged cords + joint selection")
         if tiered is None:
@@ -481,6 +461,71 @@ class EmergencyManager:
             )
             d = d.merge(Decision(warnings=(msg,)))
         return d
+
+    def _joint(
+        self, case: Case, snapshot: AirspaceSnapshot, *, buffered: bool
+    ) -> tuple[
+        dict[OperationId, list[Alternative]],
+        TieredSelection | None,
+        Callable[[Alternative, Alternative], bool],
+    ]:
+        """TD's options for the case (with or without the tracking tolerances, see
+        ``TacticalDeconfliction.pair_minima``) and their joint selection by priority."""
+        now = snapshot.t_s
+        cfg = self.config
+        t = case.threat
+        self.td.tracking_buffers = buffered
+        try:
+            options = self.td.resolve_loss_of_separation(
+                t,
+                snapshot,
+                start_t_s=self.plan_start(t, now),
+                lead_in_from_t_s=self.earliest_receipt(now),
+            )
+            for op_id, alts in options.items():
+                banned = case.excluded.get(op_id, set())
+                options[op_id] = [x for x in alts if x.maneuver not in banned]
+            ops = snapshot.operations
+            stays = {
+                k: stay(k, ops[k].plan)
+                for k, alts in options.items()
+                if k in ops and not any(x.maneuver is Maneuver.KEEP_PLAN for x in alts)
+            }
+            memo: dict[tuple[int, int], bool] = {}
+            pair = set(t.uas_ids)
+
+            def compatible(x: Alternative, y: Alternative) -> bool:
+                if (
+                    x.maneuver is Maneuver.KEEP_PLAN
+                    and y.maneuver is Maneuver.KEEP_PLAN
+                    and not {x.operation_id, y.operation_id} <= pair
+                ):
+                    # Two unchanged plans outside this threat's pair: their conflict, if
+                    # any, is another threat's, and this decision neither causes nor can
+                    # fix it (requiring it made every combination fail, and nothing moved).
+                    return True
+                key = (id(x), id(y)) if id(x) < id(y) else (id(y), id(x))
+                if key not in memo:
+                    was = self.td.tracking_buffers
+                    self.td.tracking_buffers = buffered  # also when called after the search
+                    try:
+                        memo[key] = self.td.compatible(x, y, snapshot)
+                    finally:
+                        self.td.tracking_buffers = was
+                return memo[key]
+
+            tiered = select_by_priority(
+                options,
+                {k: ops[k].priority for k in options if k in ops},
+                stays,
+                alpha=cfg.alpha,
+                beta=cfg.beta,
+                compatible=compatible,
+                max_nodes=cfg.max_combinations,
+            )
+        finally:
+            self.td.tracking_buffers = True
+        return options, tiered, compatible
 
     def _issue_joint(
         self,

@@ -15,8 +15,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from shapely.geometry import Polygon
-from shapely.geometry.polygon import orient
 
 from gcs_utm.core.monitoring.geometry import FloatArray, ring_edges, segment_entry
 from gcs_utm.geo import LocalFrame
@@ -82,6 +80,10 @@ def localise(fence: Geofence, frame: LocalFrame, inflate_m: float = 0.0) -> Loca
     if inflate_m > 0.0:
         # Chord of a 1/(4*QUAD_SEGS) turn arc sits r*cos(pi/(4 q)) from the centre: enlarge.
         r = inflate_m / math.cos(math.pi / (4 * _QUAD_SEGS))
+        # imported here: only an inflated polygon needs shapely (command start-up time)
+        from shapely.geometry import Polygon
+        from shapely.geometry.polygon import orient
+
         poly = Polygon(np.column_stack([ex, ny])).buffer(r, quad_segs=_QUAD_SEGS)
         poly = orient(poly, 1.0)
         rings = [np.asarray(poly.exterior.coords)[:-1]]

@@ -293,9 +293,38 @@ def segment_entry(
     altitude/time window) or at the first edge crossing after it.
     """
     d = p1 - p0  # (M, 4) per segment
+    lo, hi = _band_window(p0, d, (z_lo, z_hi), (t_lo, t_hi))
+    ok = lo <= hi
+    out = np.full(len(p0), np.inf)
+    if not ok.any():
+        return out
+    if center is not None:
+        return _circle_entry(p0, d, center=center, radius_m=radius_m, lo=lo, hi=hi, ok=ok, out=out)
+    assert edges is not None
+    sx = p0[:, 0] + lo * d[:, 0]  # m, position at s = lo
+    sy = p0[:, 1] + lo * d[:, 1]
+    inside_lo = points_in_edges(sx, sy, edges) & ok
+    out[inside_lo] = lo[inside_lo]
+    rest = ok & ~inside_lo
+    if rest.any():
+        idx = np.nonzero(rest)[0]
+        out[idx] = _first_edge_crossing(
+            p0[idx], d[idx], edges[idx] if edges.ndim == 3 else edges, lo[idx], hi[idx]
+        )
+    return out
+
+
+_Bound = float | FloatArray
+
+
+def _band_window(
+    p0: FloatArray, d: FloatArray, band: tuple[_Bound, _Bound], window: tuple[_Bound, _Bound]
+) -> tuple[FloatArray, FloatArray]:
+    """Parameter interval [lo, hi] of each segment within the altitude band and the
+    activation window (empty: lo > hi)."""
     lo = np.zeros(len(p0))
     hi = np.ones(len(p0))
-    for k, (a, b) in ((2, (z_lo, z_hi)), (3, (t_lo, t_hi))):
+    for k, (a, b) in ((2, band), (3, window)):
         moving = np.abs(d[:, k]) > _EPS_V
         safe = np.where(moving, d[:, k], 1.0)
         with np.errstate(invalid="ignore"):
@@ -305,51 +334,57 @@ def segment_entry(
         lo = np.maximum(lo, np.where(moving, np.minimum(s1, s2), np.where(inside, 0.0, 2.0)))
         hi = np.minimum(hi, np.where(moving, np.maximum(s1, s2), np.where(inside, 1.0, -1.0)))
         hi = np.where(np.greater(a, b), -1.0, hi)  # an inverted band or window is empty
-    ok = lo <= hi
-    out = np.full(len(p0), np.inf)
-    if not ok.any():
-        return out
-    if center is not None:
-        rx = p0[:, 0] - center[0]
-        ry = p0[:, 1] - center[1]
-        a2 = d[:, 0] ** 2 + d[:, 1] ** 2
-        b2 = 2.0 * (rx * d[:, 0] + ry * d[:, 1])
-        c2 = rx * rx + ry * ry
-        # closed disc: nudge the radius so a touch counts as inside
-        r = np.broadcast_to(np.asarray(radius_m, np.float64) * (1 + 1e-12) + 1e-9, lo.shape)
-        clo, chi = _quad_interval(a2, b2, c2, r)
-        s_in = np.maximum(lo, clo)
-        good = ok & (s_in <= np.minimum(hi, chi))
-        out[good] = s_in[good]
-        return out
-    assert edges is not None
-    per_segment = edges.ndim == 3
-    sx = p0[:, 0] + lo * d[:, 0]  # m, position at s = lo
-    sy = p0[:, 1] + lo * d[:, 1]
-    inside_lo = points_in_edges(sx, sy, edges) & ok
-    out[inside_lo] = lo[inside_lo]
-    rest = ok & ~inside_lo
-    if rest.any():
-        idx = np.nonzero(rest)[0]
-        e = edges[idx] if per_segment else edges
-        ax = p0[idx, 0, None]
-        ay = p0[idx, 1, None]
-        dx = d[idx, 0, None]
-        dy = d[idx, 1, None]
-        fx = e[..., 2] - e[..., 0]  # m, edge vectors (E,) or (m, E)
-        fy = e[..., 3] - e[..., 1]
-        wx = e[..., 0] - ax  # m, (m, E)
-        wy = e[..., 1] - ay
-        den = dx * fy - dy * fx  # m^2
-        par = np.abs(den) < 1e-12
-        dsafe = np.where(par, 1.0, den)
-        s = (wx * fy - wy * fx) / dsafe
-        u = (wx * dy - wy * dx) / dsafe
-        tol = 1e-12
-        hit = (~par) & (u >= -tol) & (u <= 1 + tol) & (s >= lo[idx, None] - tol)
-        hit &= s <= hi[idx, None] + tol
-        s_hit = np.where(hit, np.maximum(s, lo[idx, None]), np.inf).min(axis=1)
-        out[idx] = s_hit
+    return lo, hi
+
+
+def _circle_entry(
+    p0: FloatArray,
+    d: FloatArray,
+    *,
+    center: tuple[float, float] | tuple[FloatArray, FloatArray],
+    radius_m: _Bound,
+    lo: FloatArray,
+    hi: FloatArray,
+    ok: BoolArray,
+    out: FloatArray,
+) -> FloatArray:
+    """:func:`segment_entry` for a circle: the first s within [lo, hi] inside the disc."""
+    rx = p0[:, 0] - center[0]
+    ry = p0[:, 1] - center[1]
+    a2 = d[:, 0] ** 2 + d[:, 1] ** 2
+    b2 = 2.0 * (rx * d[:, 0] + ry * d[:, 1])
+    c2 = rx * rx + ry * ry
+    # closed disc: nudge the radius so a touch counts as inside
+    r = np.broadcast_to(np.asarray(radius_m, np.float64) * (1 + 1e-12) + 1e-9, lo.shape)
+    clo, chi = _quad_interval(a2, b2, c2, r)
+    s_in = np.maximum(lo, clo)
+    good = ok & (s_in <= np.minimum(hi, chi))
+    out[good] = s_in[good]
+    return out
+
+
+def _first_edge_crossing(
+    p0: FloatArray, d: FloatArray, e: FloatArray, lo: FloatArray, hi: FloatArray
+) -> FloatArray:
+    """First s in [lo, hi] at which each segment (starting outside the polygon at lo)
+    crosses one of the edges ``e`` ((E, 4), or (m, E, 4) per segment); +inf if none."""
+    ax = p0[:, 0, None]
+    ay = p0[:, 1, None]
+    dx = d[:, 0, None]
+    dy = d[:, 1, None]
+    fx = e[..., 2] - e[..., 0]  # m, edge vectors (E,) or (m, E)
+    fy = e[..., 3] - e[..., 1]
+    wx = e[..., 0] - ax  # m, (m, E)
+    wy = e[..., 1] - ay
+    den = dx * fy - dy * fx  # m^2
+    par = np.abs(den) < 1e-12
+    dsafe = np.where(par, 1.0, den)
+    s = (wx * fy - wy * fx) / dsafe
+    u = (wx * dy - wy * dx) / dsafe
+    tol = 1e-12
+    hit = (~par) & (u >= -tol) & (u <= 1 + tol) & (s >= lo[:, None] - tol)
+    hit &= s <= hi[:, None] + tol
+    out: FloatArray = np.where(hit, np.maximum(s, lo[:, None]), np.inf).min(axis=1)
     return out
 
 

@@ -22,9 +22,11 @@ changes; ``active()`` always holds the latest figures.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import numpy.typing as npt
 
 from gcs_utm.core.monitoring.checks import (
     PlanTable,
@@ -34,9 +36,10 @@ from gcs_utm.core.monitoring.checks import (
 )
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.fences import LocalFence, localise
-from gcs_utm.core.monitoring.geometry import FloatArray, window_extents
+from gcs_utm.core.monitoring.geometry import FloatArray, Windows, window_extents
 from gcs_utm.core.monitoring.separation import detect_los, detect_pairs_between, window_steps
 from gcs_utm.core.monitoring.strategic import plan_local
+from gcs_utm.core.tracking.tracks import TrackColumns, track_columns
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -51,11 +54,14 @@ from gcs_utm.model import (
     ThreatId,
     ThreatKind,
     ThreatStatus,
-    Track,
     TrackId,
 )
 
 Key = tuple[str, ...]
+IntArray = npt.NDArray[np.intp]
+BoolArray = npt.NDArray[np.bool_]
+# flight geometry m, operational volume m, plan start s, plan end s; per operation
+_Limits = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 
 
 @dataclass(slots=True)
@@ -77,6 +83,9 @@ class _State:
     present: int = 0
     clear: int = 0
     threat: Threat | None = None
+    # The latest figures (observation, prediction, time) when they changed nothing material:
+    # the Threat object is built from them only when it is read (active(), closing).
+    pending: tuple[_Observation, PredictedTrajectories | None, float] | None = None
 
 
 @dataclass(slots=True)
@@ -84,10 +93,24 @@ class _Evaluation:
     seen: dict[Key, _Observation] = field(default_factory=dict)
     # Keys whose condition is not met but not clear by the margin either (no close count).
     marginal: set[Key] = field(default_factory=set)
-    # Operations with a fresh track (conformance evidence) this cycle.
-    fresh: set[str] = field(default_factory=set)
-    # Operations and intruder track ids with a fresh prediction row (predictive evidence).
-    pred_fresh: set[str] = field(default_factory=set)
+    # Operations with a fresh track (conformance evidence) this cycle, and operations and
+    # intruder track ids with a fresh prediction row (predictive evidence): as collected,
+    # turned into sets only if a condition not seen this cycle asks (fresh_sets()).
+    fresh_parts: list[Sequence[str]] = field(default_factory=list)
+    pred_parts: list[Sequence[str]] = field(default_factory=list)
+    _sets: tuple[set[str], set[str]] | None = None
+
+    def fresh_sets(self) -> tuple[set[str], set[str]]:
+        """(operations with conformance evidence, ids with predictive evidence)."""
+        if self._sets is None:
+            fresh: set[str] = set()
+            pred: set[str] = set()
+            for part in self.fresh_parts:
+                fresh.update(part)
+            for part in self.pred_parts:
+                pred.update(part)
+            self._sets = (fresh, pred)
+        return self._sets
 
 
 class Monitor:
@@ -106,11 +129,27 @@ class Monitor:
         self._fence_cache: dict[GeofenceId, tuple[Geofence, LocalFence]] = {}
         self._plan_cache: dict[OperationId, tuple[FlightPlan, FloatArray]] = {}
         # Operations (frozen objects) of the last conformance table, the table, the anchors.
-        self._conf_cache: tuple[list[Operation], PlanTable, FloatArray] | None = None
+        self._conf_cache: tuple[list[Operation], PlanTable, FloatArray, _Limits] | None = None
 
     # ---- public -------------------------------------------------------------------------
     def active(self) -> list[Threat]:
-        return [s.threat for s in self._states.values() if s.threat is not None]
+        return [self._current(s) for s in self._states.values() if s.threat is not None]
+
+    def open_count(self) -> int:
+        """How many threats are open (without building them: see :meth:`active`)."""
+        return sum(1 for s in self._states.values() if s.threat is not None)
+
+    def _current(self, st: _State) -> Threat:
+        """The open threat of ``st`` with its latest figures."""
+        assert st.threat is not None
+        if st.pending is not None:
+            obs, pred, t = st.pending
+            old = st.threat
+            st.threat = self._make(
+                old.id, obs, old.detected_at_s, pred, updated=t, status=old.status
+            )
+            st.pending = None
+        return st.threat
 
     def cycle(self, snapshot: AirspaceSnapshot) -> list[Threat]:
         ev = self._evaluate(snapshot)
@@ -135,60 +174,71 @@ class Monitor:
         return hit[1]
 
     def _evaluate(self, snapshot: AirspaceSnapshot) -> _Evaluation:
-        cfg = self.config
         ev = _Evaluation()
         ops = snapshot.operations
-        coop = [
-            tr
-            for tr in snapshot.tracks.values()
-            if tr.cooperative and tr.operation_id in ops and not tr.stale
-        ]
-        for c in coop:
-            ev.fresh.add(str(c.operation_id))
-        self._conformance(snapshot, coop, ev)
+        cols = track_columns(snapshot.tracks, self.frame)
+        op_ids = cols.operation_ids
+        # Rows of cooperative tracks whose operation is in the snapshot (evidence about it).
+        known = np.fromiter((o in ops for o in op_ids), bool, len(op_ids))
+        usable = known & cols.cooperative
+        fresh = np.flatnonzero(usable & ~cols.stale)
+        self._conformance(snapshot, cols, fresh, ev)
         pred = snapshot.prediction
         if pred is None or len(pred.track_ids) == 0:
             return ev  # predictive conditions have no evidence this cycle
-        rows_coop: list[int] = []
-        rows_intr: list[int] = []
-        for i, tid in enumerate(pred.track_ids):
-            row = snapshot.tracks.get(tid)
-            if row is None or row.stale:
-                continue
-            if row.cooperative and row.operation_id in ops:
-                rows_coop.append(i)
-                ev.pred_fresh.add(str(row.operation_id))
-            elif not row.cooperative:
-                rows_intr.append(i)
-                ev.pred_fresh.add(str(tid))
-        op_of = {i: snapshot.tracks[pred.track_ids[i]].operation_id for i in rows_coop}
+        self._predictive(snapshot, pred, cols, usable, ev)
+        return ev
+
+    def _prediction_rows(
+        self, pred: PredictedTrajectories, cols: TrackColumns, usable: BoolArray
+    ) -> tuple[IntArray, IntArray, IntArray]:
+        """(prediction rows of fresh cooperative tracks with an operation, prediction rows of
+        fresh intruders, the column row of each prediction row); a row without a fresh
+        track is neither."""
+        if pred.track_ids == cols.ids:
+            col = np.arange(len(cols.ids), dtype=np.intp)  # the tracker's own snapshot
+        else:
+            where = {tid: i for i, tid in enumerate(cols.ids)}
+            col = np.fromiter(
+                (where.get(t, -1) for t in pred.track_ids), np.intp, len(pred.track_ids)
+            )
+        if not len(cols.ids):
+            none = np.zeros(0, np.intp)
+            return none, none, col
+        c = np.where(col >= 0, col, 0)
+        ok = (col >= 0) & ~cols.stale[c]
+        return np.flatnonzero(ok & usable[c]), np.flatnonzero(ok & ~cols.cooperative[c]), col
+
+    def _predictive(
+        self,
+        snapshot: AirspaceSnapshot,
+        pred: PredictedTrajectories,
+        cols: TrackColumns,
+        usable: BoolArray,
+        ev: _Evaluation,
+    ) -> None:
+        """Geofences, loss of separation and intruders on the prediction."""
+        cfg = self.config
+        ops = snapshot.operations
+        rows_coop, rows_intr, col = self._prediction_rows(pred, cols, usable)
+        # The operation of each cooperative prediction row, by position in rows_coop.
+        op_of: list[OperationId] = [cols.operation_ids[i] for i in col[rows_coop].tolist()]
+        ev.pred_parts.append(op_of)
+        ev.pred_parts.append([pred.track_ids[i] for i in rows_intr.tolist()])
         if len(rows_coop) == len(pred.track_ids):
             pts = pred.points  # every row: no copy
         else:
-            pts = pred.points[rows_coop] if rows_coop else np.empty((0, 1, 4))
-        ov = np.array(
-            [ops[op_of[i]].operational_volume_m for i in rows_coop]  # type: ignore[index]
-        )
+            pts = pred.points[rows_coop] if len(rows_coop) else np.empty((0, 1, 4))
+        ov = np.fromiter((ops[o].operational_volume_m for o in op_of), np.float64, len(op_of))
         # Window bounds shared by the geofence prefilter and the separation grid.
         windows = (
             window_extents(pts, window_steps(pts, cfg)) if len(pts) and pts.shape[1] >= 2 else None
         )
-        # Geofences (4D, points and segments).
-        fences = [self._fence(g) for g in snapshot.geofences]
-        exempt = {g.id: g.exempt for g in snapshot.geofences if g.exempt}
-        for h in check_geofences(pts, fences, windows):
-            op_id = op_of[rows_coop[h.row]]
-            assert op_id is not None
-            if op_id in exempt.get(h.geofence_id, ()):
-                continue
-            kind = ThreatKind.GEOFENCE_INTRUSION if h.inside_now else ThreatKind.GEOFENCE_CONFLICT
-            ev.seen[("GEO", op_id, h.geofence_id)] = _Observation(
-                kind=kind, uas_ids=(op_id,), event_t_s=h.entry_t_s, geofence_id=h.geofence_id
-            )
+        self._geofences(snapshot, pts, windows, op_of, ev)
         # Loss of separation (grid or all-pairs by size), and the margin set for closing.
         if len(rows_coop) >= 2:
             for x in detect_los(pts, ov, cfg, windows):
-                a, b = sorted((op_of[rows_coop[x.a]] or "", op_of[rows_coop[x.b]] or ""))
+                a, b = sorted((op_of[x.a], op_of[x.b]))
                 ev.seen[("LOS", a, b)] = _Observation(
                     kind=ThreatKind.LOSS_OF_SEPARATION,
                     uas_ids=(OperationId(a), OperationId(b)),
@@ -198,46 +248,79 @@ class Monitor:
                     horizontal_m=x.min_horizontal_m,
                     vertical_m=x.min_vertical_m,
                 )
-            self._separation_margin(pts, ov, rows_coop, op_of, ev)
+            self._separation_margin(pts, ov, op_of, ev)
         # Intruders: every cooperative row against every non-cooperative row.
-        if rows_coop and rows_intr:
-            ipts = pred.points[rows_intr]
-            for i, j, st in detect_pairs_between(
-                pts,
-                ipts,
-                cfg.intruder_horizontal_m,
-                cfg.intruder_vertical_m,
-                spherical=False,
-            ):
-                op_id = op_of[rows_coop[i]]
-                assert op_id is not None
-                tid = pred.track_ids[rows_intr[j]]
-                ev.seen[("INTR", op_id, str(tid))] = _Observation(
-                    kind=ThreatKind.INTRUDER,
-                    uas_ids=(op_id,),
-                    intruder_id=tid,
-                    event_t_s=float(st[0]),
-                    closest_t_s=float(st[1]),
-                    closest_m=float(st[2]),
-                    horizontal_m=float(st[3]),
-                    vertical_m=float(st[4]),
-                )
-        return ev
+        if len(rows_coop) and len(rows_intr):
+            self._intruders(pts, pred, rows_intr, op_of, ev)
+
+    def _geofences(
+        self,
+        snapshot: AirspaceSnapshot,
+        pts: FloatArray,
+        windows: Windows | None,
+        op_of: list[OperationId],
+        ev: _Evaluation,
+    ) -> None:
+        """Geofences (4D, points and segments) of the cooperative prediction rows."""
+        fences = [self._fence(g) for g in snapshot.geofences]
+        exempt = {g.id: g.exempt for g in snapshot.geofences if g.exempt}
+        for h in check_geofences(pts, fences, windows):
+            op_id = op_of[h.row]
+            if op_id in exempt.get(h.geofence_id, ()):
+                continue
+            kind = ThreatKind.GEOFENCE_INTRUSION if h.inside_now else ThreatKind.GEOFENCE_CONFLICT
+            ev.seen[("GEO", op_id, h.geofence_id)] = _Observation(
+                kind=kind, uas_ids=(op_id,), event_t_s=h.entry_t_s, geofence_id=h.geofence_id
+            )
+
+    def _intruders(
+        self,
+        pts: FloatArray,
+        pred: PredictedTrajectories,
+        rows_intr: IntArray,
+        op_of: list[OperationId],
+        ev: _Evaluation,
+    ) -> None:
+        cfg = self.config
+        ipts = pred.points[rows_intr]
+        for i, j, st in detect_pairs_between(
+            pts,
+            ipts,
+            cfg.intruder_horizontal_m,
+            cfg.intruder_vertical_m,
+            spherical=False,
+        ):
+            op_id = op_of[i]
+            tid = pred.track_ids[int(rows_intr[j])]
+            ev.seen[("INTR", op_id, str(tid))] = _Observation(
+                kind=ThreatKind.INTRUDER,
+                uas_ids=(op_id,),
+                intruder_id=tid,
+                event_t_s=float(st[0]),
+                closest_t_s=float(st[1]),
+                closest_m=float(st[2]),
+                horizontal_m=float(st[3]),
+                vertical_m=float(st[4]),
+            )
 
     def _separation_margin(
         self,
         pts: FloatArray,
         ov: FloatArray,
-        rows: list[int],
-        op_of: dict[int, OperationId | None],
+        op_of: list[OperationId],
         ev: _Evaluation,
     ) -> None:
         """Open separation threats not seen this cycle: still within minima + margin?"""
-        idx = {op_of[r]: k for k, r in enumerate(rows)}
+        keys = [
+            key
+            for key, st in self._states.items()
+            if key[0] == "LOS" and st.threat is not None and key not in ev.seen
+        ]
+        if not keys:
+            return
+        idx = {op: k for k, op in enumerate(op_of)}
         m = self.config.separation_close_margin_m
-        for key, st in self._states.items():
-            if key[0] != "LOS" or st.threat is None or key in ev.seen:
-                continue
+        for key in keys:
             ka = idx.get(OperationId(key[1]))
             kb = idx.get(OperationId(key[2]))
             if ka is None or kb is None:
@@ -253,18 +336,18 @@ class Monitor:
                 ev.marginal.add(key)
 
     def _conformance(
-        self, snapshot: AirspaceSnapshot, tracks: list[Track], ev: _Evaluation
+        self, snapshot: AirspaceSnapshot, cols: TrackColumns, rows: IntArray, ev: _Evaluation
     ) -> None:
         cfg = self.config
-        if not tracks:
+        if not len(rows):
             return
-        ops = [snapshot.operations[t.operation_id] for t in tracks]  # type: ignore[index]
-        table, anchors = self._conformance_table(ops)
-        pos = np.array([[t.east_m, t.north_m, t.alt_amsl_m] for t in tracks])  # m
-        ts = np.array([t.t_s for t in tracks])  # s
+        fresh_ids = [cols.operation_ids[i] for i in rows.tolist()]
+        ev.fresh_parts.append(fresh_ids)
+        ops = [snapshot.operations[o] for o in fresh_ids]
+        table, anchors, (fg, ovol, start, end) = self._conformance_table(ops)
+        pos = cols.pos[rows]  # m
+        ts = cols.t_s[rows]  # s
         dist = plan_distance(table, pos, ts, cfg.conformance_time_tolerance_s)  # m
-        fg = np.array([o.flight_geometry_m for o in ops])  # m
-        ovol = np.array([o.operational_volume_m for o in ops])  # m
         gated = np.zeros(len(ops), bool)
         if cfg.gate_takeoff_landing:
             # Near the first or last waypoint or home (NaN when none), horizontally within
@@ -275,8 +358,6 @@ class Monitor:
             )
             gated |= near.any(axis=1)
         if cfg.gate_outside_plan_time:
-            start = np.array([o.plan.start_t_s for o in ops])
-            end = np.array([o.plan.end_t_s for o in ops])
             gated |= ~((start <= ts) & (ts <= end))
         out_ov = dist > ovol
         in_cv = ~out_ov & (dist > fg)
@@ -288,21 +369,21 @@ class Monitor:
             ev.seen[("CONF", ops[k].id)] = _Observation(
                 kind=ThreatKind.UAS_OUT_OV if out_ov[k] else ThreatKind.UAS_IN_CV,
                 uas_ids=(ops[k].id,),
-                event_t_s=tracks[k].t_s,
+                event_t_s=float(ts[k]),
                 closest_m=d,
                 message=f"{d:.1f} m from plan",
             )
 
-    def _conformance_table(self, ops: list[Operation]) -> tuple[PlanTable, FloatArray]:
-        """Packed local plans and the take-off/landing anchors (N, 3, 3) of these operations,
-        rebuilt only when an operation's plan or home object changed (cached)."""
+    def _conformance_table(self, ops: list[Operation]) -> tuple[PlanTable, FloatArray, _Limits]:
+        """Packed local plans, the take-off/landing anchors (N, 3, 3) and the limits of these
+        operations, rebuilt only when an operation object changed (cached)."""
         prev = self._conf_cache
         if (
             prev is not None
             and len(prev[0]) == len(ops)
             and all(a is b for a, b in zip(prev[0], ops, strict=True))
         ):
-            return prev[1], prev[2]
+            return prev[1], prev[2], prev[3]
         plans = [self._plan(o) for o in ops]
         anchors = np.full((len(ops), 3, 3), np.nan)
         for k, (o, p) in enumerate(zip(ops, plans, strict=True)):
@@ -312,18 +393,32 @@ class Monitor:
                 he, hn = self.frame.point_to_local(o.home.lat_deg, o.home.lon_deg)
                 anchors[k, 2] = (he, hn, o.home.alt_amsl_m)
         table = pack_plans(plans)
-        self._conf_cache = (ops, table, anchors)
-        return table, anchors
+        limits = (
+            np.array([o.flight_geometry_m for o in ops]),  # m
+            np.array([o.operational_volume_m for o in ops]),  # m
+            np.array([o.plan.start_t_s for o in ops]),  # s
+            np.array([o.plan.end_t_s for o in ops]),  # s
+        )
+        self._conf_cache = (ops, table, anchors, limits)
+        return table, anchors, limits
 
     # ---- life cycle ---------------------------------------------------------------------
     def _fresh(self, key: Key, ev: _Evaluation) -> bool:
+        fresh, pred_fresh = ev.fresh_sets()
         if key[0] == "CONF":
-            return key[1] in ev.fresh
+            return key[1] in fresh
         if key[0] in ("INTR", "LOS"):
-            return key[1] in ev.pred_fresh and key[2] in ev.pred_fresh
-        return key[1] in ev.pred_fresh
+            return key[1] in pred_fresh and key[2] in pred_fresh
+        return key[1] in pred_fresh
 
     def _update(self, snapshot: AirspaceSnapshot, ev: _Evaluation) -> list[Threat]:
+        out = self._update_seen(snapshot, ev)
+        out.extend(self._update_unseen(snapshot, ev))
+        return out
+
+    def _update_seen(self, snapshot: AirspaceSnapshot, ev: _Evaluation) -> list[Threat]:
+        """Conditions met this cycle: open after ``open_cycles``, else the latest figures
+        (UPDATED when they changed materially)."""
         cfg = self.config
         t = snapshot.t_s
         pred: PredictedTrajectories | None = snapshot.prediction
@@ -332,20 +427,31 @@ class Monitor:
             st = self._states.setdefault(key, _State())
             st.present += 1
             st.clear = 0
-            if st.threat is None:
+            old = st.threat
+            if old is None:
                 if st.present >= cfg.open_cycles:
                     self._seq += 1
                     tid = ThreatId(f"{self.id_prefix}T{self._seq}-{key[0]}")
                     st.threat = self._make(tid, obs, t, pred)
                     out.append(st.threat)
                 continue
-            new = self._make(st.threat.id, obs, st.threat.detected_at_s, pred, updated=t)
-            if self._material_change(st.threat, new):
-                new = replace(new, status=ThreatStatus.UPDATED)
-                out.append(new)
+            if self._material_change(st, obs):
+                status = ThreatStatus.UPDATED
+                st.threat = self._make(
+                    old.id, obs, old.detected_at_s, pred, updated=t, status=status
+                )
+                st.pending = None
+                out.append(st.threat)
             else:
-                new = replace(new, status=st.threat.status)
-            st.threat = new
+                st.pending = (obs, pred, t)
+        return out
+
+    def _update_unseen(self, snapshot: AirspaceSnapshot, ev: _Evaluation) -> list[Threat]:
+        """Conditions not met this cycle: count clear cycles (fresh evidence, clear by the
+        margin) and close after ``close_cycles``, or at once when the plan is over."""
+        cfg = self.config
+        t = snapshot.t_s
+        out: list[Threat] = []
         for key in list(self._states):
             if key in ev.seen:
                 continue
@@ -364,7 +470,8 @@ class Monitor:
             if st.threat is None:
                 del self._states[key]
             elif ended or st.clear >= cfg.close_cycles:
-                out.append(replace(st.threat, status=ThreatStatus.CLOSED, updated_at_s=t))
+                closed = self._current(st)
+                out.append(replace(closed, status=ThreatStatus.CLOSED, updated_at_s=t))
                 del self._states[key]
         return out
 
@@ -372,23 +479,33 @@ class Monitor:
     def _op_ids(key: Key) -> tuple[str, ...]:
         return (key[1], key[2]) if key[0] == "LOS" else (key[1],)
 
-    def _material_change(self, old: Threat, new: Threat) -> bool:
-        if old.kind is not new.kind:
+    def _material_change(self, st: _State, new: _Observation) -> bool:
+        """Whether ``new`` differs materially from the open threat's latest figures."""
+        assert st.threat is not None
+        if st.pending is not None:
+            kind, event, closest = (
+                st.pending[0].kind,
+                st.pending[0].event_t_s,
+                st.pending[0].closest_m,
+            )
+        else:
+            old = st.threat
+            kind, event, closest = old.kind, old.predicted_event_at_s, old.closest_approach_m
+        if kind is not new.kind:
             return True
-        if (old.predicted_event_at_s is None) != (new.predicted_event_at_s is None):
+        if (event is None) != (new.event_t_s is None):
             return True
         if (
-            old.predicted_event_at_s is not None
-            and new.predicted_event_at_s is not None
-            and abs(old.predicted_event_at_s - new.predicted_event_at_s) > self.config.period_s
-            and old.kind not in (ThreatKind.UAS_IN_CV, ThreatKind.UAS_OUT_OV)
+            event is not None
+            and new.event_t_s is not None
+            and abs(event - new.event_t_s) > self.config.period_s
+            and kind not in (ThreatKind.UAS_IN_CV, ThreatKind.UAS_OUT_OV)
         ):
             return True
         return (
-            old.closest_approach_m is not None
-            and new.closest_approach_m is not None
-            and abs(old.closest_approach_m - new.closest_approach_m)
-            > self.config.separation_close_margin_m
+            closest is not None
+            and new.closest_m is not None
+            and abs(closest - new.closest_m) > self.config.separation_close_margin_m
         )
 
     @staticmethod
@@ -397,7 +514,9 @@ class Monitor:
         obs: _Observation,
         detected: float,
         pred: PredictedTrajectories | None,
+        *,
         updated: float | None = None,
+        status: ThreatStatus = ThreatStatus.OPEN,
     ) -> Threat:
         return Threat(
             id=tid,
@@ -414,4 +533,5 @@ class Monitor:
             message=obs.message,
             snapshot=pred,
             updated_at_s=updated if updated is not None else detected,
+            status=status,
         )

@@ -131,6 +131,34 @@ class Intake:
         written as an entry (:mod:`.layout`) and checked with the lane entries' checks
         (:func:`.kernel.entry_records`); then the identity of those that passed finds or
         makes their track, in batch order. Rejections are added to ``counts``."""
+        values, kinds, has_vel, rows, misses = self._entries(measurements)
+        cfg = self._config
+        idx, a, invalid, gate = kernel.entry_records(
+            values,
+            self._defaults,
+            # (None: all telemetry, all with a velocity, as lane entries)
+            np.array(kinds, dtype=np.intp) if any(kinds) else None,
+            None if all(has_vel) else np.array(has_vel, dtype=bool),
+            cfg.min_sigma_m,
+            cfg.max_future_s,
+            cfg.max_speed_mps,
+            self._north_dir,
+        )
+        counts["invalid"] += invalid
+        counts["gate"] += gate
+        rw = np.array(rows, dtype=np.intp)[idx]
+        if not misses or not len(rw) or rw.min() >= 0:
+            return rw, a
+        keep = self._resolve_misses(rw, idx, misses, counts, row_for)
+        if keep.all():
+            return rw, a
+        return rw[keep], a[:, keep]
+
+    def _entries(
+        self, measurements: Sequence[Measurement]
+    ) -> tuple[list[float], list[int], list[bool], list[int], dict[int, Key]]:
+        """(entry values, source index, has a velocity, cached row or -1, identity key of
+        each measurement whose row is not cached) of the measurements, in batch order."""
         cache = self._row_of_key
         values: list[float] = []
         put = values.extend
@@ -170,23 +198,19 @@ class Intake:
                 misses[k] = key
                 row = -1
             rows.append(row)
-        cfg = self._config
-        idx, a, invalid, gate = kernel.entry_records(
-            values,
-            self._defaults,
-            # (None: all telemetry, all with a velocity, as lane entries)
-            np.array(kinds, dtype=np.intp) if any(kinds) else None,
-            None if all(has_vel) else np.array(has_vel, dtype=bool),
-            cfg.min_sigma_m,
-            cfg.max_future_s,
-            cfg.max_speed_mps,
-            self._north_dir,
-        )
-        counts["invalid"] += invalid
-        counts["gate"] += gate
-        rw = np.array(rows, dtype=np.intp)[idx]
-        if not misses or not len(rw) or rw.min() >= 0:
-            return rw, a
+        return values, kinds, has_vel, rows, misses
+
+    def _resolve_misses(
+        self,
+        rw: IntArray,
+        idx: IntArray,
+        misses: dict[int, Key],
+        counts: dict[str, int],
+        row_for: RowFor,
+    ) -> npt.NDArray[np.bool_]:
+        """Rows (written into ``rw``) of the passing entries whose identity was not cached,
+        in batch order (finding or making their track); False where no track is theirs."""
+        cache = self._row_of_key
         keep = np.ones(len(rw), dtype=bool)
         for j in np.flatnonzero(rw < 0).tolist():
             key = misses[int(idx[j])]
@@ -199,9 +223,7 @@ class Intake:
                     continue
                 row = cache[key] = row_for(ident)
             rw[j] = row
-        if keep.all():
-            return rw, a
-        return rw[keep], a[:, keep]
+        return keep
 
     def lane_records(
         self,

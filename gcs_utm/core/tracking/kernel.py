@@ -32,6 +32,8 @@ from gcs_utm.core.tracking.layout import (
     ENT_SRC,
     ENT_T,
     ENT_VD,
+    ENT_VE,
+    ENT_VN,
     ENTRY_STRIDE,
     MAX_ALT_AMSL_M,
     MIN_ALT_AMSL_M,
@@ -116,69 +118,110 @@ def check_entries(  # noqa: PLR0917
     (the passing entries' ``ENT_SRC`` values, records (NCOL, M), invalid, gate)."""
     if v.shape[1] == 0:
         return np.zeros(0, dtype=np.intp), np.empty((NCOL, 0)), 0, 0
-    rcv, t, lon, lat, alt, vn, ve, vd = v[ENT_RCV : ENT_VD + 1]
+    vn, ve, vd = v[ENT_VN : ENT_VD + 1]
     sig = v[ENT_EPH : ENT_EPV + 1]  # eph, epv; nan: unknown
     # each entry's defaults: scalars when every entry is of source 0, else rows
     dflt: Any = defaults[0].tolist() if kind is None else defaults[kind].T
-    eph_d, epv_d, vsig = dflt
-    max_speed2 = max_speed_mps**2
     with np.errstate(all="ignore"):  # nan and inf fail the checks
         speed2 = vn * vn + ve * ve + vd * vd
-        # The common case first: a few reductions tell that every entry passes (a nan
-        # anywhere makes its reduction nan, and the comparison false).
-        lo = v[ENT_RCV : ENT_ALT + 1].min(axis=1).tolist()  # rcv, t, lon, lat, alt
-        hi = v[ENT_RCV : ENT_ALT + 1].max(axis=1).tolist()
-        sig_lo = np.fmin.reduce(sig, axis=1).tolist()  # (fmin/fmax skip nan)
-        sig_hi = np.fmax.reduce(sig, axis=1).tolist()
-        all_ok = (
-            -math.inf < lo[1]
-            and hi[1] < math.inf
-            and lo[2] >= -180.0
-            and hi[2] <= 180.0
-            and lo[3] >= -90.0
-            and hi[3] <= 90.0
-            and lo[4] >= MIN_ALT_AMSL_M
-            and hi[4] <= MAX_ALT_AMSL_M
-            and not float(np.fmax.reduce(t - rcv)) > max_future_s  # (nan rcv: passes)
-            and not (sig_lo[0] < 0.0 or sig_lo[1] < 0.0)
-            and not (sig_hi[0] == math.inf or sig_hi[1] == math.inf)
-            and float(speed2.max()) <= max_speed2
-        )
-        if all_ok:
+        sig_lo = np.fmin.reduce(sig, axis=1).tolist()  # (fmin skips nan)
+        if _all_pass(v, sig, sig_lo, speed2, max_future_s, max_speed_mps):
             invalid = gate = 0
             sel: IntArray | slice = slice(None)
         else:
-            ok = (
-                np.isfinite(t)
-                & (lat >= -90.0)
-                & (lat <= 90.0)
-                & (lon >= -180.0)
-                & (lon <= 180.0)
-                & (alt >= MIN_ALT_AMSL_M)
-                & (alt <= MAX_ALT_AMSL_M)
-                & ~((t - rcv > max_future_s) & np.isfinite(rcv))
-            )
-            eph = np.where(np.isnan(sig[0]), eph_d, sig[0])  # unknown: the default
-            epv = np.where(np.isnan(sig[1]), epv_d, sig[1])
-            ok_sigma = np.isfinite(eph) & np.isfinite(epv) & (eph >= 0.0) & (epv >= 0.0)
-            invalid = int(np.count_nonzero(~ok)) + int(np.count_nonzero(ok & ~ok_sigma))
-            ok &= ok_sigma
-            fast = ~(speed2 <= max_speed2)
-            finite_v = np.isfinite(vn) & np.isfinite(ve) & np.isfinite(vd)
-            gate = int(np.count_nonzero(ok & fast & finite_v))
-            invalid += int(np.count_nonzero(ok & fast & ~finite_v))
-            ok &= ~fast
-            sel = np.flatnonzero(ok)
+            sel, invalid, gate = _passing(v, sig, speed2, dflt, max_future_s, max_speed_mps)
     idx = v[ENT_SRC, sel].astype(np.intp)
-    a = np.empty((NCOL, len(idx)))
+    a = _records(v, sel, sig_lo, dflt, kind, has_vel, min_sigma_m, north_dir)
+    return idx, a, invalid, gate
+
+
+def _all_pass(  # noqa: PLR0917
+    v: FloatArray,
+    sig: FloatArray,
+    sig_lo: list[float],
+    speed2: FloatArray,
+    max_future_s: float,
+    max_speed_mps: float,
+) -> bool:
+    """The common case: a few reductions tell that every entry passes (a nan anywhere makes
+    its reduction nan, and the comparison false)."""
+    rcv, t = v[ENT_RCV], v[ENT_T]
+    lo = v[ENT_RCV : ENT_ALT + 1].min(axis=1).tolist()  # rcv, t, lon, lat, alt
+    hi = v[ENT_RCV : ENT_ALT + 1].max(axis=1).tolist()
+    sig_hi = np.fmax.reduce(sig, axis=1).tolist()  # (fmax skips nan)
+    return (
+        -math.inf < lo[1]
+        and hi[1] < math.inf
+        and lo[2] >= -180.0
+        and hi[2] <= 180.0
+        and lo[3] >= -90.0
+        and hi[3] <= 90.0
+        and lo[4] >= MIN_ALT_AMSL_M
+        and hi[4] <= MAX_ALT_AMSL_M
+        and not float(np.fmax.reduce(t - rcv)) > max_future_s  # (nan rcv: passes)
+        and not (sig_lo[0] < 0.0 or sig_lo[1] < 0.0)
+        and not (sig_hi[0] == math.inf or sig_hi[1] == math.inf)
+        and float(speed2.max()) <= max_speed_mps**2
+    )
+
+
+def _passing(  # noqa: PLR0917
+    v: FloatArray,
+    sig: FloatArray,
+    speed2: FloatArray,
+    dflt: Any,
+    max_future_s: float,
+    max_speed_mps: float,
+) -> tuple[IntArray, int, int]:
+    """Entry by entry: (the passing entries, invalid, gate)."""
+    rcv, t, lon, lat, alt, vn, ve, vd = v[ENT_RCV : ENT_VD + 1]
+    eph_d, epv_d, _ = dflt
+    ok = (
+        np.isfinite(t)
+        & (lat >= -90.0)
+        & (lat <= 90.0)
+        & (lon >= -180.0)
+        & (lon <= 180.0)
+        & (alt >= MIN_ALT_AMSL_M)
+        & (alt <= MAX_ALT_AMSL_M)
+        & ~((t - rcv > max_future_s) & np.isfinite(rcv))
+    )
+    eph = np.where(np.isnan(sig[0]), eph_d, sig[0])  # unknown: the default
+    epv = np.where(np.isnan(sig[1]), epv_d, sig[1])
+    ok_sigma = np.isfinite(eph) & np.isfinite(epv) & (eph >= 0.0) & (epv >= 0.0)
+    invalid = int(np.count_nonzero(~ok)) + int(np.count_nonzero(ok & ~ok_sigma))
+    ok &= ok_sigma
+    fast = ~(speed2 <= max_speed_mps**2)
+    finite_v = np.isfinite(vn) & np.isfinite(ve) & np.isfinite(vd)
+    gate = int(np.count_nonzero(ok & fast & finite_v))
+    invalid += int(np.count_nonzero(ok & fast & ~finite_v))
+    ok &= ~fast
+    return np.flatnonzero(ok), invalid, gate
+
+
+def _records(  # noqa: PLR0917
+    v: FloatArray,
+    sel: IntArray | slice,
+    sig_lo: list[float],
+    dflt: Any,
+    kind: IntArray | None,
+    has_vel: BoolArray | None,
+    min_sigma_m: float,
+    north_dir: tuple[float, float],
+) -> FloatArray:
+    """The records (NCOL, M) of the passing entries ``sel``."""
+    eph_d, epv_d, vsig = dflt
+    sig = v[ENT_EPH : ENT_EPV + 1]
+    n = v[ENT_SRC, sel].shape[0]
+    a = np.empty((NCOL, n))
     a[REC_T : REC_ALT + 1] = v[ENT_T : ENT_ALT + 1, sel]  # t, lon, lat, alt: the record's order
     # NED (true north/east) -> grid east/north: north along north_dir, east 90 deg right of it
     nd_e, nd_n = north_dir
-    vn = vn[sel]
-    ve = ve[sel]
+    vn = v[ENT_VN, sel]
+    ve = v[ENT_VE, sel]
     a[REC_VE] = vn * nd_e + ve * nd_n
     a[REC_VN] = vn * nd_n - ve * nd_e
-    np.negative(vd[sel], out=a[REC_VU])
+    np.negative(v[ENT_VD, sel], out=a[REC_VU])
     for k, default, first in ((0, eph_d, REC_R), (1, epv_d, REC_R + 2)):
         d = default if kind is None else default[sel]
         if math.isnan(sig_lo[k]):  # unknown throughout: the default's variance
@@ -200,7 +243,7 @@ def check_entries(  # noqa: PLR0917
         hv = has_vel[sel]
         a[REC_HAS_VEL] = hv
         a[REC_VE : REC_VU + 1, ~hv] = 0.0  # not measured: zero, as the record says
-    return idx, a, invalid, gate
+    return a
 
 
 def update_rows(  # noqa: PLR0917 (the tracker's arrays, as the C function takes them)

@@ -48,6 +48,12 @@ class PlanTable:
         self.n_plans = len(plans)
         # How many tracks locate() answered from their window and from the full search.
         self.searches: dict[str, int] = {"window": 0, "full": 0}
+        self._init_waypoints(plans, frame)
+        self._init_follow()
+        self._init_segments()
+
+    def _init_waypoints(self, plans: Sequence[FlightPlan], frame: LocalFrame) -> None:
+        """The waypoint table: positions (local frame), times, offsets per plan."""
         counts = np.array([len(p.waypoints) for p in plans], dtype=np.intp)
         self.n_waypoints: IntArray = counts
         total = int(counts.sum())
@@ -61,13 +67,17 @@ class PlanTable:
         self.wp_t: FloatArray = t
         # Contiguous per-axis copies for fast gathers in follow().
         self._wp_axis = [np.ascontiguousarray(self.wp_pos[:, a]) for a in range(3)]
-        start = np.array([p.start_t_s for p in plans], dtype=np.float64)
-        end = np.array([p.end_t_s for p in plans], dtype=np.float64)
-        self.start_t_s: FloatArray = start
-        self.end_t_s: FloatArray = end
+        self.start_t_s: FloatArray = np.array([p.start_t_s for p in plans], dtype=np.float64)
+        self.end_t_s: FloatArray = np.array([p.end_t_s for p in plans], dtype=np.float64)
+
+    def _init_follow(self) -> None:
+        """Plan-relative waypoint times (search keys, padded table) and the velocity of the
+        segment starting at each waypoint: what follow() reads."""
+        counts, t, start = self.n_waypoints, self.wp_t, self.start_t_s
+        total = len(t)
         # Sorted search keys: plan-relative time shifted by j * stride keeps each plan in its
         # own interval without the precision loss of adding large offsets to POSIX times.
-        duration = end - start
+        duration = self.end_t_s - start
         self._stride = float(duration.max() + 1.0) if self.n_plans else 1.0
         plan_of_wp = np.repeat(np.arange(self.n_plans), counts)
         self._keys: FloatArray = (t - start[plan_of_wp]) + plan_of_wp * self._stride
@@ -86,7 +96,16 @@ class PlanTable:
                 for a in range(3):
                     dp = np.diff(self.wp_pos[o : o + m, a])
                     self._seg_vel[a][o : o + m - 1] = np.where(dt_seg > 0.0, dp / safe, 0.0)
+        # The segment that starts at each waypoint as a line in plan-relative time:
+        # position = intercept + t_rel * velocity (for follow()).
+        self._intercept = [
+            self._wp_axis[a] - self._wp_rel_flat * self._seg_vel[a] for a in range(3)
+        ]
 
+    def _init_segments(self) -> None:
+        """The padded segment table (N plans, S segments) and its per-axis copies: what
+        locate() reads."""
+        counts, t = self.n_waypoints, self.wp_t
         n_seg = np.maximum(counts - 1, 1)
         s_max = int(n_seg.max()) if self.n_plans else 1
         self.seg_a: FloatArray = np.zeros((self.n_plans, s_max, 3))
@@ -116,11 +135,6 @@ class PlanTable:
         self.seg_len2: FloatArray = (d * d).sum(axis=2)
         # A zero-length segment divides 0 by 1: its closest point is its start (u = 0).
         self._seg_len2_safe: FloatArray = np.where(self.seg_len2 > 0.0, self.seg_len2, 1.0)
-        # The segment that starts at each waypoint as a line in plan-relative time:
-        # position = intercept + t_rel * velocity (for follow()).
-        self._intercept = [
-            self._wp_axis[a] - self._wp_rel_flat * self._seg_vel[a] for a in range(3)
-        ]
 
     def locate(
         self,

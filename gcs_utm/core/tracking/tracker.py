@@ -71,7 +71,7 @@ from gcs_utm.core.tracking.layout import (
     REC_VU,
 )
 from gcs_utm.core.tracking.plans import PlanTable
-from gcs_utm.core.tracking.tracks import build_tracks
+from gcs_utm.core.tracking.tracks import TrackColumns, TrackMap
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     Icao24,
@@ -535,71 +535,63 @@ class Tracker:
         the first cycle does; the benchmark times it)."""
         self._seg_hint[:] = -1
 
-    def _make_tracks(
+    def _columns(
         self,
         t_s: float | None,
         pos: FloatArray,
         vel: FloatArray,
         pos_var: FloatArray,
         sel: IntArray | None = None,
-    ) -> dict[TrackId, Track]:
-        """Track objects for all rows (or rows ``sel``) at ``t_s`` (None: each at its own
-        state time) with positions ``pos`` (N, 3), velocities ``vel`` (N, 3) and position
-        variances ``pos_var`` (N, 3) of those rows. Every field is converted for all rows at
-        once (``tolist``), then the objects are built column by column
-        (:func:`build_tracks`)."""
+    ) -> TrackColumns:
+        """The columns of all rows (or rows ``sel``) at ``t_s`` (None: each at its own state
+        time) with positions ``pos`` (N, 3), velocities ``vel`` (N, 3) and position variances
+        ``pos_var`` (N, 3) of those rows; the current waypoint of each row with a plan.
+        Every column is a copy (the tracker's arrays change with the next ingest)."""
         if sel is None:
             n = self._n
-            rows_t = np.full(n, t_s) if t_s is not None else self._t[:n]
-            ids = self._ids[:n]
-            op_ids = self._op_ids[:n]
-            icao = self._icao[:n]
-            coop, stale, updates = self._coop[:n], self._stale[:n], self._updates[:n]
+            rows_t = np.full(n, t_s) if t_s is not None else self._t[:n].copy()
+            ids = tuple(self._ids[:n])
+            op_ids = tuple(self._op_ids[:n])
+            icao = tuple(self._icao[:n])
+            coop, stale = self._coop[:n].copy(), self._stale[:n].copy()
+            updates = self._updates[:n].copy()
         else:
             n = len(sel)
             rows_t = np.full(n, t_s) if t_s is not None else self._t[sel]
             at = sel.tolist()
-            ids = [self._ids[i] for i in at]
-            op_ids = [self._op_ids[i] for i in at]
-            icao = [self._icao[i] for i in at]
+            ids = tuple(self._ids[i] for i in at)
+            op_ids = tuple(self._op_ids[i] for i in at)
+            icao = tuple(self._icao[i] for i in at)
             coop, stale, updates = self._coop[sel], self._stale[sel], self._updates[sel]
         plan_rows, wp, _, _ = self._plan_state(pos, rows_t, sel)
-        if len(plan_rows) == n:
-            next_wp: list[int | None] = wp.tolist()
-        else:
-            next_wp = [None] * n
-            for row, w in zip(plan_rows.tolist(), wp.tolist(), strict=True):
-                next_wp[row] = w
-        lat, lon = self.frame.to_wgs84(pos[:, 0], pos[:, 1])
-        east, north, alt = pos.T.tolist()
-        columns: dict[str, list[Any]] = {
-            "id": ids,
-            "t_s": [float(t_s)] * n if t_s is not None else rows_t.tolist(),
-            "lat_deg": np.asarray(lat, dtype=np.float64).tolist(),
-            "lon_deg": np.asarray(lon, dtype=np.float64).tolist(),
-            "alt_amsl_m": alt,
-            "east_m": east,
-            "north_m": north,
-            "vel_enu_mps": list(zip(*vel.T.tolist(), strict=True)),
-            "position_sigma_m": np.sqrt(pos_var.sum(axis=1)).tolist(),
-            "cooperative": coop.tolist(),
-            "operation_id": op_ids,
-            "icao24": icao,
-            "stale": stale.tolist(),
-            "updates": updates.tolist(),
-            "next_waypoint": next_wp,
-        }
-        return dict(zip(ids, build_tracks(columns, n), strict=True))
+        next_wp = np.full(n, -1, np.intp)
+        next_wp[plan_rows] = wp
+        return TrackColumns(
+            frame=self.frame,
+            ids=ids,
+            t_s=rows_t,
+            pos=np.array(pos, np.float64),
+            vel=np.array(vel, np.float64),
+            position_sigma_m=np.sqrt(pos_var.sum(axis=1)),
+            cooperative=coop,
+            stale=stale,
+            updates=updates,
+            operation_ids=op_ids,
+            icao24=icao,
+            next_waypoint=next_wp,
+        )
 
     def tracks(self) -> dict[TrackId, Track]:
         """Every track at its own state time (the last accepted measurement)."""
         n = self._n
-        return self._make_tracks(
-            None,
-            self._x[:n, :, kalman.POS].copy(),
-            self._x[:n, :, kalman.VEL].copy(),
-            self._p[:n, :, kalman.PP].copy(),
-        )
+        return TrackMap(
+            self._columns(
+                None,
+                self._x[:n, :, kalman.POS],
+                self._x[:n, :, kalman.VEL],
+                self._p[:n, :, kalman.PP],
+            )
+        ).materialise()
 
     def take_updated(self, limit: int | None = None) -> list[Track]:
         """Tracks changed since the previous call (for batched store writes): all of them,
@@ -614,15 +606,13 @@ class Tracker:
             taken = [dirty.pop() for _ in range(limit)]
         row = self._row
         sel = np.array(sorted(row[tid] for tid in taken if tid in row), dtype=np.intp)
-        return list(
-            self._make_tracks(
-                None,
-                self._x[sel, :, kalman.POS],
-                self._x[sel, :, kalman.VEL],
-                self._p[sel, :, kalman.PP],
-                sel,
-            ).values()
-        )
+        return self._columns(
+            None,
+            self._x[sel, :, kalman.POS],
+            self._x[sel, :, kalman.VEL],
+            self._p[sel, :, kalman.PP],
+            sel,
+        ).build()
 
     @property
     def updated_count(self) -> int:
@@ -695,16 +685,20 @@ class Tracker:
             t_s=t_s, track_ids=tuple(self._ids[:n]), points=points, sigma_m=sigma
         )
 
-    def snapshot(self, t_s: float) -> tuple[dict[TrackId, Track], PredictedTrajectories]:
-        """All tracks propagated to ``t_s`` (``Track.t_s == t_s``) and their prediction from
-        ``t_s``: one consistent view; the filter state itself is not changed."""
+    def tracks_at(self, t_s: float) -> TrackMap:
+        """All tracks propagated to ``t_s`` (``Track.t_s == t_s``; the filter state itself is
+        not changed), as columns (``TrackMap.columns``, what Monitoring reads); a ``Track``
+        object is built only for a row that is read."""
         n = self._n
         dt = t_s - self._t[:n]
         x = self._x[:n]
         pos = x[:, :, kalman.POS] + x[:, :, kalman.VEL] * dt[:, None]
         pos_var = kalman.predicted_position_var(self._p[:n], dt[:, None], self._q)[:, 0, :]
-        tracks = self._make_tracks(t_s, pos, x[:, :, kalman.VEL], pos_var)
-        return tracks, self.predict(t_s)
+        return TrackMap(self._columns(t_s, pos, x[:, :, kalman.VEL], pos_var))
+
+    def snapshot(self, t_s: float) -> tuple[TrackMap, PredictedTrajectories]:
+        """:meth:`tracks_at` ``t_s`` and their prediction from ``t_s``: one consistent view."""
+        return self.tracks_at(t_s), self.predict(t_s)
 
     def check_stale(self, t_s: float) -> list[TrackId]:
         """Mark tracks silent for more than ``stale_after_s`` as stale and return the newly

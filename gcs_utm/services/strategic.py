@@ -1,0 +1,105 @@
+"""Strategic check at filing time: every plan filed into the airspace (a new operation, or a
+new plan version of one) is checked against the other filed plans, and what it conflicts
+with is logged as a ``strategic`` event (the operator's event log, the audit trail).
+
+The filed plans are kept in a :class:`~gcs_utm.core.monitoring.strategic.FiledPlans` index,
+so a filing costs the check of ONE plan against the plans airborne at the same time; the
+others are not re-checked. The index follows the airspace through its ``on_operation``
+notification; operations loaded without notification (a scenario, the store after a
+restart, both before the service starts) are filed on the first notification. Operations
+that have LANDED or ENDED leave the index. A conflict is a finding, not a refusal: the plan
+is filed either way and Monitoring watches the pair in flight.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+
+from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.core.monitoring.strategic import FiledPlans, PlanConflict
+from gcs_utm.geo import LocalFrame
+from gcs_utm.model import FlightPlan, Operation, OperationId, OperationState
+
+_log = logging.getLogger(__name__)
+
+_OVER = (OperationState.LANDED, OperationState.ENDED)
+
+
+class FilingCheck:
+    """``check = FilingCheck(frame, config, operations=lambda: airspace.operations,
+    log_event=usm.log_event)``; wire ``check.on_operation`` to the airspace's notification."""
+
+    def __init__(
+        self,
+        frame: LocalFrame,
+        config: MonitoringConfig,
+        *,
+        operations: Callable[[], Mapping[OperationId, Operation]],
+        log_event: Callable[[str, str], None] | None = None,
+        step_s: float = 1.0,
+    ) -> None:
+        self._filed = FiledPlans(frame, config, step_s=step_s)
+        self._plan: dict[OperationId, FlightPlan] = {}
+        self._operations = operations
+        self._log_event = log_event
+        self.conflicts: dict[OperationId, list[PlanConflict]] = {}
+        """The conflicts found when each operation's current plan was filed."""
+        self.counters = {"checked": 0, "in_conflict": 0, "errors": 0}
+        self._synced = False
+
+    def __len__(self) -> int:
+        return len(self._filed)
+
+    def on_operation(self, op: Operation) -> None:
+        """An operation was filed or changed: (re)check its plan if it is new to the index.
+        A failure of the check is logged and counted; it never stops the filing."""
+        try:
+            self._on_operation(op)
+        except Exception:  # a bug here must not refuse a plan the airspace accepted
+            self.counters["errors"] += 1
+            _log.exception("strategic check of %s failed", op.id)
+
+    def _on_operation(self, op: Operation) -> None:
+        self._sync(skip=op.id)
+        if op.state in _OVER:
+            if self._plan.pop(op.id, None) is not None:
+                self._filed.remove(op.id)
+            return
+        if self._plan.get(op.id) is op.plan:
+            return  # a state change: the filed plan stands
+        found = self._filed.check(op.plan, op)
+        self._filed.add(op)
+        self._plan[op.id] = op.plan
+        self.conflicts[op.id] = found
+        self.counters["checked"] += 1
+        if found:
+            self.counters["in_conflict"] += 1
+        for c in found:
+            self._event(
+                f"{op.id} plan v{op.plan.version} conflicts with {c.b}: first loss at "
+                f"t={c.first_loss_t_s:.1f}, closest {c.min_distance_m:.1f} m "
+                f"(horizontal {c.min_horizontal_m:.1f} m, vertical {c.min_vertical_m:.1f} m)"
+            )
+
+    def _sync(self, skip: OperationId) -> None:
+        """File the operations loaded without notification (once, on the first one)."""
+        if self._synced:
+            return
+        self._synced = True
+        missing = [
+            o
+            for o in self._operations().values()
+            if o.id != skip and o.state not in _OVER and o.id not in self._plan
+        ]
+        if not missing:
+            return
+        self._filed.add_many(missing)
+        for o in missing:
+            self._plan[o.id] = o.plan
+
+    def _event(self, text: str) -> None:
+        if self._log_event is not None:
+            self._log_event("strategic", text)
+        else:
+            _log.info("strategic: %s", text)
