@@ -150,8 +150,14 @@ def fly(
         )  # fmt: skip
         try:
             _wait_operations(db, 2, 40.0, serve)
+            # ArduCopters take off one after the other (arming can be refused for a while
+            # after boot) and hover in GUIDED; both missions then start together, so the
+            # crossing does not depend on how long each arming took on a loaded machine
             for p in pilots:
-                p.arm_and_start(takeoff_agl_m=crossing.cruise_agl_m)
+                p.arm_and_start(takeoff_agl_m=crossing.cruise_agl_m, auto=False)
+            for p in pilots:
+                if p.autopilot != "px4":
+                    p.set_mode(3)  # AUTO
             _follow(pilots, crossing, flight_timeout_s)
             assert serve.poll() is None, "gcs-utm serve exited during the flight"
         except AssertionError as exc:

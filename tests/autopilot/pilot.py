@@ -203,9 +203,13 @@ class PilotLink:
                         return int(m.result)
         raise TimeoutError(f"{self.autopilot} {self.sys_id}: no COMMAND_ACK for {command}")
 
-    def arm_and_start(self, timeout_s: float = 60.0, takeoff_agl_m: float = 30.0) -> None:
+    def arm_and_start(
+        self, timeout_s: float = 60.0, takeoff_agl_m: float = 30.0, *, auto: bool = True
+    ) -> None:
         """Arm (retrying while preflight checks refuse) and start the mission. ArduCopter
-        arms in GUIDED, takes off to ``takeoff_agl_m`` and is switched to AUTO there."""
+        arms in GUIDED, takes off to ``takeoff_agl_m`` and is switched to AUTO there; with
+        ``auto=False`` it hovers in GUIDED until the caller sends ``set_mode(3)``, so that
+        several copters can start their missions together."""
         if self.autopilot != "px4":
             self.set_mode(4)  # GUIDED
         self._arm(timeout_s)
@@ -223,7 +227,8 @@ class PilotLink:
             timeout_s,
             lambda m: m.relative_alt / 1000.0 > 0.9 * takeoff_agl_m,
         )
-        self.set_mode(3)  # AUTO
+        if auto:
+            self.set_mode(3)  # AUTO
 
     def set_mode(self, custom_mode: int) -> None:
         """DO_SET_MODE with a custom mode number (ArduPilot: 3 AUTO, 4 GUIDED, 17 BRAKE)."""
