@@ -382,14 +382,14 @@ def _approach(
     return cpa_m, cpa_t, min_h
 
 
-def _min_vertical(z: FloatArray, ia: IntArray, ib: IntArray) -> FloatArray:
+def _min_vertical(points: FloatArray, ia: IntArray, ib: IntArray) -> FloatArray:
     """Minimum vertical distance over the whole horizon per pair (as ``relative_approach``:
     0 where the relative altitude changes sign, else the smaller end)."""
     out = np.empty(len(ia))
-    step = max(1, _CHUNK // z.shape[1])
+    step = max(1, _CHUNK // points.shape[1])
     for i in range(0, len(ia), step):
         sl = slice(i, i + step)
-        rz = z[ia[sl]] - z[ib[sl]]  # m, (c, S)
+        rz = points[ia[sl], :, 2] - points[ib[sl], :, 2]  # m, (c, S)
         z0 = rz[:, :-1]
         z1 = z0 + (rz[:, 1:] - z0)  # the kernel's z0 + v, bit for bit
         seg = np.where(z0 * z1 <= 0.0, 0.0, np.minimum(np.abs(z0), np.abs(z1)))
@@ -474,7 +474,7 @@ def _windowed_losses(
     np.not_equal(pair_of[1:], pair_of[:-1], out=head[1:])
     starts = np.nonzero(head)[0]
     min_h = np.minimum.reduceat(ch, starts)
-    min_v = _min_vertical(points[:, :, 2], pa, pb)
+    min_v = _min_vertical(points, pa, pb)
     cm, ct = cm[starts], ct[starts]
     fields = (pa, pb, first, ct, cm, min_h, min_v)
     return list(map(SeparationLoss, *(f.tolist() for f in fields)))
