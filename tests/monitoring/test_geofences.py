@@ -203,3 +203,20 @@ def test_degenerate_input() -> None:
     assert {h.geofence_id for h in check_geofences(one_sample, f)} == {"c", "s"}
     same = np.repeat(_line((0, 0, 100), (0, 0, 0)), 3, axis=0)  # identical hovering UAS
     assert len(check_geofences(same, f)) == 6
+
+
+def test_entry_late_in_a_long_stay_inside_the_fence_box() -> None:
+    """Rows inside a fence's bounding box for the whole horizon but outside the polygon until
+    segment k (tested in rounds of 1, 2, 4, ... segments): each reports the entry in
+    segment k, as the every-segment oracle does; a row that never enters reports none."""
+    tri = _poly_fence("t", [np.array([(0.0, 0.0), (1000.0, 0.0), (0.0, 1000.0)])])
+    ks = (0, 1, 2, 3, 5, 6, 7, 20, 59)
+    # West at 10 m/s along y = 850: inside the triangle once x < 150.
+    rows = [_line((150.0 + 10.0 * k + 5.0, 850.0, 100.0), (-10.0, 0.0, 0.0)) for k in ks]
+    rows.append(_line((950.0, 950.0, 100.0), (0.0, 0.0, 0.0)))  # in the box, never in
+    pts = np.concatenate(rows)
+    hits = check_geofences(pts, [tri])
+    assert _key(hits) == _key(check_geofences_bruteforce(pts, [tri]))
+    assert [h.row for h in hits] == list(range(len(ks)))
+    for h, k in zip(hits, ks, strict=True):
+        assert h.entry_t_s == pytest.approx(k + 0.5)

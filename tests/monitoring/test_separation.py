@@ -166,3 +166,23 @@ def test_closest_approach_outside_the_windows_in_loss_is_reported() -> None:
     assert x.min_horizontal_m == pytest.approx(0.0, abs=1e-9)
     assert x.min_vertical_m == pytest.approx(10.0)
     assert 30.0 < x.first_loss_t_s < 40.0
+
+
+def test_loss_in_the_short_last_window_of_the_last_row() -> None:
+    """The last window is shorter than the others (7 segments, windows of 3) and the loss
+    is only in its one segment, on the prediction's last row: the windowed detectors gather
+    that window past the end of the data and must mask it, giving the oracle's figures."""
+    t = np.arange(8.0)
+    a = np.column_stack([np.zeros(8), np.zeros(8), np.full(8, 100.0), t])
+    b = a.copy()
+    b[:, 0] = 500.0
+    b[7, 0] = 10.0  # closes in only during the last segment
+    c = a.copy()
+    c[:, 0] = -3000.0
+    pts = np.stack([c, a, b])
+    cfg = MonitoringConfig(grid_dt_s=3.0)
+    oracle = _key(detect_los_bruteforce(pts, np.zeros(3), cfg))
+    assert list(oracle) == [(1, 2)]
+    assert oracle[(1, 2)][0] > 6.0  # first loss within the last segment
+    assert _key(detect_los_grid(pts, np.zeros(3), cfg)) == oracle
+    assert _key(detect_los_allpairs(pts, np.zeros(3), cfg)) == oracle

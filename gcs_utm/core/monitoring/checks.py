@@ -107,14 +107,15 @@ def check_geofences(
         & (smin[:, 3] <= tab.pre[fid, 3])
         & (smax[:, 3] >= tab.pre[fid, 2])
     )
-    row, seg, fid, p0, p1 = row[keep], seg[keep], fid[keep], p0[keep], p1[keep]
-    s = tab.entry(p0, p1, fid)
+    # Each (row, fence)'s segments in time order.
+    order = np.lexsort((seg[keep], fid[keep], row[keep]))
+    sel = np.flatnonzero(keep)[order]
+    row, seg, fid, p0, p1 = row[sel], seg[sel], fid[sel], p0[sel], p1[sel]
+    s = _entries_in_order(tab, row, fid, p0, p1)
     hit = np.isfinite(s)
     row, seg, fid, s, p0, p1 = row[hit], seg[hit], fid[hit], s[hit], p0[hit], p1[hit]
     # The first segment (in time) entering each (row, fence).
-    order = np.lexsort((seg, fid, row))
-    row, seg, fid, s = row[order], seg[order], fid[order], s[order]
-    t_in = p0[order, 3] + s * (p1[order, 3] - p0[order, 3])
+    t_in = p0[:, 3] + s * (p1[:, 3] - p0[:, 3])
     first = np.ones(len(row), bool)
     first[1:] = (row[1:] != row[:-1]) | (fid[1:] != fid[:-1])
     return [
@@ -126,6 +127,34 @@ def check_geofences(
         )
         for i in np.nonzero(first)[0]
     ]
+
+
+def _entries_in_order(
+    tab: _FenceTable, row: IntArray, fid: IntArray, p0: FloatArray, p1: FloatArray
+) -> FloatArray:
+    """The exact entry parameter of each segment (p0, p1) against fence ``fid``, +inf where
+    it does not enter, or where an earlier segment of the same (row, fence) enters (only the
+    first entry is reported). Segments come grouped by (row, fence), each group in time
+    order; they are tested in rounds of 1, 2, 4, ... segments per group, and a group leaves
+    once a segment enters: a UAS inside a fence's box for its whole horizon costs a few
+    tests, not one per segment. Each segment's figure is the one a single test gives."""
+    out = np.full(len(row), np.inf)
+    if len(row) == 0:
+        return out
+    new = np.ones(len(row), bool)
+    new[1:] = (row[1:] != row[:-1]) | (fid[1:] != fid[:-1])
+    starts = np.flatnonzero(new)
+    group = np.cumsum(new) - 1
+    rank = np.arange(len(row)) - starts[group]  # position of the segment within its group
+    done = np.zeros(len(starts), bool)
+    lo, width, top = 0, 1, int(rank.max())
+    while lo <= top:
+        sel = np.flatnonzero((rank >= lo) & (rank < lo + width) & ~done[group])
+        if len(sel):
+            out[sel] = tab.entry(p0[sel], p1[sel], fid[sel])
+            done[group[sel[np.isfinite(out[sel])]]] = True
+        lo, width = lo + width, width * 2
+    return out
 
 
 def check_geofences_bruteforce(points: FloatArray, fences: Sequence[LocalFence]) -> list[FenceHit]:

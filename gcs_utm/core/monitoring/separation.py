@@ -96,47 +96,28 @@ def _planes(points: FloatArray) -> Planes:
 
 
 @dataclass(frozen=True, slots=True)
-class _Flat:
-    """The prediction as four flat planes (east, north, up, t) in one transposed copy, each
-    row of S samples followed by the next and S zeros of padding at the end, so every run of
-    ``w + 1`` samples starting in a row is one row of a sliding-window view (no index
-    arrays, no bounds clipping: samples beyond a row's end are masked as invalid)."""
+class _Samples:
+    """The prediction (N, S, 4) as one (N * S, 4) view, row after row, from which the
+    samples of any (row, window) are gathered on demand: only candidate windows are ever
+    copied, never the whole prediction."""
 
-    buf: FloatArray  # (4, N * S + S)
+    flat: FloatArray  # (N * S, 4)
     n: int
     s: int
 
     @staticmethod
-    def of(points: FloatArray) -> _Flat:
+    def of(points: FloatArray) -> _Samples:
         n, s, _ = points.shape
-        buf = np.zeros((4, n * s + s))
-        buf[:, : n * s] = points.reshape(n * s, 4).T
-        return _Flat(buf, n, s)
+        return _Samples(points.reshape(n * s, 4), n, s)
 
-    def plane(self, k: int) -> FloatArray:
-        """Axis ``k`` as an (N, S) view."""
-        out: FloatArray = self.buf[k, : self.n * self.s].reshape(self.n, self.s)
+    def window(self, rows: IntArray, win: IntArray, w: int) -> FloatArray:
+        """Samples j * w .. j * w + w of window j = ``win`` of each row of ``rows``:
+        (C, w + 1, 4). A short last window runs into the next row (or repeats the very last
+        sample): the segments beyond a row's end must be masked."""
+        start = rows * self.s + win * w
+        idx = np.minimum(start[:, None] + np.arange(w + 1), self.n * self.s - 1)
+        out: FloatArray = self.flat[idx]
         return out
-
-    def windows(self, w: int) -> Runs:
-        """East, north, up per window of ``w`` segments as contiguous (N * nw, w + 1)
-        arrays: row ``r * nw + j`` holds samples j * w .. j * w + w of prediction row r
-        (a short last window runs into the next row or the padding: mask it)."""
-        view = np.lib.stride_tricks.sliding_window_view
-        nw = -(-(self.s - 1) // w)
-        starts = (np.arange(self.n)[:, None] * self.s + np.arange(nw) * w).ravel()
-        return (
-            view(self.buf[0], w + 1)[starts],
-            view(self.buf[1], w + 1)[starts],
-            view(self.buf[2], w + 1)[starts],
-        )
-
-    def check_time_base(self) -> None:
-        if self.n > 1:
-            t = self.plane(3)
-            spread = float(np.max(np.abs(t - t[0])))
-            if spread > 1e-6:
-                raise PredictionError(f"prediction rows have different times (spread {spread} s)")
 
 
 def _evaluate(
@@ -288,8 +269,7 @@ def detect_los_allpairs(
     """All pairs of grown window boxes, then the kernel on pairs whose boxes overlap in some
     window. Faster than the grid for small N (no hashing or sorting)."""
     points = _segments(np.asarray(points, np.float64))
-    flat = _Flat.of(points)
-    flat.check_time_base()
+    _check_time_base(points)
     ov = np.asarray(ov_m, np.float64)
     if len(points) < 2:
         return []
@@ -305,7 +285,7 @@ def detect_los_allpairs(
         out_w.append(j)
     pi = np.concatenate(out_p)
     return _windowed_losses(
-        flat,
+        points,
         ov,
         ia[pi].astype(np.int64),
         ib[pi].astype(np.int64),
@@ -317,21 +297,17 @@ def detect_los_allpairs(
     )
 
 
-Runs = tuple[FloatArray, FloatArray, FloatArray]
-
-
 def _window_rel(
-    runs: Runs, s_pts: int, ia: IntArray, ib: IntArray, win: IntArray, *, w: int
+    samples: _Samples, ia: IntArray, ib: IntArray, win: IntArray, *, w: int
 ) -> tuple[Planes, Planes, npt.NDArray[np.bool_] | None]:
     """Relative position at the start of each of the W segments of window ``win`` of pairs
-    (ia, ib), and the relative motion per segment (per axis, (C, W)), from the
-    :meth:`_Flat.windows` arrays; plus the validity mask of the segments (None: all valid; the
-    last window may be shorter). The floats are exactly those of the full-horizon kernel."""
-    n_seg = s_pts - 1
-    nw = -(-n_seg // w)
-    fa = ia * nw + win
-    fb = ib * nw + win
-    rel = [np.take(r, fa, axis=0) - np.take(r, fb, axis=0) for r in runs]  # m, (C, W + 1)
+    (ia, ib), and the relative motion per segment (per axis, (C, W)); plus the validity mask
+    of the segments (None: all valid; the last window may be shorter). The floats are
+    exactly those of the full-horizon kernel."""
+    n_seg = samples.s - 1
+    ga = samples.window(ia, win, w)
+    gb = samples.window(ib, win, w)
+    rel = [ga[:, :, k] - gb[:, :, k] for k in range(3)]  # m, (C, W + 1)
     d0 = (rel[0][:, :-1], rel[1][:, :-1], rel[2][:, :-1])
     v = (
         rel[0][:, 1:] - rel[0][:, :-1],
@@ -343,7 +319,7 @@ def _window_rel(
 
 
 def _screen(
-    runs: Runs,
+    samples: _Samples,
     times: FloatArray,
     ia: IntArray,
     ib: IntArray,
@@ -363,7 +339,7 @@ def _screen(
     step = max(1, _CHUNK // w)
     for i in range(0, len(ia), step):
         sl = slice(i, i + step)
-        d0, v, valid = _window_rel(runs, len(times), ia[sl], ib[sl], win[sl], w=w)
+        d0, v, valid = _window_rel(samples, ia[sl], ib[sl], win[sl], w=w)
         lo, hi = relative_loss_interval(
             d0, v, min_h_m=min_h[sl, None], min_v_m=min_v[sl, None], spherical=spherical
         )
@@ -380,7 +356,7 @@ def _screen(
 
 
 def _approach(
-    runs: Runs, times: FloatArray, ia: IntArray, ib: IntArray, win: IntArray, *, w: int
+    samples: _Samples, times: FloatArray, ia: IntArray, ib: IntArray, win: IntArray, *, w: int
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Closest approach within each (pair, window): 3D distance, its time (the first segment
     on a tie) and the minimum horizontal distance, each (C,)."""
@@ -392,7 +368,7 @@ def _approach(
     step = max(1, _CHUNK // w)
     for i in range(0, len(ia), step):
         sl = slice(i, i + step)
-        d0, v, valid = _window_rel(runs, len(times), ia[sl], ib[sl], win[sl], w=w)
+        d0, v, valid = _window_rel(samples, ia[sl], ib[sl], win[sl], w=w)
         s_c, d_c, h_c, _ = relative_approach(d0, v)
         if valid is not None:
             d_c = np.where(valid, d_c, np.inf)
@@ -406,14 +382,14 @@ def _approach(
     return cpa_m, cpa_t, min_h
 
 
-def _min_vertical(z: FloatArray, ia: IntArray, ib: IntArray) -> FloatArray:
+def _min_vertical(points: FloatArray, ia: IntArray, ib: IntArray) -> FloatArray:
     """Minimum vertical distance over the whole horizon per pair (as ``relative_approach``:
     0 where the relative altitude changes sign, else the smaller end)."""
     out = np.empty(len(ia))
-    step = max(1, _CHUNK // z.shape[1])
+    step = max(1, _CHUNK // points.shape[1])
     for i in range(0, len(ia), step):
         sl = slice(i, i + step)
-        rz = z[ia[sl]] - z[ib[sl]]  # m, (c, S)
+        rz = points[ia[sl], :, 2] - points[ib[sl], :, 2]  # m, (c, S)
         z0 = rz[:, :-1]
         z1 = z0 + (rz[:, 1:] - z0)  # the kernel's z0 + v, bit for bit
         seg = np.where(z0 * z1 <= 0.0, 0.0, np.minimum(np.abs(z0), np.abs(z1)))
@@ -422,7 +398,7 @@ def _min_vertical(z: FloatArray, ia: IntArray, ib: IntArray) -> FloatArray:
 
 
 def _windowed_losses(
-    flat: _Flat,
+    points: FloatArray,
     ov_m: FloatArray,
     ia: IntArray,
     ib: IntArray,
@@ -445,14 +421,14 @@ def _windowed_losses(
        window) is within U or Uh (plus a rounding margin) is evaluated too; the rest cannot
        hold the minimum. The minimum vertical distance comes from one cheap pass over z.
     """
-    n = flat.n
+    n = len(points)
     if len(ia) == 0:
         return []
-    runs = flat.windows(w)
-    times = flat.plane(3)[0]
+    samples = _Samples.of(points)
+    times = points[0, :, 3]
     mh, mv = _minima(ov_m[ia], ov_m[ib], config)
     hit, first_t = _screen(
-        runs, times, ia, ib, win, w=w, min_h=mh, min_v=mv, spherical=config.spherical
+        samples, times, ia, ib, win, w=w, min_h=mh, min_v=mv, spherical=config.spherical
     )
     if not hit.any():
         return []
@@ -470,7 +446,7 @@ def _windowed_losses(
     pb = code[starts] % n
     first = np.minimum.reduceat(hf, starts)
     # 2. closest approach where the pairs lose separation
-    cm, ct, ch = _approach(runs, times, pa[pair_of], pb[pair_of], hw, w=w)
+    cm, ct, ch = _approach(samples, times, pa[pair_of], pb[pair_of], hw, w=w)
     u3 = np.minimum.reduceat(cm, starts)
     uh = np.minimum.reduceat(ch, starts)
     # 3. other windows that may hold a closer approach (box gap as the lower bound)
@@ -485,7 +461,7 @@ def _windowed_losses(
     need[pair_of, hw] = False  # already evaluated
     xp, xw = np.nonzero(need)
     if len(xp):
-        cm2, ct2, ch2 = _approach(runs, times, pa[xp], pb[xp], xw, w=w)
+        cm2, ct2, ch2 = _approach(samples, times, pa[xp], pb[xp], xw, w=w)
         pair_of = np.concatenate([pair_of, xp])
         hw = np.concatenate([hw, xw])
         cm = np.concatenate([cm, cm2])
@@ -498,7 +474,7 @@ def _windowed_losses(
     np.not_equal(pair_of[1:], pair_of[:-1], out=head[1:])
     starts = np.nonzero(head)[0]
     min_h = np.minimum.reduceat(ch, starts)
-    min_v = _min_vertical(flat.plane(2), pa, pb)
+    min_v = _min_vertical(points, pa, pb)
     cm, ct = cm[starts], ct[starts]
     fields = (pa, pb, first, ct, cm, min_h, min_v)
     return list(map(SeparationLoss, *(f.tolist() for f in fields)))
@@ -616,15 +592,16 @@ def detect_los_grid(
     candidate windows, then the closest approach on the windows that can hold it
     (``_windowed_losses``)."""
     points = _segments(np.asarray(points, np.float64))
-    flat = _Flat.of(points)
-    flat.check_time_base()
+    _check_time_base(points)
     ov = np.asarray(ov_m, np.float64)
     if len(points) < 2:
         return []
     w = window_steps(points, config)
     windows = _matching(points, w, windows)
     ia, ib, win, w = grid_candidates(points, ov, config, windows)
-    return _windowed_losses(flat, ov, ia, ib, win, w=w, lo=windows.lo, hi=windows.hi, config=config)
+    return _windowed_losses(
+        points, ov, ia, ib, win, w=w, lo=windows.lo, hi=windows.hi, config=config
+    )
 
 
 def detect_los(
