@@ -9,7 +9,8 @@ For each operation of the scenario, on the vehicle with the operation's ``sys_id
    pre-flight checks refuse) and take off to the first waypoint's altitude (PX4: NAV_TAKEOFF
    to an AMSL altitude; ArduCopter: GUIDED, then NAV_TAKEOFF above home; ArduPlane: armed in
    TAKEOFF mode); a fixed wing is then sent to loiter at the first waypoint;
-4. at the first waypoint's time, switch to mission mode and confirm it on HEARTBEAT.
+4. at the first waypoint's time plus the scenario's ``start_delay_s`` (a late start), switch
+   to mission mode and confirm it on HEARTBEAT.
 
 A vehicle that refuses a step is left as it is: the refusal is logged as one error naming the
 vehicle and the reason, recorded in the report's ``fly`` entry, and the run goes on.
@@ -165,7 +166,9 @@ async def _fly_one(
     takeoff_t_s = _takeoff_t_s(v.plan, ground_m)
     await clock.sleep(max(0.0, takeoff_t_s - clock.now_s()))
     await _takeoff(hub, clock, v, out, ground_m=ground_m)
-    await clock.sleep(max(0.0, first.t_s - clock.now_s()))
+    # a late start of the scenario (use case 1's start_delay_s) is flown as filed: late
+    start_t_s = first.t_s + v.start_delay_s
+    await clock.sleep(max(0.0, start_t_s - clock.now_s()))
     mode = await hub.send_mode(sys_id, FlightMode.MISSION)
     if not mode.ok:
         raise FlyRefusedError(f"mission mode refused: {mode.error}")
