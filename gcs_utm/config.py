@@ -114,13 +114,7 @@ def load_toml(path: str | Path) -> dict[str, Any]:
 
 def _type_name(tp: Any) -> str:
     if isinstance(tp, type):
-        if issubclass(tp, enum.Enum):
-            return "one of " + ", ".join(repr(m.value) for m in tp)
-        if dataclasses.is_dataclass(tp):
-            return "a table"
-        return {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}.get(
-            tp, tp.__name__
-        )
+        return _class_name(tp)
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
     if origin in (types.UnionType, typing.Union):
@@ -131,6 +125,16 @@ def _type_name(tp: Any) -> str:
     if origin is dict:
         return f"a table of {_type_name(args[1])}"
     return str(tp)
+
+
+def _class_name(tp: type) -> str:
+    if issubclass(tp, enum.Enum):
+        return "one of " + ", ".join(repr(m.value) for m in tp)
+    if dataclasses.is_dataclass(tp):
+        return "a table"
+    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}.get(
+        tp, tp.__name__
+    )
 
 
 def _describe(value: Any) -> str:
@@ -145,26 +149,41 @@ def _convert(tp: Any, value: Any, source: str, key: str, meta: Mapping[str, Any]
     """Check ``value`` (as parsed from TOML) against the annotation ``tp`` and convert it."""
     if tp is Any:
         return value
+    if typing.get_origin(tp) is not None:
+        return _convert_generic(tp, value, source, key, meta)
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise _bad(tp, value, source, key)
+        return build(tp, value, source=source, section=key)
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        return _convert_enum(tp, value, source, key)
+    return _convert_scalar(tp, value, source, key, meta)
+
+
+def _convert_generic(tp: Any, value: Any, source: str, key: str, meta: Mapping[str, Any]) -> Any:
+    """``value`` for a union, array or table annotation."""
     origin = typing.get_origin(tp)
     if origin in (types.UnionType, typing.Union):
         return _convert_union(tp, value, source, key, meta)
     if origin in (tuple, list):
         return _convert_sequence(tp, value, source, key, meta)
     if origin is dict:
-        if not isinstance(value, dict):
-            raise _bad(tp, value, source, key)
-        inner = typing.get_args(tp)[1]
-        return {str(k): _convert(inner, v, source, f"{key}.{k}", meta) for k, v in value.items()}
-    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
-        if not isinstance(value, dict):
-            raise _bad(tp, value, source, key)
-        return build(tp, value, source=source, section=key)
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        for member in tp:
-            if member.value == value and type(member.value) is type(value):
-                return member
+        return _convert_dict(tp, value, source, key, meta)
+    return _convert_scalar(tp, value, source, key, meta)  # refuses it, naming the type
+
+
+def _convert_dict(tp: Any, value: Any, source: str, key: str, meta: Mapping[str, Any]) -> Any:
+    if not isinstance(value, dict):
         raise _bad(tp, value, source, key)
-    return _convert_scalar(tp, value, source, key, meta)
+    inner = typing.get_args(tp)[1]
+    return {str(k): _convert(inner, v, source, f"{key}.{k}", meta) for k, v in value.items()}
+
+
+def _convert_enum(tp: type[enum.Enum], value: Any, source: str, key: str) -> enum.Enum:
+    for member in tp:
+        if member.value == value and type(member.value) is type(value):
+            return member
+    raise _bad(tp, value, source, key)
 
 
 def _bad(tp: Any, value: Any, source: str, key: str) -> ConfigError:
@@ -263,16 +282,8 @@ def build(cls: type[T], mapping: Mapping[str, Any], *, source: str, section: str
 def _toml_value(value: Any) -> str:
     if isinstance(value, enum.Enum):
         return _toml_value(value.value)
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
+    if isinstance(value, bool | int | float):
+        return _toml_number(value)
     if isinstance(value, str):
         # JSON string escapes are a subset of TOML basic-string escapes.
         return json.dumps(value, ensure_ascii=False)
@@ -281,6 +292,15 @@ def _toml_value(value: Any) -> str:
     if isinstance(value, dict):
         return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + " }"
     raise TypeError(f"cannot render {value!r} as TOML")
+
+
+def _toml_number(value: bool | float) -> str:
+    """A boolean, integer or float as TOML writes it (nan, inf, -inf included)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int) or not math.isfinite(value):
+        return str(value)  # str(nan) = "nan", str(inf) = "inf", str(-inf) = "-inf"
+    return repr(value)
 
 
 def _default_of(f: dataclasses.Field[Any]) -> Any:

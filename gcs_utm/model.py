@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any, NewType
@@ -369,75 +369,6 @@ def slot_setters(cls: type, names: tuple[str, ...]) -> tuple[SlotSetter, ...] | 
     return tuple(cls.__dict__[name].__set__ for name in names)
 
 
-_MEASUREMENT_FIELDS = (
-    "source", "capture_t_s", "receipt_t_s", "lat_deg", "lon_deg", "alt_amsl_m", "vel_ned_mps",
-    "eph_m", "epv_m", "sys_id", "icao24", "operation_id", "link", "callsign", "vehicle",
-)  # fmt: skip
-
-
-def _no_setter(obj: Any, value: Any) -> None:
-    raise AssertionError("unused: telemetry_measurement checks _M_SETTERS first")
-
-
-_M_SETTERS = slot_setters(Measurement, _MEASUREMENT_FIELDS)
-(
-    _m_source, _m_capture, _m_receipt, _m_lat, _m_lon, _m_alt, _m_vel, _m_eph, _m_epv, _m_sys,
-    _m_icao, _m_op, _m_link, _m_callsign, _m_vehicle,
-) = _M_SETTERS if _M_SETTERS is not None else (_no_setter,) * len(_MEASUREMENT_FIELDS)  # fmt: skip
-_TELEMETRY = MeasurementSource.TELEMETRY
-_new = object.__new__
-
-
-def telemetry_measurement(  # noqa: PLR0917
-    capture_t_s: float,
-    receipt_t_s: float,
-    lat_deg: float,
-    lon_deg: float,
-    alt_amsl_m: float,
-    vel_ned_mps: tuple[float, float, float] | None,
-    eph_m: float | None,
-    epv_m: float | None,
-    sys_id: SysId,
-    link: str,
-    vehicle: str,
-) -> Measurement:
-    """``Measurement(source=TELEMETRY, ...)`` with these fields and the others at their
-    defaults, built without the dataclass ``__init__`` (see :func:`slot_setters`): the
-    MAVLink receive path builds one per position report."""
-    if _M_SETTERS is None:
-        return Measurement(
-            source=_TELEMETRY,
-            capture_t_s=capture_t_s,
-            receipt_t_s=receipt_t_s,
-            lat_deg=lat_deg,
-            lon_deg=lon_deg,
-            alt_amsl_m=alt_amsl_m,
-            vel_ned_mps=vel_ned_mps,
-            eph_m=eph_m,
-            epv_m=epv_m,
-            sys_id=sys_id,
-            link=link,
-            vehicle=vehicle,
-        )
-    m: Measurement = _new(Measurement)
-    _m_source(m, _TELEMETRY)
-    _m_capture(m, capture_t_s)
-    _m_receipt(m, receipt_t_s)
-    _m_lat(m, lat_deg)
-    _m_lon(m, lon_deg)
-    _m_alt(m, alt_amsl_m)
-    _m_vel(m, vel_ned_mps)
-    _m_eph(m, eph_m)
-    _m_epv(m, epv_m)
-    _m_sys(m, sys_id)
-    _m_icao(m, None)
-    _m_op(m, None)
-    _m_link(m, link)
-    _m_callsign(m, "")
-    _m_vehicle(m, vehicle)
-    return m
-
-
 @dataclass(frozen=True, slots=True)
 class LaneSource:
     """Who a :class:`PositionLane` entry comes from: a telemetry source (one vehicle component
@@ -488,7 +419,7 @@ class PositionLane:
         self.values.clear()
         return out
 
-    def measurement(self, values: list[float], at: int) -> Measurement:
+    def measurement(self, values: Sequence[float], at: int) -> Measurement:
         """The :class:`Measurement` that the entry starting at ``values[at]`` stands for."""
         (i, rcv, cap, lon, lat, alt, vn, ve, vd, eph, epv) = values[at : at + LANE_STRIDE]
         src = self.sources[int(i)]

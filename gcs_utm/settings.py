@@ -14,6 +14,7 @@ from typing import Any
 from adapters.adsb.config import AdsbConfig
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mqtt.config import MqttConfig
+from gcs_utm.cluster.config import ClusterConfig
 from gcs_utm.config import ConfigError, build, load_toml, render_toml, setting
 from gcs_utm.core.deconfliction.config import DeconflictionConfig
 from gcs_utm.core.emergency.config import EmergencyConfig
@@ -57,6 +58,7 @@ class Settings:
     store: StoreConfig = _section(StoreConfig, "store")
     dashboard: DashboardConfig = _section(DashboardConfig, "dashboard")
     record: RecordConfig = _section(RecordConfig, "record")
+    cluster: ClusterConfig = _section(ClusterConfig, "cluster")
 
 
 SECTIONS: dict[str, type[Any]] = {
@@ -72,6 +74,7 @@ SECTIONS: dict[str, type[Any]] = {
     "store": StoreConfig,
     "dashboard": DashboardConfig,
     "record": RecordConfig,
+    "cluster": ClusterConfig,
 }
 
 

@@ -247,7 +247,19 @@ class VehicleCore:
         self._t = 0.0  # simulated s since fleet start, last advanced to
         self._booted = False
         self._next_history_t = 0.0
-        # flight state (ArduCopter boots in STABILIZE)
+        self._init_flight(spec)
+        self._init_mission(spec)
+        self._init_faults(spec)
+        self._params: dict[str, float] = {
+            "MIS_TAKEOFF_ALT": self.takeoff_alt_rel_m,
+            "RTL_RETURN_ALT": self.rtl_alt_rel_m,
+            "NAV_ACC_RAD": self.lim.acceptance_radius_m,
+            "MPC_XY_CRUISE": self.cruise_mps,
+            "FW_AIRSPD_TRIM": self.cruise_mps,
+        }
+
+    def _init_flight(self, spec: VehicleSpec) -> None:
+        """Flight state at boot: on the ground, disarmed (ArduCopter boots in STABILIZE)."""
         self._mode = POSCTL if self.is_ardupilot and not self.is_fixed_wing else HOLD
         self._armed = False
         self._landed = True
@@ -259,11 +271,12 @@ class VehicleCore:
         self._rtl_phase = 0
         self._rtl_alt = spec.home_alt_amsl_m + spec.rtl_alt_rel_m
         self._takeoff_alt = spec.home_alt_amsl_m + spec.takeoff_alt_rel_m
-        self._jam_rate = DEFAULT_FAULT_VALUE[FaultKind.GNSS_JAMMING]
         self.takeoff_alt_rel_m = spec.takeoff_alt_rel_m
         self.rtl_alt_rel_m = spec.rtl_alt_rel_m
         self.cruise_mps = self.lim.cruise_speed_mps
-        # mission
+
+    def _init_mission(self, spec: VehicleSpec) -> None:
+        """The mission the vehicle boots with (ArduPilot: item 0 is home, current item 1)."""
         self._items: list[mp.RawItem] = mission_items_from_specs(
             spec.mission, ardupilot=self.is_ardupilot, home=self.home
         )
@@ -275,8 +288,11 @@ class VehicleCore:
         self._stalled = False  # ArduPilot: a replaced mission's current item failed to restart
         self._mission_climb = False
         self._mission_speed: float | None = None
-        # faults
+
+    def _init_faults(self, spec: VehicleSpec) -> None:
+        """Fault injection state and what the faults act on (battery, links, GNSS)."""
         self._faults = [FaultState(f) for f in spec.faults]
+        self._jam_rate = DEFAULT_FAULT_VALUE[FaultKind.GNSS_JAMMING]
         self._jam_since: float | None = None
         self._jam_offset = (0.0, 0.0)
         self._jam_dir = self._rng.uniform(0.0, 2.0 * math.pi)
@@ -289,13 +305,6 @@ class VehicleCore:
         self.battery_pct = 100.0
         self._bat_level = 0  # 0 ok, 1 low, 2 critical, 3 emergency
         self._auto_started = False
-        self._params: dict[str, float] = {
-            "MIS_TAKEOFF_ALT": self.takeoff_alt_rel_m,
-            "RTL_RETURN_ALT": self.rtl_alt_rel_m,
-            "NAV_ACC_RAD": self.lim.acceptance_radius_m,
-            "MPC_XY_CRUISE": self.cruise_mps,
-            "FW_AIRSPD_TRIM": self.cruise_mps,
-        }
 
     @property
     def lat_deg(self) -> float:

@@ -146,19 +146,26 @@ def validate_item(item: RawItem) -> int:
     item without a position is not looked at)."""
     if item.command not in SUPPORTED_COMMANDS:
         return UNSUPPORTED
-    if item.command in POSITIONAL or (item.command == CMD_RTL and item.frame != FRAME_MISSION):
-        if item.command in POSITIONAL and item.frame not in GLOBAL_FRAMES:
-            return UNSUPPORTED_FRAME
-        if item.command in POSITIONAL:
-            if not -90e7 <= item.x <= 90e7:
-                return INVALID_PARAM5_X
-            if not -180e7 <= item.y <= 180e7:
-                return INVALID_PARAM6_Y
-            if not math.isfinite(item.z) and item.command != CMD_TAKEOFF:
-                return INVALID
-    for p in (item.param1, item.param2, item.param3):
-        if math.isinf(p):
-            return INVALID
+    if item.command in POSITIONAL:
+        result = _position_result(item)
+        if result != ACCEPTED:
+            return result
+    if any(math.isinf(p) for p in (item.param1, item.param2, item.param3)):
+        return INVALID
+    return ACCEPTED
+
+
+def _position_result(item: RawItem) -> int:
+    """MAV_MISSION_RESULT for the position of an item that has one: a global frame, latitude
+    and longitude in range, a finite altitude (a take-off may leave it NaN)."""
+    if item.frame not in GLOBAL_FRAMES:
+        return UNSUPPORTED_FRAME
+    if not -90e7 <= item.x <= 90e7:
+        return INVALID_PARAM5_X
+    if not -180e7 <= item.y <= 180e7:
+        return INVALID_PARAM6_Y
+    if not math.isfinite(item.z) and item.command != CMD_TAKEOFF:
+        return INVALID
     return ACCEPTED
 
 
@@ -266,37 +273,34 @@ class MissionServer:
 
     def handle(self, peer: object, msg: Inbound, now_s: float) -> bool:
         """Process one mission-protocol message; False if it is not one."""
-        t = msg.type
-        if t == "MISSION_COUNT":
-            self._on_count(peer, msg, now_s)
-        elif t in ("MISSION_ITEM_INT", "MISSION_ITEM"):
-            self._on_item(peer, msg, now_s)
-        elif t == "MISSION_REQUEST_LIST":
-            self._on_request_list(peer, msg, now_s)
-        elif t in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
-            self._on_request(peer, msg, now_s)
-        elif t == "MISSION_ACK":
-            if self._down is not None and self._down.sys_id == msg.src_system:
-                self._down = None
-        elif t == "MISSION_CLEAR_ALL":
-            mtype = msg.i("mission_type")
-            if mtype != TYPE_MISSION:
-                self._ack(peer, msg.src_system, msg.src_component, UNSUPPORTED, mtype)
-            elif self._up is not None:
-                self._ack(peer, msg.src_system, msg.src_component, ERROR)
-            else:
-                self._host.clear_mission()
-                self._ack(peer, msg.src_system, msg.src_component, ACCEPTED)
-        elif t == "MISSION_SET_CURRENT":
-            seq = msg.i("seq")
-            if not self._host.set_current(seq):
-                self._host.statustext(
-                    const("MAV_SEVERITY_ERROR"), f"WPM: MISSION_SET_CURRENT seq {seq} out of bounds"
-                )
-                self._host.count("mission_bad_seq")
-        else:
+        handler = _HANDLERS.get(msg.type)
+        if handler is None:
             return False
+        handler(self, peer, msg, now_s)
         return True
+
+    def _on_ack(self, peer: object, msg: Inbound, now_s: float) -> None:
+        """The GCS ends our download (whatever the result)."""
+        if self._down is not None and self._down.sys_id == msg.src_system:
+            self._down = None
+
+    def _on_clear_all(self, peer: object, msg: Inbound, now_s: float) -> None:
+        mtype = msg.i("mission_type")
+        if mtype != TYPE_MISSION:
+            self._ack(peer, msg.src_system, msg.src_component, UNSUPPORTED, mtype)
+        elif self._up is not None:
+            self._ack(peer, msg.src_system, msg.src_component, ERROR)
+        else:
+            self._host.clear_mission()
+            self._ack(peer, msg.src_system, msg.src_component, ACCEPTED)
+
+    def _on_set_current(self, peer: object, msg: Inbound, now_s: float) -> None:
+        seq = msg.i("seq")
+        if not self._host.set_current(seq):
+            self._host.statustext(
+                const("MAV_SEVERITY_ERROR"), f"WPM: MISSION_SET_CURRENT seq {seq} out of bounds"
+            )
+            self._host.count("mission_bad_seq")
 
     def tick(self, now_s: float) -> None:
         up = self._up
@@ -501,3 +505,17 @@ class MissionServer:
             self._host.send(
                 peer, "MISSION_ITEM", frame=frame, x=it.x * scale, y=it.y * scale, **common
             )
+
+
+_HANDLERS: dict[str, Callable[[MissionServer, object, Inbound, float], None]] = {
+    "MISSION_COUNT": MissionServer._on_count,
+    "MISSION_ITEM_INT": MissionServer._on_item,
+    "MISSION_ITEM": MissionServer._on_item,
+    "MISSION_REQUEST_LIST": MissionServer._on_request_list,
+    "MISSION_REQUEST_INT": MissionServer._on_request,
+    "MISSION_REQUEST": MissionServer._on_request,
+    "MISSION_ACK": MissionServer._on_ack,
+    "MISSION_CLEAR_ALL": MissionServer._on_clear_all,
+    "MISSION_SET_CURRENT": MissionServer._on_set_current,
+}
+"""The mission-protocol messages :meth:`MissionServer.handle` answers, by message type."""

@@ -35,7 +35,6 @@ import asyncio
 import contextlib
 import functools
 import logging
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -98,8 +97,8 @@ _ARDUPILOT_STREAM_MSGS = (
 
 _LANE_HANDOVER = 16 * LANE_STRIDE
 """Lane entries are handed to the sink after each read burst, and also once this many
-numbers (16 reports) wait: a burst of 64 datagrams takes 1-3 ms to read, and tracking should
-not wait for its end (see MavlinkHub.flush_positions)."""
+numbers (16 reports) wait: tracking should not wait for the end of a long burst of reads (see
+MavlinkHub.flush_positions)."""
 
 
 _DROPS_REPORT_S = 60.0  # a summary of refused and forgotten senders at most this often
@@ -158,7 +157,7 @@ class _Link:
     encoder: wire.Encoder | None = None
     peers: dict[Address, float] = field(default_factory=dict)  # vehicles' addresses
     seen: dict[Address | None, float] = field(default_factory=dict)  # any sender's last chunk
-    fused: bool = False  # datagram link with the fast decode: position reports fused
+    datagram: bool = False  # UDP: each chunk a datagram, parsed on its own
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -190,8 +189,9 @@ class MavlinkHub(Commands):
         self.raw_tap = raw_tap
         self.counters: HubCounters = HubCounters()
         # A sink that takes positions in columns (the USM: ``position_lane`` and
-        # ``on_position_lane``) gets GLOBAL_POSITION_INT as lane entries, handed over after
-        # each read (a UDP burst, a stream chunk) instead of one Measurement call per report.
+        # ``on_position_lane``) gets GLOBAL_POSITION_INT as entries of its lane, handed over
+        # after each read (a UDP burst, a stream chunk); other sinks get each entry as its
+        # Measurement at once (VehicleState.on_global_position).
         self._lane: PositionLane | None = getattr(sink, "position_lane", None)
         self._lane_ready: Callable[[], None] | None = getattr(sink, "on_position_lane", None)
         if self._lane is None or self._lane_ready is None:
@@ -269,9 +269,7 @@ class MavlinkHub(Commands):
         while name in self._links:
             n += 1
             name = f"{base}#{n}"
-        link = _Link(
-            name=name, transport=transport, fused=transport.datagram and self.config.fast_decode
-        )
+        link = _Link(name=name, transport=transport, datagram=transport.datagram)
         link.encoder = wire.Encoder(self.config.gcs_sys_id, self.config.gcs_comp_id)
         self._links[name] = link
         try:
@@ -392,35 +390,11 @@ class MavlinkHub(Commands):
         c.bytes += len(data)
         if self.raw_tap is not None:
             self.raw_tap(link.name, data, t)
-        if link.fused:
-            # the hot case: one position report from a vehicle already heard, in its own
-            # datagram -- straight to its state, without the generic frame objects
-            g = wire.global_position(data)
-            if g is not None:
-                sys_id, comp_id, seq, fields = g
-                st = self._states.get((link.name, addr, sys_id, comp_id))
-                if st is not None and (self._verify is None or sys_id not in self._keys):
-                    c.frames += 1
-                    link.counters.frames += 1
-                    self._heard(link, addr, st, seq, t)
-                    reboots = st.reboots
-                    try:
-                        st.on_position(fields, t, self.sink)
-                    except Exception:  # a handler bug must not kill the link
-                        c.handler_errors += 1
-                        _log.exception("handler failed on GLOBAL_POSITION_INT")
-                    if st.reboots != reboots:
-                        self._on_reboot(st)
-                    if len(self._lane_values) >= _LANE_HANDOVER:
-                        self.flush_positions()  # within a long burst too: latency
-                    return
         link.seen[addr] = t
         parser = link.parsers.get(addr) or self._new_parser(link, addr)
         before = link.counters.rejects
-        if link.transport.datagram:
-            frames = parser.feed_frames(data)
-        else:
-            frames = parser.frames(data, datagram=False)
+        # one datagram: the fast decoder (pymavlink for the rest); a stream chunk: pymavlink
+        frames = parser.feed_frames(data) if link.datagram else parser.frames(data, datagram=False)
         if link.counters.rejects != before:
             self._sync_bad(link)
             _log.debug("bad frame on %s from %s: %s", link.name, addr, link.counters.last_error)
@@ -430,8 +404,9 @@ class MavlinkHub(Commands):
             except Exception:  # a handler bug must not kill the link
                 c.handler_errors += 1
                 _log.exception("handler failed on %s", wire.msg_name(f.msg_id))
-        if not link.transport.datagram:
-            self.flush_positions()  # (a UDP link's transport calls it after each burst)
+        if not link.datagram or len(self._lane_values) >= _LANE_HANDOVER:
+            # a UDP link's transport calls it after each burst, and within a long one here
+            self.flush_positions()
 
     def flush_positions(self) -> None:
         """Hand the position reports read so far to the sink's lane (see ``__init__``); the
@@ -461,47 +436,52 @@ class MavlinkHub(Commands):
         if self._verify is not None and (cause := self._verify.accept(f)):
             self._unverified(link, cause)
             return
-        key = (link.name, addr, sys_id, comp_id)
-        st = self._states.get(key)
+        st = self._states.get((link.name, addr, sys_id, comp_id))
         if st is None:
             if mid == wire.HEARTBEAT and m.autopilot == 8:
                 return  # another GCS or a non-autopilot component: not a vehicle
             st = self._new_state(link, addr, sys_id, comp_id, t)
             if st is None:
                 return
-        self._heard(link, addr, st, seq, t)
+        st.count_frame(seq, t)  # link statistics
+        if addr is not None:
+            link.peers[addr] = t  # where to reply
         handler = self._handlers.get(mid)
-        reboots = st.reboots
         if handler is not None:
+            reboots = st.reboots
             if mid == wire.HEARTBEAT:
-                if m.autopilot == 8:
-                    return
-                new = handler(st, m, t, self.sink)
-                if new:
-                    self._senders.discovered(st)
-                if st.autopilot is Autopilot.ARDUPILOT and (new or id(st) in self._restream):
-                    self._restream.discard(id(st))
-                    self._request_streams(st)
+                self._on_heartbeat(st, handler, m, t)
             else:
                 handler(st, m, t, self.sink)
             if st.reboots != reboots:
                 self._on_reboot(st)
         if mid in _PROTOCOL_IDS:
-            target = getattr(m, "target_system", 0)
-            if target not in (0, self.config.gcs_sys_id):
-                self.counters.not_for_us += 1
-                return
-            box = self._mailbox.get(id(st))
-            if box is not None:
-                box.put_nowait(m)
+            self._to_mailbox(st, m)
 
-    def _heard(
-        self, link: _Link, addr: Address | None, st: VehicleState, seq: int, t: float
+    def _on_heartbeat(
+        self, st: VehicleState, handler: MessageHandler, m: wire.MavMsg, t: float
     ) -> None:
-        """A frame from ``st`` at ``addr``: link statistics, and where to reply."""
-        st.count_frame(seq, t)
-        if addr is not None:
-            link.peers[addr] = t
+        """A vehicle's HEARTBEAT: discovery, and ArduPilot's streams asked for when it is new
+        or its link came back."""
+        if m.autopilot == 8:
+            return  # a component without an autopilot sharing the vehicle's ids
+        new = handler(st, m, t, self.sink)
+        if new:
+            self._senders.discovered(st)
+        if st.autopilot is Autopilot.ARDUPILOT and (new or id(st) in self._restream):
+            self._restream.discard(id(st))
+            self._request_streams(st)
+
+    def _to_mailbox(self, st: VehicleState, m: wire.MavMsg) -> None:
+        """A protocol message (mission, command ack) to the transfer waiting on ``st``, when
+        it is addressed to us or to everybody."""
+        target = getattr(m, "target_system", 0)
+        if target not in (0, self.config.gcs_sys_id):
+            self.counters.not_for_us += 1
+            return
+        box = self._mailbox.get(id(st))
+        if box is not None:
+            box.put_nowait(m)
 
     def _new_state(
         self, link: _Link, addr: Address | None, sys_id: int, comp_id: int, t: float
@@ -592,10 +572,6 @@ class MavlinkHub(Commands):
         self._sync_senders()
         idle_s = self.config.sender_idle_s
         for link in self._links.values():
-            # an address with a vehicle on the fused path is seen through its peers entry
-            for a, heard in link.peers.items():
-                if link.seen.get(a, -math.inf) < heard:
-                    link.seen[a] = heard
             self._forget_addresses(link, idle_keys(link.seen, t, idle_s))
         for sys_id in idle_keys(self._claim_alerts, t, idle_s):
             del self._claim_alerts[sys_id]
@@ -695,7 +671,7 @@ class MavlinkHub(Commands):
             await asyncio.sleep(self.config.heartbeat_period_s)
 
     async def _health_loop(self) -> None:
-        chunk = 50  # vehicles per loop turn (~0.5 ms here): a large fleet must not stall reading
+        chunk = 50  # vehicles per loop turn: a large fleet must not stall reading
         while True:
             await asyncio.sleep(self.config.health_period_s)
             self.evict_idle()

@@ -54,35 +54,42 @@ class SignatureCheck:
         key = self.keys.get(f.sys_id)
         if key is None:
             return ""
-        m = f.msg
-        header = getattr(m, "_header", None)  # fast-path tuples are unsigned frames
-        buf = getattr(m, "_msgbuf", None)
-        if header is None or buf is None or not header.incompat_flags & _IFLAG_SIGNED:
-            if f.msg_id == _RADIO_STATUS:
-                return ""
-            self.counters.unsigned += 1
-            return "unsigned"
-        raw = bytes(buf)
-        if len(raw) < 10 + 2 + _SIGNATURE_LEN:
-            self.counters.bad_signature += 1
-            return "bad_signature"
-        if hashlib.sha256(key + raw[:-6]).digest()[:6] != raw[-6:]:
-            self.counters.bad_signature += 1
-            return "bad_signature"
-        link_id = raw[-_SIGNATURE_LEN]
+        raw = _signed_frame(f.msg)
+        if raw is None:
+            cause = "" if f.msg_id == _RADIO_STATUS else "unsigned"
+        elif len(raw) < 10 + 2 + _SIGNATURE_LEN or (
+            hashlib.sha256(key + raw[:-6]).digest()[:6] != raw[-6:]
+        ):
+            cause = "bad_signature"
+        else:
+            cause = self._fresh(raw, f.sys_id, f.comp_id)
+        if cause:
+            setattr(self.counters, cause, getattr(self.counters, cause) + 1)
+        return cause
+
+    def _fresh(self, raw: bytes, sys_id: int, comp_id: int) -> str:
+        """``""`` and the stream's timestamp moved on when the verified frame ``raw`` is newer
+        than the last one of its stream (a new stream: at most one minute behind ours), else
+        ``replayed``."""
         stamp = int.from_bytes(raw[-12:-6], "little")
-        stream = (link_id, f.sys_id, f.comp_id)
+        stream = (raw[-_SIGNATURE_LEN], sys_id, comp_id)  # (link id, sys_id, comp_id)
         last = self._streams.get(stream)
         if last is not None:
             if stamp <= last:
-                self.counters.replayed += 1
                 return "replayed"
-        else:
-            ours = max(self._timestamp, wire.signing_timestamp(self.now()))
-            if stamp + _NEW_STREAM_WINDOW < ours:
-                self.counters.replayed += 1
-                return "replayed"
+        elif stamp + _NEW_STREAM_WINDOW < max(self._timestamp, wire.signing_timestamp(self.now())):
+            return "replayed"
         self._streams[stream] = stamp
         self._timestamp = max(self._timestamp, stamp)
         self.counters.verified += 1
         return ""
+
+
+def _signed_frame(m: wire.MavMsg) -> bytes | None:
+    """The raw bytes of a signed pymavlink frame, None for an unsigned one (fast-path tuples
+    are unsigned frames)."""
+    header = getattr(m, "_header", None)
+    buf = getattr(m, "_msgbuf", None)
+    if header is None or buf is None or not header.incompat_flags & _IFLAG_SIGNED:
+        return None
+    return bytes(buf)

@@ -260,72 +260,20 @@ class Transfers:
     async def _download(
         self, st: VehicleState, box: asyncio.Queue[wire.MavMsg], end: float, reboots: int
     ) -> list[MissionItem]:
-        enc = self._encoder(st)
-        ts, tc = st.sys_id, st.key.comp_id
-        step = _Step(self.config)
         # drain protocol leftovers of the upload (late re-requests, duplicate ACKs)
         while not box.empty():
             box.get_nowait()
-        count: int | None = None
-        got: list[MissionItem] = []
-        silent = 0
-        refusals = 0
-
-        def request() -> bytes:
-            if count is None:
-                return enc.mission_request_list(ts, tc)
-            return enc.mission_request_int(ts, tc, len(got))
-
-        self._to(st, request())
-        sent_t = _loop_time()
+        down = _DownloadState(self, st)
+        down.request()
         try:
             while True:
                 self._check(st, reboots, end)
-                m = await self._get(box, min(sent_t + step.rto, end) - _loop_time())
+                m = await self._get(box, min(down.sent_t + down.step.rto, end) - _loop_time())
                 self._check(st, reboots, end)
                 if m is None:
-                    silent += 1
-                    if silent > self.config.max_retries:
-                        raise TransferError(f"no answer to download after {silent - 1} retries")
-                    step.backoff()
-                    self.counters.mission_retries += 1
-                    # a retry goes out twice: a lost request or a lost answer costs a whole
-                    # timeout, a duplicate costs one datagram (PX4 answers a repeated request
-                    # for the item it just sent, ArduPilot answers any request)
-                    self._to(st, request())
-                    self._to(st, request())  # encoded anew: a signed frame is never replayed
-                    sent_t = _loop_time()
-                    continue
-                mid = m._header.msgId
-                if getattr(m, "mission_type", 0) != 0:
-                    continue
-                if mid == wire.MISSION_COUNT and count is None:
-                    count = int(m.count)
-                elif mid == wire.MISSION_ITEM_INT and count is not None and m.seq == len(got):
-                    got.append(item_from(m))
-                elif mid == wire.MISSION_ACK and m.type != MAV_MISSION_ACCEPTED:
-                    # a late answer to an upload item repeated after the upload ended, or the
-                    # vehicle dropped the transfer (PX4 does on a request it did not expect):
-                    # start over; a vehicle that keeps refusing fails the download
-                    refusals += 1
-                    if refusals > _DOWNLOAD_RESTARTS:
-                        raise TransferError(
-                            f"vehicle refused the download: {mission_result(m.type)}"
-                        )
-                    count = None
-                    got.clear()
-                    self._to(st, request())
-                    sent_t = _loop_time()
-                    continue
-                else:
-                    continue
-                step.progress(_loop_time() - sent_t)
-                silent = 0
-                if count is not None and len(got) >= count:
-                    self._to(st, enc.mission_ack(ts, tc, MAV_MISSION_ACCEPTED))
-                    return got
-                self._to(st, request())
-                sent_t = _loop_time()
+                    down.on_silence()
+                elif getattr(m, "mission_type", 0) == 0 and down.on_message(m):
+                    return down.got
         except TransferError:
             self._cancel(st)
             raise
@@ -550,6 +498,79 @@ class _UploadState:
         self.sent_hi = max(self.sent_hi, seq)
         self.last_sent = self.sent_hi == n - 1
         self.sent_t = _loop_time()
+
+
+class _DownloadState:
+    """Our side of one download (MISSION_REQUEST_LIST, then each item in turn; see
+    _download)."""
+
+    def __init__(self, owner: Transfers, st: VehicleState) -> None:
+        self.owner = owner
+        self.st = st
+        self.enc = owner._encoder(st)
+        self.step = _Step(owner.config)
+        self.count: int | None = None
+        self.got: list[MissionItem] = []
+        self.silent = 0
+        self.refusals = 0
+        self.sent_t = _loop_time()
+
+    def request(self) -> None:
+        """Ask for what comes next: the list, then the next item."""
+        st = self.st
+        ts, tc = st.sys_id, st.key.comp_id
+        if self.count is None:
+            self.owner._to(st, self.enc.mission_request_list(ts, tc))
+        else:
+            self.owner._to(st, self.enc.mission_request_int(ts, tc, len(self.got)))
+        self.sent_t = _loop_time()
+
+    def on_silence(self) -> None:
+        """Our timeout: ask again, twice -- a lost request or a lost answer costs a whole
+        timeout, a duplicate costs one datagram (PX4 answers a repeated request for the item
+        it just sent, ArduPilot answers any request)."""
+        self.silent += 1
+        if self.silent > self.owner.config.max_retries:
+            raise TransferError(f"no answer to download after {self.silent - 1} retries")
+        self.step.backoff()
+        self.owner.counters.mission_retries += 1
+        self.request()
+        self.request()  # encoded anew: a signed frame is never replayed
+
+    def on_message(self, m: wire.MavMsg) -> bool:
+        """A mission message of the vehicle; True when the download is complete (and
+        acknowledged)."""
+        mid = m._header.msgId
+        if mid == wire.MISSION_COUNT and self.count is None:
+            self.count = int(m.count)
+        elif mid == wire.MISSION_ITEM_INT and self.count is not None and m.seq == len(self.got):
+            self.got.append(item_from(m))
+        elif mid == wire.MISSION_ACK and m.type != MAV_MISSION_ACCEPTED:
+            self.on_refusal(int(m.type))
+            return False
+        else:
+            return False
+        self.step.progress(_loop_time() - self.sent_t)
+        self.silent = 0
+        if self.count is not None and len(self.got) >= self.count:
+            st = self.st
+            self.owner._to(
+                st, self.enc.mission_ack(st.sys_id, st.key.comp_id, MAV_MISSION_ACCEPTED)
+            )
+            return True
+        self.request()
+        return False
+
+    def on_refusal(self, result: int) -> None:
+        """A MISSION_ACK refusal: a late answer to an upload item repeated after the upload
+        ended, or the vehicle dropped the transfer (PX4 does on a request it did not expect):
+        start over; a vehicle that keeps refusing fails the download."""
+        self.refusals += 1
+        if self.refusals > _DOWNLOAD_RESTARTS:
+            raise TransferError(f"vehicle refused the download: {mission_result(result)}")
+        self.count = None
+        self.got.clear()
+        self.request()
 
 
 def _upload_done(st: VehicleState, result: int, last_sent: bool) -> bool:

@@ -38,7 +38,6 @@ from gcs_utm.model import (
     PositionLane,
     ThreatKind,
     VehicleKind,
-    telemetry_measurement,
 )
 from gcs_utm.ratelog import RateLimitedLog
 
@@ -105,8 +104,7 @@ class VehicleState:
         self.armed = False
         self.landed: bool | None = None
         # link statistics
-        self.first_t_s = t_s
-        self.last_heard_t_s = t_s
+        self.first_t_s = self.last_heard_t_s = t_s
         self.received = 0
         self.lost = 0
         self.duplicates = 0
@@ -144,11 +142,12 @@ class VehicleState:
         self._eph_bad = False
         # the last reported (lat, lon, alt AMSL); a Position is built only for a hazard report
         self._last_fix: tuple[float, float, float] | None = None
-        # positions go to ``lane`` as entries when there is one, else as Measurements
-        self._lane_put = lane.values.extend if lane is not None else None
-        self._lane_index = (
-            lane.register(LaneSource(key.sys_id, key.link, self.tag)) if lane is not None else 0
-        )
+        # Positions become entries of ``lane`` (the sink's); without one, each entry is handed
+        # on at once as the Measurement it stands for (a lane of this vehicle's own names it).
+        self._own_lane = lane is None
+        self._lane = PositionLane() if lane is None else lane
+        self._lane_put = self._lane.values.extend
+        self._lane_index = self._lane.register(LaneSource(key.sys_id, key.link, self.tag))
 
     # --- link statistics ------------------------------------------------------------------
     def count_frame(self, seq: int, t_s: float) -> None:
@@ -361,18 +360,13 @@ class VehicleState:
         return new
 
     def on_global_position(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
-        if isinstance(m, tuple):  # the fast path's named tuple is in wire order
-            self.on_position(m, t_s, ev)
+        """GLOBAL_POSITION_INT -- the fast decoder's named tuple (any tuple of its fields in
+        wire order) or a pymavlink message: a position report for tracking."""
+        if isinstance(m, tuple):
+            boot_ms, lat_e7, lon_e7, alt_mm, _, vx, vy, vz, _ = m
         else:
-            self.on_position(
-                (m.time_boot_ms, m.lat, m.lon, m.alt, m.relative_alt, m.vx, m.vy, m.vz, m.hdg),
-                t_s,
-                ev,
-            )
-
-    def on_position(self, f: wire.GlobalPosition, t_s: float, ev: Events) -> None:
-        """GLOBAL_POSITION_INT, its fields in wire order: a measurement for tracking."""
-        boot_ms, lat_e7, lon_e7, alt_mm, _, vx, vy, vz, _ = f
+            boot_ms, lat_e7, lon_e7, alt_mm = m.time_boot_ms, m.lat, m.lon, m.alt
+            vx, vy, vz = m.vx, m.vy, m.vz
         if lat_e7 == 0 and lon_e7 == 0:
             return  # no estimate yet
         self.boot_time(boot_ms, t_s)
@@ -387,36 +381,20 @@ class VehicleState:
             return  # PX4 fills alt with INT32_MIN (-2147483.648 m) when it has no altitude
         self._last_fix = (lat, lon, alt)
         offset = self.offset_s  # capture_t_s(), inline
-        put = self._lane_put
-        if put is not None:  # the same report as the Measurement below, as a lane entry
-            eph = self.eph_m
-            epv = self.epv_m
-            put(
-                (
-                    self._lane_index,
-                    t_s,
-                    t_s if offset is None else offset + boot_ms / 1000.0,
-                    lon, lat, alt, vx / 100.0, vy / 100.0, vz / 100.0,
-                    _NAN if eph is None else eph,
-                    _NAN if epv is None else epv,
-                )
-            )  # fmt: skip
-            return
-        ev.on_measurement(
-            telemetry_measurement(
-                t_s if offset is None else offset + boot_ms / 1000.0,
-                t_s,
-                lat,
-                lon,
-                alt,
-                (vx / 100.0, vy / 100.0, vz / 100.0),
-                self.eph_m,
-                self.epv_m,
-                self.sys_id,
-                self.key.link,
-                self.tag,
-            )
-        )
+        eph = self.eph_m
+        epv = self.epv_m
+        entry = (
+            self._lane_index,
+            t_s,
+            t_s if offset is None else offset + boot_ms / 1000.0,
+            lon, lat, alt, vx / 100.0, vy / 100.0, vz / 100.0,
+            _NAN if eph is None else eph,
+            _NAN if epv is None else epv,
+        )  # fmt: skip
+        if self._own_lane:
+            ev.on_measurement(self._lane.measurement(entry, 0))
+        else:
+            self._lane_put(entry)
 
     def on_gps_raw(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
         cfg = self.cfg

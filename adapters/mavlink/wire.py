@@ -12,21 +12,17 @@ typed helpers.
 Decoded messages are pymavlink objects (typed ``Any`` here): attribute access by MAVLink field
 name; :func:`msg_id`, :func:`src` give typed header access.
 
-Fast path (:meth:`Parser.feed_frames` on datagram links): the hot telemetry messages in
-:data:`FAST_TYPES` (HEARTBEAT, SYS_STATUS, SYSTEM_TIME, GPS_RAW_INT, ATTITUDE,
+One receive decoder (:meth:`Parser.feed_frames`, datagram links): the hot telemetry messages
+in :data:`FAST_TYPES` (HEARTBEAT, SYS_STATUS, SYSTEM_TIME, GPS_RAW_INT, ATTITUDE,
 GLOBAL_POSITION_INT, VFR_HUD, EXTENDED_SYS_STATE) are framed and checked here (MAVLink 2
 header 0xFD len incompat compat seq sysid compid msgid[3]; MAVLink 1 0xFE len seq sysid compid
 msgid; X.25 CRC-16/MCRF4XX over header+payload then CRC_EXTRA, via fastcrc) and unpacked with
 ``struct`` into named tuples with pymavlink's field names, after padding the payload that
-MAVLink 2 trims of trailing zeros. Anything else — other messages, signed frames, a bad CRC,
-garbage, a frame cut short — goes to pymavlink from that byte on, so rejects are classified and
-counted exactly as before. pymavlink decode + parse_char was ~60 % of the ingest time.
-
-Fused position path (:func:`global_position`): a datagram that is exactly one unsigned MAVLink
-2 GLOBAL_POSITION_INT frame -- what a vehicle streams most -- is checked and unpacked into a
-plain tuple in one call, and the hub hands it straight to the vehicle's state, without the
-frame objects and the dispatch of the general path. Anything else returns None and takes the
-general path.
+MAVLink 2 trims of trailing zeros. Each type's layout (struct format, field names in wire
+order, payload size, CRC_EXTRA) is taken from pymavlink's message class in the dialect, so it
+is defined once. Anything else -- other messages, signed frames, a bad CRC, garbage, a frame
+cut short -- goes to pymavlink from that byte on (the fallback), so rejects are classified and
+counted as pymavlink classifies them.
 """
 
 from __future__ import annotations
@@ -143,37 +139,30 @@ _V2 = 0xFD
 _V1 = 0xFE
 _IFLAG_SIGNED = 0x01
 
-_GPI = FAST_TYPES[GLOBAL_POSITION_INT]
-_GPI_EXTRA = _GPI.crc_extra
-_GPI_SIZE = _GPI.size
-_GPI_UNPACK = _GPI.unpack
-GlobalPosition = tuple[int, int, int, int, int, int, int, int, int]
-"""GLOBAL_POSITION_INT fields in wire order: time_boot_ms, lat, lon, alt, relative_alt, vx,
-vy, vz, hdg (the order of the fast path's named tuple)."""
+
+_Header = tuple[int, int, int, int, int, int, int]
+"""A frame's header as the fast path reads it: (end, msg_id, payload offset, payload length,
+sys_id, comp_id, seq); ``end`` is one past its last byte (signature included)."""
 
 
-def global_position(data: bytes) -> tuple[int, int, int, GlobalPosition] | None:
-    """``(sys_id, comp_id, seq, fields)`` when ``data`` is exactly one unsigned MAVLink 2
-    GLOBAL_POSITION_INT frame with a good CRC -- what a vehicle streams most, one frame per
-    datagram -- else None, and nothing is counted: the caller then parses the datagram the
-    general way (:meth:`Parser.feed_frames`), which classifies and counts whatever it is."""
-    n = len(data)
-    if (
-        n < 12
-        or data[0] != _V2
-        or data[7] != GLOBAL_POSITION_INT
-        or data[2]  # incompat flags: signed
-        or data[8]
-        or data[9]
-        or n != 12 + data[1]
-        or _MCRF4XX(_GPI_EXTRA, _MCRF4XX(data[1 : n - 2])) != data[n - 2] | (data[n - 1] << 8)
-    ):
+def _header(data: bytes, i: int, n: int) -> _Header | None:
+    """The header of the MAVLink 2 or 1 frame at ``data[i]`` when the frame ends within
+    ``data``, else None (garbage, a frame cut short: pymavlink's to classify). A MAVLink 2 frame
+    with incompat flags (signed) has msg_id -1: not for the fast path, pymavlink verifies it."""
+    magic = data[i]
+    if magic == _V2:
+        if i + 12 > n:
+            return None
+        plen = data[i + 1]
+        incompat = data[i + 2]
+        end = i + 12 + plen + (13 if incompat & _IFLAG_SIGNED else 0)
+        mid = -1 if incompat else data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
+        return (end, mid, 10, plen, data[i + 5], data[i + 6], data[i + 4]) if end <= n else None
+    if magic != _V1 or i + 8 > n:
         return None
-    payload = data[10 : n - 2]
-    if n - 12 != _GPI_SIZE:
-        payload = payload + bytes(_GPI_SIZE - n + 12) if n - 12 < _GPI_SIZE else payload[:_GPI_SIZE]
-    fields: GlobalPosition = _GPI_UNPACK(payload)
-    return data[5], data[6], data[4], fields
+    plen = data[i + 1]
+    end = i + 8 + plen
+    return (end, data[i + 5], 6, plen, data[i + 3], data[i + 4], data[i + 2]) if end <= n else None
 
 
 def mission_current_id(m: MavMsg) -> int | None:
@@ -288,63 +277,31 @@ class Parser:
             out.append(Frame(h.msgId, h.srcSystem, h.srcComponent, h.seq, m))
         return out
 
-    def feed_frames(self, data: bytes) -> list[Frame]:  # noqa: C901 - per-byte framing loop, kept whole: it is the hot path
+    def feed_frames(self, data: bytes) -> list[Frame]:
         """Decode one datagram: hot telemetry on the fast path (see the module docstring),
         everything else through pymavlink. Never raises; rejects are counted."""
         if not self.fast:
             return self.frames(data, datagram=True)
         out: list[Frame] = []
-        fast = FAST_TYPES
-        crc16_ = _MCRF4XX
         n = len(data)
         i = 0
         while i < n:
-            magic = data[i]
-            if magic == _V2:
-                if i + 12 > n:
-                    break
-                plen = data[i + 1]
-                incompat = data[i + 2]
-                end = i + 12 + plen
-                if incompat & _IFLAG_SIGNED:
-                    end += 13
-                if end > n:
-                    break
-                mid = data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
-                ft = fast.get(mid)
-                if ft is None or incompat:
-                    out.extend(self.frames(data[i:end], datagram=True))
-                    i = end
-                    continue
-                hdr = 10
-                sys_id, comp_id, seq = data[i + 5], data[i + 6], data[i + 4]
-            elif magic == _V1:
-                if i + 8 > n:
-                    break
-                plen = data[i + 1]
-                end = i + 8 + plen
-                if end > n:
-                    break
-                mid = data[i + 5]
-                ft = fast.get(mid)
-                if ft is None:
-                    out.extend(self.frames(data[i:end], datagram=True))
-                    i = end
-                    continue
-                hdr = 6
-                sys_id, comp_id, seq = data[i + 3], data[i + 4], data[i + 2]
+            head = _header(data, i, n)
+            if head is None:
+                break  # garbage or a frame cut short: pymavlink classifies it from here
+            end, mid, hdr, plen, sys_id, comp_id, seq = head
+            ft = FAST_TYPES.get(mid)
+            if ft is None:  # another message, or a signed frame: pymavlink decodes this one
+                out.extend(self.frames(data[i:end], datagram=True))
             else:
-                break
-            crc = data[end - 2] | (data[end - 1] << 8)
-            if crc16_(ft.crc_extra, crc16_(data[i + 1 : end - 2])) != crc:
-                break  # pymavlink classifies and resynchronises from here
-            payload = data[i + hdr : end - 2]
-            if plen < ft.size:
-                payload += bytes(ft.size - plen)  # MAVLink 2 trims trailing zero bytes
-            elif plen > ft.size:
-                payload = payload[: ft.size]  # fields of a newer dialect we do not know
-            out.append(_new_frame((mid, sys_id, comp_id, seq, ft.make(ft.unpack(payload)))))
-            self.counters.frames += 1
+                crc = data[end - 2] | (data[end - 1] << 8)
+                if _MCRF4XX(ft.crc_extra, _MCRF4XX(data[i + 1 : end - 2])) != crc:
+                    break  # pymavlink classifies and resynchronises from here
+                payload = data[i + hdr : end - 2]
+                if plen != ft.size:  # MAVLink 2 trims trailing zeros; a newer dialect adds
+                    payload = (payload + bytes(ft.size))[: ft.size]
+                out.append(_new_frame((mid, sys_id, comp_id, seq, ft.make(ft.unpack(payload)))))
+                self.counters.frames += 1
             i = end
         if i < n:
             out.extend(self.frames(data[i:], datagram=True))

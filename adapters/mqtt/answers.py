@@ -83,58 +83,24 @@ class AnswerBook:
     def answer(self, a: PilotAnswer, t_s: float) -> AnswerOutcome:
         """Match ``a`` (received at ``t_s``; the later of ``t_s`` and ``a.t_s`` counts for
         the deadline, so a pilot clock running behind cannot extend it)."""
-
-        def out(
-            status: AnswerStatus, reason: str, state: RecommendationState | None
-        ) -> AnswerOutcome:
-            return AnswerOutcome(
-                status=status,
-                recommendation_id=a.recommendation_id,
-                version=a.version,
-                decision=a.decision,
-                reason=reason,
-                state=state,
-            )
-
         entry = self._entries.get(a.recommendation_id)
         if entry is None:
-            return out(AnswerStatus.REFUSED, "unknown recommendation", None)
+            return _outcome(a, AnswerStatus.REFUSED, "unknown recommendation", None)
         rec = entry.rec
-        if entry.operator is not None and a.operator != entry.operator:
-            return out(
-                AnswerStatus.REFUSED,
-                f"operator {a.operator!r} may not answer for operator {entry.operator!r}",
-                rec.state,
-            )
-        if a.version != rec.version:
-            if a.version in entry.older_versions or a.version < rec.version:
-                reason = f"version {a.version} was superseded by version {rec.version}"
-            else:
-                reason = f"unknown version {a.version} (current is {rec.version})"
-            return out(AnswerStatus.REFUSED, reason, rec.state)
-        if entry.answer is not None:
-            prev = entry.answer
-            if prev.decision is a.decision and prev.alternative_index == a.alternative_index:
-                return out(AnswerStatus.DUPLICATE, "already answered", rec.state)
-            return out(
-                AnswerStatus.REFUSED,
-                f"already answered: {prev.decision.value}",
-                rec.state,
-            )
-        if rec.state is not RecommendationState.PROPOSED:
-            return out(AnswerStatus.REFUSED, f"recommendation is {rec.state.value}", rec.state)
+        mismatch = _mismatch(entry, a)
+        if mismatch is not None:
+            return _outcome(a, *mismatch, rec.state)
         answered_t_s = max(t_s, a.t_s)
         if answered_t_s > rec.deadline_t_s:
             reason = f"expired: deadline {rec.deadline_t_s:.3f} passed at {answered_t_s:.3f}"
             entry.rec = rec.transition(RecommendationState.EXPIRED, answered_t_s, reason)
-            return out(AnswerStatus.REFUSED, reason, RecommendationState.EXPIRED)
+            return _outcome(a, AnswerStatus.REFUSED, reason, RecommendationState.EXPIRED)
         if a.alternative_index is not None and not 0 <= a.alternative_index < len(rec.alternatives):
-            return out(
-                AnswerStatus.REFUSED,
+            reason = (
                 f"alternative_index {a.alternative_index} out of range "
-                f"(0..{len(rec.alternatives) - 1})",
-                rec.state,
+                f"(0..{len(rec.alternatives) - 1})"
             )
+            return _outcome(a, AnswerStatus.REFUSED, reason, rec.state)
         new_state = (
             RecommendationState.ACCEPTED
             if a.decision is PilotDecision.ACCEPT
@@ -142,4 +108,43 @@ class AnswerBook:
         )
         entry.rec = rec.transition(new_state, answered_t_s, f"pilot {a.decision.value}")
         entry.answer = a
-        return out(AnswerStatus.ACCEPTED, "", new_state)
+        return _outcome(a, AnswerStatus.ACCEPTED, "", new_state)
+
+
+def _mismatch(entry: _Entry, a: PilotAnswer) -> tuple[AnswerStatus, str] | None:
+    """Why ``a`` cannot answer ``entry``'s recommendation whatever the time: another
+    operator, another version, an answer already taken (the same one again: a duplicate), a
+    recommendation no longer proposed. None when it can."""
+    rec = entry.rec
+    if entry.operator is not None and a.operator != entry.operator:
+        return (
+            AnswerStatus.REFUSED,
+            f"operator {a.operator!r} may not answer for operator {entry.operator!r}",
+        )
+    if a.version != rec.version:
+        if a.version in entry.older_versions or a.version < rec.version:
+            reason = f"version {a.version} was superseded by version {rec.version}"
+        else:
+            reason = f"unknown version {a.version} (current is {rec.version})"
+        return AnswerStatus.REFUSED, reason
+    prev = entry.answer
+    if prev is not None:
+        if prev.decision is a.decision and prev.alternative_index == a.alternative_index:
+            return AnswerStatus.DUPLICATE, "already answered"
+        return AnswerStatus.REFUSED, f"already answered: {prev.decision.value}"
+    if rec.state is not RecommendationState.PROPOSED:
+        return AnswerStatus.REFUSED, f"recommendation is {rec.state.value}"
+    return None
+
+
+def _outcome(
+    a: PilotAnswer, status: AnswerStatus, reason: str, state: RecommendationState | None
+) -> AnswerOutcome:
+    return AnswerOutcome(
+        status=status,
+        recommendation_id=a.recommendation_id,
+        version=a.version,
+        decision=a.decision,
+        reason=reason,
+        state=state,
+    )

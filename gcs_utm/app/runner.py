@@ -21,7 +21,7 @@ import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gcs_utm.clock import Clock, FastTimeLoop, LoopClock, ScaledClock
 from gcs_utm.messages import HazardReport
@@ -36,6 +36,7 @@ from .fly import FlyOutcome, fly_scenario
 from .report import Report, build_report
 from .wiring import (
     FrontendOptions,
+    Frontends,
     OperatorMode,
     Persistence,
     Runtime,
@@ -43,6 +44,9 @@ from .wiring import (
     build_runtime,
     start_service_tasks,
 )
+
+if TYPE_CHECKING:
+    from sitl import Fleet
 
 _log = logging.getLogger(__name__)
 
@@ -319,18 +323,7 @@ async def run_scenario(
         "udpin:127.0.0.1:0" if not options.external else settings.mavlink.links[0]
     )
     await rt.hub.add_link(link)
-    fleet = None
-    if not options.external:
-        from sitl import Fleet
-
-        specs = vehicle_specs(
-            scenario,
-            lead_s=lead_s,
-            gcs_port=rt.hub.local_port(link),
-            ephemeral_ports=True,
-            fast_time=options.fast_time,
-        )
-        fleet = Fleet(specs, sim_clock)
+    fleet = _fleet(rt, scenario, options, link=link, lead_s=lead_s, sim_clock=sim_clock)
     frontends = attach_frontends(
         rt,
         FrontendOptions(
@@ -342,7 +335,6 @@ async def run_scenario(
         ),
     )
     wall0 = time.perf_counter()
-    quit_requested = False
     flown: list[FlyOutcome] = []
     try:
         async with contextlib.AsyncExitStack() as stack:
@@ -350,30 +342,9 @@ async def run_scenario(
                 await stack.enter_async_context(fleet)
             if on_runtime is not None:
                 await on_runtime(rt)
-            async with asyncio.TaskGroup() as tg:
-                tasks = start_service_tasks(tg, rt, frontends)
-                tasks.append(tg.create_task(_play_alerts(rt, scenario, lead_s), name="alerts"))
-                tasks.append(tg.create_task(_sample_tracks(rt, SAMPLE_PERIOD_S), name="samples"))
-                if options.fly:
-                    # the plan version current at upload: a resolution accepted before
-                    # the take-off is flown, not overwritten by the filed plan
-                    fly = fly_scenario(
-                        rt.hub,
-                        rt.clock,
-                        scenario,
-                        flown,
-                        current_plan=lambda op_id: rt.airspace.operation(op_id).plan,
-                    )
-                    tasks.append(tg.create_task(fly, name="fly"))
-                dash = next((t for t in tasks if t.get_name() == "dashboard"), None)
-                await _until(rt.clock, end_t_s, dash)
-                if frontends.dashboard is not None and dash is not None and not dash.done():
-                    frontends.dashboard.exit()
-                quit_requested = (
-                    frontends.dashboard is not None and frontends.dashboard.quit_requested
-                )
-                for t in tasks:
-                    t.cancel()
+            quit_requested = await _serve(
+                rt, frontends, scenario, options, end_t_s=end_t_s, flown=flown
+            )
     finally:
         await rt.usm.drain()
         await rt.usm.close()
@@ -390,6 +361,76 @@ async def run_scenario(
         operator_quit=quit_requested,
     )
     store.close()
+    _write_outputs(report, scenario, options, flown)
+    return report
+
+
+def _fleet(
+    rt: Runtime,
+    scenario: Scenario,
+    options: RunOptions,
+    *,
+    link: str,
+    lead_s: float,
+    sim_clock: Any,
+) -> Fleet | None:
+    """The scenario's simulated vehicles (sitl), talking to ``link``; None with
+    ``--external`` (real autopilots)."""
+    if options.external:
+        return None
+    from sitl import Fleet
+
+    specs = vehicle_specs(
+        scenario,
+        lead_s=lead_s,
+        gcs_port=rt.hub.local_port(link),
+        ephemeral_ports=True,
+        fast_time=options.fast_time,
+    )
+    return Fleet(specs, sim_clock)
+
+
+async def _serve(
+    rt: Runtime,
+    frontends: Frontends,
+    scenario: Scenario,
+    options: RunOptions,
+    *,
+    end_t_s: float,
+    flown: list[FlyOutcome],
+) -> bool:
+    """The service tasks, the scenario's alerts, track sampling and (``--fly``) the flights,
+    until the scenario's end or the operator quits the dashboard; True when they quit."""
+    lead_s = options.lead_s if options.lead_s is not None else DEFAULT_LEAD_S
+    async with asyncio.TaskGroup() as tg:
+        tasks = start_service_tasks(tg, rt, frontends)
+        tasks.append(tg.create_task(_play_alerts(rt, scenario, lead_s), name="alerts"))
+        tasks.append(tg.create_task(_sample_tracks(rt, SAMPLE_PERIOD_S), name="samples"))
+        if options.fly:
+            # the plan version current at upload: a resolution accepted before the
+            # take-off is flown, not overwritten by the filed plan
+            fly = fly_scenario(
+                rt.hub,
+                rt.clock,
+                scenario,
+                flown,
+                current_plan=lambda op_id: rt.airspace.operation(op_id).plan,
+            )
+            tasks.append(tg.create_task(fly, name="fly"))
+        dash = next((t for t in tasks if t.get_name() == "dashboard"), None)
+        await _until(rt.clock, end_t_s, dash)
+        if frontends.dashboard is not None and dash is not None and not dash.done():
+            frontends.dashboard.exit()
+        quit_requested = frontends.dashboard is not None and frontends.dashboard.quit_requested
+        for t in tasks:
+            t.cancel()
+    return quit_requested
+
+
+def _write_outputs(
+    report: Report, scenario: Scenario, options: RunOptions, flown: list[FlyOutcome]
+) -> None:
+    """The report's JSON (with the flights of ``--fly``) and, with ``figures``, its plots."""
     data = report.to_json()
     if options.fly:
         data["fly"] = [o.to_json() for o in flown]
@@ -398,7 +439,6 @@ async def run_scenario(
         from gcs_utm.dashboard.plot import export_all
 
         export_all(data, options.out_dir, stem=scenario.name)
-    return report
 
 
 def run_scenario_blocking(

@@ -6,16 +6,24 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import signal
+import socket
 import sys
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 from gcs_utm.clock import Clock, RealClock, ScaledClock
+from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
+from gcs_utm.cluster.member import region_map_of
+from gcs_utm.cluster.node import ClusterNode
+from gcs_utm.cluster.policy import OwnershipPolicy
+from gcs_utm.cluster.regions import RegionError
 from gcs_utm.geo import LocalFrame
+from gcs_utm.model import Geofence, Operation
 from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
-from gcs_utm.store import Store, StoreWriter
+from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
 
 from .wiring import (
     FrontendOptions,
@@ -29,6 +37,85 @@ from .wiring import (
 _log = logging.getLogger(__name__)
 
 
+def check_cluster(settings: Settings, location: str | Path) -> None:
+    """``serve --cluster`` needs the shared database and a region on the grid."""
+    if not is_postgres(location):
+        raise StoreError("serve --cluster: set [store] url to the shared postgresql:// database")
+    if settings.cluster.region:
+        try:
+            region_map_of(settings.cluster).cell(settings.cluster.region)
+        except RegionError as exc:
+            raise StoreError(f"[cluster] {exc}") from exc
+
+
+async def join_cluster(
+    rt: Runtime,
+    location: str | Path,
+    stop: asyncio.Event,
+    failed: list[str],
+    policy: OwnershipPolicy,
+) -> ClusterNode:
+    """This runtime as a cluster member: checks the region map (a differing one is refused);
+    the member task and the region exchange (on the [mqtt] broker) start with the service
+    tasks."""
+    settings = rt.settings.cluster
+    instance = settings.instance or f"{socket.gethostname()}-{os.getpid()}"
+
+    def fail(why: str) -> None:
+        failed.append(why)
+        stop.set()
+
+    node: ClusterNode
+
+    async def on_tracks(tracks: list[RemoteTrack]) -> None:
+        await node.on_remote_tracks(tracks)
+
+    exchange = RegionExchange(
+        rt.settings.mqtt,
+        region_map_of(settings),
+        client_id=f"{rt.settings.mqtt.topic_prefix}-cluster-{instance}",
+        on_tracks=on_tracks,
+    )
+    node = ClusterNode(
+        location,
+        settings,
+        instance=instance,
+        epoch=rt.store.epoch,
+        frame=rt.frame,
+        clock=rt.clock,
+        airspace=rt.airspace,
+        tracking=rt.tracking,
+        usm=rt.usm,
+        record=rt.store.record,
+        on_fail=fail,
+        policy=policy,
+        exchange=exchange,
+        tracks=rt.tracks,
+        emergency=rt.emergency,
+    )
+    try:
+        await node.member.start()
+    except RegionError as exc:
+        await node.member.close()
+        raise StoreError(str(exc)) from exc
+    return node
+
+
+def _stored_airspace(
+    settings: Settings, db_path: Path, *, cluster: bool
+) -> tuple[str | Path, list[Operation], list[Geofence]]:
+    """Where the store is ([store] url, a shared PostgreSQL database, replaces the SQLite
+    file when set), and the operations and active geofences it holds. A cluster member's
+    operations come with the regions it gains (gcs_utm.cluster.node)."""
+    location: str | Path = settings.store.url or db_path
+    if cluster:
+        check_cluster(settings, location)
+    with open_store(location, busy_timeout_s=settings.store.busy_timeout_s) as reader:
+        operations = [] if cluster else reader.load_operations()
+        geofences = reader.load_geofences(active_only=True)
+    return location, operations, geofences
+
+
 async def serve(
     settings: Settings,
     *,
@@ -39,10 +126,13 @@ async def serve(
     on_runtime: Callable[[Runtime], Awaitable[None]] | None = None,
     speed: float = 1.0,
     record_dir: Path | None = None,
+    cluster: bool = False,
 ) -> int:
     """Long-running service: links from config, persistent store; restart resumes. Runs until
     SIGINT/SIGTERM (or ``stop`` is set). ``speed`` > 1 matches SITL vehicles running faster
-    than real time: the service's clock then advances ``speed`` simulated seconds per second."""
+    than real time: the service's clock then advances ``speed`` simulated seconds per second.
+    ``cluster``: a member of several instances sharing the ``[store] url`` database
+    (docs/scale-out.md); returns 3 when a region is lost (fail-stop)."""
     if record_dir is not None:  # refused before anything starts (RecordError)
         check_folder(record_dir, settings.record)
     clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
@@ -51,12 +141,10 @@ async def serve(
         settings.airspace.origin_lon_deg,
         settings.airspace.ground_elevation_amsl_m,
     )
-    reader = Store(db_path)
-    operations = reader.load_operations()
-    geofences = reader.load_geofences(active_only=True)
-    reader.close()
-    store = Persistence(StoreWriter(db_path, settings.store))
-    rt = build_runtime(settings, clock, frame, store)
+    location, operations, geofences = _stored_airspace(settings, db_path, cluster=cluster)
+    store = Persistence(StoreWriter(location, settings.store))
+    policy = OwnershipPolicy() if cluster else None
+    rt = build_runtime(settings, clock, frame, store, policy=policy)
     recorder = record_links(
         rt.hub,
         record_dir,
@@ -67,12 +155,22 @@ async def serve(
     rt.airspace.load(operations, geofences)
     rt.tracking.set_operations(operations)
     _log.info(
-        "resumed %d operations and %d geofences from %s", len(operations), len(geofences), db_path
+        "resumed %d operations and %d geofences from %s",
+        len(operations),
+        len(geofences),
+        describe(location),
     )
     for link in settings.mavlink.links:
         await rt.hub.add_link(link)
     frontends = attach_frontends(rt, FrontendOptions(operator=operator, headless=headless))
     stop = stop or asyncio.Event()
+    failed: list[str] = []
+    try:
+        node = await join_cluster(rt, location, stop, failed, policy) if policy else None
+    except StoreError:
+        await rt.hub.close()
+        store.close()
+        raise
     if on_runtime is not None:
         await on_runtime(rt)
     loop = asyncio.get_running_loop()
@@ -82,6 +180,8 @@ async def serve(
     try:
         async with asyncio.TaskGroup() as tg:
             tasks = start_service_tasks(tg, rt, frontends)
+            if node is not None:
+                tasks.append(tg.create_task(node.run(), name="cluster"))
             for t in tasks:
                 if t.get_name() == "dashboard":
                     t.add_done_callback(lambda _t: stop.set())
@@ -97,5 +197,5 @@ async def serve(
         if recorder is not None:
             recorder.close()
         store.close()
-    print("gcs-utm serve: stopped", file=sys.stderr)
-    return 0
+    print("gcs-utm serve: stopped", *failed, file=sys.stderr)
+    return 3 if failed else 0

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -54,6 +55,7 @@ from gcs_utm.store import StoreWriter
 from gcs_utm.store.ids import life_prefix
 
 if TYPE_CHECKING:
+    from gcs_utm.cluster.policy import OwnershipPolicy
     from gcs_utm.dashboard.tui import DashboardApp
     from gcs_utm.services.mqtt_gateway import MqttGateway
 
@@ -140,10 +142,17 @@ class Runtime:
 
 
 def build_runtime(
-    settings: Settings, clock: Clock, frame: LocalFrame, store: Persistence
+    settings: Settings,
+    clock: Clock,
+    frame: LocalFrame,
+    store: Persistence,
+    *,
+    policy: OwnershipPolicy | None = None,
 ) -> Runtime:
     """Build and connect the parts (no task started, no socket opened, nothing process-wide
-    changed: see :func:`gcs_utm.app.configure_interpreter` for that)."""
+    changed: see :func:`gcs_utm.app.configure_interpreter` for that). ``policy``: a cluster
+    member's ownership rule (``serve --cluster``): only the threats it decides reach its USM
+    and EM, and its recommendations for other instances' operations go to the store only."""
     plan_history: dict[OperationId, list[FlightPlan]] = {}
     geofence_history: dict[str, Geofence] = {}
     tracker = Tracker(frame, settings.tracking)
@@ -201,13 +210,17 @@ def build_runtime(
 
     monitor = Monitor(frame, settings.monitoring, id_prefix=id_prefix)
     monitoring = MonitoringService(
-        monitor, snapshot, clock, usm.on_threats, period_s=settings.monitoring.period_s
+        monitor,
+        snapshot,
+        clock,
+        usm.on_threats if policy is None else _filtered(usm.on_threats, policy),
+        period_s=settings.monitoring.period_s,
     )
     td = TacticalDeconfliction(frame, settings.deconfliction, settings.monitoring)
     em = EmergencyManager(frame, settings.emergency, td, settings.monitoring)
 
     async def on_decision(decision: Decision) -> None:
-        await apply_decision(usm, decision, store)
+        await apply_decision(usm, decision, store, owns=None if policy is None else policy.owns)
 
     def em_snapshot(t_s: float) -> Any:
         # EM/TD decide on the plans as they are being flown (re-timed by each UAS's delay),
@@ -216,7 +229,9 @@ def build_runtime(
 
     emergency = EmergencyService(em, em_snapshot, clock, on_decision)
     usm.attach_measurement_sink(tracking.submit, tracking.submit_lane)
-    usm.attach_threat_sink(emergency.submit_threats)
+    usm.attach_threat_sink(
+        emergency.submit_threats if policy is None else _filtered(emergency.submit_threats, policy)
+    )
 
     async def answer_sink(rec: Recommendation, accepted: bool) -> None:
         await emergency.submit_answer(rec.id, rec.version, accepted)
@@ -245,9 +260,28 @@ def build_runtime(
     )
 
 
-async def apply_decision(usm: Usm, decision: Decision, store: Persistence) -> None:
+def _filtered(
+    sink: Callable[[list[Threat]], Awaitable[None]], policy: OwnershipPolicy
+) -> Callable[[list[Threat]], Awaitable[None]]:
+    async def filtered(threats: list[Threat]) -> None:
+        kept = policy.filter_threats(threats)
+        if kept:
+            await sink(kept)
+
+    return filtered
+
+
+async def apply_decision(
+    usm: Usm,
+    decision: Decision,
+    store: Persistence,
+    *,
+    owns: Callable[[OperationId], bool] | None = None,
+) -> None:
     """Carry an EM decision to the world through the USM. Order matters: geofences first so
-    the operator sees why, then superseded proposals, then new recommendations."""
+    the operator sees why, then superseded proposals, then new recommendations. ``owns``
+    (cluster): a recommendation for an operation of another instance is filed in the store
+    for its owner (gcs_utm.cluster.policy), not proposed here."""
     for entry in decision.audit:
         store.record(entry)
     if decision.geofences:
@@ -255,6 +289,12 @@ async def apply_decision(usm: Usm, decision: Decision, store: Persistence) -> No
     for rec_id in decision.superseded:
         await usm.on_superseded(rec_id)
     for rec in decision.recommendations:
+        if owns is not None and not owns(rec.operation_id):
+            store.record(rec)
+            usm.log_event(
+                "cluster", f"{rec.id} v{rec.version}: filed for {rec.operation_id}'s owner"
+            )
+            continue
         await usm.on_recommendation(rec)
     for command in decision.commands:
         await usm.execute_command(command, reason="autonomous mode")

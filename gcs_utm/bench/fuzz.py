@@ -3,7 +3,7 @@ is counted by cause, memory stays bounded.
 
 Two records:
 
-- ``fuzz``: ``--frames`` datagrams (seeded, ``--seed``) into :meth:`MavlinkHub._on_chunk` --
+- ``fuzz``: ``--frames`` datagrams (seeded, ``--seed``) into :meth:`MavlinkHub.receiver` --
   the callback the UDP and TCP transports call with each datagram or stream chunk -- of a
   UDP link and a TCP link: valid frames of five vehicles and one that signs (MAVLink 1 and
   2, the messages the hub handles and the mission/command protocol), and mutations of them:
@@ -32,7 +32,13 @@ import random
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from adapters.mavlink import MavlinkHub
+    from gcs_utm.clock import ManualClock
+
+_Receiver = Callable[[bytes, "tuple[str, int] | None"], None]
 
 NAME = "fuzz"
 
@@ -223,59 +229,78 @@ class Mutator:
         return frame
 
     def datagram(self) -> tuple[bytes, tuple[str, int], str]:
-        """One fuzzed datagram, its source address and the mutation's name."""
-        r = self.rng
-        x = r.random()
+        """One fuzzed datagram, its source address and the mutation's name: the first
+        mutation of :data:`_MUTATIONS` whose share the draw falls in (and that applies to the
+        frame's MAVLink version), else several valid frames in one datagram."""
+        x = self.rng.random()
         data, addr = self.valid()
-        if x < 0.15:
-            return data, addr, "valid"
         b = bytearray(data)
-        if x < 0.35 and b[0] == 0xFD:  # random payload behind a valid CRC
-            for i in range(10, 10 + b[1]):
-                b[i] = r.getrandbits(8)
-            return bytes(self._fix_crc(b)), addr, "payload"
-        if x < 0.50:  # flipped bits
-            for _ in range(r.randint(1, 4)):
-                b[r.randrange(len(b))] ^= 1 << r.randrange(8)
-            return bytes(b), addr, "bitflip"
-        if x < 0.58:  # cut short
-            return bytes(b[: r.randrange(1, len(b))]), addr, "truncated"
-        if x < 0.62:
-            return r.randbytes(r.randint(1, 300)), addr, "random"
-        if x < 0.66 and b[0] == 0xFD:  # a message id nobody knows, with a CRC
-            b[7], b[8], b[9] = 0x39, 0x30, r.getrandbits(8) | 0x80
-            return bytes(self._fix_crc(b)), addr, "unknown"
-        if x < 0.80 and b[0] == 0xFD:  # a spoofed identity from anywhere
-            b[5], b[6] = r.choice((0, 1, 2, r.getrandbits(8))), r.getrandbits(8)
-            where = (f"10.9.{r.getrandbits(8)}.{r.getrandbits(8)}", r.randint(1024, 65535))
-            return bytes(self._fix_crc(b)), where, "spoof"
-        if x < 0.85:  # time_boot_ms going back
-            v = r.randrange(5)
-            enc = self._enc2[v]
-            m = enc.global_position_int_encode(
-                r.randint(0, 1000), 473977418, 85455939, 500000, 20000, 0, 0, 0, 0
-            )
-            return bytes(m.pack(enc)), self.vehicles[v], "backwards"
-        if x < 0.93:
-            return self._signed()
-        parts = [self.valid()[0] for _ in range(r.randint(2, 4))]
+        for limit, v2_only, mutation in _MUTATIONS:
+            if x < limit and (b[0] == 0xFD or not v2_only):
+                return mutation(self, b, addr)
+        parts = [self.valid()[0] for _ in range(self.rng.randint(2, 4))]
         return b"".join(parts), addr, "several"
 
-    def _signed(self) -> tuple[bytes, tuple[str, int], str]:
+    def _valid(self, b: bytearray, addr: tuple[str, int]) -> tuple[bytes, tuple[str, int], str]:
+        return bytes(b), addr, "valid"
+
+    def _payload(self, b: bytearray, addr: tuple[str, int]) -> tuple[bytes, tuple[str, int], str]:
+        """Random payload behind a valid CRC."""
+        for i in range(10, 10 + b[1]):
+            b[i] = self.rng.getrandbits(8)
+        return bytes(self._fix_crc(b)), addr, "payload"
+
+    def _bitflip(self, b: bytearray, addr: tuple[str, int]) -> tuple[bytes, tuple[str, int], str]:
         r = self.rng
-        addr = ("10.0.0.9", 14550)
+        for _ in range(r.randint(1, 4)):
+            b[r.randrange(len(b))] ^= 1 << r.randrange(8)
+        return bytes(b), addr, "bitflip"
+
+    def _truncated(self, b: bytearray, addr: tuple[str, int]) -> tuple[bytes, tuple[str, int], str]:
+        return bytes(b[: self.rng.randrange(1, len(b))]), addr, "truncated"
+
+    def _random(self, b: bytearray, addr: tuple[str, int]) -> tuple[bytes, tuple[str, int], str]:
+        return self.rng.randbytes(self.rng.randint(1, 300)), addr, "random"
+
+    def _unknown(self, b: bytearray, addr: tuple[str, int]) -> tuple[bytes, tuple[str, int], str]:
+        """A message id nobody knows, with a CRC."""
+        b[7], b[8], b[9] = 0x39, 0x30, self.rng.getrandbits(8) | 0x80
+        return bytes(self._fix_crc(b)), addr, "unknown"
+
+    def _spoof(self, b: bytearray, addr: tuple[str, int]) -> tuple[bytes, tuple[str, int], str]:
+        """A spoofed identity from anywhere."""
+        r = self.rng
+        b[5], b[6] = r.choice((0, 1, 2, r.getrandbits(8))), r.getrandbits(8)
+        where = (f"10.9.{r.getrandbits(8)}.{r.getrandbits(8)}", r.randint(1024, 65535))
+        return bytes(self._fix_crc(b)), where, "spoof"
+
+    def _backwards(self, b: bytearray, addr: tuple[str, int]) -> tuple[bytes, tuple[str, int], str]:
+        """A position whose time_boot_ms goes back."""
+        r = self.rng
+        v = r.randrange(5)
+        enc = self._enc2[v]
+        m = enc.global_position_int_encode(
+            r.randint(0, 1000), 473977418, 85455939, 500000, 20000, 0, 0, 0, 0
+        )
+        return bytes(m.pack(enc)), self.vehicles[v], "backwards"
+
+    def _signed(self, b: bytearray, addr: tuple[str, int]) -> tuple[bytes, tuple[str, int], str]:
+        """A frame of the signing vehicle (sysid 9, its own address): signed, forged,
+        replayed or unsigned."""
+        r = self.rng
+        where = ("10.0.0.9", 14550)
         y = r.random()
         if y < 0.5:
             frame = bytes(self._message(self._signer, 9).pack(self._signer))
             if len(self._recorded) < 64:
                 self._recorded.append(frame)
-            return frame, addr, "signed"
+            return frame, where, "signed"
         if y < 0.7:
-            return bytes(self._message(self._forger, 9).pack(self._forger)), addr, "forged"
+            return bytes(self._message(self._forger, 9).pack(self._forger)), where, "forged"
         if y < 0.85 and self._recorded:
-            return r.choice(self._recorded), addr, "replayed"
+            return r.choice(self._recorded), where, "replayed"
         plain = self._mav2.MAVLink(None, srcSystem=_SIGNED_SYSID, srcComponent=1)
-        return bytes(self._message(plain, 9).pack(plain)), addr, "unsigned"
+        return bytes(self._message(plain, 9).pack(plain)), where, "unsigned"
 
     def stream(self, total: int) -> Iterator[bytes]:
         """``total`` chunks of a byte stream (TCP): frames and mutations cut at random."""
@@ -286,6 +311,21 @@ class Mutator:
             cut = self.rng.randint(1, 300)
             yield bytes(buf[:cut])
             del buf[:cut]
+
+
+_Mutation = Callable[[Mutator, bytearray, tuple[str, int]], tuple[bytes, tuple[str, int], str]]
+_MUTATIONS: tuple[tuple[float, bool, _Mutation], ...] = (
+    # (upper end of the draw's share, MAVLink 2 frames only, mutation), tried in order
+    (0.15, False, Mutator._valid),
+    (0.35, True, Mutator._payload),
+    (0.50, False, Mutator._bitflip),
+    (0.58, False, Mutator._truncated),
+    (0.62, False, Mutator._random),
+    (0.66, True, Mutator._unknown),
+    (0.80, True, Mutator._spoof),
+    (0.85, False, Mutator._backwards),
+    (0.93, False, Mutator._signed),
+)
 
 
 def _counted(c: Any) -> int:
@@ -319,41 +359,27 @@ async def fuzz(
     hub = MavlinkHub(cfg, clock, sink)
     await hub.start()
     try:
-        udp = next(iter(hub._links.values()))
+        udp = hub.receiver(hub.link_names()[0])
         # a TCP link whose peer is not there: chunks are fed to it as a stream would be
-        tcp = hub._links[await hub.add_link("tcp:127.0.0.1:9")]
-        mut = Mutator(seed)
-        on_chunk = hub._on_chunk
-        for data, addr in mut.hello():
-            on_chunk(udp, data, addr)
-        chunks = mut.stream(frames // 10)
-        c = hub.counters
+        tcp = hub.receiver(await hub.add_link("tcp:127.0.0.1:9"))
         t0 = time.perf_counter()
-        for i in range(frames):
-            clock.advance(0.0005)
-            before = _counted(c)
-            if i % 10 == 9:
-                on_chunk(tcp, next(chunks), ("127.0.0.1", 9))
-                out.stream_chunks += 1
-            else:
-                data, addr, _kind = mut.datagram()
-                on_chunk(udp, data, addr)
-                out.datagrams += 1
-                if _counted(c) == before:
-                    out.uncounted += 1
-            if i % 20_000 == 19_999:
-                hub.evict_idle()
-                out.rss_peak_mb = max(out.rss_peak_mb, rss_mb())
-                if on_progress is not None:
-                    on_progress(i + 1)
+        _feed(
+            hub,
+            clock,
+            Mutator(seed),
+            receivers=(udp, tcp),
+            frames=frames,
+            out=out,
+            on_progress=on_progress,
+        )
         out.elapsed_s = time.perf_counter() - t0
         hub.flush_positions()
+        c = hub.counters
         snap = c.snapshot()
         out.frames_decoded = c.frames
         out.dropped = {k: snap[k] for k in _DROP_CAUSES}
         out.handler_errors = c.handler_errors
-        out.senders_held = sum(len(lk.parsers) for lk in hub._links.values())
-        out.vehicles_held = len(hub._states)
+        out.senders_held, out.vehicles_held = _held(hub)
         out.senders_evicted = c.senders_evicted
         out.vehicles_evicted = c.vehicles_evicted
         out.sink = dict(sink.counts)
@@ -363,6 +389,47 @@ async def fuzz(
     out.rss_end_mb = rss_mb()
     out.rss_peak_mb = max(out.rss_peak_mb, out.rss_end_mb)
     return out
+
+
+def _feed(
+    hub: MavlinkHub,
+    clock: ManualClock,
+    mut: Mutator,
+    *,
+    receivers: tuple[_Receiver, _Receiver],
+    frames: int,
+    out: FuzzResult,
+    on_progress: Callable[[int], None] | None,
+) -> None:
+    """``frames`` chunks into the hub's UDP and TCP receivers (every tenth a stream chunk),
+    counting datagrams that moved no counter; the idle sweep and RSS every 20,000."""
+    udp, tcp = receivers
+    for data, addr in mut.hello():
+        udp(data, addr)
+    chunks = mut.stream(frames // 10)
+    c = hub.counters
+    for i in range(frames):
+        clock.advance(0.0005)
+        before = _counted(c)
+        if i % 10 == 9:
+            tcp(next(chunks), ("127.0.0.1", 9))
+            out.stream_chunks += 1
+        else:
+            data, addr, _kind = mut.datagram()
+            udp(data, addr)
+            out.datagrams += 1
+            if _counted(c) == before:
+                out.uncounted += 1
+        if i % 20_000 == 19_999:
+            hub.evict_idle()
+            out.rss_peak_mb = max(out.rss_peak_mb, rss_mb())
+            if on_progress is not None:
+                on_progress(i + 1)
+
+
+def _held(hub: MavlinkHub) -> tuple[int, int]:
+    """(source addresses with parser state, vehicle states) the hub holds."""
+    return sum(lk.senders for lk in hub.links()), len(hub.health())
 
 
 async def spoof_idle(identities: int, idle_s: float) -> dict[str, Any]:
@@ -378,27 +445,27 @@ async def spoof_idle(identities: int, idle_s: float) -> dict[str, Any]:
     cfg = MavlinkConfig(links=("udpin:127.0.0.1:0",))
     sink = CountingSink()
     async with MavlinkHub(cfg, RealClock(), sink) as hub:
-        link = next(iter(hub._links.values()))
+        receive = hub.receiver(hub.link_names()[0])
         t0 = time.perf_counter()
         for i in range(identities):
             enc = mav2.MAVLink(None, srcSystem=1 + i % 255, srcComponent=1 + (i // 255) % 255)
             addr = (f"10.{i >> 16 & 255}.{i >> 8 & 255}.{i & 255}", 20000 + i % 40000)
-            hub._on_chunk(link, bytes(enc.heartbeat_encode(2, 12, 129, 0, 4, 3).pack(enc)), addr)
+            receive(bytes(enc.heartbeat_encode(2, 12, 129, 0, 4, 3).pack(enc)), addr)
             gpi = enc.global_position_int_encode(
                 1000, 473977418, 85455939, 500000, 20000, 0, 0, 0, 0
             )
-            hub._on_chunk(link, bytes(gpi.pack(enc)), addr)
+            receive(bytes(gpi.pack(enc)), addr)
             if i % 500 == 499:
                 await asyncio.sleep(0)  # the loop runs meanwhile, as it would in serve
         flood_s = time.perf_counter() - t0
         gc.collect()
         rss_flood = rss_mb()
-        held = (len(link.parsers), len(hub._states))
+        held = _held(hub)
         await asyncio.sleep(idle_s)
         gc.collect()
         rss_idle = rss_mb()
         c = hub.counters
-        left = (len(link.parsers), len(hub._states))
+        left = _held(hub)
         snap = c.snapshot()
     return {
         "benchmark": "fuzz_spoof_idle",

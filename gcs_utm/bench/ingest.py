@@ -1,11 +1,12 @@
-"""MAVLink ingest: GLOBAL_POSITION_INT datagrams through a udpin link into Measurements and
-tracks.
+"""MAVLink ingest: GLOBAL_POSITION_INT datagrams through a udpin link into position reports
+and tracks.
 
 End to end (``ingest_socket``): a sender *process* offers a fixed rate (``--offered-rate``,
 default 30,000 msg/s; 0 = as fast as it can) from 4 sockets (sysids 1..250 on each: 1,000
-vehicles) to 127.0.0.1; the hub (this process, one core) turns them into Measurements. The
+vehicles) to 127.0.0.1; the hub (this process, one core) turns them into position reports
+(entries of a counting sink's lane, the form the USM takes them in). The
 sender paces in 1 ms slots and reports what it really sent and how fast (``sent_per_s``: on a
-loaded box it may fall short of the offer). Reported: delivered = measurements,
+loaded box it may fall short of the offer). Reported: delivered = position reports,
 ``delivered_per_s`` = delivered / the sender's sending time, ``lost`` = sent - delivered with
 the kernel's own count of receive-buffer drops for the socket (/proc/net/udp) and the
 effective receive buffer (getsockopt). ``ingest_socket_tracked``: the same into tracks through
@@ -13,10 +14,10 @@ the app's receive path (hub -> USM -> tracking service -> tracker, :class:`_Pipe
 one process. Latency (``ingest_latency_10k``): the sender paces 10,000 msg/s; latency = end of
 the ``Tracker.ingest`` that used a measurement - its receipt time, stamped when its datagram
 was read (receipt-to-track), p99 over all messages of a run. In-process: the link's receiver on
-pre-encoded datagrams without a socket, fast path vs pymavlink for everything
-(``fast_decode`` false), the per-core decode + dispatch cost; ``ingest_inprocess_tracked``
-adds the app's receive path with a tracking step every 3,000 datagrams (0.1 s at 30,000
-msg/s): datagram to updated track on one core."""
+pre-encoded datagrams without a socket, the fast decoder vs pymavlink for everything
+(``fast_decode`` false), the per-core decode + dispatch cost into the counting sink;
+``ingest_inprocess_tracked`` adds the app's receive path with a tracking step every 3,000
+datagrams (0.1 s at 30,000 msg/s): datagram to updated track on one core."""
 
 from __future__ import annotations
 
@@ -37,8 +38,9 @@ from typing import TYPE_CHECKING
 from gcs_utm.bench.timing import summary
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Callable, Iterable, Sequence
 
+    from adapters.mavlink import MavlinkHub
     from gcs_utm.clock import Clock
     from gcs_utm.model import LaneSource, Measurement, Track
     from gcs_utm.services.usm import Usm
@@ -143,9 +145,23 @@ def _kernel_drops(port: int) -> int | None:
 
 
 class _Sink:
+    """Counts what the hub delivers: position reports as entries of its lane, as the USM
+    takes them, each with its latency from receipt to hand-over."""
+
     def __init__(self) -> None:
+        from gcs_utm.model import PositionLane
+
         self.n = 0
         self.lat: list[float] = []
+        self.position_lane = PositionLane()
+
+    def on_position_lane(self) -> None:
+        from gcs_utm.model import LANE_STRIDE
+
+        now = time.time()
+        receipts = self.position_lane.take()[1::LANE_STRIDE]
+        self.n += len(receipts)
+        self.lat.extend([now - t for t in receipts])
 
     def on_measurement(self, m: object) -> None:
         now = time.time()
@@ -296,35 +312,56 @@ def _inprocess(n: int, vehicles: int, runs: int, fast: bool, tracker_batch: int 
             if pipe is None:
                 for f, a in zip(frames, addrs, strict=True):
                     receive(f, a)
+                hub.flush_positions()
             else:
-                step = pipe.tracking.step
-                flush = hub.flush_positions
-                burst = cfg.udp_batch
-                for i, (f, a) in enumerate(zip(frames, addrs, strict=True)):
-                    receive(f, a)
-                    if (i + 1) % burst == 0:
-                        flush()  # as the UDP transport does after each burst of reads
-                    if (i + 1) % tracker_batch == 0:
-                        flush()
-                        await step()
-                flush()
-                await step()
+                await _push_tracked(
+                    hub, receive, pipe, zip(frames, addrs, strict=True), tracker_batch
+                )
             if r:  # the first run discovers the vehicles (and creates the tracks): warm-up
                 out.append((time.perf_counter() - t0) * 1000.0)
         await hub.close()
         if pipe is not None:
             pipe.close()
         got = sink.n if isinstance(sink, _Sink) else pipe.n if pipe is not None else 0
-        if got != n * (runs + 1):
-            raise RuntimeError(f"{got} measurements of {n * (runs + 1)}")
-        if pipe is not None:
-            if pipe.updated != pipe.n:
-                raise RuntimeError(f"{pipe.updated} track updates of {pipe.n} measurements")
-            if pipe.tracks != vehicles:
-                raise RuntimeError(f"{pipe.tracks} tracks for {vehicles} vehicles")
+        _check_inprocess(got, n * (runs + 1), pipe, vehicles)
         return out
 
     return asyncio.run(go())
+
+
+async def _push_tracked(
+    hub: MavlinkHub,
+    receive: Callable[[bytes, tuple[str, int]], None],
+    pipe: _Pipeline,
+    datagrams: Iterable[tuple[bytes, tuple[str, int]]],
+    tracker_batch: int,
+) -> None:
+    """Receive ``datagrams``, handing positions over after every ``udp_batch`` (as the UDP
+    transport does after each burst of reads) and stepping tracking every ``tracker_batch``."""
+    step = pipe.tracking.step
+    flush = hub.flush_positions
+    burst = hub.config.udp_batch
+    for i, (f, a) in enumerate(datagrams):
+        receive(f, a)
+        if (i + 1) % burst == 0:
+            flush()
+        if (i + 1) % tracker_batch == 0:
+            flush()
+            await step()
+    flush()
+    await step()
+
+
+def _check_inprocess(got: int, expected: int, pipe: _Pipeline | None, vehicles: int) -> None:
+    """Every datagram became a measurement, and with tracking a track update, one track per
+    vehicle; RuntimeError otherwise."""
+    if got != expected:
+        raise RuntimeError(f"{got} measurements of {expected}")
+    if pipe is not None:
+        if pipe.updated != pipe.n:
+            raise RuntimeError(f"{pipe.updated} track updates of {pipe.n} measurements")
+        if pipe.tracks != vehicles:
+            raise RuntimeError(f"{pipe.tracks} tracks for {vehicles} vehicles")
 
 
 @dataclass

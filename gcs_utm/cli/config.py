@@ -27,6 +27,7 @@ _KNOWN: dict[str, tuple[str, str]] = {
     "mqtt": ("adapters.mqtt.config", "MqttConfig"),
     "store": ("gcs_utm.store.config", "StoreConfig"),
     "dashboard": ("gcs_utm.dashboard.config", "DashboardConfig"),
+    "cluster": ("gcs_utm.cluster.config", "ClusterConfig"),
 }
 
 

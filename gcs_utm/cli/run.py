@@ -86,6 +86,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="record every MAVLink link (received and sent) as .tlog files and every ADS-B "
         "feed raw in DIR (rotation: [record]); gcs-utm replay DIR reads it back",
     )
+    serve.add_argument(
+        "--cluster",
+        action="store_true",
+        help="one of several instances sharing the [store] url PostgreSQL database and the "
+        "[mqtt] broker: owns the [cluster] region, exchanges border traffic with its "
+        "neighbours, takes over orphaned regions (docs/scale-out.md)",
+    )
     group = serve.add_mutually_exclusive_group()
     group.add_argument("--auto-accept", action="store_true")
     group.add_argument("--auto-reject", action="store_true")
@@ -338,6 +345,7 @@ def _serve(args: argparse.Namespace) -> int:
                 headless=headless,
                 speed=args.speed,
                 record_dir=args.record,
+                cluster=args.cluster,
             )
         )
     except (StoreError, RecordError) as exc:  # a store or --record DIR that cannot be used

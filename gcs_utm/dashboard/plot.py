@@ -122,6 +122,7 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
     if focus is None:
         fig, ax_all = plt.subplots(figsize=(9, 8))
         ax: Any = ax_all
+        ax_zoom: Any = None
     else:
         fig, (ax_all, ax_zoom) = plt.subplots(1, 2, figsize=(16, 8))
         ax = _Both(ax_all, ax_zoom)
@@ -134,26 +135,8 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
     labelled: set[str] = set()  # one legend entry per kind
     _draw_alternatives(report, local, ax, ax3, summary, labelled)
     _draw_threats(report, local, ax, ax3, summary, labelled)
-
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
-    ax_all.set_aspect("equal", adjustable="datalim")
-    ax_all.set_title(f"{report.get('scenario', '')}: top view")
-    if summary.plans:
-        ax_all.legend(fontsize=7, loc="best")
-    if focus is not None:
-        (fx, fy), half, what = focus
-        ax_zoom.set_xlim(fx - half, fx + half)
-        ax_zoom.set_ylim(fy - half, fy + half)
-        ax_zoom.plot([fx], [fy], "x", color="red", ms=12, mew=2)
-        ax_zoom.set_aspect("equal", adjustable="box")
-        ax_zoom.set_title(f"close-up: {what} (x), alternatives grey, selected black")
-    ax3.set_xlabel("east [m]")
-    ax3.set_ylabel("north [m]")
-    ax3.set_zlabel("altitude AMSL [m]")
-    ax3.set_title(f"{report.get('scenario', '')}: 3D")
-    if summary.plans:
-        ax3.legend(fontsize=7, loc="upper left")
+    _label_top(report, summary, ax, ax_all, (ax_zoom, focus))
+    _label_3d(report, summary, ax3)
     top = out_dir / f"{stem}_top.png"
     persp = out_dir / f"{stem}_3d.png"
     fig.savefig(top, dpi=110)
@@ -169,6 +152,36 @@ def plot_report(report: dict[str, Any], out_dir: Path, *, stem: str = "run") -> 
         if extra is not None:
             summary.files.append(extra)
     return summary
+
+
+def _label_top(
+    report: dict[str, Any], summary: PlotSummary, ax: Any, ax_all: Any, zoom: tuple[Any, Any]
+) -> None:
+    """Axes, title and legend of the top view; the close-up's window around its focus point
+    (``zoom``: its axes and the focus, both None without one)."""
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    ax_all.set_aspect("equal", adjustable="datalim")
+    ax_all.set_title(f"{report.get('scenario', '')}: top view")
+    if summary.plans:
+        ax_all.legend(fontsize=7, loc="best")
+    ax_zoom, focus = zoom
+    if focus is not None:
+        (fx, fy), half, what = focus
+        ax_zoom.set_xlim(fx - half, fx + half)
+        ax_zoom.set_ylim(fy - half, fy + half)
+        ax_zoom.plot([fx], [fy], "x", color="red", ms=12, mew=2)
+        ax_zoom.set_aspect("equal", adjustable="box")
+        ax_zoom.set_title(f"close-up: {what} (x), alternatives grey, selected black")
+
+
+def _label_3d(report: dict[str, Any], summary: PlotSummary, ax3: Any) -> None:
+    ax3.set_xlabel("east [m]")
+    ax3.set_ylabel("north [m]")
+    ax3.set_zlabel("altitude AMSL [m]")
+    ax3.set_title(f"{report.get('scenario', '')}: 3D")
+    if summary.plans:
+        ax3.legend(fontsize=7, loc="upper left")
 
 
 def _once(labelled: set[str], label: str) -> str:

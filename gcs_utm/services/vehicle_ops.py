@@ -59,6 +59,8 @@ _ABSOLUTE_FRAMES = frozenset({0, 5})  # MAV_FRAME_GLOBAL(_INT): metres AMSL
 _RELATIVE_FRAMES = frozenset({3, 6})  # MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT): metres above home
 _MATCH_H_M = 0.5  # a mission point within this of a plan waypoint is that waypoint (float32 z)
 _MATCH_V_M = 0.5
+_RETRY_FIRST_S = 2.0  # a failed mission download is tried again after this, doubling
+_RETRY_MAX_S = 30.0
 _HOME_MOVE_M = 2.0
 """A home that moved less than this is the same home: PX4's HOME_POSITION wanders by about a
 metre while its estimator converges (measured on SIH), which would re-file every few seconds."""
@@ -255,6 +257,8 @@ class _Vehicle:
     start_pending: bool = False  # the mission started during a download: re-time after it
     waiting_logged: bool = False
     ground_warned: bool = False
+    failures: int = 0  # mission downloads failed in a row
+    retry_at_s: float | None = None  # when a failed download is tried again
 
 
 class VehicleOps:
@@ -318,6 +322,9 @@ class VehicleOps:
         if self._mission_changed(v, s) or (s.armed and not v.armed):
             v.changes += 1
             self._download(v.sys_id)
+        elif v.retry_at_s is not None and self.clock.now_s() >= v.retry_at_s:
+            v.retry_at_s = None
+            self._download(v.sys_id)
         v.armed = s.armed
         flying = s.armed and s.mode in _FLYING_MODES
         started = flying and not v.flying
@@ -361,9 +368,9 @@ class VehicleOps:
                 try:
                     items = list(await download(v.sys_id))
                 except Exception as exc:  # the link's own error types; it may not answer
-                    self.counters["download_failures"] += 1
-                    self._log_event("vehicle", f"sysid {v.sys_id}: mission download failed: {exc}")
+                    self._download_failed(v, exc)
                     return
+                v.failures, v.retry_at_s = 0, None
                 v.items = items
                 if not v.again:
                     break
@@ -375,6 +382,20 @@ class VehicleOps:
             v.start_pending = False
             if v.flying:
                 self._retime(v, started=True)
+
+    def _download_failed(self, v: _Vehicle, exc: Exception) -> None:
+        """A failed download is tried again after a backoff (2, 4, 8 ... at most 30 s), checked
+        on the vehicle's next status: without it a vehicle whose first download timed out would
+        stay without an operation until its mission changed."""
+        self.counters["download_failures"] += 1
+        v.failures += 1
+        delay_s = min(_RETRY_MAX_S, _RETRY_FIRST_S * 2.0 ** (v.failures - 1))
+        v.retry_at_s = self.clock.now_s() + delay_s
+        self._log_event(
+            "vehicle",
+            f"sysid {v.sys_id}: mission download failed ({v.failures} in a row): {exc}; "
+            f"retry in {delay_s:.0f} s",
+        )
 
     def _item0_home(self, v: _Vehicle) -> None:
         """ArduPilot keeps its home in mission item 0 (absolute altitude): the home until

@@ -34,14 +34,19 @@ def encode(obj: Any) -> Any:
         return obj.value
     if isinstance(obj, np.ndarray):
         return {"__ndarray__": obj.tolist(), "dtype": str(obj.dtype)}
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return _encode_composite(obj)
+
+
+def _encode_composite(obj: Any) -> Any:
+    """A dataclass instance, list, tuple or dict, its members encoded."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return {f.name: encode(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
     if isinstance(obj, list | tuple):
         return [encode(v) for v in obj]
     if isinstance(obj, dict):
         return {str(k): encode(v) for k, v in obj.items()}
-    if isinstance(obj, np.generic):
-        return obj.item()
     raise CodecError(f"cannot encode {type(obj).__name__}")
 
 

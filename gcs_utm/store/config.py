@@ -9,9 +9,14 @@ from gcs_utm.config import setting
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class StoreConfig:
-    """The Data Base: one SQLite file in WAL mode, written by one writer thread."""
+    """The Data Base: a SQLite file in WAL mode or a shared PostgreSQL, one writer thread."""
 
     path: str = setting("gcs_utm.sqlite3", "SQLite database file (created if absent)")
+    url: str = setting(
+        "",
+        "shared PostgreSQL store instead of the SQLite file, e.g. "
+        "'postgresql://gcs@db.example/utm' (needs gcs-utm[postgres]); empty: the SQLite file",
+    )
     queue_size: int = setting(
         10_000, "writer queue capacity in write requests; track history drops when full", min=1
     )
@@ -28,10 +33,15 @@ class StoreConfig:
         "power loss",
     )
     busy_timeout_s: float = setting(
-        5.0, "how long a connection waits for a lock held by another", min=0.0, unit="s"
+        5.0,
+        "how long a connection waits for a lock held by another (PostgreSQL: to connect)",
+        min=0.0,
+        unit="s",
     )
 
     def __post_init__(self) -> None:
+        if self.url and not self.url.startswith(("postgresql://", "postgres://")):
+            raise ValueError(f"store.url: expected a postgresql:// URL or empty, got {self.url!r}")
         if self.synchronous not in ("normal", "full"):
             raise ValueError(
                 f"store.synchronous: expected 'normal' or 'full', got {self.synchronous!r}"

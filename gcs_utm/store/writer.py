@@ -21,6 +21,7 @@ import concurrent.futures
 import logging
 import queue
 import threading
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
@@ -37,13 +38,16 @@ from gcs_utm.model import (
     Threat,
     Track,
 )
+from gcs_utm.store.base import StoreBase, StoreError
 from gcs_utm.store.config import StoreConfig
-from gcs_utm.store.sqlite import Store, StoreError
+from gcs_utm.store.location import describe, is_postgres, open_store
 
 _log = logging.getLogger(__name__)
 
 T = TypeVar("T")
-_Job = tuple[Callable[[Store], Any], concurrent.futures.Future[Any]]
+_Job = tuple[Callable[[StoreBase], Any], concurrent.futures.Future[Any]]
+# how long the writer waits between attempts to reopen a lost PostgreSQL connection
+_RECONNECT_S = 1.0
 
 
 class StoreFullError(StoreError):
@@ -51,11 +55,13 @@ class StoreFullError(StoreError):
 
 
 class StoreWriter:
-    """The single writer thread. Thread-safe to call from anywhere."""
+    """The single writer thread. Thread-safe to call from anywhere. ``location`` is a SQLite
+    file path or a ``postgresql://`` URL (:func:`gcs_utm.store.open_store`)."""
 
-    def __init__(self, path: str | Path, config: StoreConfig | None = None) -> None:
+    def __init__(self, location: str | Path, config: StoreConfig | None = None) -> None:
         self.config = config or StoreConfig()
-        self.path = Path(path)
+        self.location: str | Path = location if is_postgres(location) else Path(location)
+        self.where = describe(location)
         self._queue: queue.Queue[_Job | None] = queue.Queue(maxsize=self.config.queue_size)
         self._ready = concurrent.futures.Future[None]()
         self._closed = False
@@ -70,11 +76,11 @@ class StoreWriter:
 
     # ---- submission ---------------------------------------------------------------------
     def submit(
-        self, fn: Callable[[Store], T], *, droppable: bool = False
+        self, fn: Callable[[StoreBase], T], *, droppable: bool = False
     ) -> concurrent.futures.Future[T] | None:
         """Queue ``fn(store)``; returns its future, or None if it was droppable and dropped."""
         if self._closed:
-            raise StoreError(f"{self.path}: the store writer is closed")
+            raise StoreError(f"{self.where}: the store writer is closed")
         fut: concurrent.futures.Future[T] = concurrent.futures.Future()
         job: _Job = (fn, fut)
         if droppable:
@@ -92,11 +98,11 @@ class StoreWriter:
             self._queue.put(job, timeout=self.config.put_timeout_s)
         except queue.Full:
             raise StoreFullError(
-                f"{self.path}: write queue full for {self.config.put_timeout_s} s"
+                f"{self.where}: write queue full for {self.config.put_timeout_s} s"
             ) from None
         return fut
 
-    def _must(self, fn: Callable[[Store], T]) -> concurrent.futures.Future[T]:
+    def _must(self, fn: Callable[[StoreBase], T]) -> concurrent.futures.Future[T]:
         fut = self.submit(fn)
         assert fut is not None
         return fut
@@ -144,13 +150,32 @@ class StoreWriter:
         self._thread.join(timeout_s)
 
     # ---- the thread ---------------------------------------------------------------------
+    def _open(self) -> StoreBase:
+        return open_store(
+            self.location,
+            synchronous=self.config.synchronous,
+            busy_timeout_s=self.config.busy_timeout_s,
+        )
+
+    def _reopen(self, lost: StoreBase) -> StoreBase:
+        """A new connection in the same life after the database connection was lost (a
+        PostgreSQL restart or failover); retried every ``_RECONNECT_S`` until it opens, while
+        the bounded queue applies its policy to the writes arriving meanwhile."""
+        lost.close()
+        while True:
+            try:
+                store = self._open()
+            except StoreError as exc:
+                _log.warning("store %s unreachable, retrying: %s", self.where, exc)
+                time.sleep(_RECONNECT_S)
+                continue
+            store._epoch = self.epoch
+            _log.warning("store %s reconnected", self.where)
+            return store
+
     def _run(self) -> None:
         try:
-            store = Store(
-                self.path,
-                synchronous=self.config.synchronous,
-                busy_timeout_s=self.config.busy_timeout_s,
-            )
+            store = self._open()
         except BaseException as exc:
             self._ready.set_exception(exc)
             return
@@ -178,10 +203,12 @@ class StoreWriter:
                         break
                     batch.append(nxt)
                 self._commit(store, batch)
+                if getattr(store, "broken", False):
+                    store = self._reopen(store)
         finally:
             store.close()
 
-    def _commit(self, store: Store, batch: list[_Job]) -> None:
+    def _commit(self, store: StoreBase, batch: list[_Job]) -> None:
         results: list[tuple[concurrent.futures.Future[Any], bool, Any]] = []
         try:
             with store.transaction():
@@ -211,15 +238,15 @@ class AsyncStore:
     ``write_tracks`` is fire-and-forget (droppable). The other writes return after COMMIT.
     """
 
-    def __init__(self, path: str | Path, config: StoreConfig | None = None) -> None:
-        self.writer = StoreWriter(path, config)
+    def __init__(self, location: str | Path, config: StoreConfig | None = None) -> None:
+        self.writer = StoreWriter(location, config)
         self._reads = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="store-read")
-        self._reader: Store | None = None
+        self._reader: StoreBase | None = None
 
     @classmethod
-    async def open(cls, path: str | Path, config: StoreConfig | None = None) -> AsyncStore:
-        """Open (creating/migrating the file) without blocking the loop."""
-        return await asyncio.get_running_loop().run_in_executor(None, lambda: cls(path, config))
+    async def open(cls, location: str | Path, config: StoreConfig | None = None) -> AsyncStore:
+        """Open (creating/migrating the database) without blocking the loop."""
+        return await asyncio.get_running_loop().run_in_executor(None, lambda: cls(location, config))
 
     async def close(self) -> None:
         loop = asyncio.get_running_loop()
@@ -238,7 +265,7 @@ class AsyncStore:
     async def __aexit__(self, *exc: object) -> None:
         await self.close()
 
-    async def _put(self, fn: Callable[[Store], T]) -> T:
+    async def _put(self, fn: Callable[[StoreBase], T]) -> T:
         """Queue a must-keep write without blocking the loop, then await its commit."""
         loop = asyncio.get_running_loop()
         fut = await loop.run_in_executor(None, lambda: self.writer.submit(fn))
@@ -277,12 +304,12 @@ class AsyncStore:
         await self._put(lambda s: None)
 
     # ---- reads --------------------------------------------------------------------------
-    async def read(self, fn: Callable[[Store], T]) -> T:
+    async def read(self, fn: Callable[[StoreBase], T]) -> T:
         """Run ``fn`` on the read-only connection in the reader thread."""
 
         def run() -> T:
             if self._reader is None:
-                self._reader = Store(self.writer.path, readonly=True)
+                self._reader = open_store(self.writer.location, readonly=True)
             return fn(self._reader)
 
         return await asyncio.get_running_loop().run_in_executor(self._reads, run)

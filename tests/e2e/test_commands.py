@@ -71,6 +71,7 @@ def test_bench_collects_every_benchmark() -> None:
         "fuzz",
         "strategic",
         "resolution",
+        "cluster",
     }
     # each one is also reachable by name
     for name in discover():

@@ -18,20 +18,17 @@ from gcs_utm.model import (
     GeofenceShape,
     LatLon,
     Measurement,
-    MeasurementSource,
     ModelError,
     OperationId,
     Position,
     Recommendation,
     RecommendationId,
     RecommendationState,
-    SysId,
     ThreatId,
     ThreatKind,
     TransitionError,
     Waypoint4D,
     slot_setters,
-    telemetry_measurement,
 )
 
 lats = st.floats(-79.0, 83.0)
@@ -172,41 +169,6 @@ def test_recommendation_lifecycle() -> None:
             rejected.transition(nxt, 2.0)
     with pytest.raises(TransitionError):
         rec.transition(RecommendationState.APPLIED, 1.0)
-
-
-@settings(max_examples=100, deadline=None)
-@given(
-    st.floats(allow_nan=False),
-    st.floats(allow_nan=False),
-    st.one_of(st.none(), st.floats(0.0, 100.0)),
-    st.integers(1, 255),
-    st.text(max_size=20),
-)
-def test_telemetry_measurement_equals_the_dataclass_constructor(
-    t: float, lat: float, eph: float | None, sys_id: int, vehicle: str
-) -> None:
-    """The receive path's fast constructor builds the same Measurement (equal, same hash,
-    same fields) as the keyword constructor, the unset fields at their defaults."""
-    fast = telemetry_measurement(
-        t, t + 0.5, lat, 8.5, 500.0, (1.0, -2.0, 0.5), eph, None, SysId(sys_id), "udp", vehicle
-    )
-    plain = Measurement(
-        source=MeasurementSource.TELEMETRY,
-        capture_t_s=t,
-        receipt_t_s=t + 0.5,
-        lat_deg=lat,
-        lon_deg=8.5,
-        alt_amsl_m=500.0,
-        vel_ned_mps=(1.0, -2.0, 0.5),
-        eph_m=eph,
-        epv_m=None,
-        sys_id=SysId(sys_id),
-        link="udp",
-        vehicle=vehicle,
-    )
-    assert fast == plain and hash(fast) == hash(plain) and repr(fast) == repr(plain)
-    with pytest.raises(dataclasses.FrozenInstanceError):
-        fast.lat_deg = 0.0  # type: ignore[misc]
 
 
 def test_slot_setters_only_for_the_class_they_describe() -> None:

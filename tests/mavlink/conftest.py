@@ -52,6 +52,7 @@ class Faults:
     command_result: int = 0
     drop_commands: int = 0  # ignore the first N COMMAND_LONG
     corrupt_readback: bool = False
+    refuse_readback: int = 0  # answer the first N readback item requests with MISSION_ACK error
 
 
 class FakeVehicle(asyncio.DatagramProtocol):
@@ -199,6 +200,10 @@ class FakeVehicle(asyncio.DatagramProtocol):
         elif t == "MISSION_REQUEST_LIST":
             self.send(self.mav.mission_count_encode(255, 190, len(self.mission), 0))
         elif t in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+            if self.faults.refuse_readback > 0:  # as PX4 does when it dropped the transfer
+                self.faults.refuse_readback -= 1
+                self.send(self.mav.mission_ack_encode(255, 190, 1, 0))  # MAV_MISSION_ERROR
+                return
             if m.seq < len(self.mission):
                 it = self.mission[m.seq]
                 z = it.z + (5.0 if self.faults.corrupt_readback else 0.0)

@@ -151,28 +151,8 @@ def test_every_fast_type_matches_dialect_size(mid: int) -> None:
     assert wire.FAST_TYPES[mid].size == mav2.mavlink_map[mid].unpacker.size
 
 
-# --- wire.global_position: the fused single-frame position path of the hub ------------------
+# --- odd single datagrams: the fast decoder decides and counts as pymavlink does -----------
 _GPI_FIELDS = mav2.mavlink_map[wire.GLOBAL_POSITION_INT].ordered_fieldnames
-
-
-@settings(max_examples=300, deadline=None)
-@given(
-    st.tuples(*[_field(t) for t in mav2.MAVLink_global_position_int_message.fieldtypes]),
-    st.integers(1, 255),
-    st.integers(0, 255),
-    st.integers(0, 255),
-)
-def test_global_position_equals_pymavlink(
-    values: tuple[Any, ...], sys_id: int, comp_id: int, seq: int
-) -> None:
-    enc = mav2.MAVLink(None, srcSystem=sys_id, srcComponent=comp_id)
-    enc.seq = seq
-    frame = bytes(mav2.MAVLink_global_position_int_message(*values).pack(enc))
-    got = wire.global_position(frame)
-    [ref] = wire.Parser(fast=False).frames(frame, datagram=True)
-    assert got is not None
-    assert got[:3] == (sys_id, comp_id, seq) == tuple(ref[1:4])
-    assert got[3] == tuple(getattr(ref.msg, n) for n in _GPI_FIELDS)
 
 
 def _with_crc(body: bytes, extra: int) -> bytes:
@@ -185,13 +165,19 @@ def _with_crc(body: bytes, extra: int) -> bytes:
     return body + int(crc.crc).to_bytes(2, "little")
 
 
-def test_global_position_declines_what_is_not_one_plain_position_frame() -> None:
-    """None (the general parser decides and counts) for everything but exactly one unsigned
-    MAVLink 2 GLOBAL_POSITION_INT frame with a good CRC; a longer payload (a newer dialect)
-    is cut to the fields we know, as the general fast path does."""
+def _parsed(data: bytes, *, fast: bool) -> tuple[list[tuple[Any, ...]], dict[str, Any]]:
+    counters = wire.ParseCounters()
+    frames = wire.Parser(counters, fast=fast).feed_frames(data)
+    got = [(*f[:4], tuple(getattr(f.msg, n) for n in _GPI_FIELDS)) for f in frames]
+    return got, {k: getattr(counters, k) for k in counters.__dataclass_fields__}
+
+
+def test_odd_position_datagrams_decode_and_count_as_pymavlink() -> None:
+    """Cut, padded, doubled, corrupted, MAVLink 1, signed and other-type datagrams: the fast
+    decoder gives pymavlink's frames and rejections, and a longer payload (a newer dialect) is
+    cut to the fields we know."""
     enc = mav2.MAVLink(None, srcSystem=3, srcComponent=1)
     good = _gpi(enc)
-    assert wire.global_position(good) is not None
     bad_crc = bytearray(good)
     bad_crc[-1] ^= 0x01
     v1 = bytes(
@@ -202,39 +188,35 @@ def test_global_position_declines_what_is_not_one_plain_position_frame() -> None
     signed = wire.Encoder(3, 1, key=bytes(range(32))).raw(
         "global_position_int", 5, 1, 2, 3, 4, 5, 6, 7, 8
     )
-    other = bytes(enc.attitude_encode(1, 0.1, 0.2, 0.3, 0, 0, 0).pack(enc))
     for data in (
         b"",
+        good,
         good[:11],
         good[:-1],  # cut short
         good + b"\x00",  # a trailing byte
         good + _gpi(enc, 2),  # two frames in one datagram
+        signed + good,  # a signed frame, then a plain one
         bytes(bad_crc),
+        bytes(bad_crc) + good,
         v1,
         signed,
-        other,
     ):
-        assert wire.global_position(data) is None, data.hex()
+        assert _parsed(data, fast=True) == _parsed(data, fast=False), data.hex()
     extra = mav2.MAVLink_global_position_int_message.crc_extra
     payload = mav2.MAVLink_global_position_int_message.unpacker.pack(
         1000, 473977418, 85455939, 500000, 10000, 1, -2, 3, 7
     )
     longer = _with_crc(bytes([0xFD, 30, 0, 0, 9, 3, 1, 33, 0, 0]) + payload + b"\x01\x02", extra)
-    got = wire.global_position(longer)
-    assert got == (3, 1, 9, (1000, 473977418, 85455939, 500000, 10000, 1, -2, 3, 7))
     [ref] = wire.Parser().feed_frames(longer)
-    assert tuple(ref.msg) == got[3]
+    assert ref[1:4] == (3, 1, 9)
+    assert tuple(ref.msg) == (1000, 473977418, 85455939, 500000, 10000, 1, -2, 3, 7)
 
 
-async def test_hub_fused_position_path_equals_the_general_path(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """The same datagrams through a hub with the fused position path (fast decode) and one
-    without (pymavlink for everything): the same measurements, link statistics (loss,
-    duplicates, reboots), counters and vehicles -- and the fused one really skipped the
-    generic path for the position reports of vehicles it already knew."""
+async def test_hub_with_the_fast_decoder_equals_pymavlink_for_everything() -> None:
+    """The same datagrams through a hub with the fast decoder and one with pymavlink for
+    everything (``fast_decode`` false): the same measurements, link statistics (loss,
+    duplicates, reboots), counters and vehicles."""
     from adapters.mavlink import MavlinkConfig, MavlinkHub
-    from adapters.mavlink.vehicle import VehicleState
     from gcs_utm.clock import ManualClock
 
     from .conftest import Sink
@@ -269,45 +251,29 @@ async def test_hub_fused_position_path_equals_the_general_path(
     e1.seq += 1
     seqs.append((no_fix, a))
 
-    calls = [0]
-    generic = VehicleState.on_global_position
-
-    def counted(self: VehicleState, m: Any, t_s: float, ev: Any) -> None:
-        calls[0] += 1
-        generic(self, m, t_s, ev)
-
-    monkeypatch.setattr(VehicleState, "on_global_position", counted)
-
-    async def run(fast: bool) -> tuple[Sink, MavlinkHub, int]:
-        calls[0] = 0
+    async def run(fast: bool) -> tuple[Sink, MavlinkHub]:
         sink = Sink()
         clock = ManualClock(1_700_000_000.0)
         hub = MavlinkHub(MavlinkConfig(links=("udpin:127.0.0.1:0",), fast_decode=fast), clock, sink)
         await hub.start()
         link = next(iter(hub._links.values()))
-        # the handler table holds the function itself: point it at the counting wrapper
-        hub._handlers[wire.GLOBAL_POSITION_INT] = counted
         for data, addr in seqs:
             clock.advance(0.01)
             hub._on_chunk(link, data, addr)
         await hub.close()
-        return sink, hub, calls[0]
+        return sink, hub
 
-    fused, hub_f, generic_f = await run(True)
-    plain, hub_p, generic_p = await run(False)
+    fast, hub_fast = await run(True)
+    slow, hub_slow = await run(False)
     # the duplicated datagram is a measurement too (tracking drops it as a duplicate)
-    assert len(fused.measurements) == len(plain.measurements) == 2 * 40 + 1 + 2
-    assert fused.measurements == plain.measurements
-    assert hub_f.counters.snapshot() == hub_p.counters.snapshot()
-    assert hub_f.counters.bad_crc == 1 and hub_f.counters.frames == 1 + 80 + 1 + 2 + 1
-    assert len(fused.vehicles) == len(plain.vehicles) == 1
-    for key in hub_p._states:
-        sf, sp = hub_f._states[key], hub_p._states[key]
+    assert len(fast.measurements) == len(slow.measurements) == 2 * 40 + 1 + 2
+    assert fast.measurements == slow.measurements
+    assert hub_fast.counters.snapshot() == hub_slow.counters.snapshot()
+    assert hub_fast.counters.bad_crc == 1 and hub_fast.counters.frames == 1 + 80 + 1 + 2 + 1
+    assert len(fast.vehicles) == len(slow.vehicles) == 1
+    for key in hub_slow._states:
+        sf, ss = hub_fast._states[key], hub_slow._states[key]
         got = (sf.received, sf.lost, sf.duplicates, sf.reboots, sf.offset_s, sf.tag)
-        assert got == (sp.received, sp.lost, sp.duplicates, sp.reboots, sp.offset_s, sp.tag)
-    [st1] = [s for k, s in hub_f._states.items() if k[1] == a]
+        assert got == (ss.received, ss.lost, ss.duplicates, ss.reboots, ss.offset_s, ss.tag)
+    [st1] = [s for k, s in hub_fast._states.items() if k[1] == a]
     assert (st1.lost, st1.duplicates, st1.reboots) == (6, 1, 1)
-    # general path: every position report; fused: only the first from the unknown address b
-    # and the two-frame datagram
-    assert generic_p == 2 * 40 + 1 + 2 + 1
-    assert generic_f == 1 + 2

@@ -216,7 +216,7 @@ def _clock_state(**cfg: Any) -> tuple[VehicleState, _Events]:
 
 
 def _report(st: VehicleState, ev: _Events, boot_ms: int, receipt_t_s: float) -> Any:
-    st.on_position((boot_ms, 473977000, 85456000, 488000, 0, 0, 0, 0, 0), receipt_t_s, ev)
+    st.on_global_position((boot_ms, 473977000, 85456000, 488000, 0, 0, 0, 0, 0), receipt_t_s, ev)
     return ev.measurements[-1]
 
 
@@ -261,7 +261,7 @@ def test_clock_drift_followed_capture_never_after_receipt(rate: float) -> None:
 def test_position_without_altitude_is_no_measurement() -> None:
     """PX4 reports alt = INT32_MIN (-2147483.648 m) when it has no altitude: not a position."""
     st, ev = _clock_state()
-    st.on_position((30_000, 473977000, 85456000, -(2**31), 0, 0, 0, 0, 0), 1000.0, ev)
+    st.on_global_position((30_000, 473977000, 85456000, -(2**31), 0, 0, 0, 0, 0), 1000.0, ev)
     assert ev.measurements == []
     assert st.last_position is None
     assert _report(st, ev, 30_020, 1000.02).alt_amsl_m == 488.0

@@ -5,7 +5,9 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from adapters.mavlink import UploadFailure, plan_to_mission_items
+import pytest
+
+from adapters.mavlink import MavlinkError, UploadFailure, plan_to_mission_items
 from gcs_utm.messages import FlightMode
 from gcs_utm.model import (
     Command,
@@ -87,6 +89,23 @@ async def test_readback_mismatch_is_not_verified(env: Any) -> None:
     v.faults.corrupt_readback = True
     res = await env.hub.upload_plan(SysId(6), _plan(3))
     assert not res.verified and "readback" in res.error
+    v.close()
+
+
+async def test_download_restarts_on_a_refusal_at_most_twice(env: Any) -> None:
+    """A MISSION_ACK refusal during a download starts it over (MISSION_REQUEST_LIST again);
+    a third refusal fails it, naming the result."""
+    v = await env.vehicle(16)
+    res = await env.hub.upload_plan(SysId(16), _plan(3))
+    assert res.verified, res
+    v.faults.refuse_readback = 2
+    lists = sum(m.get_type() == "MISSION_REQUEST_LIST" for m in v.received)
+    got = await env.hub.download_mission(SysId(16))
+    assert len(got) == len(v.mission)
+    assert sum(m.get_type() == "MISSION_REQUEST_LIST" for m in v.received) - lists == 3
+    v.faults.refuse_readback = 3
+    with pytest.raises(MavlinkError, match="refused the download: MAV_MISSION_ERROR"):
+        await env.hub.download_mission(SysId(16))
     v.close()
 
 

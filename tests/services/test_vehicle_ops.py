@@ -154,6 +154,49 @@ async def test_mission_before_the_fix_waits_for_home_then_is_filed() -> None:
     assert not any("no waypoints" in e.text for e in usm.events)
 
 
+async def test_failed_download_at_discovery_is_retried_with_backoff() -> None:
+    """PX4 under load times out the discovery download ("Operation timeout"): the mission is
+    downloaded again after a backoff on the vehicle's next status, not only when the mission
+    changes (it never changes: the vehicle would otherwise stay without an operation)."""
+    usm, port, clock = _usm()
+    port.mission = _relative_mission()
+    failures = [TimeoutError("no MISSION_COUNT"), TimeoutError("no MISSION_COUNT")]
+    plain = port.download_mission
+
+    async def flaky(sys_id: SysId) -> list[_Item]:
+        if failures:
+            port.downloads += 1
+            raise failures.pop(0)
+        return await plain(sys_id)
+
+    port.download_mission = flaky  # type: ignore[method-assign]
+    usm.attach_vehicles(port)
+    status = dict(total=3, home=HOME, position=HOME)
+    usm.on_vehicle(_Info(key=_Key(1)))
+    usm.on_status(_status(1000.0, **status))  # type: ignore[arg-type]  # count known at start
+    await usm.drain()
+    usm.on_status(_status(1000.5, **status))  # type: ignore[arg-type]
+    await usm.drain()
+    assert port.downloads == 1  # backoff: not yet
+    clock.set(1002.0)
+    usm.on_status(_status(1002.0, **status))  # type: ignore[arg-type]
+    await usm.drain()
+    assert port.downloads == 2 and usm.airspace.by_sys_id(SysId(1)) is None
+    clock.set(1005.0)
+    usm.on_status(_status(1005.0, **status))  # type: ignore[arg-type]
+    await usm.drain()
+    assert port.downloads == 2  # the second failure doubled the wait to 4 s
+    clock.set(1006.0)
+    usm.on_status(_status(1006.0, **status))  # type: ignore[arg-type]
+    await usm.drain()
+    assert port.downloads == 3
+    assert usm.airspace.by_sys_id(SysId(1)) is not None
+    assert sum("mission download failed" in e.text for e in usm.events) == 2
+    usm.on_status(_status(1100.0, **status))  # type: ignore[arg-type]
+    await usm.drain()
+    assert port.downloads == 3  # a success ends the retries
+
+
 async def test_connected_airborne_altitudes_from_home_not_first_altitude() -> None:
     """An ArduCopter found airborne 40 m up: waypoints relative to its home (mission item 0,
     then HOME_POSITION), not to the first altitude it reports (issue 26.4)."""

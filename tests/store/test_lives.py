@@ -14,54 +14,47 @@ from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.monitor import Monitor
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import RecommendationState, ThreatId, ThreatStatus
-from gcs_utm.store import Store, StoreError, StoreWriter
+from gcs_utm.store import Store, StoreError, StoreWriter, open_store
 from gcs_utm.store.codec import dumps
 from gcs_utm.store.ids import epoch_of, life_prefix
 from gcs_utm.store.schema import MIGRATIONS
+from tests.store.conftest import raw_execute
 from tests.store.test_store import _rec, _threat
 
 
-def _rows(db: Path, table: str) -> list[tuple[object, ...]]:
-    conn = sqlite3.connect(db)
-    try:
-        return list(conn.execute(f"SELECT * FROM {table} ORDER BY 1, 2"))
-    finally:
-        conn.close()
+def _rows(db: str | Path, table: str) -> list[tuple[object, ...]]:
+    return raw_execute(db, f"SELECT * FROM {table} ORDER BY 1, 2")
 
 
-def test_epochs_increase_and_are_never_reused(tmp_path: Path) -> None:
-    db = tmp_path / "s.sqlite"
+def test_epochs_increase_and_are_never_reused(db: str | Path) -> None:
     epochs = []
     for _ in range(3):
-        with Store(db) as s:
+        with open_store(db) as s:
             epochs.append(s.begin_life())
     assert epochs == [1, 2, 3]
-    conn = sqlite3.connect(db)
-    conn.execute("DELETE FROM lives")  # even with the rows gone, AUTOINCREMENT goes on
-    conn.commit()
-    conn.close()
-    with Store(db) as s:
+    # even with the rows gone, AUTOINCREMENT (an identity sequence) goes on
+    raw_execute(db, "DELETE FROM lives")
+    with open_store(db) as s:
         assert s.begin_life() == 4
     w = StoreWriter(db)
     try:
         assert w.epoch == 5
     finally:
         w.close()
-    with Store(db) as s:
+    with open_store(db) as s:
         assert [e for e, _t, _pid in s.lives()] == [4, 5]
 
 
-def test_a_later_life_never_overwrites_a_threat_or_recommendation(tmp_path: Path) -> None:
-    db = tmp_path / "s.sqlite"
+def test_a_later_life_never_overwrites_a_threat_or_recommendation(db: str | Path) -> None:
     threat, rec = _threat(), _rec()
-    with Store(db) as first:
+    with open_store(db) as first:
         first.save_threat(threat)
         first.save_recommendation(rec)
         # the life that wrote a row updates it (a threat's and a version's life cycle)
         first.save_threat(replace(threat, status=ThreatStatus.CLOSED))
         first.save_recommendation(replace(rec, state=RecommendationState.ACCEPTED))
     before_t, before_r = _rows(db, "threats"), _rows(db, "recommendations")
-    with Store(db) as second:
+    with open_store(db) as second:
         second.begin_life()
         with pytest.raises(StoreError, match="written by life 1, this is life 2"):
             second.save_threat(replace(threat, message="a new threat reusing the id"))

@@ -43,9 +43,18 @@ from gcs_utm.model import (
     TrackId,
 )
 from gcs_utm.scenario import load_scenario
-from gcs_utm.store import AsyncStore, Store, StoreConfig, StoreError, StoreFullError, StoreWriter
+from gcs_utm.store import (
+    AsyncStore,
+    StoreBase,
+    StoreConfig,
+    StoreError,
+    StoreFullError,
+    StoreWriter,
+    open_store,
+)
 from gcs_utm.store.codec import encode
-from gcs_utm.store.schema import MIGRATIONS
+from gcs_utm.store.schema import MIGRATIONS, PG_MIGRATIONS
+from tests.store.conftest import raw_execute
 
 REPO = Path(__file__).resolve().parents[2]
 UC1 = REPO / "config/scenarios/use_case_1.toml"
@@ -133,7 +142,7 @@ def _rec() -> Recommendation:
     )
 
 
-def _fill(store: Store) -> None:
+def _fill(store: StoreBase) -> None:
     sc = load_scenario(UC1)
     for op in sc.operations:
         store.save_operation(op)
@@ -153,7 +162,7 @@ def _fill(store: Store) -> None:
     store.audit(AuditEntry(t_s=9.5, actor="em", action="select", subject="R1", detail={"a": 1}))
 
 
-def _snapshot(store: Store) -> dict[str, object]:
+def _snapshot(store: StoreBase) -> dict[str, object]:
     threats = store.load_threats()
     return {
         "ops": store.load_operations(),
@@ -168,8 +177,8 @@ def _snapshot(store: Store) -> dict[str, object]:
     }
 
 
-def test_round_trip_of_every_model_object(tmp_path: Path) -> None:
-    with Store(tmp_path / "db.sqlite3") as store:
+def test_round_trip_of_every_model_object(db: str | Path) -> None:
+    with open_store(db) as store:
         _fill(store)
         sc = load_scenario(UC1)
         assert store.load_operations() == list(sc.operations)
@@ -191,22 +200,22 @@ def test_round_trip_of_every_model_object(tmp_path: Path) -> None:
         ]
 
 
-def test_restart_loads_everything_back_equal(tmp_path: Path) -> None:
-    path = tmp_path / "db.sqlite3"
-    with Store(path) as store:
+def test_restart_loads_everything_back_equal(db: str | Path) -> None:
+    with open_store(db) as store:
         _fill(store)
         before = _snapshot(store)
-    with Store(path) as store:
+    with open_store(db) as store:
         assert _snapshot(store) == before
         assert store.integrity_check() == "ok"
         assert store.schema_version == len(MIGRATIONS)
-    conn = sqlite3.connect(path)
-    assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
-    conn.close()
+    if isinstance(db, Path):
+        conn = sqlite3.connect(db)
+        assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+        conn.close()
 
 
-def test_plan_versions_and_latest(tmp_path: Path) -> None:
-    with Store(tmp_path / "db.sqlite3") as store:
+def test_plan_versions_and_latest(db: str | Path) -> None:
+    with open_store(db) as store:
         op = load_scenario(UC1).operations[0]
         store.save_operation(op)
         v2 = replace(op.plan, version=2, reason="accepted R1", created_t_s=50.0)
@@ -221,8 +230,8 @@ def test_plan_versions_and_latest(tmp_path: Path) -> None:
         assert store.latest_plan("UAS1") == v2
 
 
-def test_geofence_deactivation_and_older_track_sample(tmp_path: Path) -> None:
-    with Store(tmp_path / "db.sqlite3") as store:
+def test_geofence_deactivation_and_older_track_sample(db: str | Path) -> None:
+    with open_store(db) as store:
         store.save_geofence(_fence("A"))
         store.save_geofence(_fence("B"))
         assert store.deactivate_geofence("A")
@@ -236,8 +245,8 @@ def test_geofence_deactivation_and_older_track_sample(tmp_path: Path) -> None:
         assert [t.t_s for t in store.track_history("UAS1")] == [3.0, 5.0]
 
 
-def test_recommendation_states_filter(tmp_path: Path) -> None:
-    with Store(tmp_path / "db.sqlite3") as store:
+def test_recommendation_states_filter(db: str | Path) -> None:
+    with open_store(db) as store:
         rec = _rec()
         store.save_recommendation(rec)
         accepted = rec.transition(RecommendationState.ACCEPTED, 10.0)
@@ -250,24 +259,25 @@ def test_recommendation_states_filter(tmp_path: Path) -> None:
         assert len(store.load_recommendations(latest_only=False)) == 2
 
 
-def test_newer_schema_is_refused(tmp_path: Path) -> None:
-    path = tmp_path / "db.sqlite3"
-    Store(path).close()
-    conn = sqlite3.connect(path)
-    conn.execute(f"PRAGMA user_version = {len(MIGRATIONS) + 1}")
-    conn.close()
+def test_newer_schema_is_refused(db: str | Path) -> None:
+    open_store(db).close()
+    if isinstance(db, Path):
+        raw_execute(db, f"PRAGMA user_version = {len(MIGRATIONS) + 1}")
+    else:
+        raw_execute(db, f"UPDATE gcs_utm_schema SET version = {len(MIGRATIONS) + 1}")
     with pytest.raises(StoreError, match="newer"):
-        Store(path)
+        open_store(db)
+    with pytest.raises(StoreError, match="schema version"):
+        open_store(db, readonly=True)
 
 
-def test_failed_request_in_a_batch_rolls_back_alone(tmp_path: Path) -> None:
-    path = tmp_path / "db.sqlite3"
-    writer = StoreWriter(path)
+def test_failed_request_in_a_batch_rolls_back_alone(db: str | Path) -> None:
+    writer = StoreWriter(db)
     gate = threading.Event()
     writer.submit(lambda s: gate.wait(5))  # hold the writer so the next three share a batch
     ok1 = writer.audit(AuditEntry(t_s=1.0, actor="a", action="x", subject="s"))
 
-    def bad(s: Store) -> None:
+    def bad(s: StoreBase) -> None:
         s.audit(AuditEntry(t_s=2.0, actor="a", action="bad", subject="s"))
         raise ValueError("boom")
 
@@ -279,12 +289,12 @@ def test_failed_request_in_a_batch_rolls_back_alone(tmp_path: Path) -> None:
         failed.result(5)
     assert ok1.result(5) > 0 and ok2.result(5) > 0
     writer.close()
-    with Store(path) as store:
+    with open_store(db) as store:
         assert [e.action for e in store.load_audit()] == ["x", "y"]
 
 
-def test_full_queue_drops_tracks_but_raises_for_audit(tmp_path: Path) -> None:
-    writer = StoreWriter(tmp_path / "db.sqlite3", StoreConfig(queue_size=2, put_timeout_s=0.1))
+def test_full_queue_drops_tracks_but_raises_for_audit(db: str | Path) -> None:
+    writer = StoreWriter(db, StoreConfig(queue_size=2, put_timeout_s=0.1))
     gate = threading.Event()
     blocker = writer.submit(lambda s: gate.wait(5))
     # wait until the writer holds the blocker, so the queue itself is empty
@@ -301,19 +311,18 @@ def test_full_queue_drops_tracks_but_raises_for_audit(tmp_path: Path) -> None:
     blocker.result(5)
     writer.flush(5)
     writer.close()
-    with Store(tmp_path / "db.sqlite3") as store:
+    with open_store(db) as store:
         assert [t.t_s for t in store.track_history("UAS1")] == [0.0, 1.0]
 
 
-async def test_async_store_durable_writes_and_reads(tmp_path: Path) -> None:
-    path = tmp_path / "db.sqlite3"
+async def test_async_store_durable_writes_and_reads(db: str | Path) -> None:
     rec = _rec()
-    async with await AsyncStore.open(path) as store:
+    async with await AsyncStore.open(db) as store:
         await store.save_recommendation(rec)
         accepted = rec.transition(RecommendationState.ACCEPTED, 10.0)
         await store.save_recommendation(accepted)
         # durable: a separate connection sees it as soon as the await returns
-        with Store(path, readonly=True) as other:
+        with open_store(db, readonly=True) as other:
             assert other.load_recommendations(state=RecommendationState.ACCEPTED) == [accepted]
         assert store.write_tracks([_track(0, 0.0)])
         await store.flush()
@@ -355,11 +364,10 @@ _CHILD = textwrap.dedent(
 )
 
 
-def test_sigkill_mid_stream_keeps_every_committed_row(tmp_path: Path) -> None:
-    path = tmp_path / "crash.sqlite3"
+def test_sigkill_mid_stream_keeps_every_committed_row(db: str | Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     child = subprocess.Popen(
-        [sys.executable, "-c", _CHILD, str(path)],
+        [sys.executable, "-c", _CHILD, str(db)],
         stdout=subprocess.PIPE,
         text=True,
         env=env,
@@ -377,7 +385,7 @@ def test_sigkill_mid_stream_keeps_every_committed_row(tmp_path: Path) -> None:
         child.stdout.close()
     assert child.returncode == -signal.SIGKILL
     assert len(reported) >= 300
-    with Store(path) as store:
+    with open_store(db) as store:
         assert store.integrity_check() == "ok"
         seqs = {int(e.subject) for e in store.load_audit()}
         assert set(reported) <= seqs
@@ -450,14 +458,14 @@ def test_track_doc_is_the_codec_document() -> None:
 
 
 def test_write_tracks_large_batch_with_repeats_keeps_newest_latest_and_all_history(
-    tmp_path: Path,
+    db: str | Path, tmp_path: Path
 ) -> None:
     """One batch larger than a statement's chunk, where ids repeat out of time order: the
     latest state is each id's newest sample, the history holds every sample (as writing them
     one by one does)."""
     batch = [_track(i, 100.0 + i, f"T{i % 700}") for i in range(1500)]
     batch += [_track(9, 50.0, "T3"), _track(9, 5000.0, "T4")]  # older, then newer, again
-    with Store(tmp_path / "db.sqlite3") as store:
+    with open_store(db) as store:
         store.write_tracks(batch)
         latest = {t.id: t.t_s for t in store.latest_tracks()}
         assert len(latest) == 700
@@ -467,7 +475,99 @@ def test_write_tracks_large_batch_with_repeats_keeps_newest_latest_and_all_histo
         assert [t.t_s for t in store.track_history("T3")] == [50.0, 103.0, 803.0, 1503.0]
         rows = store._conn.execute("SELECT COUNT(*) FROM track_history").fetchone()[0]
         assert rows == 1502
-    with Store(tmp_path / "one.sqlite3") as one:
+    with open_store(tmp_path / "one.sqlite3") as one:
         for t in batch:
             one.write_tracks([t])
         assert {t.id: t.t_s for t in one.latest_tracks()} == latest
+
+
+def test_both_backends_have_the_same_tables_and_columns(pg_url: str, tmp_path: Path) -> None:
+    """The PostgreSQL migrations are the SQLite ones, number for number: the same tables with
+    the same columns in the same order."""
+    assert len(PG_MIGRATIONS) == len(MIGRATIONS)
+    sq = tmp_path / "db.sqlite3"
+    open_store(sq).close()
+    open_store(pg_url).close()
+    sqlite_cols: dict[str, list[str]] = {}
+    for (table,) in raw_execute(sq, "SELECT name FROM sqlite_master WHERE type='table'"):
+        if str(table).startswith("sqlite_"):
+            continue
+        cols = raw_execute(sq, f"PRAGMA table_info({table})")
+        sqlite_cols[str(table)] = [str(c[1]) for c in cols]
+    pg_cols: dict[str, list[str]] = {}
+    for table, column in raw_execute(
+        pg_url,
+        "SELECT table_name, column_name FROM information_schema.columns "
+        "WHERE table_schema='public' AND table_name <> 'gcs_utm_schema' "
+        "ORDER BY table_name, ordinal_position",
+    ):
+        pg_cols.setdefault(str(table), []).append(str(column))
+    assert pg_cols == sqlite_cols
+
+
+def test_a_bad_location_is_one_store_error(pg_server: object, tmp_path: Path) -> None:
+    with pytest.raises(StoreError, match="not a store location"):
+        open_store("mysql://x/y")
+    with pytest.raises(StoreError, match="cannot connect"):
+        open_store(f"postgresql://gcs:secret@/nodb?host={tmp_path}", busy_timeout_s=1.0)
+    try:
+        open_store(f"postgresql://gcs:secret@/nodb?host={tmp_path}", busy_timeout_s=1.0)
+    except StoreError as exc:
+        assert "secret" not in str(exc)
+
+
+def test_writer_survives_a_postgresql_restart(tmp_path: Path) -> None:
+    """A database failover cuts every connection: the batch in flight fails with a
+    StoreError (its futures say so, nothing is half-written), the writer opens a new
+    connection in the same life, and later writes commit."""
+    from tests.store import pgserver
+
+    server, why = pgserver.start()
+    if server is None:
+        pytest.skip(f"no PostgreSQL server could be started here: {why}")
+    try:
+        url = server.create_database()
+        writer = StoreWriter(url, StoreConfig(put_timeout_s=30.0))
+        epoch = writer.epoch
+        assert writer.audit(AuditEntry(t_s=1.0, actor="a", action="before", subject="s")).result(5)
+        server.restart()
+        outcomes: list[str] = []
+        for i in range(50):  # the first write after the cut finds the old connection dead
+            fut = writer.audit(AuditEntry(t_s=2.0 + i, actor="a", action=f"after{i}", subject="s"))
+            try:
+                fut.result(30)
+                outcomes.append("ok")
+                break
+            except StoreError:
+                outcomes.append("lost")
+        assert outcomes[-1] == "ok" and len(outcomes) <= 3, outcomes
+        writer.save_threat(_threat()).result(30)
+        writer.close()
+        with open_store(url) as store:
+            actions = [e.action for e in store.load_audit()]
+            assert actions[0] == "before" and actions[-1] == f"after{len(outcomes) - 1}"
+            assert [t.id for t in store.load_threats()] == ["T1"]
+            assert raw_execute(url, "SELECT epoch FROM threats") == [(epoch,)]
+    finally:
+        server.stop()
+
+
+def test_instances_starting_together_migrate_once(pg_url: str) -> None:
+    """Several processes opening one new database at once: the advisory lock lets one migrate
+    while the others wait, and all see the current schema."""
+    errors: list[BaseException] = []
+    versions: list[int] = []
+
+    def open_one() -> None:
+        try:
+            with open_store(pg_url) as s:
+                versions.append(s.schema_version)
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=open_one) for _ in range(6)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    assert errors == [] and versions == [len(PG_MIGRATIONS)] * 6

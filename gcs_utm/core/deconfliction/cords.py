@@ -202,7 +202,7 @@ def apply(base: FloatArray, normals: FloatArray, axis: str, sign: int, d: FloatA
     return out
 
 
-def resolve(  # noqa: C901 - the charged-cords iteration of the paper, one loop
+def resolve(  # noqa: C901, PLR0912, PLR0915 - the charged-cords iteration of the paper, one loop
     cords: Sequence[Cord],
     grid_t: FloatArray,
     minima: FloatArray,

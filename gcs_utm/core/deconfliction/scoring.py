@@ -192,7 +192,7 @@ def score(
     )[0]
 
 
-def score_many(  # noqa: C901 - every candidate scored in one vectorised pass
+def score_many(  # noqa: C901, PLR0912, PLR0915 - every candidate scored in one vectorised pass
     news: Sequence[LocalPlan],
     ref: Reference,
     *,

@@ -1,0 +1,376 @@
+"""A serving instance as a cluster member (``serve --cluster``): the member task's regions
+drive what this instance's airspace holds.
+
+- start: the airspace holds the active geofences and no operation; operations come with the
+  regions this instance gains;
+- region gained (its configured region at start, or an orphan taken over): the region's
+  operations, the active geofences and its pending recommendations are loaded from the store
+  (:mod:`gcs_utm.cluster.resume`); each pending recommendation is proposed again as the next
+  version in this life, so its pilot prompt goes on where the dead owner left it;
+- region lost (the lease could not be renewed in time, or another instance holds it): this
+  instance stops (fail-stop, exit code 3). It cannot know what the new owner has decided
+  since, and a clean restart re-joins as a standby; carrying on would risk two instances
+  deciding for the same operations.
+- traffic: the tracks of the operations it owns go out on their regions' MQTT topics; the
+  tracks of other instances' operations inside the halo of its regions come in
+  (:mod:`gcs_utm.cluster.exchange`): such an operation is loaded from the store as *foreign*
+  (without its system id and ICAO address, so none of this instance's vehicles is taken for
+  it) and its tracks are fed to the tracker as its measurements; foreign plans and the
+  active geofences are refreshed from the store every ``renew_s``;
+- decisions: who decides is :mod:`gcs_utm.cluster.policy`; a recommendation another life
+  filed for an operation this instance owns is adopted (proposed again as the next version
+  in this life), like a pending one at takeover.
+Every gain and loss is audited (actor: this instance's lease holder name).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import logging
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+from typing import Protocol
+
+from gcs_utm.clock import Clock
+from gcs_utm.cluster.config import ClusterConfig
+from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
+from gcs_utm.cluster.lease import Lease
+from gcs_utm.cluster.member import ClusterMember
+from gcs_utm.cluster.policy import OwnershipPolicy
+from gcs_utm.cluster.resume import RegionState, load_region
+from gcs_utm.geo import LocalFrame
+from gcs_utm.model import (
+    AuditEntry,
+    Geofence,
+    Measurement,
+    MeasurementSource,
+    Operation,
+    OperationId,
+    Recommendation,
+    RecommendationId,
+    Track,
+    TrackId,
+)
+from gcs_utm.store import StoreBase, StoreError
+
+_log = logging.getLogger(__name__)
+
+
+class AirspacePort(Protocol):
+    @property
+    def operations(self) -> Mapping[OperationId, Operation]: ...
+
+    def load(self, operations: Iterable[Operation], geofences: Iterable[Geofence]) -> None: ...
+
+    def geofences(self, *, active_at_s: float | None = None) -> tuple[Geofence, ...]: ...
+
+
+class TrackingPort(Protocol):
+    def set_operations(self, operations: Iterable[Operation]) -> None: ...
+
+
+class UsmPort(Protocol):
+    async def on_recommendation(self, rec: Recommendation) -> None: ...
+
+    def log_event(self, kind: str, text: str) -> None: ...
+
+    def on_measurement(self, m: Measurement) -> None: ...
+
+
+class EmergencyPort(Protocol):
+    """What the decider's EM hears about a recommendation another instance carried out."""
+
+    async def submit_answer(
+        self, rec_id: RecommendationId, version: int, accepted: bool
+    ) -> None: ...
+
+    async def submit_outcome(
+        self, rec_id: RecommendationId, version: int, applied: bool, reason: str
+    ) -> None: ...
+
+
+# how often the node publishes its own tracks to the region topics
+PUBLISH_PERIOD_S = 0.5
+
+
+class ClusterNode:
+    """Connects a :class:`ClusterMember` to one runtime's airspace, tracking and USM."""
+
+    def __init__(
+        self,
+        location: str | Path,
+        config: ClusterConfig,
+        *,
+        instance: str,
+        epoch: int,
+        frame: LocalFrame,
+        clock: Clock,
+        airspace: AirspacePort,
+        tracking: TrackingPort,
+        usm: UsmPort,
+        record: Callable[[object], None],
+        on_fail: Callable[[str], None],
+        policy: OwnershipPolicy | None = None,
+        exchange: RegionExchange | None = None,
+        tracks: Callable[[], Mapping[TrackId, Track]] | None = None,
+        emergency: EmergencyPort | None = None,
+    ) -> None:
+        self.member = ClusterMember(
+            location,
+            config,
+            instance=instance,
+            epoch=epoch,
+            on_gained=self._gained,
+            on_lost=self._lost,
+        )
+        self._frame = frame
+        self._clock = clock
+        self._airspace = airspace
+        self._tracking = tracking
+        self._usm = usm
+        self._record = record
+        self._on_fail = on_fail
+        self.resumed: dict[str, RegionState] = {}
+        self.policy = policy or OwnershipPolicy()
+        self.policy.operations_of = lambda: airspace.operations
+        self.exchange = exchange
+        self._tracks = tracks
+        self._adopted: set[tuple[str, int]] = set()
+        self._emergency = emergency
+        self._relayed: set[tuple[str, int, str]] = set()
+        self._loading: set[OperationId] = set()
+        self.foreign_measurements = 0
+
+    async def _gained(self, region_id: str, lease: Lease | None) -> None:
+        region_map = self.member.map
+        state = await self.member.read(lambda s: load_region(s, region_id, region_map, self._frame))
+        assert isinstance(state, RegionState)
+        self.resumed[region_id] = state
+        for op in state.operations:
+            self.policy.foreign.discard(op.id)
+        if self.exchange is not None:
+            self.exchange.watch(self.member.owned)
+        known = set(self._airspace.operations)
+        self._airspace.load(state.operations, state.geofences)
+        self._tracking.set_operations(self._airspace.operations.values())
+        generation = lease.generation if lease is not None else 0
+        for rec in state.pending:
+            self._adopted.add((rec.id, rec.version))
+            await self._usm.on_recommendation(
+                dataclasses.replace(
+                    rec,
+                    version=rec.version + 1,
+                    reason=f"resumed by {self.member.holder} (region {region_id}, lease "
+                    f"generation {generation})",
+                )
+            )
+        new_ops = [op.id for op in state.operations if op.id not in known]
+        watched = [op.id for op in state.operations if op.id in known]
+        text = (
+            f"region {region_id} held (generation {generation}): {len(new_ops)} operations, "
+            f"{len(state.geofences)} geofences, {len(state.pending)} pending recommendations"
+        )
+        _log.info("cluster: %s", text)
+        self._usm.log_event("cluster", text)
+        self._record(
+            AuditEntry(
+                t_s=self._clock.now_s(),
+                actor=self.member.holder,
+                action="region_gained",
+                subject=region_id,
+                detail={
+                    "generation": generation,
+                    "operations": [str(op.id) for op in state.operations],
+                    "were_watched": [str(i) for i in watched],
+                    "pending": [f"{r.id} v{r.version}" for r in state.pending],
+                },
+            )
+        )
+
+    async def _lost(self, region_id: str, _lease: Lease | None) -> None:
+        self._record(
+            AuditEntry(
+                t_s=self._clock.now_s(),
+                actor=self.member.holder,
+                action="region_lost",
+                subject=region_id,
+            )
+        )
+        self._on_fail(f"region {region_id} lost: this instance stops (fail-stop)")
+
+    # ---- traffic of other instances -------------------------------------------------------
+    def _in_halo(self, t: RemoteTrack) -> bool:
+        east_m, north_m = self._frame.point_to_local(t.lat_deg, t.lon_deg)
+        return bool(self.member.map.regions_near(east_m, north_m) & set(self.member.owned))
+
+    async def on_remote_tracks(self, tracks: list[RemoteTrack]) -> None:
+        """Feed the tracks of other instances' operations inside this instance's halo."""
+        now_s = self._clock.now_s()
+        for t in tracks:
+            op_id = t.operation_id
+            if self.policy.owns(op_id) or not self._in_halo(t):
+                continue  # our own echo, or traffic far from our regions
+            if op_id not in self.policy.foreign and not await self._load_foreign(op_id):
+                continue
+            ve, vn, vu = t.vel_enu_mps
+            self._usm.on_measurement(
+                Measurement(
+                    source=MeasurementSource.MQTT,
+                    capture_t_s=t.t_s,
+                    receipt_t_s=now_s,
+                    lat_deg=t.lat_deg,
+                    lon_deg=t.lon_deg,
+                    alt_amsl_m=t.alt_amsl_m,
+                    vel_ned_mps=(vn, ve, -vu),
+                    eph_m=t.position_sigma_m,
+                    operation_id=op_id,
+                    link=f"cluster:{t.region_id}",
+                )
+            )
+            self.foreign_measurements += 1
+
+    async def _load_foreign(self, op_id: OperationId) -> bool:
+        if op_id in self._loading:
+            return False
+        self._loading.add(op_id)
+        try:
+            found = await self.member.read(lambda s: _operation(s, op_id))
+        finally:
+            self._loading.discard(op_id)
+        if not isinstance(found, Operation):
+            return False  # not filed (yet): its owner saves it first
+        self.policy.foreign.add(op_id)
+        self._install_foreign([found])
+        self._usm.log_event("cluster", f"watching {op_id} of another instance (halo)")
+        return True
+
+    def _install_foreign(self, ops: list[Operation]) -> None:
+        stripped = [dataclasses.replace(op, sys_id=None, icao24=None) for op in ops]
+        self._airspace.load(stripped, ())
+        self._tracking.set_operations(self._airspace.operations.values())
+
+    async def refresh(self) -> None:
+        """Foreign operations' plans and the active geofences as filed in the store (their
+        owners change them), and recommendations other lives filed for our operations."""
+        foreign = set(self.policy.foreign)
+        epoch = self.member.epoch
+        snap = await self.member.read(lambda s: _refresh_view(s, foreign, epoch))
+        assert isinstance(snap, tuple)
+        ops, fences, proposed, touched = snap
+        await self._relay(touched)
+        current = self._airspace.operations
+        changed = [op for op in ops if (c := current.get(op.id)) is None or c.plan != op.plan]
+        if changed:
+            self._install_foreign(changed)
+        known = {g.id for g in self._airspace.geofences()}
+        new_fences = [g for g in fences if g.id not in known]
+        if new_fences:
+            self._airspace.load((), new_fences)
+        for rec, epoch in proposed:
+            if epoch == self.member.epoch or not self.policy.owns(rec.operation_id):
+                continue
+            if (rec.id, rec.version) in self._adopted:
+                continue
+            self._adopted.add((rec.id, rec.version))
+            self._usm.log_event("cluster", f"{rec.id} v{rec.version} decided by life {epoch}")
+            await self._usm.on_recommendation(
+                dataclasses.replace(
+                    rec,
+                    version=rec.version + 1,
+                    reason=f"decided by life {epoch}, proposed by {self.member.holder}",
+                )
+            )
+
+    async def _relay(self, touched: list[tuple[str, int, str, int]]) -> None:
+        """Tell this instance's EM what the owner did with a recommendation it decided for
+        the owner's operation: the owner's later version accepted (or rejected), then applied
+        (or failed). Without it the EM would let its own version expire and decide again."""
+        if self._emergency is None:
+            return
+        mine: dict[str, int] = {}
+        later: dict[str, tuple[int, str]] = {}
+        for rec_id, version, state, epoch in touched:
+            if epoch == self.member.epoch:
+                mine[rec_id] = version
+                later.pop(rec_id, None)
+            elif rec_id in mine:
+                later[rec_id] = (version, state)
+        for rec_id, (version, state) in later.items():
+            ours = mine[rec_id]
+            rid = RecommendationId(rec_id)
+            answer = _ANSWER_OF.get(state)
+            if answer is not None and (rec_id, ours, "answer") not in self._relayed:
+                self._relayed.add((rec_id, ours, "answer"))
+                await self._emergency.submit_answer(rid, ours, answer)
+            outcome = _OUTCOME_OF.get(state)
+            if outcome is not None and (rec_id, ours, "outcome") not in self._relayed:
+                self._relayed.add((rec_id, ours, "outcome"))
+                await self._emergency.submit_outcome(
+                    rid, ours, outcome, f"{state} by its owner as v{version}"
+                )
+
+    def publish(self) -> None:
+        if self.exchange is None or self._tracks is None:
+            return
+        own = [
+            t
+            for t in self._tracks().values()
+            if t.operation_id is not None and self.policy.owns(t.operation_id)
+        ]
+        if own:
+            self.exchange.publish(own, self._clock.now_s())
+
+    async def run(self) -> None:
+        """The member task, the exchange and the periodic refresh/publication."""
+        async with asyncio.TaskGroup() as tg:
+            tg.create_task(self.member.run())
+            if self.exchange is not None:
+                tg.create_task(self.exchange.run())
+            tg.create_task(self._periodic())
+
+    async def _periodic(self) -> None:
+        next_refresh = 0.0
+        loop = asyncio.get_running_loop()
+        while True:
+            if self.member.owned:
+                self.publish()
+                if loop.time() >= next_refresh:
+                    next_refresh = loop.time() + self.member.config.renew_s
+                    try:
+                        await self.refresh()
+                    except StoreError as exc:
+                        _log.warning("cluster: refresh from the store failed: %s", exc)
+            await asyncio.sleep(PUBLISH_PERIOD_S)
+
+
+def _operation(store: StoreBase, op_id: OperationId) -> Operation | None:
+    for op in store.load_operations():
+        if op.id == op_id:
+            return op
+    return None
+
+
+# the owner's state of its version -> what the decider's EM hears (an answer, an outcome)
+_ANSWER_OF = {"accepted": True, "applied": True, "failed": True, "rejected": False}
+_OUTCOME_OF = {"applied": True, "failed": False}
+
+
+def _refresh_view(
+    store: StoreBase, foreign: set[OperationId], epoch: int
+) -> tuple[
+    list[Operation],
+    list[Geofence],
+    list[tuple[Recommendation, int]],
+    list[tuple[str, int, str, int]],
+]:
+    ops = [op for op in store.load_operations() if op.id in foreign] if foreign else []
+    return (
+        ops,
+        store.load_geofences(active_only=True),
+        store.proposed_with_lives(),
+        store.versions_touched_by(epoch),
+    )
+
+
+__all__ = ["ClusterNode"]

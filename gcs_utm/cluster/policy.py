@@ -1,0 +1,59 @@
+"""Who decides what in a cluster: the ownership rule every instance applies the same way.
+
+An instance *owns* the operations in its airspace that are not *foreign*; foreign operations
+are those of other instances that it watches because their UAS are in the halo of one of its
+regions (:mod:`gcs_utm.cluster.exchange`). Monitoring sees both, so a conflict across a
+border is detected on both sides; then:
+
+- **one decider per threat**: a threat is decided by the owner of its most important UAS:
+  the highest ``priority``; equal priorities, the smallest operation id. Both instances read
+  the operations from the same store, so both reach the same answer, and the other instance
+  drops the threat (it sees the decision in the store);
+- a threat about foreign UAS only (their conformance, their geofences) is their owner's;
+- a recommendation the decider makes for a foreign operation is filed in the store and not
+  presented here: the operation's owner proposes it to its pilot as the next version in its
+  own life and uploads it (:meth:`gcs_utm.cluster.node.ClusterNode.adopt_decisions`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+
+from gcs_utm.model import Operation, OperationId, Threat
+
+
+class OwnershipPolicy:
+    """The rule above over the airspace's operations (``operations_of``, set by the cluster
+    node once the runtime exists) and the set of foreign ones."""
+
+    def __init__(self) -> None:
+        self.operations_of: Callable[[], Mapping[OperationId, Operation]] = dict
+        self.foreign: set[OperationId] = set()
+
+    def owns(self, op_id: OperationId) -> bool:
+        return op_id not in self.foreign and op_id in self.operations_of()
+
+    def decider_of(
+        self, uas_ids: tuple[OperationId, ...], ops: Mapping[OperationId, Operation]
+    ) -> OperationId | None:
+        """The operation whose owner decides for these UAS (None when none is known)."""
+        known = [ops[i] for i in uas_ids if i in ops]
+        if not known:
+            return None
+        return min(known, key=lambda op: (-op.priority, op.id)).id
+
+    def filter_threats(self, threats: list[Threat]) -> list[Threat]:
+        """The threats this instance decides for (a threat naming no operation, a hazard of
+        the service itself, is always kept)."""
+        if not self.foreign:
+            return threats
+        ops = self.operations_of()
+        kept = []
+        for t in threats:
+            decider = self.decider_of(t.uas_ids, ops) if t.uas_ids else None
+            if not t.uas_ids or (decider is not None and decider not in self.foreign):
+                kept.append(t)
+        return kept
+
+
+__all__ = ["OwnershipPolicy"]
