@@ -4,12 +4,14 @@
 instead of 30 m/s; the same line, cut so that the plane reaches the crossing 100 s after its
 first waypoint as in use case 1) and shifted by 110 s for boot and take-off; the multirotor's
 plan and its 3 s late start are use case 1's. A SIH quadrotor flies UAS1 (sys_id 1) and a SIH
-plane UAS2 (sys_id 2, with ``PX4_SIH_PLANE_PARAMS``). Checked on the report:
-- LOSS_OF_SEPARATION between UAS1 and UAS2 is predicted before it happens;
-- a recommendation for the low-priority UAS1 (never the plane) is accepted, uploaded and
-  verified by readback, and the quadrotor flies it: its track passes the new plan's waypoints;
-- the flown separation (the UAS's tracks, built from PX4's own GLOBAL_POSITION_INT) stays
-  above the minima: horizontally 50 m, or vertically 15 m, at every common sample.
+plane UAS2 (sys_id 2, with ``PX4_SIH_PLANE_PARAMS``). Checked on the report and on PX4's own
+GLOBAL_POSITION_INT (recorded by the run, ``--record``):
+- both missions uploaded, verified, armed and started; UAS1's 3 s late start flown;
+- LOSS_OF_SEPARATION between UAS1 and UAS2 predicted at least 30 s before it would happen;
+- recommendations for the low-priority UAS1 only (never the plane), accepted, uploaded and
+  verified by readback, and flown: PX4's positions pass each waypoint of UAS1's last plan;
+- the flown separation (PX4's positions, time-matched) never under 50 m horizontally while
+  under 15 m vertically, and no loss of separation in the report.
 
 Use case 2 cannot run on PX4 v1.15.2 SIH: its SIH GNSS simulation takes no failure injection
 (docs/autopilots.md, "Use cases 1 and 2 on PX4").
