@@ -1,7 +1,7 @@
 """Use case 1 with ``gcs-utm run --external --fly`` on real PX4 v1.15.2 SIH vehicles (issue 18).
 
-``tests/data/use_case_1_px4.toml`` is use case 1 matched to the SIH plane's speed (14 m/s
-instead of 30 m/s; the same line, cut so that the plane reaches the crossing 100 s after its
+``config/scenarios/use_case_1_px4.toml`` is use case 1 matched to the SIH plane's speed
+(14 m/s instead of 30 m/s; the same line, cut so that the plane reaches the crossing 100 s after its
 first waypoint as in use case 1) and shifted by 110 s for boot and take-off; the multirotor's
 plan and its 3 s late start are use case 1's. A SIH quadrotor flies UAS1 (sys_id 1) and a SIH
 plane UAS2 (sys_id 2, with ``PX4_SIH_PLANE_PARAMS``). Checked on the report and on PX4's own
@@ -37,7 +37,7 @@ from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 
 SPEED = 5.0  # PX4_SIM_SPEED_FACTOR; run --speed matches it
 LAT0, LON0, GROUND_M = PX4_DEFAULT_HOME
-SCENARIO = REPO / "tests" / "data" / "use_case_1_px4.toml"
+SCENARIO = REPO / "config" / "scenarios" / "use_case_1_px4.toml"
 HOMES = {1: ("quad", (240.0, -40.0)), 2: ("plane", (1717.8, -137.4))}  # the scenario's homes
 # the plane waits for its start in a loiter around its first waypoint: within its 30 m
 # operational volume (PX4's default NAV_LOITER_RAD is 80 m), as its operator would set it
