@@ -2,13 +2,15 @@
 
 For each operation of the scenario, on the vehicle with the operation's ``sys_id``:
 1. wait until the vehicle is discovered and reports a position;
-2. upload the filed plan through :meth:`MavlinkHub.upload_plan` (verified by readback, first
+2. upload the operation's current plan version (the filed one, or a resolution accepted
+   before the upload) through :meth:`MavlinkHub.upload_plan` (verified by readback, first
    waypoint made current; the mission mode is not set yet: the vehicle is on the ground);
 3. at the first waypoint's time minus the climb time, arm (retried while the autopilot's
    pre-flight checks refuse) and take off to the first waypoint's altitude (PX4: NAV_TAKEOFF
    to an AMSL altitude; ArduCopter: GUIDED, then NAV_TAKEOFF above home; ArduPlane: armed in
    TAKEOFF mode); a fixed wing is then sent to loiter at the first waypoint;
-4. at the first waypoint's time, switch to mission mode and confirm it on HEARTBEAT.
+4. at the first waypoint's time plus the scenario's ``start_delay_s`` (a late start), switch
+   to mission mode and confirm it on HEARTBEAT.
 
 A vehicle that refuses a step is left as it is: the refusal is logged as one error naming the
 vehicle and the reason, recorded in the report's ``fly`` entry, and the run goes on.
@@ -19,7 +21,8 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from adapters.mavlink import MavlinkHub
@@ -27,7 +30,15 @@ from adapters.mavlink.transfer import MavlinkError
 from adapters.mavlink.vehicle import VehicleState
 from gcs_utm.clock import Clock
 from gcs_utm.messages import FlightMode
-from gcs_utm.model import Autopilot, Command, CommandKind, SysId, VehicleKind
+from gcs_utm.model import (
+    Autopilot,
+    Command,
+    CommandKind,
+    FlightPlan,
+    OperationId,
+    SysId,
+    VehicleKind,
+)
 from gcs_utm.scenario import Scenario
 from gcs_utm.scenario.types import VehicleSetup
 
@@ -87,23 +98,45 @@ class FlyOutcome:
         }
 
 
+CurrentPlan = Callable[[OperationId], FlightPlan]
+"""The operation's current plan version (the UTM's airspace), read at upload time."""
+
+
 async def fly_scenario(
-    hub: MavlinkHub, clock: Clock, scenario: Scenario, outcomes: list[FlyOutcome]
+    hub: MavlinkHub,
+    clock: Clock,
+    scenario: Scenario,
+    outcomes: list[FlyOutcome],
+    *,
+    current_plan: CurrentPlan | None = None,
 ) -> None:
     """Fly every operation of ``scenario`` on its external vehicle (one task each); fills
-    ``outcomes`` as it goes, so that a run cut short still reports what was done."""
+    ``outcomes`` as it goes, so that a run cut short still reports what was done.
+    ``current_plan`` gives each operation's plan version at the time of its upload (a
+    resolution accepted before the upload is not overwritten by the filed plan); without
+    it the filed plan is uploaded."""
     async with asyncio.TaskGroup() as tg:
         for v in scenario.vehicles:
             out = FlyOutcome(uas=str(v.operation_id), sys_id=v.sys_id)
             outcomes.append(out)
-            tg.create_task(_fly_guarded(hub, clock, v, out), name=f"fly-{v.operation_id}")
+            plan_of = current_plan or _filed_plan(v.plan)
+            tg.create_task(_fly_guarded(hub, clock, v, out, plan_of), name=f"fly-{v.operation_id}")
 
 
-async def _fly_guarded(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome) -> None:
+def _filed_plan(plan: FlightPlan) -> CurrentPlan:
+    def plan_of(_op_id: OperationId) -> FlightPlan:
+        return plan
+
+    return plan_of
+
+
+async def _fly_guarded(
+    hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome, plan_of: CurrentPlan
+) -> None:
     try:
         if v.sys_id is None:
             raise FlyRefusedError("the operation has no sys_id: no vehicle to fly it")
-        await _fly_one(hub, clock, v, out)
+        await _fly_one(hub, clock, v, out, plan_of)
     except (FlyRefusedError, MavlinkError) as exc:  # MavlinkError: the vehicle was lost
         out.error = str(exc)
         _log.error("fly %s (sys_id %s): %s", v.operation_id, v.sys_id, exc)
@@ -114,47 +147,64 @@ def _step(out: FlyOutcome, clock: Clock, text: str) -> None:
     _log.info("fly %s (sys_id %s): %s", out.uas, out.sys_id, text)
 
 
-async def _fly_one(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome) -> None:
+async def _fly_one(
+    hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome, plan_of: CurrentPlan
+) -> None:
     assert v.sys_id is not None
-    wps = v.plan.waypoints
-    first = wps[0]
-    await _wait_fix(hub, clock, v, first.t_s + DISCOVERY_GRACE_S)
+    sys_id = v.sys_id
+    await _wait_fix(hub, clock, v, plan_of(v.operation_id).waypoints[0].t_s + DISCOVERY_GRACE_S)
     _step(out, clock, "discovered with a position fix")
-    if not await _wait_home(hub, clock, v.sys_id):
+    if not await _wait_home(hub, clock, sys_id):
         _step(out, clock, f"no HOME_POSITION within {HOME_WAIT_S:.0f} s: going on without")
     st = hub.state(v.sys_id)
     # the vehicle's own home (ArduPilot's take-off altitude is relative to it); a first
     # position can precede the autopilot's altitude origin (ArduPlane reported ~0 m AMSL)
     pos = st.home or st.last_position
     ground_m = pos.alt_amsl_m if pos is not None else v.home.alt_amsl_m
-    climb_m = max(0.0, first.alt_amsl_m - ground_m)
-    takeoff_t_s = first.t_s - climb_m / TAKEOFF_CLIMB_MPS - TAKEOFF_MARGIN_S
-    await _upload(hub, clock, v, out, until_t_s=takeoff_t_s)
+    v = await _upload(hub, clock, v, out, plan_of, ground_m=ground_m)
+    first = v.plan.waypoints[0]
+    takeoff_t_s = _takeoff_t_s(v.plan, ground_m)
     await clock.sleep(max(0.0, takeoff_t_s - clock.now_s()))
     await _takeoff(hub, clock, v, out, ground_m=ground_m)
-    await clock.sleep(max(0.0, first.t_s - clock.now_s()))
-    mode = await hub.send_mode(v.sys_id, FlightMode.MISSION)
+    # a late start of the scenario (use case 1's start_delay_s) is flown as filed: late
+    start_t_s = first.t_s + v.start_delay_s
+    await clock.sleep(max(0.0, start_t_s - clock.now_s()))
+    mode = await hub.send_mode(sys_id, FlightMode.MISSION)
     if not mode.ok:
         raise FlyRefusedError(f"mission mode refused: {mode.error}")
-    if not await hub.wait_mode(hub.state(v.sys_id), FlightMode.MISSION, MODE_CONFIRM_S):
-        shown = hub.state(v.sys_id).mode.value
+    if not await hub.wait_mode(hub.state(sys_id), FlightMode.MISSION, MODE_CONFIRM_S):
+        shown = hub.state(sys_id).mode.value
         raise FlyRefusedError(f"HEARTBEAT still shows {shown}, not mission")
     out.started = True
     out.late_s = max(0.0, clock.now_s() - first.t_s)
     _step(out, clock, f"mission started ({out.late_s:.1f} s after the first waypoint's time)")
 
 
+def _takeoff_t_s(plan: FlightPlan, ground_m: float) -> float:
+    first = plan.waypoints[0]
+    climb_m = max(0.0, first.alt_amsl_m - ground_m)
+    return first.t_s - climb_m / TAKEOFF_CLIMB_MPS - TAKEOFF_MARGIN_S
+
+
 async def _upload(
-    hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome, *, until_t_s: float
-) -> None:
-    """Upload the filed plan (readback verified, first waypoint current); a failed upload
-    (each is already tried twice) is tried again every ``UPLOAD_RETRY_S`` until the take-off
-    time: on a loaded machine a transfer can overrun its budget."""
+    hub: MavlinkHub,
+    clock: Clock,
+    v: VehicleSetup,
+    out: FlyOutcome,
+    plan_of: CurrentPlan,
+    *,
+    ground_m: float,
+) -> VehicleSetup:
+    """Upload the operation's current plan version (readback verified, first waypoint
+    current), read again at each try; ``v`` with the plan uploaded. A failed upload (each is
+    already tried twice) is tried again every ``UPLOAD_RETRY_S`` until the take-off time: on
+    a loaded machine a transfer can overrun its budget."""
     assert v.sys_id is not None
     while True:
+        plan = plan_of(v.operation_id)
         res = await hub.upload_plan(
             v.sys_id,
-            v.plan,
+            plan,
             home=v.home,
             set_mission_mode=False,
             climb_rate_mps=v.max_climb_rate_mps,
@@ -163,11 +213,17 @@ async def _upload(
         if res.ok:
             break
         why = f"plan upload failed ({res.failure}): {res.error}"
-        if clock.now_s() + UPLOAD_RETRY_S >= until_t_s:
+        if clock.now_s() + UPLOAD_RETRY_S >= _takeoff_t_s(plan, ground_m):
             raise FlyRefusedError(why)
         _step(out, clock, f"{why}; trying again")
         await clock.sleep(UPLOAD_RETRY_S)
-    _step(out, clock, f"plan uploaded and verified ({res.items} items, current {res.current_seq})")
+    _step(
+        out,
+        clock,
+        f"plan v{plan.version} uploaded and verified ({res.items} items, "
+        f"current {res.current_seq})",
+    )
+    return replace(v, plan=plan)
 
 
 async def _wait_fix(hub: MavlinkHub, clock: Clock, v: VehicleSetup, until_t_s: float) -> None:

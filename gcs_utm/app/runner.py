@@ -407,7 +407,15 @@ async def _serve(
         tasks.append(tg.create_task(_play_alerts(rt, scenario, lead_s), name="alerts"))
         tasks.append(tg.create_task(_sample_tracks(rt, SAMPLE_PERIOD_S), name="samples"))
         if options.fly:
-            fly = fly_scenario(rt.hub, rt.clock, scenario, flown)
+            # the plan version current at upload: a resolution accepted before the
+            # take-off is flown, not overwritten by the filed plan
+            fly = fly_scenario(
+                rt.hub,
+                rt.clock,
+                scenario,
+                flown,
+                current_plan=lambda op_id: rt.airspace.operation(op_id).plan,
+            )
             tasks.append(tg.create_task(fly, name="fly"))
         dash = next((t for t in tasks if t.get_name() == "dashboard"), None)
         await _until(rt.clock, end_t_s, dash)
