@@ -137,9 +137,17 @@ class PilotLink:
 
     def wait_ready(self, timeout_s: float = 60.0) -> None:
         """Until the autopilot has a position fix and a home."""
-        if self.autopilot != "px4":
-            self.request_streams()
-        self.wait("GLOBAL_POSITION_INT", timeout_s, lambda m: m.lat != 0)
+        end = time.monotonic() + timeout_s
+        while True:
+            if self.autopilot != "px4":
+                # ArduPilot ignores a stream request sent while it is still booting: repeat it
+                self.request_streams()
+            try:
+                self.wait("GLOBAL_POSITION_INT", 2.0, lambda m: m.lat != 0)
+                break
+            except TimeoutError:
+                if time.monotonic() >= end:
+                    raise
         end = time.monotonic() + timeout_s
         while self.home is None and time.monotonic() < end:
             self.send(
