@@ -13,9 +13,11 @@ waits for the write's commit instead of slipping in between), and the write is r
 one this life gained. The refusal is handed to ``on_refused`` (the cluster node audits it and
 stops the instance, the same fail-stop as a lost lease).
 
-What is not fenced: rows of operations whose region this life never held (the decider's
-filing of a recommendation for another instance's operation: it is proposed by that
-operation's owner, whose own writes are fenced), threats, answers and the audit.
+A row of an operation whose region this life never held (the decider's filing of a
+recommendation for another instance's operation) is written under this life's authority over
+its own regions: it is checked against every lease this life gained, so a stale decider
+cannot file either. Not fenced: a life that holds no region (nothing to check against),
+threats, answers and the audit.
 """
 
 from __future__ import annotations
@@ -69,11 +71,19 @@ class LeaseFence:
         self.generations = {**self.generations, region_id: generation}
 
     def __call__(self, c: Connection, op_id: str) -> None:
-        """Raise FencedError when this life's lease of ``op_id``'s region was taken over."""
+        """Raise FencedError when a lease this write relies on was taken over: the lease of
+        ``op_id``'s region when this life gained that region, else (a decision filed for
+        another instance's operation, made under this life's authority over its own
+        regions) every lease this life gained."""
         region_id = self._region_of(op_id)
-        held = None if region_id is None else self.generations.get(region_id)
-        if region_id is None or held is None:
+        generations = self.generations
+        if region_id is not None and region_id in generations:
+            self._check(c, op_id, region_id, generations[region_id])
             return
+        for held_region, held in sorted(generations.items()):
+            self._check(c, op_id, held_region, held)
+
+    def _check(self, c: Connection, op_id: str, region_id: str, held: int) -> None:
         row = c.execute(
             "SELECT holder, generation FROM region_leases WHERE region_id = ?" + self._lock_sql,
             (region_id,),

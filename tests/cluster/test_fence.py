@@ -53,13 +53,16 @@ async def test_a_stalled_member_cannot_write_its_lost_regions_rows(pg_url: str) 
         # the owner's adoption path (a version allocated on the member's connection) too
         await a.node.decisions.adopt(later, "adopted by a stale member")
         assert a.usm.proposed == []
+        # and a decision A would file for B's UAS2 (as a decider watching it)
+        uas2 = replace(rec, id=RecommendationId("T9/UAS2"), operation_id=OperationId("UAS2"))
+        await a.node.decisions.file(uas2)
         await asyncio.sleep(0.05)  # the refusals reach the loop
         assert a.failed == ["region c0r0 taken over: this instance stops (fenced)"]
         a.flush()
         with open_store(pg_url) as s:
             fenced = [e for e in s.load_audit() if e.action == "write_fenced"]
             plans = [p.version for p in s.load_plans("UAS1")]
-        assert len(fenced) == 4 and {e.subject for e in fenced} == {"UAS1"}
+        assert [e.subject for e in fenced] == ["UAS1"] * 4 + ["UAS2"]
         assert fenced[0].actor == a.node.member.holder
         assert fenced[0].detail == {
             "region": "c0r0",
@@ -107,12 +110,18 @@ def test_the_fence_checks_the_generation_on_both_backends(db: str | Path) -> Non
         assert {(r.current_generation, r.current_holder) for r in refused} == {(2, "B#2")}
         s.fence = None
         assert [r.version for r in s.load_recommendations(latest_only=False)] == [1, 2]
-        # an operation of a region this life never held is not fenced (a decider's filing)
+        # a filing for an operation of a region this life never held (a decider's) is
+        # checked against every lease it gained: refused too, as A is stale
         s.fence = fence
-        s.save_recommendation(
-            replace(rec, id=RecommendationId(rec.id + "x"), operation_id=OperationId("UAS2"))
-        )
-        assert len(refused) == 2
+        other = replace(rec, id=RecommendationId(rec.id + "x"), operation_id=OperationId("UAS2"))
+        with pytest.raises(FencedError, match="region c0r0"):
+            s.save_recommendation(other)
+        # a life holding a live lease files it
+        b_fence = LeaseFence("B#2", region_of, refused.append, lock_sql=s.lock_share_sql)
+        b_fence.gained("c0r0", 2)
+        s.fence = b_fence
+        s.save_recommendation(other)
+        assert len(refused) == 3
 
 
 def test_versions_are_allocated_once_each_under_a_race(pg_url: str) -> None:
