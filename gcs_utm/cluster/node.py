@@ -196,6 +196,7 @@ class ClusterNode:
         self.resumed[region_id] = state
         for op in state.operations:
             self.policy.foreign.discard(op.id)
+            self._regions_of_ops[op.id] = region_id  # the fence's map, filled ahead of writes
         if self.exchange is not None:
             self.exchange.watch(self.member.owned)
         known = set(self._airspace.operations)

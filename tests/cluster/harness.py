@@ -6,14 +6,15 @@ test (no background task), so a test can also stall one member past its lease ex
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from gcs_utm.app.wiring import Persistence
 from gcs_utm.clock import RealClock
 from gcs_utm.cluster.config import ClusterConfig
-from gcs_utm.cluster.node import ClusterNode
+from gcs_utm.cluster.decisions import UsmPort
+from gcs_utm.cluster.node import AirspacePort, ClusterNode
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     Command,
@@ -168,10 +169,18 @@ def file_airspace(location: str | Path) -> list[Operation]:
 
 
 async def member(
-    location: str | Path, cfg: ClusterConfig, *, fenced: bool = True, command_ok: bool = True
+    location: str | Path,
+    cfg: ClusterConfig,
+    *,
+    fenced: bool = True,
+    command_ok: bool = True,
+    services: Callable[[Persistence], tuple[UsmPort, AirspacePort]] | None = None,
 ) -> Member:
+    """A member; ``services``: makes a real USM and airspace on the member's store instead
+    of the fakes (the fakes are still returned, unused)."""
     writer = StoreWriter(location)
     store = Persistence(writer)
+    usm_port, airspace_port = services(store) if services is not None else (None, None)
     usm = FakeUsm(store, command_ok=command_ok)
     em = FakeEm()
     airspace = FakeAirspace()
@@ -183,9 +192,9 @@ async def member(
         epoch=writer.epoch,
         frame=frame(),
         clock=RealClock(),
-        airspace=airspace,
+        airspace=airspace_port or airspace,
         tracking=FakeTracking(),
-        usm=usm,
+        usm=usm_port or usm,
         record=store.record,
         on_fail=failed.append,
         emergency=em,

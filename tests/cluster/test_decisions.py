@@ -158,3 +158,66 @@ async def test_a_stale_command_is_not_sent(pg_url: str) -> None:
     finally:
         await a.close()
         await b.close()
+
+
+class _Vehicles:
+    """The MAVLink side of the owner's USM: records the commands sent, acknowledges them."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[int, Command]] = []
+
+    async def upload_plan(self, *args: object, **kwargs: object) -> object:
+        raise AssertionError("no upload expected")
+
+    async def send_command(self, sys_id: int, command: Command) -> _Ack:
+        self.sent.append((sys_id, command))
+        return _Ack()
+
+
+class _Ack:
+    ok = True
+    error = ""
+
+
+@pytest.mark.timeout(60)
+async def test_the_owners_usm_sends_a_forwarded_hold_to_the_vehicle(pg_url: str) -> None:
+    """The same hand-over with the owner's real USM and airspace: the hold goes to UAS1's
+    system id through the vehicle port, is audited, and suspends the operation."""
+    from gcs_utm.app.wiring import Persistence
+    from gcs_utm.clock import RealClock
+    from gcs_utm.services.airspace import Airspace
+
+    vehicles = _Vehicles()
+    real: list[Usm] = []
+
+    def services(store: Persistence) -> tuple[Usm, Airspace]:
+        airspace = Airspace(on_operation=store.save_operation)
+        usm = Usm(airspace, RealClock(), record=store.record)
+        usm.attach_vehicles(vehicles)  # type: ignore[arg-type]
+        real.append(usm)
+        return usm, airspace
+
+    (uas1,) = [op for op in file_airspace(pg_url) if op.id == UAS1]
+    a = await member(pg_url, config("A", "c0r0", standby=False), services=services)
+    b = await member(pg_url, config("B", "c1r0", standby=False))
+    try:
+        assert await a.step() == ["gained c0r0"] and await b.step() == ["gained c1r0"]
+        b.node.policy.foreign.add(UAS1)
+        b.node._install_foreign([uas1])
+        hold = Command(kind=CommandKind.HOLD, operation_id=UAS1)
+        now = time.time()
+        rec = replace(
+            _rec(), selected=None, alternatives=(), command=hold, deadline_t_s=now + 600.0
+        ).transition(RecommendationState.ACCEPTED, now, "autonomous mode")
+        await _decide(b, rec, commands=(hold,))
+        await a.node.refresh()
+        assert vehicles.sent == [(1, hold)]
+        (usm,) = real
+        assert usm.airspace.operation(UAS1).state.value == "suspended"
+        a.flush()
+        assert [(v, s) for v, s, _e in _versions(pg_url)] == [(1, "accepted"), (2, "applied")]
+        audit = raw_execute(pg_url, "SELECT actor, action, subject FROM audit ORDER BY seq")
+        assert ("usm", "command_hold", "UAS1") in audit
+    finally:
+        await a.close()
+        await b.close()
