@@ -44,6 +44,7 @@ from adapters.mavlink.adsb_relay import AdsbRelay, MessageHandler
 from adapters.mavlink.commands import Commands
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.endpoint import parse_endpoint
+from adapters.mavlink.handlers import message_handlers
 from adapters.mavlink.senders import Senders, idle_keys, over_cap_keys
 from adapters.mavlink.signing import SignatureCheck
 from adapters.mavlink.transfer import (
@@ -221,20 +222,8 @@ class MavlinkHub(Commands):
         self._restream: set[int] = set()  # id(state) of ArduPilot vehicles to ask for streams
         self._drops_reported: tuple[float, dict[str, int]] = (clock.now_s(), {})
         self._tasks: list[asyncio.Task[None]] = []
-        self._handlers: dict[int, MessageHandler] = {
-            wire.HEARTBEAT: VehicleState.on_heartbeat,
-            wire.GLOBAL_POSITION_INT: VehicleState.on_global_position,
-            wire.GPS_RAW_INT: VehicleState.on_gps_raw,
-            wire.SYS_STATUS: VehicleState.on_sys_status,
-            wire.BATTERY_STATUS: VehicleState.on_battery_status,
-            wire.MISSION_CURRENT: VehicleState.on_mission_current,
-            wire.EXTENDED_SYS_STATE: VehicleState.on_extended_sys_state,
-            wire.STATUSTEXT: VehicleState.on_statustext,
-            wire.SYSTEM_TIME: VehicleState.on_system_time,
-            wire.HOME_POSITION: VehicleState.on_home_position,
-        }
         self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE relayed by a vehicle -> ADS-B measurement
-        self._handlers[wire.ADSB_VEHICLE] = self.adsb_relay.on_adsb_vehicle
+        self._handlers = message_handlers(self.adsb_relay)  # shared with the tlog replay
 
     # --- lifecycle ------------------------------------------------------------------------
     async def __aenter__(self) -> MavlinkHub:
