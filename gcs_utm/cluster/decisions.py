@@ -20,6 +20,11 @@ QoS 0, latest-wins traffic, right for tracks and wrong for commands.
     (the command's own audit row names the outcome); one past its deadline is stale and left.
 - **decider's EM** (:meth:`DecisionRelay.relay`): hears the owner's answer (when its own
   version was still a prompt) and the outcome, in its own version numbers.
+- **decider become owner** (:meth:`DecisionRelay.adopt` of a version of a recommendation this
+  life's EM decided: its region was gained with the prompt pending): EM's pending version
+  takes the adopted (store-allocated) number (``EmergencyPort.renumber``), so the pilot's
+  answer reaches EM under the number the pilot saw, and EM's next version of the id, which
+  goes to this instance's USM directly, is above every stored version.
 """
 
 from __future__ import annotations
@@ -66,6 +71,8 @@ class EmergencyPort(Protocol):
     async def submit_outcome(
         self, rec_id: RecommendationId, version: int, applied: bool, reason: str
     ) -> None: ...
+
+    def renumber(self, rec_id: RecommendationId, version: int) -> bool: ...
 
 
 # the owner's state of its version -> what the decider's EM hears (an answer, an outcome)
@@ -185,6 +192,10 @@ class DecisionRelay:
             _log.warning("cluster: %s v%d not adopted: %s", rec.id, rec.version, exc)
             self._usm.log_event("cluster", f"{rec.id} v{rec.version} not adopted: {exc}")
             return
+        # this life's EM decided it (for an operation that was foreign here, now gained):
+        # its pending version continues from the adopted number (see module)
+        if self._emergency is not None and self._emergency.renumber(rec.id, version):
+            self._usm.log_event("cluster", f"{rec.id}: EM's pending version is now v{version}")
         await self._usm.on_recommendation(dataclasses.replace(mine, version=version))
 
     async def take(self, open_recs: list[tuple[Recommendation, int]]) -> None:

@@ -94,6 +94,18 @@ class EmergencyService:
     ) -> None:
         await self._queue.put(_Outcome(rec_id, version, applied, reason))
 
+    def renumber(self, rec_id: RecommendationId, version: int) -> bool:
+        """A cluster member took over the prompt of ``rec_id`` as ``version`` (a number
+        allocated in the shared store, gcs_utm.cluster.decisions): when that is EM's pending
+        version under a smaller number, it takes ``version``, so the pilot's answer names
+        EM's version and EM's next version of the id is above every stored one. Immediate
+        (not queued): EM decides on one task, and this runs between its steps."""
+        cur = self.em.recommendation(rec_id)
+        if cur is None or cur.state is not RecommendationState.PROPOSED or cur.version >= version:
+            return False
+        self.em.record(replace(cur, version=version))
+        return True
+
     # The USM's operator port: EM hears how accepted recommendations ended.
     async def present(self, rec: Recommendation) -> None:
         return None

@@ -13,7 +13,7 @@ from pathlib import Path
 from gcs_utm.app.wiring import Persistence
 from gcs_utm.clock import RealClock
 from gcs_utm.cluster.config import ClusterConfig
-from gcs_utm.cluster.decisions import UsmPort
+from gcs_utm.cluster.decisions import EmergencyPort, UsmPort
 from gcs_utm.cluster.node import AirspacePort, ClusterNode
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
@@ -90,6 +90,7 @@ class FakeEm:
     def __init__(self) -> None:
         self.answers: list[tuple[str, int, bool]] = []
         self.outcomes: list[tuple[str, int, bool]] = []
+        self.renumbered: list[tuple[str, int]] = []
 
     async def submit_answer(self, rec_id: RecommendationId, version: int, accepted: bool) -> None:
         self.answers.append((rec_id, version, accepted))
@@ -98,6 +99,10 @@ class FakeEm:
         self, rec_id: RecommendationId, version: int, applied: bool, reason: str
     ) -> None:
         self.outcomes.append((rec_id, version, applied))
+
+    def renumber(self, rec_id: RecommendationId, version: int) -> bool:
+        self.renumbered.append((rec_id, version))
+        return False
 
 
 @dataclass
@@ -175,9 +180,11 @@ async def member(
     fenced: bool = True,
     command_ok: bool = True,
     services: Callable[[Persistence], tuple[UsmPort, AirspacePort]] | None = None,
+    emergency: EmergencyPort | None = None,
 ) -> Member:
     """A member; ``services``: makes a real USM and airspace on the member's store instead
-    of the fakes (the fakes are still returned, unused)."""
+    of the fakes (the fakes are still returned, unused); ``emergency``: a real EM service
+    instead of the fake (likewise)."""
     writer = StoreWriter(location)
     store = Persistence(writer)
     usm_port, airspace_port = services(store) if services is not None else (None, None)
@@ -197,7 +204,7 @@ async def member(
         usm=usm_port or usm,
         record=store.record,
         on_fail=failed.append,
-        emergency=em,
+        emergency=emergency or em,
     )
     if fenced:
         writer.set_fence(node.fence).result(10.0)

@@ -9,6 +9,8 @@ B decides for A's UAS1 (B owns UAS2, the higher priority); A owns UAS1's link an
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import time
 from dataclasses import replace
 from typing import cast
@@ -22,6 +24,7 @@ from gcs_utm.model import (
     CommandKind,
     OperationId,
     Recommendation,
+    RecommendationId,
     RecommendationState,
 )
 from gcs_utm.services.usm import Usm
@@ -219,5 +222,141 @@ async def test_the_owners_usm_sends_a_forwarded_hold_to_the_vehicle(pg_url: str)
         audit = raw_execute(pg_url, "SELECT actor, action, subject FROM audit ORDER BY seq")
         assert ("usm", "command_hold", "UAS1") in audit
     finally:
+        await a.close()
+        await b.close()
+
+
+LEASE_S = 1.0
+
+
+@pytest.mark.timeout(60)
+async def test_after_a_takeover_the_deciders_re_decision_reaches_its_own_pilot(
+    pg_url: str,
+) -> None:
+    """B's EM decided for A's UAS1 (foreign in B); A proposed it to its pilot (v2) and died
+    with the prompt pending; B, a standby, took c0r0 over and proposed the prompt again (v3,
+    allocated in the store). B's EM numbers its own operations' versions itself: its pending
+    version takes the adopted number, so its re-decision (the previous number + 1, as the
+    pure EM numbers) is above every stored version and reaches B's pilot through B's real
+    USM, and the pilot's answer reaches B's EM under the number the pilot saw."""
+    from gcs_utm.app.wiring import Persistence
+    from gcs_utm.clock import RealClock
+    from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
+    from gcs_utm.core.emergency import EmergencyConfig, EmergencyManager
+    from gcs_utm.core.emergency.decision import Case
+    from gcs_utm.core.monitoring.config import MonitoringConfig
+    from gcs_utm.messages import PilotAnswer, PilotDecision
+    from gcs_utm.model import AirspaceSnapshot
+    from gcs_utm.services.airspace import Airspace
+    from gcs_utm.services.emergency import EmergencyService
+    from tests.cluster.harness import frame
+    from tests.store.test_store import _threat
+
+    mon = MonitoringConfig()
+    em = EmergencyManager(
+        frame(),
+        EmergencyConfig(min_response_s=300.0, answer_window_s=300.0),
+        TacticalDeconfliction(frame(), DeconflictionConfig(), mon),
+        mon,
+    )
+    b_box: list[Member] = []
+    usm_box: list[Usm] = []
+    decisions: list[Decision] = []
+
+    async def on_decision(d: Decision) -> None:  # as serve carries B's EM decisions out
+        decisions.append(d)
+        b = b_box[0]
+        await apply_decision(
+            usm_box[0], d, b.store, owns=b.node.policy.owns, file=b.node.policy.filer
+        )
+
+    def snapshot(t_s: float) -> AirspaceSnapshot:
+        return AirspaceSnapshot(t_s=t_s, operations={}, tracks={}, geofences=())
+
+    service = EmergencyService(em, snapshot, RealClock(), on_decision)
+
+    def services(store: Persistence) -> tuple[Usm, Airspace]:
+        airspace = Airspace(on_operation=store.save_operation)
+        usm = Usm(airspace, RealClock(), record=store.record)
+
+        async def answer_sink(rec: Recommendation, accepted: bool) -> None:
+            await service.submit_answer(rec.id, rec.version, accepted)
+
+        usm.attach_answer_sink(answer_sink)  # as gcs_utm.app.wiring attaches them
+        usm.attach_operator(service)
+        usm_box.append(usm)
+        return usm, airspace
+
+    ops = {op.id: op for op in file_airspace(pg_url)}
+    a = await member(pg_url, config("A", "c0r0", standby=False, lease_s=LEASE_S))
+    b = await member(
+        pg_url,
+        config("B", "c1r0", standby=True, lease_s=LEASE_S),
+        services=services,
+        emergency=service,
+    )
+    b_box.append(b)
+    (usm_b,) = usm_box
+    ea, eb = a.node.member.epoch, b.node.member.epoch
+    running = asyncio.create_task(service.run())
+    try:
+        assert await a.step() == ["gained c0r0"] and await b.step() == ["gained c1r0"]
+        b.node.policy.foreign.add(UAS1)
+        b.node._install_foreign([ops[UAS1]])
+        # B's EM decides v1 for A's UAS1: filed for A, proposed by A to its pilot as v2
+        now = time.time()
+        case = Case(
+            threat=replace(_threat(), predicted_event_at_s=now + 600.0),
+            action="resolve",
+            attempt_t_s=now,
+        )
+        proposed = _rec().selected
+        await on_decision(em.issue(case, UAS1, now, selected=proposed, reason="first"))
+        b.flush()
+        (rid,) = (str(r) for r in case.rec_ids)
+        assert usm_b.recommendations == {}  # not B's pilot
+        await a.node.refresh()
+        assert [r.version for r in a.usm.proposed] == [2]
+        a.flush()
+        # A dies (no more lease rounds); B, a standby, takes c0r0 over with the prompt
+        await asyncio.sleep(LEASE_S + 0.2)
+        assert await b.step() == ["gained c0r0"]
+        b.flush()
+        assert _versions(pg_url) == [(1, "proposed", eb), (2, "proposed", ea), (3, "proposed", eb)]
+        held = usm_b.recommendations[RecommendationId(rid)].rec
+        assert (held.version, held.state) == (3, RecommendationState.PROPOSED)
+        # B's EM re-decides (supersedes its pending version with the next number)
+        again = em.issue(case, UAS1, time.time(), selected=proposed, reason="re-decision")
+        await on_decision(again)
+        b.flush()
+        held = usm_b.recommendations[RecommendationId(rid)].rec
+        assert (held.version, held.state, held.reason) == (
+            4,
+            RecommendationState.PROPOSED,
+            "re-decision",
+        )  # B's pilot is prompted with it
+        assert _versions(pg_url)[2:] == [(3, "superseded", eb), (4, "proposed", eb)]
+        # B's pilot accepts v4: B's EM hears it for its own current version
+        answer = PilotAnswer(
+            recommendation_id=RecommendationId(rid),
+            version=4,
+            decision=PilotDecision.ACCEPT,
+            t_s=time.time(),
+        )
+        assert (await usm_b.answer(answer)).status.value == "accepted"
+        for _ in range(200):
+            if service.processed >= 1:
+                break
+            await asyncio.sleep(0.02)
+        answered = em.recommendation(RecommendationId(rid))
+        assert answered is not None and answered.version == 4
+        assert answered.state is not RecommendationState.PROPOSED  # accepted (then failed:
+        # B's test USM has no vehicle link), not ignored
+        assert [w for d in decisions for w in d.warnings] == []
+        assert a.failed == [] and b.failed == []
+    finally:
+        running.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await running
         await a.close()
         await b.close()
