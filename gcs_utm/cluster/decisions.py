@@ -24,7 +24,9 @@ QoS 0, latest-wins traffic, right for tracks and wrong for commands.
   life's EM decided: its region was gained with the prompt pending): EM's pending version
   takes the adopted (store-allocated) number (``EmergencyPort.renumber``), so the pilot's
   answer reaches EM under the number the pilot saw, and EM's next version of the id, which
-  goes to this instance's USM directly, is above every stored version.
+  goes to this instance's USM directly, is above every stored version. Likewise EM's next
+  version of a recommendation that is not pending at the gain (e.g. accepted, its upload
+  the former owner's) is numbered above the highest stored one (``continue_after``).
 """
 
 from __future__ import annotations
@@ -73,6 +75,8 @@ class EmergencyPort(Protocol):
     ) -> None: ...
 
     def renumber(self, rec_id: RecommendationId, version: int) -> bool: ...
+
+    def continue_after(self, rec_id: RecommendationId, version: int) -> None: ...
 
 
 # the owner's state of its version -> what the decider's EM hears (an answer, an outcome)
@@ -197,6 +201,13 @@ class DecisionRelay:
         if self._emergency is not None and self._emergency.renumber(rec.id, version):
             self._usm.log_event("cluster", f"{rec.id}: EM's pending version is now v{version}")
         await self._usm.on_recommendation(dataclasses.replace(mine, version=version))
+
+    def continue_after(self, highest: tuple[tuple[str, int], ...]) -> None:
+        """A region was gained: EM's next version of each of these recommendations (of the
+        region's operations) is numbered above the highest stored one (see module)."""
+        if self._emergency is not None:
+            for rec_id, version in highest:
+                self._emergency.continue_after(RecommendationId(rec_id), version)
 
     async def take(self, open_recs: list[tuple[Recommendation, int]]) -> None:
         """The prompts and commands other lives filed for this instance's operations."""

@@ -191,7 +191,10 @@ class ClusterNode:
 
     async def _gained(self, region_id: str, lease: Lease | None) -> None:
         region_map = self.member.map
-        state = await self.member.read(lambda s: load_region(s, region_id, region_map, self._frame))
+        epoch = self.member.epoch
+        state = await self.member.read(
+            lambda s: load_region(s, region_id, region_map, self._frame, epoch)
+        )
         assert isinstance(state, RegionState)
         self.resumed[region_id] = state
         for op in state.operations:
@@ -210,6 +213,7 @@ class ClusterNode:
                 f"resumed by {self.member.holder} (region {region_id}, lease "
                 f"generation {generation})",
             )
+        self.decisions.continue_after(state.highest)
         new_ops = [op.id for op in state.operations if op.id not in known]
         watched = [op.id for op in state.operations if op.id in known]
         text = (

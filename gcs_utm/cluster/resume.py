@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from gcs_utm.cluster.regions import RegionMap
 from gcs_utm.geo import LocalFrame
-from gcs_utm.model import Geofence, Operation, Recommendation, RecommendationState
+from gcs_utm.model import Geofence, Operation, OperationId, Recommendation, RecommendationState
 from gcs_utm.store import StoreBase
 
 
@@ -27,6 +27,9 @@ class RegionState:
     operations: tuple[Operation, ...]
     geofences: tuple[Geofence, ...]
     pending: tuple[Recommendation, ...]
+    # the highest stored version of each recommendation of the region's operations that the
+    # gaining life wrote a version of (the ones its EM may hold, decided for them as foreign)
+    highest: tuple[tuple[str, int], ...] = ()
 
 
 def departure_region(op: Operation, frame: LocalFrame, region_map: RegionMap) -> str:
@@ -36,10 +39,12 @@ def departure_region(op: Operation, frame: LocalFrame, region_map: RegionMap) ->
 
 
 def load_region(
-    store: StoreBase, region_id: str, region_map: RegionMap, frame: LocalFrame
+    store: StoreBase, region_id: str, region_map: RegionMap, frame: LocalFrame, epoch: int = 0
 ) -> RegionState:
     """The operations departing in ``region_id``, the active geofences and the region's
-    pending recommendations (read in one call on the caller's thread)."""
+    pending recommendations (read in one call on the caller's thread); with ``epoch`` (the
+    gaining life), the highest version of each recommendation of those operations it wrote
+    a version of."""
     ops = tuple(
         op
         for op in store.load_operations()
@@ -56,7 +61,18 @@ def load_region(
         operations=ops,
         geofences=tuple(store.load_geofences(active_only=True)),
         pending=pending,
+        highest=_highest(store, ids, epoch) if epoch else (),
     )
+
+
+def _highest(store: StoreBase, op_ids: set[OperationId], epoch: int) -> tuple[tuple[str, int], ...]:
+    rows = store._rows(
+        "SELECT id, operation_id, MAX(version) FROM recommendations WHERE id IN "
+        "(SELECT id FROM recommendations WHERE epoch = ?) GROUP BY id, operation_id "
+        "ORDER BY id",
+        (epoch,),
+    )
+    return tuple((str(i), int(v)) for i, op, v in rows if OperationId(str(op)) in op_ids)
 
 
 __all__ = ["RegionState", "departure_region", "load_region"]

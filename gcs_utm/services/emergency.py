@@ -106,6 +106,11 @@ class EmergencyService:
         self.em.record(replace(cur, version=version))
         return True
 
+    def continue_after(self, rec_id: RecommendationId, version: int) -> None:
+        """Versions of ``rec_id`` up to ``version`` are in the shared store (a cluster member
+        gained the region of its operation): EM's next version is numbered above them."""
+        self.em.continue_after(rec_id, version)
+
     # The USM's operator port: EM hears how accepted recommendations ended.
     async def present(self, rec: Recommendation) -> None:
         return None

@@ -104,6 +104,9 @@ class FakeEm:
         self.renumbered.append((rec_id, version))
         return False
 
+    def continue_after(self, rec_id: RecommendationId, version: int) -> None:
+        return None
+
 
 @dataclass
 class Member:

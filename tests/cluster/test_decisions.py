@@ -12,25 +12,32 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import cast
 
 import pytest
 
-from gcs_utm.app.wiring import apply_decision
-from gcs_utm.core.emergency import Decision
+from gcs_utm.app.wiring import Persistence, apply_decision
+from gcs_utm.clock import RealClock
+from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
+from gcs_utm.core.emergency import Decision, EmergencyConfig, EmergencyManager
+from gcs_utm.core.emergency.decision import Case
+from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.messages import PilotAnswer, PilotDecision
 from gcs_utm.model import (
+    AirspaceSnapshot,
     Command,
     CommandKind,
     OperationId,
     Recommendation,
-    RecommendationId,
     RecommendationState,
 )
+from gcs_utm.services.airspace import Airspace
+from gcs_utm.services.emergency import EmergencyService
 from gcs_utm.services.usm import Usm
-from tests.cluster.harness import Member, config, file_airspace, member
+from tests.cluster.harness import Member, config, file_airspace, frame, member
 from tests.store.conftest import raw_execute
-from tests.store.test_store import _rec
+from tests.store.test_store import _rec, _threat
 
 UAS1 = OperationId("UAS1")
 
@@ -186,9 +193,6 @@ class _Ack:
 async def test_the_owners_usm_sends_a_forwarded_hold_to_the_vehicle(pg_url: str) -> None:
     """The same hand-over with the owner's real USM and airspace: the hold goes to UAS1's
     system id through the vehicle port, is audited, and suspends the operation."""
-    from gcs_utm.app.wiring import Persistence
-    from gcs_utm.clock import RealClock
-    from gcs_utm.services.airspace import Airspace
 
     vehicles = _Vehicles()
     real: list[Usm] = []
@@ -229,29 +233,32 @@ async def test_the_owners_usm_sends_a_forwarded_hold_to_the_vehicle(pg_url: str)
 LEASE_S = 1.0
 
 
-@pytest.mark.timeout(60)
-async def test_after_a_takeover_the_deciders_re_decision_reaches_its_own_pilot(
-    pg_url: str,
-) -> None:
-    """B's EM decided for A's UAS1 (foreign in B); A proposed it to its pilot (v2) and died
-    with the prompt pending; B, a standby, took c0r0 over and proposed the prompt again (v3,
-    allocated in the store). B's EM numbers its own operations' versions itself: its pending
-    version takes the adopted number, so its re-decision (the previous number + 1, as the
-    pure EM numbers) is above every stored version and reaches B's pilot through B's real
-    USM, and the pilot's answer reaches B's EM under the number the pilot saw."""
-    from gcs_utm.app.wiring import Persistence
-    from gcs_utm.clock import RealClock
-    from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
-    from gcs_utm.core.emergency import EmergencyConfig, EmergencyManager
-    from gcs_utm.core.emergency.decision import Case
-    from gcs_utm.core.monitoring.config import MonitoringConfig
-    from gcs_utm.messages import PilotAnswer, PilotDecision
-    from gcs_utm.model import AirspaceSnapshot
-    from gcs_utm.services.airspace import Airspace
-    from gcs_utm.services.emergency import EmergencyService
-    from tests.cluster.harness import frame
-    from tests.store.test_store import _threat
+@dataclass
+class _Owner:
+    """B of the takeover tests: a standby member with a real USM and a real EM service."""
 
+    b: Member
+    em: EmergencyManager
+    usm: Usm
+    service: EmergencyService
+    decisions: list[Decision]
+
+    async def decide(self, d: Decision) -> None:
+        """B's EM decision, carried out as serve carries it (gcs_utm.app.wiring)."""
+        self.decisions.append(d)
+        policy = self.b.node.policy
+        await apply_decision(self.usm, d, self.b.store, owns=policy.owns, file=policy.filer)
+        self.b.flush()
+
+    async def processed(self, n: int) -> None:
+        for _ in range(250):
+            if self.service.processed >= n:
+                return
+            await asyncio.sleep(0.02)
+        raise AssertionError(f"EM processed {self.service.processed} items, not {n}")
+
+
+async def _owner(url: str) -> _Owner:
     mon = MonitoringConfig()
     em = EmergencyManager(
         frame(),
@@ -259,21 +266,16 @@ async def test_after_a_takeover_the_deciders_re_decision_reaches_its_own_pilot(
         TacticalDeconfliction(frame(), DeconflictionConfig(), mon),
         mon,
     )
-    b_box: list[Member] = []
-    usm_box: list[Usm] = []
-    decisions: list[Decision] = []
+    box: list[_Owner] = []
 
-    async def on_decision(d: Decision) -> None:  # as serve carries B's EM decisions out
-        decisions.append(d)
-        b = b_box[0]
-        await apply_decision(
-            usm_box[0], d, b.store, owns=b.node.policy.owns, file=b.node.policy.filer
-        )
+    async def on_decision(d: Decision) -> None:
+        await box[0].decide(d)
 
     def snapshot(t_s: float) -> AirspaceSnapshot:
         return AirspaceSnapshot(t_s=t_s, operations={}, tracks={}, geofences=())
 
     service = EmergencyService(em, snapshot, RealClock(), on_decision)
+    usms: list[Usm] = []
 
     def services(store: Persistence) -> tuple[Usm, Airspace]:
         airspace = Airspace(on_operation=store.save_operation)
@@ -284,75 +286,128 @@ async def test_after_a_takeover_the_deciders_re_decision_reaches_its_own_pilot(
 
         usm.attach_answer_sink(answer_sink)  # as gcs_utm.app.wiring attaches them
         usm.attach_operator(service)
-        usm_box.append(usm)
+        usms.append(usm)
         return usm, airspace
 
-    ops = {op.id: op for op in file_airspace(pg_url)}
-    a = await member(pg_url, config("A", "c0r0", standby=False, lease_s=LEASE_S))
     b = await member(
-        pg_url,
+        url,
         config("B", "c1r0", standby=True, lease_s=LEASE_S),
         services=services,
         emergency=service,
     )
-    b_box.append(b)
-    (usm_b,) = usm_box
+    box.append(_Owner(b, em, usms[0], service, []))
+    return box[0]
+
+
+async def _takeover_pair(url: str) -> tuple[Member, _Owner, Case]:
+    """A owns UAS1, B (standby, real USM and EM) owns UAS2 and watches UAS1; the case B's EM
+    decides UAS1 in."""
+    ops = {op.id: op for op in file_airspace(url)}
+    a = await member(url, config("A", "c0r0", standby=False, lease_s=LEASE_S))
+    owner = await _owner(url)
+    b = owner.b
+    assert await a.step() == ["gained c0r0"] and await b.step() == ["gained c1r0"]
+    b.node.policy.foreign.add(UAS1)
+    b.node._install_foreign([ops[UAS1]])
+    now = time.time()
+    case = Case(
+        threat=replace(_threat(), predicted_event_at_s=now + 600.0),
+        action="resolve",
+        attempt_t_s=now,
+    )
+    return a, owner, case
+
+
+async def _a_dies(a: Member, b: Member) -> None:
+    """A makes no more lease rounds; B, a standby, takes c0r0 over."""
+    await asyncio.sleep(LEASE_S + 0.2)
+    assert await b.step() == ["gained c0r0"]
+    b.flush()
+
+
+@pytest.mark.timeout(60)
+async def test_after_a_takeover_the_deciders_re_decision_reaches_its_own_pilot(
+    pg_url: str,
+) -> None:
+    """B's EM decided for A's UAS1 (foreign in B); A proposed it to its pilot (v2) and died
+    with the prompt pending; B, a standby, took c0r0 over and proposed the prompt again (v3,
+    allocated in the store). B's EM numbers its own operations' versions itself: its pending
+    version takes the adopted number, so its re-decision (the previous number + 1, as the
+    pure EM numbers) is above every stored version and reaches B's pilot through B's real
+    USM, and the pilot's answer reaches B's EM under the number the pilot saw."""
+    a, owner, case = await _takeover_pair(pg_url)
+    b, em, usm_b = owner.b, owner.em, owner.usm
     ea, eb = a.node.member.epoch, b.node.member.epoch
-    running = asyncio.create_task(service.run())
+    running = asyncio.create_task(owner.service.run())
     try:
-        assert await a.step() == ["gained c0r0"] and await b.step() == ["gained c1r0"]
-        b.node.policy.foreign.add(UAS1)
-        b.node._install_foreign([ops[UAS1]])
         # B's EM decides v1 for A's UAS1: filed for A, proposed by A to its pilot as v2
-        now = time.time()
-        case = Case(
-            threat=replace(_threat(), predicted_event_at_s=now + 600.0),
-            action="resolve",
-            attempt_t_s=now,
-        )
         proposed = _rec().selected
-        await on_decision(em.issue(case, UAS1, now, selected=proposed, reason="first"))
-        b.flush()
-        (rid,) = (str(r) for r in case.rec_ids)
+        await owner.decide(em.issue(case, UAS1, time.time(), selected=proposed, reason="first"))
+        (rid,) = case.rec_ids
         assert usm_b.recommendations == {}  # not B's pilot
         await a.node.refresh()
         assert [r.version for r in a.usm.proposed] == [2]
         a.flush()
-        # A dies (no more lease rounds); B, a standby, takes c0r0 over with the prompt
-        await asyncio.sleep(LEASE_S + 0.2)
-        assert await b.step() == ["gained c0r0"]
-        b.flush()
+        await _a_dies(a, b)
         assert _versions(pg_url) == [(1, "proposed", eb), (2, "proposed", ea), (3, "proposed", eb)]
-        held = usm_b.recommendations[RecommendationId(rid)].rec
+        held = usm_b.recommendations[rid].rec
         assert (held.version, held.state) == (3, RecommendationState.PROPOSED)
         # B's EM re-decides (supersedes its pending version with the next number)
-        again = em.issue(case, UAS1, time.time(), selected=proposed, reason="re-decision")
-        await on_decision(again)
-        b.flush()
-        held = usm_b.recommendations[RecommendationId(rid)].rec
-        assert (held.version, held.state, held.reason) == (
-            4,
-            RecommendationState.PROPOSED,
-            "re-decision",
-        )  # B's pilot is prompted with it
+        await owner.decide(em.issue(case, UAS1, time.time(), selected=proposed, reason="again"))
+        held = usm_b.recommendations[rid].rec  # B's pilot is prompted with it
+        assert (held.version, held.state, held.reason) == (4, RecommendationState.PROPOSED, "again")
         assert _versions(pg_url)[2:] == [(3, "superseded", eb), (4, "proposed", eb)]
         # B's pilot accepts v4: B's EM hears it for its own current version
         answer = PilotAnswer(
-            recommendation_id=RecommendationId(rid),
-            version=4,
-            decision=PilotDecision.ACCEPT,
-            t_s=time.time(),
+            recommendation_id=rid, version=4, decision=PilotDecision.ACCEPT, t_s=time.time()
         )
         assert (await usm_b.answer(answer)).status.value == "accepted"
-        for _ in range(200):
-            if service.processed >= 1:
-                break
-            await asyncio.sleep(0.02)
-        answered = em.recommendation(RecommendationId(rid))
+        await owner.processed(1)
+        answered = em.recommendation(rid)
         assert answered is not None and answered.version == 4
-        assert answered.state is not RecommendationState.PROPOSED  # accepted (then failed:
-        # B's test USM has no vehicle link), not ignored
-        assert [w for d in decisions for w in d.warnings] == []
+        # accepted (then failed: B's test USM has no vehicle link), not ignored
+        assert answered.state is not RecommendationState.PROPOSED
+        assert [w for d in owner.decisions for w in d.warnings] == []
+        assert a.failed == [] and b.failed == []
+    finally:
+        running.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await running
+        await a.close()
+        await b.close()
+
+
+@pytest.mark.timeout(60)
+async def test_after_a_takeover_of_an_accepted_decision_the_next_version_is_above(
+    pg_url: str,
+) -> None:
+    """The same, but A's pilot had accepted A's v2 (B's EM heard it for its v1) and A died
+    before the upload's outcome: nothing is pending at the takeover. B's EM's next version
+    of the id is numbered above A's v2 (not v2 again, a row of A's life the store refuses)."""
+    a, owner, case = await _takeover_pair(pg_url)
+    b, em, usm_b = owner.b, owner.em, owner.usm
+    ea, eb = a.node.member.epoch, b.node.member.epoch
+    running = asyncio.create_task(owner.service.run())
+    try:
+        proposed = _rec().selected
+        await owner.decide(em.issue(case, UAS1, time.time(), selected=proposed, reason="first"))
+        (rid,) = case.rec_ids
+        await a.node.refresh()
+        (asked,) = a.usm.proposed
+        a.store.record(asked.transition(RecommendationState.ACCEPTED, time.time(), "pilot"))
+        a.flush()
+        await b.node.refresh()  # B's EM hears the accept for its v1
+        await owner.processed(1)
+        heard = em.recommendation(rid)
+        assert heard is not None
+        assert (heard.version, heard.state) == (1, RecommendationState.ACCEPTED)
+        await _a_dies(a, b)
+        assert usm_b.recommendations == {}  # nothing pending to resume
+        # B's EM decides again for UAS1 (e.g. supervision: the threat is still predicted)
+        await owner.decide(em.issue(case, UAS1, time.time(), selected=proposed, reason="again"))
+        held = usm_b.recommendations[rid].rec
+        assert (held.version, held.state) == (3, RecommendationState.PROPOSED)
+        assert _versions(pg_url) == [(1, "accepted", eb), (2, "accepted", ea), (3, "proposed", eb)]
         assert a.failed == [] and b.failed == []
     finally:
         running.cancel()

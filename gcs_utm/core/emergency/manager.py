@@ -101,6 +101,9 @@ class EmergencyManager:
         self.answer_delay_s = answer_delay_s
         self._cases: dict[ThreatId, Case] = {}
         self._recs: dict[RecommendationId, Recommendation] = {}
+        # versions of an id numbered elsewhere (another instance of a cluster): the next
+        # version of the id is above them
+        self._floors: dict[RecommendationId, int] = {}
 
     # ---- queries ----------------------------------------------------------------------------
     def pending(self) -> list[Recommendation]:
@@ -121,6 +124,11 @@ class EmergencyManager:
         """Store ``rec`` as the current version of its id; returns it."""
         self._recs[rec.id] = rec
         return rec
+
+    def continue_after(self, rec_id: RecommendationId, version: int) -> None:
+        """The next version of ``rec_id`` is numbered above ``version`` (taken elsewhere)."""
+        if rec_id in self._recs:
+            self._floors[rec_id] = max(self._floors.get(rec_id, 0), version)
 
     # ---- entry points -----------------------------------------------------------------------
     def on_threat(self, threat: Threat, snapshot: AirspaceSnapshot) -> Decision:
@@ -359,7 +367,7 @@ class EmergencyManager:
                 case.deviates_at[rid] = t_dev
         rec = Recommendation(
             id=rid,
-            version=1 if prev is None else prev.version + 1,
+            version=max(0 if prev is None else prev.version, self._floors.get(rid, 0)) + 1,
             threat_id=case.threat.id,
             threat_kind=case.threat.kind,
             operation_id=op_id,
