@@ -18,6 +18,8 @@ constant the plan-following prediction uses for its cross-track offset (the auto
 converges onto the circle and the waypoint's altitude), so the prediction starts at the
 track's position.
 
+:func:`overlay` applies both to a prediction (what ``Tracker.predict`` calls).
+
 Units: local frame metres (east, north, alt AMSL), seconds.
 """
 
@@ -25,6 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
+
+from gcs_utm.core.tracking import kalman
+from gcs_utm.core.tracking.plans import PlanTable
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -97,3 +102,50 @@ def loiter_points(
     north = center[:, 1, None] + r * np.cos(bearing)
     alt = center[:, 2, None] + (pos[:, 2] - center[:, 2])[:, None] * decay
     return [east, north, alt]
+
+
+def overlay(
+    axes: list[FloatArray],
+    *,
+    plans: PlanTable,
+    plan_row: IntArray,
+    loiter_m: FloatArray,
+    t_state_s: FloatArray,
+    x: FloatArray,
+    ahead0_s: FloatArray,
+    steps_s: FloatArray,
+    decay_s: float,
+) -> None:
+    """Overwrite in ``axes`` (east, north, alt; each (N, K)) the rows that are loitering with
+    their circle. Per row: ``plan_row`` its plan in ``plans`` (-1: none), ``loiter_m`` its
+    loiter radius (0: none), ``t_state_s`` and ``x`` (N, 3, 2) its filter state, ``ahead0_s``
+    the time from its state to the first point; ``steps_s`` the points' offsets from the
+    first."""
+    rows = np.flatnonzero((plan_row >= 0) & (loiter_m > 0.0))
+    if not len(rows):
+        return
+    j = plan_row[rows]
+    center = plans.wp_pos[plans.wp_offset[j] + plans.n_waypoints[j] - 1]
+    pos = x[rows, :, kalman.POS]
+    vel = x[rows, :, kalman.VEL]
+    radius = loiter_m[rows]
+    at = loiter_rows(
+        radius_m=radius,
+        t_state_s=t_state_s[rows],
+        end_t_s=plans.end_t_s[j],
+        pos=pos,
+        vel=vel,
+        center=center,
+    )
+    if not len(at):
+        return
+    circle = loiter_points(
+        radius_m=radius[at],
+        pos=pos[at],
+        vel=vel[at],
+        center=center[at],
+        tau_s=np.add.outer(ahead0_s[rows[at]], steps_s),
+        decay_s=decay_s,
+    )
+    for axis in range(3):
+        axes[axis][rows[at]] = circle[axis]

@@ -686,47 +686,21 @@ class Tracker:
                 for axis in range(3):
                     axes[axis][fr] = f_axes[axis]
                 sigma[fr] = f_sigma
-        self._predict_loiter(axes, ahead0, steps)
+        loiter.overlay(
+            axes,
+            plans=self._plans,
+            plan_row=self._plan_row[:n],
+            loiter_m=self._loiter_m[:n],
+            t_state_s=self._t[:n],
+            x=self._x[:n],
+            ahead0_s=ahead0,
+            steps_s=steps,
+            decay_s=cfg.plan_offset_decay_s,
+        )
         points = np.stack([*axes, np.broadcast_to(times, (n, k))], axis=2)
         return PredictedTrajectories(
             t_s=t_s, track_ids=tuple(self._ids[:n]), points=points, sigma_m=sigma
         )
-
-    def _predict_loiter(
-        self, axes: list[FloatArray], ahead0: FloatArray, steps: FloatArray
-    ) -> None:
-        """Overwrite in ``axes`` the rows of fixed wings loitering after their plan's end
-        with their loiter circle (:mod:`.loiter`)."""
-        n = self._n
-        rows = np.flatnonzero((self._plan_row[:n] >= 0) & (self._loiter_m[:n] > 0.0))
-        if not len(rows):
-            return
-        plans = self._plans
-        j = self._plan_row[rows]
-        center = plans.wp_pos[plans.wp_offset[j] + plans.n_waypoints[j] - 1]
-        pos = self._x[rows, :, kalman.POS]
-        vel = self._x[rows, :, kalman.VEL]
-        radius = self._loiter_m[rows]
-        at = loiter.loiter_rows(
-            radius_m=radius,
-            t_state_s=self._t[rows],
-            end_t_s=plans.end_t_s[j],
-            pos=pos,
-            vel=vel,
-            center=center,
-        )
-        if not len(at):
-            return
-        circle = loiter.loiter_points(
-            radius_m=radius[at],
-            pos=pos[at],
-            vel=vel[at],
-            center=center[at],
-            tau_s=np.add.outer(ahead0[rows[at]], steps),
-            decay_s=self.config.plan_offset_decay_s,
-        )
-        for axis in range(3):
-            axes[axis][rows[at]] = circle[axis]
 
     def tracks_at(self, t_s: float) -> TrackMap:
         """All tracks propagated to ``t_s`` (``Track.t_s == t_s``; the filter state itself is
