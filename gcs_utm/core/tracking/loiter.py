@@ -30,6 +30,7 @@ import numpy.typing as npt
 
 from gcs_utm.core.tracking import kalman
 from gcs_utm.core.tracking.plans import PlanTable
+from gcs_utm.model import Operation
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -42,6 +43,13 @@ radii), and a track further away has been sent elsewhere (a reroute ends with a 
 MIN_SPEED_MPS = 1.0
 """Below this horizontal speed the track's bearing and turn tell nothing (a fixed wing is never
 that slow in flight): it is extrapolated as any other track."""
+
+
+def loiter_radius_m(op: Operation) -> float:
+    """The circle a vehicle flies around its last waypoint once its plan has ended: its turn
+    radius if it cannot hover (a fixed wing), else 0 (it stops there)."""
+    env = op.performance()
+    return 0.0 if env.can_hover else env.turn_radius_m
 
 
 def loiter_rows(

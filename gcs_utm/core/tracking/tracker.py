@@ -184,7 +184,7 @@ class Tracker:
             j = self._plan_of_op.get(op_id, -1) if op_id is not None else -1
             self._plan_row[row] = j
             self._geom_m[row] = ops[j].flight_geometry_m if j >= 0 else 0.0
-            self._loiter_m[row] = _loiter_radius_m(ops[j]) if j >= 0 else 0.0
+            self._loiter_m[row] = loiter.loiter_radius_m(ops[j]) if j >= 0 else 0.0
         keep = np.array(
             [tid.partition("@")[0] not in claimed for tid in self._ids[: self._n]], dtype=bool
         )
@@ -242,7 +242,7 @@ class Tracker:
         op = self._intake.ops.get(ident.operation_id) if ident.operation_id is not None else None
         self._plan_row[row] = self._plan_of_op[op.id] if op is not None else -1
         self._geom_m[row] = op.flight_geometry_m if op is not None else 0.0
-        self._loiter_m[row] = _loiter_radius_m(op) if op is not None else 0.0
+        self._loiter_m[row] = loiter.loiter_radius_m(op) if op is not None else 0.0
         self._seg_hint[row] = -1
         return row
 
@@ -740,10 +740,3 @@ class Tracker:
         row = self._row.get(track_id)
         op_id = self._op_ids[row] if row is not None else None
         return self._intake.ops.get(op_id) if op_id is not None else None
-
-
-def _loiter_radius_m(op: Operation) -> float:
-    """The circle a vehicle flies around its last waypoint once its plan has ended: its turn
-    radius if it cannot hover (a fixed wing), else 0 (it stops there)."""
-    env = op.performance()
-    return 0.0 if env.can_hover else env.turn_radius_m
