@@ -99,6 +99,7 @@ def test_a_multirotor_crossing_a_loitering_fixed_wing_is_moved_not_kept() -> Non
     rec = by_op.get(OperationId("M"))
     audit = next(a for a in d.audit if a.action == "decision")
     assert rec is not None, audit.detail
+    assert "all_kept" not in audit.detail
     assert rec.selected is not None and rec.selected.maneuver is not Maneuver.KEEP_PLAN
     assert OperationId("F") not in by_op  # the loitering aircraft is not re-planned
     # The multirotor's new plan keeps the minima from F's circle.
