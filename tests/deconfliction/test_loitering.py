@@ -111,37 +111,3 @@ def test_a_multirotor_crossing_a_loitering_fixed_wing_is_moved_not_kept() -> Non
     (ae, an, az), (be, bn, bz) = a.coords(t), b.coords(t)
     h, v = em.td.monitoring.effective_minima(10.0, 10.0)
     assert (np.maximum(np.hypot(ae - be, an - bn) / h, np.abs(az - bz) / v) >= 1.0).all()
-
-
-def test_a_multirotor_crossing_the_circle_a_fixed_wing_will_fly_is_moved() -> None:
-    """F's plan ends 20 s after the snapshot, flying east into the origin; M crosses, 40 s
-    later, the point of the circle F will be on (clockwise from the last leg)."""
-    f = replace(
-        sc.make_operation("F", [(-2000.0, 0.0, ALT_M), (0.0, 0.0, ALT_M)], t0_s=T0 - 180.0),
-        vehicle_kind=VehicleKind.FIXED_WING,
-        cruise_speed_mps=SPEED_MPS,
-    )
-    end_t_s = f.plan.end_t_s
-    radius = loiter.loiter_radius_m(f)
-    east, north, _ = loiter.loiter_points(
-        radius_m=np.array([radius]),
-        pos=np.array([[0.0, 0.0, ALT_M]]),
-        vel=np.array([[SPEED_MPS, 0.0, 0.0]]),
-        center=np.array([[0.0, 0.0, ALT_M]]),
-        tau_s=np.array([[40.0]]),
-        decay_s=loitering.CONVERGE_S,
-    )
-    pe, pn = float(east[0, 0]), float(north[0, 0])
-    m = sc.make_operation(
-        "M", [(pe, pn - 1000.0, ALT_M), (pe, pn + 1000.0, ALT_M)], t0_s=end_t_s + 40.0 - 100.0
-    )
-    snap = sc.snapshot([m, f])
-    ghost = loitering.coming_circle(f, snap, sc.FRAME, T0 + 600.0)
-    assert ghost is not None and ghost.id == loitering.ghost_id(f.id)
-    assert ghost.plan.start_t_s > end_t_s
-    los = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["M", "F"], event_in_s=end_t_s + 40.0 - T0)
-    d = sc.build_manager().on_threat(los, snap)
-    by_op = {r.operation_id: r for r in d.recommendations}
-    rec = by_op.get(OperationId("M"))
-    assert rec is not None, d.audit[0].detail
-    assert rec.selected is not None and rec.selected.maneuver is not Maneuver.KEEP_PLAN

@@ -12,12 +12,9 @@ time (the decision's horizon): its filed waypoints, then timed points on the cir
 tracker predicts (the same geometry, :func:`.loiter.loiter_rows` and
 :func:`.loiter.loiter_points`: centre the last waypoint, phase and turn from the track,
 angular speed from its ground speed, offsets converging with the plan-following time
-constant). :func:`coming_circle` predicts, under an id of its own (a *ghost*), the circle
-of a fixed wing whose plan ends within the horizon: from the last waypoint, the way the last
-leg points, clockwise. TD takes the other UAS of a decision with these plans
-(:func:`traffic`), and the UAS of the threat too (:func:`circles`); it moves neither a
-loitering aircraft nor a ghost (the new plan of an aircraft that circles would be a deformed
-circle): the others are kept clear of them.
+constant). TD takes the other UAS of a decision with these plans (:func:`traffic`), and an
+involved loitering aircraft too (:func:`as_traffic`), which it does not move (its new plan
+would be a deformed circle): the others are kept clear of it.
 
 Units: local frame metres (east, north, alt AMSL), seconds.
 """
@@ -25,7 +22,7 @@ Units: local frame metres (east, north, alt AMSL), seconds.
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Sequence
+from collections.abc import Collection
 from dataclasses import replace
 
 import numpy as np
@@ -45,13 +42,6 @@ from gcs_utm.model import (
 CIRCLE_STEP_S = 2.0
 """Spacing of the circle's points in time: at a fixed wing's speed on its turn radius a chord
 of this length lies within two metres of the arc."""
-
-GHOST_SUFFIX = "~loiter"
-"""Suffix of the id of the circle a fixed wing will fly after its plan (:func:`coming_circle`)."""
-
-GHOST_GAP_S = 0.5
-"""The circle starts this long after the plan's end: a plan and its own circle never share an
-instant (TD would see a UAS in conflict with itself)."""
 
 CONVERGE_S = 10.0
 """Time constant with which the track's offset from the circle shrinks (the tracker's
@@ -114,75 +104,6 @@ def loiter_plan(
     return replace(op.plan, waypoints=op.plan.waypoints + circle.waypoints)
 
 
-def ghost_id(op_id: OperationId) -> OperationId:
-    """The id of the circle ``op_id`` will fly after its plan (:func:`coming_circle`)."""
-    return OperationId(f"{op_id}{GHOST_SUFFIX}")
-
-
-def is_ghost(op_id: OperationId) -> bool:
-    return str(op_id).endswith(GHOST_SUFFIX)
-
-
-def rigid(op_id: OperationId, loitering: Collection[OperationId]) -> bool:
-    """TD does not move a loitering aircraft nor the circle a fixed wing will fly."""
-    return op_id in loitering or is_ghost(op_id)
-
-
-def coming_circle(
-    op: Operation, snapshot: AirspaceSnapshot, frame: LocalFrame, until_t_s: float
-) -> Operation | None:
-    """For a fixed wing whose plan ends after the snapshot and before ``until_t_s``: an
-    operation (id :func:`ghost_id`, a *ghost*) that flies only the circle it will loiter
-    from its plan's end up to ``until_t_s`` (:func:`.loiter.loiter_points` from the last
-    waypoint, the way the last leg points, at the cruise speed: clockwise, onto the radius
-    with the plan-following time constant). Else None. TD keeps the others clear of it; the
-    fixed wing's own new plans are not checked against it (a new plan has its own end)."""
-    radius = loiter.loiter_radius_m(op)
-    end_t_s = op.plan.end_t_s
-    if radius <= 0.0 or not snapshot.t_s < end_t_s < until_t_s or len(op.plan.waypoints) < 2:
-        return None
-    xyz = plan_to_local(op.plan, frame).xyz()
-    leg = xyz[-1, :2] - xyz[-2, :2]
-    leg_m = float(np.hypot(leg[0], leg[1]))
-    if leg_m < 1.0:
-        return None
-    center = xyz[-1:]
-    vel = np.array([[*(leg * op.cruise_speed_mps / leg_m), 0.0]])
-    t_from = end_t_s + GHOST_GAP_S
-    k = max(2, math.ceil((until_t_s - t_from) / CIRCLE_STEP_S) + 1)
-    times = np.linspace(t_from, until_t_s, k)
-    east, north, alt = loiter.loiter_points(
-        radius_m=np.array([radius]),
-        pos=center,
-        vel=vel,
-        center=center,
-        tau_s=(times - end_t_s)[None, :],
-        decay_s=CONVERGE_S,
-    )
-    gid = ghost_id(op.id)
-    base = FlightPlan(operation_id=gid, version=0, waypoints=op.plan.waypoints[-1:])
-    plan = local_to_plan(
-        LocalPlan(east[0], north[0], alt[0], times),
-        base,
-        frame,
-        created_t_s=snapshot.t_s,
-        reason="loiter",
-    )
-    return replace(op, id=gid, plan=plan)
-
-
-def circles(
-    involved: Sequence[Operation], snapshot: AirspaceSnapshot, frame: LocalFrame, until_t_s: float
-) -> tuple[list[Operation], list[Operation], set[OperationId]]:
-    """For the UAS of a threat: each one (a loitering one with its circle, :func:`as_traffic`),
-    the circles the fixed wings among them will fly after their plans
-    (:func:`coming_circle`), and the ids of the loitering ones."""
-    out = [as_traffic(op, snapshot, frame, until_t_s) or op for op in involved]
-    ghosts = [g for op in involved if (g := coming_circle(op, snapshot, frame, until_t_s))]
-    loitering = {a.id for a, b in zip(out, involved, strict=True) if a is not b}
-    return out, ghosts, loitering
-
-
 def as_traffic(
     op: Operation, snapshot: AirspaceSnapshot, frame: LocalFrame, until_t_s: float
 ) -> Operation | None:
@@ -201,17 +122,14 @@ def traffic(
 ) -> list[Operation]:
     """The operations other than ``exclude`` that are traffic at the snapshot: active ones
     whose plan has not ended, and loitering fixed wings (whatever the state of their
-    operation: the aircraft is in the air) with their circle up to ``until_t_s``, and the
-    circles the fixed wings among the active ones will fly after their plans (also of an
-    excluded one, unless its circle's id is excluded too)."""
+    operation: the aircraft is in the air) with their circle up to ``until_t_s``."""
     out = []
     for op in snapshot.operations.values():
+        if op.id in exclude:
+            continue
         circling = as_traffic(op, snapshot, frame, until_t_s)
         if circling is not None:
             out.append(circling)
         elif op.state not in inactive and op.plan.end_t_s >= snapshot.t_s:
             out.append(op)
-            if ghost_id(op.id) not in exclude:
-                ghost = coming_circle(op, snapshot, frame, until_t_s)
-                out += [ghost] if ghost is not None else []
-    return [op for op in out if op.id not in exclude]
+    return out

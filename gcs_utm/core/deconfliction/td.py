@@ -189,6 +189,7 @@ class TacticalDeconfliction:
     def others(
         self, snapshot: AirspaceSnapshot, exclude: Collection[OperationId]
     ) -> list[Operation]:
+        """The traffic other than ``exclude``: fixed wings that loiter with their circle."""
         until = snapshot.t_s + self.config.horizon_s
         return lt.traffic(snapshot, exclude, self.frame, until, _INACTIVE)
 
@@ -282,7 +283,7 @@ class TacticalDeconfliction:
         self._queue = []
 
     def _mobility(self, op: Operation) -> float:
-        if op.priority >= self.config.immovable_priority or lt.rigid(op.id, self._loitering):
+        if op.priority >= self.config.immovable_priority or op.id in self._loitering:
             return 0.0
         return 1.0 / max(op.priority, 1)
 
@@ -331,7 +332,7 @@ class TacticalDeconfliction:
         # one Monitoring call per group of others with the same buffered minima
         groups: dict[int, tuple[MonitoringConfig, list[Operation]]] = {}
         for o in others:
-            if o.id not in (op.id, lt.ghost_id(op.id)):
+            if o.id != op.id:
                 cfg = self._pair_config(op, o)
                 groups.setdefault(id(cfg), (cfg, []))[1].append(o)
         for cfg, group in groups.values():
@@ -560,19 +561,18 @@ class TacticalDeconfliction:
         t0 = self.start_time(snapshot, start_t_s)
         self.set_lead_in(lead_in_from_t_s, t0)
         cfg = self.config
-        involved, ghosts, self._loitering = lt.circles(
-            [snapshot.operations[i] for i in threat.uas_ids if i in snapshot.operations],
-            snapshot,
-            self.frame,
-            t0 + cfg.horizon_s,
-        )
+        involved = [
+            lt.as_traffic(op, snapshot, self.frame, t0 + cfg.horizon_s) or op
+            for op in (snapshot.operations[i] for i in threat.uas_ids if i in snapshot.operations)
+        ]
+        self._loitering = {op.id for op in involved if op is not snapshot.operations[op.id]}
         if not involved:
             return {}
         local = {op.id: self.local_plan(op.plan).after(t0) for op in involved}
         end = min(t0 + cfg.horizon_s, max(float(lp.t[-1]) for lp in local.values()))
         steps = max(2, math.ceil((end - t0) / cfg.cord_dt_s) + 1)
         grid: FloatArray = t0 + np.arange(steps, dtype=np.float64) * cfg.cord_dt_s
-        members = list(involved) + self._neighbours(involved, snapshot, grid) + ghosts
+        members = list(involved) + self._neighbours(involved, snapshot, grid)
         for op in members:
             local.setdefault(op.id, self.local_plan(op.plan).after(t0))
         u = len(members)
@@ -586,7 +586,7 @@ class TacticalDeconfliction:
             local=local,
             grid=grid,
             minima=minima,
-            outsiders=self.others(snapshot, {op.id for op in members}) + ghosts,
+            outsiders=self.others(snapshot, {op.id for op in members}),
             geofences=snapshot.geofences,
             fences=self.local_fences(snapshot.geofences),
             lowest=min(op.priority for op in members),
@@ -600,7 +600,7 @@ class TacticalDeconfliction:
                 margin_fraction=cfg.separation_margin_fraction,
             ),
         )
-        for op in (m for m in members if not lt.is_ghost(m.id)):
+        for op in members:
             # Keeping the plan moves nothing: no priority price (the score's cost is then 0).
             self._queue.append(
                 _Candidate(
@@ -710,7 +710,7 @@ class TacticalDeconfliction:
         """Operations whose plans come within 3x the minima of an involved plan inside the
         horizon: the ones a deformation can push into (nearest first, at most
         ``max_neighbours``)."""
-        ids = {op.id for op in involved} | {lt.ghost_id(op.id) for op in involved}
+        ids = {op.id for op in involved}
         pos = [self.local_plan(op.plan).sample(grid) for op in involved]
         found: list[tuple[float, Operation]] = []
         for other in self.others(snapshot, ids):
