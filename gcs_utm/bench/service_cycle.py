@@ -7,7 +7,9 @@ seed and draws, so ``--uas 10000 --uas 100000`` here is the airspace of ``bench 
 --uas 10000 --uas 100000 --density-of 10000``). Wall time on a shared machine is mostly the
 other jobs' load; CPU time of the process (``getrusage``, user + system) is much less
 disturbed, so each cycle is timed in both, and the minor page faults (fresh memory mapped
-and zeroed by the kernel, counted in system time) are reported with them.
+and zeroed by the kernel, counted in system time) are reported with them. The process keeps
+the memory it frees, as the service does (``gcs_utm.app.memory``, set by the service's
+entry point); ``--default-allocator`` times the C library's default behaviour instead.
 
 Records:
 - ``service_cycle``: per N, medians over ``--runs`` cycles after ``--warmup`` untimed ones of
@@ -28,6 +30,7 @@ import time
 
 import numpy as np
 
+from gcs_utm.app.memory import retain_freed_memory
 from gcs_utm.bench.monitoring import BOX_M, _fences, _Setup
 
 NAME = "service_cycle"
@@ -46,6 +49,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="N0",
         help="traffic density of N0 UAS in the 50 km box (the box side grows with "
         "sqrt(N / N0), the geofences with N / N0); 0: one 50 km box for every N",
+    )
+    p.add_argument(
+        "--default-allocator",
+        action="store_true",
+        help="leave the C allocator's defaults (the service keeps the memory it frees)",
     )
 
 
@@ -84,6 +92,7 @@ def _growth(medians: dict[int, float]) -> dict[str, float]:
 def run(args: argparse.Namespace) -> list[dict[str, object]]:
     if args.runs < 1 or args.warmup < 0:
         raise ValueError("--runs must be >= 1 and --warmup >= 0")
+    retained = False if args.default_allocator else retain_freed_memory()
     sizes = args.uas or [10000, 100000]
     rng = np.random.default_rng(args.seed)
     base_fences = _fences(rng)  # the draws of bench monitoring, in its order
@@ -119,6 +128,7 @@ def run(args: argparse.Namespace) -> list[dict[str, object]]:
                 "threats": s.monitor.open_count(),
                 "box_km": round(box_m / 1000.0, 1),
                 "geofences": len(fences),
+                "retain_freed_memory": retained,
                 "loadavg_1min": [round(load_before, 2), round(os.getloadavg()[0], 2)],
             }
         )
