@@ -40,7 +40,12 @@ IN_ALL = False  # the 100,000-UAS airspace takes about half a minute: run when n
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--uas", "--n", type=int, action="append", help="N (repeatable)")
     p.add_argument("--runs", type=int, default=7, help="timed cycles per N")
-    p.add_argument("--warmup", type=int, default=2, help="untimed cycles before them")
+    p.add_argument(
+        "--warmup",
+        type=int,
+        default=3,
+        help="untimed cycles before them (the heap grows in the first)",
+    )
     p.add_argument("--seed", type=int, default=7)
     p.add_argument(
         "--density-of",
