@@ -20,11 +20,7 @@ Use case 2 cannot run on PX4 v1.15.2 SIH: its SIH GNSS simulation takes no failu
 from __future__ import annotations
 
 import bisect
-import json
 import math
-import subprocess
-import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -33,6 +29,7 @@ import pytest
 from pymavlink import mavutil
 
 from tests.autopilot.autopilots import PX4_DEFAULT_HOME, PX4_SIH_PLANE_PARAMS, REPO, SitlProcess
+from tests.autopilot.fly import run_fly
 from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 
 SPEED = 5.0  # PX4_SIM_SPEED_FACTOR; run --speed matches it
@@ -118,22 +115,9 @@ def test_use_case_1_on_px4_sih_plane_and_quad(
         pilot.set_params(PLANE_PARAMS)
     finally:
         pilot.close()
-    out_dir = tmp_path / "runs"
-    t0 = time.monotonic()
-    run = subprocess.run(
-        [sys.executable, "-m", "gcs_utm", "run", str(SCENARIO), "--external", "--fly",
-         "--auto-accept", "--headless", "--no-figures", "--speed", str(SPEED),
-         "--out", str(out_dir), "--record", str(tmp_path / "rec")],
-        capture_output=True, text=True, timeout=240, stdin=subprocess.DEVNULL, check=False,
-    )  # fmt: skip
-    log = (run.stdout + run.stderr)[-6000:]
-    print(f"run: {time.monotonic() - t0:.0f} s wall")
-    assert run.returncode == 0, log
-    report = json.loads((out_dir / "use_case_1_px4.json").read_text())
+    record = ("--record", str(tmp_path / "rec"))
+    report, log = run_fly(SCENARIO, tmp_path / "runs", SPEED, extra_args=record)
     fly = {f["uas"]: f for f in report["fly"]}
-    for f in fly.values():
-        assert not f["error"], f"{f}\n{log}"
-        assert f["uploaded"] and f["verified"] and f["armed"] and f["started"], f"{f}\n{log}"
     # the scenario's 3 s late start of UAS1 is flown (mission mode 3 s after its time)
     print("mission started late by:", {u: f["late_s"] for u, f in fly.items()})
     assert fly["UAS1"]["late_s"] >= 3.0
