@@ -491,7 +491,10 @@ class ThreatKind(Enum):
     UAS_OUT_OV = "UAS_OUT_OV"
     UAS_IN_CV = "UAS_IN_CV"
     JAMMING_ATTACK = "JAMMING_ATTACK"
-    SPOOFING_ATTACK = "SPOOFING_ATTACK"
+    SPOOFING_ATTACK = "SPOOFING_ATTACK"  # the vehicle's own GNSS is spoofed (it says so)
+    # a second sender on a MAVLink link claims a system id bound to a vehicle: its frames are
+    # dropped; the real vehicle is not affected (two vehicles on one sysid, a stray sender)
+    SYSID_CONFLICT = "SYSID_CONFLICT"
     GNSS_DEGRADATION = "GNSS_DEGRADATION"
     LACK_OF_BATTERY = "LACK_OF_BATTERY"
     TECHNICAL_FAILURE = "TECHNICAL_FAILURE"

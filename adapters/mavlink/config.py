@@ -145,7 +145,7 @@ class MavlinkConfig:
     sysid_binding: bool = setting(
         True,
         "a system id belongs to the link and address it was first heard on: another sender "
-        "claiming it is dropped and reported (SPOOFING_ATTACK); false = each (link, address) "
+        "claiming it is dropped and reported (SYSID_CONFLICT); false = each (link, address) "
         "with a system id is a vehicle of its own (fleets reusing system ids, e.g. ArduPilot "
         "SITL instances all at sysid 1), addressed by VehicleKey",
     )

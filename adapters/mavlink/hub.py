@@ -13,10 +13,11 @@ Identity: a vehicle is (link, source address, sysid, compid) = :class:`VehicleKe
 take a ``SysId`` (resolved to its most recently heard component) or a ``VehicleKey``. Replies
 are unicast to the address the vehicle was last heard from. A system id is bound to the link
 and address it was first heard on; another sender claiming it is dropped, counted and reported
-as a SPOOFING_ATTACK hazard instead of taking it over; system id 0 is never a vehicle; with a
-key in ``signing_keys`` a vehicle's frames must be signed with it (see
-:mod:`adapters.mavlink.senders`, :mod:`adapters.mavlink.signing`). Per-sender state is capped
-and forgotten when idle (``max_senders``, ``max_vehicles``, ``sender_idle_s``).
+as a SYSID_CONFLICT hazard (an operator warning: the bound vehicle flies on) instead of taking
+it over; system id 0 is never a vehicle; with a key in ``signing_keys`` a vehicle's frames must
+be signed with it (see :mod:`adapters.mavlink.senders`, :mod:`adapters.mavlink.signing`).
+Per-sender state is capped and forgotten when idle (``max_senders``, ``max_vehicles``,
+``sender_idle_s``).
 
 Links: a TCP or serial link that is down (not up yet at start, or closed by the peer) is
 reopened with backoff (``reconnect_min_s`` .. ``reconnect_max_s``); while it is down each of its
@@ -44,6 +45,7 @@ from adapters.mavlink.adsb_relay import AdsbRelay, MessageHandler
 from adapters.mavlink.commands import Commands
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.endpoint import parse_endpoint
+from adapters.mavlink.handlers import message_handlers
 from adapters.mavlink.senders import Senders, idle_keys, over_cap_keys
 from adapters.mavlink.signing import SignatureCheck
 from adapters.mavlink.transfer import (
@@ -221,20 +223,8 @@ class MavlinkHub(Commands):
         self._restream: set[int] = set()  # id(state) of ArduPilot vehicles to ask for streams
         self._drops_reported: tuple[float, dict[str, int]] = (clock.now_s(), {})
         self._tasks: list[asyncio.Task[None]] = []
-        self._handlers: dict[int, MessageHandler] = {
-            wire.HEARTBEAT: VehicleState.on_heartbeat,
-            wire.GLOBAL_POSITION_INT: VehicleState.on_global_position,
-            wire.GPS_RAW_INT: VehicleState.on_gps_raw,
-            wire.SYS_STATUS: VehicleState.on_sys_status,
-            wire.BATTERY_STATUS: VehicleState.on_battery_status,
-            wire.MISSION_CURRENT: VehicleState.on_mission_current,
-            wire.EXTENDED_SYS_STATE: VehicleState.on_extended_sys_state,
-            wire.STATUSTEXT: VehicleState.on_statustext,
-            wire.SYSTEM_TIME: VehicleState.on_system_time,
-            wire.HOME_POSITION: VehicleState.on_home_position,
-        }
         self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE relayed by a vehicle -> ADS-B measurement
-        self._handlers[wire.ADSB_VEHICLE] = self.adsb_relay.on_adsb_vehicle
+        self._handlers = message_handlers(self.adsb_relay)  # shared with the tlog replay
 
     # --- lifecycle ------------------------------------------------------------------------
     async def __aenter__(self) -> MavlinkHub:
@@ -495,8 +485,10 @@ class MavlinkHub(Commands):
         return st
 
     def _claimed(self, link: _Link, addr: Address | None, sys_id: int, t: float) -> None:
-        """Another sender claims ``sys_id``: a SPOOFING_ATTACK hazard for the vehicle bound to
-        it, at most once per ``warn_interval_s`` per system id (claims are counted)."""
+        """Another sender claims ``sys_id``: a SYSID_CONFLICT hazard for the vehicle bound to
+        it, at most once per ``warn_interval_s`` per system id (claims are counted). Not
+        SPOOFING_ATTACK: that is the vehicle's own GNSS being spoofed, and EM suspends the
+        vehicle for it; here the impostor's frames never reach the vehicle's state."""
         last = self._claim_alerts.get(sys_id)
         if last is not None and t - last < self.config.warn_interval_s:
             return
@@ -511,7 +503,7 @@ class MavlinkHub(Commands):
             f"frames dropped ({self.counters.sysid_claims} claims so far)"
         )
         self._ratelog.warning("claim", "%s", message)  # one line per interval for all
-        self.sink.on_hazard(owner.hazard(ThreatKind.SPOOFING_ATTACK, t, message))
+        self.sink.on_hazard(owner.hazard(ThreatKind.SYSID_CONFLICT, t, message))
 
     def _unverified(self, link: _Link, cause: str) -> None:
         """A frame of a keyed vehicle that failed verification: dropped, counted by cause (a

@@ -21,12 +21,12 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 from adapters.mavlink import MavlinkHub
-from adapters.mavlink.transfer import MavlinkError
+from adapters.mavlink.transfer import CommandResult, MavlinkError
 from adapters.mavlink.vehicle import VehicleState
 from gcs_utm.clock import Clock
 from gcs_utm.messages import FlightMode
@@ -56,6 +56,10 @@ UPLOAD_RETRY_S = 5.0  # clock seconds between two uploads of the plan
 HOME_WAIT_S = 20.0  # clock seconds to wait for HOME_POSITION after the first fix
 ARM_TRY_S = 60.0  # clock seconds of arming tries (pre-flight checks refuse after boot)
 ARM_RETRY_S = 2.0  # clock seconds between two arming tries
+SILENT_TRIES = 3
+"""Times a step is sent when the vehicle does not answer at all: each send already resends
+its COMMAND_LONG (``[mavlink] command_retries``), but a loaded link or autopilot can stay
+silent for longer; a refusal is final."""
 TAKEOFF_CLIMB_MPS = 1.0
 """Climb rate assumed to schedule the take-off (PX4's MPC_TKO_SPEED default is 1.5 m/s)."""
 TAKEOFF_MARGIN_S = 15.0  # clock seconds for arming and spool-up before the climb
@@ -169,9 +173,7 @@ async def _fly_one(
     # a late start of the scenario (use case 1's start_delay_s) is flown as filed: late
     start_t_s = first.t_s + v.start_delay_s
     await clock.sleep(max(0.0, start_t_s - clock.now_s()))
-    mode = await hub.send_mode(sys_id, FlightMode.MISSION)
-    if not mode.ok:
-        raise FlyRefusedError(f"mission mode refused: {mode.error}")
+    await _answered(lambda: hub.send_mode(sys_id, FlightMode.MISSION), "mission mode")
     if not await hub.wait_mode(hub.state(sys_id), FlightMode.MISSION, MODE_CONFIRM_S):
         shown = hub.state(sys_id).mode.value
         raise FlyRefusedError(f"HEARTBEAT still shows {shown}, not mission")
@@ -239,6 +241,19 @@ async def _wait_fix(hub: MavlinkHub, clock: Clock, v: VehicleSetup, until_t_s: f
     raise FlyRefusedError("never discovered with a position fix")
 
 
+async def _answered(send: Callable[[], Awaitable[CommandResult]], what: str) -> None:
+    """Send a step until the vehicle answers it (at most SILENT_TRIES times); raise
+    FlyRefusedError naming ``what`` if it refuses or never answers."""
+    res = CommandResult(ok=False, result=None, attempts=0, error="not sent")
+    for _ in range(SILENT_TRIES):
+        res = await send()
+        if res.ok:
+            return
+        if res.result is not None:  # answered: refused
+            break
+    raise FlyRefusedError(f"{what} refused: {res.error}")
+
+
 async def _wait_home(hub: MavlinkHub, clock: Clock, sys_id: int) -> bool:
     """Until the vehicle reports its home (PX4 sets it once its position is valid; a take-off
     sent before may be accepted and never flown)."""
@@ -252,17 +267,15 @@ async def _wait_home(hub: MavlinkHub, clock: Clock, sys_id: int) -> bool:
 
 async def _arm(hub: MavlinkHub, clock: Clock, v: VehicleSetup, out: FlyOutcome) -> None:
     assert v.sys_id is not None
-    st = hub.state(v.sys_id)
+    sys_id = v.sys_id
+    st = hub.state(sys_id)
     if _arduplane(st):  # armed in TAKEOFF mode, it takes off (NAV_TAKEOFF is for quadplanes)
-        res = await hub.command_long(
-            v.sys_id, MAV_CMD_DO_SET_MODE, (1.0, ARDUPLANE_TAKEOFF, 0.0, 0.0, 0.0, 0.0, 0.0)
+        params = (1.0, ARDUPLANE_TAKEOFF, 0.0, 0.0, 0.0, 0.0, 0.0)
+        await _answered(
+            lambda: hub.command_long(sys_id, MAV_CMD_DO_SET_MODE, params), "TAKEOFF mode"
         )
-        if not res.ok:
-            raise FlyRefusedError(f"TAKEOFF mode refused: {res.error}")
-    elif st.autopilot is Autopilot.ARDUPILOT:
-        res = await hub.send_mode(v.sys_id, FlightMode.GUIDED)  # ArduCopter takes off in GUIDED
-        if not res.ok:
-            raise FlyRefusedError(f"GUIDED refused: {res.error}")
+    elif st.autopilot is Autopilot.ARDUPILOT:  # ArduCopter takes off in GUIDED
+        await _answered(lambda: hub.send_mode(sys_id, FlightMode.GUIDED), "GUIDED")
     end_t_s = clock.now_s() + ARM_TRY_S
     error = ""
     while clock.now_s() < end_t_s:
@@ -291,21 +304,20 @@ async def _takeoff(
     any climb left). A vehicle that disarms or does not climb (an autopilot may accept the
     command and still stay on the ground right after boot) is armed and sent it again."""
     assert v.sys_id is not None
+    sys_id = v.sys_id
     first = v.plan.waypoints[0]
     alt_amsl_m, first_t_s = first.alt_amsl_m, first.t_s
-    st = hub.state(v.sys_id)
+    st = hub.state(sys_id)
     alt = alt_amsl_m if st.autopilot is not Autopilot.ARDUPILOT else alt_amsl_m - ground_m
-    nan = math.nan
+    takeoff = (0.0, 0.0, 0.0, math.nan, math.nan, math.nan, alt)
     why = ""
     for attempt in range(1, TAKEOFF_TRIES + 1):
         if attempt == 1 or not st.armed:
             await _arm(hub, clock, v, out)
         if not _arduplane(st):
-            res = await hub.command_long(
-                v.sys_id, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, nan, nan, nan, alt)
+            await _answered(
+                lambda: hub.command_long(sys_id, MAV_CMD_NAV_TAKEOFF, takeoff), "take-off"
             )
-            if not res.ok:
-                raise FlyRefusedError(f"take-off refused: {res.error}")
         _step(out, clock, f"taking off to {alt_amsl_m:.1f} m AMSL (try {attempt})")
         # ArduPlane climbs to its own TKOFF_ALT: sent on from a safe height, it climbs the rest
         climb_to_m = min(alt_amsl_m, ground_m + PLANE_SAFE_M) if _arduplane(st) else alt_amsl_m
@@ -333,13 +345,11 @@ async def _wait_at_first_waypoint(
     ended, hundreds of metres out on the runway heading, and would reach the first waypoint
     late. Sent there (DO_REPOSITION, as a ground station's "go to"), it loiters around it."""
     assert v.sys_id is not None
-    first = v.plan.waypoints[0]
-    res = await hub.send_command(
-        v.sys_id,
-        Command(kind=CommandKind.GOTO, operation_id=v.operation_id, target=first.position),
+    sys_id = v.sys_id
+    goto = Command(
+        kind=CommandKind.GOTO, operation_id=v.operation_id, target=v.plan.waypoints[0].position
     )
-    if not res.ok:
-        raise FlyRefusedError(f"go-to the first waypoint refused: {res.error}")
+    await _answered(lambda: hub.send_command(sys_id, goto), "go-to the first waypoint")
     _step(out, clock, "sent to loiter at the first waypoint")
 
 

@@ -8,8 +8,10 @@ Pipeline (:class:`ReplayPipeline`, sans-IO: feed it ``(record t_s, packet)`` and
 
 - every record's packet is parsed by the MAVLink adapter's parser
   (:class:`adapters.mavlink.wire.Parser`) and dispatched, per (sysid, compid), to the adapter's
-  per-vehicle telemetry state (:class:`adapters.mavlink.vehicle.VehicleState`), exactly as the
-  hub does on a live link; ground stations (HEARTBEAT autopilot ``MAV_AUTOPILOT_INVALID``) are
+  per-vehicle telemetry state (:class:`adapters.mavlink.vehicle.VehicleState`) through the
+  hub's own handler table (:func:`adapters.mavlink.handlers.message_handlers`), exactly as on a
+  live link (HOME_POSITION gives each vehicle's home, reported with the height above it);
+  ground stations (HEARTBEAT autopilot ``MAV_AUTOPILOT_INVALID``) are
   not vehicles;
 - the **record time is the capture time** (and the receipt time) of every measurement: the
   vehicle-clock mapping of a live link is replaced, because a tlog's record times are the only
@@ -40,7 +42,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,6 +50,7 @@ from typing import Any
 from adapters.mavlink import wire
 from adapters.mavlink.adsb_relay import AdsbRelay
 from adapters.mavlink.config import MavlinkConfig
+from adapters.mavlink.handlers import message_handlers
 from adapters.mavlink.vehicle import VehicleInfo, VehicleState
 from adapters.tlog import TlogCounters
 from gcs_utm.core.monitoring import Monitor, MonitoringConfig
@@ -70,19 +73,6 @@ _log = logging.getLogger(__name__)
 
 MAV_AUTOPILOT_INVALID = 8  # a ground station or companion, not a vehicle
 _MAX_CATCH_UP_CYCLES = 30  # beyond this many silent periods, jump to the next record
-
-_Handler = Callable[[VehicleState, wire.MavMsg, float, Any], object]
-_HANDLERS: dict[int, _Handler] = {
-    wire.HEARTBEAT: VehicleState.on_heartbeat,
-    wire.GLOBAL_POSITION_INT: VehicleState.on_global_position,
-    wire.GPS_RAW_INT: VehicleState.on_gps_raw,
-    wire.SYS_STATUS: VehicleState.on_sys_status,
-    wire.BATTERY_STATUS: VehicleState.on_battery_status,
-    wire.MISSION_CURRENT: VehicleState.on_mission_current,
-    wire.EXTENDED_SYS_STATE: VehicleState.on_extended_sys_state,
-    wire.STATUSTEXT: VehicleState.on_statustext,
-    wire.SYSTEM_TIME: VehicleState.on_system_time,
-}
 
 
 class ReplayError(ValueError):
@@ -190,6 +180,7 @@ class ReplayPipeline:
         self.threats: dict[str, _ThreatStats] = {}
         self._states: dict[tuple[int, int], VehicleState] = {}
         self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE -> ADS-B measurements, as on a live link
+        self._handlers = message_handlers(self.adsb_relay)  # the live hub's table
         self._pending: list[Measurement] = []
         self._t = 0.0
         self._next_cycle_t_s: float | None = None
@@ -274,10 +265,7 @@ class ReplayPipeline:
         v.messages += 1
         v.last_t_s = t_s
         st.count_frame(seq, t_s)
-        if mid == wire.ADSB_VEHICLE:
-            self.adsb_relay.on_adsb_vehicle(st, m, t_s, self)
-            return
-        handler = _HANDLERS.get(mid)
+        handler = self._handlers.get(mid)
         if handler is not None:
             handler(st, m, t_s, self)
 
@@ -418,6 +406,8 @@ class ReplayPipeline:
                     "last_t_s": v.last_t_s,
                     "first_position": _pos_json(v.first_position),
                     "last_position": _pos_json(v.last_position),
+                    "home": _pos_json(_home(status)),
+                    "last_height_above_home_m": _above_home(status, v.last_position),
                     "last_mode": status.mode.value if status else None,
                     "armed": status.armed if status else None,
                 }
@@ -526,3 +516,19 @@ def _pos_json(p: tuple[float, float, float] | None) -> dict[str, float] | None:
     if p is None:
         return None
     return {"lat_deg": p[0], "lon_deg": p[1], "alt_amsl_m": p[2]}
+
+
+def _home(status: VehicleStatus | None) -> tuple[float, float, float] | None:
+    home = None if status is None else status.home
+    return None if home is None else (home.lat_deg, home.lon_deg, home.alt_amsl_m)
+
+
+def _above_home(
+    status: VehicleStatus | None, last: tuple[float, float, float] | None
+) -> float | None:
+    """The last position's height above the vehicle's home (AGL where home is on the
+    ground), as the live service reads relative altitudes; None without a home."""
+    home = _home(status)
+    if home is None or last is None:
+        return None
+    return round(last[2] - home[2], 3)

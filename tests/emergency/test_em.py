@@ -276,6 +276,21 @@ def test_in_contingency_volume_only_warns() -> None:
     assert d.warnings and d.recommendations == () and d.escalations == ()
 
 
+def test_a_sysid_claim_only_warns_gnss_spoofing_still_suspends() -> None:
+    """A second sender on the vehicle's system id (SYSID_CONFLICT) leaves the vehicle flying,
+    even in autonomous mode; the vehicle's own GNSS spoofing is still suspended."""
+    a = sc.make_operation("A", [(-500, 0, 100), (500, 0, 100)])
+    snap = sc.snapshot([a], t_s=sc.T0_S + 10)
+    claim = sc.threat(ThreatKind.SYSID_CONFLICT, ["A"], t_s=sc.T0_S + 10, message="claimed")
+    d = make_em(autonomous=True).on_threat(claim, snap)
+    assert d.commands == () and d.recommendations == () and d.geofences == ()
+    assert d.warnings == ("SYSID_CONFLICT: A claimed",) and d.escalations == ()
+    assert [e.action for e in d.audit] == ["warn"]
+    spoof = sc.threat(ThreatKind.SPOOFING_ATTACK, ["A"], t_s=sc.T0_S + 10)
+    d2 = make_em(autonomous=True).on_threat(spoof, snap)
+    assert [c.kind for c in d2.commands] == [CommandKind.HOLD] and d2.geofences
+
+
 def test_link_loss_alerts_and_fences_the_predicted_position() -> None:
     op = sc.make_operation("A", [(0, 0, 100), (1000, 0, 100)])
     d = make_em().on_threat(sc.threat(ThreatKind.COMMUNICATION_FAILURE, ["A"]), sc.snapshot([op]))

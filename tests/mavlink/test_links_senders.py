@@ -139,13 +139,15 @@ async def test_a_second_sender_claiming_a_bound_sysid_is_dropped_and_reported() 
         assert [v.key.address for v in hub.vehicles()] == ["10.0.0.1:14550"]
         assert hub.state(SysId(1)).key.address == "10.0.0.1:14550"
         assert {m.vehicle for m in sink.measurements} == {"10.0.0.1:14550"}
-        spoofing = [h for h in sink.hazards if h.kind is ThreatKind.SPOOFING_ATTACK]
-        assert len(spoofing) == 1 and spoofing[0].sys_id == 1  # one per interval
-        assert "10.0.0.66" in spoofing[0].message and "10.0.0.1:14550" in spoofing[0].message
+        # a link-level claim, not the vehicle's GNSS being spoofed (which EM suspends for)
+        assert not [h for h in sink.hazards if h.kind is ThreatKind.SPOOFING_ATTACK]
+        claims = [h for h in sink.hazards if h.kind is ThreatKind.SYSID_CONFLICT]
+        assert len(claims) == 1 and claims[0].sys_id == 1  # one per interval
+        assert "10.0.0.66" in claims[0].message and "10.0.0.1:14550" in claims[0].message
         clock.advance(10.0)  # the next interval: reported again
         hub._on_chunk(link, _hb(owner), a)
         hub._on_chunk(link, _hb(spoof), b)
-        assert len([h for h in sink.hazards if h.kind is ThreatKind.SPOOFING_ATTACK]) == 2
+        assert len([h for h in sink.hazards if h.kind is ThreatKind.SYSID_CONFLICT]) == 2
         # a claim over another link is refused even after silence (no move across links)
         other = await hub.add_link("udpin:127.0.0.1:0")
         clock.advance(5.0)

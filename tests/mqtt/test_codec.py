@@ -311,3 +311,19 @@ def test_nesting_is_bounded_like_every_other_input() -> None:
     deeper = "[" * 100_000 + "]" * 100_000
     with pytest.raises(MqttMessageError, match="nested deeper than 64 levels"):
         decode(T, T.answers("alice"), deeper, 0.0)
+
+
+def test_a_sysid_conflict_is_published_as_a_valid_alert() -> None:
+    from adapters.mqtt.encode import encode_alert
+    from gcs_utm.model import Threat
+
+    claim = Threat(
+        id=ThreatId("sysid_conflict-1"),
+        kind=ThreatKind.SYSID_CONFLICT,
+        uas_ids=(OperationId("op"),),
+        detected_at_s=T0,
+        message="sysid 1 claimed by another sender",
+    )
+    obj = json.loads(encode_alert(claim))
+    validate("alert", obj)
+    assert obj["kind"] == "SYSID_CONFLICT" and obj["operation_ids"] == ["op"]

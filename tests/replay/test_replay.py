@@ -47,6 +47,10 @@ def test_real_ardusub_tlog_through_the_cli(
     assert (v["sys_id"], v["autopilot"], v["positions"]) == (1, "ardupilot", 792)
     assert v["first_position"]["lat_deg"] == pytest.approx(48.386, abs=1e-3)
     assert v["first_position"]["lon_deg"] == pytest.approx(-124.631, abs=1e-3)
+    # its one HOME_POSITION, through the live hub's handler table: the ROV's home at the surface
+    home = {"lat_deg": 48.3861417, "lon_deg": -124.630573, "alt_amsl_m": 0.16}
+    assert v["home"] == pytest.approx(home)
+    assert v["last_height_above_home_m"] == pytest.approx(0.07, abs=0.005)
     assert r["frame"]["epsg"] == 32610  # UTM 10N, from the first position
     track = r["tracks"]["sysid:1"]
     assert track["updates"] == 792 and track["cooperative"] is False

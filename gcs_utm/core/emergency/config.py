@@ -33,6 +33,9 @@ DEFAULT_POLICY: dict[str, str] = {
     ThreatKind.UAS_IN_CV.value: "warn",
     ThreatKind.JAMMING_ATTACK.value: "suspend_and_geofence",
     ThreatKind.SPOOFING_ATTACK.value: "suspend_and_geofence",
+    # the impostor's frames are dropped at the link: the bound vehicle flies on, the operator
+    # is told (holding a healthy vehicle because another sender shares its sysid helps nobody)
+    ThreatKind.SYSID_CONFLICT.value: "warn",
     ThreatKind.GNSS_DEGRADATION.value: "land_or_home",
     ThreatKind.LACK_OF_BATTERY.value: "land_or_home",
     ThreatKind.TECHNICAL_FAILURE.value: "land_or_home",

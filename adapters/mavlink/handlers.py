@@ -1,0 +1,43 @@
+"""The one table of per-message telemetry handlers: MAVLink message id -> what a vehicle's
+:class:`~adapters.mavlink.vehicle.VehicleState` does with it.
+
+The live hub (:class:`adapters.mavlink.hub.MavlinkHub`) and the tlog replay
+(:class:`gcs_utm.cli.replay_pipeline.ReplayPipeline`) both dispatch through
+:func:`message_handlers`, so a replayed recording goes through exactly the handling of a live
+link (HOME_POSITION included: the vehicle's home, against which relative altitudes are read).
+Messages outside the table are not telemetry (mission and command protocol messages go to the
+hub's transfer mailboxes) or not used.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+
+from adapters.mavlink import wire
+from adapters.mavlink.adsb_relay import AdsbRelay, MessageHandler
+from adapters.mavlink.vehicle import VehicleState
+
+VEHICLE_HANDLERS: Mapping[int, MessageHandler] = MappingProxyType(
+    {
+        wire.HEARTBEAT: VehicleState.on_heartbeat,
+        wire.GLOBAL_POSITION_INT: VehicleState.on_global_position,
+        wire.GPS_RAW_INT: VehicleState.on_gps_raw,
+        wire.SYS_STATUS: VehicleState.on_sys_status,
+        wire.BATTERY_STATUS: VehicleState.on_battery_status,
+        wire.MISSION_CURRENT: VehicleState.on_mission_current,
+        wire.EXTENDED_SYS_STATE: VehicleState.on_extended_sys_state,
+        wire.STATUSTEXT: VehicleState.on_statustext,
+        wire.SYSTEM_TIME: VehicleState.on_system_time,
+        wire.HOME_POSITION: VehicleState.on_home_position,
+    }
+)
+"""The handlers that need nothing but the vehicle's state (read-only)."""
+
+
+def message_handlers(adsb_relay: AdsbRelay) -> dict[int, MessageHandler]:
+    """The full table: :data:`VEHICLE_HANDLERS` plus ``ADSB_VEHICLE`` relayed to
+    ``adsb_relay`` (which keeps its own counters, one per hub or replay)."""
+    table = dict(VEHICLE_HANDLERS)
+    table[wire.ADSB_VEHICLE] = adsb_relay.on_adsb_vehicle
+    return table
