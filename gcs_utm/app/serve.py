@@ -93,6 +93,7 @@ async def join_cluster(
         tracks=rt.tracks,
         emergency=rt.emergency,
     )
+    rt.store.writer.set_fence(node.fence)  # region-owned rows carry the lease generation
     try:
         await node.member.start()
     except RegionError as exc:

@@ -220,7 +220,13 @@ def build_runtime(
     em = EmergencyManager(frame, settings.emergency, td, settings.monitoring)
 
     async def on_decision(decision: Decision) -> None:
-        await apply_decision(usm, decision, store, owns=None if policy is None else policy.owns)
+        await apply_decision(
+            usm,
+            decision,
+            store,
+            owns=None if policy is None else policy.owns,
+            file=None if policy is None else policy.filer,
+        )
 
     def em_snapshot(t_s: float) -> Any:
         # EM/TD decide on the plans as they are being flown (re-timed by each UAS's delay),
@@ -277,11 +283,14 @@ async def apply_decision(
     store: Persistence,
     *,
     owns: Callable[[OperationId], bool] | None = None,
+    file: Callable[[Recommendation], Awaitable[None]] | None = None,
 ) -> None:
     """Carry an EM decision to the world through the USM. Order matters: geofences first so
     the operator sees why, then superseded proposals, then new recommendations. ``owns``
     (cluster): a recommendation for an operation of another instance is filed in the store
-    for its owner (gcs_utm.cluster.policy), not proposed here."""
+    for its owner (gcs_utm.cluster.policy), not proposed here: by ``file`` (the cluster
+    node's version allocation) when given; a command for such an operation travels with its
+    filed recommendation and its owner sends it (gcs_utm.cluster.decisions)."""
     for entry in decision.audit:
         store.record(entry)
     if decision.geofences:
@@ -290,6 +299,9 @@ async def apply_decision(
         await usm.on_superseded(rec_id)
     for rec in decision.recommendations:
         if owns is not None and not owns(rec.operation_id):
+            if file is not None:
+                await file(rec)
+                continue
             store.record(rec)
             usm.log_event(
                 "cluster", f"{rec.id} v{rec.version}: filed for {rec.operation_id}'s owner"
@@ -297,6 +309,8 @@ async def apply_decision(
             continue
         await usm.on_recommendation(rec)
     for command in decision.commands:
+        if owns is not None and not owns(command.operation_id):
+            continue  # sent by the operation's owner, from the filed recommendation
         await usm.execute_command(command, reason="autonomous mode")
     for text in decision.escalations:
         await usm.escalate(text)

@@ -17,9 +17,14 @@ drive what this instance's airspace holds.
   (without its system id and ICAO address, so none of this instance's vehicles is taken for
   it) and its tracks are fed to the tracker as its measurements; foreign plans and the
   active geofences are refreshed from the store every ``renew_s``;
-- decisions: who decides is :mod:`gcs_utm.cluster.policy`; a recommendation another life
-  filed for an operation this instance owns is adopted (proposed again as the next version
-  in this life), like a pending one at takeover.
+- decisions: who decides is :mod:`gcs_utm.cluster.policy`; what crosses instances goes
+  through the store (:mod:`gcs_utm.cluster.decisions`): a recommendation another life filed
+  for an operation this instance owns is adopted (proposed again as a new version allocated
+  in this life, :mod:`gcs_utm.cluster.versions`), like a pending one at takeover, and a
+  command decided for it is sent to its vehicle here;
+- fencing: the writes of this instance's regions' rows carry the lease generation it gained
+  them with (:mod:`gcs_utm.cluster.fence`); a refused write is audited and stops the
+  instance, like a lost lease.
 Every gain and loss is audited (actor: this instance's lease holder name).
 """
 
@@ -33,12 +38,15 @@ from pathlib import Path
 from typing import Protocol
 
 from gcs_utm.clock import Clock
+from gcs_utm.cluster import versions
 from gcs_utm.cluster.config import ClusterConfig
+from gcs_utm.cluster.decisions import DecisionRelay, EmergencyPort, UsmPort
 from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
+from gcs_utm.cluster.fence import LeaseFence, Refusal
 from gcs_utm.cluster.lease import Lease
 from gcs_utm.cluster.member import ClusterMember
 from gcs_utm.cluster.policy import OwnershipPolicy
-from gcs_utm.cluster.resume import RegionState, load_region
+from gcs_utm.cluster.resume import RegionState, departure_region, load_region
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AuditEntry,
@@ -48,11 +56,10 @@ from gcs_utm.model import (
     Operation,
     OperationId,
     Recommendation,
-    RecommendationId,
     Track,
     TrackId,
 )
-from gcs_utm.store import StoreBase, StoreError
+from gcs_utm.store import StoreBase, StoreError, is_postgres
 
 _log = logging.getLogger(__name__)
 
@@ -68,26 +75,6 @@ class AirspacePort(Protocol):
 
 class TrackingPort(Protocol):
     def set_operations(self, operations: Iterable[Operation]) -> None: ...
-
-
-class UsmPort(Protocol):
-    async def on_recommendation(self, rec: Recommendation) -> None: ...
-
-    def log_event(self, kind: str, text: str) -> None: ...
-
-    def on_measurement(self, m: Measurement) -> None: ...
-
-
-class EmergencyPort(Protocol):
-    """What the decider's EM hears about a recommendation another instance carried out."""
-
-    async def submit_answer(
-        self, rec_id: RecommendationId, version: int, accepted: bool
-    ) -> None: ...
-
-    async def submit_outcome(
-        self, rec_id: RecommendationId, version: int, applied: bool, reason: str
-    ) -> None: ...
 
 
 # how often the node publishes its own tracks to the region topics
@@ -136,11 +123,71 @@ class ClusterNode:
         self.policy.operations_of = lambda: airspace.operations
         self.exchange = exchange
         self._tracks = tracks
-        self._adopted: set[tuple[str, int]] = set()
-        self._emergency = emergency
-        self._relayed: set[tuple[str, int, str]] = set()
         self._loading: set[OperationId] = set()
         self.foreign_measurements = 0
+        self._regions_of_ops: dict[OperationId, str] = {}
+        self._failed = False
+        try:
+            self._loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
+        except RuntimeError:
+            self._loop = None
+        self.fence = LeaseFence(
+            self.member.holder,
+            self._region_of,
+            self._refused,
+            lock_sql=" FOR SHARE" if is_postgres(location) else "",
+        )
+        self.decisions = DecisionRelay(
+            member=self.member,
+            policy=self.policy,
+            usm=usm,
+            clock=clock,
+            record=record,
+            fence=self.fence,
+            emergency=emergency,
+        )
+        self.policy.filer = self.decisions.file
+
+    # ---- lease fencing (gcs_utm.cluster.fence) ----------------------------------------------
+    def _region_of(self, op_id: str) -> str | None:
+        """The region of one of the airspace's operations (called on the store's threads)."""
+        oid = OperationId(op_id)
+        region_id = self._regions_of_ops.get(oid)
+        if region_id is None:
+            op = self._airspace.operations.get(oid)
+            if op is None or not op.plan.waypoints:
+                return None
+            region_id = departure_region(op, self._frame, self.member.map)
+            self._regions_of_ops[oid] = region_id
+        return region_id
+
+    def _refused(self, refusal: Refusal) -> None:
+        """A write refused by the fence (on a store thread): audited and fail-stop, on the
+        loop."""
+        if self._loop is not None:
+            self._loop.call_soon_threadsafe(self._fenced_out, refusal)
+
+    def _fenced_out(self, refusal: Refusal) -> None:
+        text = refusal.text(self.member.holder)
+        _log.error("cluster: %s", text)
+        self._usm.log_event("cluster", text)
+        self._record(
+            AuditEntry(
+                t_s=self._clock.now_s(),
+                actor=self.member.holder,
+                action="write_fenced",
+                subject=refusal.operation_id,
+                detail={
+                    "region": refusal.region_id,
+                    "generation": refusal.generation,
+                    "current_generation": refusal.current_generation,
+                    "current_holder": refusal.current_holder,
+                },
+            )
+        )
+        if not self._failed:
+            self._failed = True
+            self._on_fail(f"region {refusal.region_id} taken over: this instance stops (fenced)")
 
     async def _gained(self, region_id: str, lease: Lease | None) -> None:
         region_map = self.member.map
@@ -149,21 +196,19 @@ class ClusterNode:
         self.resumed[region_id] = state
         for op in state.operations:
             self.policy.foreign.discard(op.id)
+            self._regions_of_ops[op.id] = region_id  # the fence's map, filled ahead of writes
         if self.exchange is not None:
             self.exchange.watch(self.member.owned)
         known = set(self._airspace.operations)
         self._airspace.load(state.operations, state.geofences)
         self._tracking.set_operations(self._airspace.operations.values())
         generation = lease.generation if lease is not None else 0
+        self.fence.gained(region_id, generation)
         for rec in state.pending:
-            self._adopted.add((rec.id, rec.version))
-            await self._usm.on_recommendation(
-                dataclasses.replace(
-                    rec,
-                    version=rec.version + 1,
-                    reason=f"resumed by {self.member.holder} (region {region_id}, lease "
-                    f"generation {generation})",
-                )
+            await self.decisions.adopt(
+                rec,
+                f"resumed by {self.member.holder} (region {region_id}, lease "
+                f"generation {generation})",
             )
         new_ops = [op.id for op in state.operations if op.id not in known]
         watched = [op.id for op in state.operations if op.id in known]
@@ -257,8 +302,8 @@ class ClusterNode:
         epoch = self.member.epoch
         snap = await self.member.read(lambda s: _refresh_view(s, foreign, epoch))
         assert isinstance(snap, tuple)
-        ops, fences, proposed, touched = snap
-        await self._relay(touched)
+        ops, fences, open_recs, touched = snap
+        await self.decisions.relay(touched)
         current = self._airspace.operations
         changed = [op for op in ops if (c := current.get(op.id)) is None or c.plan != op.plan]
         if changed:
@@ -267,48 +312,7 @@ class ClusterNode:
         new_fences = [g for g in fences if g.id not in known]
         if new_fences:
             self._airspace.load((), new_fences)
-        for rec, epoch in proposed:
-            if epoch == self.member.epoch or not self.policy.owns(rec.operation_id):
-                continue
-            if (rec.id, rec.version) in self._adopted:
-                continue
-            self._adopted.add((rec.id, rec.version))
-            self._usm.log_event("cluster", f"{rec.id} v{rec.version} decided by life {epoch}")
-            await self._usm.on_recommendation(
-                dataclasses.replace(
-                    rec,
-                    version=rec.version + 1,
-                    reason=f"decided by life {epoch}, proposed by {self.member.holder}",
-                )
-            )
-
-    async def _relay(self, touched: list[tuple[str, int, str, int]]) -> None:
-        """Tell this instance's EM what the owner did with a recommendation it decided for
-        the owner's operation: the owner's later version accepted (or rejected), then applied
-        (or failed). Without it the EM would let its own version expire and decide again."""
-        if self._emergency is None:
-            return
-        mine: dict[str, int] = {}
-        later: dict[str, tuple[int, str]] = {}
-        for rec_id, version, state, epoch in touched:
-            if epoch == self.member.epoch:
-                mine[rec_id] = version
-                later.pop(rec_id, None)
-            elif rec_id in mine:
-                later[rec_id] = (version, state)
-        for rec_id, (version, state) in later.items():
-            ours = mine[rec_id]
-            rid = RecommendationId(rec_id)
-            answer = _ANSWER_OF.get(state)
-            if answer is not None and (rec_id, ours, "answer") not in self._relayed:
-                self._relayed.add((rec_id, ours, "answer"))
-                await self._emergency.submit_answer(rid, ours, answer)
-            outcome = _OUTCOME_OF.get(state)
-            if outcome is not None and (rec_id, ours, "outcome") not in self._relayed:
-                self._relayed.add((rec_id, ours, "outcome"))
-                await self._emergency.submit_outcome(
-                    rid, ours, outcome, f"{state} by its owner as v{version}"
-                )
+        await self.decisions.take(open_recs)
 
     def publish(self) -> None:
         if self.exchange is None or self._tracks is None:
@@ -323,6 +327,7 @@ class ClusterNode:
 
     async def run(self) -> None:
         """The member task, the exchange and the periodic refresh/publication."""
+        self._loop = asyncio.get_running_loop()
         async with asyncio.TaskGroup() as tg:
             tg.create_task(self.member.run())
             if self.exchange is not None:
@@ -351,11 +356,6 @@ def _operation(store: StoreBase, op_id: OperationId) -> Operation | None:
     return None
 
 
-# the owner's state of its version -> what the decider's EM hears (an answer, an outcome)
-_ANSWER_OF = {"accepted": True, "applied": True, "failed": True, "rejected": False}
-_OUTCOME_OF = {"applied": True, "failed": False}
-
-
 def _refresh_view(
     store: StoreBase, foreign: set[OperationId], epoch: int
 ) -> tuple[
@@ -368,7 +368,7 @@ def _refresh_view(
     return (
         ops,
         store.load_geofences(active_only=True),
-        store.proposed_with_lives(),
+        versions.open_with_lives(store),
         store.versions_touched_by(epoch),
     )
 

@@ -12,14 +12,15 @@ border is detected on both sides; then:
 - a threat about foreign UAS only (their conformance, their geofences) is their owner's;
 - a recommendation the decider makes for a foreign operation is filed in the store and not
   presented here: the operation's owner proposes it to its pilot as the next version in its
-  own life and uploads it (:meth:`gcs_utm.cluster.node.ClusterNode.adopt_decisions`).
+  own life and uploads it; a command decided for it (autonomous mode) is sent by its owner
+  (:mod:`gcs_utm.cluster.decisions`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Awaitable, Callable, Mapping
 
-from gcs_utm.model import Operation, OperationId, Threat
+from gcs_utm.model import Operation, OperationId, Recommendation, Threat
 
 
 class OwnershipPolicy:
@@ -29,6 +30,9 @@ class OwnershipPolicy:
     def __init__(self) -> None:
         self.operations_of: Callable[[], Mapping[OperationId, Operation]] = dict
         self.foreign: set[OperationId] = set()
+        # how a decision for a foreign operation is filed for its owner (set by the cluster
+        # node: gcs_utm.cluster.decisions.DecisionRelay.file); None: the plain store write
+        self.filer: Callable[[Recommendation], Awaitable[None]] | None = None
 
     def owns(self, op_id: OperationId) -> bool:
         return op_id not in self.foreign and op_id in self.operations_of()

@@ -7,7 +7,7 @@ backend); :class:`StoreWriter` is the single writer thread with a bounded, batch
 :class:`AsyncStore` is what asyncio services use (durable awaits, non-blocking reads).
 """
 
-from gcs_utm.store.base import StoreBase, StoreError
+from gcs_utm.store.base import Connection, FencedError, StoreBase, StoreError
 from gcs_utm.store.config import StoreConfig
 from gcs_utm.store.location import describe, is_postgres, open_store
 from gcs_utm.store.sqlite import Store
@@ -15,6 +15,8 @@ from gcs_utm.store.writer import AsyncStore, StoreFullError, StoreWriter
 
 __all__ = [
     "AsyncStore",
+    "Connection",
+    "FencedError",
     "Store",
     "StoreBase",
     "StoreConfig",

@@ -23,7 +23,7 @@ import os
 import time
 import types
 import typing
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
 from gcs_utm.messages import PilotAnswer
@@ -48,6 +48,12 @@ from gcs_utm.store.codec import CodecError, dumps, loads
 class StoreError(RuntimeError):
     """The database cannot be used (newer schema, corrupt document, closed store, lost
     connection)."""
+
+
+class FencedError(StoreError):
+    """A write of a row owned by an operation's region, refused because the writing life's
+    lease of that region was taken over since (a cluster member that stalled past its lease
+    expiry, see :mod:`gcs_utm.cluster.fence`)."""
 
 
 class Cursor(Protocol):
@@ -121,6 +127,13 @@ class StoreBase:
     _conn: Any
     # how a top-level transaction begins (SQLite: take the write lock at once)
     _begin_sql = "BEGIN"
+    # what a SELECT appends to keep the rows it read from changing until the transaction
+    # ends (PostgreSQL: a share lock; SQLite's single writer needs none)
+    lock_share_sql = ""
+    # A cluster member's lease fence (gcs_utm.cluster.fence): called with the connection and
+    # the operation id inside the transaction of every write of a row its region owns (the
+    # operation, its plans, its recommendations); raises FencedError to refuse the write.
+    fence: Callable[[Connection, str], None] | None = None
 
     def _init_state(self) -> None:
         self._depth = 0
@@ -211,6 +224,15 @@ class StoreBase:
             if self._depth > 0:
                 self._conn.execute(release)  # ROLLBACK TO keeps the savepoint open: close it
 
+    def lock_key(self, c: Connection, key: str) -> None:
+        """Serialise the transactions that call this with the same ``key`` until they end
+        (SQLite: its one writer already does; PostgreSQL: a transaction advisory lock)."""
+        return None
+
+    def _fenced(self, c: Connection, op_id: str) -> None:
+        if self.fence is not None:
+            self.fence(c, op_id)
+
     def _rows(self, sql: str, params: Sequence[Any] = ()) -> list[tuple[Any, ...]]:
         return list(self._conn.execute(sql, params).fetchall())
 
@@ -218,6 +240,7 @@ class StoreBase:
     def save_operation(self, op: Operation, t_s: float | None = None) -> None:
         """Insert or update an operation; its current plan is also kept as a plan version."""
         with self.transaction() as c:
+            self._fenced(c, op.id)
             c.execute(
                 "INSERT INTO operations (id, state, updated_t_s, doc) VALUES (?, ?, ?, ?) "
                 "ON CONFLICT(id) DO UPDATE SET state=excluded.state, "
@@ -237,6 +260,7 @@ class StoreBase:
         existing (operation, version) raises :class:`StoreError`."""
         waypoints = dumps(plan.waypoints)
         with self.transaction() as c:
+            self._fenced(c, plan.operation_id)
             row = c.execute(
                 "SELECT waypoints, reason, created_t_s FROM flight_plans "
                 "WHERE operation_id=? AND version=?",
@@ -413,6 +437,7 @@ class StoreBase:
         life that wrote a version may update it (see :meth:`save_threat`)."""
         epoch = self.epoch
         with self.transaction() as c:
+            self._fenced(c, rec.operation_id)
             cur = c.execute(
                 "INSERT INTO recommendations "
                 "(id, version, state, threat_id, operation_id, created_t_s, doc, epoch) "
@@ -472,18 +497,6 @@ class StoreBase:
             sql += " WHERE " + " AND ".join(clauses)
         sql += " ORDER BY created_t_s, id, version"
         return [self._load(Recommendation, d) for (d,) in self._rows(sql, params)]
-
-    def proposed_with_lives(self) -> list[tuple[Recommendation, int]]:
-        """The latest version of every recommendation that is still PROPOSED, each with the
-        life (epoch) that wrote it (a cluster member adopts the ones another life wrote for
-        its operations)."""
-        rows = self._rows(
-            "SELECT doc, epoch FROM recommendations r WHERE state = ? AND "
-            "version = (SELECT MAX(version) FROM recommendations q WHERE q.id = r.id) "
-            "ORDER BY created_t_s, id",
-            (RecommendationState.PROPOSED.value,),
-        )
-        return [(self._load(Recommendation, d), int(e)) for d, e in rows]
 
     def versions_touched_by(self, epoch: int) -> list[tuple[str, int, str, int]]:
         """(id, version, state, epoch) of every version of each recommendation id that life
@@ -579,4 +592,12 @@ TABLES = frozenset(
     }
 )
 
-__all__ = ["TABLES", "Connection", "Cursor", "StoreBase", "StoreError", "track_doc"]
+__all__ = [
+    "TABLES",
+    "Connection",
+    "Cursor",
+    "FencedError",
+    "StoreBase",
+    "StoreError",
+    "track_doc",
+]

@@ -26,9 +26,11 @@ except ImportError as exc:  # pragma: no cover - depends on the installed extras
         "a postgresql:// store needs psycopg 3: pip install 'gcs-utm[postgres]'"
     ) from exc
 
-from gcs_utm.store.base import TABLES, StoreBase, StoreError
+from gcs_utm.store.base import TABLES, Connection, StoreBase, StoreError
 from gcs_utm.store.schema import PG_MIGRATIONS
 
+# First number of the advisory locks of StoreBase.lock_key ("gcsk" in ASCII)
+_KEY_LOCKS = 0x6763736B
 # Key of the advisory lock held while migrating ("gcsutm" in ASCII): any fixed number that
 # no other application of the database uses.
 _MIGRATE_LOCK = 0x67637375746D
@@ -88,6 +90,11 @@ class PgStore(StoreBase):
 
     _conn: _PgConnection
     _now_sql = "SELECT extract(epoch FROM clock_timestamp())::float8"
+    lock_share_sql = " FOR SHARE"
+
+    def lock_key(self, c: Connection, key: str) -> None:
+        # the two-number form, in a space of its own: never the migration lock's key
+        c.execute(f"SELECT pg_advisory_xact_lock({_KEY_LOCKS}, hashtext(?))", (key,))
 
     def __init__(
         self, url: str, *, readonly: bool = False, connect_timeout_s: float = 10.0

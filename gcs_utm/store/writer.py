@@ -38,7 +38,7 @@ from gcs_utm.model import (
     Threat,
     Track,
 )
-from gcs_utm.store.base import StoreBase, StoreError
+from gcs_utm.store.base import Connection, StoreBase, StoreError
 from gcs_utm.store.config import StoreConfig
 from gcs_utm.store.location import describe, is_postgres, open_store
 
@@ -70,6 +70,7 @@ class StoreWriter:
         # The life this writer begins when it opens the store (see Store.begin_life): the
         # service prefixes its ids with it.
         self.epoch = 0
+        self._fence: Callable[[Connection, str], None] | None = None
         self._thread = threading.Thread(target=self._run, name="store-writer", daemon=True)
         self._thread.start()
         self._ready.result()  # raises if the file cannot be opened or migrated
@@ -137,6 +138,18 @@ class StoreWriter:
     def audit(self, entry: AuditEntry) -> concurrent.futures.Future[int]:
         return self._must(lambda s: s.audit(entry))
 
+    def set_fence(
+        self, fence: Callable[[Connection, str], None] | None
+    ) -> concurrent.futures.Future[None]:
+        """Check every write of a region-owned row against ``fence`` (a cluster member's
+        lease fence, :attr:`StoreBase.fence`), on this connection and on every reconnection."""
+        self._fence = fence
+
+        def install(s: StoreBase) -> None:
+            s.fence = fence
+
+        return self._must(install)
+
     def flush(self, timeout_s: float | None = None) -> None:
         """Wait until everything queued so far is committed."""
         self._must(lambda s: None).result(timeout=timeout_s)
@@ -170,6 +183,7 @@ class StoreWriter:
                 time.sleep(_RECONNECT_S)
                 continue
             store._epoch = self.epoch
+            store.fence = self._fence
             _log.warning("store %s reconnected", self.where)
             return store
 

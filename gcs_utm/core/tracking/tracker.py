@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from gcs_utm.core.tracking import kalman, kernel, prediction
+from gcs_utm.core.tracking import kalman, kernel, loiter, prediction
 from gcs_utm.core.tracking.config import TrackingConfig
 from gcs_utm.core.tracking.intake import Identity, Intake
 from gcs_utm.core.tracking.layout import (
@@ -145,6 +145,7 @@ class Tracker:
         self._stale = np.zeros(0, dtype=bool)
         self._plan_row = np.zeros(0, dtype=np.intp)
         self._geom_m = np.zeros(0)
+        self._loiter_m = np.zeros(0)  # loiter radius of a fixed wing's operation, else 0
         # Closest plan segment found by the last locate (-1: none): the windowed search
         # starts there (see PlanTable.locate). A cache only: never changes a result.
         self._seg_hint = np.zeros(0, dtype=np.intp)
@@ -187,6 +188,7 @@ class Tracker:
             j = self._plan_of_op.get(op_id, -1) if op_id is not None else -1
             self._plan_row[row] = j
             self._geom_m[row] = ops[j].flight_geometry_m if j >= 0 else 0.0
+            self._loiter_m[row] = _loiter_radius_m(ops[j]) if j >= 0 else 0.0
         keep = np.array(
             [tid.partition("@")[0] not in claimed for tid in self._ids[: self._n]], dtype=bool
         )
@@ -215,6 +217,7 @@ class Tracker:
         self._stale = grown(self._stale)
         self._plan_row = grown(self._plan_row, -1)
         self._geom_m = grown(self._geom_m)
+        self._loiter_m = grown(self._loiter_m)
         self._seg_hint = grown(self._seg_hint, -1)
         self._cap = cap
 
@@ -243,6 +246,7 @@ class Tracker:
         op = self._intake.ops.get(ident.operation_id) if ident.operation_id is not None else None
         self._plan_row[row] = self._plan_of_op[op.id] if op is not None else -1
         self._geom_m[row] = op.flight_geometry_m if op is not None else 0.0
+        self._loiter_m[row] = _loiter_radius_m(op) if op is not None else 0.0
         self._seg_hint[row] = -1
         return row
 
@@ -250,7 +254,7 @@ class Tracker:
         idx = np.flatnonzero(keep)
         for name in (
             "_x", "_p", "_t", "_src_t", "_updates", "_gate_fails", "_coop", "_stale",
-            "_plan_row", "_geom_m", "_seg_hint",
+            "_plan_row", "_geom_m", "_loiter_m", "_seg_hint",
         ):  # fmt: skip
             arr = getattr(self, name)
             arr[: len(idx)] = arr[idx]
@@ -632,7 +636,9 @@ class Tracker:
         ``plan_offset_decay_s``), its radius grows by ``plan_sigma_growth_mps``; every other
         track is extrapolated with its filtered velocity and its radius is the filter's
         position covariance propagated (root of the trace). Time is counted from each
-        track's state time, so a stale track's radius keeps growing.
+        track's state time, so a stale track's radius keeps growing. A fixed wing whose plan
+        has ended and that circles its last waypoint is predicted on that loiter circle
+        (:mod:`.loiter`), not on its tangent.
 
         Layout: the rows are predicted in blocks of ``PREDICT_BLOCK_ROWS`` (each row's
         figures do not depend on the others), each block as (K, ) arrays per axis written
@@ -663,6 +669,18 @@ class Tracker:
             sigma[block] = block_sigma
             for axis in range(3):
                 points[block, :, axis] = axes[axis]
+        # Loitering fixed wings onto their circle (few rows, written through the result).
+        loiter.overlay(
+            [points[:, :, axis] for axis in range(3)],
+            plans=self._plans,
+            plan_row=self._plan_row[:n],
+            loiter_m=self._loiter_m[:n],
+            t_state_s=self._t[:n],
+            x=self._x[:n],
+            ahead0_s=ahead0,
+            steps_s=steps,
+            decay_s=cfg.plan_offset_decay_s,
+        )
         return PredictedTrajectories(
             t_s=t_s, track_ids=tuple(self._ids[:n]), points=points, sigma_m=sigma
         )
@@ -742,3 +760,10 @@ class Tracker:
         row = self._row.get(track_id)
         op_id = self._op_ids[row] if row is not None else None
         return self._intake.ops.get(op_id) if op_id is not None else None
+
+
+def _loiter_radius_m(op: Operation) -> float:
+    """The circle a vehicle flies around its last waypoint once its plan has ended: its turn
+    radius if it cannot hover (a fixed wing), else 0 (it stops there)."""
+    env = op.performance()
+    return 0.0 if env.can_hover else env.turn_radius_m
