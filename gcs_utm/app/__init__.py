@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import sys
 
+from .memory import retain_freed_memory
 from .report import Report, build_report
 from .runner import (
     FAST_TIME_EPOCH_UTC_S,
@@ -46,10 +47,11 @@ measurements behind the value are in docs/performance.md)."""
 
 
 def configure_interpreter() -> None:
-    """Process-wide settings the running service needs (see GIL_SWITCH_INTERVAL_S): called by
-    the entry point, once, before the event loop starts."""
+    """Process-wide settings the running service needs (see GIL_SWITCH_INTERVAL_S and
+    :mod:`.memory`): called by the entry point, once, before the event loop starts."""
     if sys.getswitchinterval() > GIL_SWITCH_INTERVAL_S:
         sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+    retain_freed_memory()  # the monitoring cycle reuses its arrays' memory (memory.py)
 
 
 __all__ = [

@@ -72,6 +72,7 @@ def test_bench_collects_every_benchmark() -> None:
         "strategic",
         "resolution",
         "cluster",
+        "service_cycle",
     }
     # each one is also reachable by name
     for name in discover():

@@ -405,6 +405,8 @@ def test_a_predicted_loss_with_clean_plans_is_reported_not_ignored() -> None:
     d = em.on_threat(threat, snap)
     assert not plans(d)
     assert d.warnings and "off their plans" in d.warnings[0]
+    (audit,) = (a for a in d.audit if a.action == "decision")
+    assert "not where its plan says" in str(audit.detail["all_kept"])
     again = em.supervise(at(snap, em.config.retry_after_s + 1.0))
     assert not again.warnings  # said once per case
 

@@ -34,6 +34,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from gcs_utm.core.deconfliction import cords as cd
+from gcs_utm.core.deconfliction import loitering as lt
 from gcs_utm.core.deconfliction.config import DeconflictionConfig
 from gcs_utm.core.deconfliction.deform import deformed
 from gcs_utm.core.deconfliction.geometry import (
@@ -161,6 +162,7 @@ class TacticalDeconfliction:
         self._local: dict[int, tuple[FlightPlan, LocalPlan]] = {}
         self._speeds: dict[int, tuple[FlightPlan, tuple[float, float]]] = {}
         self._pair_configs: dict[tuple[float, float, float], MonitoringConfig] = {}
+        self._loitering: set[OperationId] = set()  # involved fixed wings on their circle
         self.tracking_buffers = True
         """Keep the vehicles' tracking tolerances free around new plans (:meth:`pair_minima`);
         EM switches them off for a second search when no combination keeps them."""
@@ -187,13 +189,9 @@ class TacticalDeconfliction:
     def others(
         self, snapshot: AirspaceSnapshot, exclude: Collection[OperationId]
     ) -> list[Operation]:
-        return [
-            op
-            for op in snapshot.operations.values()
-            if op.id not in exclude
-            and op.state not in _INACTIVE
-            and op.plan.end_t_s >= snapshot.t_s
-        ]
+        """The traffic other than ``exclude``: fixed wings that loiter with their circle."""
+        until = snapshot.t_s + self.config.horizon_s
+        return lt.traffic(snapshot, exclude, self.frame, until, _INACTIVE)
 
     def current_xyz(self, op: Operation, snapshot: AirspaceSnapshot) -> FloatArray:
         """Where the UAS is now: its track if tracked, else its plan at the snapshot time."""
@@ -285,7 +283,7 @@ class TacticalDeconfliction:
         self._queue = []
 
     def _mobility(self, op: Operation) -> float:
-        if op.priority >= self.config.immovable_priority:
+        if op.priority >= self.config.immovable_priority or op.id in self._loitering:
             return 0.0
         return 1.0 / max(op.priority, 1)
 
@@ -563,7 +561,11 @@ class TacticalDeconfliction:
         t0 = self.start_time(snapshot, start_t_s)
         self.set_lead_in(lead_in_from_t_s, t0)
         cfg = self.config
-        involved = [snapshot.operations[i] for i in threat.uas_ids if i in snapshot.operations]
+        involved = [
+            lt.as_traffic(op, snapshot, self.frame, t0 + cfg.horizon_s) or op
+            for op in (snapshot.operations[i] for i in threat.uas_ids if i in snapshot.operations)
+        ]
+        self._loitering = {op.id for op in involved if op is not snapshot.operations[op.id]}
         if not involved:
             return {}
         local = {op.id: self.local_plan(op.plan).after(t0) for op in involved}

@@ -69,6 +69,13 @@ from gcs_utm.model import (
     ThreatStatus,
 )
 
+KEPT_REASON = (
+    "every UAS keeps its plan: TD finds the plans (a finished fixed wing's as its loiter "
+    "circle) clear of each other by the buffered minima, while Monitoring predicts the loss "
+    "from the tracks: a UAS is not where its plan says"
+)
+"""Why a multi-UAS decision that moves nobody moves nobody (``all_kept`` in its audit)."""
+
 
 def _alt_record(alt: Alternative, alpha: float, beta: float) -> dict[str, object]:
     return {
@@ -453,9 +460,11 @@ class EmergencyManager:
                 escalations=(msg,), audit=(self.audit(now, "escalation", t.id, detail),)
             )
         detail["moved_up_to_priority"] = tiered.moved_up_to_priority
+        kept = all(a.maneuver is Maneuver.KEEP_PLAN for a in tiered.selection.chosen.values())
+        if kept:
+            detail["all_kept"] = KEPT_REASON
         d = Decision(audit=(self.audit(now, "decision", t.id, detail),))
         d = d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
-        kept = all(a.maneuver is Maneuver.KEEP_PLAN for a in tiered.selection.chosen.values())
         if kept and not self._in_force(case) and not case.off_plan_escalated:
             case.off_plan_escalated = True
             # Monitoring predicts the loss from the tracks, yet every plan is clear of it: the

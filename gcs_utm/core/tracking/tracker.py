@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from gcs_utm.core.tracking import kalman, kernel, prediction
+from gcs_utm.core.tracking import kalman, kernel, loiter, prediction
 from gcs_utm.core.tracking.config import TrackingConfig
 from gcs_utm.core.tracking.intake import Identity, Intake
 from gcs_utm.core.tracking.layout import (
@@ -86,6 +86,10 @@ from gcs_utm.model import (
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
+
+PREDICT_BLOCK_ROWS = 2048
+"""Rows predicted together (:meth:`Tracker.predict`): a block's (rows, 61) temporaries are
+1 MB each, so the few a block needs fit in a core's L2 cache (2 MB on the project's machine)."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -141,6 +145,7 @@ class Tracker:
         self._stale = np.zeros(0, dtype=bool)
         self._plan_row = np.zeros(0, dtype=np.intp)
         self._geom_m = np.zeros(0)
+        self._loiter_m = np.zeros(0)  # loiter radius of a fixed wing's operation, else 0
         # Closest plan segment found by the last locate (-1: none): the windowed search
         # starts there (see PlanTable.locate). A cache only: never changes a result.
         self._seg_hint = np.zeros(0, dtype=np.intp)
@@ -183,6 +188,7 @@ class Tracker:
             j = self._plan_of_op.get(op_id, -1) if op_id is not None else -1
             self._plan_row[row] = j
             self._geom_m[row] = ops[j].flight_geometry_m if j >= 0 else 0.0
+            self._loiter_m[row] = loiter.loiter_radius_m(ops[j]) if j >= 0 else 0.0
         keep = np.array(
             [tid.partition("@")[0] not in claimed for tid in self._ids[: self._n]], dtype=bool
         )
@@ -211,6 +217,7 @@ class Tracker:
         self._stale = grown(self._stale)
         self._plan_row = grown(self._plan_row, -1)
         self._geom_m = grown(self._geom_m)
+        self._loiter_m = grown(self._loiter_m)
         self._seg_hint = grown(self._seg_hint, -1)
         self._cap = cap
 
@@ -239,6 +246,7 @@ class Tracker:
         op = self._intake.ops.get(ident.operation_id) if ident.operation_id is not None else None
         self._plan_row[row] = self._plan_of_op[op.id] if op is not None else -1
         self._geom_m[row] = op.flight_geometry_m if op is not None else 0.0
+        self._loiter_m[row] = loiter.loiter_radius_m(op) if op is not None else 0.0
         self._seg_hint[row] = -1
         return row
 
@@ -246,7 +254,7 @@ class Tracker:
         idx = np.flatnonzero(keep)
         for name in (
             "_x", "_p", "_t", "_src_t", "_updates", "_gate_fails", "_coop", "_stale",
-            "_plan_row", "_geom_m", "_seg_hint",
+            "_plan_row", "_geom_m", "_loiter_m", "_seg_hint",
         ):  # fmt: skip
             arr = getattr(self, name)
             arr[: len(idx)] = arr[idx]
@@ -628,62 +636,91 @@ class Tracker:
         ``plan_offset_decay_s``), its radius grows by ``plan_sigma_growth_mps``; every other
         track is extrapolated with its filtered velocity and its radius is the filter's
         position covariance propagated (root of the trace). Time is counted from each
-        track's state time, so a stale track's radius keeps growing.
+        track's state time, so a stale track's radius keeps growing. A fixed wing whose plan
+        has ended and that circles its last waypoint is predicted on that loiter circle
+        (:mod:`.loiter`), not on its tangent.
 
-        Layout: (N, K) arrays per axis, stacked once at the end (much faster than writing
-        through an (N, K, 4) array). Whichever kind of row is the majority is computed for
-        all rows at once and the minority is written over it: scattering the majority's
-        rows into the result would cost more than computing them."""
+        Layout: the rows are predicted in blocks of ``PREDICT_BLOCK_ROWS`` (each row's
+        figures do not depend on the others), each block as (K, ) arrays per axis written
+        into the one (N, K, 4) result: a block's temporaries stay in the CPU cache, so the
+        cost per row does not rise once N's (N, K) planes outgrow it. In a block, whichever
+        kind of row is the majority is computed for all its rows at once and the minority is
+        written over it: scattering the majority's rows would cost more than computing
+        them."""
         n = self._n
         cfg = self.config
         k = cfg.n_points
         steps: FloatArray = np.arange(k, dtype=np.float64) * cfg.step_s
-        times = t_s + steps
         # Time from each track's state to the first point; point k is ahead0 + steps[k]
         # (an outer sum: no (N, K) array of POSIX times is subtracted).
         ahead0 = t_s - self._t[:n]
         rows, _, dist, tau0 = self._plan_state(self._x[:n, :, kalman.POS], self._t[:n])
         follow = dist <= self._geom_m[rows] * self.config.plan_follow_factor
-        fr = rows[follow]
         is_follow = np.zeros(n, dtype=bool)
-        is_follow[fr] = True
+        is_follow[rows[follow]] = True
+        tau = np.zeros(n)  # plan time of each following row's state
+        tau[rows[follow]] = tau0[follow]
+        points = np.empty((n, k, 4))
+        points[:, :, 3] = t_s + steps
+        sigma = np.empty((n, k))
+        for lo in range(0, n, PREDICT_BLOCK_ROWS):
+            block = slice(lo, min(lo + PREDICT_BLOCK_ROWS, n))
+            axes, block_sigma = self._predict_block(block, is_follow[block], tau, ahead0, steps)
+            sigma[block] = block_sigma
+            for axis in range(3):
+                points[block, :, axis] = axes[axis]
+        # Loitering fixed wings onto their circle (few rows, written through the result).
+        loiter.overlay(
+            [points[:, :, axis] for axis in range(3)],
+            plans=self._plans,
+            plan_row=self._plan_row[:n],
+            loiter_m=self._loiter_m[:n],
+            t_state_s=self._t[:n],
+            x=self._x[:n],
+            ahead0_s=ahead0,
+            steps_s=steps,
+            decay_s=cfg.plan_offset_decay_s,
+        )
+        return PredictedTrajectories(
+            t_s=t_s, track_ids=tuple(self._ids[:n]), points=points, sigma_m=sigma
+        )
+
+    def _predict_block(
+        self,
+        block: slice,
+        is_follow: npt.NDArray[np.bool_],
+        tau: FloatArray,
+        ahead0: FloatArray,
+        steps: FloatArray,
+    ) -> tuple[list[FloatArray], FloatArray]:
+        """Axes and radii of rows ``block`` (see :meth:`predict`); ``is_follow`` is of the
+        block's rows, ``tau`` (plan time) and ``ahead0`` of all rows."""
+        cfg = self.config
+        x, p, a0 = self._x[block], self._p[block], ahead0[block]
+        plan_row, tau = self._plan_row[block], tau[block]
+        fr = np.flatnonzero(is_follow)
         ex = np.flatnonzero(~is_follow)
-        if len(fr) * 2 > n:
+        if len(fr) * 2 > len(is_follow):
             # Rows that do not follow get a placeholder plan (row 0 at its start), are
             # computed along with the others and then overwritten by extrapolation.
-            plan_rows = np.where(is_follow, self._plan_row[:n], 0)
-            tau_all = np.full(n, self._plans.start_t_s[0])
-            tau_all[fr] = tau0[follow]
-            axes, sigma = prediction.follow(
-                self._plans, cfg, self._x[:n], self._p[:n], plan_rows, tau_all, ahead0, steps
-            )
+            plan_rows = np.where(is_follow, plan_row, 0)
+            tau_all = np.where(is_follow, tau, self._plans.start_t_s[0])
+            axes, sigma = prediction.follow(self._plans, cfg, x, p, plan_rows, tau_all, a0, steps)
             if len(ex):
-                ex_axes, ex_sigma = prediction.extrapolate(
-                    self._x[ex], self._p[ex], self._q, ahead0[ex], steps
-                )
+                ex_axes, ex_sigma = prediction.extrapolate(x[ex], p[ex], self._q, a0[ex], steps)
                 for axis in range(3):
                     axes[axis][ex] = ex_axes[axis]
                 sigma[ex] = ex_sigma
         else:
-            axes, sigma = prediction.extrapolate(self._x[:n], self._p[:n], self._q, ahead0, steps)
+            axes, sigma = prediction.extrapolate(x, p, self._q, a0, steps)
             if len(fr):
                 f_axes, f_sigma = prediction.follow(
-                    self._plans,
-                    cfg,
-                    self._x[fr],
-                    self._p[fr],
-                    self._plan_row[fr],
-                    tau0[follow],
-                    ahead0[fr],
-                    steps,
+                    self._plans, cfg, x[fr], p[fr], plan_row[fr], tau[fr], a0[fr], steps
                 )
                 for axis in range(3):
                     axes[axis][fr] = f_axes[axis]
                 sigma[fr] = f_sigma
-        points = np.stack([*axes, np.broadcast_to(times, (n, k))], axis=2)
-        return PredictedTrajectories(
-            t_s=t_s, track_ids=tuple(self._ids[:n]), points=points, sigma_m=sigma
-        )
+        return axes, sigma
 
     def tracks_at(self, t_s: float) -> TrackMap:
         """All tracks propagated to ``t_s`` (``Track.t_s == t_s``; the filter state itself is

@@ -1,0 +1,135 @@
+"""A fixed wing whose plan has ended, as traffic: its loiter circle, not its last point.
+
+A fixed wing cannot stop: when its mission ends the autopilot circles the last waypoint at the
+loiter radius (:mod:`gcs_utm.core.tracking.loiter`), and Tracking predicts it there. Its filed
+plan, sampled past its end, is one point (or nothing): candidates and keep-plan judged
+against that plan see no conflict with an aircraft that is in fact flying round a circle of
+up to a turn radius around that point, and an involved UAS that passes through the circle is
+left on its plan.
+
+:func:`loiter_plan` gives each such operation a plan that goes on round the circle up to a
+time (the decision's horizon): its filed waypoints, then timed points on the circle the
+tracker predicts (the same geometry, :func:`.loiter.loiter_rows` and
+:func:`.loiter.loiter_points`: centre the last waypoint, phase and turn from the track,
+angular speed from its ground speed, offsets converging with the plan-following time
+constant). TD takes the other UAS of a decision with these plans (:func:`traffic`), and an
+involved loitering aircraft too (:func:`as_traffic`), which it does not move (its new plan
+would be a deformed circle): the others are kept clear of it.
+
+Units: local frame metres (east, north, alt AMSL), seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Collection
+from dataclasses import replace
+
+import numpy as np
+
+from gcs_utm.core.deconfliction.geometry import LocalPlan, local_to_plan, plan_to_local
+from gcs_utm.core.tracking import loiter
+from gcs_utm.geo import LocalFrame
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    FlightPlan,
+    Operation,
+    OperationId,
+    OperationState,
+    Track,
+)
+
+CIRCLE_STEP_S = 2.0
+"""Spacing of the circle's points in time: at a fixed wing's speed on its turn radius a chord
+of this length lies within two metres of the arc."""
+
+CONVERGE_S = 10.0
+"""Time constant with which the track's offset from the circle shrinks (the tracker's
+``plan_offset_decay_s`` default): only the first seconds of the circle depend on it."""
+
+
+def _track_of(op: Operation, snapshot: AirspaceSnapshot) -> Track | None:
+    for tr in snapshot.tracks.values():
+        if tr.operation_id == op.id and not tr.stale:
+            return tr
+    return None
+
+
+def loiter_plan(
+    op: Operation, snapshot: AirspaceSnapshot, frame: LocalFrame, until_t_s: float
+) -> FlightPlan | None:
+    """``op``'s plan followed by its loiter circle up to ``until_t_s``, or None when it is not
+    loitering at the snapshot (not a fixed wing, plan not ended, no fresh track, track away
+    from the last waypoint or too slow to tell its turn: :func:`.loiter.loiter_rows`)."""
+    radius = loiter.loiter_radius_m(op)
+    if radius <= 0.0 or op.plan.end_t_s > snapshot.t_s:
+        return None
+    tr = _track_of(op, snapshot)
+    if tr is None:
+        return None
+    e, n = frame.point_to_local(tr.lat_deg, tr.lon_deg)
+    pos = np.array([[e, n, tr.alt_amsl_m]])
+    vel = np.array([tr.vel_enu_mps], dtype=np.float64)
+    lp = plan_to_local(op.plan, frame)
+    center = lp.xyz()[-1:]
+    radius_m = np.array([radius])
+    rows = loiter.loiter_rows(
+        radius_m=radius_m,
+        t_state_s=np.array([snapshot.t_s]),
+        end_t_s=np.array([op.plan.end_t_s]),
+        pos=pos,
+        vel=vel,
+        center=center,
+    )
+    t_from = max(tr.t_s, op.plan.end_t_s + 1e-3)
+    if not len(rows) or until_t_s <= t_from:
+        return None
+    k = max(2, math.ceil((until_t_s - t_from) / CIRCLE_STEP_S) + 1)
+    times = np.linspace(t_from, until_t_s, k)
+    east, north, alt = loiter.loiter_points(
+        radius_m=radius_m,
+        pos=pos,
+        vel=vel,
+        center=center,
+        tau_s=(times - tr.t_s)[None, :],
+        decay_s=CONVERGE_S,
+    )
+    circle = local_to_plan(
+        LocalPlan(east[0], north[0], alt[0], times),
+        op.plan,
+        frame,
+        created_t_s=snapshot.t_s,
+        reason="loiter",
+    )
+    return replace(op.plan, waypoints=op.plan.waypoints + circle.waypoints)
+
+
+def as_traffic(
+    op: Operation, snapshot: AirspaceSnapshot, frame: LocalFrame, until_t_s: float
+) -> Operation | None:
+    """``op`` with its plan extended by its loiter circle (:func:`loiter_plan`), or None when
+    it is not loitering."""
+    plan = loiter_plan(op, snapshot, frame, until_t_s)
+    return None if plan is None else replace(op, plan=plan)
+
+
+def traffic(
+    snapshot: AirspaceSnapshot,
+    exclude: Collection[OperationId],
+    frame: LocalFrame,
+    until_t_s: float,
+    inactive: Collection[OperationState],
+) -> list[Operation]:
+    """The operations other than ``exclude`` that are traffic at the snapshot: active ones
+    whose plan has not ended, and loitering fixed wings (whatever the state of their
+    operation: the aircraft is in the air) with their circle up to ``until_t_s``."""
+    out = []
+    for op in snapshot.operations.values():
+        if op.id in exclude:
+            continue
+        circling = as_traffic(op, snapshot, frame, until_t_s)
+        if circling is not None:
+            out.append(circling)
+        elif op.state not in inactive and op.plan.end_t_s >= snapshot.t_s:
+            out.append(op)
+    return out

@@ -1,0 +1,159 @@
+"""Prediction of a fixed wing that has finished its plan: it loiters around its last waypoint.
+
+A fixed wing cannot stop. When its mission ends, PX4 and ArduPilot (and the simulated
+vehicle) circle the last waypoint at the loiter radius (PX4's NAV_LOITER_RAD, ArduPlane's
+WP_LOITER_RAD; clockwise by default, the sign of the radius turns it around). Extrapolating
+such a track with its velocity predicts a straight line along the circle's tangent: a path
+the aircraft never flies, that runs into geofences and other UAS beside the circle (and
+misses the ones on it). Clamping it to the plan's last point is no better: the circle is up
+to one radius away from it.
+
+:func:`loiter_rows` picks the tracks that are loitering: a plan whose end time has passed
+at the track's state time, and the track within :data:`CAPTURE_RADII` loiter radii of the
+last waypoint (horizontally). :func:`loiter_points` predicts them on the circle: centre the
+last waypoint, the phase of the track's current bearing from it, the direction in which it
+is turning (clockwise when it does not tell), the angular speed of its horizontal speed on
+the radius. The track's radial and vertical offsets from the circle shrink with the time
+constant the plan-following prediction uses for its cross-track offset (the autopilot
+converges onto the circle and the waypoint's altitude), so the prediction starts at the
+track's position.
+
+:func:`overlay` applies both to a prediction (what ``Tracker.predict`` calls).
+
+Units: local frame metres (east, north, alt AMSL), seconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from gcs_utm.core.tracking import kalman
+from gcs_utm.core.tracking.plans import PlanTable
+from gcs_utm.model import Operation
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.intp]
+
+CAPTURE_RADII = 2.0
+"""A track within this many loiter radii of its ended plan's last waypoint is loitering: the
+autopilots steer onto the circle from wherever they are (the simulated vehicle from within 3
+radii), and a track further away has been sent elsewhere (a reroute ends with a plan)."""
+
+MIN_SPEED_MPS = 1.0
+"""Below this horizontal speed the track's bearing and turn tell nothing (a fixed wing is never
+that slow in flight): it is extrapolated as any other track."""
+
+
+def loiter_radius_m(op: Operation) -> float:
+    """The circle a vehicle flies around its last waypoint once its plan has ended: its turn
+    radius if it cannot hover (a fixed wing), else 0 (it stops there)."""
+    env = op.performance()
+    return 0.0 if env.can_hover else env.turn_radius_m
+
+
+def loiter_rows(
+    *,
+    radius_m: FloatArray,
+    t_state_s: FloatArray,
+    end_t_s: FloatArray,
+    pos: FloatArray,
+    vel: FloatArray,
+    center: FloatArray,
+) -> IntArray:
+    """Positions (in these arrays) of the rows that are loitering. ``radius_m`` (N,) is each
+    row's loiter radius (0: the vehicle hovers, never loiters), ``t_state_s`` its state time,
+    ``end_t_s`` its plan's end, ``pos`` and ``vel`` (N, 3) its state, ``center`` (N, 3) its
+    plan's last waypoint."""
+    horiz = np.hypot(pos[:, 0] - center[:, 0], pos[:, 1] - center[:, 1])  # m
+    speed = np.hypot(vel[:, 0], vel[:, 1])  # m/s
+    ok = (
+        (radius_m > 0.0)
+        & (t_state_s >= end_t_s)
+        & (horiz <= CAPTURE_RADII * radius_m)
+        & (speed >= MIN_SPEED_MPS)
+    )
+    out: IntArray = np.flatnonzero(ok)
+    return out
+
+
+def loiter_points(
+    *,
+    radius_m: FloatArray,
+    pos: FloatArray,
+    vel: FloatArray,
+    center: FloatArray,
+    tau_s: FloatArray,
+    decay_s: float,
+) -> list[FloatArray]:
+    """East, north, alt (each (N, K)) of loitering rows at times ``tau_s`` (N, K) after their
+    state: on the circle of ``radius_m`` around ``center``, from the row's bearing, at its
+    horizontal speed, turning the way it turns; radial and vertical offsets decaying with
+    ``decay_s``."""
+    de = pos[:, 0] - center[:, 0]  # m
+    dn = pos[:, 1] - center[:, 1]  # m
+    dist = np.hypot(de, dn)  # m
+    speed = np.hypot(vel[:, 0], vel[:, 1])  # m/s
+    # Bearing from the centre (radians clockwise from north); at the centre itself, the
+    # direction the track flies in (it leaves the centre that way).
+    at_center = dist < 1e-6
+    bearing0 = np.where(at_center, np.arctan2(vel[:, 0], vel[:, 1]), np.arctan2(de, dn))
+    # Clockwise (bearing increasing) unless the velocity runs against the clockwise tangent
+    # (cos b, -sin b) of the bearing.
+    cw_tangent = vel[:, 0] * np.cos(bearing0) - vel[:, 1] * np.sin(bearing0)  # m/s
+    turn = np.where(cw_tangent < 0.0, -1.0, 1.0)
+    rate = turn * speed / radius_m  # rad/s
+    decay = np.exp(-tau_s / decay_s)
+    r = radius_m[:, None] + (dist - radius_m)[:, None] * decay  # m
+    bearing = bearing0[:, None] + rate[:, None] * tau_s
+    east = center[:, 0, None] + r * np.sin(bearing)
+    north = center[:, 1, None] + r * np.cos(bearing)
+    alt = center[:, 2, None] + (pos[:, 2] - center[:, 2])[:, None] * decay
+    return [east, north, alt]
+
+
+def overlay(
+    axes: list[FloatArray],
+    *,
+    plans: PlanTable,
+    plan_row: IntArray,
+    loiter_m: FloatArray,
+    t_state_s: FloatArray,
+    x: FloatArray,
+    ahead0_s: FloatArray,
+    steps_s: FloatArray,
+    decay_s: float,
+) -> None:
+    """Overwrite in ``axes`` (east, north, alt; each (N, K)) the rows that are loitering with
+    their circle. Per row: ``plan_row`` its plan in ``plans`` (-1: none), ``loiter_m`` its
+    loiter radius (0: none), ``t_state_s`` and ``x`` (N, 3, 2) its filter state, ``ahead0_s``
+    the time from its state to the first point; ``steps_s`` the points' offsets from the
+    first."""
+    rows = np.flatnonzero((plan_row >= 0) & (loiter_m > 0.0))
+    if not len(rows):
+        return
+    j = plan_row[rows]
+    center = plans.wp_pos[plans.wp_offset[j] + plans.n_waypoints[j] - 1]
+    pos = x[rows, :, kalman.POS]
+    vel = x[rows, :, kalman.VEL]
+    radius = loiter_m[rows]
+    at = loiter_rows(
+        radius_m=radius,
+        t_state_s=t_state_s[rows],
+        end_t_s=plans.end_t_s[j],
+        pos=pos,
+        vel=vel,
+        center=center,
+    )
+    if not len(at):
+        return
+    circle = loiter_points(
+        radius_m=radius[at],
+        pos=pos[at],
+        vel=vel[at],
+        center=center[at],
+        tau_s=np.add.outer(ahead0_s[rows[at]], steps_s),
+        decay_s=decay_s,
+    )
+    for axis in range(3):
+        axes[axis][rows[at]] = circle[axis]
