@@ -435,3 +435,36 @@ def test_an_accepted_plan_older_than_the_airspace_plan_is_not_put_back() -> None
     seen2 = em2.case(other.id)
     assert seen2 is not None and acc2.selected is not None
     assert seen2.operations[acc2.operation_id].plan.waypoints == acc2.selected.plan.waypoints
+
+
+def test_a_final_safe_command_in_force_is_not_proposed_again() -> None:
+    """GNSS degradation does not clear while the UAS lands: once LAND is accepted and applied,
+    supervision used to propose LAND again every retry_after_s (use case 2 asked the pilot the
+    same question seven times while the vehicle was already landing). It is audited once."""
+    op = sc.make_operation("A", [(0, 0, 100), (3000, 0, 100)], landing_sites=[(1400, 300, 60)])
+    t = sc.T0_S + 100.0
+    threat = sc.threat(ThreatKind.GNSS_DEGRADATION, ["A"], t_s=t)
+    em = make_em(max_replans=0)
+    snap = sc.snapshot([op], t_s=t)
+    rec = next(r for r in em.on_threat(threat, snap).recommendations)
+    now = t
+    commands, audits = [], []
+    for _ in range(6):  # answer, apply, let it settle, supervise: until LAND is in force
+        now += 1.0
+        (acc,) = em.on_answer(rec, True, replace(snap, t_s=now)).recommendations
+        em.on_outcome(acc.id, acc.version, True, "applied", replace(snap, t_s=now))
+        if acc.command is not None:
+            commands.append(acc.command.kind)
+        for _tick in range(5):  # supervision ticks, retry_after_s apart
+            now = max(now, em.supervision_due(acc) or now) + em.config.retry_after_s + 1.0
+            d = em.supervise(replace(snap, t_s=now))
+            audits += [str(a.detail) for a in d.audit]
+            if plans(d):
+                break
+        if not plans(d):
+            break
+        (rec,) = plans(d)
+    assert commands == [CommandKind.LAND], commands
+    assert not d.escalations
+    final = [a for a in audits if "final safe command in force" in a]
+    assert len(final) == 1, audits

@@ -88,3 +88,6 @@ class Case:
     """The "plans clear, tracks predict a loss" warning was given (once per case)."""
     deviates_at: dict[RecommendationId, float] = field(default_factory=dict)
     """When each recommended plan first leaves the plan it replaces (see .supervision)."""
+    final_in_force: bool = False
+    """A final safe command (land, return to launch) is in force for every UAS of the case:
+    supervision has stopped re-proposing it (see .supervision)."""

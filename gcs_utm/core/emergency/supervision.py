@@ -13,7 +13,12 @@ an upload that failed, each lead to a new decision (paper §4.4: nothing is drop
   the recommendation, up to ``max_replans`` times; then it escalates with the reason,
   proposing the threat's safe command. When the new decision keeps the standing plans (it
   chooses them again) nothing is sent; when it finds no combination at all it escalates
-  likewise. Further supervision of the case waits ``retry_after_s``.
+  likewise. Further supervision of the case waits ``retry_after_s``. Once a *final* safe
+  command (land, return to launch) is in force for every UAS of the case, the threat is
+  expected to stay open until the UAS is down or home (a degraded GNSS does not recover by
+  landing), so the same command is not proposed again every ``retry_after_s``: the pilot
+  would be asked the same question over and over while the vehicle already does it. That is
+  audited once; a vehicle that does not comply is Monitoring's business (conformance).
 - **Failed upload or verification.** The first failure for a UAS re-plans once; the next
   escalates and proposes the safe command for the threat kind (:func:`safe_command`): the
   UAS is never left with a failed plan and no pending decision.
@@ -48,6 +53,8 @@ _LAND_KINDS = frozenset(
 )
 _RTL_KINDS = frozenset({ThreatKind.COMMUNICATION_FAILURE})
 _IN_FORCE = (RecommendationState.ACCEPTED, RecommendationState.APPLIED)
+_FINAL_COMMANDS = frozenset({CommandKind.LAND, CommandKind.RTL})
+"""Safe commands after which nothing better can be proposed for the UAS."""
 
 
 def safe_command(kind: ThreatKind) -> CommandKind:
@@ -89,16 +96,10 @@ def supervise_case(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot)
     now = snapshot.t_s
     recs = [em.recommendation(r) for r in sorted(case.rec_ids)]
     live = [r for r in recs if r is not None and r.state in _IN_FORCE]
-    if (
-        case.action in ONE_SHOT
-        or not live
-        or any(r is not None and r.state is RecommendationState.PROPOSED for r in recs)
-    ):
+    if _not_due(em, case, recs, live, now):
         return Decision()
-    if now < max(settled_at(em, case, r) for r in live):
-        return Decision()
-    if case.supervised and now - case.attempt_t_s < em.config.retry_after_s:
-        return Decision()
+    if _final_command_in_force(case, live):
+        return _final_noted(em, case, live, now)
     case.supervised += 1
     case.attempt_t_s = now
     versions = ", ".join(f"{r.id} v{r.version}" for r in live)
@@ -110,6 +111,44 @@ def supervise_case(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot)
     if d.escalations and not d.recommendations:
         return d.merge(escalate_safe(em, case, [r.operation_id for r in live], now, why))
     return Decision(audit=(audit,)).merge(d)
+
+
+def _not_due(
+    em: EmergencyManager,
+    case: Case,
+    recs: list[Recommendation | None],
+    live: list[Recommendation],
+    now: float,
+) -> bool:
+    """Nothing to supervise yet: a one-shot action, nothing in force, a pilot still asked, a
+    plan not settled, or the last attempt less than ``retry_after_s`` ago."""
+    if case.action in ONE_SHOT or not live:
+        return True
+    if any(r is not None and r.state is RecommendationState.PROPOSED for r in recs):
+        return True
+    if now < max(settled_at(em, case, r) for r in live):
+        return True
+    return bool(case.supervised) and now - case.attempt_t_s < em.config.retry_after_s
+
+
+def _final_noted(
+    em: EmergencyManager, case: Case, live: list[Recommendation], now: float
+) -> Decision:
+    """Audit once that the final safe command stays in force and is not proposed again."""
+    if case.final_in_force:
+        return Decision()
+    case.final_in_force = True
+    commands = ", ".join(f"{r.id} v{r.version}" for r in live)
+    why = f"final safe command in force ({commands}): not proposed again"
+    return Decision(audit=(em.audit(now, "supervision", case.threat.id, {"reason": why}),))
+
+
+def _final_command_in_force(case: Case, live: list[Recommendation]) -> bool:
+    """Every UAS of the case has a final safe command (land, RTL) accepted or applied."""
+    kind = safe_command(case.threat.kind)
+    return kind in _FINAL_COMMANDS and all(
+        r.command is not None and r.command.kind is kind for r in live
+    )
 
 
 def escalate_safe(
