@@ -50,6 +50,7 @@ from gcs_utm.services.airspace import Airspace, AirspaceError
 
 if TYPE_CHECKING:
     from gcs_utm.services.usm import UsmConfig
+    from gcs_utm.services.vehicle_ops import VehicleOps
 
 _log = logging.getLogger(__name__)
 
@@ -202,6 +203,7 @@ class RecommendationLifecycle:
     recommendations: dict[RecommendationId, RecommendationRecord]
     _record: Callable[[object], None]
     _vehicles: VehiclePort | None
+    vehicle_ops: VehicleOps
     _operators: list[OperatorPort]
     _answer_sinks: list[Callable[[Recommendation, bool], Awaitable[None]]]
     threats: dict[ThreatId, Threat]
@@ -423,6 +425,7 @@ class RecommendationLifecycle:
             record, RecommendationState.UPLOADING, f"{maneuver} as plan v{new_plan.version}"
         )
         error = ""
+        self.vehicle_ops.expect_upload(op.sys_id, new_plan)
         for attempt in range(1, self.config.upload_attempts + 1):
             result = await self._vehicles.upload_plan(
                 op.sys_id,
@@ -440,6 +443,7 @@ class RecommendationLifecycle:
             error = result.error or "readback did not match"
             self.log_event("upload", f"{rec.id} attempt {attempt} failed: {error}")
         if not record.verified:
+            self.vehicle_ops.expect_upload(op.sys_id, None)
             self.counters["uploads_failed"] += 1
             await self._fail(record, error)
             return

@@ -259,6 +259,7 @@ class _Vehicle:
     ground_warned: bool = False
     failures: int = 0  # mission downloads failed in a row
     retry_at_s: float | None = None  # when a failed download is tried again
+    uploading: FlightPlan | None = None  # the plan the USM is uploading (see expect_upload)
 
 
 class VehicleOps:
@@ -291,6 +292,15 @@ class VehicleOps:
     def attach(self, port: object) -> None:
         """The MAVLink side; without ``download_mission`` no operation is filed."""
         self._port = getattr(port, "download_mission", None)
+
+    def expect_upload(self, sys_id: SysId, plan: FlightPlan | None) -> None:
+        """The USM uploads ``plan`` (None: that upload is over and failed). The vehicle's
+        mission changes with the upload, which starts a download; a download that returns
+        that plan before the USM installs it (after the readback) is the upload's own echo,
+        not a new mission of the pilot's: it is not filed as a plan of its own."""
+        v = self._vehicles.get(sys_id)
+        if v is not None:
+            v.uploading = plan
 
     # ---- events -------------------------------------------------------------------------
     def on_vehicle(self, v: object) -> None:
@@ -510,7 +520,8 @@ class VehicleOps:
                 self._add(v, plan)
             return
         home_moved = op.conops == CONOPS and v.home is not None and _moved(op.home, v.home)
-        if _flies_plan(v, points, op.plan) and not home_moved:
+        echo = v.uploading is not None and _flies_plan(v, points, v.uploading)
+        if (echo or _flies_plan(v, points, op.plan)) and not home_moved:
             return
         why = reason or "the vehicle's mission changed"
         plan = self._plan(

@@ -4,6 +4,8 @@ vehicle's progress, the ground warning. The USM with a fake MAVLink side on a ma
 
 from __future__ import annotations
 
+import asyncio
+import dataclasses
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -11,8 +13,21 @@ from pathlib import Path
 import pytest
 
 from gcs_utm.clock import ManualClock
-from gcs_utm.messages import FlightMode, VehicleStatus
-from gcs_utm.model import Autopilot, OperationId, Position, SysId, VehicleKind
+from gcs_utm.messages import FlightMode, PilotAnswer, PilotDecision, VehicleStatus
+from gcs_utm.model import (
+    Alternative,
+    Autopilot,
+    FlightPlan,
+    Maneuver,
+    OperationId,
+    Position,
+    Recommendation,
+    RecommendationId,
+    SysId,
+    ThreatId,
+    ThreatKind,
+    VehicleKind,
+)
 from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.usm import Usm
 from gcs_utm.services.vehicle_ops import (
@@ -23,7 +38,7 @@ from gcs_utm.services.vehicle_ops import (
 )
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from usm_fakes import FakeVehicles, make_operation
+from usm_fakes import FakeVehicles, Result, make_operation
 
 HOME = Position(lat_deg=45.4671160, lon_deg=-73.7578370, alt_amsl_m=32.34)
 NORTH_100M_E7 = 9046  # ~100.0 m of latitude, in degrees x 1e7
@@ -335,3 +350,64 @@ async def test_home_far_from_the_airspace_ground_warns_once(
     assert len(warnings) == int(warned)
     if warned:
         assert "32.34" in warnings[0] and "488.00" in warnings[0]
+
+
+def _items_of(plan: FlightPlan) -> list[_Item]:
+    """The plan as a mission in MAV_FRAME_GLOBAL (AMSL), as the USM uploads it."""
+    return [
+        _Item(command=16, x=_e7(w.lat_deg), y=_e7(w.lon_deg), z=w.alt_amsl_m, frame=0, seq=k)
+        for k, w in enumerate(plan.waypoints)
+    ]
+
+
+async def test_the_echo_of_the_usms_own_upload_is_not_filed_as_the_pilots_mission() -> None:
+    """The upload changes the vehicle's mission, which starts a download; when that download
+    ended before the readback did, the uploaded plan was filed "from the vehicle's mission"
+    under the next version and the recommendation's own plan was then refused ("plan version
+    2 is not newer than 2"; seen in use case 2): the UTM held a copy timed from the download,
+    not the plan EM made."""
+    usm: Usm
+    op0 = make_operation(100.0)
+
+    class EchoPort(_Port):
+        async def upload_plan(self, sys_id: SysId, plan: FlightPlan, **kw: object) -> Result:
+            self.mission = _items_of(plan)  # the vehicle has the new mission...
+            usm.on_status(_status(112.0, total=len(self.mission), mission_id=9, home=HOME))
+            for _ in range(10):  # ...and the download of it ends before the readback
+                await asyncio.sleep(0)
+            return await super().upload_plan(sys_id, plan, **kw)  # type: ignore[arg-type]
+
+    clock = ManualClock(110.0)
+    usm = Usm(Airspace(), clock)
+    usm.airspace.load([op0], [])
+    port = EchoPort()
+    port.mission = _items_of(op0.plan)
+    usm.attach_vehicles(port)
+    usm.on_vehicle(_Info(key=_Key(1)))
+    usm.on_status(_status(110.0, total=2, mission_id=8, home=HOME, position=HOME))
+    await usm.drain()
+    up = tuple(dataclasses.replace(w, alt_amsl_m=720.0) for w in op0.plan.waypoints)
+    new = dataclasses.replace(op0.plan, waypoints=up)
+    rec = Recommendation(
+        id=RecommendationId("t1/UAS1"),
+        version=1,
+        threat_id=ThreatId("t1"),
+        threat_kind=ThreatKind.LOSS_OF_SEPARATION,
+        operation_id=op0.id,
+        created_t_s=110.0,
+        deadline_t_s=130.0,
+        selected=Alternative(
+            operation_id=op0.id, maneuver=Maneuver.GO_UP, plan=new, cost=0.1, risk=0.1
+        ),
+    )
+    await usm.on_recommendation(rec)
+    answer = PilotAnswer(
+        recommendation_id=rec.id, version=1, decision=PilotDecision.ACCEPT, t_s=111.0,
+        operator="alice", source="dashboard",
+    )  # fmt: skip
+    await usm.answer(answer)
+    await usm.drain()
+    assert port.downloads >= 2  # the echo was downloaded
+    op = usm.airspace.operation(op0.id)
+    assert (op.plan.version, op.plan.reason) == (2, "LOSS_OF_SEPARATION: go_up")
+    assert usm.vehicle_ops.counters["refiled"] == 0
