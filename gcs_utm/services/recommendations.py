@@ -452,6 +452,9 @@ class RecommendationLifecycle:
             self.airspace.replace_plan(new_plan)
         except AirspaceError as exc:  # a newer plan landed meanwhile: keep the newer one
             _log.warning("plan of %s not installed: %s", op.id, exc)
+        # installed: a later echo matches the operation's own plan; an expectation left
+        # standing would hide a pilot's later upload of this same mission
+        self.vehicle_ops.expect_upload(op.sys_id, None)
         await self._set_state(
             record, RecommendationState.APPLIED, f"{maneuver}: mission verified by readback"
         )
