@@ -50,6 +50,7 @@ from gcs_utm.model import (
     ThreatKind,
     ThreatStatus,
 )
+from gcs_utm.ratelog import RateLimitedLog
 from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.recommendations import (
     AnswerOutcome,
@@ -85,6 +86,7 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
+_TASK_ERROR_INTERVAL_S = 10.0  # one line per failing task kind in this time (ratelog)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -209,6 +211,7 @@ class Usm(RecommendationLifecycle):
         self._hazard_sweep_t_s = float("-inf")
         self._hazard_seq = itertools.count(1)
         self._tasks: set[asyncio.Task[None]] = set()
+        self._task_errors = RateLimitedLog(_log, _TASK_ERROR_INTERVAL_S, max_causes=64)
         self.counters: dict[str, int] = {
             "measurements": 0,
             "unknown_vehicle_measurements": 0,
@@ -545,9 +548,23 @@ class Usm(RecommendationLifecycle):
         task.add_done_callback(self._task_done)
 
     def _task_done(self, task: asyncio.Task[None]) -> None:
+        """A failed task is logged once per interval and cause (its coroutine and error
+        type), the first with its traceback, the repeats counted: a sender that makes the
+        same task fail on every frame cannot flood the log."""
         self._tasks.discard(task)
-        if not task.cancelled() and task.exception() is not None:
-            _log.error("USM task failed", exc_info=task.exception())
+        if task.cancelled() or (exc := task.exception()) is None:
+            return
+        coro = task.get_coro()
+        where = getattr(coro, "__qualname__", type(coro).__name__)
+        self._task_errors.log(
+            logging.ERROR,
+            f"{where}:{type(exc).__name__}",
+            "USM task %s failed: %s: %s",
+            where,
+            type(exc).__name__,
+            exc,
+            exc_info=exc,
+        )
 
     async def drain(self) -> None:
         """Wait for spawned work (uploads, hazard forwarding) to finish."""
