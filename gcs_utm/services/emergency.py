@@ -30,12 +30,14 @@ from dataclasses import dataclass, replace
 
 from gcs_utm.clock import Clock
 from gcs_utm.core.emergency import Decision, EmergencyManager
+from gcs_utm.core.emergency.closing import close_threat
 from gcs_utm.model import (
     AirspaceSnapshot,
     Recommendation,
     RecommendationId,
     RecommendationState,
     Threat,
+    ThreatStatus,
 )
 
 _log = logging.getLogger(__name__)
@@ -191,6 +193,8 @@ class EmergencyService:
             await self._decide(
                 lambda: self.em.on_answer(asked, item.accepted, self._snapshot(now)), item.rec_id
             )
+        elif item.status is ThreatStatus.CLOSED:  # its geofences go with it
+            await self._decide(lambda: close_threat(self.em, item), item.id)
         else:
             await self._decide(lambda: self.em.on_threat(item, self._snapshot(now)), item.id)
         self.processed += 1

@@ -9,6 +9,7 @@ from gcs_utm.model import (
     AuditEntry,
     Command,
     Geofence,
+    GeofenceId,
     Maneuver,
     Operation,
     OperationId,
@@ -53,6 +54,8 @@ class Decision:
     superseded: tuple[RecommendationId, ...] = ()
     audit: tuple[AuditEntry, ...] = ()
     warnings: tuple[str, ...] = ()
+    removed_geofences: tuple[GeofenceId, ...] = ()
+    """Geofences EM created that are to go (their threat closed)."""
 
     def merge(self, other: Decision) -> Decision:
         return Decision(
@@ -63,6 +66,7 @@ class Decision:
             superseded=self.superseded + other.superseded,
             audit=self.audit + other.audit,
             warnings=self.warnings + other.warnings,
+            removed_geofences=self.removed_geofences + other.removed_geofences,
         )
 
 
