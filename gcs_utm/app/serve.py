@@ -25,6 +25,7 @@ from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
 
+from .restart import load_held, start_review
 from .wiring import (
     FrontendOptions,
     Persistence,
@@ -146,6 +147,8 @@ async def serve(
     store = Persistence(StoreWriter(location, settings.store))
     policy = OwnershipPolicy() if cluster else None
     rt = build_runtime(settings, clock, frame, store, policy=policy)
+    # (a cluster's other lives are other instances, alive: only a lone service reviews them)
+    held = [] if cluster else load_held(location, store.epoch, settings.store.busy_timeout_s)
     recorder = record_links(
         rt.hub,
         record_dir,
@@ -183,6 +186,7 @@ async def serve(
             tasks = start_service_tasks(tg, rt, frontends)
             if node is not None:
                 tasks.append(tg.create_task(node.run(), name="cluster"))
+            tasks.extend(start_review(tg, rt, held))
             for t in tasks:
                 if t.get_name() == "dashboard":
                     t.add_done_callback(lambda _t: stop.set())

@@ -156,6 +156,14 @@ class UsmConfig:
         max=600.0,
         unit="s",
     )
+    restart_review_s: float = setting(
+        30.0,
+        "after a restart, threats an earlier life left open that the new life does not detect "
+        "again within this time are closed (docs/emergency.md, 'After a restart')",
+        min=0.0,
+        max=3600.0,
+        unit="s",
+    )
     max_hazard_keys: int = setting(
         4096,
         "hazard coalescing keys kept (one per kind and UAS or alert); a key older than "
@@ -225,7 +233,7 @@ class Usm(RecommendationLifecycle):
         self._hazard_threats: dict[tuple[ThreatKind, str], ThreatId] = {}  # open, per key
         self.threat_closer = ThreatCloser(
             Evidence(
-                operation=self._operation,
+                operation=self.operation_or_none,
                 status=lambda sys_id: self.statuses_by_sys_id().get(sys_id),
                 health=lambda sys_id: self.health_by_sys_id().get(sys_id),
             ),
@@ -284,9 +292,15 @@ class Usm(RecommendationLifecycle):
             self._measurement_sinks.append(sink)
             self._plain_sinks.append(sink)
 
-    def attach_threat_sink(self, sink: Callable[[list[Threat]], Awaitable[None]]) -> None:
-        """Emergency Management's input."""
-        self._threat_sinks.append(sink)
+    def attach_threat_sink(
+        self, sink: Callable[[list[Threat]], Awaitable[None]], *, first: bool = False
+    ) -> None:
+        """Emergency Management's input. ``first``: ahead of the sinks attached before (a
+        restart's review must see a new threat before EM does)."""
+        if first:
+            self._threat_sinks.insert(0, sink)
+        else:
+            self._threat_sinks.append(sink)
 
     def attach_answer_sink(self, sink: Callable[[Recommendation, bool], Awaitable[None]]) -> None:
         """Emergency Management hears every accept/reject (it re-plans on reject)."""
@@ -499,7 +513,8 @@ class Usm(RecommendationLifecycle):
         self.threat_closer.watch(threat, h.sys_id)
         self._spawn(self.on_threats([threat]))
 
-    def _operation(self, op_id: OperationId) -> Operation | None:
+    def operation_or_none(self, op_id: OperationId) -> Operation | None:
+        """The airspace's operation ``op_id``, None when there is none."""
         try:
             return self.airspace.operation(op_id)
         except AirspaceError:
