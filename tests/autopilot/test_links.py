@@ -27,6 +27,7 @@ from gcs_utm.model import (
     OperationId,
     SysId,
     ThreatKind,
+    ThreatStatus,
     VehicleKind,
     Waypoint4D,
 )
@@ -145,6 +146,14 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
                 "not heard after the restart",
             )
             await _until(lambda: rt.tracks()[op.id].t_s > t_restart, 90.0, "track not live again")
+            # positions flow again: the threat closes, and the link-loss geofence goes with it
+            # (issue 31: it stayed open while positions flowed)
+            await _until(lambda: not lost(rt), 30.0, "COMMUNICATION_FAILURE stayed open")
+            await _until(
+                lambda: not [g for g in rt.airspace.geofences() if g.id.startswith("em-")],
+                10.0,
+                "the link-loss geofence stayed",
+            )
             done["ok"] = True
         finally:
             stop.set()
@@ -164,6 +173,16 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
     )
     await done["task"]  # its assertion, if any
     assert code == 0 and done.get("ok")
+    with Store(db) as s:
+        lost_rows = [t for t in s.load_threats() if t.kind is ThreatKind.COMMUNICATION_FAILURE]
+        assert lost_rows and all(t.status is ThreatStatus.CLOSED for t in lost_rows)
+        reasons = [
+            a.detail["reason"]
+            for a in s.load_audit()
+            if a.actor == "usm" and a.action == "threat_closed"
+        ]
+        assert any("flow again" in str(r) for r in reasons), reasons
+        assert s.load_geofences(active_only=True) == []
 
 
 def _operation() -> Operation:
