@@ -152,3 +152,19 @@ async def test_a_claim_closes_when_the_other_sender_is_quiet() -> None:
         await _tick(usm, clock, 1.0)
     assert usm.threats == {}
     assert _reasons(recorded) == ["no other sender claimed the system id for 30 s"]
+
+
+async def test_a_disarmed_vehicle_of_a_planned_operation_is_on_the_ground() -> None:
+    """ArduPilot reports no landed state: disarmed, not reported airborne, is on the ground."""
+    usm, clock, recorded, _ = _usm()
+    usm.on_hazard(HazardReport(kind=ThreatKind.TECHNICAL_FAILURE, t_s=T0, sys_id=SysId(1)))
+    await usm.drain()
+    usm.on_status(_status(T0 - 1.0, armed=False))  # older than the threat: no evidence
+    for _ in range(4):
+        await _tick(usm, clock, 1.0)
+    assert len(usm.threats) == 1
+    usm.on_status(_status(T0 + 5.0, armed=False, landed=None, mode=FlightMode.HOLD))
+    for _ in range(4):
+        await _tick(usm, clock, 1.0)
+    assert usm.threats == {}
+    assert _reasons(recorded) == ["UAS1 is on the ground (disarmed)"]
