@@ -143,9 +143,12 @@ async def serve(
         settings.airspace.ground_elevation_amsl_m,
     )
     location, operations, geofences = _stored_airspace(settings, db_path, cluster=cluster)
-    store = Persistence(StoreWriter(location, settings.store))
+    # a PostgreSQL outage at stop leaves the writes not yet taken in a local journal
+    pending = Path(settings.store.journal) if is_postgres(location) else None
+    store = Persistence(StoreWriter(location, settings.store, journal=pending))
     policy = OwnershipPolicy() if cluster else None
     rt = build_runtime(settings, clock, frame, store, policy=policy)
+    store.writer.on_event = lambda text: rt.usm.log_event("store", text)
     recorder = record_links(
         rt.hub,
         record_dir,
