@@ -23,9 +23,9 @@ from gcs_utm.store import journal as store_journal
 from tests.store import pgserver
 
 
-@pytest.fixture
-def server() -> Iterator[pgserver.PgServer]:
-    """A private server of its own (these tests kill it)."""
+@pytest.fixture(scope="module")
+def own_server() -> Iterator[pgserver.PgServer]:
+    """A private server of this module's own (its tests kill it)."""
     srv, why = pgserver.start()
     if srv is None:
         pytest.skip(f"no PostgreSQL server could be started here: {why}")
@@ -35,10 +35,33 @@ def server() -> Iterator[pgserver.PgServer]:
         srv.stop()
 
 
+@pytest.fixture
+def server(own_server: pgserver.PgServer) -> pgserver.PgServer:
+    """The module's server, running (a test that failed may have left it killed)."""
+    if own_server.proc.poll() is not None:
+        _start(own_server)
+    return own_server
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError, ValueError, IndexError):
+            if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(stat.parent.name))
+    return out
+
+
 def _kill(server: pgserver.PgServer) -> None:
-    """SIGKILL the postmaster (its backends then end with "unexpected postmaster exit")."""
+    """SIGKILL the postmaster, then wait until its backends have ended too ("terminating
+    connection due to unexpected postmaster exit"): from then on nothing can commit."""
+    backends = _children(server.proc.pid)
     server.proc.send_signal(signal.SIGKILL)
     server.proc.wait(10)
+    deadline = time.monotonic() + 10
+    while any(Path(f"/proc/{pid}").exists() for pid in backends):
+        assert time.monotonic() < deadline, "postgres backends outlived the postmaster"
+        time.sleep(0.02)
 
 
 def _start(server: pgserver.PgServer) -> None:
