@@ -19,6 +19,7 @@ from gcs_utm.cluster.member import region_map_of
 from gcs_utm.cluster.node import ClusterNode
 from gcs_utm.cluster.policy import OwnershipPolicy
 from gcs_utm.cluster.regions import RegionError
+from gcs_utm.config import ConfigError
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import Geofence, Operation
 from gcs_utm.services.recorder import check_folder, record_links
@@ -117,6 +118,20 @@ def _stored_airspace(
     return location, operations, geofences
 
 
+async def _open_links(rt: Runtime, store: Persistence) -> None:
+    """Open the ``[mavlink]`` links; one that cannot be (taken since the start's
+    check_resources) is one ConfigError line, after closing what is open."""
+    for i, link in enumerate(rt.settings.mavlink.links):
+        try:
+            await rt.hub.add_link(link)
+        except OSError as exc:
+            await rt.hub.close()
+            store.close()
+            raise ConfigError(
+                "serve", f"mavlink.links[{i}]", f"{link!r} cannot be opened: {exc}"
+            ) from exc
+
+
 async def serve(
     settings: Settings,
     *,
@@ -164,8 +179,7 @@ async def serve(
         len(geofences),
         describe(location),
     )
-    for link in settings.mavlink.links:
-        await rt.hub.add_link(link)
+    await _open_links(rt, store)
     frontends = attach_frontends(rt, FrontendOptions(operator=operator, headless=headless))
     stop = stop or asyncio.Event()
     failed: list[str] = []
