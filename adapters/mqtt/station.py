@@ -27,6 +27,7 @@ import contextlib
 import json
 import logging
 import random
+import ssl
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
@@ -67,8 +68,9 @@ class _Pending:
 
 class PilotStation:
     """``async with PilotStation(config, "alice", clock) as station:`` connects as operator
-    ``alice`` (``config.username``/``password`` are its broker credentials, ``client_id``
-    its session) until the block exits. :attr:`recommendations` receives each
+    ``alice`` (``config.username``/``password`` are its broker credentials; ``client_id``
+    names its session, ``station-<operator>`` by default: never the UTM's own) until the
+    block exits. :attr:`recommendations` receives each
     ``recommendation`` message (decoded JSON); :meth:`answer` sends an answer and returns
     gcs-utm's acknowledgement."""
 
@@ -79,6 +81,7 @@ class PilotStation:
         clock: Clock,
         *,
         resend_s: float = 5.0,
+        client_id: str | None = None,
         rng: random.Random | None = None,
     ) -> None:
         if not resend_s > 0.0:
@@ -87,6 +90,7 @@ class PilotStation:
         self.operator = operator
         self._clock = clock
         self.resend_s = resend_s
+        self.client_id = client_id or f"station-{operator}"
         self._rng = rng or random.Random()
         self.topics = Topics(config.topic_prefix)
         self.recommendations: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
@@ -171,6 +175,14 @@ class PilotStation:
 
     def _client_for(self) -> aiomqtt.Client:
         cfg = self._config
+        tls_params = None
+        if cfg.tls.enabled:
+            tls_params = aiomqtt.TLSParameters(
+                ca_certs=cfg.tls.ca_path or None,
+                certfile=cfg.tls.cert_path or None,
+                keyfile=cfg.tls.key_path or None,
+                cert_reqs=ssl.CERT_REQUIRED,
+            )
         connect = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
         connect.SessionExpiryInterval = cfg.session_expiry_s
         return aiomqtt.Client(
@@ -178,12 +190,14 @@ class PilotStation:
             cfg.port,
             username=cfg.username or None,
             password=cfg.password or None,
-            identifier=cfg.client_id,
+            identifier=self.client_id,
             protocol=aiomqtt.ProtocolVersion.V5,
             clean_start=False,
             properties=connect,
             keepalive=cfg.keepalive_s,
             timeout=cfg.publish_timeout_s,
+            tls_params=tls_params,
+            tls_insecure=cfg.tls.insecure if cfg.tls.enabled else None,
         )
 
     async def _run(self) -> None:

@@ -56,8 +56,10 @@ def apply(store: StoreBase, op: Op) -> Any:
 
 @dataclass(frozen=True, slots=True)
 class JournalBatch:
-    """One batch that was not committed: the life that made it, its number, its ops."""
+    """One batch that was not committed: the store it was for (as :func:`describe` names
+    it, without a password), the life that made it, its number, its ops."""
 
+    store: str
     epoch: int
     batch: int
     ops: tuple[Op, ...]
@@ -82,7 +84,12 @@ def append(path: Path, batches: Sequence[JournalBatch]) -> None:
     """Append ``batches`` to the journal at ``path`` and flush them to disk."""
     lines = [
         json.dumps(
-            {"epoch": b.epoch, "batch": b.batch, "ops": [_encode_op(op) for op in b.ops]},
+            {
+                "store": b.store,
+                "epoch": b.epoch,
+                "batch": b.batch,
+                "ops": [_encode_op(op) for op in b.ops],
+            },
             separators=(",", ":"),
             allow_nan=True,
         )
@@ -116,7 +123,9 @@ def read(path: Path) -> list[JournalBatch]:
         try:
             data = json.loads(line)
             ops = tuple(_decode_op(op) for op in data["ops"])
-            out.append(JournalBatch(int(data["epoch"]), int(data["batch"]), ops))
+            out.append(
+                JournalBatch(str(data["store"]), int(data["epoch"]), int(data["batch"]), ops)
+            )
         except (ValueError, TypeError, KeyError, CodecError) as exc:
             raise StoreError(
                 f"{path}:{number}: not a store journal entry ({exc}); move the file away "

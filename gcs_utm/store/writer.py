@@ -389,9 +389,9 @@ class StoreWriter:
         jobs = batch + rest
         kept = [job.op for job in batch if job.op is not None]
         later = [job.op for job in rest if job.op is not None]
-        batches = [JournalBatch(self.epoch, seq, tuple(kept))] if kept else []
+        batches = [JournalBatch(self.where, self.epoch, seq, tuple(kept))] if kept else []
         if later:
-            batches.append(JournalBatch(self.epoch, seq + 1, tuple(later)))
+            batches.append(JournalBatch(self.where, self.epoch, seq + 1, tuple(later)))
         n_ops = len(kept) + len(later)
         where = "nowhere (no journal)"
         if self.journal is not None and batches:
@@ -416,6 +416,12 @@ def replay(store: StoreBase, path: Path, tell: Callable[[int, str], None]) -> No
     the file. A write the database refuses is logged and skipped (as it would have been
     then); a lost connection raises and keeps the file for the next start."""
     batches = journal.read(path)
+    for b in batches:
+        if b.store != store.where:
+            raise StoreError(
+                f"{path}: journal of the store {b.store}, not of {store.where}: start with "
+                "that store to replay it, or move the file away"
+            )
     own = store.epoch
     replayed = skipped = 0
     try:

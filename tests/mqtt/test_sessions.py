@@ -91,9 +91,7 @@ async def test_an_answer_sent_during_a_broker_restart_is_resent_until_acknowledg
     usm.book.register(rec, "alice")
     # gcs-utm's first reconnect waits 1.5-3 s; the station's 0.025-0.1 s
     utm = plain_broker.config(backoff_initial_s=3.0, backoff_max_s=3.0)
-    alice = plain_broker.config(
-        "alice", client_id="station-alice", backoff_initial_s=0.05, backoff_max_s=0.1
-    )
+    alice = plain_broker.config("alice", backoff_initial_s=0.05, backoff_max_s=0.1)
     async with (
         MqttBridge(utm, clock, usm, rng=random.Random(1)) as bridge,
         PilotStation(alice, "alice", clock, resend_s=60.0) as station,

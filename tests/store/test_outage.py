@@ -208,8 +208,13 @@ def test_writes_held_at_stop_go_to_the_journal_and_the_next_start_replays_them(
 
 def test_a_corrupt_journal_is_one_error_naming_the_file(pg_url: str, tmp_path: Path) -> None:
     pending = tmp_path / "store.journal"
-    pending.write_text('{"epoch": 1, "batch": 1, "ops": [["drop_table", []]]}\n')
+    pending.write_text('{"store": "x", "epoch": 1, "batch": 1, "ops": [["drop_table", []]]}\n')
     with pytest.raises(StoreError, match=r"store\.journal:1: not a store journal entry"):
+        StoreWriter(pg_url, journal=pending)
+    pending.write_text(
+        '{"store": "postgresql://elsewhere/db", "epoch": 1, "batch": 1, "ops": []}\n'
+    )
+    with pytest.raises(StoreError, match="journal of the store postgresql://elsewhere/db, not of"):
         StoreWriter(pg_url, journal=pending)
     pending.write_text('{"epoch": 1, "batch": 1, "op')  # torn last line: ignored
     StoreWriter(pg_url, journal=pending).close()
