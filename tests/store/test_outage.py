@@ -9,6 +9,7 @@ import contextlib
 import logging
 import shutil
 import signal
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -219,3 +220,34 @@ def test_a_corrupt_journal_is_one_error_naming_the_file(pg_url: str, tmp_path: P
     pending.write_text('{"epoch": 1, "batch": 1, "op')  # torn last line: ignored
     StoreWriter(pg_url, journal=pending).close()
     assert not pending.exists()
+
+
+def test_postgres_killed_and_restarted_while_answers_stream_in_loses_none(
+    server: pgserver.PgServer,
+) -> None:
+    """Answers and their audit entries keep arriving (every 2 ms) while the postmaster is
+    killed and started again: every one is stored exactly once, in order."""
+    url = server.create_database()
+    writer = StoreWriter(url, StoreConfig(batch_max=8, put_timeout_s=30.0))
+    futs: list[Any] = []
+
+    def stream() -> None:
+        for i in range(150):
+            futs.extend([writer.record_answer(_answer(i)), writer.audit(_entry(i))])
+            time.sleep(0.002)
+
+    feeder = threading.Thread(target=stream)
+    try:
+        feeder.start()
+        while len(futs) < 40:
+            time.sleep(0.005)
+        _kill(server)
+        _start(server)
+        feeder.join(60)
+        for f in futs:
+            f.result(30)
+    finally:
+        writer.close()
+    answers, audit = _rows(url)
+    assert answers == [f"R{i}" for i in range(150)]
+    assert audit == [f"R{i}" for i in range(150)]
