@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from adapters.mavlink import MavlinkHub
+from adapters.remoteid.operator import RemoteIdOperator
 from gcs_utm.clock import Clock
 from gcs_utm.core.deconfliction import TacticalDeconfliction
 from gcs_utm.core.deconfliction.retime import retime_snapshot
@@ -133,6 +134,7 @@ class Runtime:
     emergency: EmergencyService
     hub: MavlinkHub
     surveillance: SurveillanceService  # [adsb] receiver feeds (none unless enabled)
+    remote_id: RemoteIdOperator  # the operator's Remote ID part to vehicles (docs/remote-id.md)
     plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
@@ -261,6 +263,15 @@ def build_runtime(
         emergency=emergency,
         hub=hub,
         surveillance=SurveillanceService(settings.adsb, clock, usm.on_measurement),
+        remote_id=RemoteIdOperator(
+            settings.remote_id,
+            clock,
+            hub,
+            vehicles=hub.remote_id,
+            known=hub.vehicles,
+            operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
+            on_problem=lambda text: usm.log_event("remote_id", text),
+        ),
         plan_history=plan_history,
         geofence_history=geofence_history,
     )
@@ -415,6 +426,7 @@ def start_service_tasks(
         tg.create_task(rt.emergency.run(), name="emergency"),
         tg.create_task(rt.usm.run(), name="usm"),
         tg.create_task(rt.surveillance.run(), name="adsb"),
+        tg.create_task(rt.remote_id.run(), name="remote-id"),
     ]
     if frontends.headless is not None:
         tasks.append(tg.create_task(_headless_status(rt, frontends.headless), name="status"))
