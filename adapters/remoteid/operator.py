@@ -66,7 +66,7 @@ class OperatorPart:
     """What gcs-utm tells one vehicle's Remote ID."""
 
     sys_id: int
-    location: OperatorLocation
+    location: OperatorLocation | None  # None: no SYSTEM is sent (reported)
     location_type: OperatorLocationType
     classification: Classification
     operator_id: str | None
@@ -130,8 +130,6 @@ class RemoteIdOperator:
         for sys_id, v in list(self.vehicles.declared.items()):
             sent = self._sent.setdefault(sys_id, _Sent())
             part = self.part_for(v, sent)
-            if part is None:
-                continue
             static = t_s - sent.static_t_s >= self.config.static_period_s
             try:
                 self._send(part, t_s, static=static)
@@ -165,27 +163,20 @@ class RemoteIdOperator:
                     return op
         return None
 
-    def part_for(self, v: DeclaredVehicle, sent: _Sent | None = None) -> OperatorPart | None:
-        """The operator part for ``v``, or None (reported) when there is no operator
-        location to send."""
+    def part_for(self, v: DeclaredVehicle, sent: _Sent | None = None) -> OperatorPart:
+        """The operator part for ``v``; what is missing is reported (once per cause)."""
         cfg = self.config
         op = self.operation_of(v.sys_id)
         operator = op.operator if op is not None else "default"
         location, location_type = self._location(op, operator)
-        if location is None:
-            what = (
-                f"operation {op.id} has no home or waypoint"
-                if op is not None
-                else "no operation is filed for it"
-            )
+        if location is None:  # only without an operation: an operation has a take-off point
             self._problem(
                 v,
                 sent,
-                f"no operator location for Remote ID vehicle sysid {v.sys_id}: {what} "
-                f"and [remote_id] operator_locations has no {operator!r}; it cannot arm if it "
-                "enforces Remote ID",
+                f"no operator location for Remote ID vehicle sysid {v.sys_id}: no operation is "
+                f"filed for it and [remote_id] operator_locations has no {operator!r}; it "
+                "cannot arm if it enforces Remote ID",
             )
-            return None
         operator_id = cfg.operator_ids.get(operator)
         if operator_id is None:
             self._problem(
@@ -240,12 +231,18 @@ class RemoteIdOperator:
         self._on_problem(text)
 
     def _send(self, part: OperatorPart, t_s: float, *, static: bool) -> None:
-        c = self.counters
-        sid = SysId(part.sys_id)
         loc = part.location
         eu = part.classification.category.value != 0 or part.classification.eu_class.value != 0
+        if loc is not None:
+            self._send_system(part, loc, t_s, eu=eu)
+        if static:
+            self._send_static(part)
+
+    def _send_system(
+        self, part: OperatorPart, loc: OperatorLocation, t_s: float, *, eu: bool
+    ) -> None:
         self.hub.send_raw(
-            sid,
+            SysId(part.sys_id),
             "open_drone_id_system",
             part.sys_id,
             0,  # every component: the autopilot and a transmitter
@@ -263,9 +260,11 @@ class RemoteIdOperator:
             loc.altitude_amsl_m,  # geoid undulation not applied (docs/remote-id.md)
             max(0, int(t_s - ODID_EPOCH_UTC_S)),  # s since 2019-01-01 UTC
         )
-        c.system += 1
-        if not static:
-            return
+        self.counters.system += 1
+
+    def _send_static(self, part: OperatorPart) -> None:
+        c = self.counters
+        sid = SysId(part.sys_id)
         if part.serial_number is not None:
             uas_id = list(part.serial_number.encode("ascii").ljust(20, b"\0"))
             self.hub.send_raw(

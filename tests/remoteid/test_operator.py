@@ -210,7 +210,12 @@ async def test_missing_parts_are_reported_once(rid_env: Any) -> None:
     op.tick(1.0)
     op.tick(2.0)
     assert 2 in env.hub.remote_id.declared  # listed in [remote_id] vehicles
-    assert len(env.problems) == 1 and "no operator location" in env.problems[0]
+    # no operation, nothing configured: each missing part reported once, no SYSTEM sent
+    assert [p.split(" ")[:3] for p in env.problems] == [
+        ["no", "operator", "location"],
+        ["no", "operator", "ID"],
+        ["no", "UA", "serial"],
+    ]
     assert "no operation is filed" in env.problems[0]
     env.operations.append(_operation(2, operator="nobody", home=None))
     op.tick(3.0)
@@ -219,10 +224,7 @@ async def test_missing_parts_are_reported_once(rid_env: Any) -> None:
     s = _got(v, "OPEN_DRONE_ID_SYSTEM")[-1]
     assert (s.operator_latitude, s.operator_longitude) == (473980000, 85460000)  # 1st waypoint
     assert _got(v, "OPEN_DRONE_ID_BASIC_ID") == [] and _got(v, "OPEN_DRONE_ID_OPERATOR_ID") == []
-    assert [p.split(" ")[:3] for p in env.problems[1:]] == [
-        ["no", "operator", "ID"],
-        ["no", "UA", "serial"],
-    ]
+    assert len(env.problems) == 4 and "'nobody'" in env.problems[3]  # its operator has no ID
     v.close()
 
 
