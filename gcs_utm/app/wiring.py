@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from adapters.mavlink import MavlinkHub
+from adapters.remoteid.ingest import RidIngest, telemetry_positions
 from adapters.remoteid.operator import RemoteIdOperator
 from gcs_utm.clock import Clock
 from gcs_utm.core.deconfliction import TacticalDeconfliction
@@ -135,6 +136,7 @@ class Runtime:
     hub: MavlinkHub
     surveillance: SurveillanceService  # [adsb] receiver feeds (none unless enabled)
     remote_id: RemoteIdOperator  # the operator's Remote ID part to vehicles (docs/remote-id.md)
+    remote_id_ingest: RidIngest  # what vehicles report of Remote ID
     plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
@@ -250,6 +252,12 @@ def build_runtime(
     usm.attach_operator(emergency)
     hub = MavlinkHub(settings.mavlink, clock, usm)
     usm.attach_vehicles(hub)
+    rid_ingest = RidIngest(  # vehicles' OPEN_DRONE_ID_* reports: docs/remote-id.md
+        consistency_m=settings.remote_id.consistency_m,
+        position_of=telemetry_positions(hub),
+        on_identity=lambda text: usm.log_event("remote_id", text),
+    )
+    rid_ingest.register(hub.remote_id)
     return Runtime(
         settings=settings,
         clock=clock,
@@ -272,6 +280,7 @@ def build_runtime(
             operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
             on_problem=lambda text: usm.log_event("remote_id", text),
         ),
+        remote_id_ingest=rid_ingest,
         plan_history=plan_history,
         geofence_history=geofence_history,
     )

@@ -119,6 +119,8 @@ class Intake:
         if sys_id is not None:
             tid = f"sysid:{sys_id}@{vehicle}" if vehicle else f"sysid:{sys_id}"
             return Identity(TrackId(tid), False, None, None)
+        if vehicle.startswith("rid:"):  # an aircraft known only by its Remote ID broadcast
+            return Identity(TrackId(vehicle), False, None, None)
         return None
 
     def measurement_records(
