@@ -13,6 +13,7 @@ from typing import Any
 
 from adapters.adsb.config import AdsbConfig
 from adapters.mavlink.config import MavlinkConfig
+from adapters.mavlink.traffic_out import TrafficOutConfig
 from adapters.mqtt.config import MqttConfig
 from adapters.remoteid.config import RemoteIdConfig
 from gcs_utm.cluster.config import ClusterConfig
@@ -61,6 +62,7 @@ class Settings:
     record: RecordConfig = _section(RecordConfig, "record")
     cluster: ClusterConfig = _section(ClusterConfig, "cluster")
     remote_id: RemoteIdConfig = _section(RemoteIdConfig, "remote_id")
+    traffic_out: TrafficOutConfig = _section(TrafficOutConfig, "traffic_out")
 
 
 SECTIONS: dict[str, type[Any]] = {
@@ -78,6 +80,7 @@ SECTIONS: dict[str, type[Any]] = {
     "record": RecordConfig,
     "cluster": ClusterConfig,
     "remote_id": RemoteIdConfig,
+    "traffic_out": TrafficOutConfig,
 }
 
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from adapters.mavlink import MavlinkHub
+from adapters.mavlink.traffic_out import TrafficOut
 from adapters.remoteid.ingest import RidIngest, telemetry_positions
 from adapters.remoteid.operator import RemoteIdOperator
 from gcs_utm.clock import Clock
@@ -137,6 +138,7 @@ class Runtime:
     surveillance: SurveillanceService  # [adsb] receiver feeds (none unless enabled)
     remote_id: RemoteIdOperator  # the operator's Remote ID part to vehicles (docs/remote-id.md)
     remote_id_ingest: RidIngest  # what vehicles report of Remote ID
+    traffic_out: TrafficOut  # ADSB_VEHICLE to vehicles for the traffic near them
     plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
@@ -281,6 +283,12 @@ def build_runtime(
             on_problem=lambda text: usm.log_event("remote_id", text),
         ),
         remote_id_ingest=rid_ingest,
+        traffic_out=TrafficOut(
+            settings.traffic_out,
+            hub,
+            tracks=tracking.tracks_now,
+            operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
+        ),
         plan_history=plan_history,
         geofence_history=geofence_history,
     )
@@ -436,6 +444,7 @@ def start_service_tasks(
         tg.create_task(rt.usm.run(), name="usm"),
         tg.create_task(rt.surveillance.run(), name="adsb"),
         tg.create_task(rt.remote_id.run(), name="remote-id"),
+        tg.create_task(rt.traffic_out.run(), name="traffic-out"),
     ]
     if frontends.headless is not None:
         tasks.append(tg.create_task(_headless_status(rt, frontends.headless), name="status"))
