@@ -74,7 +74,7 @@ class RemoteIdConfig:
     serial_numbers: dict[str, str] = setting(
         {},
         'UA serial numbers (ANSI/CTA-2063-A) by system id: {"1" = "1596A303716531B"}; sent as '
-        "the Basic ID of vehicles that have none of their own",
+        "the vehicle's Basic ID (an ArduPilot with a serial number stored keeps its own)",
     )
     classifications: dict[str, str] = setting(
         {},
@@ -86,8 +86,8 @@ class RemoteIdConfig:
     )
     consistency_m: float = setting(
         150.0,
-        "a vehicle's Remote ID location farther than this from its telemetry position raises "
-        "a spoofing threat",
+        "a vehicle's Remote ID location farther than this (plus its accuracy class) from its "
+        "telemetry position raises a REMOTE_ID_MISMATCH threat",
         min=1.0,
         unit="m",
     )
