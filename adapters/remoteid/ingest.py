@@ -14,7 +14,8 @@ the aircraft it is about:
   locations become measurements of the non-cooperative track ``rid:<hex>``.
 
 A Basic ID that changes while the aircraft is airborne raises REMOTE_ID_MISMATCH too. Identity
-changes are reported through ``on_identity`` (the USM event log); :attr:`RidIngest.aircraft`
+changes are reported through ``on_identity`` with the record and a line of text (the USM
+event log, and the store's audit log as :func:`identity_audit`); :attr:`RidIngest.aircraft`
 holds the latest of each record.
 """
 
@@ -40,7 +41,7 @@ from adapters.remoteid.vehicles import (
 )
 from gcs_utm.geo import haversine_m
 from gcs_utm.messages import HazardReport
-from gcs_utm.model import Measurement, MeasurementSource, Position, SysId, ThreatKind
+from gcs_utm.model import AuditEntry, Measurement, MeasurementSource, Position, SysId, ThreatKind
 
 _FIX_MAX_AGE_S = 3.0  # a telemetry position older than this is not compared
 _MAX_AIRCRAFT = 4096  # records kept; anybody in radio range can add one
@@ -95,7 +96,7 @@ class RidIngest:
         *,
         consistency_m: float,
         position_of: Callable[[int], tuple[Position, float] | None],
-        on_identity: Callable[[str], None] = lambda _text: None,
+        on_identity: Callable[[RidAircraft, str], None] = lambda _rec, _text: None,
     ) -> None:
         self.consistency_m = consistency_m
         self.counters = RidIngestCounters()
@@ -239,9 +240,10 @@ class RidIngest:
         rec = self._update(st, key, t_s, **changes)
         if before is None or any(getattr(before, k) != v for k, v in changes.items()):
             self._on_identity(
+                rec,
                 f"{key}: Remote ID "
                 + ", ".join(f"{k.replace('_', ' ')} {v!s}" for k, v in changes.items())
-                + (f" (serial {rec.uas_id})" if "uas_id" not in changes and rec.uas_id else "")
+                + (f" (serial {rec.uas_id})" if "uas_id" not in changes and rec.uas_id else ""),
             )
 
     def _basic_id(
@@ -338,6 +340,23 @@ def _table(table: tuple[float | None, ...], code: int) -> float | None:
 
 def _status(code: int) -> OperationalStatus | None:
     return OperationalStatus(code) if code in OperationalStatus._value2member_map_ else None
+
+
+def identity_audit(rec: RidAircraft) -> AuditEntry:
+    """The store's audit entry for an identity a Remote ID record now holds."""
+    return AuditEntry(
+        t_s=rec.updated_t_s,
+        actor="remote-id",
+        action="identity",
+        subject=rec.key,
+        detail={
+            "sys_id": rec.sys_id,
+            "uas_id": rec.uas_id,
+            "id_type": None if rec.id_type is None else rec.id_type.name,
+            "ua_type": None if rec.ua_type is None else rec.ua_type.name,
+            "operator_id": rec.operator_id,
+        },
+    )
 
 
 class _States(Protocol):

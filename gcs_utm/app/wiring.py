@@ -21,7 +21,12 @@ from typing import TYPE_CHECKING, Any
 
 from adapters.mavlink import MavlinkHub
 from adapters.mavlink.traffic_out import TrafficOut
-from adapters.remoteid.ingest import RidIngest, telemetry_positions
+from adapters.remoteid.ingest import (
+    RidAircraft,
+    RidIngest,
+    identity_audit,
+    telemetry_positions,
+)
 from adapters.remoteid.operator import RemoteIdOperator
 from gcs_utm.clock import Clock
 from gcs_utm.core.deconfliction import TacticalDeconfliction
@@ -254,10 +259,15 @@ def build_runtime(
     usm.attach_operator(emergency)
     hub = MavlinkHub(settings.mavlink, clock, usm)
     usm.attach_vehicles(hub)
+
+    def rid_identity(rec: RidAircraft, text: str) -> None:
+        usm.log_event("remote_id", text)
+        store.record(identity_audit(rec))
+
     rid_ingest = RidIngest(  # vehicles' OPEN_DRONE_ID_* reports: docs/remote-id.md
         consistency_m=settings.remote_id.consistency_m,
         position_of=telemetry_positions(hub),
-        on_identity=lambda text: usm.log_event("remote_id", text),
+        on_identity=rid_identity,
     )
     rid_ingest.register(hub.remote_id)
     return Runtime(

@@ -14,7 +14,7 @@ os.environ["MAVLINK20"] = "1"
 
 from adapters.mavlink import MavlinkConfig, MavlinkHub
 from adapters.remoteid.f3411 import IdType, UaType
-from adapters.remoteid.ingest import RidIngest, telemetry_positions
+from adapters.remoteid.ingest import RidAircraft, RidIngest, identity_audit, telemetry_positions
 from gcs_utm.clock import RealClock
 from gcs_utm.model import SysId, ThreatKind, TrackId
 from tests.mavlink.conftest import FakeVehicle, Sink
@@ -29,11 +29,11 @@ MAC = [0x60, 0x60, 0x1F, 0x01, 0x02, 0x03] + [0] * 14
 class _Env:
     def __init__(self, hub: MavlinkHub, sink: Sink, port: int) -> None:
         self.hub, self.sink, self.port = hub, sink, port
-        self.identity: list[str] = []
+        self.identity: list[tuple[RidAircraft, str]] = []
         self.rid = RidIngest(
             consistency_m=150.0,
             position_of=telemetry_positions(hub),
-            on_identity=self.identity.append,
+            on_identity=lambda rec, text: self.identity.append((rec, text)),
         )
         self.rid.register(hub.remote_id)
 
@@ -110,7 +110,12 @@ async def test_identity_and_a_change_in_flight(env: Any) -> None:
         UaType(2),
     )
     assert rec.operator_id == "FIN87astrdge12k8" and rec.sys_id == 2
-    assert any("1596A303716531B" in t for t in env.identity)
+    rec2, text = next((r, t) for r, t in env.identity if "1596A303716531B" in t)
+    assert text.startswith("sysid:2: Remote ID uas id 1596A303716531B")
+    audit = identity_audit(env.rid.aircraft["sysid:2"])  # what the store's audit log gets
+    assert (audit.actor, audit.action, audit.subject) == ("remote-id", "identity", "sysid:2")
+    assert audit.detail["uas_id"] == "1596A303716531B"
+    assert audit.detail["operator_id"] == "FIN87astrdge12k8" and rec2.key == "sysid:2"
     assert env.hazards() == []
     _location(v, LAT, LON)  # airborne (status 2); no telemetry position: its position
     await _until(lambda: env.rid.counters.measurements == 1)
