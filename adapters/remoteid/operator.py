@@ -16,6 +16,8 @@ suspended, then planned) and ``[remote_id]``:
 - serial number: ``serial_numbers[sysid]``; UA type from the operation's (else the vehicle's)
   kind; classification: ``classifications[sysid]`` else ``default_classification``.
 
+A declared vehicle with no operation filed for its system id is a REMOTE_ID_MISMATCH hazard
+(``on_hazard``, once per vehicle until it has one): it broadcasts an identity nobody filed.
 What is missing is reported once per vehicle and cause through ``on_problem`` (the USM's
 event log): no operator location means nothing is sent and an ArduPilot enforcing Remote ID
 does not arm. Pure apart from the hub it sends through; :meth:`tick` does one round.
@@ -42,7 +44,8 @@ from adapters.remoteid.f3411 import (
 from adapters.remoteid.identity import Classification, parse_classification
 from adapters.remoteid.vehicles import DeclaredVehicle, RidVehicles
 from gcs_utm.clock import Clock
-from gcs_utm.model import Operation, OperationState, SysId, VehicleKind
+from gcs_utm.messages import HazardReport
+from gcs_utm.model import Operation, OperationState, SysId, ThreatKind, VehicleKind
 
 _log = logging.getLogger(__name__)
 
@@ -87,6 +90,7 @@ class RidOperatorCounters:
 class _Sent:
     static_t_s: float = float("-inf")
     problems: set[str] = field(default_factory=set)
+    unfiled_reported: bool = False
 
 
 class RemoteIdOperator:
@@ -102,6 +106,7 @@ class RemoteIdOperator:
         known: Callable[[], Iterable[VehicleInfo]],
         operations: Callable[[], Iterable[Operation]],
         on_problem: Callable[[str], None],
+        on_hazard: Callable[[HazardReport], None] = lambda _h: None,
     ) -> None:
         self.config = config
         self.clock = clock
@@ -111,6 +116,7 @@ class RemoteIdOperator:
         self._known = known
         self._operations = operations
         self._on_problem = on_problem
+        self._on_hazard = on_hazard
         self._sent: dict[int, _Sent] = {}
         self._locations = {
             k: parse_operator_location(v) for k, v in config.operator_locations.items()
@@ -167,6 +173,8 @@ class RemoteIdOperator:
         """The operator part for ``v``; what is missing is reported (once per cause)."""
         cfg = self.config
         op = self.operation_of(v.sys_id)
+        if sent is not None:
+            self._unfiled(v, sent, op is None)
         operator = op.operator if op is not None else "default"
         location, location_type = self._location(op, operator)
         if location is None:  # only without an operation: an operation has a take-off point
@@ -203,6 +211,25 @@ class RemoteIdOperator:
             operator_id=operator_id,
             serial_number=serial,
             ua_type=_UA_TYPES.get(kind, UaType.NONE) if kind is not None else UaType.NONE,
+        )
+
+    def _unfiled(self, v: DeclaredVehicle, sent: _Sent, unfiled: bool) -> None:
+        """A REMOTE_ID_MISMATCH hazard when ``v`` has no operation (once until it has one)."""
+        if not unfiled:
+            sent.unfiled_reported = False
+            return
+        if sent.unfiled_reported:
+            return
+        sent.unfiled_reported = True
+        self._on_hazard(
+            HazardReport(
+                kind=ThreatKind.REMOTE_ID_MISMATCH,
+                t_s=self.clock.now_s(),
+                sys_id=SysId(v.sys_id),
+                message=f"sysid {v.sys_id} declares Remote ID ({v.how}) but no operation is "
+                "filed for it",
+                source="remote-id",
+            )
         )
 
     def _location(

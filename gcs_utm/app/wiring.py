@@ -291,6 +291,7 @@ def build_runtime(
             known=hub.vehicles,
             operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
             on_problem=lambda text: usm.log_event("remote_id", text),
+            on_hazard=usm.on_hazard,
         ),
         remote_id_ingest=rid_ingest,
         traffic_out=TrafficOut(

@@ -31,6 +31,7 @@ from gcs_utm.model import (
     OperationState,
     Position,
     SysId,
+    ThreatKind,
     VehicleKind,
     Waypoint4D,
 )
@@ -127,6 +128,7 @@ class _Env:
     def __init__(self, hub: MavlinkHub, port: int, operations: list[Operation]) -> None:
         self.hub, self.port, self.operations = hub, port, operations
         self.problems: list[str] = []
+        self.hazards: list[Any] = []
 
     def operator(self, **cfg: Any) -> RemoteIdOperator:
         return RemoteIdOperator(
@@ -137,6 +139,7 @@ class _Env:
             known=self.hub.vehicles,
             operations=lambda: self.operations,
             on_problem=self.problems.append,
+            on_hazard=self.hazards.append,
         )
 
     async def vehicle(self, sys_id: int, autopilot: int = 3) -> FakeVehicle:
@@ -199,7 +202,7 @@ async def test_declared_vehicle_gets_operator_part(rid_env: Any) -> None:
     assert (b.id_type, b.ua_type) == (1, 2)  # serial number, multirotor
     [o] = _got(v, "OPEN_DRONE_ID_OPERATOR_ID")
     assert o.operator_id.rstrip("\x00") == "FIN87astrdge12k8"
-    assert env.problems == []
+    assert env.problems == [] and env.hazards == []
     v.close()
 
 
@@ -217,6 +220,10 @@ async def test_missing_parts_are_reported_once(rid_env: Any) -> None:
         ["no", "UA", "serial"],
     ]
     assert "no operation is filed" in env.problems[0]
+    # and it broadcasts an identity nobody filed: one hazard, not one per round
+    [h] = env.hazards
+    assert h.kind is ThreatKind.REMOTE_ID_MISMATCH and h.sys_id == 2
+    assert "declares Remote ID ([remote_id] vehicles) but no operation" in h.message
     env.operations.append(_operation(2, operator="nobody", home=None))
     op.tick(3.0)
     op.tick(4.0)
@@ -225,6 +232,7 @@ async def test_missing_parts_are_reported_once(rid_env: Any) -> None:
     assert (s.operator_latitude, s.operator_longitude) == (473980000, 85460000)  # 1st waypoint
     assert _got(v, "OPEN_DRONE_ID_BASIC_ID") == [] and _got(v, "OPEN_DRONE_ID_OPERATOR_ID") == []
     assert len(env.problems) == 4 and "'nobody'" in env.problems[3]  # its operator has no ID
+    assert len(env.hazards) == 1  # filed now: no more
     v.close()
 
 
