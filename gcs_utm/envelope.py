@@ -43,6 +43,19 @@ class PerformanceEnvelope:
             return self.tracking_error_m
         return MULTIROTOR_TRACKING_ERROR_M if self.can_hover else FIXED_WING_TRACKING_ERROR_M
 
+    vertical_tracking_error_m: float | None = None
+    """How far (vertically) the vehicle flies from a new plan's altitude: altitude-hold error
+    and the lag of a climb or descent. None: the default of its kind."""
+
+    def vertical_tracking_tolerance_m(self) -> float:
+        """The vertical tracking error TD keeps free around a new plan (see
+        :attr:`vertical_tracking_error_m`)."""
+        if self.vertical_tracking_error_m is not None:
+            return self.vertical_tracking_error_m
+        if self.can_hover:
+            return MULTIROTOR_VERTICAL_TRACKING_ERROR_M
+        return FIXED_WING_VERTICAL_TRACKING_ERROR_M
+
     def __post_init__(self) -> None:
         for name in (
             "climb_rate_mps",
@@ -62,9 +75,10 @@ class PerformanceEnvelope:
             raise EnvelopeError("turn_radius_m", "must be >= 0")
         if self.min_speed_mps > self.max_speed_mps:
             raise EnvelopeError("min_speed_mps", "is above max_speed_mps")
-        t = self.tracking_error_m
-        if t is not None and not (math.isfinite(t) and t >= 0.0):
-            raise EnvelopeError("tracking_error_m", f"must be a finite number >= 0, got {t!r}")
+        for name in ("tracking_error_m", "vertical_tracking_error_m"):
+            t = getattr(self, name)
+            if t is not None and not (math.isfinite(t) and t >= 0.0):
+                raise EnvelopeError(name, f"must be a finite number >= 0, got {t!r}")
 
 
 MULTIROTOR_DESCENT_RATE_MPS = 1.5
@@ -82,6 +96,12 @@ a lateral deformation (PX4 and ArduCopter slow down to turn; the simulated vehic
 the generated encounters."""
 FIXED_WING_TRACKING_ERROR_M = 10.0
 """...of a fixed wing: it cuts each corner on its turn radius and lags along the arc."""
+MULTIROTOR_VERTICAL_TRACKING_ERROR_M = 2.0
+"""Vertical 4D tracking error of a multirotor: PX4's and ArduCopter's altitude controllers
+hold within about a metre and reach a new altitude a second or two late at the descent
+rate (1.5 m/s)."""
+FIXED_WING_VERTICAL_TRACKING_ERROR_M = 5.0
+"""...of a fixed wing: TECS trades height for speed in turns and lags a climb."""
 FIXED_WING_TURN_RADIUS_M = 80.0
 """PX4's NAV_LOITER_RAD default, a turn a small fixed wing flies at cruise speed."""
 

@@ -51,6 +51,7 @@ from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags, turn_
 from gcs_utm.core.deconfliction.scoring import Neighbour, Reference, Score, reference, score_many
 from gcs_utm.core.deconfliction.single import resolve_single
 from gcs_utm.core.deconfliction.timing import timing_candidates
+from gcs_utm.core.deconfliction.tolerance import pair_buffers
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import plan_vs_geofences, plan_vs_plans
 from gcs_utm.geo import LocalFrame
@@ -290,14 +291,13 @@ class TacticalDeconfliction:
     def pair_minima(self, a: Operation, b: Operation) -> tuple[float, float]:
         """(horizontal, vertical) minima TD keeps between the plans of ``a`` and ``b``: the
         pair's effective minima (one definition of loss, :mod:`..monitoring.loss`) plus the
-        two vehicles' tracking tolerances horizontally (in sphere mode, on the 3D distance).
-        A plan is flown with a lag at its corners; a candidate that keeps only the bare
-        minima is flown into a loss by a few metres."""
+        two vehicles' tracking tolerances, horizontal and vertical (sphere mode: horizontal
+        on the 3D distance). A plan is flown with a lag at its corners and an altitude error;
+        a candidate keeping only the bare minima is flown into a loss by a few metres."""
         h, v = self.monitoring.effective_minima(a.operational_volume_m, b.operational_volume_m)
         if not self.tracking_buffers:
             return h, v
-        buf = a.performance().tracking_tolerance_m() + b.performance().tracking_tolerance_m()
-        return h + buf, v + buf if self.monitoring.spherical else v
+        return pair_buffers(a.performance(), b.performance(), h, v, self.monitoring.spherical)
 
     def _pair_config(self, a: Operation, b: Operation) -> MonitoringConfig:
         """Monitoring's configuration with :meth:`pair_minima` as the pair's minima (the
