@@ -47,6 +47,7 @@ from gcs_utm.core.deconfliction.geometry import (
     separation_screen,
 )
 from gcs_utm.core.deconfliction.intruder import intruder_plan, resolve_intruder
+from gcs_utm.core.deconfliction.overshoot import overshoot_flags
 from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags, turn_flags
 from gcs_utm.core.deconfliction.scoring import Neighbour, Reference, Score, reference, score_many
 from gcs_utm.core.deconfliction.single import resolve_single
@@ -511,11 +512,10 @@ class TacticalDeconfliction:
         assert plan is not None
         self._local[id(plan)] = (plan, c.full())  # its local form, without a second conversion
         env = op.performance()
-        unsafe = (
-            envelope_flags(c.new, c.old, env)
-            + turn_flags(c.new, c.old, env.turn_radius_m)
-            + floor_flags(c.new, c.old, self.floor_amsl(op), lands=c.maneuver in _ABANDON)
-        )
+        unsafe = envelope_flags(c.new, c.old, env) + turn_flags(c.new, c.old, env.turn_radius_m)
+        unsafe += floor_flags(c.new, c.old, self.floor_amsl(op), lands=c.maneuver in _ABANDON)
+        filed = self.local_plan(op.plan)
+        unsafe += overshoot_flags(c.full(), c.new.t[0], filed, c.fences, c.geofences, op)
         if unsafe:
             return unsafe, plan, []
         checked = plan
