@@ -111,8 +111,10 @@ class FilingCheck:
             self._fences(o)
 
     def in_fences(self, op: Operation) -> list[FenceFinding]:
-        """The active geofences ``op``'s plan runs into (none without ``geofences``)."""
-        if self._geofences is None:
+        """The active geofences ``op``'s plan runs into (none without ``geofences``). A
+        plan of Tactical Deconfliction is not judged again: TD verified it against every
+        fence, from its exit point on when it leaves one it is in."""
+        if self._geofences is None or op.plan.reason.startswith("TD "):
             return []
         return plan_in_fences(op.plan, op, self._geofences(), self._frame)
 

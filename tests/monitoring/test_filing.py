@@ -78,3 +78,7 @@ def test_the_filing_check_logs_a_plan_into_a_fence() -> None:
     assert events == [("strategic", check.fence_findings["B"][0].message())]
     airspace.add_operation(operation("C", [(-500, 300, 100, T0), (500, 300, 100, T0 + 100)]))
     assert check.fence_findings["C"] == []
+    # TD's plan out of the fence starts inside it: TD verified it from the exit on.
+    b = airspace.operation("B")
+    airspace.replace_plan(replace(b.plan, version=2, reason="TD hold"))
+    assert check.fence_findings["B"] == [] and len(events) == 1
