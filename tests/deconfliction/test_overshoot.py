@@ -84,3 +84,11 @@ def test_the_turn_onto_the_first_leg_keeps_the_stopping_distance() -> None:
     # 15 m farther, both keep their stopping distance and are offered again.
     offered, _ = _first_leg_options(135.0)
     assert {Maneuver.RETURN_HOME, Maneuver.DIRECT_TO_GOAL} <= offered
+
+
+def test_a_way_out_of_a_fence_is_not_refused_for_braking_on_the_way_out() -> None:
+    # 10 m from the fence's volume at 10 m/s, inside TD's clearance: whatever it does, the
+    # UAS brakes 19-20 m on towards the fence. The ways out (leave, hold outside, home) are
+    # judged from their exit point on, so they are still offered.
+    offered, dropped = _first_leg_options(113.0)
+    assert {Maneuver.HOLD, Maneuver.RETURN_HOME} <= offered, dropped

@@ -11,9 +11,10 @@ that reduced speed) comes closer than the operational volume to a geofence whose
 band (grown by the volume) and activation window hold the turn: the turn point must be that
 far from the fence's volume in the direction the vehicle flies. Checked at every generated
 waypoint and at the start point, where the vehicle turns from the way it flies now (its
-filed plan as flown) onto the first leg. A turn point already within the volume of a fence
-(an escape from inside) is not judged here: its leg out is verified from the exit point on.
-Pure.
+filed plan as flown) onto the first leg. A plan that leaves a fence it is in (escape, hold
+outside, home or a landing site from inside) is judged from its exit point on, as it is
+verified: braking on the way out is unavoidable, and judging it would leave the UAS with no
+way out offered. A turn point within the volume of a fence is not judged either. Pure.
 """
 
 from __future__ import annotations

@@ -514,8 +514,8 @@ class TacticalDeconfliction:
         env = op.performance()
         unsafe = envelope_flags(c.new, c.old, env) + turn_flags(c.new, c.old, env.turn_radius_m)
         unsafe += floor_flags(c.new, c.old, self.floor_amsl(op), lands=c.maneuver in _ABANDON)
-        filed = self.local_plan(op.plan)
-        unsafe += overshoot_flags(c.full(), c.new.t[0], filed, c.fences, c.geofences, op)
+        filed, first_t = self.local_plan(op.plan), c.new.t[min(c.verify_from, len(c.new) - 1)]
+        unsafe += overshoot_flags(c.full(), first_t, filed, c.fences, c.geofences, op)
         if unsafe:
             return unsafe, plan, []
         checked = plan
