@@ -85,7 +85,11 @@ def overshoot_flags(  # noqa: PLR0917 - the candidate's parts, as td._check has 
         p = pts[at[k]]
         s = np.linspace(0.0, reach, max(2, math.ceil(reach / SAMPLE_M) + 1))
         line = p[:2] + s[:, None] * heading[k]
+        lo, hi = line.min(axis=0) - ov_m, line.max(axis=0) + ov_m
         for f, binds in zip(fences, applies, strict=True):
+            b = f.shape.bounds  # a fence whose box is farther than the volume cannot matter
+            if b[0] > hi[0] or b[2] < lo[0] or b[1] > hi[1] or b[3] < lo[1]:
+                continue
             if not binds or not _holds(f, float(p[2]), float(t[at[k]]), ov_m):
                 continue
             dist = f.horizontal_distance(line[:, 0], line[:, 1])
