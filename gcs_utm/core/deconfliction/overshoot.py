@@ -75,9 +75,13 @@ def overshoot_flags(  # noqa: PLR0917 - the candidate's parts, as td._check has 
     at = np.arange(1, len(pts) - 1)  # index in pts of each turn point
     start = int(np.searchsorted(t, start_t_s - 1e-6))
     judged = (at >= start) & (np.nan_to_num(turn) > math.radians(MIN_TURN_DEG))
-    if filed.e.size:
+    if judged.any() and filed.e.size:
         gap = np.linalg.norm(pts[at][:, None, :] - filed.xyz()[None, :, :], axis=2).min(axis=1)
         judged &= (gap > SAME_POINT_M) | (at == start)
+    if not judged.any():
+        return []
+    boxes = np.array([f.shape.bounds for f in fences])  # east_min, north_min, east_max, north_max
+    binds = np.array(applies, dtype=bool)
     out: list[str] = []
     for k in np.flatnonzero(judged):
         v = min(float(speed[k]), envelope.max_speed_mps)
@@ -86,11 +90,12 @@ def overshoot_flags(  # noqa: PLR0917 - the candidate's parts, as td._check has 
         s = np.linspace(0.0, reach, max(2, math.ceil(reach / SAMPLE_M) + 1))
         line = p[:2] + s[:, None] * heading[k]
         lo, hi = line.min(axis=0) - ov_m, line.max(axis=0) + ov_m
-        for f, binds in zip(fences, applies, strict=True):
-            b = f.shape.bounds  # a fence whose box is farther than the volume cannot matter
-            if b[0] > hi[0] or b[2] < lo[0] or b[1] > hi[1] or b[3] < lo[1]:
-                continue
-            if not binds or not _holds(f, float(p[2]), float(t[at[k]]), ov_m):
+        # a fence whose box is farther than the volume from the overshoot cannot matter
+        near = binds & (boxes[:, 0] <= hi[0]) & (boxes[:, 2] >= lo[0])
+        near &= (boxes[:, 1] <= hi[1]) & (boxes[:, 3] >= lo[1])
+        for i in np.flatnonzero(near):
+            f = fences[i]
+            if not _holds(f, float(p[2]), float(t[at[k]]), ov_m):
                 continue
             dist = f.horizontal_distance(line[:, 0], line[:, 1])
             if dist[0] >= ov_m and float(dist.min()) < ov_m:
