@@ -94,7 +94,7 @@ def overshoot_flags(  # noqa: PLR0917 - the candidate's parts, as td._check has 
         near = binds & (boxes[:, 0] <= hi[0]) & (boxes[:, 2] >= lo[0])
         near &= (boxes[:, 1] <= hi[1]) & (boxes[:, 3] >= lo[1])
         for i in np.flatnonzero(near):
-            f = fences[i]
+            f = fences[int(i)]
             if not _holds(f, float(p[2]), float(t[at[k]]), ov_m):
                 continue
             dist = f.horizontal_distance(line[:, 0], line[:, 1])
