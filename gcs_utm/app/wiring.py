@@ -202,6 +202,7 @@ def build_runtime(
         settings.monitoring,
         operations=lambda: airspace.operations,
         log_event=usm.log_event,
+        geofences=airspace.geofences,
     )
 
     async def tracking_hazard(h: HazardReport) -> None:
@@ -437,7 +438,7 @@ def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
     if mqtt:
         from gcs_utm.services.mqtt_gateway import MqttGateway
 
-        gateway = MqttGateway(rt.usm, settings.mqtt, tracks=rt.tracks)
+        gateway = MqttGateway(rt.usm, settings.mqtt, tracks=rt.tracks, frame=rt.frame)
         rt.usm.attach_operator(gateway)
         rt.usm.attach_threat_sink(gateway.on_threats)
         rt.usm.attach_geofence_listener(gateway.on_geofences)
