@@ -69,8 +69,15 @@ def attach_restart_review(rt: Runtime, held: list[Held]) -> RestartReview | None
     return review
 
 
-def start_review(tg: asyncio.TaskGroup, rt: Runtime, held: list[Held]) -> list[asyncio.Task[None]]:
-    """The review's task (none when nothing is held), attached before any threat arrives."""
+def start_review(
+    tg: asyncio.TaskGroup, rt: Runtime, location: str | Path, *, cluster: bool
+) -> list[asyncio.Task[None]]:
+    """The review's task for the store at ``location`` (none when nothing is held, or for a
+    cluster member: its other lives are other instances, alive), attached before any threat
+    arrives (call it before the service's tasks first run)."""
+    if cluster:
+        return []
+    held = load_held(location, rt.store.epoch, rt.settings.store.busy_timeout_s)
     review = attach_restart_review(rt, held)
     if review is None:
         return []

@@ -58,7 +58,7 @@ async def _life(db: Path, *, degraded: bool) -> int:
             tasks = [
                 tg.create_task(rt.emergency.run()),
                 tg.create_task(rt.usm.run()),
-                *start_review(tg, rt, held),
+                *start_review(tg, rt, db, cluster=False),
             ]
             if degraded:
                 rt.usm.on_hazard(
