@@ -247,6 +247,11 @@ def build_runtime(
 
     emergency = EmergencyService(em, em_snapshot, clock, on_decision)
     usm.attach_measurement_sink(tracking.submit, tracking.submit_lane)
+    usm.attach_threat_evidence(
+        lambda op_id: tracker.last_accepted_t_s(TrackId(op_id)),
+        fresh_s=settings.tracking.stale_after_s,
+        eph_good_m=settings.mavlink.eph_degraded_m / 2.0,  # where the vehicle re-arms it
+    )
     usm.attach_threat_sink(
         emergency.submit_threats if policy is None else _filtered(emergency.submit_threats, policy)
     )
@@ -335,6 +340,8 @@ async def apply_decision(
         store.record(entry)
     if decision.geofences:
         await usm.add_geofences(decision.geofences)
+    if decision.removed_geofences:
+        await usm.remove_geofences(decision.removed_geofences)
     for rec_id in decision.superseded:
         await usm.on_superseded(rec_id)
     for rec in decision.recommendations:

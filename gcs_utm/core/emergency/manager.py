@@ -1,18 +1,15 @@
 """Emergency Management: threat -> policy -> TD alternatives -> joint selection -> actions.
 
-Pure (no I/O, no clock): time comes from the snapshot (``AirspaceSnapshot.t_s``). State is
-the open cases (one per threat id: the threat, the action taken, per-UAS excluded maneuvers and
-re-plan counts, extra dynamic geofences) and the current version of every recommendation.
+Pure (no I/O, no clock: time is ``AirspaceSnapshot.t_s``). State: the open cases (one per
+threat id, :class:`~.decision.Case`) and the current version of every recommendation.
 
 Guarantees:
 - every plan change or command leaves as a :class:`Recommendation` with a deadline
   (predicted event time minus ``deadline_margin_s``, never less than ``min_response_s`` from
   now); in autonomous mode it is born ACCEPTED and commands are also returned to execute;
-- a rejection or an expiry re-plans without the refused maneuver (a new version of the same
-  recommendation id) up to ``max_replans`` times, then escalates to the operator; when no
-  feasible alternative exists EM escalates: nothing is dropped silently;
-- every decision yields an :class:`AuditEntry` with all alternatives, their cost and risk, the
-  weights, the selection and the reason.
+- a rejection or an expiry re-plans without the refused maneuver (a new version of the id) up
+  to ``max_replans`` times, then escalates; no feasible alternative: EM escalates (no drop);
+- every decision is audited (:class:`AuditEntry`: alternatives, cost, risk, weights, reason).
 """
 
 from __future__ import annotations
@@ -126,6 +123,9 @@ class EmergencyManager:
 
     def case(self, threat_id: ThreatId) -> Case | None:
         return self._cases.get(threat_id)
+
+    def adopt(self, case: Case) -> None:  # a previous life's case, as it is (see .adoption)
+        self._cases[case.threat.id] = case
 
     def record(self, rec: Recommendation) -> Recommendation:
         """Store ``rec`` as the current version of its id; returns it."""

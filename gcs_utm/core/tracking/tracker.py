@@ -499,6 +499,11 @@ class Tracker:
     def __len__(self) -> int:
         return self._n
 
+    def last_accepted_t_s(self, track_id: TrackId) -> float | None:
+        """When the track last accepted a measurement (capture time); None: no such track."""
+        row = self._row.get(track_id)
+        return None if row is None else float(self._t[row])
+
     def covariance(self, track_id: TrackId) -> FloatArray:
         """The 6x6 covariance of a track over (east, north, up, v_east, v_north, v_up)."""
         row = self._row[track_id]
