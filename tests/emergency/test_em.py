@@ -122,7 +122,10 @@ def test_repeated_rejection_escalates_to_the_operator() -> None:
     assert again.selected.maneuver is not rec.selected.maneuver  # type: ignore[union-attr]
     d2 = em.on_answer(again, False, snap)
     assert d2.escalations and "operator action needed" in d2.escalations[0]
-    assert em.pending() == []
+    # no third plan: the escalation proposes the safe command (hold) instead
+    (cmd,) = em.pending()
+    assert cmd.selected is None and cmd.command is not None
+    assert cmd.command.kind is CommandKind.HOLD and "hold proposed" in d2.escalations[0]
 
 
 def test_stale_answer_is_ignored_with_a_warning() -> None:

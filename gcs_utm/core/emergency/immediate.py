@@ -202,7 +202,7 @@ class Choice:
     tried: list[dict[str, object]]
 
 
-def choose(  # noqa: PLR0917 - one call site
+def choose_commands(  # noqa: PLR0917 - one call site
     td: TacticalDeconfliction,
     snapshot: AirspaceSnapshot,
     candidates: Sequence[OperationId],
@@ -306,14 +306,19 @@ def propose(
     snapshot: AirspaceSnapshot,
     why: str,
     candidates: Sequence[OperationId],
+    *,
+    choose: bool = True,
 ) -> Decision:
     """Escalate with ``why`` and propose the immediate commands chosen for ``candidates``
-    (the threat's safe command when nothing can be computed); nothing new when the same
-    commands are already proposed or in force for the case."""
+    (the threat's safe command when nothing can be computed, or without ``choose``: not a
+    loss of separation); nothing new when the same commands are already proposed or in
+    force for the case."""
     now = snapshot.t_s
     t = case.threat
     ops = snapshot.operations
-    choice = choose(
+    if not choose:
+        return escalate_safe(em, case, list(candidates), now, why)
+    choice = choose_commands(
         em.td,
         snapshot,
         candidates,

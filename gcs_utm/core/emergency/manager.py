@@ -46,6 +46,7 @@ from gcs_utm.core.emergency.selection import (
 )
 from gcs_utm.core.emergency.supervision import (
     deviation_start,
+    escalate_safe,
     on_outcome,
     safe_command,
     settled_at,
@@ -672,7 +673,7 @@ class EmergencyManager:
                 d = self.issue(case, op_id, now, command=cmd, reason=msg)
                 return d.merge(Decision(escalations=(msg,), audit=audit))
             msg = f"{case.threat.id}: no feasible alternative for {op_id} ({t.kind.value})"
-            return Decision(escalations=(msg,), audit=audit)
+            return Decision(audit=audit).merge(escalate_safe(self, case, [op_id], now, msg))
         d = Decision(audit=(self.audit(now, "decision", case.threat.id, detail),))
         return d.merge(
             self.issue(
@@ -750,13 +751,13 @@ class EmergencyManager:
         if rec.selected is not None:
             case.excluded.setdefault(op_id, set()).add(rec.selected.maneuver)
         mode = case.modes.get(op_id, "")
-        if mode == MODE_COMMAND or n > self.config.max_replans:
-            what = "a command" if mode == MODE_COMMAND else f"{n - 1} re-plans"
-            msg = f"{rec.threat_id}: {op_id} {why} {what}; operator action needed"
-            return Decision(
-                escalations=(msg,),
-                audit=(self.audit(now, "escalation", rec.threat_id, {"reason": msg}),),
-            )
+        if mode == MODE_COMMAND:  # the pilot refused (or let expire) the command itself
+            msg = f"{rec.threat_id}: {op_id} {why} a command; operator action needed"
+            audit = self.audit(now, "escalation", rec.threat_id, {"reason": msg})
+            return Decision(escalations=(msg,), audit=(audit,))
+        if n > self.config.max_replans:  # escalate with a command to confirm
+            msg = f"{rec.threat_id}: {op_id} {why} {n - 1} re-plans"
+            return propose(self, case, snapshot, msg, [op_id], choose=mode == MODE_MULTI)
         if mode == MODE_MULTI:
             return self._multi(case, snapshot)
         if mode == MODE_INTRUDER:
