@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from gcs_utm.app import OperatorMode, RunOptions, run_scenario_blocking
-from gcs_utm.app import runner as app_runner
+from gcs_utm.app.report import build_report
 from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.scenario import load_scenario
 from gcs_utm.settings import Settings
@@ -31,13 +31,12 @@ def _fly(name: str, out: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[dict[st
     progress)."""
     path = DATA / f"{name}.toml"
     seen: dict[str, Any] = {}
-    build = app_runner.build_report
 
     def spy(*args: Any, **kw: Any) -> Any:
-        seen["vehicles"] = kw["vehicles"]
-        return build(*args, **kw)
+        seen["vehicles"] = kw["vehicles"]  # the simulated vehicles: their true positions
+        return build_report(*args, **kw)
 
-    monkeypatch.setattr(app_runner, "build_report", spy)
+    monkeypatch.setattr("gcs_utm.app.runner.build_report", spy)
     options = RunOptions(
         speed=math.inf,
         headless=True,
