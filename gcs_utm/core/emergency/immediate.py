@@ -8,17 +8,20 @@ every recommendation, with an escalation that names it) instead of plans when:
   from nowhere, a conflict detected late): plans would start inside the loss;
 - no combination of plans resolves the conflict;
 - every plan keeps separation while the tracks predict the loss, even re-timed from the
-  vehicles' progress (:mod:`.progress`): a UAS is not where its plan says. Only the UAS whose
-  track is off its plan (beyond its flight geometry) are commanded, when there are such.
+  vehicles' progress (the snapshot EM decides on holds the plans as flown,
+  :mod:`gcs_utm.core.deconfliction.retime`): a UAS is not where its plan says. Only the UAS
+  whose track is off its plan (beyond its flight geometry) are commanded, when there are
+  such.
 
 The commands are *hold* (a multirotor brakes and holds position and altitude; a fixed wing
 circles where it is) and *climb* or *descend in place* (a GOTO to the point where the vehicle
 stops, the vertical minimum plus a margin higher or lower, within the altitude band and
 above the safety floor). Each UAS of the threat gets none or one of them; every combination
-is flown forward on a 0.5 s grid from the predicted paths (the snapshot's prediction row of
-each track, else its velocity, else its plan): up to the command time as predicted, then
-braking at :data:`BRAKE_MPS2` to a stop (a fixed wing: anywhere within two turn radii of where
-it was commanded) while climbing or descending at its rates. The combination is kept that
+is flown forward on a 0.5 s grid: a commanded UAS at its track's velocity up to the command
+time, then braking at :data:`BRAKE_MPS2` to a stop (a fixed wing: anywhere within two turn
+radii of where it was commanded) while climbing or descending at its rates; every other UAS
+on its predicted path (the snapshot's prediction row of its track, else its velocity, else
+its plan). The combination is kept that
 keeps TD's minima (effective minima plus tracking tolerances) from the other UAS of the
 threat and from all other traffic with the fewest commanded UAS, then the lowest priorities,
 then the largest separation; when none keeps them, the one with the largest separation. The
@@ -162,8 +165,10 @@ def _moves(
         (CLIMB, min(float(p0[2]) + rise_m, hi), env.climb_rate_mps),
         (DESCEND, max(float(p0[2]) - rise_m, lo), env.descent_rate_mps),
     ):
-        if action != HOLD and abs(target_z - p0[2]) < 1.0:
-            continue
+        if (action == CLIMB and target_z < p0[2] + 1.0) or (
+            action == DESCEND and target_z > p0[2] - 1.0
+        ):
+            continue  # no room in the altitude band (or already outside it that way)
         dz = np.clip(target_z - p0[2], -rate * tau, rate * tau)
         xyz = before.copy()
         after = grid >= t_cmd
