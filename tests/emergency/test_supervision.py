@@ -402,8 +402,9 @@ def test_an_escalated_case_is_retried_on_the_supervision_tick() -> None:
 
 def test_a_predicted_loss_with_clean_plans_gets_an_immediate_command() -> None:
     """Every plan already keeps separation while the tracks predict the loss (a UAS flies
-    off its plan): EM does not keep all. It warns, escalates and proposes an immediate
-    command for the UAS whose track is off its plan, and the audit says which and why."""
+    off its plan): EM does not keep all. It warns at once and, when the event is within the
+    lead plus 10 s, escalates and proposes an immediate command for the UAS whose track is
+    off its plan; the audit says which and why."""
     snap, threat = sc.scenario_los_2uas()
     # A's track is 40 m north of its plan, heading at B (B is where its plan says)
     la, lo = sc.FRAME.point_to_wgs84(-1000.0, 40.0)
@@ -427,17 +428,23 @@ def test_a_predicted_loss_with_clean_plans_gets_an_immediate_command() -> None:
     }
     td = _FakeTD(opts, {frozenset({"A:keep_plan", "B:keep_plan"})})
     em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
-    d = em.on_threat(threat, snap)
-    assert d.warnings and "(A off its plan)" in d.warnings[0]
-    (audit,) = (a for a in d.audit if a.action == "decision")
+    d0 = em.on_threat(threat, snap)  # the event is 100 s ahead: warned, command deferred
+    assert d0.warnings and "(A off its plan)" in d0.warnings[0]
+    (audit,) = (a for a in d0.audit if a.action == "decision")
     assert "not where its plan says" in str(audit.detail["all_kept"])
+    assert not plans(d0) and not d0.escalations
+    (later,) = (a for a in d0.audit if a.action == "immediate")
+    assert "deferred to 83.0 s from now" in str(later.detail["reason"])  # 100 - 7 - 10
+    assert em.supervise(at(snap, 82.0)) == Decision()
+    d = em.supervise(at(snap, 83.5))
+    assert not d.warnings  # said once per case
     (rec,) = plans(d)
     assert rec.operation_id == "A" and rec.selected is None and rec.command is not None
     assert d.escalations and "proposed" in d.escalations[0]
     (why,) = (a for a in d.audit if a.action == "immediate")
     assert why.detail["selected"] == {"A": rec_action(rec)}
-    again = em.supervise(at(snap, em.config.retry_after_s + 1.0))
-    assert not again.warnings and not again.escalations  # said once per case
+    again = em.supervise(at(snap, 84.5))
+    assert again == Decision()  # the command is pending: nothing new
 
 
 def rec_action(rec: Recommendation) -> str:

@@ -49,8 +49,10 @@ from gcs_utm.model import (
     Operation,
     OperationId,
     Position,
+    RecommendationId,
     RecommendationState,
     Threat,
+    ThreatKind,
 )
 
 if TYPE_CHECKING:
@@ -305,6 +307,34 @@ def too_late(em: EmergencyManager, threat: Threat, now: float) -> str:
     )
 
 
+IMMINENT_S = 10.0
+"""With every plan kept, the immediate command waits until the event is this much beyond
+the lead: further ahead the plans or the tracks often change (a UAS catches up, a plan
+ends), and a UAS held early is where no plan says for the rest of its flight."""
+
+
+def keep_all(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+    """Every plan of the case is kept while the tracks predict the loss: warn (once per
+    case) and, once the event is within the lead plus :data:`IMMINENT_S`, propose the
+    immediate command for the UAS whose track is off its plan (all of the threat's when
+    none is); until then the case is decided again at that time."""
+    t = case.threat
+    now = snapshot.t_s
+    off = [k for k in t.uas_ids if k in off_plan(em.td, snapshot)]
+    msg = f"{t.id}: loss predicted for {', '.join(t.uas_ids)} although the plans keep "
+    msg += f"separation ({', '.join(off) or 'none'} off its plan)"
+    d = Decision() if case.off_plan_escalated else Decision(warnings=(msg,))
+    case.off_plan_escalated = True
+    event = t.predicted_event_at_s
+    due_t_s = None if event is None else event - (em.plan_start(t, now) - now) - IMMINENT_S
+    if due_t_s is not None and due_t_s > now:
+        # decided again at due_t_s (the retry of a case that ended without a plan)
+        case.attempt_t_s = due_t_s - em.config.retry_after_s
+        why = f"{msg}; immediate command deferred to {due_t_s - now:.1f} s from now"
+        return d.merge(Decision(audit=(em.audit(now, "immediate", t.id, {"reason": why}),)))
+    return d.merge(propose(em, case, snapshot, msg, off or list(t.uas_ids)))
+
+
 def propose(
     em: EmergencyManager,
     case: Case,
@@ -345,6 +375,20 @@ def propose(
     detail["measured_s"] = em.lead.measured()
     audit = Decision(audit=(em.audit(now, "immediate", t.id, detail),))
     return audit.merge(escalate_safe(em, case, list(choice.commands), now, text, choice.commands))
+
+
+def held_by(em: EmergencyManager, op_id: OperationId, other: Case) -> str:
+    """The loss-of-separation case (other than ``other``) whose immediate command for
+    ``op_id`` is accepted or applied ("" when none): the UAS is off its plan on purpose, and
+    a conformance decision must not send it back into the loss (back to plan)."""
+    for tid in em.open_threats():
+        case = em.case(tid)
+        if case is None or case is other or case.threat.kind is not ThreatKind.LOSS_OF_SEPARATION:
+            continue
+        rec = em.recommendation(RecommendationId(f"{tid}/{op_id}"))
+        if rec is not None and rec.command is not None and rec.state in _LIVE[1:]:
+            return str(tid)
+    return ""
 
 
 def _standing(em: EmergencyManager, case: Case, choice: Choice) -> bool:

@@ -33,7 +33,7 @@ from gcs_utm.core.emergency.decision import (
     Decision,
 )
 from gcs_utm.core.emergency.geofences import area, link_loss, suspend
-from gcs_utm.core.emergency.immediate import off_plan, propose, too_late
+from gcs_utm.core.emergency.immediate import held_by, keep_all, propose, too_late
 from gcs_utm.core.emergency.lead import ResponseTimes
 from gcs_utm.core.emergency.selection import (
     STAY_DETAIL,
@@ -463,16 +463,8 @@ class EmergencyManager:
         if late and not kept:
             return d.merge(propose(self, case, snapshot, late, t.uas_ids))
         d = d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
-        if kept and not self._in_force(case) and not case.off_plan_escalated:
-            # The tracks predict the loss, yet every plan (re-timed) is clear of it: the UAS
-            # off their plans get an immediate command (with plans of this case in force,
-            # keeping them is supervision's normal answer while the UAS turn onto them).
-            case.off_plan_escalated = True
-            off = [k for k in t.uas_ids if k in off_plan(self.td, snapshot)]
-            msg = f"{t.id}: loss predicted for {', '.join(t.uas_ids)} although the plans keep "
-            msg += f"separation ({', '.join(off) or 'none'} off its plan)"
-            d = d.merge(Decision(warnings=(msg,)))
-            d = d.merge(propose(self, case, snapshot, msg, off or list(t.uas_ids)))
+        if kept and not self._in_force(case):
+            d = d.merge(keep_all(self, case, snapshot))  # never keep all: see .immediate
         return d
 
     def _joint(
@@ -625,6 +617,10 @@ class EmergencyManager:
     ) -> Decision:
         now = snapshot.t_s
         t = threat or case.threat
+        held = held_by(self, op_id, case) if case.action == "back_to_plan" else None
+        if held:  # off its plan on purpose: not sent back into the loss it avoids
+            why: dict[str, object] = {"reason": f"{op_id} follows {held}'s immediate command"}
+            return Decision(audit=(self.audit(now, "deferred", case.threat.id, why),))
         snapshot = self._intended(snapshot, case)
         case.operations = dict(snapshot.operations)
         case.modes[op_id] = f"single:{','.join(sorted(m.value for m in maneuvers))}"
