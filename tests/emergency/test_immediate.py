@@ -27,6 +27,7 @@ from gcs_utm.model import (
     RecommendationState,
     ThreatId,
     ThreatKind,
+    ThreatStatus,
     Track,
     TrackId,
 )
@@ -181,3 +182,25 @@ def test_a_crossing_needs_one_command_for_the_lower_priority_uas() -> None:
 
 def sc_td() -> TacticalDeconfliction:
     return TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MON)
+
+
+def test_a_conformance_decision_does_not_undo_an_immediate_command() -> None:
+    """A UAS told to hold is off its plan on purpose: the conformance threat that follows
+    (UAS_OUT_OV, back to plan) must not send it back into the loss it avoids."""
+    snap, threat = sc.scenario_los_2uas()
+    threat = replace(threat, predicted_event_at_s=snap.t_s + 5.0)
+    em = make_em()
+    d = em.on_threat(threat, snap)
+    cmds = [r for r in d.recommendations if r.command is not None]
+    assert cmds, d
+    for r in cmds:
+        em.on_answer(r, True, snap)
+    held = cmds[0].operation_id
+    out = sc.threat(ThreatKind.UAS_OUT_OV, [held], tid="t2", event_in_s=0.0)
+    d2 = em.on_threat(out, snap)
+    assert d2.recommendations == ()
+    (why,) = d2.audit
+    assert why.action == "deferred" and "t1's immediate command" in str(why.detail["reason"])
+    # once the loss case is closed, conformance decides as usual again
+    em.on_threat(replace(threat, status=ThreatStatus.CLOSED), snap)
+    assert em.on_threat(replace(out, id=ThreatId("t3")), snap).audit[0].action != "deferred"
