@@ -11,7 +11,10 @@ every recommendation, with an escalation that names it) instead of plans when:
   vehicles' progress (the snapshot EM decides on holds the plans as flown,
   :mod:`gcs_utm.core.deconfliction.retime`): a UAS is not where its plan says. Only the UAS
   whose track is off its plan (beyond its flight geometry) are commanded, when there are
-  such.
+  such, and only once the event is within the lead plus :data:`IMMINENT_S` (:func:`keep_all`).
+
+A UAS under such a command is off its plan on purpose: a conformance decision (back to plan)
+for it waits while the loss case is open (:func:`held_by`).
 
 The commands are *hold* (a multirotor brakes and holds position and altitude; a fixed wing
 circles where it is) and *climb* or *descend in place* (a GOTO to the point where the vehicle
