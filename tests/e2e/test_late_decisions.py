@@ -103,6 +103,7 @@ def test_a_uas_appearing_seconds_before_the_loss_gets_an_immediate_command(
     assert los, report["threats"]
     warning_s = los[0]["predicted_event_at_s"] - los[0]["detected_at_s"]
     assert 3.0 <= warning_s <= 10.0  # detected late: less than a new plan needs
+    assert flown >= 1.0, f"flown inside the minima (separation ratio {flown:.3f})"
     assert report["escalations"], "the late case must reach the operator"
     _escalations_carry_commands(report)
     commanded = [
@@ -111,7 +112,6 @@ def test_a_uas_appearing_seconds_before_the_loss_gets_an_immediate_command(
         if r["threat_kind"] == "LOSS_OF_SEPARATION" and r["maneuver"] in {"hold", "goto"}
     ]
     assert commanded and commanded[0]["verified"], report["recommendations"]
-    assert flown >= 1.0, f"flown inside the minima (separation ratio {flown:.3f})"
 
 
 def test_a_uas_behind_its_plan_does_not_fly_into_the_loss_its_track_predicts(
