@@ -429,7 +429,7 @@ def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
         rt.usm.attach_operator(headless)
     if options.operator in (OperatorMode.AUTO_ACCEPT, OperatorMode.AUTO_REJECT):
         # New plans start where the UAS will be when the answer comes: after this delay.
-        rt.emergency.em.answer_delay_s = settings.dashboard.auto_answer_delay_s
+        rt.emergency.em.lead.answer_delay_s = settings.dashboard.auto_answer_delay_s
         rt.usm.attach_operator(
             AutoOperator(
                 rt.usm.answer,

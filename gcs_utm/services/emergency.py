@@ -11,6 +11,8 @@ still predicted after its plan was applied gets a new decision).
 Upload outcomes: the service is also an operator port of the USM (``present``/``update``);
 when the USM reports a recommendation APPLIED or FAILED, the outcome is queued for
 ``EmergencyManager.on_outcome`` (a failure re-plans once, then the safe command is proposed).
+Every state change also goes to ``EmergencyManager.lead`` (answer, upload and command times
+measured per vehicle: how soon a new plan can start, ``gcs_utm.core.emergency.lead``).
 Wire it with ``usm.attach_operator(emergency)``.
 
 Queue policy: bounded (``queue_size``); submitters wait when it is full (threats and answers
@@ -126,6 +128,7 @@ class EmergencyService:
         return None
 
     async def update(self, rec: Recommendation) -> None:
+        self.em.lead.on_state(rec)  # measured answer, upload and command times (core.lead)
         if rec.state is RecommendationState.APPLIED:
             await self.submit_outcome(rec.id, rec.version, True, rec.reason)
         elif rec.state is RecommendationState.FAILED:
