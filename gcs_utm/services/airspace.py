@@ -61,6 +61,9 @@ class Airspace:
         """Increases on every change; consumers compare it to skip rework."""
         self._sys_index: dict[SysId, OperationId] = {}
         self._sys_index_version = -1
+        # per operation, from its vehicle's own messages: True in the air, False on the ground
+        # (absent: its vehicle reports no state); not a change of the picture (no version)
+        self._airborne: dict[OperationId, bool] = {}
 
     # ---- queries --------------------------------------------------------------------------
     @property
@@ -91,6 +94,17 @@ class Airspace:
             return tuple(fences)
         return tuple(g for g in fences if g.end_t_s is None or g.end_t_s >= active_at_s)
 
+    def set_airborne(self, op_id: OperationId, airborne: bool | None) -> None:
+        """The operation's vehicle is in the air (True), on the ground (False) or reports no
+        state (None), as its own messages say (:mod:`gcs_utm.services.flight_state`)."""
+        if airborne is None:
+            self._airborne.pop(op_id, None)
+        else:
+            self._airborne[op_id] = airborne
+
+    def airborne(self, op_id: OperationId) -> bool | None:
+        return self._airborne.get(op_id)
+
     # ---- changes --------------------------------------------------------------------------
     def load(self, operations: Iterable[Operation], geofences: Iterable[Geofence]) -> None:
         """Initial state (from a scenario or the store); no notifications."""
@@ -118,6 +132,19 @@ class Airspace:
         self._operations[op_id] = new
         self.version += 1
         _log.info("operation %s: %s -> %s", op_id, op.state.value, state.value)
+        if self._on_operation:
+            self._on_operation(new)
+        return new
+
+    def set_home(self, op_id: OperationId, home: Position) -> Operation:
+        """The operation's vehicle has this home (its HOME_POSITION when it armed)."""
+        op = self.operation(op_id)
+        if op.home == home:
+            return op
+        new = dataclasses.replace(op, home=home)
+        self._operations[op_id] = new
+        self.version += 1
+        _log.info("operation %s: home %s", op_id, home)
         if self._on_operation:
             self._on_operation(new)
         return new
@@ -162,12 +189,16 @@ class Airspace:
 
     def snapshot(self, t_s: float, tracks: TrackSource) -> AirspaceSnapshot:
         """One consistent view at ``t_s``: tracking's (tracks, prediction) pair is taken at
-        once, then joined with the operations and the geofences not expired at ``t_s``."""
+        once, then joined with the operations, the geofences not expired at ``t_s`` and which
+        operations are in the air or on the ground."""
         track_map, prediction = tracks()
+        flags = self._airborne
         return AirspaceSnapshot(
             t_s=t_s,
             operations=dict(self._operations),
             tracks=track_map,
             geofences=self.geofences(active_at_s=t_s),
             prediction=prediction,
+            airborne=frozenset(k for k, up in flags.items() if up and k in self._operations),
+            grounded=frozenset(k for k, up in flags.items() if not up and k in self._operations),
         )
