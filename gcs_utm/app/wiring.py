@@ -191,6 +191,7 @@ def build_runtime(
         settings.monitoring,
         operations=lambda: airspace.operations,
         log_event=usm.log_event,
+        airborne=airspace.airborne_ids,
     )
 
     async def tracking_hazard(h: HazardReport) -> None:

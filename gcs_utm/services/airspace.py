@@ -105,6 +105,10 @@ class Airspace:
     def airborne(self, op_id: OperationId) -> bool | None:
         return self._airborne.get(op_id)
 
+    def airborne_ids(self) -> frozenset[OperationId]:
+        """The operations whose vehicle is in the air."""
+        return frozenset(k for k, up in self._airborne.items() if up and k in self._operations)
+
     # ---- changes --------------------------------------------------------------------------
     def load(self, operations: Iterable[Operation], geofences: Iterable[Geofence]) -> None:
         """Initial state (from a scenario or the store); no notifications."""
@@ -192,13 +196,14 @@ class Airspace:
         once, then joined with the operations, the geofences not expired at ``t_s`` and which
         operations are in the air or on the ground."""
         track_map, prediction = tracks()
-        flags = self._airborne
         return AirspaceSnapshot(
             t_s=t_s,
             operations=dict(self._operations),
             tracks=track_map,
             geofences=self.geofences(active_at_s=t_s),
             prediction=prediction,
-            airborne=frozenset(k for k, up in flags.items() if up and k in self._operations),
-            grounded=frozenset(k for k, up in flags.items() if not up and k in self._operations),
+            airborne=self.airborne_ids(),
+            grounded=frozenset(
+                k for k, up in self._airborne.items() if not up and k in self._operations
+            ),
         )

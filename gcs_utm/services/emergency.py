@@ -30,6 +30,7 @@ from dataclasses import dataclass, replace
 
 from gcs_utm.clock import Clock
 from gcs_utm.core.emergency import Decision, EmergencyManager
+from gcs_utm.core.emergency.ground import not_decided, on_ground
 from gcs_utm.model import (
     AirspaceSnapshot,
     Recommendation,
@@ -192,8 +193,16 @@ class EmergencyService:
                 lambda: self.em.on_answer(asked, item.accepted, self._snapshot(now)), item.rec_id
             )
         else:
-            await self._decide(lambda: self.em.on_threat(item, self._snapshot(now)), item.id)
+            await self._decide(lambda: self._on_threat(item, now), item.id)
         self.processed += 1
+
+    def _on_threat(self, threat: Threat, now: float) -> Decision:
+        """EM's decision on a threat, none for one with a UAS on the ground (ground.py)."""
+        snapshot = self._snapshot(now)
+        grounded = on_ground(threat, snapshot)
+        if grounded:
+            return not_decided(threat, grounded, now)
+        return self.em.on_threat(threat, snapshot)
 
     async def _decide(self, step: Callable[[], Decision], subject: str) -> None:
         try:
