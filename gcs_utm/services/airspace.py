@@ -61,9 +61,10 @@ class Airspace:
         """Increases on every change; consumers compare it to skip rework."""
         self._sys_index: dict[SysId, OperationId] = {}
         self._sys_index_version = -1
-        # per operation, from its vehicle's own messages: True in the air, False on the ground
-        # (absent: its vehicle reports no state); not a change of the picture (no version)
-        self._airborne: dict[OperationId, bool] = {}
+        # per system id, from the vehicle's own messages: True in the air, False on the ground
+        # (absent: it reports no state); not a change of the picture (no version). It is the
+        # state of the operation that system id flies (by_sys_id).
+        self._airborne: dict[SysId, bool] = {}
 
     # ---- queries --------------------------------------------------------------------------
     @property
@@ -94,20 +95,30 @@ class Airspace:
             return tuple(fences)
         return tuple(g for g in fences if g.end_t_s is None or g.end_t_s >= active_at_s)
 
-    def set_airborne(self, op_id: OperationId, airborne: bool | None) -> None:
-        """The operation's vehicle is in the air (True), on the ground (False) or reports no
-        state (None), as its own messages say (:mod:`gcs_utm.services.flight_state`)."""
+    def set_airborne(self, sys_id: SysId, airborne: bool | None) -> None:
+        """The vehicle flying ``sys_id`` is in the air (True), on the ground (False) or
+        reports no state (None), as its own messages say (:mod:`.flight_state`)."""
         if airborne is None:
-            self._airborne.pop(op_id, None)
+            self._airborne.pop(sys_id, None)
         else:
-            self._airborne[op_id] = airborne
+            self._airborne[sys_id] = airborne
 
     def airborne(self, op_id: OperationId) -> bool | None:
-        return self._airborne.get(op_id)
+        """Whether the operation's vehicle is in the air (None: no state, or the operation
+        is not the one its system id flies)."""
+        op = self._operations.get(op_id)
+        if op is None or op.sys_id is None:
+            return None
+        flown = self.by_sys_id(op.sys_id)
+        return self._airborne.get(op.sys_id) if flown is not None and flown.id == op_id else None
+
+    def _flown(self, up: bool) -> frozenset[OperationId]:
+        ops = (self.by_sys_id(s) for s, flag in self._airborne.items() if flag is up)
+        return frozenset(op.id for op in ops if op is not None)
 
     def airborne_ids(self) -> frozenset[OperationId]:
         """The operations whose vehicle is in the air."""
-        return frozenset(k for k, up in self._airborne.items() if up and k in self._operations)
+        return self._flown(True)
 
     # ---- changes --------------------------------------------------------------------------
     def load(self, operations: Iterable[Operation], geofences: Iterable[Geofence]) -> None:
@@ -202,8 +213,6 @@ class Airspace:
             tracks=track_map,
             geofences=self.geofences(active_at_s=t_s),
             prediction=prediction,
-            airborne=self.airborne_ids(),
-            grounded=frozenset(
-                k for k, up in self._airborne.items() if not up and k in self._operations
-            ),
+            airborne=self._flown(True),
+            grounded=self._flown(False),
         )

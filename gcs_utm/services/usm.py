@@ -426,10 +426,10 @@ class Usm(RecommendationLifecycle):
             if change != "home":
                 self.log_event("vehicle", f"sysid {s.sys_id}: {change}")
         self.vehicle_ops.on_status(s, flight, changes)  # mission changes, home, progress
+        self.airspace.set_airborne(s.sys_id, flight.airborne)
         op = self.airspace.by_sys_id(s.sys_id)
         if op is None:
             return
-        self.airspace.set_airborne(op.id, flight.airborne)
         state = op.state
         if flight.airborne or (
             s.armed and s.mode in (FlightMode.MISSION, FlightMode.TAKEOFF, FlightMode.GUIDED)
