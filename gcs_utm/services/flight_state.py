@@ -6,7 +6,9 @@ A vehicle is **airborne** when it is armed (HEARTBEAT ``base_mode`` armed flag) 
 - it reports none (``MAV_LANDED_STATE_UNDEFINED``, or no EXTENDED_SYS_STATE): it is more than
   ``airborne_height_m`` above its home, or has moved more than ``airborne_move_m`` from where
   it was armed.
-Otherwise it is **on the ground** (pre-flight): a disarmed vehicle always is.
+It is **on the ground** (pre-flight) when it says so: disarmed, or armed with the landed
+state on the ground. An armed vehicle that reports no landed state and shows neither height
+nor movement yet (e.g. heard for the first time) is neither: nothing is assumed either way.
 
 The state machine (transitions returned by :meth:`FlightState.update`):
 
@@ -57,9 +59,16 @@ class FlightState:
     home_at_arming: Position | None = None
     armed_at: Position | None = None  # where it was when it armed
 
+    on_ground: bool = False  # disarmed, or armed and landed by its own landed state
+
     @property
     def airborne(self) -> bool:
         return self.phase is Phase.AIRBORNE
+
+    @property
+    def flying(self) -> bool | None:
+        """True airborne, False on the ground, None when its messages do not tell."""
+        return True if self.airborne else (False if self.on_ground else None)
 
     def update(self, s: VehicleStatus) -> list[str]:
         """Take one status; the transitions it made, in order (``rebooted``, ``fix``,
@@ -87,6 +96,7 @@ class FlightState:
             out.append("disarmed")
         self.armed = s.armed
         up = s.armed and self._in_air(s)
+        self.on_ground = not up and (not s.armed or s.landed is True)
         if up and self.phase is not Phase.AIRBORNE:
             out.append("took_off")
         elif not up and self.phase is Phase.AIRBORNE:

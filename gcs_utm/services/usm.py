@@ -87,6 +87,18 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
+_VEHICLE_HAZARDS = frozenset(
+    {
+        ThreatKind.GNSS_DEGRADATION,
+        ThreatKind.JAMMING_ATTACK,
+        ThreatKind.SPOOFING_ATTACK,
+        ThreatKind.LACK_OF_BATTERY,
+        ThreatKind.TECHNICAL_FAILURE,
+        ThreatKind.COMMUNICATION_FAILURE,
+    }
+)
+"""A vehicle's own hazards: on the ground they are its pre-flight findings, not threats."""
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class UsmConfig:
@@ -426,7 +438,7 @@ class Usm(RecommendationLifecycle):
             if change != "home":
                 self.log_event("vehicle", f"sysid {s.sys_id}: {change}")
         self.vehicle_ops.on_status(s, flight, changes)  # mission changes, home, progress
-        self.airspace.set_airborne(s.sys_id, flight.airborne)
+        self.airspace.set_airborne(s.sys_id, flight.flying)
         op = self.airspace.by_sys_id(s.sys_id)
         if op is None:
             return
@@ -444,10 +456,10 @@ class Usm(RecommendationLifecycle):
             self.airspace.set_state(op.id, state)
 
     def on_ground(self, sys_id: SysId) -> bool:
-        """True when the vehicle flying ``sys_id`` (its latest status) is on the ground by its
-        own messages (:mod:`gcs_utm.services.flight_state`)."""
+        """True when the vehicle flying ``sys_id`` (its latest status) says it is on the
+        ground (:mod:`gcs_utm.services.flight_state`)."""
         flight = self._flight_by_sys_id.get(sys_id)
-        return flight is not None and not flight.airborne
+        return flight is not None and flight.on_ground
 
     def on_link_health(self, h: LinkHealth) -> None:
         self.health[(h.sys_id, h.vehicle)] = h
@@ -473,8 +485,9 @@ class Usm(RecommendationLifecycle):
         """A hazard from outside Monitoring becomes a threat for EM, coalesced per
         (kind, UAS) within the cooldown so a flapping GNSS does not storm the operator."""
         self.counters["hazards"] += 1
-        if (h.sys_id is not None and self.on_ground(h.sys_id)) or (
-            h.operation_id is not None and self.airspace.airborne(h.operation_id) is False
+        if h.kind in _VEHICLE_HAZARDS and (
+            (h.sys_id is not None and self.on_ground(h.sys_id))
+            or (h.operation_id is not None and self.airspace.airborne(h.operation_id) is False)
         ):
             # a vehicle on the ground (acquiring GNSS, rebooted, link gone) is in pre-flight:
             # its checks are the pilot's, not an emergency of the airspace

@@ -74,7 +74,7 @@ def test_airborne_from_armed_and_landed_state_else_height_or_movement() -> None:
     # No landed state (an autopilot that sends no EXTENDED_SYS_STATE): height or movement.
     h = FlightState()
     h.update(_s(armed=True))
-    assert not h.airborne
+    assert not h.airborne and h.flying is None  # heard armed: not assumed on the ground
     h.update(_s(armed=True, position=_up(1.0)))
     assert not h.airborne  # an altitude wandering on the ground
     h.update(_s(armed=True, position=_up(3.0)))
@@ -116,6 +116,11 @@ async def test_hazards_of_a_vehicle_on_the_ground_are_preflight_not_threats() ->
     usm.on_hazard(replace(gnss, t_s=1001.0))
     await usm.drain()
     assert [t.kind for t in seen] == [ThreatKind.GNSS_DEGRADATION]  # type: ignore[attr-defined]
+    # Heard armed without a landed state yet (a restart of the UTM mid-flight): not gated.
+    usm.on_status(_s(armed=True, reboots=2, fix=0, home=None))
+    usm.on_hazard(replace(gnss, kind=ThreatKind.LACK_OF_BATTERY, t_s=1002.0))
+    await usm.drain()
+    assert len(seen) == 2
 
 
 async def test_the_airspace_snapshot_says_who_is_airborne_and_the_operation_ends_on_landing() -> (
