@@ -37,7 +37,7 @@ def test_disarmed_px4_quads_with_crossing_missions_get_no_decision(
     cfg = _config(tmp_path / "serve.toml", crossing, ["udpin:127.0.0.1:14550"])
     with log_path.open("wb") as log:
         serve = subprocess.Popen(
-            [sys.executable, "-m", "gcs_utm", "serve", "--headless", "--auto-accept",
+            [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless", "--auto-accept",
              "--config", str(cfg), "--db", str(db), "--speed", str(SPEED)],
             stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
         )  # fmt: skip
@@ -81,6 +81,11 @@ def test_disarmed_px4_quads_with_crossing_missions_get_no_decision(
     assert modes and AUTO_MISSION not in modes, f"mission mode set on the ground\n{tail}"
     filed = rows(db, "SELECT operation_id FROM flight_plans WHERE version = 1")
     assert len(filed) == 2, filed
+    threats = rows(db, "SELECT id FROM threats")
+    audited = {
+        str(r[0]) for r in rows(db, "SELECT subject FROM audit WHERE action = 'not_decided'")
+    }
+    assert {str(r[0]) for r in threats} <= audited, (threats, audited)
     for sys_id in (1, 2):  # the home is the one after the fix
         fix = text.find(f"sysid {sys_id}: fix")
         home = text.find(f"sysid {sys_id}: home ")
