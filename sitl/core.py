@@ -106,8 +106,10 @@ AP_STREAM_GROUPS: dict[int, tuple[str, ...]] = {
     6: ("GLOBAL_POSITION_INT",),  # POSITION
     10: ("ATTITUDE",),  # EXTRA1
     11: ("VFR_HUD",),  # EXTRA2
-    12: ("BATTERY_STATUS", "SYSTEM_TIME", "EXTENDED_SYS_STATE", "HOME_POSITION"),  # EXTRA3
+    12: ("BATTERY_STATUS", "SYSTEM_TIME", "HOME_POSITION"),  # EXTRA3
 }
+# (ArduPilot 4.6 puts EXTENDED_SYS_STATE in no group: measured, with every group asked for, it
+# sends it only once SET_MESSAGE_INTERVAL asks for it, as the hub does)
 REQUESTABLE = (*STREAMS, "AUTOPILOT_VERSION")
 
 SENSORS_PRESENT = (
