@@ -10,11 +10,12 @@ restart, both before the service starts) are filed on the first notification. Op
 that have LANDED or ENDED leave the index. A conflict is a finding, not a refusal: the plan
 is filed either way and Monitoring watches the pair in flight.
 
-A UAS in the air is traffic until it lands, whatever its plan says: a plan is also checked
-against each airborne UAS (``airborne``, from the vehicles' own messages) hovering at the end
-of its plan once that has ended, and an airborne UAS's own plan is followed by that hover
-while the other plans go on (a fixed wing's loiter circle is Monitoring's and TD's, from its
-track; here its circle's centre stands for it).
+A UAS in the air is traffic until it lands, whatever its plan says: a plan (when filed, and
+again when its operation is activated) is also checked against each airborne UAS
+(``airborne``, from the vehicles' own messages) hovering at the end of its plan once that has
+ended, and an airborne UAS's own plan is followed by that hover while the other plans go on
+(a fixed wing's loiter circle is Monitoring's and TD's, from its track; here its circle's
+centre stands for it).
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ class FilingCheck:
         """The conflicts found when each operation's current plan was filed."""
         self.counters = {"checked": 0, "in_conflict": 0, "errors": 0}
         self._synced = False
+        self._state: dict[OperationId, OperationState] = {}
 
     def __len__(self) -> int:
         return len(self._filed)
@@ -78,14 +80,24 @@ class FilingCheck:
             if self._plan.pop(op.id, None) is not None:
                 self._filed.remove(op.id)
             return
+        activated = op.state is OperationState.ACTIVE and self._state.get(op.id) is not op.state
+        self._state[op.id] = op.state
         if self._plan.get(op.id) is op.plan:
+            if activated:  # activation: UAS that ended their plan meanwhile may still be up
+                self._report(op, self._after_plans(op, ()), counted=False)
             return  # a state change: the filed plan stands
         found = self._filed.check(op.plan, op)
         found += self._after_plans(op, {c.b for c in found})
         self._filed.add(op)
         self._plan[op.id] = op.plan
+        self._report(op, found)
+
+    def _report(self, op: Operation, found: list[PlanConflict], *, counted: bool = True) -> None:
+        """Keep and log the conflicts of ``op``'s plan (``counted``: a new check)."""
+        if not counted and not found:
+            return
         self.conflicts[op.id] = found
-        self.counters["checked"] += 1
+        self.counters["checked"] += counted
         if found:
             self.counters["in_conflict"] += 1
         for c in found:

@@ -135,3 +135,18 @@ def test_an_airborne_uas_after_its_plan_is_traffic_for_a_filing() -> None:
     airspace.add_operation(cross)
     airspace.add_operation(_line("H", 0.0))
     assert [c.b for c in check.conflicts["H"]] == ["X"]
+
+
+def test_at_activation_a_plan_is_checked_against_uas_that_ended_theirs_in_the_air() -> None:
+    """X is filed while H's plan is still running (H's hover is checked only from H's own
+    re-filing); when X's operation is activated, H has ended its plan and hovers in the air
+    on X's path: the check at activation finds it."""
+    airborne: set[str] = set()
+    airspace, check = _airborne_check(airborne)
+    airspace.add_operation(_line("H", 0.0))
+    cross = operation("X", [(1000.0, -1000.0, 100.0, T0 + 100), (1000.0, 1000.0, 100.0, T0 + 300)])
+    airspace.add_operation(cross)
+    assert check.conflicts["X"] == []
+    airborne.add("H")
+    airspace.set_state(cross.id, OperationState.ACTIVE)
+    assert [c.b for c in check.conflicts["X"]] == ["H"]
