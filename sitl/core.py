@@ -396,7 +396,13 @@ class VehicleCore:
             return 0.0
         return min(1.0, (self._t - self._jam_since) / 10.0 + 0.1)
 
+    def _acquiring_gnss(self) -> bool:
+        """No fix yet since boot (``VehicleSpec.gnss_fix_after_s``)."""
+        return self._t - self.spec.boot_at_s < self.spec.gnss_fix_after_s
+
     def _gps_fix_type(self) -> int:
+        if self._acquiring_gnss():
+            return 0
         lvl = self._jam_level()
         if lvl == 0.0:
             return 3
