@@ -142,10 +142,8 @@ class UsmConfig:
     )
     home_tolerance_m: float = setting(
         1.0,
-        "a vehicle's home (HOME_POSITION after its first 3D fix) that moves more than this "
-        "vertically (2 m horizontally) re-files its operation; at arming it is re-filed "
-        "whatever the move (the floor of generated plans is this home plus "
-        "[deconfliction] min_height_above_home_m)",
+        "a vehicle's home (HOME_POSITION after its first 3D fix) moving more than this "
+        "vertically (2 m horizontally) re-files its operation, and at arming whatever the move",
         min=0.01,
         unit="m",
     )
