@@ -20,6 +20,8 @@ from gcs_utm.model import (
     OperationState,
     Threat,
     ThreatKind,
+    Track,
+    TrackId,
 )
 
 T0 = sc.T0_S
@@ -106,3 +108,29 @@ def _keep(op: Operation) -> Alternative:
     return Alternative(
         operation_id=op.id, maneuver=Maneuver.KEEP_PLAN, plan=op.plan, cost=0, risk=0
     )
+
+
+def test_an_airborne_uas_waiting_for_its_plan_is_traffic_where_it_is() -> None:
+    """W took off early and waits in the air at the origin for its plan, which starts 500 m
+    east in 120 s (it leaves at 70 s at its 10 m/s); M passes over the origin in MEET_S: W is
+    traffic there, not nowhere."""
+    w = sc.make_operation("W", [(500.0, 0.0, ALT_M), (1000.0, 0.0, ALT_M)], t0_s=T0 + 120.0)
+    m = sc.make_operation("M", [(-600.0, 0.0, ALT_M), (600.0, 0.0, ALT_M)], t0_s=T0)
+    track = Track(
+        id=TrackId("tW"),
+        t_s=T0,
+        lat_deg=sc.FRAME.point_to_wgs84(0.0, 0.0)[0],
+        lon_deg=sc.FRAME.point_to_wgs84(0.0, 0.0)[1],
+        alt_amsl_m=ALT_M,
+        east_m=0.0,
+        north_m=0.0,
+        vel_enu_mps=(0.0, 0.0, 0.0),
+        position_sigma_m=1.0,
+        cooperative=True,
+        operation_id=w.id,
+    )
+    snap = replace(sc.snapshot([w, m]), tracks={track.id: track})
+    td = sc.build_manager().td
+    air = replace(snap, airborne=frozenset({w.id, M}))
+    assert any("separation with W" in f for f in td.verify(m.plan, m, td.others(air, {M}), ()))
+    assert td.verify(m.plan, m, td.others(snap, {M}), ()) == []  # not known to be airborne

@@ -45,6 +45,7 @@ from gcs_utm.model import (
     OperationId,
     OperationState,
     Track,
+    Waypoint4D,
 )
 
 CIRCLE_STEP_S = 2.0
@@ -133,13 +134,28 @@ def hover_plan(plan: FlightPlan, until_t_s: float) -> FlightPlan:
 def after_plan(
     op: Operation, snapshot: AirspaceSnapshot, frame: LocalFrame, until_t_s: float
 ) -> FlightPlan:
-    """Where an airborne UAS will be up to ``until_t_s``: its plan, then its loiter circle (a
-    fixed wing seen on it) or a hover at its last waypoint. The plan itself for a UAS not in
-    the air (``snapshot.airborne``)."""
+    """Where an airborne UAS will be up to ``until_t_s``: where its track is now when its plan
+    has not started yet (it waits in the air), its plan, then its loiter circle (a fixed wing
+    seen on it) or a hover at its last waypoint. The plan itself for a UAS not in the air
+    (``snapshot.airborne``)."""
     if op.id not in snapshot.airborne:
         return op.plan
     circle = loiter_plan(op, snapshot, frame, until_t_s)
-    return circle if circle is not None else hover_plan(op.plan, until_t_s)
+    plan = circle if circle is not None else hover_plan(op.plan, until_t_s)
+    tr = _track_of(op, snapshot)
+    if tr is not None and plan.start_t_s > max(tr.t_s, snapshot.t_s):
+        # waiting in the air for its plan: where it is until it must leave, at its cruise
+        # speed, to reach its first waypoint on time
+        first = plan.waypoints[0]
+        e0, n0 = frame.point_to_local(tr.lat_deg, tr.lon_deg)
+        e1, n1 = frame.point_to_local(first.lat_deg, first.lon_deg)
+        dist_m = math.hypot(e1 - e0, n1 - n0, first.alt_amsl_m - tr.alt_amsl_m)
+        leave_t_s = max(snapshot.t_s, plan.start_t_s - dist_m / op.cruise_speed_mps)
+        here = Waypoint4D(
+            lat_deg=tr.lat_deg, lon_deg=tr.lon_deg, alt_amsl_m=tr.alt_amsl_m, t_s=snapshot.t_s
+        )
+        plan = replace(plan, waypoints=(here, replace(here, t_s=leave_t_s), *plan.waypoints))
+    return plan
 
 
 def extended(
