@@ -134,3 +134,16 @@ def test_an_airborne_uas_waiting_for_its_plan_is_traffic_where_it_is() -> None:
     air = replace(snap, airborne=frozenset({w.id, M}))
     assert any("separation with W" in f for f in td.verify(m.plan, m, td.others(air, {M}), ()))
     assert td.verify(m.plan, m, td.others(snap, {M}), ()) == []  # not known to be airborne
+
+
+def test_a_candidate_of_an_airborne_uas_hovers_after_its_end_in_every_decision() -> None:
+    """M's plan ends at the origin in 60 s, where it will hover; X passes there at 100 s. The
+    verification of M's plan sees it, on whatever snapshot TD decides (a single-UAS or an
+    intruder decision takes the traffic first, as a multi-UAS one does)."""
+    m = sc.make_operation("M", [(-600.0, 0.0, ALT_M), (0.0, 0.0, ALT_M)], t0_s=T0)
+    x = sc.make_operation("X", [(0.0, -1000.0, ALT_M), (0.0, 1000.0, ALT_M)], t0_s=T0)
+    td = sc.build_manager().td
+    for airborne, flagged in ((frozenset({M}), True), (frozenset(), False), ({M}, True)):
+        snap = replace(sc.snapshot([m, x]), airborne=frozenset(airborne))
+        flags = td.verify(m.plan, m, td.others(snap, {M}), ())
+        assert any("separation with X" in f for f in flags) is flagged, (airborne, flags)

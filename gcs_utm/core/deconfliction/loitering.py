@@ -216,7 +216,9 @@ class Airborne:
         self._plans: dict[int, tuple[FlightPlan, FlightPlan]] = {}
 
     def until(self, snapshot: AirspaceSnapshot) -> float:
-        """The end of the decision's horizon."""
+        """The end of the decision's horizon on ``snapshot``, now the one being decided (TD
+        takes the traffic first in every decision: single UAS and intruders too)."""
+        self.at(snapshot)
         return snapshot.t_s + self.horizon_s
 
     def at(self, snapshot: AirspaceSnapshot) -> None:
