@@ -16,19 +16,24 @@ again when its operation is activated) is also checked against each airborne UAS
 ended, and an airborne UAS's own plan is followed by that hover while the other plans go on
 (a fixed wing's loiter circle is Monitoring's and TD's, from its track; here its circle's
 centre stands for it).
+
+With ``geofences``, each filed plan is also checked against them: a path or destination
+inside an active fence is logged with the operation, the fence, the waypoint and a proposed
+fix (:mod:`gcs_utm.core.monitoring.filing`); a submission over MQTT is refused for it.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import replace
 
 from gcs_utm.core.deconfliction.loitering import hover_plan
 from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.core.monitoring.filing import FenceFinding, plan_in_fences
 from gcs_utm.core.monitoring.strategic import FiledPlans, PlanConflict, plan_vs_plans
 from gcs_utm.geo import LocalFrame
-from gcs_utm.model import FlightPlan, Operation, OperationId, OperationState
+from gcs_utm.model import FlightPlan, Geofence, Operation, OperationId, OperationState
 
 _log = logging.getLogger(__name__)
 
@@ -48,11 +53,15 @@ class FilingCheck:
         log_event: Callable[[str, str], None] | None = None,
         step_s: float = 1.0,
         airborne: Callable[[], Collection[OperationId]] | None = None,
+        geofences: Callable[[], Sequence[Geofence]] | None = None,
     ) -> None:
         self._filed = FiledPlans(frame, config, step_s=step_s)
         self._frame = frame
         self._config = config
         self._airborne = airborne
+        self._geofences = geofences
+        self.fence_findings: dict[OperationId, list[FenceFinding]] = {}
+        """The geofences each operation's current plan runs into (see :meth:`in_fences`)."""
         self._plan: dict[OperationId, FlightPlan] = {}
         self._operations = operations
         self._log_event = log_event
@@ -90,6 +99,7 @@ class FilingCheck:
         found += self._after_plans(op, {c.b for c in found})
         self._filed.add(op)
         self._plan[op.id] = op.plan
+        self._fences(op)
         self._report(op, found)
 
     def _report(self, op: Operation, found: list[PlanConflict], *, counted: bool = True) -> None:
@@ -147,6 +157,21 @@ class FilingCheck:
         self._filed.add_many(missing)
         for o in missing:
             self._plan[o.id] = o.plan
+            self._fences(o)
+
+    def in_fences(self, op: Operation) -> list[FenceFinding]:
+        """The active geofences ``op``'s plan runs into (none without ``geofences``). A
+        plan of Tactical Deconfliction is not judged again: TD verified it against every
+        fence, from its exit point on when it leaves one it is in."""
+        if self._geofences is None or op.plan.reason.startswith("TD "):
+            return []
+        return plan_in_fences(op.plan, op, self._geofences(), self._frame)
+
+    def _fences(self, op: Operation) -> None:
+        found = self.in_fences(op)
+        self.fence_findings[op.id] = found
+        for f in found:
+            self._event(f.message())
 
     def _event(self, text: str) -> None:
         if self._log_event is not None:

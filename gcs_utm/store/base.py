@@ -187,6 +187,18 @@ class StoreBase:
             return self.begin_life()
         return self._epoch
 
+    def mark_batch(self, c: Connection, epoch: int, batch: int) -> None:
+        """Record, inside a batch's transaction, that life ``epoch``'s batch ``batch`` commits
+        with it (the writer numbers its batches 1, 2, ... in order)."""
+        c.execute("UPDATE lives SET committed_batch = ? WHERE epoch = ?", (batch, epoch))
+
+    def committed_batch(self, epoch: int) -> int:
+        """The number of the last batch life ``epoch`` committed (0: none)."""
+        row = self._conn.execute(
+            "SELECT committed_batch FROM lives WHERE epoch = ?", (epoch,)
+        ).fetchone()
+        return 0 if row is None else int(row[0])
+
     def lives(self) -> list[tuple[int, float, int]]:
         """(epoch, started_unix_s, pid) of every life, oldest first."""
         return [

@@ -23,6 +23,7 @@ REROUTE_MANEUVERS = frozenset(
     {
         Maneuver.REROUTE,
         Maneuver.ESCAPE,
+        Maneuver.HOLD,  # offered from inside a geofence only: leave it and hold outside
         Maneuver.DIRECT_TO_GOAL,
         Maneuver.BACK_TO_PLAN,
         Maneuver.NEXT_WAYPOINT,
