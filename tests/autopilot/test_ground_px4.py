@@ -81,7 +81,7 @@ def test_disarmed_px4_quads_with_crossing_missions_get_no_decision(
     assert modes and AUTO_MISSION not in modes, f"mission mode set on the ground\n{tail}"
     filed = rows(db, "SELECT operation_id FROM flight_plans WHERE version = 1")
     assert len(filed) == 2, filed
-    threats = rows(db, "SELECT id FROM threats")
+    threats = rows(db, "SELECT id FROM threats WHERE kind = 'LOSS_OF_SEPARATION'")
     audited = {
         str(r[0]) for r in rows(db, "SELECT subject FROM audit WHERE action = 'not_decided'")
     }
