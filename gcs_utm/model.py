@@ -699,3 +699,11 @@ class AirspaceSnapshot:
     tracks: Mapping[TrackId, Track]
     geofences: tuple[Geofence, ...]
     prediction: PredictedTrajectories | None = None
+    airborne: frozenset[OperationId] = frozenset()
+    """Operations whose vehicle is in the air by its own messages (armed and not landed: see
+    docs/autopilots.md, "Vehicle state"): traffic from take-off to landing, whatever their plan
+    says. Operations whose vehicle reports nothing (ADS-B only, a scenario) are in neither
+    set."""
+    grounded: frozenset[OperationId] = frozenset()
+    """Operations whose vehicle is on the ground (disarmed, or armed and landed): nothing is
+    decided for them but pre-flight checks."""

@@ -202,6 +202,7 @@ def build_runtime(
         settings.monitoring,
         operations=lambda: airspace.operations,
         log_event=usm.log_event,
+        airborne=airspace.airborne_ids,
         geofences=airspace.geofences,
     )
 
