@@ -265,6 +265,10 @@ class Usm(RecommendationLifecycle):
         )
         self._tasks: set[asyncio.Task[None]] = set()
         self._task_errors = RateLimitedLog(_log, _TASK_ERROR_INTERVAL_S, max_causes=64)
+        # a sender toggling armed or rebooting on every frame must not flood log and events
+        self._transitions = RateLimitedLog(
+            _log, _TASK_ERROR_INTERVAL_S, now=self.clock.now_s, max_causes=256
+        )
         self.counters: dict[str, int] = {
             "measurements": 0,
             "unknown_vehicle_measurements": 0,
@@ -474,8 +478,11 @@ class Usm(RecommendationLifecycle):
         changes = flight.update(s)
         self._flight_by_sys_id[s.sys_id] = flight  # (the latest status of that system id)
         for change in changes:
-            if change != "home":
-                self.log_event("vehicle", f"sysid {s.sys_id}: {change}")
+            if change != "home" and self._transitions.log(
+                logging.INFO, f"{s.sys_id}:{change}", "vehicle: sysid %s: %s", s.sys_id, change
+            ):
+                text = f"sysid {s.sys_id}: {change}"
+                self.events.append(UsmEvent(t_s=self.clock.now_s(), kind="vehicle", text=text))
         self.vehicle_ops.on_status(s, flight, changes)  # mission changes, home, progress
         self.airspace.set_airborne(s.sys_id, flight.flying)
         op = self.airspace.by_sys_id(s.sys_id)
