@@ -24,7 +24,8 @@ airspace has ~100,000 candidate pairs of ~600 samples each):
    so that is an interval of it). Over a coarse segment where both plans keep their altitude,
    every sub-segment has the same vertical distance: it is taken from the waypoints directly.
    A pair whose loss is within the millimetre of the minima, a plan that is not strictly
-   increasing in time or a short span is evaluated in full.
+   increasing in time or a short span is evaluated in full, and so is every pair of a call
+   with few samples in all (one plan against a few, as a resolution is verified).
 3. The samples of those windows (the same grid values ``np.arange`` gives, the same waypoint
    times), positions by ``np.interp`` per plan, the kernel, and segmented reductions per pair
    that keep the first index of a minimum, as ``np.argmin`` does.
@@ -54,6 +55,7 @@ _LOSS_MARGIN_M = 1e-3  # the screen's minima grow (and shrink) by this, plus 1e-
 _DIST_MARGIN = 1e-8  # squared-distance margin of the windows, relative to the pair's scale^2
 _TIME_MARGIN_S = 1e-3  # windows grow by this on each side (sample times are ~1e-7 s apart)
 _FULL_BELOW = 16  # grid samples: a shorter span is evaluated in full
+_SCREEN_ABOVE = 20_000  # grid samples of all pairs: fewer are all evaluated in full
 _BATCH = 400_000  # samples per vectorised pass (memory: a few dozen arrays of it)
 
 
@@ -132,6 +134,8 @@ def check_pairs(
     live = (t0 <= t1) & ~_boxes_apart(plans, ia, ib, (mh, mv), spherical=spherical)
     grid_n, delta = _grid(t0, t1, step_s)
     screen = live & plans.regular[ia] & plans.regular[ib] & (grid_n >= _FULL_BELOW)
+    if grid_n[live].sum() < _SCREEN_ABOVE:
+        screen[:] = False  # few samples in all: the screen would cost more than it saves
     pairs = _Pairs(ia, ib, t0, t1, mh, mv, grid_n, delta, step_s)
     win_p, win_lo, win_hi, vconst = _screened_windows(
         plans, pairs, np.flatnonzero(screen), spherical=spherical
@@ -403,12 +407,13 @@ def _evaluate_batch(
     wp, k_lo, k_hi = ranges
     rng, t = _samples(plans, pairs, wp, k_lo, k_hi)
     # sub-segments: consecutive samples of one range (a range of one sample: zero length)
+    i0 = np.flatnonzero(rng[1:] == rng[:-1])
+    i1 = i0 + 1
     single = np.bincount(rng, minlength=len(wp)) == 1
-    seg = np.flatnonzero(rng[1:] == rng[:-1])
-    i0 = np.concatenate([seg, np.flatnonzero(single[rng])])
-    i1 = np.concatenate([seg + 1, np.flatnonzero(single[rng])])
-    order = np.argsort(i0, kind="stable")
-    i0, i1 = i0[order], i1[order]
+    if single.any():  # t0 == t1: the span is one instant
+        lone = np.flatnonzero(single[rng])
+        i0 = np.sort(np.concatenate([i0, lone]))
+        i1 = np.where(np.isin(i0, lone), i0, i0 + 1)
     p = wp[rng[i0]]
     both = _positions(plans, np.concatenate([pairs.ia[wp[rng]], pairs.ib[wp[rng]]]), np.tile(t, 2))
     pa, pb = both[: len(t)], both[len(t) :]
@@ -446,10 +451,10 @@ def _evaluate_batch(
 def _first_min(values: FloatArray, starts: IntArray) -> IntArray:
     """Per segment (``starts``) the first index of its smallest value (``np.argmin``)."""
     counts = np.diff(np.append(starts, len(values)))
-    low = np.repeat(np.minimum.reduceat(values, starts), counts)
-    hits = np.flatnonzero(values == low)
-    seg_of = np.repeat(np.arange(len(starts)), counts)[hits]
-    _, first = np.unique(seg_of, return_index=True)
+    seg_of = np.repeat(np.arange(len(starts)), counts)
+    hits = np.flatnonzero(values == np.minimum.reduceat(values, starts)[seg_of])
+    first = np.ones(len(hits), bool)
+    first[1:] = seg_of[hits[1:]] != seg_of[hits[:-1]]
     out: IntArray = hits[first]
     return out
 
