@@ -3,14 +3,16 @@ airspace (:mod:`.dense_airspace`) end to end, as a user runs it, and its stages.
 
 Records, per N (``--dense-plans``):
 - ``strategic.scenario_check``: the command ``python -m gcs_utm scenario check FILE --json``
-  in a fresh process, stdout to a file: wall time (median of ``--cli-runs``) and the child's
-  CPU time (user + system, median), the conflicts it wrote;
+  in a fresh process (in the file's folder), stdout to a file: wall time (median of
+  ``--cli-runs``, after one warm-up run) and the child's CPU time (user + system, median),
+  the conflicts it wrote;
 - ``strategic.dense_stages``: the same work in this process, stage by stage (median of
   ``--runs``): ``load_ms`` (``load_any``), ``check_ms`` (``strategic_check``, the core call)
-  and ``write_ms`` (the JSON report), with the conflicts per plan;
+  and ``write_ms`` (the JSON report), with the conflicts per plan; ``median_ms`` is their sum;
 - with ``--against DIR`` (another checkout of gcs-utm, e.g. the code before a change):
   ``strategic.scenario_check_against``, the same command with ``PYTHONPATH=DIR``, run
-  alternately with ours so that both see the same machine load.
+  alternately with ours so that both see the same machine load, and ``same_report``: whether
+  both wrote the same JSON document.
 """
 
 from __future__ import annotations
@@ -48,8 +50,8 @@ def _run_cli(path: Path, out: Path, pythonpath: str | None) -> tuple[float, floa
     cmd = [sys.executable, "-m", "gcs_utm", "scenario", "check", str(path), "--json"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    with out.open("wb") as fh:
-        subprocess.run(cmd, stdout=fh, env=env, check=True, timeout=600)
+    with out.open("wb") as fh:  # run in the file's folder: the current one may hold a checkout
+        subprocess.run(cmd, stdout=fh, env=env, cwd=path.parent, check=True, timeout=900)
     wall_ms = (time.perf_counter() - t0) * 1000.0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu_s = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -90,11 +92,12 @@ def _stages(path: Path, n: int, runs: int) -> dict[str, object]:
     for stage, fn in (("load_ms", load), ("check_ms", check), ("write_ms", write)):
         medians[stage] = round(statistics.median(time_runs(fn, runs=runs)), 1)
     conflicts = len(box["report"].conflicts)  # type: ignore[attr-defined]
-    ms = [sum(medians.values())]
+    ms = [sum(medians.values())]  # the record's median: the sum of the stages' medians
     return summary(
         "strategic.dense_stages",
         n,
         ms,
+        stage_runs=runs,
         **medians,
         conflicts=conflicts,
         conflicts_per_plan=round(conflicts / n, 2),

@@ -64,3 +64,20 @@ def test_dense_airspace_checked_end_to_end(tmp_path: Path) -> None:
     assert doc == json.loads(json.dumps(report_document(sc, report)))
     assert len(doc["operations"]) == 400
     assert len(doc["conflicts"]) == len(report.conflicts) > 0
+
+
+def test_bench_dense_profile_reports_the_command_and_its_stages() -> None:
+    import argparse
+
+    from gcs_utm.bench import strategic
+
+    parser = argparse.ArgumentParser()
+    strategic.add_arguments(parser)
+    args = parser.parse_args(["--profile", "dense", "--dense-plans", "150", "--cli-runs", "1"])
+    args.runs = 1
+    records = {r["benchmark"]: r for r in strategic.run(args)}
+    cli, stages = records["strategic.scenario_check"], records["strategic.dense_stages"]
+    assert cli["n"] == stages["n"] == 150
+    assert cli["conflicts"] == stages["conflicts"]
+    assert float(cli["cpu_median_ms"]) > 0  # type: ignore[arg-type]
+    assert {"load_ms", "check_ms", "write_ms"} <= set(stages)
