@@ -83,7 +83,6 @@ class _Plans:
     regular: BoolArray  # >= 2 waypoints, strictly increasing times
     lo: FloatArray  # (N, 3) bounding box
     hi: FloatArray
-    local: Sequence[FloatArray]
 
     @staticmethod
     def of(local: Sequence[FloatArray]) -> _Plans:
@@ -104,7 +103,6 @@ class _Plans:
             regular=(k >= 2) & (bad == 0),
             lo=np.minimum.reduceat(table[:, :3], off, axis=0),
             hi=np.maximum.reduceat(table[:, :3], off, axis=0),
-            local=local,
         )
 
 
