@@ -7,8 +7,9 @@ Records, per N (``--dense-plans``):
   ``--cli-runs``, after one warm-up run) and the child's CPU time (user + system, median),
   the conflicts it wrote;
 - ``strategic.dense_stages``: the same work in this process, stage by stage (median of
-  ``--runs``): ``load_ms`` (``load_any``), ``check_ms`` (``strategic_check``, the core call)
-  and ``write_ms`` (the JSON report), with the conflicts per plan; ``median_ms`` is their sum;
+  ``--runs``): ``load_ms`` (``load_any``) and ``check_ms`` (``strategic_check``, the core
+  call), with the conflicts per plan; ``median_ms`` is their sum (the report is written by
+  the command, a layer above the benchmarks: it is in ``strategic.scenario_check`` only);
 - with ``--against DIR`` (another checkout of gcs-utm, e.g. the code before a change):
   ``strategic.scenario_check_against``, the same command with ``PYTHONPATH=DIR``, run
   alternately with ours so that both see the same machine load, and ``same_report``: whether
@@ -18,7 +19,6 @@ Records, per N (``--dense-plans``):
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import os
 import resource
@@ -72,7 +72,6 @@ def _cli_record(name: str, n: int, runs: list[tuple[float, float]], out: Path) -
 
 
 def _stages(path: Path, n: int, runs: int) -> dict[str, object]:
-    from gcs_utm.cli.scenario import report_document, write_json
     from gcs_utm.core.monitoring import MonitoringConfig, strategic_check
     from gcs_utm.scenario import load_any
 
@@ -85,11 +84,8 @@ def _stages(path: Path, n: int, runs: int) -> dict[str, object]:
         sc = box["scenario"]
         box["report"] = strategic_check(sc.operations, sc.geofences, sc.frame, MonitoringConfig())  # type: ignore[attr-defined]
 
-    def write() -> None:
-        write_json(report_document(box["scenario"], box["report"]), io.StringIO())  # type: ignore[arg-type]
-
     medians = {}
-    for stage, fn in (("load_ms", load), ("check_ms", check), ("write_ms", write)):
+    for stage, fn in (("load_ms", load), ("check_ms", check)):
         medians[stage] = round(statistics.median(time_runs(fn, runs=runs)), 1)
     conflicts = len(box["report"].conflicts)  # type: ignore[attr-defined]
     ms = [sum(medians.values())]  # the record's median: the sum of the stages' medians
