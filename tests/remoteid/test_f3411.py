@@ -12,7 +12,6 @@ publishers print:
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
