@@ -54,7 +54,7 @@ class RidTracks:
         self._records = records
         self._operations = operations
 
-    def _by_track(self) -> dict[str, RemoteIdentity]:
+    def by_track(self) -> dict[str, RemoteIdentity]:
         """Remote identities by the id of the track they belong on (``sysid:<n>`` stands for
         every ``sysid:<n>@<address>`` track too)."""
         records = self._records()
@@ -73,7 +73,7 @@ class RidTracks:
 
     def attach(self, tracks: dict[TrackId, Track]) -> dict[TrackId, Track]:
         """The snapshot with ``remote_id`` set on each track a record belongs on."""
-        by_track = self._by_track()
+        by_track = self.by_track()
         if not by_track:
             return tracks
         out = dict(tracks)
@@ -85,7 +85,7 @@ class RidTracks:
 
     def attach_list(self, tracks: Sequence[Track]) -> list[Track]:
         """:meth:`attach` for a batch of track samples (the store's track writes)."""
-        by_track = self._by_track()
+        by_track = self.by_track()
         if not by_track:
             return list(tracks)
         out: list[Track] = []
