@@ -103,6 +103,7 @@ def _flat_fields(cls: type, skip: str) -> tuple[str, ...] | None:
 # remote_id (a nested record, None on most tracks) is left to the generic path when it is set
 _TRACK_FIELDS = _flat_fields(Track, skip="remote_id")
 _track_values = operator.attrgetter(*_TRACK_FIELDS) if _TRACK_FIELDS else None
+_TRACK_KEYS = (*(_TRACK_FIELDS or ()), "remote_id")
 
 
 def track_doc(t: Track) -> str:
@@ -115,7 +116,7 @@ def track_doc(t: Track) -> str:
         return dumps(t)
     try:
         return json.dumps(
-            {**dict(zip(_TRACK_FIELDS, _track_values(t), strict=True)), "remote_id": None},
+            dict(zip(_TRACK_KEYS, (*_track_values(t), None), strict=True)),
             separators=(",", ":"),
             allow_nan=True,
         )
