@@ -26,6 +26,7 @@ from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
 
+from .restart import start_review
 from .wiring import (
     FrontendOptions,
     Persistence,
@@ -200,6 +201,7 @@ async def serve(
             tasks = start_service_tasks(tg, rt, frontends)
             if node is not None:
                 tasks.append(tg.create_task(node.run(), name="cluster"))
+            tasks.extend(start_review(tg, rt, location, cluster=cluster))
             for t in tasks:
                 if t.get_name() == "dashboard":
                     t.add_done_callback(lambda _t: stop.set())

@@ -208,6 +208,7 @@ def build_runtime(
         settings.monitoring,
         operations=lambda: airspace.operations,
         log_event=usm.log_event,
+        geofences=airspace.geofences,
     )
 
     async def tracking_hazard(h: HazardReport) -> None:
@@ -257,6 +258,11 @@ def build_runtime(
 
     emergency = EmergencyService(em, em_snapshot, clock, on_decision)
     usm.attach_measurement_sink(tracking.submit, tracking.submit_lane)
+    usm.attach_threat_evidence(
+        lambda op_id: tracker.last_accepted_t_s(TrackId(op_id)),
+        fresh_s=settings.tracking.stale_after_s,
+        eph_good_m=settings.mavlink.eph_degraded_m / 2.0,  # where the vehicle re-arms it
+    )
     usm.attach_threat_sink(
         emergency.submit_threats if policy is None else _filtered(emergency.submit_threats, policy)
     )
@@ -346,6 +352,8 @@ async def apply_decision(
         store.record(entry)
     if decision.geofences:
         await usm.add_geofences(decision.geofences)
+    if decision.removed_geofences:
+        await usm.remove_geofences(decision.removed_geofences)
     for rec_id in decision.superseded:
         await usm.on_superseded(rec_id)
     for rec in decision.recommendations:
@@ -433,7 +441,7 @@ def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
         rt.usm.attach_operator(headless)
     if options.operator in (OperatorMode.AUTO_ACCEPT, OperatorMode.AUTO_REJECT):
         # New plans start where the UAS will be when the answer comes: after this delay.
-        rt.emergency.em.answer_delay_s = settings.dashboard.auto_answer_delay_s
+        rt.emergency.em.lead.answer_delay_s = settings.dashboard.auto_answer_delay_s
         rt.usm.attach_operator(
             AutoOperator(
                 rt.usm.answer,
@@ -449,7 +457,7 @@ def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
     if mqtt:
         from gcs_utm.services.mqtt_gateway import MqttGateway
 
-        gateway = MqttGateway(rt.usm, settings.mqtt, tracks=rt.tracks)
+        gateway = MqttGateway(rt.usm, settings.mqtt, tracks=rt.tracks, frame=rt.frame)
         rt.usm.attach_operator(gateway)
         rt.usm.attach_threat_sink(gateway.on_threats)
         rt.usm.attach_geofence_listener(gateway.on_geofences)

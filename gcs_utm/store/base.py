@@ -481,6 +481,36 @@ class StoreBase:
             )
         return [self._load(Threat, d) for (d,) in rows]
 
+    def open_threats_of_earlier_lives(self, epoch: int) -> list[Threat]:
+        """Threats the lives before ``epoch`` left open (OPEN or UPDATED): a process that
+        died (kill -9) closed nothing. A restart reviews them (gcs_utm.app.restart)."""
+        rows = self._rows(
+            "SELECT doc FROM threats WHERE status <> ? AND epoch < ? ORDER BY detected_at_s, id",
+            (ThreatStatus.CLOSED.value, epoch),
+        )
+        return [self._load(Threat, d) for (d,) in rows]
+
+    def settle_inherited(self, item: Threat | Recommendation) -> bool:
+        """A later life ends what an earlier, dead life left open: a threat it closes (CLOSED)
+        or a recommendation version still waiting for an answer (PROPOSED) whose prompt died
+        with that life. The one exception to "a row of another life is never overwritten"
+        (:meth:`save_threat`), and only for those rows: a closed threat or a version in any
+        other state stays as it was. Returns whether the row changed."""
+        closed, proposed = ThreatStatus.CLOSED.value, RecommendationState.PROPOSED.value
+        with self.transaction() as c:
+            if isinstance(item, Threat):
+                cur = c.execute(
+                    "UPDATE threats SET status=?, doc=? WHERE id=? AND epoch < ? AND status <> ?",
+                    (item.status.value, dumps(item), item.id, self.epoch, closed),
+                )
+            else:
+                cur = c.execute(
+                    "UPDATE recommendations SET state=?, doc=? "
+                    "WHERE id=? AND version=? AND epoch < ? AND state = ?",
+                    (item.state.value, dumps(item), item.id, item.version, self.epoch, proposed),
+                )
+            return bool(cur.rowcount)
+
     def save_recommendation(self, rec: Recommendation) -> None:
         """Insert a version or update its state (the lifecycle of one id+version). Only the
         life that wrote a version may update it (see :meth:`save_threat`)."""
