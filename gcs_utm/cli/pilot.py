@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # the command imports them when it runs: `--help` stays fast
     from adapters.mqtt.config import MqttConfig
     from adapters.mqtt.station import PilotStation
+    from gcs_utm.clock import Clock
 
 Write = Callable[[str], None]
 
@@ -49,22 +50,30 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 def _run(args: argparse.Namespace) -> int:
     import dataclasses
 
+    from adapters.mqtt.topics import valid_operator
     from gcs_utm.config import ConfigError
     from gcs_utm.settings import load_settings
 
+    if not valid_operator(args.operator):
+        print(
+            f"gcs-utm pilot: --operator {args.operator!r}: expected letters, digits, '_', '.' "
+            "or '-' (the operator's broker user name and topic level)",
+            file=sys.stderr,
+        )
+        return 2
     if not args.resend_s > 0.0:
         print(f"gcs-utm pilot: --resend-s must be positive, got {args.resend_s}", file=sys.stderr)
         return 2
     try:
-        mqtt = load_settings(args.config).mqtt
-    except ConfigError as exc:
-        print(f"gcs-utm pilot: {exc}", file=sys.stderr)
-        return 2
-    if not mqtt.username:
-        mqtt = dataclasses.replace(mqtt, username=args.operator)
-    try:
+        try:
+            mqtt = load_settings(args.config).mqtt
+        except ConfigError as exc:
+            print(f"gcs-utm pilot: {exc}", file=sys.stderr)
+            return 2
+        if not mqtt.username:
+            mqtt = dataclasses.replace(mqtt, username=args.operator)
         return asyncio.run(_main(mqtt, args.operator, args.resend_s))
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # Ctrl-C: the station has been closed by asyncio.run
         print("\npilot station stopped", flush=True)
         return 0
 
@@ -98,12 +107,15 @@ async def run_pilot(
     write: Write,
     *,
     resend_s: float = 5.0,
+    clock: Clock | None = None,
 ) -> int:
-    """The pilot station until ``lines`` gives None (end of input): 0."""
+    """The pilot station until ``lines`` gives None (end of input): 0. ``clock`` stamps the
+    answers (wall-clock time by default)."""
     from adapters.mqtt.station import PilotStation
     from gcs_utm.clock import RealClock
 
-    async with PilotStation(config, operator, RealClock(), resend_s=resend_s) as station:
+    station_clock = clock or RealClock()
+    async with PilotStation(config, operator, station_clock, resend_s=resend_s) as station:
         console = _Console(station, write)
         watcher = asyncio.create_task(_watch(station, config, write))
         try:

@@ -87,7 +87,7 @@ def option_summary(alt: dict[str, Any]) -> str:
         parts.append(f"min separation {terms['min_separation_ratio']:.2f}x required")
     parts.append(f"cost {float(alt.get('cost', 0.0)):.2f}, risk {float(alt.get('risk', 0.0)):.2f}")
     # the human part of the detail (before the scoring terms), if any
-    label = detail.split(";")[0].strip()
+    label = detail.split(";", maxsplit=1)[0].strip()
     if label and not _TERM.search(label):
         parts.append(label)
     return ", ".join(parts)

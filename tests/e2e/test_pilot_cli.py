@@ -8,6 +8,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import signal
+import subprocess
 import sys
 import time
 from collections.abc import AsyncIterator
@@ -166,3 +168,31 @@ async def test_pilot_command_accepts_option_0_and_gcs_utm_applies_it(tmp_path: P
         await usm.drain()
         await usm.close()
         broker.stop()
+
+
+def test_pilot_help_imports_no_mqtt_client_or_app() -> None:
+    code = (
+        "import sys\n"
+        "from gcs_utm.cli import main\n"
+        "try:\n"
+        "    main(['pilot', '--help'])\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "print('IMPORTED', *(m for m in ('aiomqtt', 'numpy', 'gcs_utm.app', "
+        "'adapters.mqtt.station') if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert "--operator OPERATOR" in out.stdout
+    assert out.stdout.splitlines()[-1] == "IMPORTED"
+
+
+async def test_sigint_exits_cleanly_while_the_broker_is_unreachable(tmp_path: Path) -> None:
+    broker = make_broker(tmp_path)
+    broker.stop()  # its port is free: nothing listens
+    async with _pilot(broker, tmp_path) as pilot:
+        await pilot.until("cannot reach the MQTT broker")
+        pilot.proc.send_signal(signal.SIGINT)  # Ctrl-C
+        async with asyncio.timeout(5.0):
+            assert await pilot.proc.wait() == 0
+        await pilot.until("pilot station stopped")
+        assert not [line for line in pilot.out if "Traceback" in line], pilot.out
