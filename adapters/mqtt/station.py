@@ -243,6 +243,7 @@ class PilotStation:
                 ]
             )
             self._client = client
+            self.last_error = ""
             self.connects += 1
             await self._send_all()  # on every (re)connection
             timer = asyncio.create_task(self._resend_periodically())

@@ -93,9 +93,12 @@ def _read_stdin_into(lines: asyncio.Queue[str | None], loop: asyncio.AbstractEve
     at exit; a terminal, pipe or file all work), None at end of input."""
 
     def read() -> None:
-        for line in sys.stdin:
-            loop.call_soon_threadsafe(lines.put_nowait, line)
-        loop.call_soon_threadsafe(lines.put_nowait, None)
+        try:
+            for line in sys.stdin:
+                loop.call_soon_threadsafe(lines.put_nowait, line)
+            loop.call_soon_threadsafe(lines.put_nowait, None)
+        except RuntimeError:  # the loop has closed (Ctrl-C): nobody to hand the line to
+            return
 
     threading.Thread(target=read, name="pilot-stdin", daemon=True).start()
 
@@ -130,8 +133,8 @@ async def run_pilot(
 
 
 async def _watch(station: PilotStation, config: MqttConfig, write: Write) -> None:
-    """One line on each change of the connection: connected, or cannot reach the broker
-    (the station keeps retrying with backoff)."""
+    """One line on each change of the connection: connected, or cannot connect to the
+    broker (the station keeps retrying with backoff)."""
     where = f"{config.host}:{config.port}"
     write(f"connecting to the MQTT broker {where} as operator {station.operator} ...")
     was: bool | None = None
@@ -141,7 +144,7 @@ async def _watch(station: PilotStation, config: MqttConfig, write: Write) -> Non
             write(f"connected to {where}; waiting for recommendations")
         elif not now and station.last_error and was is not False:
             write(
-                f"cannot reach the MQTT broker {where}: {station.last_error}; "
+                f"cannot connect to the MQTT broker {where}: {station.last_error}; "
                 "retrying (Ctrl-D or Ctrl-C to quit)"
             )
         if now or station.last_error:
@@ -157,7 +160,7 @@ class _Console:
         self._station = station
         self._write = write
         self._current: dict[str, Any] | None = None  # the recommendation an answer is for
-        self._seen: set[str] = set()  # recommendation ids shown
+        self._versions: dict[str, int] = {}  # the latest version shown, by recommendation id
         self._deliveries: set[asyncio.Task[None]] = set()
 
     async def serve(self, lines: asyncio.Queue[str | None]) -> None:
@@ -188,24 +191,22 @@ class _Console:
     def show(self, rec: dict[str, Any]) -> None:
         from gcs_utm.cli.pilot_text import recommendation_text
 
-        current = self._current
         rec_id = str(rec.get("recommendation_id"))
-        if current is not None and str(current.get("recommendation_id")) == rec_id:
-            if current.get("version") == rec.get("version"):
-                return  # re-published after a reconnect: already shown
-            self._write(
-                f"recommendation {rec_id} v{current.get('version')} superseded by "
-                f"v{rec.get('version')}"
-            )
+        version = int(rec.get("version", -1))
+        shown = self._versions.get(rec_id)
+        if shown is not None and version <= shown:
+            return  # re-published after a reconnect (or older): already shown
+        if shown is not None:
+            self._write(f"recommendation {rec_id} v{shown} superseded by v{version}")
         self._current = rec
-        self._seen.add(rec_id)
+        self._versions[rec_id] = version
         self._write(recommendation_text(rec))
 
     def on_status(self, status: dict[str, Any]) -> None:
         from gcs_utm.cli.pilot_text import status_text
 
         rec_id = str(status.get("recommendation_id"))
-        if rec_id not in self._seen:
+        if rec_id not in self._versions:
             return  # not one this station showed (e.g. before it started)
         self._write(status_text(status))
         current = self._current

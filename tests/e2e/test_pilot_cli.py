@@ -190,7 +190,7 @@ async def test_sigint_exits_cleanly_while_the_broker_is_unreachable(tmp_path: Pa
     broker = make_broker(tmp_path)
     broker.stop()  # its port is free: nothing listens
     async with _pilot(broker, tmp_path) as pilot:
-        await pilot.until("cannot reach the MQTT broker")
+        await pilot.until("cannot connect to the MQTT broker")
         pilot.proc.send_signal(signal.SIGINT)  # Ctrl-C
         async with asyncio.timeout(5.0):
             assert await pilot.proc.wait() == 0

@@ -76,10 +76,10 @@ async def test_unreachable_broker_is_one_line_and_retried_until_it_is_up(
     broker.stop()
     cfg = broker.config("alice", backoff_initial_s=0.05, backoff_max_s=0.2)
     async with _pilot(cfg) as pilot:
-        line = await pilot.until("cannot reach the MQTT broker")
+        line = await pilot.until("cannot connect to the MQTT broker")
         assert line.endswith("retrying (Ctrl-D or Ctrl-C to quit)")
         await asyncio.sleep(0.5)  # several failed attempts: still one line
-        assert sum("cannot reach" in o for o in pilot.out) == 1
+        assert sum("cannot connect" in o for o in pilot.out) == 1
         broker.start()
         await pilot.until("connected to", timeout_s=5.0)
 
@@ -97,6 +97,7 @@ async def test_superseded_and_expired_recommendations_are_said_so(broker: Broker
             bridge.publish_recommendation(v2, "alice")
             assert await pilot.until("superseded") == "recommendation rec-1 v1 superseded by v2"
             await pilot.until("recommendation rec-1 v2 for UAS op-alice-1")
+            bridge.publish_recommendation(v2, "alice")  # as after a reconnect: not shown again
             expired = dataclasses.replace(v2, state=RecommendationState.EXPIRED)
             bridge.publish_recommendation_status(expired, "alice")
             assert await pilot.until("expired") == (
@@ -104,6 +105,7 @@ async def test_superseded_and_expired_recommendations_are_said_so(broker: Broker
             )
             pilot.lines.put_nowait("a\n")
             await pilot.until("no recommendation to answer now")
+    assert sum("rec-1 v2 for UAS" in line for line in pilot.out) == 1
     assert usm.answers == []
 
 
@@ -129,3 +131,10 @@ async def test_answer_while_gcs_utm_is_away_is_resent_until_acknowledged(
         assert line == "gcs-utm accepted the answer to recommendation rec-1 v1 (state accepted)"
     assert [a.alternative_index for a in usm.answers][:1] == [1]
     assert [o.status.value for o in usm.outcomes].count("accepted") == 1
+
+
+async def test_refused_credentials_are_one_line_not_a_traceback(broker: Broker) -> None:
+    cfg = broker.config("alice", password="wrong", backoff_initial_s=0.05, backoff_max_s=0.2)
+    async with _pilot(cfg) as pilot:
+        line = await pilot.until("cannot connect to the MQTT broker")
+        assert "authori" in line.lower()  # mosquitto: "Not authorized"
