@@ -244,9 +244,9 @@ class _Console:
         station = self._station
         rec_id, version = str(rec["recommendation_id"]), int(rec["version"])
         decision = PilotDecision.ACCEPT if accept else PilotDecision.REJECT
-        option = "" if not accept else (" (proposed option)" if index is None else "")
-        if accept and index is not None:
-            option = f" (alternative_index {index})"
+        option = ""
+        if accept:
+            option = " (proposed option)" if index is None else f" (alternative_index {index})"
         self._write(f"sending {decision.value}{option} for recommendation {rec_id} v{version}")
         said_waiting = False
         while True:
