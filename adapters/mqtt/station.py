@@ -71,8 +71,10 @@ class PilotStation:
     ``alice`` (``config.username``/``password`` are its broker credentials; ``client_id``
     names its session, ``station-<operator>`` by default: never the UTM's own) until the
     block exits. :attr:`recommendations` receives each
-    ``recommendation`` message (decoded JSON); :meth:`answer` sends an answer and returns
-    gcs-utm's acknowledgement."""
+    ``recommendation`` message (decoded JSON), :attr:`statuses` each state change of a
+    recommendation (a ``recommendation_status`` that is not an acknowledgement: expired,
+    superseded, applied, ...); :meth:`answer` sends an answer and returns gcs-utm's
+    acknowledgement. :attr:`connected` and :attr:`last_error` say how the broker is."""
 
     def __init__(
         self,
@@ -94,6 +96,9 @@ class PilotStation:
         self._rng = rng or random.Random()
         self.topics = Topics(config.topic_prefix)
         self.recommendations: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self.statuses: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        # why the last connection attempt failed or the connection dropped ("" if none yet)
+        self.last_error = ""
         self._pending: dict[tuple[str, int], _Pending] = {}
         self._client: aiomqtt.Client | None = None
         self._task: asyncio.Task[None] | None = None
@@ -116,6 +121,11 @@ class PilotStation:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
             self._task = None
+
+    @property
+    def connected(self) -> bool:
+        """Whether the station is connected and subscribed now."""
+        return self._client is not None
 
     @property
     def unacknowledged(self) -> list[tuple[str, int]]:
@@ -207,6 +217,7 @@ class PilotStation:
                 await self._serve_once()
             except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
                 self._client = None
+                self.last_error = str(exc) or type(exc).__name__
                 failures += 1
                 cfg = self._config
                 ceiling = min(
@@ -232,6 +243,7 @@ class PilotStation:
                 ]
             )
             self._client = client
+            self.last_error = ""
             self.connects += 1
             await self._send_all()  # on every (re)connection
             timer = asyncio.create_task(self._resend_periodically())
@@ -274,7 +286,8 @@ class PilotStation:
     def _on_status(self, msg: dict[str, Any]) -> None:
         answer = msg.get("answer")
         if not isinstance(answer, dict):
-            return  # a state change, not an acknowledgement
+            self.statuses.put_nowait(msg)  # a state change, not an acknowledgement
+            return
         version = answer.get("version")
         key = (str(msg.get("recommendation_id")), version if isinstance(version, int) else -1)
         pending = self._pending.get(key)

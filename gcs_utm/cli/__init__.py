@@ -25,6 +25,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "run scenarios end to end in fast time with an automatic operator and summarise the "
         "resolutions (JSON and markdown)",
     ),
+    "pilot": ("pilot", "remote pilot station: show recommendations over MQTT and answer them"),
     "plot": ("plot", "draw figures and GeoJSON/KML from a run report"),
     "replay": (
         "replay",
