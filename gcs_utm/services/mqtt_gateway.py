@@ -29,6 +29,7 @@ from adapters.mqtt import answers as mqtt_answers
 from adapters.mqtt.bridge import MqttBridge
 from adapters.mqtt.codec import FlightPlanSubmission, FlightStatusKind, FlightStatusReport
 from adapters.mqtt.config import MqttConfig
+from gcs_utm.flyable import plan_speed_problem
 from gcs_utm.messages import HazardReport, PilotAnswer
 from gcs_utm.model import (
     Geofence,
@@ -162,6 +163,9 @@ class MqttGateway:
             default_flight_geometry_m=cfg.default_flight_geometry_m,
             default_operational_volume_m=cfg.default_operational_volume_m,
         )
+        slow = plan_speed_problem(op)
+        if slow is not None:  # a fixed wing cannot fly slower than its minimum airspeed
+            raise ValueError(slow)
         airspace.add_operation(op)
         self.usm.log_event("operation", f"{op.id} filed over MQTT by {s.operator}")
 
