@@ -40,6 +40,8 @@ from dataclasses import dataclass
 from gcs_utm.app.report import EscalationReport, PlanReport, RecommendationReport, Report
 from gcs_utm.geo import LocalFrame
 
+from .generator import PROFILES
+
 Pair = tuple[str, str]
 
 ESCALATION_COMMAND_WINDOW_S = 1.0
@@ -129,7 +131,9 @@ class ScenarioOutcome:
 def profile_of(scenario: str) -> str:
     """The generator profile in a generated encounter's name (``enc_S_NNNN_PROFILE_kind``)."""
     m = _PROFILE.match(scenario)
-    return m.group(1) if m else "-"
+    if m and m.group(1) in PROFILES:
+        return m.group(1)
+    return "classic" if scenario.startswith("enc_") else "-"
 
 
 def _pair(a: str, b: str) -> Pair:
@@ -301,14 +305,19 @@ def _intrusions(report: Report) -> tuple[Intrusion, ...]:
 def _without_command(report: Report) -> int:
     """Escalations with no recommendation proposed within ESCALATION_COMMAND_WINDOW_S of them
     for the threat they name (else the recommendation, else the UAS they name)."""
-    return sum(not _has_command(e, report.recommendations) for e in report.escalations)
+    threats = [t.id for t in report.threats]
+    return sum(not _has_command(e, report.recommendations, threats) for e in report.escalations)
 
 
-def _has_command(e: EscalationReport, recs: Sequence[RecommendationReport]) -> bool:
+def _has_command(
+    e: EscalationReport, recs: Sequence[RecommendationReport], threat_ids: Sequence[str]
+) -> bool:
     if e.at_s is None:
         return True  # not placed in time: not judged
-    related = [r for r in recs if r.threat in e.text or r.id in e.text]
-    if not related:
+    named = [t for t in threat_ids if re.search(rf"(^|\W){re.escape(t)}(\W|$)", e.text)]
+    if named:
+        related = [r for r in recs if r.threat in named]
+    else:
         related = [r for r in recs if re.search(rf"\b{re.escape(r.uas)}\b", e.text)]
     return any(
         abs(t - e.at_s) <= ESCALATION_COMMAND_WINDOW_S

@@ -308,5 +308,7 @@ def test_truth_leaves_out_vehicles_on_the_ground(tmp_path: object) -> None:
     (ground,) = truth([_Vehicle(1, a), _Vehicle(2, b)], scenario, frame, MonitoringConfig()).pairs  # type: ignore[arg-type]
     assert not ground.loss_of_separation and ground.min_distance_m is None
     a_up = [(t, lat, lon, 2.0) for t, lat, lon, _ in a]
-    (flying,) = truth([_Vehicle(1, a_up), _Vehicle(2, b)], scenario, frame, MonitoringConfig()).pairs  # type: ignore[arg-type]
+    (flying,) = truth(
+        [_Vehicle(1, a_up), _Vehicle(2, b)], scenario, frame, MonitoringConfig()
+    ).pairs  # type: ignore[arg-type]
     assert flying.loss_of_separation and flying.first_loss_at_s == pytest.approx(10.0)
