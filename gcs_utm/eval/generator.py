@@ -488,11 +488,10 @@ def _build_vertical(
     v_min = max(SEPARATION_V_M, a.volume_m + b.volume_m)
     offset = v_min + rng.choice((-1.0, 1.0)) * rng.uniform(0.01, 0.10)
     sign = 1.0 if a.alt_agl_m - offset < 30.0 or rng.random() < 0.5 else -1.0
-    uas[1] = dataclasses.replace(b, alt_agl_m=round(a.alt_agl_m + sign * offset, 3), climb_m=0.0)
+    alt_b = round(round(a.alt_agl_m, 2) + sign * offset, 3)  # UAS1's as filed (cm)
+    uas[1] = dataclasses.replace(b, alt_agl_m=alt_b, climb_m=0.0)
     plans = {u.id: u.waypoints(min(rng.uniform(*LEAD_IN_S), u.t_s - 5.0)) for u in uas}
-    plans["UAS2"] = [
-        (e, n, round(a.alt_agl_m + sign * offset, 3), t) for e, n, _, t in plans["UAS2"]
-    ]
+    plans["UAS2"] = [(e, n, alt_b, t) for e, n, _, t in plans["UAS2"]]
     _add_extras(rng, uas, plans, centre=centre, t_c=t_c, n_uas=n_uas)
     return _Built(uas=uas, plans=plans)
 

@@ -4,6 +4,7 @@ report's ground truth between position records (true metres, linear motion in be
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -12,6 +13,7 @@ import pytest
 from pyproj import Geod
 
 from gcs_utm.app.report import (
+    EscalationReport,
     OperationReport,
     OriginReport,
     PlanReport,
@@ -312,3 +314,46 @@ def test_truth_leaves_out_vehicles_on_the_ground(tmp_path: object) -> None:
         [_Vehicle(1, a_up), _Vehicle(2, b)], scenario, frame, MonitoringConfig()
     ).pairs  # type: ignore[arg-type]
     assert flying.loss_of_separation and flying.first_loss_at_s == pytest.approx(10.0)
+
+
+def test_truth_intrusions_on_true_positions_with_their_duration(tmp_path: object) -> None:
+    """A vehicle 12 s inside a cylinder that applies to it (records once a second), none for
+    the exempt one."""
+    from gcs_utm.model import Geofence, GeofenceShape, LatLon
+
+    scenario = _scenario_two_uas(tmp_path)
+    frame = scenario.frame  # type: ignore[attr-defined]
+    lat, lon = _ll(0.0, 500.0)
+    fence = Geofence(
+        id="G",
+        shape=GeofenceShape.CYLINDER,
+        center=LatLon(lat_deg=lat, lon_deg=lon),
+        radius_m=60.0,
+        min_alt_amsl_m=0.0,
+        max_alt_amsl_m=300.0,
+        exempt=("B",),
+    )
+    path = [(float(t), *_ll(-205.0 + 10.0 * t, 500.0), 50.0) for t in range(41)]
+    vehicles = [_Vehicle(1, path), _Vehicle(2, list(path))]
+    report = truth(vehicles, scenario, frame, MonitoringConfig(), geofences={"G": fence})  # type: ignore[arg-type]
+    (g,) = report.intrusions
+    assert (g.uas, g.geofence, g.samples_inside) == ("A", "G", 12)  # east -55..55 m
+    assert g.first_at_s == 15.0 and g.duration_s == 12.0
+
+
+def test_escalations_without_a_proposed_command() -> None:
+    """An escalation counts as carrying a command when a recommendation of the threat it
+    names (else of a UAS it names) was proposed within a second of it."""
+    base = _report()
+    escalations = (
+        EscalationReport(at_s=10.5, text="t: no feasible alternative for A"),  # A's rec at 10
+        EscalationReport(at_s=31.0, text="t-B-D-30.0: no conflict-free combination"),
+        EscalationReport(at_s=31.0, text="r-B v1 (B) expired without an answer"),
+        EscalationReport(at_s=50.0, text="t: no feasible alternative for A"),
+    )
+    report = dataclasses.replace(base, escalations=escalations)
+    o = outcome(report)
+    # the rec of "t" proposed at 10 s: the first has a command; "t-B-D-30.0" has no rec
+    # (B's rec is of threat "t"): none; the third names no threat, B's rec at 31 s: one;
+    # the fourth is 40 s after any proposal: none
+    assert (o.escalations, o.escalations_without_command) == (4, 2)
