@@ -24,8 +24,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.network, pytest.mark.timeout(900)]
 def test_every_predicted_loss_is_avoided_in_closed_loop(tmp_path: Path) -> None:
     assert {e.kind for e in generate(N, SEED)} == set(KINDS)
     paths = write_encounters(tmp_path / "scenarios", N, SEED)
-    s = run_eval(paths, Settings(), EvalOptions(out_dir=tmp_path, jobs=2))
-    table = markdown(s)
+    summary = run_eval(paths, Settings(), EvalOptions(out_dir=tmp_path, jobs=2))
+    table = markdown(summary)
+    s = summary.totals
     assert s.failed_runs == 0, table
     assert s.predicted_losses >= N, table  # the set does bring UAS into conflict
     assert s.geofence_intrusions == 0, table
