@@ -115,17 +115,20 @@ class ScenarioOutcome:
 
     @property
     def flown_predicted(self) -> int:
-        """Predicted pairs flown as a loss anyway."""
-        return len(set(self.predicted_pairs) & set(self.flown_loss_pairs))
+        """Flown losses predicted before any plan the UTM issued to the pair (cause
+        ``predicted``). Each flown loss has one cause: this + created + missed = flown."""
+        return sum(f.cause == "predicted" for f in self.flown_losses)
 
     @property
     def avoided(self) -> int:
-        return self.predicted - self.flown_predicted
+        """Predicted pairs not flown as a loss (a loss created by a plan made after an
+        earlier prediction of the same pair is predicted and not avoided)."""
+        return len(set(self.predicted_pairs) - set(self.flown_loss_pairs))
 
     @property
     def missed(self) -> int:
-        """Flown losses never predicted and not created by an accepted plan."""
-        return len(set(self.flown_loss_pairs) - set(self.predicted_pairs) - set(self.created_pairs))
+        """Flown losses not predicted before they happened and not created by a plan."""
+        return sum(f.cause == "missed" for f in self.flown_losses)
 
 
 def profile_of(scenario: str) -> str:
@@ -513,7 +516,7 @@ def _total_lines(s: EvalSummary) -> list[str]:
         f"| predicted losses of separation (pairs) | {t.predicted_losses} |",
         f"| predicted losses avoided | {t.losses_avoided} / {t.predicted_losses} ({_share(t)}) |",
         f"| losses flown under the effective minima | {t.losses_flown_under_effective_minima} |",
-        f"| of which predicted and not avoided | {t.predicted_losses_flown} |",
+        f"| of which predicted before any UTM plan of the pair | {t.predicted_losses_flown} |",
         f"| of which created by accepted plans | {t.losses_created_by_accepted_plans} |",
         f"| of which never predicted | {t.losses_missed} |",
         f"| smallest flown horizontal / vertical distance | {_closest(t)} |",
