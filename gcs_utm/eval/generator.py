@@ -18,6 +18,13 @@ about half the encounters have a cylinder geofence beside the conflict (never on
 path), which a resolution must not enter. Two origins are used (Madrid, Seville) so frames far
 from the UTM zone's central meridian are exercised.
 
+Profiles (:data:`PROFILES`, docs/evaluation.md) change what the encounters stress: ``late``
+(a UAS appears 3-15 s before the loss), ``lag`` (vehicles 2-15 s behind their filed plans),
+``endpoint`` (a plan ends at the conflict point), ``fence`` (a geofence crossing, touching
+or around filed paths and destinations), ``vertical`` (centimetres from the vertical
+minimum), ``merge`` (3-6 UAS converging), ``mixed`` (a multirotor and a fixed wing);
+``classic`` is the set above, ``all`` cycles through them.
+
 Units: metres east/north of the airspace origin (ENU), metres above ground, seconds after the
 scenario start. Everything comes from ``random.Random(seed)``: the same seed gives the same files.
 """
