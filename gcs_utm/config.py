@@ -55,16 +55,64 @@ def setting(
     return field(default=default, metadata=meta)
 
 
+# The physical limit of a numeric setting that declares no bound of its own, by its unit:
+# beyond it a value means nothing physical and only overflows or silently disables something
+# downstream (1e300 m/s as a speed gate overflows the first squared distance).
+UNIT_LIMITS: dict[str, float] = {
+    "s": 1e6,  # 11.6 days
+    "ms": 1e9,
+    "m": 1e7,  # a quarter of the Earth's circumference
+    "m/s": 1e3,  # about Mach 3
+    "m/s^2": 1e3,  # about 100 g
+    "deg": 360.0,
+    "%": 100.0,
+    "Hz": 1e4,
+    "MB": 1e6,  # a terabyte
+    "bytes": 2**31 - 1,  # a C int: what setsockopt takes
+}
+COUNT_LIMIT = 1e9  # an integer without a unit (a count, a size)
+FACTOR_LIMIT = 1e6  # a number without a unit (a weight, a factor)
+
+
+def limits(meta: Mapping[str, Any], *, integer: bool) -> tuple[float, float, str]:
+    """The inclusive range a numeric setting accepts: its declared ``min``/``max``, else
+    -/+ the physical limit of its unit (:data:`UNIT_LIMITS`); and what the limit is, for a
+    message ("" for a declared bound)."""
+    unit = str(meta.get("unit") or "")
+    if unit in UNIT_LIMITS:
+        cap, why = UNIT_LIMITS[unit], f" (the physical limit for {unit})"
+    elif integer:
+        cap, why = COUNT_LIMIT, " (the limit for a count)"
+    else:
+        cap, why = FACTOR_LIMIT, " (the limit for a factor)"
+    lo, hi = meta.get("min"), meta.get("max")
+    return (
+        -cap if lo is None else float(lo),
+        cap if hi is None else float(hi),
+        why if lo is None or hi is None else "",
+    )
+
+
 def check_range(source: str, key: str, value: float, meta: dict[str, Any]) -> None:
-    """Raise :class:`ConfigError` if ``value`` is NaN/inf or outside ``meta``'s range."""
+    """Raise :class:`ConfigError` if ``value`` is NaN/inf or outside ``meta``'s range (its
+    declared one, else the physical limit of its unit: :func:`limits`)."""
     if isinstance(value, float) and not math.isfinite(value):
         raise ConfigError(source, key, f"expected a finite number, got {value!r}")
-    lo = meta.get("min")
-    hi = meta.get("max")
-    if lo is not None and value < lo:
-        raise ConfigError(source, key, f"expected a value >= {lo}, got {value!r}")
-    if hi is not None and value > hi:
-        raise ConfigError(source, key, f"expected a value <= {hi}, got {value!r}")
+    lo, hi, why = limits(meta, integer=isinstance(value, int))
+    declared_lo, declared_hi = meta.get("min"), meta.get("max")
+    if value < lo:
+        shown = declared_lo if declared_lo is not None else _number(lo)
+        note = "" if declared_lo is not None else why
+        raise ConfigError(source, key, f"expected a value >= {shown}{note}, got {value!r}")
+    if value > hi:
+        shown = declared_hi if declared_hi is not None else _number(hi)
+        note = "" if declared_hi is not None else why
+        raise ConfigError(source, key, f"expected a value <= {shown}{note}, got {value!r}")
+
+
+def _number(x: float) -> str:
+    x = float(x)
+    return str(int(x)) if x.is_integer() and abs(x) < 1e16 else repr(x)
 
 
 def field_docs(cls: type[Any]) -> dict[str, str]:

@@ -43,6 +43,31 @@ class PerformanceEnvelope:
             return self.tracking_error_m
         return MULTIROTOR_TRACKING_ERROR_M if self.can_hover else FIXED_WING_TRACKING_ERROR_M
 
+    vertical_tracking_error_m: float | None = None
+    """How far (vertically) the vehicle flies from a new plan's altitude: altitude-hold error
+    and the lag of a climb or descent. None: the default of its kind."""
+
+    def vertical_tracking_tolerance_m(self) -> float:
+        """The vertical tracking error TD keeps free around a new plan (see
+        :attr:`vertical_tracking_error_m`)."""
+        if self.vertical_tracking_error_m is not None:
+            return self.vertical_tracking_error_m
+        if self.can_hover:
+            return MULTIROTOR_VERTICAL_TRACKING_ERROR_M
+        return FIXED_WING_VERTICAL_TRACKING_ERROR_M
+
+    horizontal_accel_mps2: float | None = None
+    """The horizontal acceleration a multirotor brakes and turns with. None: the default
+    (:data:`MULTIROTOR_HORIZONTAL_ACCEL_MPS2`)."""
+
+    def stopping_distance_m(self, speed_mps: float) -> float:
+        """How far a vehicle that can hover flies on while it brakes from ``speed_mps`` to a
+        stop, ``v^2 / (2 a)`` (0 for one that cannot: it turns on its radius instead)."""
+        if not self.can_hover:
+            return 0.0
+        accel = self.horizontal_accel_mps2 or MULTIROTOR_HORIZONTAL_ACCEL_MPS2
+        return speed_mps * speed_mps / (2.0 * accel)
+
     def __post_init__(self) -> None:
         for name in (
             "climb_rate_mps",
@@ -56,15 +81,19 @@ class PerformanceEnvelope:
         for name in ("climb_rate_mps", "descent_rate_mps", "max_speed_mps"):
             if getattr(self, name) <= 0.0:
                 raise EnvelopeError(name, "must be positive")
+        a = self.horizontal_accel_mps2
+        if a is not None and not (math.isfinite(a) and a > 0.0):
+            raise EnvelopeError("horizontal_accel_mps2", f"must be a positive number, got {a!r}")
         if self.min_speed_mps < 0.0:
             raise EnvelopeError("min_speed_mps", "must be >= 0")
         if self.turn_radius_m < 0.0:
             raise EnvelopeError("turn_radius_m", "must be >= 0")
         if self.min_speed_mps > self.max_speed_mps:
             raise EnvelopeError("min_speed_mps", "is above max_speed_mps")
-        t = self.tracking_error_m
-        if t is not None and not (math.isfinite(t) and t >= 0.0):
-            raise EnvelopeError("tracking_error_m", f"must be a finite number >= 0, got {t!r}")
+        for name in ("tracking_error_m", "vertical_tracking_error_m"):
+            t = getattr(self, name)
+            if t is not None and not (math.isfinite(t) and t >= 0.0):
+                raise EnvelopeError(name, f"must be a finite number >= 0, got {t!r}")
 
 
 MULTIROTOR_DESCENT_RATE_MPS = 1.5
@@ -82,6 +111,15 @@ a lateral deformation (PX4 and ArduCopter slow down to turn; the simulated vehic
 the generated encounters."""
 FIXED_WING_TRACKING_ERROR_M = 10.0
 """...of a fixed wing: it cuts each corner on its turn radius and lags along the arc."""
+MULTIROTOR_VERTICAL_TRACKING_ERROR_M = 2.0
+"""Vertical 4D tracking error of a multirotor: PX4's and ArduCopter's altitude controllers
+hold within about a metre and reach a new altitude a second or two late at the descent
+rate (1.5 m/s)."""
+FIXED_WING_VERTICAL_TRACKING_ERROR_M = 5.0
+"""...of a fixed wing: TECS trades height for speed in turns and lags a climb."""
+MULTIROTOR_HORIZONTAL_ACCEL_MPS2 = 2.5
+"""ArduCopter's WPNAV_ACCEL default (PX4's MPC_ACC_HOR is 3 m/s^2): the lower of the two, so
+the stopping distance is not underestimated."""
 FIXED_WING_TURN_RADIUS_M = 80.0
 """PX4's NAV_LOITER_RAD default, a turn a small fixed wing flies at cruise speed."""
 

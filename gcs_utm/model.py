@@ -501,6 +501,8 @@ class ThreatKind(Enum):
     COMMUNICATION_FAILURE = "COMMUNICATION_FAILURE"
     ALERT_WARNING = "ALERT_WARNING"
     INTRUDER = "INTRUDER"
+    # what a UAS broadcasts as Remote ID disagrees with its telemetry (position, identity)
+    REMOTE_ID_MISMATCH = "REMOTE_ID_MISMATCH"
 
 
 class ThreatStatus(Enum):

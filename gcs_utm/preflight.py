@@ -5,7 +5,12 @@
   the MQTT client makes when it connects), a certificate comes with its key;
 - ``[mqtt] topic_prefix``: a valid topic name without wildcards;
 - reconnect backoffs: the first delay is not above the cap;
-- ``[airspace]``: the origin makes a local frame.
+- ``[airspace]``: the origin makes a local frame;
+- ``[mavlink] links``: no link listed twice.
+
+:func:`check_resources` then opens what ``serve``'s start opens, and closes it again: every
+``udpin`` link is bound (all of them at once, as ``serve`` holds them) and every ``udpout``
+host resolves. ``config check`` and ``serve`` both run it.
 
 ``[mavlink]`` links and signing keys are checked by ``MavlinkConfig`` itself when the file is
 loaded (the hub's own parser; 64 hex digits under a system id 1..255).
@@ -17,11 +22,14 @@ file run these checks, so "ok" means ``serve`` will start with it.
 
 from __future__ import annotations
 
+import contextlib
+import socket
 import ssl
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from adapters.mavlink.endpoint import EndpointError, EndpointKind, parse_endpoint
 from gcs_utm.config import ConfigError
 from gcs_utm.geo import FrameError, LocalFrame
 
@@ -47,6 +55,51 @@ def _problems(settings: Any) -> Iterator[tuple[str, str]]:
         settings.adsb.reconnect_max_s,
     )
     yield from _mqtt(settings.mqtt)
+    yield from _duplicate_links(settings.mavlink.links)
+
+
+def _duplicate_links(links: tuple[str, ...]) -> Iterator[tuple[str, str]]:
+    seen: dict[str, str] = {}
+    for i, text in enumerate(links):
+        try:
+            ep = parse_endpoint(text)
+        except EndpointError:
+            continue  # MavlinkConfig refused it already
+        name = str(ep)
+        if ep.kind is EndpointKind.UDPIN and ep.port == 0:
+            continue  # each binds a port of its own
+        if name in seen:
+            yield f"mavlink.links[{i}]", f"{text!r} is the same link as {seen[name]!r}"
+        seen.setdefault(name, text)
+
+
+def check_resources(settings: Any, *, source: str) -> None:
+    """Raise :class:`ConfigError` for the first resource ``serve``'s start could not open
+    (see the module docstring)."""
+    for key, problem in resource_problems(settings):
+        raise ConfigError(source, key, problem)
+
+
+def resource_problems(settings: Any) -> list[tuple[str, str]]:
+    """Every (dotted key, problem) of the sockets ``serve``'s start opens: each ``udpin`` link
+    bound as the hub binds it (IPv4, all at once), each ``udpout`` host resolved."""
+    out: list[tuple[str, str]] = []
+    with contextlib.ExitStack() as held:
+        for i, text in enumerate(settings.mavlink.links):
+            try:
+                ep = parse_endpoint(text)
+            except EndpointError:
+                continue
+            try:
+                if ep.kind is EndpointKind.UDPIN:
+                    sock = held.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
+                    sock.bind((ep.host, ep.port))
+                elif ep.kind is EndpointKind.UDPOUT:
+                    socket.gethostbyname(ep.host)
+            except OSError as exc:
+                what = "cannot be bound" if ep.kind is EndpointKind.UDPIN else "does not resolve"
+                out.append((f"mavlink.links[{i}]", f"{text!r} {what}: {exc.strerror or exc}"))
+    return out
 
 
 def _airspace(air: Any) -> Iterator[tuple[str, str]]:
@@ -108,4 +161,4 @@ def _tls(tls: Any) -> Iterator[tuple[str, str]]:
             yield "mqtt.tls.cert_path", f"the certificate and key do not load together: {exc}"
 
 
-__all__ = ["check_settings", "problems"]
+__all__ = ["check_resources", "check_settings", "problems", "resource_problems"]

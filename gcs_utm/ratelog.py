@@ -54,9 +54,17 @@ class RateLimitedLog:
         self.held_total = 0
         self._causes: dict[str, _Cause] = {}
 
-    def log(self, level: int, cause: str, msg: str, *args: object) -> bool:
+    def log(
+        self,
+        level: int,
+        cause: str,
+        msg: str,
+        *args: object,
+        exc_info: BaseException | None = None,
+    ) -> bool:
         """Log ``msg % args`` for ``cause`` unless it was logged less than ``interval_s``
-        ago (then count it). Returns True when a line was written."""
+        ago (then count it). Returns True when a line was written. ``exc_info``: its
+        traceback goes with a line that is written (never with the held repeats)."""
         t = self.now()
         c = self._causes.get(cause)
         if c is not None and t - c.last_t_s < self.interval_s:
@@ -71,7 +79,7 @@ class RateLimitedLog:
             self._causes[cause] = _Cause(last_t_s=t)
         else:
             held, c.held, c.last_t_s = c.held, 0, t
-        self._write(level, msg, args, held)
+        self._write(level, msg, args, held, exc_info=exc_info)
         return True
 
     def warning(self, cause: str, msg: str, *args: object) -> bool:
@@ -99,8 +107,15 @@ class RateLimitedLog:
             self._write(c.level, c.msg, c.args, c.held - 1, last=True)
 
     def _write(
-        self, level: int, msg: str, args: tuple[object, ...], held: int, *, last: bool = False
+        self,
+        level: int,
+        msg: str,
+        args: tuple[object, ...],
+        held: int,
+        *,
+        last: bool = False,
+        exc_info: BaseException | None = None,
     ) -> None:
         if held or last:
             msg = f"{msg} ({held:,} more since the last line)"
-        self.logger.log(level, msg, *args)
+        self.logger.log(level, msg, *args, exc_info=exc_info)

@@ -13,7 +13,9 @@ from typing import Any
 
 from adapters.adsb.config import AdsbConfig
 from adapters.mavlink.config import MavlinkConfig
+from adapters.mavlink.traffic_out import TrafficOutConfig
 from adapters.mqtt.config import MqttConfig
+from adapters.remoteid.config import RemoteIdConfig
 from gcs_utm.cluster.config import ClusterConfig
 from gcs_utm.config import ConfigError, build, load_toml, render_toml, setting
 from gcs_utm.core.deconfliction.config import DeconflictionConfig
@@ -59,6 +61,8 @@ class Settings:
     dashboard: DashboardConfig = _section(DashboardConfig, "dashboard")
     record: RecordConfig = _section(RecordConfig, "record")
     cluster: ClusterConfig = _section(ClusterConfig, "cluster")
+    remote_id: RemoteIdConfig = _section(RemoteIdConfig, "remote_id")
+    traffic_out: TrafficOutConfig = _section(TrafficOutConfig, "traffic_out")
 
 
 SECTIONS: dict[str, type[Any]] = {
@@ -75,6 +79,8 @@ SECTIONS: dict[str, type[Any]] = {
     "dashboard": DashboardConfig,
     "record": RecordConfig,
     "cluster": ClusterConfig,
+    "remote_id": RemoteIdConfig,
+    "traffic_out": TrafficOutConfig,
 }
 
 

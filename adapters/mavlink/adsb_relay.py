@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 from adapters.adsb import adsb_vehicle_to_measurement
 from adapters.mavlink import wire
+from adapters.mavlink.traffic_out import SYNTHETIC_ICAO_BASE
 from adapters.mavlink.vehicle import Events, VehicleState
 
 MessageHandler = Callable[[VehicleState, wire.MavMsg, float, Events], bool | None]
@@ -26,6 +27,7 @@ class AdsbRelayCounters:
     reports: int = 0  # ADSB_VEHICLE frames handled
     measurements: int = 0  # of them, handed on as measurements
     invalid: int = 0  # no valid position/altitude flags, a bad ICAO address or coordinates
+    echoes: int = 0  # our own traffic out coming back (a made-up address, traffic_out.py)
 
 
 class AdsbRelay:
@@ -37,6 +39,9 @@ class AdsbRelay:
     def on_adsb_vehicle(self, st: VehicleState, m: wire.MavMsg, t_s: float, ev: Events) -> None:
         c = self.counters
         c.reports += 1
+        if int(m.ICAO_address) >= SYNTHETIC_ICAO_BASE:
+            c.echoes += 1
+            return
         meas = adsb_vehicle_to_measurement(
             icao_address=int(m.ICAO_address),
             lat_e7=int(m.lat),

@@ -17,6 +17,7 @@ from types import MappingProxyType
 from adapters.mavlink import wire
 from adapters.mavlink.adsb_relay import AdsbRelay, MessageHandler
 from adapters.mavlink.vehicle import VehicleState
+from adapters.remoteid.vehicles import RidVehicles
 
 VEHICLE_HANDLERS: Mapping[int, MessageHandler] = MappingProxyType(
     {
@@ -35,9 +36,14 @@ VEHICLE_HANDLERS: Mapping[int, MessageHandler] = MappingProxyType(
 """The handlers that need nothing but the vehicle's state (read-only)."""
 
 
-def message_handlers(adsb_relay: AdsbRelay) -> dict[int, MessageHandler]:
+def message_handlers(
+    adsb_relay: AdsbRelay, remote_id: RidVehicles | None = None
+) -> dict[int, MessageHandler]:
     """The full table: :data:`VEHICLE_HANDLERS` plus ``ADSB_VEHICLE`` relayed to
-    ``adsb_relay`` (which keeps its own counters, one per hub or replay)."""
+    ``adsb_relay`` (which keeps its own counters, one per hub or replay), and the
+    OPEN_DRONE_ID_* messages and ArduPilot's ODID texts to ``remote_id`` (docs/remote-id.md)."""
     table = dict(VEHICLE_HANDLERS)
     table[wire.ADSB_VEHICLE] = adsb_relay.on_adsb_vehicle
+    if remote_id is not None:
+        table.update(remote_id.handlers(table.get(wire.STATUSTEXT)))
     return table

@@ -54,6 +54,7 @@ from adapters.mavlink.transfer import (
 )
 from adapters.mavlink.transport import Address, Backoff, Transport
 from adapters.mavlink.vehicle import VehicleInfo, VehicleState
+from adapters.remoteid.vehicles import RidVehicles
 from gcs_utm.clock import Clock
 from gcs_utm.messages import HazardReport, LinkHealth, VehicleKey, VehicleStatus
 from gcs_utm.model import (
@@ -224,7 +225,8 @@ class MavlinkHub(Commands):
         self._drops_reported: tuple[float, dict[str, int]] = (clock.now_s(), {})
         self._tasks: list[asyncio.Task[None]] = []
         self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE relayed by a vehicle -> ADS-B measurement
-        self._handlers = message_handlers(self.adsb_relay)  # shared with the tlog replay
+        self.remote_id = RidVehicles()  # OPEN_DRONE_ID_* and ODID texts (docs/remote-id.md)
+        self._handlers = message_handlers(self.adsb_relay, self.remote_id)  # as tlog replay
 
     # --- lifecycle ------------------------------------------------------------------------
     async def __aenter__(self) -> MavlinkHub:
@@ -615,6 +617,11 @@ class MavlinkHub(Commands):
         if link is None:
             raise TransferError(f"link {st.key.link} closed")
         self._send(link, frame, self._addr.get(id(st)))
+
+    def send_raw(self, vehicle: SysId | VehicleKey, name: str, *args: object) -> None:
+        """Send message ``name`` (its pymavlink encoder name) from us to ``vehicle``."""
+        st = self.state(vehicle)
+        self._to(st, self._encoder(st).raw(name, *args))
 
     def _request_streams(self, st: VehicleState) -> None:
         """ArduPilot sends no telemetry until asked: REQUEST_DATA_STREAM (old) and

@@ -16,8 +16,10 @@ Invariants and policies:
   are kept by the broker (in memory: no broker persistence needed) and delivered on
   reconnect. A broker restart without persistence (mosquitto's default) loses that session:
   on every reconnect the bridge re-publishes the recommendations still waiting for an answer
-  (before their deadline), so a station answers them again; the USM takes a repeated answer
-  as a duplicate.
+  (before their deadline) and the retained ``online`` status (after subscribing), and every
+  answer's outcome is published on the operator's status topic: a station keeping its answer
+  until that acknowledgement re-sends it then (:mod:`adapters.mqtt.station`); the USM takes
+  a repeated answer as a duplicate.
 - Outgoing queue (``queue_max``): every ``publish_*`` call only enqueues (never blocks the
   caller). A message leaves the queue only after the broker acknowledged it (QoS 1) or took
   it (QoS 0), so messages produced while the broker is down are sent after reconnect

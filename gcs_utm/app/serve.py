@@ -19,12 +19,14 @@ from gcs_utm.cluster.member import region_map_of
 from gcs_utm.cluster.node import ClusterNode
 from gcs_utm.cluster.policy import OwnershipPolicy
 from gcs_utm.cluster.regions import RegionError
+from gcs_utm.config import ConfigError
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import Geofence, Operation
 from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
 
+from .restart import start_review
 from .wiring import (
     FrontendOptions,
     Persistence,
@@ -117,6 +119,20 @@ def _stored_airspace(
     return location, operations, geofences
 
 
+async def _open_links(rt: Runtime, store: Persistence) -> None:
+    """Open the ``[mavlink]`` links; one that cannot be (taken since the start's
+    check_resources) is one ConfigError line, after closing what is open."""
+    for i, link in enumerate(rt.settings.mavlink.links):
+        try:
+            await rt.hub.add_link(link)
+        except OSError as exc:
+            await rt.hub.close()
+            store.close()
+            raise ConfigError(
+                "serve", f"mavlink.links[{i}]", f"{link!r} cannot be opened: {exc}"
+            ) from exc
+
+
 async def serve(
     settings: Settings,
     *,
@@ -143,9 +159,12 @@ async def serve(
         settings.airspace.ground_elevation_amsl_m,
     )
     location, operations, geofences = _stored_airspace(settings, db_path, cluster=cluster)
-    store = Persistence(StoreWriter(location, settings.store))
+    # a PostgreSQL outage at stop leaves the writes not yet taken in a local journal
+    pending = Path(settings.store.journal) if is_postgres(location) else None
+    store = Persistence(StoreWriter(location, settings.store, journal=pending))
     policy = OwnershipPolicy() if cluster else None
     rt = build_runtime(settings, clock, frame, store, policy=policy)
+    store.writer.on_event = lambda text: rt.usm.log_event("store", text)
     recorder = record_links(
         rt.hub,
         record_dir,
@@ -161,8 +180,7 @@ async def serve(
         len(geofences),
         describe(location),
     )
-    for link in settings.mavlink.links:
-        await rt.hub.add_link(link)
+    await _open_links(rt, store)
     frontends = attach_frontends(rt, FrontendOptions(operator=operator, headless=headless))
     stop = stop or asyncio.Event()
     failed: list[str] = []
@@ -183,6 +201,7 @@ async def serve(
             tasks = start_service_tasks(tg, rt, frontends)
             if node is not None:
                 tasks.append(tg.create_task(node.run(), name="cluster"))
+            tasks.extend(start_review(tg, rt, location, cluster=cluster))
             for t in tasks:
                 if t.get_name() == "dashboard":
                     t.add_done_callback(lambda _t: stop.set())

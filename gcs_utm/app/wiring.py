@@ -20,6 +20,14 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from adapters.mavlink import MavlinkHub
+from adapters.mavlink.traffic_out import TrafficOut
+from adapters.remoteid.ingest import (
+    RidAircraft,
+    RidIngest,
+    identity_audit,
+    telemetry_positions,
+)
+from adapters.remoteid.operator import RemoteIdOperator
 from gcs_utm.clock import Clock
 from gcs_utm.core.deconfliction import TacticalDeconfliction
 from gcs_utm.core.deconfliction.retime import retime_snapshot
@@ -133,6 +141,9 @@ class Runtime:
     emergency: EmergencyService
     hub: MavlinkHub
     surveillance: SurveillanceService  # [adsb] receiver feeds (none unless enabled)
+    remote_id: RemoteIdOperator  # the operator's Remote ID part to vehicles (docs/remote-id.md)
+    remote_id_ingest: RidIngest  # what vehicles report of Remote ID
+    traffic_out: TrafficOut  # ADSB_VEHICLE to vehicles for the traffic near them
     plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
@@ -191,6 +202,7 @@ def build_runtime(
         settings.monitoring,
         operations=lambda: airspace.operations,
         log_event=usm.log_event,
+        geofences=airspace.geofences,
     )
 
     async def tracking_hazard(h: HazardReport) -> None:
@@ -235,6 +247,11 @@ def build_runtime(
 
     emergency = EmergencyService(em, em_snapshot, clock, on_decision)
     usm.attach_measurement_sink(tracking.submit, tracking.submit_lane)
+    usm.attach_threat_evidence(
+        lambda op_id: tracker.last_accepted_t_s(TrackId(op_id)),
+        fresh_s=settings.tracking.stale_after_s,
+        eph_good_m=settings.mavlink.eph_degraded_m / 2.0,  # where the vehicle re-arms it
+    )
     usm.attach_threat_sink(
         emergency.submit_threats if policy is None else _filtered(emergency.submit_threats, policy)
     )
@@ -248,6 +265,17 @@ def build_runtime(
     usm.attach_operator(emergency)
     hub = MavlinkHub(settings.mavlink, clock, usm)
     usm.attach_vehicles(hub)
+
+    def rid_identity(rec: RidAircraft, text: str) -> None:
+        usm.log_event("remote_id", text)
+        store.record(identity_audit(rec))
+
+    rid_ingest = RidIngest(  # vehicles' OPEN_DRONE_ID_* reports: docs/remote-id.md
+        consistency_m=settings.remote_id.consistency_m,
+        position_of=telemetry_positions(hub),
+        on_identity=rid_identity,
+    )
+    rid_ingest.register(hub.remote_id)
     return Runtime(
         settings=settings,
         clock=clock,
@@ -261,6 +289,23 @@ def build_runtime(
         emergency=emergency,
         hub=hub,
         surveillance=SurveillanceService(settings.adsb, clock, usm.on_measurement),
+        remote_id=RemoteIdOperator(
+            settings.remote_id,
+            clock,
+            hub,
+            vehicles=hub.remote_id,
+            known=hub.vehicles,
+            operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
+            on_problem=lambda text: usm.log_event("remote_id", text),
+            on_hazard=usm.on_hazard,
+        ),
+        remote_id_ingest=rid_ingest,
+        traffic_out=TrafficOut(
+            settings.traffic_out,
+            hub,
+            tracks=tracking.tracks_now,
+            operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
+        ),
         plan_history=plan_history,
         geofence_history=geofence_history,
     )
@@ -295,6 +340,8 @@ async def apply_decision(
         store.record(entry)
     if decision.geofences:
         await usm.add_geofences(decision.geofences)
+    if decision.removed_geofences:
+        await usm.remove_geofences(decision.removed_geofences)
     for rec_id in decision.superseded:
         await usm.on_superseded(rec_id)
     for rec in decision.recommendations:
@@ -382,7 +429,7 @@ def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
         rt.usm.attach_operator(headless)
     if options.operator in (OperatorMode.AUTO_ACCEPT, OperatorMode.AUTO_REJECT):
         # New plans start where the UAS will be when the answer comes: after this delay.
-        rt.emergency.em.answer_delay_s = settings.dashboard.auto_answer_delay_s
+        rt.emergency.em.lead.answer_delay_s = settings.dashboard.auto_answer_delay_s
         rt.usm.attach_operator(
             AutoOperator(
                 rt.usm.answer,
@@ -398,7 +445,7 @@ def attach_frontends(rt: Runtime, options: FrontendOptions) -> Frontends:
     if mqtt:
         from gcs_utm.services.mqtt_gateway import MqttGateway
 
-        gateway = MqttGateway(rt.usm, settings.mqtt, tracks=rt.tracks)
+        gateway = MqttGateway(rt.usm, settings.mqtt, tracks=rt.tracks, frame=rt.frame)
         rt.usm.attach_operator(gateway)
         rt.usm.attach_threat_sink(gateway.on_threats)
         rt.usm.attach_geofence_listener(gateway.on_geofences)
@@ -415,6 +462,8 @@ def start_service_tasks(
         tg.create_task(rt.emergency.run(), name="emergency"),
         tg.create_task(rt.usm.run(), name="usm"),
         tg.create_task(rt.surveillance.run(), name="adsb"),
+        tg.create_task(rt.remote_id.run(), name="remote-id"),
+        tg.create_task(rt.traffic_out.run(), name="traffic-out"),
     ]
     if frontends.headless is not None:
         tasks.append(tg.create_task(_headless_status(rt, frontends.headless), name="status"))

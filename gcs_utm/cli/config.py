@@ -13,7 +13,7 @@ import sys
 from typing import Any
 
 from gcs_utm.config import ConfigError, build, load_toml, render_toml
-from gcs_utm.preflight import check_settings
+from gcs_utm.preflight import check_resources, check_settings
 from gcs_utm.settings import Settings
 
 # Section -> (module, class), as agreed in docs/HELPERS.md; used only without gcs_utm.settings.
@@ -65,9 +65,10 @@ def _default(args: argparse.Namespace) -> int:
 
 
 def check_file(path: str) -> dict[str, Any]:
-    """Load and validate every section of ``path``, then check the whole as ``serve`` will
-    use it (:mod:`gcs_utm.preflight`: link strings, signing keys, TLS files, ranges across
-    keys); returns section -> settings object for the sections the file sets."""
+    """Load and validate every section of ``path``, then check the whole as ``serve``'s start
+    will (:mod:`gcs_utm.preflight`: link strings, signing keys, TLS files, ranges across
+    keys, duplicate links; links bindable); returns section -> settings object for the
+    sections the file sets."""
     known = sections()
     doc = load_toml(path)
     out: dict[str, Any] = {}
@@ -77,10 +78,9 @@ def check_file(path: str) -> dict[str, Any]:
                 path, name, "unknown section; valid sections are: " + ", ".join(sorted(known))
             )
         out[name] = build(known[name], table, source=path, section=name)
-    check_settings(
-        Settings(**{n: v for n, v in out.items() if n in Settings.__dataclass_fields__}),
-        source=path,
-    )
+    settings = Settings(**{n: v for n, v in out.items() if n in Settings.__dataclass_fields__})
+    check_settings(settings, source=path)
+    check_resources(settings, source=path)  # what serve's start opens: links bind
     return out
 
 

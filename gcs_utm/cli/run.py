@@ -334,6 +334,14 @@ def _serve(args: argparse.Namespace) -> int:
     settings = _settings(args)
     if settings is None:
         return 2
+    from gcs_utm.config import ConfigError
+    from gcs_utm.preflight import check_resources
+
+    try:  # what serve's start opens (config check runs the same)
+        check_resources(settings, source=args.config or "(default settings)")
+    except ConfigError as exc:
+        print(f"gcs-utm: {exc}", file=sys.stderr)
+        return 2
     operator = (
         OperatorMode.AUTO_ACCEPT
         if args.auto_accept
@@ -362,6 +370,6 @@ def _serve(args: argparse.Namespace) -> int:
                 cluster=args.cluster,
             )
         )
-    except (StoreError, RecordError) as exc:  # a store or --record DIR that cannot be used
-        print(f"gcs-utm: {exc}", file=sys.stderr)
+    except (StoreError, RecordError, ConfigError) as exc:  # a store, --record DIR or link
+        print(f"gcs-utm: {exc}", file=sys.stderr)  # that cannot be used
         return 2

@@ -11,6 +11,8 @@ still predicted after its plan was applied gets a new decision).
 Upload outcomes: the service is also an operator port of the USM (``present``/``update``);
 when the USM reports a recommendation APPLIED or FAILED, the outcome is queued for
 ``EmergencyManager.on_outcome`` (a failure re-plans once, then the safe command is proposed).
+Every state change also goes to ``EmergencyManager.lead`` (answer, upload and command times
+measured per vehicle: how soon a new plan can start, ``gcs_utm.core.emergency.lead``).
 Wire it with ``usm.attach_operator(emergency)``.
 
 Queue policy: bounded (``queue_size``); submitters wait when it is full (threats and answers
@@ -25,20 +27,27 @@ import asyncio
 import contextlib
 import logging
 import math
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, replace
 
 from gcs_utm.clock import Clock
 from gcs_utm.core.emergency import Decision, EmergencyManager
+from gcs_utm.core.emergency.adoption import adopt_case
+from gcs_utm.core.emergency.closing import close_threat
 from gcs_utm.model import (
     AirspaceSnapshot,
+    Geofence,
     Recommendation,
     RecommendationId,
     RecommendationState,
     Threat,
+    ThreatId,
+    ThreatStatus,
 )
 
 _log = logging.getLogger(__name__)
+
+Adoptable = tuple[Threat, Sequence[Recommendation], Sequence[Geofence]]
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,6 +90,9 @@ class EmergencyService:
         self._supervised_t_s = -math.inf
         self.processed = 0
         self.failures = 0
+        self.adoptions: dict[ThreatId, Adoptable] = {}
+        """New threat id -> the earlier life's threat it adopts (gcs_utm.services.restart_review),
+        its recommendations and geofences; taken when the threat arrives."""
 
     async def submit_threats(self, threats: list[Threat]) -> None:
         for t in threats:
@@ -116,6 +128,7 @@ class EmergencyService:
         return None
 
     async def update(self, rec: Recommendation) -> None:
+        self.em.lead.on_state(rec)  # measured answer, upload and command times (core.lead)
         if rec.state is RecommendationState.APPLIED:
             await self.submit_outcome(rec.id, rec.version, True, rec.reason)
         elif rec.state is RecommendationState.FAILED:
@@ -191,9 +204,27 @@ class EmergencyService:
             await self._decide(
                 lambda: self.em.on_answer(asked, item.accepted, self._snapshot(now)), item.rec_id
             )
+        elif item.status is ThreatStatus.CLOSED:  # its geofences go with it
+            await self._decide(lambda: close_threat(self.em, item), item.id)
+        elif (held := self.adoptions.pop(item.id, None)) is not None:
+            await self._decide(lambda: self._adopt(item, held, now), item.id)
         else:
             await self._decide(lambda: self.em.on_threat(item, self._snapshot(now)), item.id)
         self.processed += 1
+
+    def _adopt(self, threat: Threat, held: Adoptable, now: float) -> Decision:
+        """A restart detected the condition of an earlier life's threat again: its case is
+        taken over (nothing in force: decided as a new threat)."""
+        inherited, recs, fences = held
+        d = adopt_case(
+            self.em,
+            threat,
+            inherited=inherited,
+            recommendations=recs,
+            geofences=fences,
+            now=now,
+        )
+        return d if d is not None else self.em.on_threat(threat, self._snapshot(now))
 
     async def _decide(self, step: Callable[[], Decision], subject: str) -> None:
         try:

@@ -29,7 +29,9 @@ from adapters.mqtt import answers as mqtt_answers
 from adapters.mqtt.bridge import MqttBridge
 from adapters.mqtt.codec import FlightPlanSubmission, FlightStatusKind, FlightStatusReport
 from adapters.mqtt.config import MqttConfig
+from gcs_utm.core.monitoring.filing import plan_in_fences
 from gcs_utm.flyable import plan_speed_problem
+from gcs_utm.geo import LocalFrame
 from gcs_utm.messages import HazardReport, PilotAnswer
 from gcs_utm.model import (
     Geofence,
@@ -68,8 +70,10 @@ class MqttGateway:
         *,
         tracks: TrackSource | None = None,
         bridge: MqttBridge | None = None,
+        frame: LocalFrame | None = None,
     ) -> None:
         self.usm = usm
+        self._frame = frame  # with it, a plan into an active geofence is refused
         self.config = config
         self._tracks = tracks
         self.bridge = bridge or MqttBridge(config, usm.clock, self)
@@ -166,6 +170,10 @@ class MqttGateway:
         slow = plan_speed_problem(op)
         if slow is not None:  # a fixed wing cannot fly slower than its minimum airspeed
             raise ValueError(slow)
+        if self._frame is not None:
+            found = plan_in_fences(op.plan, op, airspace.geofences(), self._frame)
+            if found:
+                raise ValueError("; ".join(f.message() for f in found))
         airspace.add_operation(op)
         self.usm.log_event("operation", f"{op.id} filed over MQTT by {s.operator}")
 

@@ -9,17 +9,22 @@ notification; operations loaded without notification (a scenario, the store afte
 restart, both before the service starts) are filed on the first notification. Operations
 that have LANDED or ENDED leave the index. A conflict is a finding, not a refusal: the plan
 is filed either way and Monitoring watches the pair in flight.
+
+With ``geofences``, each filed plan is also checked against them: a path or destination
+inside an active fence is logged with the operation, the fence, the waypoint and a proposed
+fix (:mod:`gcs_utm.core.monitoring.filing`); a submission over MQTT is refused for it.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 
 from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.core.monitoring.filing import FenceFinding, plan_in_fences
 from gcs_utm.core.monitoring.strategic import FiledPlans, PlanConflict
 from gcs_utm.geo import LocalFrame
-from gcs_utm.model import FlightPlan, Operation, OperationId, OperationState
+from gcs_utm.model import FlightPlan, Geofence, Operation, OperationId, OperationState
 
 _log = logging.getLogger(__name__)
 
@@ -38,8 +43,13 @@ class FilingCheck:
         operations: Callable[[], Mapping[OperationId, Operation]],
         log_event: Callable[[str, str], None] | None = None,
         step_s: float = 1.0,
+        geofences: Callable[[], Sequence[Geofence]] | None = None,
     ) -> None:
         self._filed = FiledPlans(frame, config, step_s=step_s)
+        self._frame = frame
+        self._geofences = geofences
+        self.fence_findings: dict[OperationId, list[FenceFinding]] = {}
+        """The geofences each operation's current plan runs into (see :meth:`in_fences`)."""
         self._plan: dict[OperationId, FlightPlan] = {}
         self._operations = operations
         self._log_event = log_event
@@ -72,6 +82,7 @@ class FilingCheck:
         self._filed.add(op)
         self._plan[op.id] = op.plan
         self.conflicts[op.id] = found
+        self._fences(op)
         self.counters["checked"] += 1
         if found:
             self.counters["in_conflict"] += 1
@@ -97,6 +108,21 @@ class FilingCheck:
         self._filed.add_many(missing)
         for o in missing:
             self._plan[o.id] = o.plan
+            self._fences(o)
+
+    def in_fences(self, op: Operation) -> list[FenceFinding]:
+        """The active geofences ``op``'s plan runs into (none without ``geofences``). A
+        plan of Tactical Deconfliction is not judged again: TD verified it against every
+        fence, from its exit point on when it leaves one it is in."""
+        if self._geofences is None or op.plan.reason.startswith("TD "):
+            return []
+        return plan_in_fences(op.plan, op, self._geofences(), self._frame)
+
+    def _fences(self, op: Operation) -> None:
+        found = self.in_fences(op)
+        self.fence_findings[op.id] = found
+        for f in found:
+            self._event(f.message())
 
     def _event(self, text: str) -> None:
         if self._log_event is not None:

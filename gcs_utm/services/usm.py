@@ -20,7 +20,7 @@ import itertools
 import logging
 from collections import deque
 from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from adapters.mavlink.senders import idle_keys, over_cap_keys
 from gcs_utm.clock import Clock
@@ -37,9 +37,12 @@ from gcs_utm.model import (
     Command,
     CommandKind,
     Geofence,
+    GeofenceId,
     LaneSource,
     Measurement,
     MeasurementSource,
+    Operation,
+    OperationId,
     OperationState,
     PositionLane,
     Recommendation,
@@ -50,7 +53,8 @@ from gcs_utm.model import (
     ThreatKind,
     ThreatStatus,
 )
-from gcs_utm.services.airspace import Airspace
+from gcs_utm.ratelog import RateLimitedLog
+from gcs_utm.services.airspace import Airspace, AirspaceError
 from gcs_utm.services.recommendations import (
     AnswerOutcome,
     AnswerStatus,
@@ -68,6 +72,7 @@ from gcs_utm.services.telemetry_stats import (
     TelemetryStats,
     latest_per_sys_id,
 )
+from gcs_utm.services.threat_lifecycle import Evidence, ThreatCloser
 from gcs_utm.services.vehicle_ops import VehicleOps, VehicleOpsSettings
 
 __all__ = [
@@ -85,6 +90,7 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
+_TASK_ERROR_INTERVAL_S = 10.0  # one line per failing task kind in this time (ratelog)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -141,6 +147,22 @@ class UsmConfig:
         "recently heard eighth is folded into 'adsb:evicted' (counted in adsb_sources_evicted)",
         min=8,
         max=1_000_000,
+    )
+    threat_clear_s: float = setting(
+        3.0,
+        "a threat raised from a hazard closes when its cause (link loss, GNSS degradation, "
+        "...) has been gone this long (docs/emergency.md, 'When a threat closes')",
+        min=0.0,
+        max=600.0,
+        unit="s",
+    )
+    restart_review_s: float = setting(
+        30.0,
+        "after a restart, threats an earlier life left open that the new life does not detect "
+        "again within this time are closed (docs/emergency.md, 'After a restart')",
+        min=0.0,
+        max=3600.0,
+        unit="s",
     )
     max_hazard_keys: int = setting(
         4096,
@@ -208,7 +230,19 @@ class Usm(RecommendationLifecycle):
         self._hazard_seen: dict[tuple[ThreatKind, str], float] = {}
         self._hazard_sweep_t_s = float("-inf")
         self._hazard_seq = itertools.count(1)
+        self._hazard_threats: dict[tuple[ThreatKind, str], ThreatId] = {}  # open, per key
+        self.threat_closer = ThreatCloser(
+            Evidence(
+                operation=self.operation_or_none,
+                status=lambda sys_id: self.statuses_by_sys_id().get(sys_id),
+                health=lambda sys_id: self.health_by_sys_id().get(sys_id),
+            ),
+            self._close_threat,
+            clear_s=self.config.threat_clear_s,
+            quiet_s=self.config.hazard_cooldown_s,
+        )
         self._tasks: set[asyncio.Task[None]] = set()
+        self._task_errors = RateLimitedLog(_log, _TASK_ERROR_INTERVAL_S, max_causes=64)
         self.counters: dict[str, int] = {
             "measurements": 0,
             "unknown_vehicle_measurements": 0,
@@ -258,9 +292,15 @@ class Usm(RecommendationLifecycle):
             self._measurement_sinks.append(sink)
             self._plain_sinks.append(sink)
 
-    def attach_threat_sink(self, sink: Callable[[list[Threat]], Awaitable[None]]) -> None:
-        """Emergency Management's input."""
-        self._threat_sinks.append(sink)
+    def attach_threat_sink(
+        self, sink: Callable[[list[Threat]], Awaitable[None]], *, first: bool = False
+    ) -> None:
+        """Emergency Management's input. ``first``: ahead of the sinks attached before (a
+        restart's review must see a new threat before EM does)."""
+        if first:
+            self._threat_sinks.insert(0, sink)
+        else:
+            self._threat_sinks.append(sink)
 
     def attach_answer_sink(self, sink: Callable[[Recommendation, bool], Awaitable[None]]) -> None:
         """Emergency Management hears every accept/reject (it re-plans on reject)."""
@@ -345,6 +385,7 @@ class Usm(RecommendationLifecycle):
             old = over_cap_keys(seen, self.config.max_hazard_keys)
         for k in old:
             del seen[k]
+            self._hazard_threats.pop(k, None)
         self.counters["hazard_keys_evicted"] += len(old)
 
     @property
@@ -454,6 +495,8 @@ class Usm(RecommendationLifecycle):
         last = self._hazard_seen.get(key)
         if last is not None and h.t_s - last < self.config.hazard_cooldown_s:
             self.counters["hazards_coalesced"] += 1
+            if (open_id := self._hazard_threats.get(key)) is not None:
+                self.threat_closer.repeated(open_id, h.t_s)
             return
         self._hazard_seen[key] = h.t_s
         threat = Threat(
@@ -466,7 +509,56 @@ class Usm(RecommendationLifecycle):
             area=h.area,
             message=h.message,
         )
+        self._hazard_threats[key] = threat.id
+        self.threat_closer.watch(threat, h.sys_id)
         self._spawn(self.on_threats([threat]))
+
+    def operation_or_none(self, op_id: OperationId) -> Operation | None:
+        """The airspace's operation ``op_id``, None when there is none."""
+        try:
+            return self.airspace.operation(op_id)
+        except AirspaceError:
+            return None
+
+    def attach_threat_evidence(
+        self,
+        last_position_t_s: Callable[[OperationId], float | None],
+        *,
+        fresh_s: float,
+        eph_good_m: float,
+    ) -> None:
+        """What tells the threat closer that positions flow again (tracking: a position
+        newer than ``fresh_s`` ends a link loss) and that a GNSS fix is good again."""
+        closer = self.threat_closer
+        closer.evidence = replace(closer.evidence, last_position_t_s=last_position_t_s)
+        closer.fresh_s, closer.eph_good_m = fresh_s, eph_good_m
+
+    async def _close_threat(self, closed: Threat, reason: str) -> None:
+        """A hazard's threat is over (see :mod:`.threat_lifecycle`): closed in the store, on
+        the operator's views and for EM (which drops its geofences), with the reason audited;
+        the same hazard raised later is a new threat (not coalesced into this one)."""
+        for key in [k for k, v in self._hazard_threats.items() if v == closed.id]:
+            del self._hazard_threats[key]
+            self._hazard_seen.pop(key, None)
+        self._record(
+            AuditEntry(
+                t_s=self.clock.now_s(),
+                actor="usm",
+                action="threat_closed",
+                subject=closed.id,
+                detail={"kind": closed.kind.value, "reason": reason},
+            )
+        )
+        text = f"{closed.message}; closed: {reason}" if closed.message else f"closed: {reason}"
+        await self.on_threats([replace(closed, message=text)])
+
+    async def run(self, period_s: float = 0.5) -> None:
+        """Housekeeping every ``period_s`` clock seconds: recommendation deadlines, and the
+        threats of hazards whose cause is gone."""
+        while True:
+            await self.expire_due()
+            await self.threat_closer.check(self.clock.now_s())
+            await self.clock.sleep(period_s)
 
     async def on_threats(self, threats: list[Threat]) -> None:
         """From Monitoring (and hazards): record, then hand to EM."""
@@ -497,6 +589,16 @@ class Usm(RecommendationLifecycle):
         for g in changed:
             self.log_event("geofence", f"geofence {g.id} created ({g.reason or g.kind.value})")
         if changed:
+            for listener in self._geofence_listeners:
+                await listener(self.airspace.geofences())
+
+    async def remove_geofences(self, geofence_ids: Sequence[GeofenceId]) -> None:
+        """EM's geofences whose threat closed leave the airspace (and the store's active
+        ones)."""
+        removed = [g for g in geofence_ids if self.airspace.remove_geofence(g)]
+        for g in removed:
+            self.log_event("geofence", f"geofence {g} removed (its threat closed)")
+        if removed:
             for listener in self._geofence_listeners:
                 await listener(self.airspace.geofences())
 
@@ -545,9 +647,23 @@ class Usm(RecommendationLifecycle):
         task.add_done_callback(self._task_done)
 
     def _task_done(self, task: asyncio.Task[None]) -> None:
+        """A failed task is logged once per interval and cause (its coroutine and error
+        type), the first with its traceback, the repeats counted: a sender that makes the
+        same task fail on every frame cannot flood the log."""
         self._tasks.discard(task)
-        if not task.cancelled() and task.exception() is not None:
-            _log.error("USM task failed", exc_info=task.exception())
+        if task.cancelled() or (exc := task.exception()) is None:
+            return
+        coro = task.get_coro()
+        where = getattr(coro, "__qualname__", type(coro).__name__)
+        self._task_errors.log(
+            logging.ERROR,
+            f"{where}:{type(exc).__name__}",
+            "USM task %s failed: %s: %s",
+            where,
+            type(exc).__name__,
+            exc,
+            exc_info=exc,
+        )
 
     async def drain(self) -> None:
         """Wait for spawned work (uploads, hazard forwarding) to finish."""

@@ -61,6 +61,10 @@ _MATCH_H_M = 0.5  # a mission point within this of a plan waypoint is that waypo
 _MATCH_V_M = 0.5
 _RETRY_FIRST_S = 2.0  # a failed mission download is tried again after this, doubling
 _RETRY_MAX_S = 30.0
+_FAILURES_CAP = 1000
+"""Failed downloads in a row are counted up to this (the back-off reached its cap long
+before): a counter a sender drives cannot grow without bound."""
+_BACKOFF_STEPS_MAX = 16  # 2 s * 2**16 is past any cap: no exponent past it (no overflow)
 _HOME_MOVE_M = 2.0
 """A home that moved less than this is the same home: PX4's HOME_POSITION wanders by about a
 metre while its estimator converges (measured on SIH), which would re-file every few seconds."""
@@ -253,6 +257,7 @@ class _Vehicle:
     flying: bool = False  # armed in a mission mode
     downloading: bool = False
     again: bool = False  # the mission changed during a download: download once more
+    change_waiting: bool = False  # the mission changed (or it armed) during a back-off
     changes: int = 0  # downloads triggered by a change after discovery
     start_pending: bool = False  # the mission started during a download: re-time after it
     waiting_logged: bool = False
@@ -329,12 +334,7 @@ class VehicleOps:
         v.mission_id = s.mission_id
         if s.home is not None and _moved(v.home, s.home):
             self._home(v, s.home, from_status=True)
-        if self._mission_changed(v, s) or (s.armed and not v.armed):
-            v.changes += 1
-            self._download(v.sys_id)
-        elif v.retry_at_s is not None and self.clock.now_s() >= v.retry_at_s:
-            v.retry_at_s = None
-            self._download(v.sys_id)
+        self._maybe_download(v, self._mission_changed(v, s) or (s.armed and not v.armed))
         v.armed = s.armed
         flying = s.armed and s.mode in _FLYING_MODES
         started = flying and not v.flying
@@ -344,6 +344,20 @@ class VehicleOps:
             v.seq = s.mission_seq
         if flying and (started or advanced):
             self._retime(v, started=started)
+
+    def _maybe_download(self, v: _Vehicle, changed: bool) -> None:
+        """Download on a mission change or an arming, and retry a failed download when its
+        back-off is over. A change during a back-off waits for it: a sender toggling armed
+        would otherwise start a download (and fail it) on every frame."""
+        if v.retry_at_s is not None and self.clock.now_s() < v.retry_at_s:
+            v.change_waiting = v.change_waiting or changed
+            return
+        if not changed and v.retry_at_s is None:
+            return
+        if changed or v.change_waiting:
+            v.changes += 1
+        v.retry_at_s, v.change_waiting = None, False
+        self._download(v.sys_id)
 
     @staticmethod
     def _mission_changed(v: _Vehicle, s: VehicleStatus) -> bool:
@@ -396,10 +410,12 @@ class VehicleOps:
     def _download_failed(self, v: _Vehicle, exc: Exception) -> None:
         """A failed download is tried again after a backoff (2, 4, 8 ... at most 30 s), checked
         on the vehicle's next status: without it a vehicle whose first download timed out would
-        stay without an operation until its mission changed."""
+        stay without an operation until its mission changed. Mission changes and armings
+        wait for the back-off too (see _maybe_download)."""
         self.counters["download_failures"] += 1
-        v.failures += 1
-        delay_s = min(_RETRY_MAX_S, _RETRY_FIRST_S * 2.0 ** (v.failures - 1))
+        v.failures = min(v.failures + 1, _FAILURES_CAP)
+        steps = min(v.failures - 1, _BACKOFF_STEPS_MAX)
+        delay_s = min(_RETRY_MAX_S, _RETRY_FIRST_S * 2.0**steps)
         v.retry_at_s = self.clock.now_s() + delay_s
         self._log_event(
             "vehicle",

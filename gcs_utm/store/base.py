@@ -187,6 +187,18 @@ class StoreBase:
             return self.begin_life()
         return self._epoch
 
+    def mark_batch(self, c: Connection, epoch: int, batch: int) -> None:
+        """Record, inside a batch's transaction, that life ``epoch``'s batch ``batch`` commits
+        with it (the writer numbers its batches 1, 2, ... in order)."""
+        c.execute("UPDATE lives SET committed_batch = ? WHERE epoch = ?", (batch, epoch))
+
+    def committed_batch(self, epoch: int) -> int:
+        """The number of the last batch life ``epoch`` committed (0: none)."""
+        row = self._conn.execute(
+            "SELECT committed_batch FROM lives WHERE epoch = ?", (epoch,)
+        ).fetchone()
+        return 0 if row is None else int(row[0])
+
     def lives(self) -> list[tuple[int, float, int]]:
         """(epoch, started_unix_s, pid) of every life, oldest first."""
         return [
@@ -431,6 +443,36 @@ class StoreBase:
                 "SELECT doc FROM threats WHERE status=? ORDER BY detected_at_s, id", (status.value,)
             )
         return [self._load(Threat, d) for (d,) in rows]
+
+    def open_threats_of_earlier_lives(self, epoch: int) -> list[Threat]:
+        """Threats the lives before ``epoch`` left open (OPEN or UPDATED): a process that
+        died (kill -9) closed nothing. A restart reviews them (gcs_utm.app.restart)."""
+        rows = self._rows(
+            "SELECT doc FROM threats WHERE status <> ? AND epoch < ? ORDER BY detected_at_s, id",
+            (ThreatStatus.CLOSED.value, epoch),
+        )
+        return [self._load(Threat, d) for (d,) in rows]
+
+    def settle_inherited(self, item: Threat | Recommendation) -> bool:
+        """A later life ends what an earlier, dead life left open: a threat it closes (CLOSED)
+        or a recommendation version still waiting for an answer (PROPOSED) whose prompt died
+        with that life. The one exception to "a row of another life is never overwritten"
+        (:meth:`save_threat`), and only for those rows: a closed threat or a version in any
+        other state stays as it was. Returns whether the row changed."""
+        closed, proposed = ThreatStatus.CLOSED.value, RecommendationState.PROPOSED.value
+        with self.transaction() as c:
+            if isinstance(item, Threat):
+                cur = c.execute(
+                    "UPDATE threats SET status=?, doc=? WHERE id=? AND epoch < ? AND status <> ?",
+                    (item.status.value, dumps(item), item.id, self.epoch, closed),
+                )
+            else:
+                cur = c.execute(
+                    "UPDATE recommendations SET state=?, doc=? "
+                    "WHERE id=? AND version=? AND epoch < ? AND state = ?",
+                    (item.state.value, dumps(item), item.id, item.version, self.epoch, proposed),
+                )
+            return bool(cur.rowcount)
 
     def save_recommendation(self, rec: Recommendation) -> None:
         """Insert a version or update its state (the lifecycle of one id+version). Only the

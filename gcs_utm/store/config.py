@@ -17,6 +17,11 @@ class StoreConfig:
         "shared PostgreSQL store instead of the SQLite file, e.g. "
         "'postgresql://gcs@db.example/utm' (needs gcs-utm[postgres]); empty: the SQLite file",
     )
+    journal: str = setting(
+        "gcs_utm.store-journal",
+        "local file keeping the writes a PostgreSQL store could not take before the service "
+        "stopped (database unreachable); the next start replays it. One file per instance",
+    )
     queue_size: int = setting(
         10_000, "writer queue capacity in write requests; track history drops when full", min=1
     )

@@ -113,6 +113,12 @@ MIGRATIONS: tuple[str, ...] = (
         expires_unix_s REAL NOT NULL
     );
     """,
+    # 4: the number of the last batch each life's writer committed, written in the batch's own
+    # transaction, so a batch retried after a lost connection (or replayed from the local
+    # journal, gcs_utm/store/journal.py) is known to have committed and is not applied twice.
+    """
+    ALTER TABLE lives ADD COLUMN committed_batch INTEGER NOT NULL DEFAULT 0;
+    """,
 )
 
 # The same schema in PostgreSQL, migration for migration (number n here is number n above):
@@ -216,5 +222,8 @@ PG_MIGRATIONS: tuple[str, ...] = (
         acquired_unix_s DOUBLE PRECISION NOT NULL,
         expires_unix_s DOUBLE PRECISION NOT NULL
     );
+    """,
+    """
+    ALTER TABLE lives ADD COLUMN committed_batch BIGINT NOT NULL DEFAULT 0;
     """,
 )

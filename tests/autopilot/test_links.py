@@ -27,12 +27,14 @@ from gcs_utm.model import (
     OperationId,
     SysId,
     ThreatKind,
+    ThreatStatus,
+    TrackId,
     VehicleKind,
     Waypoint4D,
 )
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store
-from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess
+from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, PX4_DEFAULT_HOME, SitlProcess
 from tests.mavlink.conftest import Sink
 
 SPEED = 5.0
@@ -145,6 +147,14 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
                 "not heard after the restart",
             )
             await _until(lambda: rt.tracks()[op.id].t_s > t_restart, 90.0, "track not live again")
+            # positions flow again: the threat closes, and the link-loss geofence goes with it
+            # (issue 31: it stayed open while positions flowed)
+            await _until(lambda: not lost(rt), 30.0, "COMMUNICATION_FAILURE stayed open")
+            await _until(
+                lambda: not [g for g in rt.airspace.geofences() if g.id.startswith("em-")],
+                10.0,
+                "the link-loss geofence stayed",
+            )
             done["ok"] = True
         finally:
             stop.set()
@@ -164,10 +174,85 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
     )
     await done["task"]  # its assertion, if any
     assert code == 0 and done.get("ok")
+    with Store(db) as s:
+        lost_rows = [t for t in s.load_threats() if t.kind is ThreatKind.COMMUNICATION_FAILURE]
+        assert lost_rows and all(t.status is ThreatStatus.CLOSED for t in lost_rows)
+        reasons = [
+            a.detail["reason"]
+            for a in s.load_audit()
+            if a.actor == "usm" and a.action == "threat_closed"
+        ]
+        assert any("flow again" in str(r) for r in reasons), reasons
+        assert s.load_geofences(active_only=True) == []
 
 
-def _operation() -> Operation:
-    lat, lon, ground_m, _ = ARDUPILOT_DEFAULT_HOME
+@pytest.mark.timeout(240)
+async def test_serve_closes_the_link_loss_of_a_restarted_px4(
+    px4: Callable[..., SitlProcess], tmp_path: Path
+) -> None:
+    """A PX4 (SIH) killed and started again: the operation flying sysid 1 gets a
+    COMMUNICATION_FAILURE and EM's temporary geofence; once PX4's positions flow again the
+    threat closes (it stayed open while they flowed, issue 31) and the geofence goes."""
+    db = tmp_path / "utm.sqlite"
+    lat, lon, ground_m = PX4_DEFAULT_HOME
+    op = _operation((lat, lon, ground_m))
+    with Store(db) as store:
+        store.save_operation(op)
+        store.save_plan(op.plan)
+    settings = dataclasses.replace(
+        Settings(), mavlink=MavlinkConfig(links=("udpin:127.0.0.1:14550",))
+    )
+    stop = asyncio.Event()
+    done: dict[str, Any] = {}
+
+    def lost(rt: Runtime) -> bool:
+        return any(t.kind is ThreatKind.COMMUNICATION_FAILURE for t in rt.usm.threats.values())
+
+    def fenced(rt: Runtime) -> bool:
+        return any(g.id.startswith("em-") for g in rt.airspace.geofences())
+
+    async def scenario(rt: Runtime) -> None:
+        try:
+            p = px4(instance=0, speed=SPEED)
+            await _until(lambda: TrackId(op.id) in rt.tracks(), 90.0, "no track of the operation")
+            os.killpg(p.proc.pid, signal.SIGKILL)
+            p.proc.wait(timeout=10.0)
+            await _until(lambda: lost(rt) and fenced(rt), 30.0, "no link loss and fence")
+            t_restart = rt.clock.now_s()
+            px4(instance=0, speed=SPEED)
+            await _until(
+                lambda: rt.usm.health_by_sys_id()[SysId(1)].last_heard_t_s > t_restart,
+                90.0,
+                "not heard after the restart",
+            )
+            await _until(lambda: not lost(rt), 30.0, "COMMUNICATION_FAILURE stayed open")
+            await _until(lambda: not fenced(rt), 10.0, "the link-loss geofence stayed")
+            done["ok"] = True
+        finally:
+            stop.set()
+
+    async def on_runtime(rt: Runtime) -> None:
+        done["task"] = asyncio.create_task(scenario(rt))
+
+    code = await serve(
+        settings,
+        db_path=db,
+        operator=OperatorMode.NONE,
+        headless=False,
+        stop=stop,
+        on_runtime=on_runtime,
+        speed=SPEED,
+    )
+    await done["task"]
+    assert code == 0 and done.get("ok")
+    with Store(db) as s:
+        rows = [t for t in s.load_threats() if t.kind is ThreatKind.COMMUNICATION_FAILURE]
+        assert rows and all(t.status is ThreatStatus.CLOSED for t in rows)
+        assert all("flow again" in t.message for t in rows), [t.message for t in rows]
+
+
+def _operation(home: tuple[float, float, float] | None = None) -> Operation:
+    lat, lon, ground_m = home or ARDUPILOT_DEFAULT_HOME[:3]
     t0 = time.time()
     plan = FlightPlan(
         operation_id=OperationId("AP1"),

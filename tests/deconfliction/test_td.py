@@ -573,6 +573,13 @@ def test_go_down_under_a_crossing_is_not_free() -> None:
     last waypoint, so its 3D path was *shorter* than the plan and its cost 0.000. Now it climbs
     back to the last waypoint and pays for leaving the plan."""
     snap, kind, uas = scenario_climb_crossing()
+    # Use case 1 descends to just the vertical minimum (no vertical tracking tolerance then).
+    snap = sc.snapshot(
+        [
+            replace(o, envelope=replace(o.performance(), vertical_tracking_error_m=0.0))
+            for o in snap.operations.values()
+        ]
+    )
     alts = make_td().resolve_loss_of_separation(sc.threat(kind, uas, event_in_s=47), snap)
     down = [a for a in alts[OperationId("UAS1")] if a.maneuver is Maneuver.GO_DOWN]
     assert down

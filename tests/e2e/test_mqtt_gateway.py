@@ -24,6 +24,7 @@ from usm_fakes import OP, FakeVehicles, make_operation, make_plan
 
 from adapters.mqtt.codec import Topics
 from gcs_utm.clock import ManualClock
+from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     Alternative,
     FlightPlan,
@@ -84,7 +85,10 @@ class _World:
 
 @contextlib.asynccontextmanager
 async def _world(
-    tmp_path: Path, geofences: tuple[Geofence, ...] = (), extra: tuple[str, ...] = ()
+    tmp_path: Path,
+    geofences: tuple[Geofence, ...] = (),
+    extra: tuple[str, ...] = (),
+    frame: LocalFrame | None = None,
 ) -> AsyncIterator[_World]:
     broker: Broker = make_broker(tmp_path)
     try:
@@ -94,7 +98,7 @@ async def _world(
         usm = Usm(airspace, clock)
         vehicles = FakeVehicles()
         usm.attach_vehicles(vehicles)
-        gateway = MqttGateway(usm, broker.config())
+        gateway = MqttGateway(usm, broker.config(), frame=frame)
         gateway.attach()
         task = asyncio.create_task(gateway.run())
         try:
@@ -217,6 +221,41 @@ async def test_flight_plan_creates_operation_duplicate_refused_and_threat_alerte
         await w.gateway.bridge.flush(5.0)
         await asyncio.sleep(0.2)
         assert not [m for m in w.alice.empty_for() if m[0] == T.alerts_for("alice")]
+
+
+async def test_a_flight_plan_into_an_active_geofence_is_refused_with_a_fix(
+    tmp_path: Path,
+) -> None:
+    # A fire fence around (40.0, -3.0): a plan that ends at its centre is refused with one
+    # error naming the operation, the fence, the waypoint and a fix; one beside it is filed.
+    fence = _fence("fire", None)
+    plan = {
+        "schema_version": 1,
+        "type": "flight_plan",
+        "operation_id": "UAS3",
+        "t_s": T0,
+        "waypoints": [
+            {"lat_deg": 40.01, "lon_deg": -3.0, "alt_amsl_m": 700.0, "t_s": T0},
+            {"lat_deg": 40.0, "lon_deg": -3.0, "alt_amsl_m": 700.0, "t_s": T0 + 100},
+        ],
+    }
+    async with _world(tmp_path, (fence,), frame=LocalFrame(40.0, -3.0, 600.0)) as w:
+        await w.alice.send(T.flight_plans("alice"), plan)
+        _, err, _ = await w.alice.next(T.errors_for("alice"))
+        reason = err["reason"]
+        assert "operation UAS3" in reason and "geofence fire" in reason, reason
+        assert "waypoint 1 (the destination)" in reason and "fix: move waypoint 1" in reason
+        assert OperationId("UAS3") not in w.usm.airspace.operations
+        beside = [
+            {"lat_deg": 40.01, "lon_deg": -3.0, "alt_amsl_m": 700.0, "t_s": T0},
+            {"lat_deg": 40.02, "lon_deg": -3.0, "alt_amsl_m": 700.0, "t_s": T0 + 100},
+        ]
+        await w.alice.send(T.flight_plans("alice"), {**plan, "waypoints": beside})
+        for _ in range(500):  # filed when the gateway has handled the message
+            if OperationId("UAS3") in w.usm.airspace.operations:
+                break
+            await asyncio.sleep(0.01)
+        assert OperationId("UAS3") in w.usm.airspace.operations
 
 
 def _fence(gid: str, end_t_s: float | None) -> Geofence:

@@ -148,3 +148,28 @@ def test_gauss_use_case_loss_separation_is_detected_and_resolved(tmp_path: Path)
     assert any("mission verified" in text for _, text in rec["history"]), rec["history"]
     (pair,) = report["truth"]["pairs"]
     assert not pair["loss_of_separation"] and pair["min_distance_m"] > 15.0, pair
+
+
+def test_a_link_loss_that_ends_closes_and_its_fence_stops_rerouting(tmp_path: Path) -> None:
+    """The built-in vehicles (sitl) with UAS1's link lost for 15 s: COMMUNICATION_FAILURE is
+    raised, EM fences UAS1's predicted position (UAS2 is inside it), and when UAS1's
+    positions flow again the threat closes with the reason and the fence goes, so nothing
+    re-plans UAS2 around it any more (issue 31: it stayed open, three escape plans)."""
+    text = (SCENARIOS / "use_case_2.toml").read_text()
+    text = text[: text.index("[[events]]")]
+    text += '[[events]]\nat_s = 12.0\nkind = "link_loss"\nuas = "UAS1"\nduration_s = 15.0\n'
+    path = tmp_path / "use_case_2_link_back.toml"
+    path.write_text(text)
+    report = _run(path, tmp_path, duration_s=90.0)
+    lost = [t for t in report["threats"] if t["kind"] == "COMMUNICATION_FAILURE"]
+    assert [t["status"] for t in lost] == ["open", "closed"], lost
+    assert "positions of UAS1 flow again" in lost[1]["message"]
+    fenced = [t for t in report["threats"] if t["kind"].startswith("GEOFENCE")]
+    assert fenced and {t["status"] for t in fenced} == {"open", "closed"}
+    closed_at = lost[0]["detected_at_s"] + 15.0 + 10.0  # the link is back, then closed
+    late = [
+        r
+        for r in report["recommendations"]
+        if r["threat_kind"].startswith("GEOFENCE") and r["created_at_s"] > closed_at
+    ]
+    assert late == []

@@ -122,7 +122,10 @@ def test_repeated_rejection_escalates_to_the_operator() -> None:
     assert again.selected.maneuver is not rec.selected.maneuver  # type: ignore[union-attr]
     d2 = em.on_answer(again, False, snap)
     assert d2.escalations and "operator action needed" in d2.escalations[0]
-    assert em.pending() == []
+    # no third plan: the escalation proposes the safe command (hold) instead
+    (cmd,) = em.pending()
+    assert cmd.selected is None and cmd.command is not None
+    assert cmd.command.kind is CommandKind.HOLD and "hold proposed" in d2.escalations[0]
 
 
 def test_stale_answer_is_ignored_with_a_warning() -> None:
@@ -178,9 +181,13 @@ def test_no_feasible_alternative_is_an_explicit_escalation() -> None:
     b = sc.make_operation("B", [(1000, 0, 100), (-1000, 0, 100)], priority=2000)
     em = make_em()
     d = em.on_threat(sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"]), sc.snapshot([a, b]))
-    assert d.recommendations == ()
+    assert all(r.selected is None for r in d.recommendations)  # no plan...
     assert d.escalations and "no conflict-free combination" in d.escalations[0]
     assert d.audit[0].action == "escalation"
+    # ...but the escalation carries an immediate command, for the pilot to confirm
+    (cmd,) = d.recommendations
+    assert cmd.command is not None and cmd.state is RecommendationState.PROPOSED
+    assert f"{cmd.command.kind.value} for {cmd.operation_id} proposed" in d.escalations[0]
 
 
 def test_an_escalated_threat_is_retried_only_after_the_retry_period() -> None:
@@ -189,9 +196,14 @@ def test_an_escalated_threat_is_retried_only_after_the_retry_period() -> None:
     snap = sc.snapshot([a, b])
     threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"])
     em = make_em(retry_after_s=30.0)
-    assert em.on_threat(threat, snap).escalations
+    first = em.on_threat(threat, snap)
+    assert first.escalations
     updated = replace(threat, status=ThreatStatus.UPDATED)
     assert em.on_threat(updated, at(snap, snap.t_s + 1.0)) == Decision()  # no churn
+    # the pilot refuses the proposed command: the case waits for the retry period
+    (cmd,) = first.recommendations
+    assert em.on_answer(cmd, False, at(snap, snap.t_s + 2.0)).escalations
+    assert em.on_threat(updated, at(snap, snap.t_s + 3.0)) == Decision()
     again = em.on_threat(updated, at(snap, snap.t_s + 31.0))
     assert again.escalations, "still unsolvable: the operator is reminded"
 

@@ -26,6 +26,8 @@ from gcs_utm.model import (
     Threat,
     ThreatKind,
     ThreatStatus,
+    Track,
+    TrackId,
 )
 from gcs_utm.services.emergency import EmergencyService
 
@@ -94,8 +96,10 @@ def accept_all(em: EmergencyManager, d: Decision, snap: AirspaceSnapshot) -> lis
 
 
 def test_a_threat_still_predicted_after_the_accepted_plan_gets_a_new_version() -> None:
-    """Used to be blocked for as long as the accepted recommendation lived."""
+    """Used to be blocked for as long as the accepted recommendation lived. (Monitoring
+    still predicts the event well ahead: a new plan can start in time.)"""
     snap, threat = sc.scenario_los_2uas()
+    threat = replace(threat, predicted_event_at_s=sc.T0_S + 300.0)
     em = make_em(max_replans=1)
     (acc,) = accept_all(em, em.on_threat(threat, snap), at(snap, 1.0))
     assert acc.selected is not None and acc.selected.plan is not None
@@ -359,7 +363,8 @@ def test_overlapping_threats_build_on_each_others_recommended_plans() -> None:
     for tid, pair in (("t1", ["A", "B"]), ("t2", ["A", "C"]), ("t3", ["B", "C"])):
         threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, pair, tid=tid, event_in_s=100)
         for r in plans(em.on_threat(threat, snap)):
-            latest[r.operation_id] = r
+            if r.selected is not None:  # (a case no plan resolves gets an immediate command)
+                latest[r.operation_id] = r
     ops = dict(snap.operations)
     for k, r in latest.items():
         assert r.selected is not None and r.selected.plan is not None
@@ -382,7 +387,10 @@ def test_an_escalated_case_is_retried_on_the_supervision_tick() -> None:
     td = _FakeTD(opts, set())
     em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
     d = em.on_threat(threat, snap)
-    assert d.escalations and not plans(d)
+    assert d.escalations and all(r.selected is None for r in plans(d))
+    (cmd,) = plans(d)  # the escalation's immediate command: the pilot refuses it
+    assert cmd.command is not None
+    em.on_answer(cmd, False, at(snap, 1.0))
     assert em.supervising()
     assert em.supervise(at(snap, 10.0)) == Decision()  # not before retry_after_s
     td.ok = {frozenset({"A:go_up", "B:keep_plan"})}  # the airspace changed meanwhile
@@ -392,23 +400,60 @@ def test_an_escalated_case_is_retried_on_the_supervision_tick() -> None:
     assert rec.selected.maneuver is Maneuver.GO_UP
 
 
-def test_a_predicted_loss_with_clean_plans_is_reported_not_ignored() -> None:
-    """Every plan already keeps separation (the UAS fly off them): nothing to re-plan, but
-    the decision says so instead of staying silent."""
+def test_a_predicted_loss_with_clean_plans_gets_an_immediate_command() -> None:
+    """Every plan already keeps separation while the tracks predict the loss (a UAS flies
+    off its plan): EM does not keep all. It warns at once and, when the event is within the
+    lead plus 10 s, escalates and proposes an immediate command for the UAS whose track is
+    off its plan; the audit says which and why."""
     snap, threat = sc.scenario_los_2uas()
+    # A's track is 40 m north of its plan, heading at B (B is where its plan says)
+    la, lo = sc.FRAME.point_to_wgs84(-1000.0, 40.0)
+    track = Track(
+        id=TrackId("A"),
+        t_s=snap.t_s,
+        lat_deg=la,
+        lon_deg=lo,
+        alt_amsl_m=100.0,
+        east_m=-1000.0,
+        north_m=40.0,
+        vel_enu_mps=(10.0, 0.0, 0.0),
+        position_sigma_m=1.0,
+        cooperative=True,
+        operation_id=OperationId("A"),
+    )
+    snap = replace(snap, tracks={TrackId("A"): track})
     opts = {
         OperationId("A"): [_alt(snap, "A", Maneuver.KEEP_PLAN, 0.0)],
         OperationId("B"): [_alt(snap, "B", Maneuver.KEEP_PLAN, 0.0)],
     }
     td = _FakeTD(opts, {frozenset({"A:keep_plan", "B:keep_plan"})})
     em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
-    d = em.on_threat(threat, snap)
-    assert not plans(d)
-    assert d.warnings and "off their plans" in d.warnings[0]
-    (audit,) = (a for a in d.audit if a.action == "decision")
+    d0 = em.on_threat(threat, snap)  # the event is 100 s ahead: warned, command deferred
+    assert d0.warnings and "(A off its plan)" in d0.warnings[0]
+    (audit,) = (a for a in d0.audit if a.action == "decision")
     assert "not where its plan says" in str(audit.detail["all_kept"])
-    again = em.supervise(at(snap, em.config.retry_after_s + 1.0))
-    assert not again.warnings  # said once per case
+    assert not plans(d0) and not d0.escalations
+    (later,) = (a for a in d0.audit if a.action == "immediate")
+    assert "deferred to 83.0 s from now" in str(later.detail["reason"])  # 100 - 7 - 10
+    assert em.supervise(at(snap, 82.0)) == Decision()
+    d = em.supervise(at(snap, 83.5))
+    assert not d.warnings  # said once per case
+    (rec,) = plans(d)
+    assert rec.operation_id == "A" and rec.selected is None and rec.command is not None
+    assert d.escalations and "proposed" in d.escalations[0]
+    (why,) = (a for a in d.audit if a.action == "immediate")
+    assert why.detail["selected"] == {"A": rec_action(rec)}
+    again = em.supervise(at(snap, 84.5))
+    assert again == Decision()  # the command is pending: nothing new
+
+
+def rec_action(rec: Recommendation) -> str:
+    """hold, climb or descend: what an immediate command does."""
+    assert rec.command is not None
+    if rec.command.kind is CommandKind.HOLD:
+        return "hold"
+    assert rec.command.target is not None
+    return "climb" if rec.command.target.alt_amsl_m > 100.0 else "descend"
 
 
 def test_an_accepted_plan_older_than_the_airspace_plan_is_not_put_back() -> None:

@@ -5,6 +5,7 @@ strings, signing keys, TLS files and cross-key ranges are checked up front, by t
 from __future__ import annotations
 
 import shutil
+import socket
 import subprocess
 from pathlib import Path
 
@@ -137,3 +138,40 @@ def test_defaults_and_good_values_have_no_problems(tmp_path: Path) -> None:
     )
     settings = load_settings(path)
     assert settings.mavlink.links[1] == "tcp:127.0.0.1:5760"
+
+
+def test_config_check_and_serve_refuse_a_link_that_cannot_be_opened_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A link listed twice, a port another program holds, an address not on this host, an
+    unresolvable peer: ``config check`` names the link in one line, and ``serve`` refuses to
+    start with the same line (it used to end in tracebacks)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as held:
+        held.bind(("127.0.0.1", 0))
+        port = held.getsockname()[1]
+        cases = [
+            (
+                '"udpin:127.0.0.1:14999", "udp:127.0.0.1:14999"',
+                "links[1]: 'udp:127.0.0.1:14999' is the same link",
+            ),
+            (f'"udpin:127.0.0.1:{port}"', f"links[0]: 'udpin:127.0.0.1:{port}' cannot be bound"),
+            ('"udpin:0.0.0.0:0", "udpin:192.0.2.1:0"', "links[1]: 'udpin:192.0.2.1:0' cannot be"),
+            ('"udpout:no-such-host.invalid:14550"', "does not resolve"),
+        ]
+        for links, fragment in cases:
+            code, said = _check(tmp_path, f"[mavlink]\nlinks = [{links}]\n", capsys)
+            assert code == 2 and said.count("\n") == 1 and fragment in said, said
+        code = main(
+            [
+                "serve",
+                "--config",
+                str(tmp_path / "c.toml"),
+                "--headless",
+                "--db",
+                str(tmp_path / "d"),
+            ]
+        )
+        _, err = capsys.readouterr()
+        assert code == 2 and err.count("\n") == 1 and "does not resolve" in err, err
+        code, said = _check(tmp_path, '[mavlink]\nlinks = ["udpin:127.0.0.1:0"]\n', capsys)
+        assert code == 0 and "ok" in said

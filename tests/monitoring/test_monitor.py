@@ -228,6 +228,25 @@ def test_intruder_against_uas() -> None:
     assert t.predicted_event_at_s == pytest.approx((2000 - 150) / 50)
 
 
+def test_intruder_threat_closes_when_tracking_dropped_the_intruder() -> None:
+    """A silent intruder is stale (its threat stays open: no evidence), and once tracking
+    drops it (intruder_drop_after_s) the threat closes: nothing could close it any more."""
+    ops = [_line_op("A", 0)]
+    states = {"A": ((0, 0, 100), (10, 0, 0)), "icao:abc123": ((2000, 0, 130), (-40, 0, 0))}
+    mon = Monitor(FRAME, MonitoringConfig(**LOOSE))
+    intr = frozenset({"icao:abc123"})
+    (t,) = [
+        x
+        for x in mon.cycle(_snapshot(0, states, ops, intruders=intr))
+        if x.kind is ThreatKind.INTRUDER
+    ]
+    silent = frozenset({"icao:abc123"})
+    for k in range(1, 4):
+        assert mon.cycle(_snapshot(k, states, ops, intruders=intr, stale=silent)) == []
+    (c,) = mon.cycle(_snapshot(4, {"A": states["A"]}, ops))
+    assert c.id == t.id and c.status is ThreatStatus.CLOSED
+
+
 def test_degenerate_snapshots() -> None:
     mon = Monitor(FRAME, MonitoringConfig(**LOOSE))
     empty = AirspaceSnapshot(t_s=0, operations={}, tracks={}, geofences=(), prediction=None)

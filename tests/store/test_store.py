@@ -517,9 +517,9 @@ def test_a_bad_location_is_one_store_error(pg_server: object, tmp_path: Path) ->
 
 
 def test_writer_survives_a_postgresql_restart(tmp_path: Path) -> None:
-    """A database failover cuts every connection: the batch in flight fails with a
-    StoreError (its futures say so, nothing is half-written), the writer opens a new
-    connection in the same life, and later writes commit."""
+    """A database failover cuts every connection: the first write after it finds the old
+    connection dead, is kept and retried on a new connection in the same life, and commits
+    (nothing is lost, nothing half-written)."""
     from tests.store import pgserver
 
     server, why = pgserver.start()
@@ -531,21 +531,12 @@ def test_writer_survives_a_postgresql_restart(tmp_path: Path) -> None:
         epoch = writer.epoch
         assert writer.audit(AuditEntry(t_s=1.0, actor="a", action="before", subject="s")).result(5)
         server.restart()
-        outcomes: list[str] = []
-        for i in range(50):  # the first write after the cut finds the old connection dead
-            fut = writer.audit(AuditEntry(t_s=2.0 + i, actor="a", action=f"after{i}", subject="s"))
-            try:
-                fut.result(30)
-                outcomes.append("ok")
-                break
-            except StoreError:
-                outcomes.append("lost")
-        assert outcomes[-1] == "ok" and len(outcomes) <= 3, outcomes
+        fut = writer.audit(AuditEntry(t_s=2.0, actor="a", action="after", subject="s"))
+        assert fut.result(30) > 1
         writer.save_threat(_threat()).result(30)
         writer.close()
         with open_store(url) as store:
-            actions = [e.action for e in store.load_audit()]
-            assert actions[0] == "before" and actions[-1] == f"after{len(outcomes) - 1}"
+            assert [e.action for e in store.load_audit()] == ["before", "after"]
             assert [t.id for t in store.load_threats()] == ["T1"]
             assert raw_execute(url, "SELECT epoch FROM threats") == [(epoch,)]
     finally:

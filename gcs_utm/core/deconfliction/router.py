@@ -21,16 +21,34 @@ class Router:
 
     ``now`` is when the new plan starts (the vehicle has it by then) and ``cur`` where the
     UAS is expected to be at that time; vertical legs take the envelope's climb or descent
-    rate."""
+    rate. From inside an obstacle every route first leaves it by the closest border point,
+    ``escape_m`` beyond it (see :meth:`exit_xyz`)."""
 
-    def __init__(
-        self, op: Operation, planner: VisibilityPlanner, now: float, cur: FloatArray, lp: LocalPlan
+    def __init__(  # noqa: PLR0917 - the planner's context, positional as before
+        self,
+        op: Operation,
+        planner: VisibilityPlanner,
+        now: float,
+        cur: FloatArray,
+        lp: LocalPlan,
+        escape_m: float = 0.0,
     ) -> None:
         self.op = op
         self.planner = planner
         self.now = now
         self.cur = cur
         self.lp = lp
+        self.escape_m = escape_m
+
+    def inside(self) -> bool:
+        """Is the UAS (at the start time) inside an inflated geofence?"""
+        return not self.planner.free(self.cur[:2])
+
+    def exit_xyz(self) -> FloatArray:
+        """The closest point outside every obstacle, ``escape_m`` beyond the border, at the
+        current altitude (the current position when outside)."""
+        out2 = self.planner.exit_point(self.cur[:2], self.escape_m)
+        return np.array([out2[0], out2[1], self.cur[2]])
 
     def _fly(self, pts: Sequence[FloatArray], t0: float) -> LocalPlan:
         xyz = np.array([np.asarray(p, dtype=np.float64) for p in pts])
@@ -106,9 +124,8 @@ class Router:
         plan = self._route_via(self.cur, self.now, [], 1)
         return None if plan is None else (plan, 0)
 
-    def escape(self, extra_m: float) -> tuple[LocalPlan, int] | None:
-        out2 = self.planner.exit_point(self.cur[:2], extra_m)
-        out = np.array([out2[0], out2[1], self.cur[2]])
+    def escape(self) -> tuple[LocalPlan, int] | None:
+        out = self.exit_xyz()
         # Rejoin at the first plan waypoint ahead that is outside every obstacle.
         plan = self._route_via(out, self.now, [self.cur], 1)
         if plan is None:
@@ -166,9 +183,31 @@ class Router:
         return self._join(self._fly(path, self.now), 1), 0
 
     def land_at(self, site: FloatArray) -> tuple[LocalPlan, int] | None:
-        """Cruise at the current altitude to above ``site``, then descend onto it."""
+        """Cruise at the current altitude to above ``site``, then descend onto it. From
+        inside an obstacle, leave it first (:meth:`exit_xyz`); the plan is then verified
+        from the exit point on (the leg out is unavoidable)."""
+        head, start = ([self.cur], self.exit_xyz()) if self.inside() else ([], self.cur)
         above = np.array([site[0], site[1], self.cur[2]])
-        path = self._path3d(self.cur, above)
+        path = self._path3d(start, above)
         if path is None:
             return None
-        return self._fly([*path, site], self.now), 0
+        return self._fly([*head, *path, site], self.now), len(head)
+
+    def hold_outside(self, hold_s: float) -> tuple[LocalPlan, int]:
+        """Leave the obstacle by the closest border point (:meth:`exit_xyz`) and hold there
+        for ``hold_s`` (a vehicle that cannot hover ends its plan there and circles it);
+        verified from the exit point on."""
+        out = self.exit_xyz()
+        plan = self._fly([self.cur, out], self.now)
+        if not self.op.performance().can_hover:
+            return plan, 1
+        t_end = float(plan.t[-1]) + hold_s
+        return (
+            LocalPlan(
+                np.append(plan.e, out[0]),
+                np.append(plan.n, out[1]),
+                np.append(plan.z, out[2]),
+                np.append(plan.t, t_end),
+            ),
+            1,
+        )

@@ -95,19 +95,38 @@ def resolve_single(  # noqa: PLR0917 - the method's arguments, passed on
             verify_from=verify_from,
         )
 
-    router = Router(op, planner, t0, cur, lp)
-    if not planner.free(cur[:2]):
-        if Maneuver.ESCAPE in want:
-            add(
-                Maneuver.ESCAPE,
-                router.escape(cfg.escape_distance_m),
-                "leave by the closest border point, then rejoin the plan",
-            )
+    router = Router(op, planner, t0, cur, lp, cfg.escape_distance_m)
+    if router.inside():
+        _from_inside(td, router, want, add)
     else:
         _routes(td, op, router, want, add)
-        _abandon(td, op, router, want, add)
+    _abandon(td, op, router, want, add)
     td.flush(snapshot.t_s)
     return out
+
+
+def _from_inside(
+    td: TacticalDeconfliction,
+    router: Router,
+    want: set[Maneuver],
+    add: Callable[[Maneuver, tuple[LocalPlan, int] | None, str], None],
+) -> None:
+    """Inside a geofence grown by the UAS's volume: leave by the closest border point and
+    rejoin the plan (escape) or, whatever the plan does (its destination may lie inside the
+    fence), leave and hold outside; return home and the landing sites leave first too
+    (:func:`_abandon`, :meth:`Router.land_at`). So the UAS always has a way out offered."""
+    if Maneuver.ESCAPE in want:
+        add(
+            Maneuver.ESCAPE,
+            router.escape(),
+            "leave by the closest border point, then rejoin the plan",
+        )
+    if Maneuver.HOLD in want:
+        add(
+            Maneuver.HOLD,
+            router.hold_outside(td.config.horizon_s),
+            "leave by the closest border point and hold there",
+        )
 
 
 def _routes(

@@ -47,10 +47,12 @@ from gcs_utm.core.deconfliction.geometry import (
     separation_screen,
 )
 from gcs_utm.core.deconfliction.intruder import intruder_plan, resolve_intruder
+from gcs_utm.core.deconfliction.overshoot import overshoot_flags
 from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags, turn_flags
 from gcs_utm.core.deconfliction.scoring import Neighbour, Reference, Score, reference, score_many
 from gcs_utm.core.deconfliction.single import resolve_single
 from gcs_utm.core.deconfliction.timing import timing_candidates
+from gcs_utm.core.deconfliction.tolerance import pair_buffers
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import plan_vs_geofences, plan_vs_plans
 from gcs_utm.geo import LocalFrame
@@ -290,14 +292,13 @@ class TacticalDeconfliction:
     def pair_minima(self, a: Operation, b: Operation) -> tuple[float, float]:
         """(horizontal, vertical) minima TD keeps between the plans of ``a`` and ``b``: the
         pair's effective minima (one definition of loss, :mod:`..monitoring.loss`) plus the
-        two vehicles' tracking tolerances horizontally (in sphere mode, on the 3D distance).
-        A plan is flown with a lag at its corners; a candidate that keeps only the bare
-        minima is flown into a loss by a few metres."""
+        two vehicles' tracking tolerances, horizontal and vertical (sphere mode: horizontal
+        on the 3D distance). A plan is flown with a lag at its corners and an altitude error;
+        a candidate keeping only the bare minima is flown into a loss by a few metres."""
         h, v = self.monitoring.effective_minima(a.operational_volume_m, b.operational_volume_m)
         if not self.tracking_buffers:
             return h, v
-        buf = a.performance().tracking_tolerance_m() + b.performance().tracking_tolerance_m()
-        return h + buf, v + buf if self.monitoring.spherical else v
+        return pair_buffers(a.performance(), b.performance(), h, v, self.monitoring.spherical)
 
     def _pair_config(self, a: Operation, b: Operation) -> MonitoringConfig:
         """Monitoring's configuration with :meth:`pair_minima` as the pair's minima (the
@@ -511,11 +512,10 @@ class TacticalDeconfliction:
         assert plan is not None
         self._local[id(plan)] = (plan, c.full())  # its local form, without a second conversion
         env = op.performance()
-        unsafe = (
-            envelope_flags(c.new, c.old, env)
-            + turn_flags(c.new, c.old, env.turn_radius_m)
-            + floor_flags(c.new, c.old, self.floor_amsl(op), lands=c.maneuver in _ABANDON)
-        )
+        unsafe = envelope_flags(c.new, c.old, env) + turn_flags(c.new, c.old, env.turn_radius_m)
+        unsafe += floor_flags(c.new, c.old, self.floor_amsl(op), lands=c.maneuver in _ABANDON)
+        filed, first_t = self.local_plan(op.plan), c.new.t[min(c.verify_from, len(c.new) - 1)]
+        unsafe += overshoot_flags(c.full(), first_t, filed, c.fences, c.geofences, op)
         if unsafe:
             return unsafe, plan, []
         checked = plan

@@ -42,6 +42,7 @@ DEFAULT_POLICY: dict[str, str] = {
     ThreatKind.COMMUNICATION_FAILURE.value: "alert_and_geofence",
     ThreatKind.ALERT_WARNING.value: "geofence_from_area",
     ThreatKind.INTRUDER.value: "vertical_avoidance",
+    ThreatKind.REMOTE_ID_MISMATCH.value: "warn",  # the broadcast is wrong, not the flight
 }
 
 

@@ -9,6 +9,7 @@ from gcs_utm.model import (
     AuditEntry,
     Command,
     Geofence,
+    GeofenceId,
     Maneuver,
     Operation,
     OperationId,
@@ -23,6 +24,7 @@ REROUTE_MANEUVERS = frozenset(
     {
         Maneuver.REROUTE,
         Maneuver.ESCAPE,
+        Maneuver.HOLD,  # offered from inside a geofence only: leave it and hold outside
         Maneuver.DIRECT_TO_GOAL,
         Maneuver.BACK_TO_PLAN,
         Maneuver.NEXT_WAYPOINT,
@@ -53,6 +55,8 @@ class Decision:
     superseded: tuple[RecommendationId, ...] = ()
     audit: tuple[AuditEntry, ...] = ()
     warnings: tuple[str, ...] = ()
+    removed_geofences: tuple[GeofenceId, ...] = ()
+    """Geofences EM created that are to go (their threat closed)."""
 
     def merge(self, other: Decision) -> Decision:
         return Decision(
@@ -63,6 +67,7 @@ class Decision:
             superseded=self.superseded + other.superseded,
             audit=self.audit + other.audit,
             warnings=self.warnings + other.warnings,
+            removed_geofences=self.removed_geofences + other.removed_geofences,
         )
 
 

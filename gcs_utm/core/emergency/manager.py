@@ -1,18 +1,15 @@
 """Emergency Management: threat -> policy -> TD alternatives -> joint selection -> actions.
 
-Pure (no I/O, no clock): time comes from the snapshot (``AirspaceSnapshot.t_s``). State is
-the open cases (one per threat id: the threat, the action taken, per-UAS excluded maneuvers and
-re-plan counts, extra dynamic geofences) and the current version of every recommendation.
+Pure (no I/O, no clock: time is ``AirspaceSnapshot.t_s``). State: the open cases (one per
+threat id, :class:`~.decision.Case`) and the current version of every recommendation.
 
 Guarantees:
 - every plan change or command leaves as a :class:`Recommendation` with a deadline
   (predicted event time minus ``deadline_margin_s``, never less than ``min_response_s`` from
   now); in autonomous mode it is born ACCEPTED and commands are also returned to execute;
-- a rejection or an expiry re-plans without the refused maneuver (a new version of the same
-  recommendation id) up to ``max_replans`` times, then escalates to the operator; when no
-  feasible alternative exists EM escalates: nothing is dropped silently;
-- every decision yields an :class:`AuditEntry` with all alternatives, their cost and risk, the
-  weights, the selection and the reason.
+- a rejection or an expiry re-plans without the refused maneuver (a new version of the id) up
+  to ``max_replans`` times, then escalates; no feasible alternative: EM escalates (no drop);
+- every decision is audited (:class:`AuditEntry`: alternatives, cost, risk, weights, reason).
 """
 
 from __future__ import annotations
@@ -33,6 +30,8 @@ from gcs_utm.core.emergency.decision import (
     Decision,
 )
 from gcs_utm.core.emergency.geofences import area, link_loss, suspend
+from gcs_utm.core.emergency.immediate import held_by, keep_all, propose, too_late
+from gcs_utm.core.emergency.lead import ResponseTimes
 from gcs_utm.core.emergency.selection import (
     STAY_DETAIL,
     Selection,
@@ -44,6 +43,7 @@ from gcs_utm.core.emergency.selection import (
 )
 from gcs_utm.core.emergency.supervision import (
     deviation_start,
+    escalate_safe,
     on_outcome,
     safe_command,
     settled_at,
@@ -70,9 +70,9 @@ from gcs_utm.model import (
 )
 
 KEPT_REASON = (
-    "every UAS keeps its plan: TD finds the plans (a finished fixed wing's as its loiter "
-    "circle) clear of each other by the buffered minima, while Monitoring predicts the loss "
-    "from the tracks: a UAS is not where its plan says"
+    "every plan (re-timed from the vehicles' progress; a finished fixed wing's as its loiter "
+    "circle) keeps the buffered minima, while Monitoring predicts the loss from the tracks: "
+    "a UAS is not where its plan says; immediate command proposed"
 )
 """Why a multi-UAS decision that moves nobody moves nobody (``all_kept`` in its audit)."""
 
@@ -100,12 +100,13 @@ class EmergencyManager:
         answer_delay_s: float | None = None,
     ) -> None:
         """``answer_delay_s``: when an automatic operator answers (``--auto-accept``), its
-        delay; None when a person answers (then ``emergency.expected_answer_s``)."""
+        delay; None when a person answers (then ``emergency.expected_answer_s``). Measured
+        answer, upload and command times go to :attr:`lead` (see .lead)."""
         self.frame = frame
         self.config = config
         self.td = td
         self.monitoring = monitoring
-        self.answer_delay_s = answer_delay_s
+        self.lead = ResponseTimes(config, answer_delay_s)
         self._cases: dict[ThreatId, Case] = {}
         self._recs: dict[RecommendationId, Recommendation] = {}
         # versions of an id numbered elsewhere (another instance of a cluster): the next
@@ -126,6 +127,9 @@ class EmergencyManager:
 
     def case(self, threat_id: ThreatId) -> Case | None:
         return self._cases.get(threat_id)
+
+    def adopt(self, case: Case) -> None:  # a previous life's case, as it is (see .adoption)
+        self._cases[case.threat.id] = case
 
     def record(self, rec: Recommendation) -> Recommendation:
         """Store ``rec`` as the current version of its id; returns it."""
@@ -305,10 +309,10 @@ class EmergencyManager:
 
     def plan_start(self, threat: Threat, now: float) -> float:
         """When a plan decided now can start: the expected answer (none in autonomous mode;
-        the automatic operator's delay; else ``expected_answer_s``, never past the deadline),
-        the upload and a margin. The vehicle has the plan before then, and its first waypoint
-        lies ahead of it."""
-        return self._start(now, self._deadline(threat, now))
+        measured per vehicle, else the automatic operator's delay or ``expected_answer_s``,
+        never past the deadline), the upload and a margin (see .lead). The vehicle has the
+        plan before then, and its first waypoint lies ahead of it."""
+        return self.lead.plan_start(threat.uas_ids, now, self._deadline(threat, now))
 
     def supervision_due(self, rec: Recommendation) -> float | None:
         """When an accepted ``rec`` is settled (see :mod:`.supervision`); None when its case
@@ -318,22 +322,13 @@ class EmergencyManager:
 
     def manoeuvre_start(self, rec: Recommendation) -> float:
         """When the plan of ``rec`` leaves the UAS's path (its lead-in ends)."""
-        return self._start(rec.created_t_s, rec.deadline_t_s)
+        return self.lead.plan_start((rec.operation_id,), rec.created_t_s, rec.deadline_t_s)
 
-    def _start(self, now: float, deadline_t_s: float) -> float:
-        cfg = self.config
-        expected = cfg.expected_answer_s if self.answer_delay_s is None else self.answer_delay_s
-        answer = 0.0 if cfg.autonomous else min(deadline_t_s - now, expected)
-        return now + answer + cfg.upload_time_s + cfg.start_margin_s
-
-    def earliest_receipt(self, now: float) -> float:
+    def earliest_receipt(self, now: float, op_ids: Sequence[OperationId] = ()) -> float:
         """The earliest the vehicle can have a plan decided now: an immediate answer (or the
         automatic operator's delay) plus the upload. A new plan carries timed points of the
         current path from then to its start (TD's lead-in)."""
-        answer = 0.0 if self.answer_delay_s is None else self.answer_delay_s
-        if self.config.autonomous:
-            answer = 0.0
-        return now + answer + self.config.upload_time_s
+        return self.lead.earliest_receipt(op_ids, now)
 
     def audit(self, t_s: float, action: str, subject: str, detail: dict[str, object]) -> AuditEntry:
         return AuditEntry(t_s=t_s, actor=ACTOR, action=action, subject=str(subject), detail=detail)
@@ -439,11 +434,16 @@ class EmergencyManager:
     def _multi(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
         """Charged cords + joint selection under the priority rule (selection tiers). A UAS
         without a verified option stays on its plan (escalated for it) while the others
-        move; the case escalates only when no combination resolves the conflict."""
+        move. An immediate command is proposed (.immediate) when the event is nearer than a
+        new plan's start, when no combination resolves the conflict, or when every plan
+        (re-timed from the vehicles' progress by the snapshot provider) is kept."""
         snapshot = self._intended(snapshot, case)
         case.operations = dict(snapshot.operations)
         now = snapshot.t_s
         t = case.threat
+        late = too_late(self, t, now)  # with plans of the case in force: only if they change
+        if late and not self._in_force(case):
+            return propose(self, case, snapshot, late, t.uas_ids)
         options, tiered, compatible = self._joint(case, snapshot, buffered=True)
         if tiered is None:
             # No combination keeps the vehicles' tracking tolerances free: the best one that
@@ -452,31 +452,19 @@ class EmergencyManager:
         sel = None if tiered is None else tiered.selection
         detail = self._detail(options, sel, "loss of separation: charged cords + joint selection")
         if tiered is None:
-            msg = (
-                f"{t.id}: no conflict-free combination of alternatives for "
-                f"{', '.join(t.uas_ids)}; operator action needed"
-            )
-            return Decision(
-                escalations=(msg,), audit=(self.audit(now, "escalation", t.id, detail),)
-            )
+            msg = f"{t.id}: no conflict-free combination of alternatives for {', '.join(t.uas_ids)}"
+            audit = Decision(audit=(self.audit(now, "escalation", t.id, detail),))
+            return audit.merge(propose(self, case, snapshot, msg, t.uas_ids))
         detail["moved_up_to_priority"] = tiered.moved_up_to_priority
         kept = all(a.maneuver is Maneuver.KEEP_PLAN for a in tiered.selection.chosen.values())
         if kept:
             detail["all_kept"] = KEPT_REASON
         d = Decision(audit=(self.audit(now, "decision", t.id, detail),))
+        if late and not kept:
+            return d.merge(propose(self, case, snapshot, late, t.uas_ids))
         d = d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
-        if kept and not self._in_force(case) and not case.off_plan_escalated:
-            case.off_plan_escalated = True
-            # Monitoring predicts the loss from the tracks, yet every plan is clear of it: the
-            # UAS are not where their plans say. Nothing to re-plan; the operator is warned
-            # (conformance threats handle the deviation itself).
-            # (With plans of this case in force, keeping them is supervision's normal answer
-            # while the UAS turn onto them.)
-            msg = (
-                f"{t.id}: loss of separation predicted for {', '.join(t.uas_ids)} although "
-                "their plans keep separation (off their plans?)"
-            )
-            d = d.merge(Decision(warnings=(msg,)))
+        if kept and not self._in_force(case):
+            d = d.merge(keep_all(self, case, snapshot))  # never keep all: see .immediate
         return d
 
     def _joint(
@@ -497,7 +485,7 @@ class EmergencyManager:
                 t,
                 snapshot,
                 start_t_s=self.plan_start(t, now),
-                lead_in_from_t_s=self.earliest_receipt(now),
+                lead_in_from_t_s=self.earliest_receipt(now, t.uas_ids),
             )
             for op_id, alts in options.items():
                 banned = case.excluded.get(op_id, set())
@@ -629,6 +617,10 @@ class EmergencyManager:
     ) -> Decision:
         now = snapshot.t_s
         t = threat or case.threat
+        held = held_by(self, op_id, case) if case.action == "back_to_plan" else None
+        if held:  # off its plan on purpose: not sent back into the loss it avoids
+            why: dict[str, object] = {"reason": f"{op_id} follows {held}'s immediate command"}
+            return Decision(audit=(self.audit(now, "deferred", case.threat.id, why),))
         snapshot = self._intended(snapshot, case)
         case.operations = dict(snapshot.operations)
         case.modes[op_id] = f"single:{','.join(sorted(m.value for m in maneuvers))}"
@@ -640,7 +632,7 @@ class EmergencyManager:
             maneuvers=allowed,
             extra_geofences=tuple(case.geofences),
             start_t_s=self.plan_start(t, now),
-            lead_in_from_t_s=self.earliest_receipt(now),
+            lead_in_from_t_s=self.earliest_receipt(now, (op_id,)),
         )
         cfg = self.config
         if case.action == "land_or_home":
@@ -677,7 +669,7 @@ class EmergencyManager:
                 d = self.issue(case, op_id, now, command=cmd, reason=msg)
                 return d.merge(Decision(escalations=(msg,), audit=audit))
             msg = f"{case.threat.id}: no feasible alternative for {op_id} ({t.kind.value})"
-            return Decision(escalations=(msg,), audit=audit)
+            return Decision(audit=audit).merge(escalate_safe(self, case, [op_id], now, msg))
         d = Decision(audit=(self.audit(now, "decision", case.threat.id, detail),))
         return d.merge(
             self.issue(
@@ -704,7 +696,7 @@ class EmergencyManager:
                 op_id,
                 snapshot,
                 self.plan_start(case.threat, now),
-                self.earliest_receipt(now),
+                self.earliest_receipt(now, (op_id,)),
             )
             if x.maneuver not in banned
         ]
@@ -755,13 +747,13 @@ class EmergencyManager:
         if rec.selected is not None:
             case.excluded.setdefault(op_id, set()).add(rec.selected.maneuver)
         mode = case.modes.get(op_id, "")
-        if mode == MODE_COMMAND or n > self.config.max_replans:
-            what = "a command" if mode == MODE_COMMAND else f"{n - 1} re-plans"
-            msg = f"{rec.threat_id}: {op_id} {why} {what}; operator action needed"
-            return Decision(
-                escalations=(msg,),
-                audit=(self.audit(now, "escalation", rec.threat_id, {"reason": msg}),),
-            )
+        if mode == MODE_COMMAND:  # the pilot refused (or let expire) the command itself
+            msg = f"{rec.threat_id}: {op_id} {why} a command; operator action needed"
+            audit = self.audit(now, "escalation", rec.threat_id, {"reason": msg})
+            return Decision(escalations=(msg,), audit=(audit,))
+        if n > self.config.max_replans:  # escalate with a command to confirm
+            msg = f"{rec.threat_id}: {op_id} {why} {n - 1} re-plans"
+            return propose(self, case, snapshot, msg, [op_id], choose=mode == MODE_MULTI)
         if mode == MODE_MULTI:
             return self._multi(case, snapshot)
         if mode == MODE_INTRUDER:

@@ -26,6 +26,7 @@ an upload that failed, each lead to a new decision (paper §4.4: nothing is drop
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -151,21 +152,38 @@ def _final_command_in_force(case: Case, live: list[Recommendation]) -> bool:
     )
 
 
-def escalate_safe(
-    em: EmergencyManager, case: Case, op_ids: list[OperationId], now: float, why: str
+def escalate_safe(  # noqa: PLR0917 - the decision's context, then what to propose
+    em: EmergencyManager,
+    case: Case,
+    op_ids: list[OperationId],
+    now: float,
+    why: str,
+    commands: Mapping[OperationId, Command] | None = None,
 ) -> Decision:
-    """Escalate with ``why`` and propose the threat's safe command to each UAS in ``op_ids``."""
+    """Escalate with ``why`` and propose a safe command to each UAS in ``op_ids``: the one in
+    ``commands`` (EM's immediate command, see .immediate), else the threat's safe command."""
     kind = safe_command(case.threat.kind)
-    msg = f"{why}; operator action needed: {kind.value} proposed"
+    cmds = {k: Command(kind=kind, operation_id=k) for k in dict.fromkeys(op_ids)}
+    cmds.update(commands or {})
+    what = (
+        kind.value if not commands else ", ".join(f"{describe(c)} for {k}" for k, c in cmds.items())
+    )
+    msg = f"{why}; operator action needed: {what} proposed"
     d = Decision(
         escalations=(msg,),
         audit=(em.audit(now, "escalation", case.threat.id, {"reason": msg}),),
     )
-    for op_id in dict.fromkeys(op_ids):
+    for op_id, cmd in cmds.items():
         case.modes[op_id] = MODE_COMMAND
-        cmd = Command(kind=kind, operation_id=op_id)
         d = d.merge(em.issue(case, op_id, now, command=cmd, reason=msg))
     return d
+
+
+def describe(cmd: Command) -> str:
+    """A command in words: its kind, and a GOTO's target altitude."""
+    if cmd.kind is CommandKind.GOTO and cmd.target is not None:
+        return f"goto {cmd.target.alt_amsl_m:.1f} m AMSL in place"
+    return cmd.kind.value
 
 
 def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answer

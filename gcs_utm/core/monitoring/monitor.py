@@ -448,7 +448,9 @@ class Monitor:
 
     def _update_unseen(self, snapshot: AirspaceSnapshot, ev: _Evaluation) -> list[Threat]:
         """Conditions not met this cycle: count clear cycles (fresh evidence, clear by the
-        margin) and close after ``close_cycles``, or at once when the plan is over."""
+        margin) and close after ``close_cycles``, or at once when the plan is over or the
+        intruder gone (tracking drops an intruder silent for ``intruder_drop_after_s``: with no
+        track left, nothing would ever be fresh evidence of its threat again)."""
         cfg = self.config
         t = snapshot.t_s
         out: list[Threat] = []
@@ -460,7 +462,7 @@ class Monitor:
                 (o := snapshot.operations.get(OperationId(u))) is None
                 or o.state in (OperationState.LANDED, OperationState.ENDED)
                 for u in self._op_ids(key)
-            )
+            ) or (key[0] == "INTR" and key[2] not in snapshot.tracks)  # the intruder is gone
             if not ended and (key in ev.marginal or not self._fresh(key, ev)):
                 st.clear = 0 if key in ev.marginal else st.clear
                 st.present = 0 if key in ev.marginal else st.present

@@ -141,6 +141,15 @@ class TrackingConfig:
         min=0.01,
         unit="s",
     )
+    plan_offset_persist_s: float = setting(
+        10.0,
+        "an altitude offset from the plan seen on one side of it for this long persists: "
+        "the prediction keeps it (its smallest size over the last one to two such spans) "
+        "instead of decaying it",
+        min=0.5,
+        max=3600.0,
+        unit="s",
+    )
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):

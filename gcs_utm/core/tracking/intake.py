@@ -6,7 +6,8 @@
 Association: a measurement's ``operation_id`` if known, else its MAVLink ``sys_id``, else its
 ICAO address, mapped to the operation. Anything else with an ICAO address is the intruder
 ``"icao:<hex>"``; an unassigned MAVLink vehicle is the intruder ``"sysid:<n>"``, or
-``"sysid:<n>@<host:port>"`` when the measurement names the vehicle's address.
+``"sysid:<n>@<host:port>"`` when the measurement names the vehicle's address; an aircraft
+known only by its Remote ID broadcast (``vehicle`` ``"rid:<id>"``) is the intruder ``"rid:<id>"``.
 """
 
 from __future__ import annotations
@@ -119,6 +120,8 @@ class Intake:
         if sys_id is not None:
             tid = f"sysid:{sys_id}@{vehicle}" if vehicle else f"sysid:{sys_id}"
             return Identity(TrackId(tid), False, None, None)
+        if vehicle.startswith("rid:"):  # an aircraft known only by its Remote ID broadcast
+            return Identity(TrackId(vehicle), False, None, None)
         return None
 
     def measurement_records(

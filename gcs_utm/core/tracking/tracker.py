@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from gcs_utm.core.tracking import kalman, kernel, loiter, prediction
+from gcs_utm.core.tracking import kalman, kernel, loiter, offsets, prediction
 from gcs_utm.core.tracking.config import TrackingConfig
 from gcs_utm.core.tracking.intake import Identity, Intake
 from gcs_utm.core.tracking.layout import (
@@ -149,6 +149,7 @@ class Tracker:
         # Closest plan segment found by the last locate (-1: none): the windowed search
         # starts there (see PlanTable.locate). A cache only: never changes a result.
         self._seg_hint = np.zeros(0, dtype=np.intp)
+        self._alt_offsets = offsets.AltitudeOffsets(config.plan_offset_persist_s)  # rows: _x's
         self._ids: list[TrackId] = []
         self._op_ids: list[OperationId | None] = []
         self._icao: list[Icao24 | None] = []
@@ -219,6 +220,7 @@ class Tracker:
         self._geom_m = grown(self._geom_m)
         self._loiter_m = grown(self._loiter_m)
         self._seg_hint = grown(self._seg_hint, -1)
+        self._alt_offsets.grow(cap, self._n)
         self._cap = cap
 
     def _row_for(self, ident: Identity, new: tuple[list[TrackId], list[TrackId]]) -> int:
@@ -248,6 +250,7 @@ class Tracker:
         self._geom_m[row] = op.flight_geometry_m if op is not None else 0.0
         self._loiter_m[row] = loiter.loiter_radius_m(op) if op is not None else 0.0
         self._seg_hint[row] = -1
+        self._alt_offsets.reset(np.array([row], dtype=np.intp))
         return row
 
     def _compact(self, keep: npt.NDArray[np.bool_]) -> None:
@@ -258,6 +261,7 @@ class Tracker:
         ):  # fmt: skip
             arr = getattr(self, name)
             arr[: len(idx)] = arr[idx]
+        self._alt_offsets.compact(idx)
         removed = [self._ids[i] for i in np.flatnonzero(~keep)]
         self._ids = [self._ids[i] for i in idx]
         self._op_ids = [self._op_ids[i] for i in idx]
@@ -495,6 +499,11 @@ class Tracker:
     def __len__(self) -> int:
         return self._n
 
+    def last_accepted_t_s(self, track_id: TrackId) -> float | None:
+        """When the track last accepted a measurement (capture time); None: no such track."""
+        row = self._row.get(track_id)
+        return None if row is None else float(self._t[row])
+
     def covariance(self, track_id: TrackId) -> FloatArray:
         """The 6x6 covariance of a track over (east, north, up, v_east, v_north, v_up)."""
         row = self._row[track_id]
@@ -669,6 +678,7 @@ class Tracker:
             sigma[block] = block_sigma
             for axis in range(3):
                 points[block, :, axis] = axes[axis]
+        self._keep_persistent_alt(rows[follow], tau0[follow], points[:, :, 2], ahead0, steps)
         # Loitering fixed wings onto their circle (few rows, written through the result).
         loiter.overlay(
             [points[:, :, axis] for axis in range(3)],
@@ -721,6 +731,18 @@ class Tracker:
                     axes[axis][fr] = f_axes[axis]
                 sigma[fr] = f_sigma
         return axes, sigma
+
+    def _keep_persistent_alt(
+        self, fr: IntArray, tau0: FloatArray, alt: FloatArray, ahead0: FloatArray, steps: FloatArray
+    ) -> None:
+        """Rows ``fr`` follow their plans from plan times ``tau0``: sample their altitude
+        offsets from the plan and keep the persistent part in ``alt`` (:mod:`.offsets`)."""
+        if len(fr):
+            now = self._plans.follow(self._plan_row[fr], tau0, np.zeros(len(fr)), 1.0, 1)
+            self._alt_offsets.observe(fr, self._t[fr], self._x[fr, 2, kalman.POS] - now[2][:, 0])
+            bias = self._alt_offsets.persistent(fr)
+            decay_s = self.config.plan_offset_decay_s
+            offsets.keep_persistent(alt, fr, bias, ahead0, steps, decay_s=decay_s)
 
     def tracks_at(self, t_s: float) -> TrackMap:
         """All tracks propagated to ``t_s`` (``Track.t_s == t_s``; the filter state itself is

@@ -1,0 +1,297 @@
+"""The remote pilot station's end of the answer protocol: the project's reference client.
+
+An answer is delivered when gcs-utm says it got it, not when the broker took it: a broker
+restarted without persistence (mosquitto's default) forgets gcs-utm's session, and an answer
+it receives before gcs-utm has subscribed again reaches nobody. So (docs/mqtt.md, "Answer
+delivery"):
+
+- the station keeps each answer until gcs-utm *acknowledges* it: a ``recommendation_status``
+  on the operator's ``status`` topic whose ``answer`` names the same recommendation id,
+  version and decision (outcome ``accepted``, ``duplicate`` or ``refused`` with its reason);
+- until then it re-sends the answer (QoS 1) after each of its own (re)connections, when
+  gcs-utm announces it is online (the retained ``bridge_status``, which the bridge publishes
+  only once its subscriptions are in place), when gcs-utm re-publishes a recommendation the
+  station has answered (gcs-utm re-asks what it has no answer for), and every ``resend_s``;
+- gcs-utm takes a repeated answer as a ``duplicate`` and changes nothing, so re-sending
+  never changes a decision; it does add an ``answers`` row and an audit entry each time.
+
+The session is MQTT 5 with a fixed client id, clean start off and the configured session
+expiry, subscriptions at QoS 1 (a broker that keeps the session delivers what was published
+while the station was away). Reconnects back off like the bridge's (equal jitter).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import random
+import ssl
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any
+
+import aiomqtt
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
+
+from adapters.mqtt.config import MqttConfig
+from adapters.mqtt.topics import Topics
+from gcs_utm.clock import Clock
+from gcs_utm.messages import PilotDecision
+
+_log = logging.getLogger(__name__)
+
+_QOS = 1
+
+
+@dataclass(frozen=True, slots=True)
+class AnswerAck:
+    """gcs-utm's acknowledgement of one answer: ``outcome`` is ``accepted``, ``duplicate`` or
+    ``refused`` (then ``reason`` says why); ``state`` is the recommendation's state after it."""
+
+    recommendation_id: str
+    version: int
+    decision: str
+    outcome: str
+    state: str | None
+    reason: str
+
+
+@dataclass(slots=True)
+class _Pending:
+    payload: bytes
+    decision: str
+    acked: asyncio.Future[AnswerAck]
+
+
+class PilotStation:
+    """``async with PilotStation(config, "alice", clock) as station:`` connects as operator
+    ``alice`` (``config.username``/``password`` are its broker credentials; ``client_id``
+    names its session, ``station-<operator>`` by default: never the UTM's own) until the
+    block exits. :attr:`recommendations` receives each
+    ``recommendation`` message (decoded JSON); :meth:`answer` sends an answer and returns
+    gcs-utm's acknowledgement."""
+
+    def __init__(
+        self,
+        config: MqttConfig,
+        operator: str,
+        clock: Clock,
+        *,
+        resend_s: float = 5.0,
+        client_id: str | None = None,
+        rng: random.Random | None = None,
+    ) -> None:
+        if not resend_s > 0.0:
+            raise ValueError(f"resend_s: expected a positive number of seconds, got {resend_s}")
+        self._config = config
+        self.operator = operator
+        self._clock = clock
+        self.resend_s = resend_s
+        self.client_id = client_id or f"station-{operator}"
+        self._rng = rng or random.Random()
+        self.topics = Topics(config.topic_prefix)
+        self.recommendations: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        self._pending: dict[tuple[str, int], _Pending] = {}
+        self._client: aiomqtt.Client | None = None
+        self._task: asyncio.Task[None] | None = None
+        self.connects = 0
+        # how many times each answer was published, by (recommendation id, version)
+        self.sent: dict[tuple[str, int], int] = {}
+
+    async def __aenter__(self) -> PilotStation:
+        self._task = asyncio.create_task(self._run(), name=f"station-{self.operator}")
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+            self._task = None
+
+    @property
+    def unacknowledged(self) -> list[tuple[str, int]]:
+        """(recommendation id, version) of the answers gcs-utm has not acknowledged yet."""
+        return list(self._pending)
+
+    async def answer(
+        self,
+        recommendation_id: str,
+        version: int,
+        decision: PilotDecision,
+        *,
+        alternative_index: int | None = None,
+        timeout_s: float | None = None,
+    ) -> AnswerAck:
+        """Answer one recommendation version and wait for gcs-utm's acknowledgement (raises
+        TimeoutError after ``timeout_s``; the answer is still re-sent until acknowledged or
+        the station stops)."""
+        key = (recommendation_id, version)
+        pending = self._pending.get(key)
+        if pending is None:
+            body: dict[str, Any] = {
+                "schema_version": 1,
+                "type": "pilot_answer",
+                "recommendation_id": recommendation_id,
+                "version": version,
+                "decision": decision.value,
+                "t_s": self._clock.now_s(),
+            }
+            if alternative_index is not None:
+                body["alternative_index"] = alternative_index
+            pending = _Pending(
+                json.dumps(body).encode(),
+                decision.value,
+                asyncio.get_running_loop().create_future(),
+            )
+            self._pending[key] = pending
+            await self._send(key)
+        return await asyncio.wait_for(asyncio.shield(pending.acked), timeout_s)
+
+    # ---- the connection ------------------------------------------------------------------
+    async def _send(self, key: tuple[str, int]) -> None:
+        """Send one unacknowledged answer now if connected (else the next connection will)."""
+        pending = self._pending.get(key)
+        client = self._client
+        if pending is None or client is None:
+            return
+        self.sent[key] = self.sent.get(key, 0) + 1
+        try:
+            await client.publish(self.topics.answers(self.operator), pending.payload, qos=_QOS)
+        except aiomqtt.MqttError as exc:  # the connection loop reconnects and re-sends
+            _log.info("station %s: answer %s v%d not sent: %s", self.operator, *key, exc)
+
+    async def _send_all(self) -> None:
+        for key in list(self._pending):
+            await self._send(key)
+
+    def _client_for(self) -> aiomqtt.Client:
+        cfg = self._config
+        tls_params = None
+        if cfg.tls.enabled:
+            tls_params = aiomqtt.TLSParameters(
+                ca_certs=cfg.tls.ca_path or None,
+                certfile=cfg.tls.cert_path or None,
+                keyfile=cfg.tls.key_path or None,
+                cert_reqs=ssl.CERT_REQUIRED,
+            )
+        connect = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+        connect.SessionExpiryInterval = cfg.session_expiry_s
+        return aiomqtt.Client(
+            cfg.host,
+            cfg.port,
+            username=cfg.username or None,
+            password=cfg.password or None,
+            identifier=self.client_id,
+            protocol=aiomqtt.ProtocolVersion.V5,
+            clean_start=False,
+            properties=connect,
+            keepalive=cfg.keepalive_s,
+            timeout=cfg.publish_timeout_s,
+            tls_params=tls_params,
+            tls_insecure=cfg.tls.insecure if cfg.tls.enabled else None,
+        )
+
+    async def _run(self) -> None:
+        failures = 0
+        while True:
+            try:
+                await self._serve_once()
+            except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
+                self._client = None
+                failures += 1
+                cfg = self._config
+                ceiling = min(
+                    cfg.backoff_max_s, cfg.backoff_initial_s * 2.0 ** min(failures - 1, 30)
+                )
+                delay = ceiling / 2.0 + self._rng.uniform(0.0, ceiling / 2.0)
+                _log.info("station %s: %s; reconnecting in %.2f s", self.operator, exc, delay)
+                await asyncio.sleep(delay)
+            else:
+                failures = 0
+
+    async def _serve_once(self) -> None:
+        topics = self.topics
+        async with asyncio.timeout(self._config.connect_timeout_s):
+            client = self._client_for()
+            await client.__aenter__()
+        try:
+            await client.subscribe(
+                [
+                    (topics.recommendations(self.operator), _QOS),
+                    (topics.status(self.operator), _QOS),
+                    (topics.bridge, _QOS),
+                ]
+            )
+            self._client = client
+            self.connects += 1
+            await self._send_all()  # on every (re)connection
+            timer = asyncio.create_task(self._resend_periodically())
+            try:
+                async for message in client.messages:
+                    await self._on_message(str(message.topic), message.payload)
+            finally:
+                timer.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await timer
+        finally:
+            self._client = None
+            with contextlib.suppress(Exception):
+                async with asyncio.timeout(self._config.connect_timeout_s):
+                    await client.__aexit__(None, None, None)
+
+    async def _resend_periodically(self) -> None:
+        while True:
+            await asyncio.sleep(self.resend_s)
+            await self._send_all()
+
+    async def _on_message(self, topic: str, payload: Any) -> None:
+        try:
+            msg = json.loads(payload)
+            kind = msg["type"]
+            key = (str(msg.get("recommendation_id")), int(msg.get("version", -1)))
+        except (ValueError, TypeError, KeyError, AttributeError):
+            _log.warning("station %s: not a gcs-utm message on %s", self.operator, topic)
+            return
+        if kind == "recommendation_status":
+            self._on_status(msg)
+        elif kind == "bridge_status" and msg.get("online"):
+            await self._send_all()  # gcs-utm is subscribed again
+        elif kind == "recommendation":
+            if key in self._pending:
+                await self._send(key)  # asked again: gcs-utm has no answer for it
+            else:
+                self.recommendations.put_nowait(msg)
+
+    def _on_status(self, msg: dict[str, Any]) -> None:
+        answer = msg.get("answer")
+        if not isinstance(answer, dict):
+            return  # a state change, not an acknowledgement
+        version = answer.get("version")
+        key = (str(msg.get("recommendation_id")), version if isinstance(version, int) else -1)
+        pending = self._pending.get(key)
+        if pending is None or answer.get("decision") != pending.decision:
+            return
+        del self._pending[key]
+        if not pending.acked.done():
+            pending.acked.set_result(
+                AnswerAck(
+                    recommendation_id=key[0],
+                    version=key[1],
+                    decision=pending.decision,
+                    outcome=str(answer.get("outcome")),
+                    state=msg.get("state"),
+                    reason=str(msg.get("reason", "")),
+                )
+            )
+
+
+__all__ = ["AnswerAck", "PilotStation"]

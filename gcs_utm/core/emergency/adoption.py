@@ -1,0 +1,69 @@
+"""A restarted service takes over the case of a threat its previous life left open.
+
+After a kill -9 the new life detects the same condition again (a GNSS still degraded, a
+conflict still predicted) under a new threat id. Deciding afresh proposed, and with
+auto-accept applied, the same safety command once per life (4 lands and a hold after 10
+restarts). Adopting the previous life's case instead keeps what it put in force (accepted or
+applied recommendations, the dynamic geofences it created) as the new threat's case: nothing
+is proposed again, supervision goes on from there (see :mod:`.supervision`), and closing the
+threat later removes the adopted geofences. With nothing in force (the pilot had not answered
+yet: that prompt died with the process) there is nothing to adopt and EM decides as for any
+new threat. Pure, like the manager.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from gcs_utm.core.emergency.decision import (
+    MODE_COMMAND,
+    MODE_MULTI,
+    SINGLE_MANEUVERS,
+    Case,
+    Decision,
+)
+from gcs_utm.model import Geofence, Recommendation, RecommendationState, Threat
+
+if TYPE_CHECKING:
+    from gcs_utm.core.emergency.manager import EmergencyManager
+
+_IN_FORCE = (RecommendationState.ACCEPTED, RecommendationState.APPLIED)
+
+
+def adopt_case(
+    em: EmergencyManager,
+    threat: Threat,
+    *,
+    inherited: Threat,
+    recommendations: Sequence[Recommendation],
+    geofences: Sequence[Geofence],
+    now: float,
+) -> Decision | None:
+    """Make the case of ``inherited`` (a previous life's open threat; its latest
+    ``recommendations`` and the ``geofences`` its case created that are still active) the case
+    of ``threat``, the same condition detected again. None when nothing of it is in force:
+    then the caller decides as usual."""
+    in_force = [r for r in recommendations if r.state in _IN_FORCE]
+    if not in_force and not geofences:
+        return None
+    action = em.config.action_for(threat.kind)
+    case = Case(threat=threat, action=action, attempt_t_s=now, geofences=list(geofences))
+    single = ",".join(sorted(m.value for m in SINGLE_MANEUVERS.get(action, ())))
+    for rec in in_force:
+        em.record(rec)
+        case.rec_ids.add(rec.id)
+        if rec.command is not None:
+            case.modes[rec.operation_id] = MODE_COMMAND
+        else:
+            case.modes[rec.operation_id] = (
+                MODE_MULTI if action == "alternative_plans" else (f"single:{single}")
+            )
+    em.adopt(case)
+    detail: dict[str, object] = {
+        "reason": f"the condition of {inherited.id} (an earlier life's) detected again",
+        "from": inherited.id,
+        "in_force": [f"{r.id} v{r.version} {r.state.value}" for r in in_force],
+        "geofences": [g.id for g in geofences],
+    }
+    return Decision(audit=(em.audit(now, "adopted", threat.id, detail),))

@@ -1,0 +1,404 @@
+"""Immediate commands for a loss of separation that new plans cannot resolve in time.
+
+A new plan acts only after the answer and the upload (:mod:`.lead`); a command acts after the
+answer and its acknowledgement. EM proposes a command (through the same pilot prompt as
+every recommendation, with an escalation that names it) instead of plans when:
+
+- the predicted event is nearer than the time a new plan needs to start (a UAS that appears
+  from nowhere, a conflict detected late): plans would start inside the loss;
+- no combination of plans resolves the conflict;
+- every plan keeps separation while the tracks predict the loss, even re-timed from the
+  vehicles' progress (the snapshot EM decides on holds the plans as flown,
+  :mod:`gcs_utm.core.deconfliction.retime`): a UAS is not where its plan says. Only the UAS
+  whose track is off its plan (beyond its flight geometry) are commanded, when there are
+  such, and only once the event is within the lead plus :data:`IMMINENT_S` (:func:`keep_all`).
+
+A UAS under such a command is off its plan on purpose: a conformance decision (back to plan)
+for it waits while the loss case is open (:func:`held_by`).
+
+The commands are *hold* (a multirotor brakes and holds position and altitude; a fixed wing
+circles where it is) and *climb* or *descend in place* (a GOTO to the point where the vehicle
+stops, the vertical minimum plus a margin higher or lower, within the altitude band and
+above the safety floor). Each UAS of the threat gets none or one of them; every combination
+is flown forward on a 0.5 s grid: a commanded UAS at its track's velocity up to the command
+time, then braking at :data:`BRAKE_MPS2` to a stop (a fixed wing: anywhere within two turn
+radii of where it was commanded) while climbing or descending at its rates; every other UAS
+on its predicted path (the snapshot's prediction row of its track, else its velocity, else
+its plan). The combination is kept that
+keeps TD's minima (effective minima plus tracking tolerances) from the other UAS of the
+threat and from all other traffic with the fewest commanded UAS, then the lowest priorities,
+then the largest separation; when none keeps them, the one with the largest separation. The
+audit lists every combination with its separation ratio.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from gcs_utm.core.deconfliction.geometry import LocalPlan
+from gcs_utm.core.emergency.decision import Case, Decision
+from gcs_utm.core.emergency.supervision import escalate_safe
+from gcs_utm.core.monitoring.loss import separation_ratio
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    Command,
+    CommandKind,
+    FloatArray,
+    Operation,
+    OperationId,
+    Position,
+    RecommendationId,
+    RecommendationState,
+    Threat,
+    ThreatKind,
+)
+
+if TYPE_CHECKING:
+    from gcs_utm.core.deconfliction import TacticalDeconfliction
+    from gcs_utm.core.emergency.manager import EmergencyManager
+
+BRAKE_MPS2 = 2.5
+"""Deceleration assumed for a multirotor that brakes (PX4 MPC_ACC_HOR 3 m/s^2, less a
+margin)."""
+STEP_S = 0.5
+AFTER_EVENT_S = 30.0
+"""The combinations are flown up to this long after the predicted event (at least
+:data:`MIN_HORIZON_S` from now)."""
+MIN_HORIZON_S = 30.0
+MAX_UAS = 3
+"""At most this many UAS of one threat get a command (4 options each)."""
+VERTICAL_MARGIN_M = 5.0
+"""A climb or descent in place goes this much beyond the pair's vertical minimum."""
+HOLD, CLIMB, DESCEND = "hold", "climb", "descend"
+
+_LIVE = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED, RecommendationState.APPLIED)
+
+
+@dataclass(frozen=True, slots=True)
+class _Move:
+    """One UAS's commanded positions on the grid, and how much horizontal room its hold
+    takes (a fixed wing circles)."""
+
+    op_id: OperationId
+    action: str
+    xyz: FloatArray
+    slack_m: float
+    command: Command
+
+
+def track_xyz(
+    td: TacticalDeconfliction, op: Operation, snapshot: AirspaceSnapshot
+) -> FloatArray | None:
+    """Where the vehicle is by its fresh track (local frame), None without one."""
+    for tr in snapshot.tracks.values():
+        if tr.operation_id == op.id and not tr.stale:
+            e, n = td.frame.point_to_local(tr.lat_deg, tr.lon_deg)
+            return np.array([e, n, tr.alt_amsl_m])
+    return None
+
+
+def predicted_path(
+    td: TacticalDeconfliction,
+    op: Operation,
+    snapshot: AirspaceSnapshot,
+    until_t_s: float,
+    *,
+    use_prediction: bool = True,
+) -> LocalPlan:
+    """Where the UAS is predicted to fly: its track's prediction row (which follows its
+    plan), else (or with ``use_prediction`` False: how it flies until a command reaches it)
+    its track at constant velocity, else its plan."""
+    pred = snapshot.prediction
+    for tid, tr in snapshot.tracks.items():
+        if tr.operation_id != op.id or tr.stale:
+            continue
+        if use_prediction and pred is not None and tid in pred.track_ids:
+            pts = pred.points[pred.track_ids.index(tid)]
+            return LocalPlan(*(pts[:, i].copy() for i in range(4)))
+        e, n = td.frame.point_to_local(tr.lat_deg, tr.lon_deg)
+        ve, vn, vu = tr.vel_enu_mps
+        span = max(until_t_s - tr.t_s, 1.0)
+        return LocalPlan(
+            np.array([e, e + ve * span]),
+            np.array([n, n + vn * span]),
+            np.array([tr.alt_amsl_m, tr.alt_amsl_m + vu * span]),
+            np.array([tr.t_s, tr.t_s + span]),
+        )
+    return td.local_plan(op.plan)
+
+
+def _at(path: LocalPlan, grid: FloatArray) -> FloatArray:
+    e, n, z = path.coords(grid)
+    return np.column_stack((e, n, z))
+
+
+def _moves(
+    td: TacticalDeconfliction,
+    op: Operation,
+    path: LocalPlan,
+    grid: FloatArray,
+    *,
+    t_cmd: float,
+    rise_m: float,
+) -> list[_Move]:
+    """Hold, climb and descend in place for ``op`` commanded at ``t_cmd`` (see the module
+    docstring); a climb or descent that the altitude band leaves no room for is left out."""
+    env = op.performance()
+    before = _at(path, grid)
+    p0, p1 = _at(path, np.array([t_cmd, t_cmd + STEP_S]))
+    v = (p1[:2] - p0[:2]) / STEP_S
+    speed = float(np.hypot(v[0], v[1]))
+    tau = np.clip(grid - t_cmd, 0.0, None)
+    if env.can_hover and speed > 1e-6:
+        t_stop = speed / BRAKE_MPS2
+        tb = np.minimum(tau, t_stop)
+        run = speed * tb - 0.5 * BRAKE_MPS2 * tb * tb
+        stop_xy = p0[:2] + v / speed * run[:, None]
+        slack = 0.0
+    else:
+        stop_xy = np.repeat(p0[None, :2], grid.shape[0], axis=0)
+        slack = 0.0 if env.can_hover else 2.0 * env.turn_radius_m
+    lo, hi = td.alt_limits(op)
+    out = []
+    for action, target_z, rate in (
+        (HOLD, float(p0[2]), 1.0),
+        (CLIMB, min(float(p0[2]) + rise_m, hi), env.climb_rate_mps),
+        (DESCEND, max(float(p0[2]) - rise_m, lo), env.descent_rate_mps),
+    ):
+        if (action == CLIMB and target_z < p0[2] + 1.0) or (
+            action == DESCEND and target_z > p0[2] - 1.0
+        ):
+            continue  # no room in the altitude band (or already outside it that way)
+        dz = np.clip(target_z - p0[2], -rate * tau, rate * tau)
+        xyz = before.copy()
+        after = grid >= t_cmd
+        xyz[after, :2] = stop_xy[after]
+        xyz[after, 2] = p0[2] + dz[after]
+        stop = stop_xy[-1]
+        if action == HOLD:
+            command = Command(kind=CommandKind.HOLD, operation_id=op.id)
+        else:
+            lat, lon = td.frame.point_to_wgs84(float(stop[0]), float(stop[1]))
+            target = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=target_z)
+            command = Command(kind=CommandKind.GOTO, operation_id=op.id, target=target)
+        out.append(_Move(op.id, action, xyz, slack, command))
+    return out
+
+
+_Flown = tuple[Operation, FloatArray, float]
+"""A UAS, its positions on the grid and the horizontal room its hold takes."""
+
+
+def _ratio(td: TacticalDeconfliction, fa: _Flown, fb: _Flown) -> float:
+    """The smallest separation ratio of two grid paths under TD's minima for the pair."""
+    (a, xa, sa), (b, xb, sb) = fa, fb
+    h_min, v_min = td.pair_minima(a, b)
+    dh = np.maximum(np.hypot(xa[:, 0] - xb[:, 0], xa[:, 1] - xb[:, 1]) - sa - sb, 0.0)
+    r = separation_ratio(dh, xa[:, 2] - xb[:, 2], h_min, v_min, spherical=td.monitoring.spherical)
+    return float(r.min())
+
+
+@dataclass(frozen=True, slots=True)
+class Choice:
+    commands: dict[OperationId, Command]
+    actions: dict[OperationId, str]
+    ratio: float
+    clear: bool
+    tried: list[dict[str, object]]
+
+
+def choose_commands(  # noqa: PLR0917 - one call site
+    td: TacticalDeconfliction,
+    snapshot: AirspaceSnapshot,
+    candidates: Sequence[OperationId],
+    t_cmd: float,
+    event_t_s: float | None,
+    priority_of: dict[OperationId, int],
+) -> Choice | None:
+    """The immediate commands for ``candidates`` (see the module docstring); None when no
+    candidate is in the snapshot."""
+    now = snapshot.t_s
+    ops = snapshot.operations
+    cands = [ops[k] for k in candidates if k in ops][:MAX_UAS]
+    if not cands:
+        return None
+    until = max(now + MIN_HORIZON_S, (event_t_s or now) + AFTER_EVENT_S)
+    grid = np.arange(now, until + STEP_S, STEP_S)
+    others = [
+        o
+        for k, o in ops.items()
+        if k not in {c.id for c in cands}
+        and (track_xyz(td, o, snapshot) is not None or o.plan.start_t_s <= now <= o.plan.end_t_s)
+    ]
+    paths = {o.id: _at(predicted_path(td, o, snapshot, until), grid) for o in cands + others}
+    options: list[list[_Move | None]] = []
+    for c in cands:
+        v_mins = [td.pair_minima(c, o)[1] for o in cands + others if o.id != c.id]
+        rise = max(v_mins, default=td.monitoring.separation_vertical_m)
+        path = predicted_path(td, c, snapshot, until, use_prediction=False)
+        options.append(
+            [None, *_moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)]
+        )
+    best: tuple[tuple[float, ...], Choice] | None = None
+    tried: list[dict[str, object]] = []
+    for combo in itertools.product(*options):
+        moves = [m for m in combo if m is not None]
+        if not moves:
+            continue
+        ratio = _combo_ratio(td, cands, others, combo, paths)
+        clear = ratio >= 1.0
+        prio = sum(priority_of.get(m.op_id, 0) for m in moves)
+        key = (0.0, len(moves), prio, -ratio) if clear else (1.0, -ratio, len(moves), prio)
+        actions = {m.op_id: m.action for m in moves}
+        tried.append(
+            {"commands": {str(k): v for k, v in actions.items()}, "ratio": round(ratio, 3)}
+        )
+        if best is None or key < best[0]:
+            cmds = {m.op_id: m.command for m in moves}
+            best = (key, Choice(cmds, actions, ratio, clear, tried))
+    return None if best is None else best[1]
+
+
+def _combo_ratio(
+    td: TacticalDeconfliction,
+    cands: list[Operation],
+    others: list[Operation],
+    combo: Sequence[_Move | None],
+    paths: dict[OperationId, FloatArray],
+) -> float:
+    """The smallest separation ratio of a combination: between the threat's UAS and from
+    each of them to all other traffic."""
+    xyz = {c.id: (paths[c.id] if m is None else m.xyz) for c, m in zip(cands, combo, strict=True)}
+    slack = {c.id: (0.0 if m is None else m.slack_m) for c, m in zip(cands, combo, strict=True)}
+    worst = np.inf
+    for i, a in enumerate(cands):
+        for b in cands[i + 1 :]:
+            worst = min(worst, _ratio(td, (a, xyz[a.id], slack[a.id]), (b, xyz[b.id], slack[b.id])))
+        for o in others:
+            worst = min(worst, _ratio(td, (a, xyz[a.id], slack[a.id]), (o, paths[o.id], 0.0)))
+    return float(worst)
+
+
+def off_plan(td: TacticalDeconfliction, snapshot: AirspaceSnapshot) -> list[OperationId]:
+    """The UAS whose track is farther than their flight geometry from their plan now."""
+    out = []
+    for k, op in snapshot.operations.items():
+        pos = track_xyz(td, op, snapshot)
+        if pos is None:
+            continue
+        plan_pos = td.local_plan(op.plan).position_at(snapshot.t_s)
+        if float(np.linalg.norm(pos - plan_pos)) > op.flight_geometry_m:
+            out.append(k)
+    return out
+
+
+def too_late(em: EmergencyManager, threat: Threat, now: float) -> str:
+    """Why a new plan decided ``now`` would start inside the predicted loss ("" when it
+    would not, or the threat predicts no event time)."""
+    event = threat.predicted_event_at_s
+    lead_s = em.plan_start(threat, now) - now
+    if event is None or event - now >= lead_s:
+        return ""
+    return (
+        f"{threat.id}: loss predicted in {event - now:.1f} s, sooner than a new plan can "
+        f"start ({lead_s:.1f} s: answer, upload, margin)"
+    )
+
+
+IMMINENT_S = 10.0
+"""With every plan kept, the immediate command waits until the event is this much beyond
+the lead: further ahead the plans or the tracks often change (a UAS catches up, a plan
+ends), and a UAS held early is where no plan says for the rest of its flight."""
+
+
+def keep_all(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+    """Every plan of the case is kept while the tracks predict the loss: warn (once per
+    case) and, once the event is within the lead plus :data:`IMMINENT_S`, propose the
+    immediate command for the UAS whose track is off its plan (all of the threat's when
+    none is); until then the case is decided again at that time."""
+    t = case.threat
+    now = snapshot.t_s
+    off = [k for k in t.uas_ids if k in off_plan(em.td, snapshot)]
+    msg = f"{t.id}: loss predicted for {', '.join(t.uas_ids)} although the plans keep "
+    msg += f"separation ({', '.join(off) or 'none'} off its plan)"
+    d = Decision() if case.off_plan_escalated else Decision(warnings=(msg,))
+    case.off_plan_escalated = True
+    event = t.predicted_event_at_s
+    due_t_s = None if event is None else event - (em.plan_start(t, now) - now) - IMMINENT_S
+    if due_t_s is not None and due_t_s > now:
+        # decided again at due_t_s (the retry of a case that ended without a plan)
+        case.attempt_t_s = due_t_s - em.config.retry_after_s
+        why = f"{msg}; immediate command deferred to {due_t_s - now:.1f} s from now"
+        return d.merge(Decision(audit=(em.audit(now, "immediate", t.id, {"reason": why}),)))
+    return d.merge(propose(em, case, snapshot, msg, off or list(t.uas_ids)))
+
+
+def propose(
+    em: EmergencyManager,
+    case: Case,
+    snapshot: AirspaceSnapshot,
+    why: str,
+    candidates: Sequence[OperationId],
+    *,
+    choose: bool = True,
+) -> Decision:
+    """Escalate with ``why`` and propose the immediate commands chosen for ``candidates``
+    (the threat's safe command when nothing can be computed, or without ``choose``: not a
+    loss of separation); nothing new when the same commands are already proposed or in
+    force for the case."""
+    now = snapshot.t_s
+    t = case.threat
+    ops = snapshot.operations
+    if not choose:
+        return escalate_safe(em, case, list(candidates), now, why)
+    choice = choose_commands(
+        em.td,
+        snapshot,
+        candidates,
+        em.lead.command_at(candidates, now),
+        t.predicted_event_at_s,
+        {k: ops[k].priority for k in candidates if k in ops},
+    )
+    if choice is None:
+        return escalate_safe(em, case, list(candidates), now, why)
+    if _standing(em, case, choice):
+        stand: dict[str, object] = {"reason": f"{why}; the immediate commands stand"}
+        stand["selected"] = choice.actions
+        return Decision(audit=(em.audit(now, "immediate", t.id, stand),))
+    how = "keeps" if choice.clear else "does not keep (the best there is)"
+    text = f"{why}; immediate command {how} the minima (ratio {choice.ratio:.2f})"
+    detail: dict[str, object] = {"reason": text, "selected": choice.actions}
+    detail["tried"] = choice.tried
+    detail["acts_in_s"] = round(em.lead.command_at(candidates, now) - now, 3)
+    detail["measured_s"] = em.lead.measured()
+    audit = Decision(audit=(em.audit(now, "immediate", t.id, detail),))
+    return audit.merge(escalate_safe(em, case, list(choice.commands), now, text, choice.commands))
+
+
+def held_by(em: EmergencyManager, op_id: OperationId, other: Case) -> str:
+    """The loss-of-separation case (other than ``other``) whose immediate command for
+    ``op_id`` is accepted or applied ("" when none): the UAS is off its plan on purpose, and
+    a conformance decision must not send it back into the loss (back to plan)."""
+    for tid in em.open_threats():
+        case = em.case(tid)
+        if case is None or case is other or case.threat.kind is not ThreatKind.LOSS_OF_SEPARATION:
+            continue
+        rec = em.recommendation(RecommendationId(f"{tid}/{op_id}"))
+        if rec is not None and rec.command is not None and rec.state in _LIVE[1:]:
+            return str(tid)
+    return ""
+
+
+def _standing(em: EmergencyManager, case: Case, choice: Choice) -> bool:
+    """Every chosen command is already proposed or in force for its UAS in this case."""
+    live = {}
+    for rid in case.rec_ids:
+        r = em.recommendation(rid)
+        if r is not None and r.state in _LIVE and r.command is not None:
+            live[r.operation_id] = r.command.kind
+    return all(live.get(k) is c.kind for k, c in choice.commands.items())
