@@ -75,6 +75,9 @@ class LocalFrame:
     _origin_en: tuple[float, float] = field(init=False, repr=False, compare=False)
     _ecef_fwd: Transformer = field(init=False, repr=False, compare=False)
     _ecef_inv: Transformer = field(init=False, repr=False, compare=False)
+    _basis: list[tuple[FloatArray, FloatArray]] = field(
+        init=False, repr=False, compare=False, default_factory=list
+    )  # the ENU origin and rotation, computed on first use (a transform per call otherwise)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.origin_lat_deg) and math.isfinite(self.origin_lon_deg)):
@@ -140,6 +143,11 @@ class LocalFrame:
 
     # ---- true local East-North-Up ---------------------------------------------------------
     def _enu_basis(self) -> tuple[FloatArray, FloatArray]:
+        if not self._basis:
+            self._basis.append(self._compute_enu_basis())
+        return self._basis[0]
+
+    def _compute_enu_basis(self) -> tuple[FloatArray, FloatArray]:
         lat = math.radians(self.origin_lat_deg)
         lon = math.radians(self.origin_lon_deg)
         h0 = (

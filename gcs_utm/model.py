@@ -440,6 +440,24 @@ class PositionLane:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class RemoteIdentity:
+    """What a UAS's Remote ID (ASTM F3411 / OpenDroneID) says of it (docs/remote-id.md).
+    ``source`` names the Remote ID record: ``sysid:<n>`` (what vehicle n reports of itself)
+    or ``rid:<id_or_mac hex>`` (an aircraft a vehicle's receiver heard)."""
+
+    source: str
+    uas_id: str = ""  # "" until a Basic ID is heard
+    id_type: str = ""  # F3411 ID type name (SERIAL_NUMBER, CAA_REGISTRATION_ID, ...)
+    ua_type: str = ""  # F3411 UA type name (HELICOPTER_OR_MULTIROTOR, AEROPLANE, ...)
+    operator_id: str = ""
+    lat_deg: float | None = None  # the last Remote ID Location (None: none heard yet)
+    lon_deg: float | None = None
+    alt_m: float | None = None  # its geodetic (WGS84) altitude, else pressure altitude
+    location_t_s: float | None = None  # when that Location was received
+    updated_t_s: float = 0.0  # when any of this last changed
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class Track:
     """The filtered state of one UAS or intruder at ``t_s``.
 
@@ -462,6 +480,9 @@ class Track:
     stale: bool = False
     updates: int = 0
     next_waypoint: int | None = None
+    # set on the snapshots the views, MQTT and the store get (adapters/remoteid/tracks.py),
+    # never by the tracker
+    remote_id: RemoteIdentity | None = None
 
     @property
     def ground_speed_mps(self) -> float:
@@ -699,3 +720,11 @@ class AirspaceSnapshot:
     tracks: Mapping[TrackId, Track]
     geofences: tuple[Geofence, ...]
     prediction: PredictedTrajectories | None = None
+    airborne: frozenset[OperationId] = frozenset()
+    """Operations whose vehicle is in the air by its own messages (armed and not landed: see
+    docs/autopilots.md, "Vehicle state"): traffic from take-off to landing, whatever their plan
+    says. Operations whose vehicle reports nothing (ADS-B only, a scenario) are in neither
+    set."""
+    grounded: frozenset[OperationId] = frozenset()
+    """Operations whose vehicle is on the ground (disarmed, or armed and landed): nothing is
+    decided for them but pre-flight checks."""

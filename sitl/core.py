@@ -106,8 +106,10 @@ AP_STREAM_GROUPS: dict[int, tuple[str, ...]] = {
     6: ("GLOBAL_POSITION_INT",),  # POSITION
     10: ("ATTITUDE",),  # EXTRA1
     11: ("VFR_HUD",),  # EXTRA2
-    12: ("BATTERY_STATUS", "SYSTEM_TIME", "EXTENDED_SYS_STATE", "HOME_POSITION"),  # EXTRA3
+    12: ("BATTERY_STATUS", "SYSTEM_TIME", "HOME_POSITION"),  # EXTRA3
 }
+# (ArduPilot 4.6 puts EXTENDED_SYS_STATE in no group: measured, with every group asked for, it
+# sends it only once SET_MESSAGE_INTERVAL asks for it, as the hub does)
 REQUESTABLE = (*STREAMS, "AUTOPILOT_VERSION")
 
 SENSORS_PRESENT = (
@@ -394,7 +396,13 @@ class VehicleCore:
             return 0.0
         return min(1.0, (self._t - self._jam_since) / 10.0 + 0.1)
 
+    def _acquiring_gnss(self) -> bool:
+        """No fix yet since boot (``VehicleSpec.gnss_fix_after_s``)."""
+        return self._t - self.spec.boot_at_s < self.spec.gnss_fix_after_s
+
     def _gps_fix_type(self) -> int:
+        if self._acquiring_gnss():
+            return 0
         lvl = self._jam_level()
         if lvl == 0.0:
             return 3

@@ -121,6 +121,11 @@ class VehicleSpec:
     faults: tuple[FaultSpec, ...] = ()
     battery_capacity_s: float = 1200.0  # endurance at hover/cruise, simulated s
     gnss_noise_m: float = 0.0  # std-dev of reported horizontal position noise
+    # GNSS acquisition: simulated s after boot without a fix (GPS_RAW_INT fix_type 0, 100 m
+    # accuracy, no global position). Meanwhile a PX4 sends HOME_POSITION from its estimate,
+    # HOME_PRE_FIX_OFFSET_M off in altitude (PX4 SIH sends one 0.4 s after boot, before its
+    # fix); an ArduPilot sends none before its fix (both measured). 0: a fix at boot.
+    gnss_fix_after_s: float = 0.0
     wind_north_mps: float = 0.0  # wind toward... blowing *to* the north (fixed wing drift)
     wind_east_mps: float = 0.0
     seed: int = 0

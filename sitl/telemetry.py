@@ -38,6 +38,10 @@ from sitl.links import Link, StreamState
 
 _log = logging.getLogger(__name__)
 
+HOME_PRE_FIX_OFFSET_M = -2.0
+"""A PX4's HOME_POSITION altitude before its fix, off its true home (PX4 SIH's wandered
+by up to 2 m while its estimator converged)."""
+
 
 class Telemetry(Faults):
     """Streams and message content (see the module docstring)."""
@@ -135,6 +139,8 @@ class Telemetry(Faults):
         k = self.k
         tb = self._time_boot_ms()
         lat, lon, alt = self._noisy_reported()
+        if self._acquiring_gnss():
+            lat = lon = 0.0  # no global position before the first fix
         link.send(
             "GLOBAL_POSITION_INT",
             time_boot_ms=tb,
@@ -155,6 +161,8 @@ class Telemetry(Faults):
         fix = self._gps_fix_type()
         hdop = 0.8 + 30.0 * lvl * lvl  # eph grows with the jamming level
         h_acc_m = 1.0 + self.spec.gnss_noise_m + 60.0 * lvl * lvl
+        if fix == 0 and self._acquiring_gnss():
+            h_acc_m = 100.0  # (PX4 SIH without a fix: 100 m)
         sats = max(0, round(14 - 12 * lvl))
         gs = math.hypot(k.vn_mps, k.ve_mps)
         link.send(
@@ -237,11 +245,16 @@ class Telemetry(Faults):
         )
 
     def _tx_home_position(self, link: Link) -> None:
+        alt = self.home[2]
+        if self._acquiring_gnss():  # (VehicleSpec.gnss_fix_after_s)
+            if self.is_ardupilot:
+                return
+            alt += HOME_PRE_FIX_OFFSET_M
         link.send(
             "HOME_POSITION",
             latitude=round(self.home[0] * 1e7),
             longitude=round(self.home[1] * 1e7),
-            altitude=round(self.home[2] * 1000),
+            altitude=round(alt * 1000),
             x=0.0,
             y=0.0,
             z=0.0,

@@ -11,7 +11,8 @@ One upload (:meth:`Uploads.upload_items`) is, for each try:
    item after it (a DO item as current fails to restart), and the skipped speed item is then
    sent as a DO_CHANGE_SPEED command;
 4. with ``set_mission_mode``, DO_SET_MODE to the autopilot's mission mode (PX4 AUTO.MISSION,
-   ArduPilot AUTO) until HEARTBEAT shows it.
+   ArduPilot AUTO) until HEARTBEAT shows it -- only on an armed vehicle: on the ground the
+   mode is the pilot's (it would override the mode the pilot takes off in).
 A try that fails at any step is repeated once (ArduPilot refuses uploads with NO_SPACE for a
 moment after boot; a lost datagram can fail a readback), unless the vehicle is unknown or the
 deadline has passed. The result says which step failed (:class:`UploadFailure`).
@@ -173,9 +174,11 @@ class Uploads(Transfers):
                     UploadFailure.CURRENT_NOT_SET,
                 )
             tried.current_seq = seq
-        if set_mission_mode:
+        if set_mission_mode and st.armed:
             await self._ensure_mission_mode(st, end)
             tried.mode_set = True
+        elif set_mission_mode:  # never on the ground: the mode is the pilot's until take-off
+            _log.info("%s: disarmed, mission mode not set after the upload", st.key)
         if skipped_speed is not None:
             p = skipped_speed
             res = await self._command_long(

@@ -214,9 +214,14 @@ class VehicleState:
         self._window_end_ms = boot_ms + self._window_ms
 
     def _rebooted(self, boot_ms: int) -> None:
+        """A new life of the vehicle: a new pre-flight. What the last one reported (fix,
+        accuracy, home, landed state) is forgotten, so acquiring GNSS again on the ground is
+        not a fix lost nor an accuracy jump."""
         self.reboots += 1
         self._last_seq = -1
         self._system_time_boot_ms = -1
+        self.fix_type = self.eph_m = self.epv_m = self.home = self.landed = None
+        self._fix_lost = self._eph_bad = False
         self._ratelog.warning(
             f"reboot:{self.sys_id}",
             "%s rebooted (time_boot_ms %d -> %d)",
@@ -323,6 +328,7 @@ class VehicleState:
             home=self.home,
             mission_id=self.mission_id,
             position=self.last_position,
+            reboots=self.reboots,
         )
 
     def hazard(self, kind: ThreatKind, t_s: float, message: str) -> HazardReport:
@@ -489,10 +495,15 @@ class VehicleState:
             ev.on_status(self.status(t_s))
 
     def on_home_position(self, m: wire.MavMsg, t_s: float, ev: Events) -> None:
-        """HOME_POSITION: the vehicle's home (AMSL); a status goes out when it moves."""
+        """HOME_POSITION: the vehicle's home (AMSL); a status goes out when it moves. Only
+        once the vehicle has a 3D fix: PX4 sends one 0.4 s after boot, before its fix, from an
+        estimate that is not its position yet."""
         lat_e7, lon_e7 = int(m.latitude), int(m.longitude)
         if lat_e7 == 0 and lon_e7 == 0:
             return  # not set yet
+        fix = self.fix_type
+        if (fix is None and self._last_fix is None) or (fix is not None and fix < 3):
+            return  # (a vehicle that sends no GPS_RAW_INT: once it reports positions)
         lat, lon, alt = lat_e7 / 1e7, lon_e7 / 1e7, m.altitude / 1000.0
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
             return

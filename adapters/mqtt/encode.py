@@ -14,6 +14,7 @@ from gcs_utm.model import (
     Recommendation,
     RecommendationId,
     RecommendationState,
+    RemoteIdentity,
     Threat,
     Track,
     Waypoint4D,
@@ -155,6 +156,24 @@ def encode_geofence_event(action: str, g: Geofence, t_s: float) -> bytes:
     )
 
 
+def _remote_id(rid: RemoteIdentity | None) -> dict[str, object] | None:
+    """A track's Remote ID (docs/remote-id.md), null when none was heard."""
+    if rid is None:
+        return None
+    return {
+        "source": rid.source,
+        "uas_id": rid.uas_id,
+        "id_type": rid.id_type,
+        "ua_type": rid.ua_type,
+        "operator_id": rid.operator_id,
+        "lat_deg": rid.lat_deg,
+        "lon_deg": rid.lon_deg,
+        "alt_m": rid.alt_m,
+        "location_t_s": rid.location_t_s,
+        "updated_t_s": rid.updated_t_s,
+    }
+
+
 def encode_traffic(tracks: Iterable[Track], t_s: float) -> bytes:
     return dumps(
         {
@@ -174,6 +193,7 @@ def encode_traffic(tracks: Iterable[Track], t_s: float) -> bytes:
                     "operation_id": tr.operation_id,
                     "icao24": tr.icao24,
                     "stale": tr.stale,
+                    "remote_id": _remote_id(tr.remote_id),
                 }
                 for tr in tracks
             ],

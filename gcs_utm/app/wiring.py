@@ -28,6 +28,7 @@ from adapters.remoteid.ingest import (
     telemetry_positions,
 )
 from adapters.remoteid.operator import RemoteIdOperator
+from adapters.remoteid.tracks import RidTracks
 from gcs_utm.clock import Clock
 from gcs_utm.core.deconfliction import TacticalDeconfliction
 from gcs_utm.core.deconfliction.retime import retime_snapshot
@@ -46,6 +47,7 @@ from gcs_utm.model import (
     Operation,
     OperationId,
     Recommendation,
+    RemoteIdentity,
     Threat,
     Track,
     TrackId,
@@ -116,6 +118,9 @@ class Persistence:
     def write_tracks(self, tracks: list[Track]) -> None:
         self.writer.write_tracks(tracks)
 
+    def write_remote_ids(self, rows: list[tuple[TrackId, RemoteIdentity]]) -> None:
+        self.writer.write_remote_ids(rows)
+
     @property
     def epoch(self) -> int:
         """The store life this process writes in (ids carry it, see gcs_utm.store.ids)."""
@@ -143,13 +148,14 @@ class Runtime:
     surveillance: SurveillanceService  # [adsb] receiver feeds (none unless enabled)
     remote_id: RemoteIdOperator  # the operator's Remote ID part to vehicles (docs/remote-id.md)
     remote_id_ingest: RidIngest  # what vehicles report of Remote ID
+    remote_id_tracks: RidTracks  # ... put on the tracks the views, MQTT and the store get
     traffic_out: TrafficOut  # ADSB_VEHICLE to vehicles for the traffic near them
     plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
 
     def tracks(self) -> dict[TrackId, Track]:
-        return self.tracking.tracks_now()
+        return self.remote_id_tracks.attach(self.tracking.tracks_now())
 
 
 def build_runtime(
@@ -202,17 +208,23 @@ def build_runtime(
         settings.monitoring,
         operations=lambda: airspace.operations,
         log_event=usm.log_event,
+        airborne=airspace.airborne_ids,
         geofences=airspace.geofences,
     )
 
     async def tracking_hazard(h: HazardReport) -> None:
         usm.on_hazard(h)
 
+    # Remote ID records (rid_ingest, below) on the tracks: docs/remote-id.md
+    rid_tracks = RidTracks(
+        lambda: rid_ingest.aircraft,
+        lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
+    )
     tracking = TrackingService(
         tracker,
         clock,
         on_hazard=tracking_hazard,
-        track_sink=store.write_tracks,
+        track_sink=rid_tracks.track_sink(store.write_tracks, store.write_remote_ids),
         ingest_delay_s=settings.tracking.ingest_delay_s,
     )
     tracking_ref.append(tracking)
@@ -300,6 +312,7 @@ def build_runtime(
             on_hazard=usm.on_hazard,
         ),
         remote_id_ingest=rid_ingest,
+        remote_id_tracks=rid_tracks,
         traffic_out=TrafficOut(
             settings.traffic_out,
             hub,

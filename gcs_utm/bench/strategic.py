@@ -12,6 +12,10 @@ Records:
   (``FiledPlans.check``), the call a filing operator waits for; each run a different new
   plan (``--queries`` of them), the filed plans indexed once beforehand (and not re-checked).
 - ``strategic.file_one``: filing one plan into the index (``FiledPlans.add``).
+
+The dense profile (:mod:`.strategic_cli`, ``--dense-plans``): ``gcs-utm scenario check`` of
+a denser airspace end to end (load, check, JSON report), in a fresh process as a user runs it,
+and the same stages in this process. ``--profile index`` or ``--profile dense`` runs one part.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import argparse
 
 import numpy as np
 
+from gcs_utm.bench import strategic_cli
 from gcs_utm.bench.timing import summary, time_runs
 from gcs_utm.core.monitoring import MonitoringConfig, strategic_check
 from gcs_utm.core.monitoring.plan_index import candidate_pairs, grid_cell_m, growth_m, window_boxes
@@ -39,6 +44,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=3)
     p.add_argument("--queries", type=int, default=30, help="one-vs-N checks timed per N")
     p.add_argument("--seed", type=int, default=11)
+    p.add_argument("--profile", choices=("all", "index", "dense"), default="all")
+    strategic_cli.add_arguments(p)
 
 
 def random_operations(n: int, seed: int, *, prefix: str = "op") -> list[Operation]:
@@ -86,6 +93,13 @@ def _candidates(ops: list[Operation], cfg: MonitoringConfig) -> int:
 
 
 def run(args: argparse.Namespace) -> list[dict[str, object]]:
+    records = _index_records(args) if args.profile in ("all", "index") else []
+    if args.profile in ("all", "dense"):
+        records += strategic_cli.run(args)
+    return records
+
+
+def _index_records(args: argparse.Namespace) -> list[dict[str, object]]:
     sizes = args.plans or [2000, 10000]
     cfg = MonitoringConfig()
     records: list[dict[str, object]] = []

@@ -91,6 +91,7 @@ def scenario_pipeline(
         mavlink=b.mavlink,
         tracking=b.tracking,
         monitoring=b.monitoring,
+        remote_id=b.remote_id_config,
         frame=scenario.frame,
         operations=scenario.operations,
         geofences=scenario.geofences,
@@ -211,6 +212,7 @@ def _prepare(args: argparse.Namespace) -> tuple[Inputs, ReplayPipeline | None, A
             mavlink=settings.mavlink,
             tracking=settings.tracking,
             monitoring=settings.monitoring,
+            remote_id=settings.remote_id,
         )
         if args.scenario is not None:
             pipeline = scenario_pipeline(inputs, args.scenario, pipeline)

@@ -52,6 +52,10 @@ from adapters.mavlink.adsb_relay import AdsbRelay
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.handlers import message_handlers
 from adapters.mavlink.vehicle import VehicleInfo, VehicleState
+from adapters.remoteid.config import RemoteIdConfig
+from adapters.remoteid.ingest import RidIngest
+from adapters.remoteid.tracks import RidTracks
+from adapters.remoteid.vehicles import RidVehicles
 from adapters.tlog import TlogCounters
 from gcs_utm.core.monitoring import Monitor, MonitoringConfig
 from gcs_utm.core.tracking import Tracker, TrackingConfig
@@ -64,6 +68,7 @@ from gcs_utm.model import (
     MeasurementSource,
     Operation,
     OperationId,
+    Position,
     SysId,
     Threat,
     TrackId,
@@ -152,6 +157,7 @@ class ReplayPipeline:
         frame: LocalFrame | None = None,
         operations: Sequence[Operation] = (),
         geofences: Sequence[Geofence] = (),
+        remote_id: RemoteIdConfig | None = None,
     ) -> None:
         if not period_s > 0.0:
             raise ValueError(f"period_s must be positive, got {period_s}")
@@ -159,6 +165,7 @@ class ReplayPipeline:
         self.mavlink = mavlink or MavlinkConfig()
         self.tracking = tracking or TrackingConfig()
         self.monitoring = monitoring or MonitoringConfig()
+        self.remote_id_config = remote_id or RemoteIdConfig()
         self.period_s = period_s
         self.parser = wire.Parser()
         self.frame: LocalFrame | None = frame
@@ -180,7 +187,15 @@ class ReplayPipeline:
         self.threats: dict[str, _ThreatStats] = {}
         self._states: dict[tuple[int, int], VehicleState] = {}
         self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE -> ADS-B measurements, as on a live link
-        self._handlers = message_handlers(self.adsb_relay)  # the live hub's table
+        # OPEN_DRONE_ID_* and ODID texts as on a live link (docs/remote-id.md): identities,
+        # RID positions, REMOTE_ID_MISMATCH hazards (compared with the replayed telemetry)
+        self.remote_id = RidVehicles()
+        self.rid_ingest = RidIngest(
+            consistency_m=self.remote_id_config.consistency_m,
+            position_of=self._telemetry_position,
+        )
+        self.rid_ingest.register(self.remote_id)
+        self._handlers = message_handlers(self.adsb_relay, self.remote_id)  # the live hub's
         self._pending: list[Measurement] = []
         self._t = 0.0
         self._next_cycle_t_s: float | None = None
@@ -216,6 +231,14 @@ class ReplayPipeline:
 
     def on_link_health(self, h: LinkHealth) -> None:
         pass  # link health is a live-link concern; a tlog has no receive path to judge
+
+    def _telemetry_position(self, sys_id: int) -> tuple[Position, float] | None:
+        """A vehicle's last telemetry position and when it was last heard (RidIngest's
+        ``position_of``, as the live hub's :func:`telemetry_positions`)."""
+        for (sid, _), st in self._states.items():
+            if sid == sys_id and st.last_position is not None:
+                return st.last_position, st.last_heard_t_s
+        return None
 
     # ---- input -----------------------------------------------------------------------------
     def feed_packet(self, t_s: float, packet: bytes) -> None:
@@ -484,6 +507,7 @@ class ReplayPipeline:
             "tracks": tracks,
             "threats": threats,
             "hazards": hazards,
+            "remote_id": self._remote_id_report(),
             "counters": {
                 "corrupt_records": counters.corrupt_chunks + counters.truncated_tail,
                 "tlog": counters.as_dict(),
@@ -509,6 +533,21 @@ class ReplayPipeline:
                 "skipped_cycles": self.counters.skipped_cycles,
             },
             "wall_s": round(wall_s, 3),
+        }
+
+    def _remote_id_report(self) -> dict[str, Any]:
+        """The Remote ID heard: each source's identity on its track, and the counters."""
+        on_tracks = RidTracks(lambda: self.rid_ingest.aircraft, self.operations.values)
+        return {
+            "declared_sys_ids": sorted(self.remote_id.declared),
+            "identities": [
+                {"track_id": tid, **dataclasses.asdict(ident)}
+                for tid, ident in sorted(on_tracks.by_track().items())
+            ],
+            "counters": {
+                **dataclasses.asdict(self.remote_id.counters),
+                **dataclasses.asdict(self.rid_ingest.counters),
+            },
         }
 
 

@@ -15,7 +15,7 @@ import json
 import math
 import sys
 from dataclasses import replace
-from typing import Any
+from typing import Any, TextIO
 
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import StrategicReport, strategic_check
@@ -126,6 +126,29 @@ def report_document(scenario: Scenario, report: StrategicReport) -> dict[str, An
     }
 
 
+_LINES_PER_WRITE = 1000
+
+
+def write_json(doc: dict[str, Any], out: TextIO) -> None:
+    """``doc`` as one JSON document: a top-level key per line, each element of a list on a
+    line of its own, written in chunks as it goes (a dense airspace's report holds tens of
+    thousands of conflicts: one ``json.dump`` of it with an indent took seconds)."""
+    out.write("{\n")
+    last = len(doc) - 1
+    for n, (key, value) in enumerate(doc.items()):
+        comma = "," if n < last else ""
+        if not isinstance(value, list) or not value:
+            out.write(f"  {json.dumps(key)}: {json.dumps(value)}{comma}\n")
+            continue
+        out.write(f"  {json.dumps(key)}: [\n")
+        for start in range(0, len(value), _LINES_PER_WRITE):
+            chunk = value[start : start + _LINES_PER_WRITE]
+            more = "," if start + _LINES_PER_WRITE < len(value) else ""
+            out.write("    " + ",\n    ".join(map(json.dumps, chunk)) + more + "\n")
+        out.write(f"  ]{comma}\n")
+    out.write("}\n")
+
+
 def _fail(args: argparse.Namespace, error: dict[str, str]) -> int:
     """One error line on stderr; with --json also the error as a JSON document on stdout."""
     where = ": ".join(v for v in (error["file"], error["item"], error["field"]) if v)
@@ -174,8 +197,7 @@ def _check_file(args: argparse.Namespace) -> int:
     report = strategic_check(ops, scenario.geofences, scenario.frame, config, step_s=step_s)
     doc = report_document(scenario, report)
     if args.json:
-        json.dump(doc, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        write_json(doc, sys.stdout)
         return 0
     _print(args, scenario, doc)
     return 0

@@ -104,6 +104,8 @@ def operations_table(d: DashboardData, *, width: int | None = None, wide_at: int
     """Operations (and intruders), one row each. Narrower than ``wide_at`` characters the
     table keeps the :data:`_OPS_NARROW` columns so every value stays readable."""
     columns: tuple[str, ...] = _OPS_COLUMNS + _OPS_COLUMNS_END
+    if any(t.remote_id is not None for t in d.tracks.values()):
+        columns += ("Remote ID",)  # only once some UAS broadcasts it (docs/remote-id.md)
     if width is not None and width < wide_at:
         columns = _OPS_NARROW
     table = Table(title="Operations", expand=True, show_lines=False)
@@ -137,6 +139,7 @@ def operations_table(d: DashboardData, *, width: int | None = None, wide_at: int
                 "Batt": _fmt(status.battery_pct, ".0f", "%") if status else "-",
                 "Mode": status.mode.value if status else "-",
                 "State": op.state.value,
+                "Remote ID": _remote_id(track),
             }
         )
     for t in d.tracks.values():
@@ -145,7 +148,7 @@ def operations_table(d: DashboardData, *, width: int | None = None, wide_at: int
         rows.append(
             {
                 "UAS": t.id,
-                "ConOps": "intruder (ADS-B)",
+                "ConOps": "Remote ID" if t.id.startswith("rid:") else "intruder (ADS-B)",
                 "Prio": "-",
                 "Position": f"{t.lat_deg:.5f},{t.lon_deg:.5f}",
                 "Alt AMSL": _fmt(t.alt_amsl_m, ".0f", " m"),
@@ -155,11 +158,20 @@ def operations_table(d: DashboardData, *, width: int | None = None, wide_at: int
                 "Batt": "-",
                 "Mode": "-",
                 "State": "non-coop",
+                "Remote ID": _remote_id(t),
             }
         )
     for row in rows:
         table.add_row(*(row[c] for c in columns))
     return table
+
+
+def _remote_id(track: Track | None) -> str:
+    """The UAS ID (and operator ID) its Remote ID broadcasts, "-" when none was heard."""
+    rid = None if track is None else track.remote_id
+    if rid is None or not (rid.uas_id or rid.operator_id):
+        return "-"
+    return " / ".join(x for x in (rid.uas_id, rid.operator_id) if x)
 
 
 def _closest(t: Threat) -> str:

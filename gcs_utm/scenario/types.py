@@ -10,7 +10,7 @@ before building anything half-valid.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any, TypeVar
 
@@ -116,12 +116,27 @@ class Scenario:
     for the settings' rule. When set, ``gcs-utm run`` and ``scenario check`` use
     ``separation_mode = "sphere"`` with it (:func:`monitoring_for`)."""
 
+    _by_id: dict[str, tuple[Operation | None, VehicleSetup | None]] = field(
+        init=False, repr=False, compare=False, default_factory=dict
+    )
+    """Operation and vehicle per operation id, built on first use: a lookup per operation
+    must not scan them all (a 10,000-operation airspace)."""
+
+    def _lookup(self, op_id: str) -> tuple[Operation | None, VehicleSetup | None]:
+        index = self._by_id
+        if not index and (self.operations or self.vehicles):
+            ops = {op.id: op for op in reversed(self.operations)}  # the first of an id wins
+            setups = {v.operation_id: v for v in reversed(self.vehicles)}
+            for key in ops.keys() | setups.keys():
+                index[key] = (ops.get(key), setups.get(key))
+        return index.get(op_id, (None, None))
+
     def operation(self, op_id: str) -> Operation:
         """The operation with id ``op_id`` (KeyError if none)."""
-        for op in self.operations:
-            if op.id == op_id:
-                return op
-        raise KeyError(op_id)
+        op = self._lookup(op_id)[0]
+        if op is None:
+            raise KeyError(op_id)
+        return op
 
     def monitoring_for(self, config: _Config) -> _Config:
         """A ``MonitoringConfig`` with this scenario's separation rule applied (unchanged
@@ -131,7 +146,8 @@ class Scenario:
         return replace(config, separation_mode="sphere", safety_distance_m=self.safety_distance_m)
 
     def vehicle(self, op_id: str) -> VehicleSetup:
-        for v in self.vehicles:
-            if v.operation_id == op_id:
-                return v
-        raise KeyError(op_id)
+        """The vehicle of operation ``op_id`` (KeyError if none)."""
+        setup = self._lookup(op_id)[1]
+        if setup is None:
+            raise KeyError(op_id)
+        return setup

@@ -61,6 +61,10 @@ class Airspace:
         """Increases on every change; consumers compare it to skip rework."""
         self._sys_index: dict[SysId, OperationId] = {}
         self._sys_index_version = -1
+        # per system id, from the vehicle's own messages: True in the air, False on the ground
+        # (absent: it reports no state); not a change of the picture (no version). It is the
+        # state of the operation that system id flies (by_sys_id).
+        self._airborne: dict[SysId, bool] = {}
 
     # ---- queries --------------------------------------------------------------------------
     @property
@@ -91,6 +95,31 @@ class Airspace:
             return tuple(fences)
         return tuple(g for g in fences if g.end_t_s is None or g.end_t_s >= active_at_s)
 
+    def set_airborne(self, sys_id: SysId, airborne: bool | None) -> None:
+        """The vehicle flying ``sys_id`` is in the air (True), on the ground (False) or
+        reports no state (None), as its own messages say (:mod:`.flight_state`)."""
+        if airborne is None:
+            self._airborne.pop(sys_id, None)
+        else:
+            self._airborne[sys_id] = airborne
+
+    def airborne(self, op_id: OperationId) -> bool | None:
+        """Whether the operation's vehicle is in the air (None: no state, or the operation
+        is not the one its system id flies)."""
+        op = self._operations.get(op_id)
+        if op is None or op.sys_id is None:
+            return None
+        flown = self.by_sys_id(op.sys_id)
+        return self._airborne.get(op.sys_id) if flown is not None and flown.id == op_id else None
+
+    def _flown(self, up: bool) -> frozenset[OperationId]:
+        ops = (self.by_sys_id(s) for s, flag in self._airborne.items() if flag is up)
+        return frozenset(op.id for op in ops if op is not None)
+
+    def airborne_ids(self) -> frozenset[OperationId]:
+        """The operations whose vehicle is in the air."""
+        return self._flown(True)
+
     # ---- changes --------------------------------------------------------------------------
     def load(self, operations: Iterable[Operation], geofences: Iterable[Geofence]) -> None:
         """Initial state (from a scenario or the store); no notifications."""
@@ -118,6 +147,19 @@ class Airspace:
         self._operations[op_id] = new
         self.version += 1
         _log.info("operation %s: %s -> %s", op_id, op.state.value, state.value)
+        if self._on_operation:
+            self._on_operation(new)
+        return new
+
+    def set_home(self, op_id: OperationId, home: Position) -> Operation:
+        """The operation's vehicle has this home (its HOME_POSITION when it armed)."""
+        op = self.operation(op_id)
+        if op.home == home:
+            return op
+        new = dataclasses.replace(op, home=home)
+        self._operations[op_id] = new
+        self.version += 1
+        _log.info("operation %s: home %s", op_id, home)
         if self._on_operation:
             self._on_operation(new)
         return new
@@ -162,7 +204,8 @@ class Airspace:
 
     def snapshot(self, t_s: float, tracks: TrackSource) -> AirspaceSnapshot:
         """One consistent view at ``t_s``: tracking's (tracks, prediction) pair is taken at
-        once, then joined with the operations and the geofences not expired at ``t_s``."""
+        once, then joined with the operations, the geofences not expired at ``t_s`` and which
+        operations are in the air or on the ground."""
         track_map, prediction = tracks()
         return AirspaceSnapshot(
             t_s=t_s,
@@ -170,4 +213,6 @@ class Airspace:
             tracks=track_map,
             geofences=self.geofences(active_at_s=t_s),
             prediction=prediction,
+            airborne=self._flown(True),
+            grounded=self._flown(False),
         )

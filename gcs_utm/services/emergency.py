@@ -34,6 +34,7 @@ from gcs_utm.clock import Clock
 from gcs_utm.core.emergency import Decision, EmergencyManager
 from gcs_utm.core.emergency.adoption import adopt_case
 from gcs_utm.core.emergency.closing import close_threat
+from gcs_utm.core.emergency.ground import not_decided, on_ground
 from gcs_utm.model import (
     AirspaceSnapshot,
     Geofence,
@@ -209,7 +210,7 @@ class EmergencyService:
         elif (held := self.adoptions.pop(item.id, None)) is not None:
             await self._decide(lambda: self._adopt(item, held, now), item.id)
         else:
-            await self._decide(lambda: self.em.on_threat(item, self._snapshot(now)), item.id)
+            await self._decide(lambda: self._on_threat(item, now), item.id)
         self.processed += 1
 
     def _adopt(self, threat: Threat, held: Adoptable, now: float) -> Decision:
@@ -224,7 +225,15 @@ class EmergencyService:
             geofences=fences,
             now=now,
         )
-        return d if d is not None else self.em.on_threat(threat, self._snapshot(now))
+        return d if d is not None else self._on_threat(threat, now)
+
+    def _on_threat(self, threat: Threat, now: float) -> Decision:
+        """EM's decision on a threat, none for one with a UAS on the ground (ground.py)."""
+        snapshot = self._snapshot(now)
+        grounded = on_ground(threat, snapshot)
+        if grounded:
+            return not_decided(threat, grounded, now)
+        return self.em.on_threat(threat, snapshot)
 
     async def _decide(self, step: Callable[[], Decision], subject: str) -> None:
         try:

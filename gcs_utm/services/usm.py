@@ -55,6 +55,7 @@ from gcs_utm.model import (
 )
 from gcs_utm.ratelog import RateLimitedLog
 from gcs_utm.services.airspace import Airspace, AirspaceError
+from gcs_utm.services.flight_state import FlightState, Phase
 from gcs_utm.services.recommendations import (
     AnswerOutcome,
     AnswerStatus,
@@ -91,6 +92,18 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 _TASK_ERROR_INTERVAL_S = 10.0  # one line per failing task kind in this time (ratelog)
+
+_VEHICLE_HAZARDS = frozenset(
+    {
+        ThreatKind.GNSS_DEGRADATION,
+        ThreatKind.JAMMING_ATTACK,
+        ThreatKind.SPOOFING_ATTACK,
+        ThreatKind.LACK_OF_BATTERY,
+        ThreatKind.TECHNICAL_FAILURE,
+        ThreatKind.COMMUNICATION_FAILURE,
+    }
+)
+"""A vehicle's own hazards: on the ground they are its pre-flight findings, not threats."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -132,6 +145,13 @@ class UsmConfig:
         "cruise speed assumed for a vehicle's downloaded mission without speed items",
         min=0.1,
         unit="m/s",
+    )
+    home_tolerance_m: float = setting(
+        1.0,
+        "a vehicle's home (HOME_POSITION after its first 3D fix) moving more than this "
+        "vertically (2 m horizontally) re-files its operation, and at arming whatever the move",
+        min=0.01,
+        unit="m",
     )
     ground_warning_m: float = setting(
         50.0,
@@ -219,6 +239,8 @@ class Usm(RecommendationLifecycle):
         self._geofence_listeners: list[Callable[[Sequence[Geofence]], Awaitable[None]]] = []
         # per vehicle, as health: (system id, where it was first heard)
         self.statuses: dict[tuple[SysId, str], VehicleStatus] = {}
+        self.flight: dict[tuple[SysId, str], FlightState] = {}
+        self._flight_by_sys_id: dict[SysId, FlightState] = {}
         # per vehicle: (system id, where it was first heard), see LinkHealth.vehicle
         self.health: dict[tuple[SysId, str], LinkHealth] = {}
         self.threats: dict[ThreatId, Threat] = {}
@@ -243,11 +265,16 @@ class Usm(RecommendationLifecycle):
         )
         self._tasks: set[asyncio.Task[None]] = set()
         self._task_errors = RateLimitedLog(_log, _TASK_ERROR_INTERVAL_S, max_causes=64)
+        # a sender toggling armed or rebooting on every frame must not flood log and events
+        self._transitions = RateLimitedLog(
+            _log, _TASK_ERROR_INTERVAL_S, now=self.clock.now_s, max_causes=256
+        )
         self.counters: dict[str, int] = {
             "measurements": 0,
             "unknown_vehicle_measurements": 0,
             "hazards": 0,
             "hazards_coalesced": 0,
+            "hazards_on_ground": 0,
             "answers_refused": 0,
             "uploads_ok": 0,
             "uploads_failed": 0,
@@ -265,6 +292,7 @@ class Usm(RecommendationLifecycle):
                 operational_volume_m=cfg.default_operational_volume_m,
                 cruise_speed_mps=cfg.default_cruise_speed_mps,
                 ground_warning_m=cfg.ground_warning_m,
+                home_tolerance_m=cfg.home_tolerance_m,
                 ground_elevation_amsl_m=ground_elevation_amsl_m,
             ),
             log_event=self.log_event,
@@ -446,20 +474,38 @@ class Usm(RecommendationLifecycle):
 
     def on_status(self, s: VehicleStatus) -> None:
         self.statuses[(s.sys_id, s.vehicle)] = s
-        self.vehicle_ops.on_status(s)  # mission changes, home, progress
+        flight = self.flight.setdefault((s.sys_id, s.vehicle), FlightState())
+        changes = flight.update(s)
+        self._flight_by_sys_id[s.sys_id] = flight  # (the latest status of that system id)
+        for change in changes:
+            if change != "home" and self._transitions.log(
+                logging.INFO, f"{s.sys_id}:{change}", "vehicle: sysid %s: %s", s.sys_id, change
+            ):
+                text = f"sysid {s.sys_id}: {change}"
+                self.events.append(UsmEvent(t_s=self.clock.now_s(), kind="vehicle", text=text))
+        self.vehicle_ops.on_status(s, flight, changes)  # mission changes, home, progress
+        self.airspace.set_airborne(s.sys_id, flight.flying)
         op = self.airspace.by_sys_id(s.sys_id)
         if op is None:
             return
         state = op.state
-        if s.armed and s.mode in (FlightMode.MISSION, FlightMode.TAKEOFF, FlightMode.GUIDED):
+        if flight.airborne or (
+            s.armed and s.mode in (FlightMode.MISSION, FlightMode.TAKEOFF, FlightMode.GUIDED)
+        ):
             state = OperationState.ACTIVE
         elif s.armed and s.mode is FlightMode.HOLD and op.state is OperationState.ACTIVE:
             # a hold the UTM did not ask for is still an active flight
             state = OperationState.ACTIVE
-        elif not s.armed and op.state is OperationState.ACTIVE and s.landed:
-            state = OperationState.LANDED
+        elif flight.phase is Phase.LANDED and op.state is OperationState.ACTIVE:
+            state = OperationState.LANDED  # the operation ends when the vehicle lands/disarms
         if state is not op.state and op.state is not OperationState.SUSPENDED:
             self.airspace.set_state(op.id, state)
+
+    def on_ground(self, sys_id: SysId) -> bool:
+        """True when the vehicle flying ``sys_id`` (its latest status) says it is on the
+        ground (:mod:`gcs_utm.services.flight_state`)."""
+        flight = self._flight_by_sys_id.get(sys_id)
+        return flight is not None and flight.on_ground
 
     def on_link_health(self, h: LinkHealth) -> None:
         self.health[(h.sys_id, h.vehicle)] = h
@@ -485,6 +531,16 @@ class Usm(RecommendationLifecycle):
         """A hazard from outside Monitoring becomes a threat for EM, coalesced per
         (kind, UAS) within the cooldown so a flapping GNSS does not storm the operator."""
         self.counters["hazards"] += 1
+        if h.kind in _VEHICLE_HAZARDS and (
+            (h.sys_id is not None and self.on_ground(h.sys_id))
+            or (h.operation_id is not None and self.airspace.airborne(h.operation_id) is False)
+        ):
+            # a vehicle on the ground (acquiring GNSS, rebooted, link gone) is in pre-flight:
+            # its checks are the pilot's, not an emergency of the airspace
+            self.counters["hazards_on_ground"] += 1
+            who = h.operation_id or f"sysid {h.sys_id}"
+            self.log_event("preflight", f"{who} on the ground: {h.kind.value} {h.message}")
+            return
         op_id = h.operation_id
         if op_id is None and h.sys_id is not None:
             op = self.airspace.by_sys_id(h.sys_id)

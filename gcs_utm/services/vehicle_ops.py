@@ -6,10 +6,16 @@ that flies a mission is an operation, filed from the mission it has, kept in ste
   MISSION_CURRENT, or on arming; the mission is then downloaded again and compared with the
   plan by position (a mission that is the plan, e.g. one the UTM uploaded, changes nothing).
   A mission present before the first position fix waits for the home it needs.
-- Home from HOME_POSITION (ArduPilot: else mission item 0), never from the first reported
-  altitude (a vehicle that connects airborne would put every waypoint that much too high);
-  waypoints in a relative-altitude frame are resolved against it; a vehicle-filed operation
-  is re-filed when its home moves.
+- Home from HOME_POSITION (ArduPilot: else mission item 0) once the vehicle has had a 3D fix
+  since its boot (PX4 sends HOME_POSITION 0.4 s after boot, before its fix), never from the
+  first reported altitude (a vehicle that connects airborne would put every waypoint that
+  much too high); waypoints in a relative-altitude frame are resolved against it; the
+  operation is re-filed when its home moves more than ``home_tolerance_m`` vertically (2 m
+  horizontally), and its home is set to the vehicle's at arming (the floor of its flight).
+- A mission present before the first 3D fix is filed, whole, when the fix comes. A disarmed
+  vehicle's plan is its whole mission from where it stands (the current item counts only in
+  the air); it is re-timed from the vehicle's progress when it starts the mission.
+- A reboot forgets the home: a new pre-flight.
 - Timed from the vehicle's progress, not from the download: the plan starts at the vehicle's
   position, flies to the current item (MISSION_CURRENT) and on at the mission's speeds
   (DO_CHANGE_SPEED, else the cruise speed); it is re-timed when the vehicle starts the mission
@@ -43,6 +49,7 @@ from gcs_utm.model import (
     Waypoint4D,
 )
 from gcs_utm.services.airspace import Airspace, AirspaceError
+from gcs_utm.services.flight_state import FlightState
 
 _log = logging.getLogger(__name__)
 
@@ -81,6 +88,7 @@ class VehicleOpsSettings:
     cruise_speed_mps: float
     ground_warning_m: float
     ground_elevation_amsl_m: float | None = None
+    home_tolerance_m: float = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -231,10 +239,11 @@ def _same_place(p: NavPoint, w: Waypoint4D) -> bool:
     )
 
 
-def _moved(a: Position | None, b: Position | None) -> bool:
+def _moved(a: Position | None, b: Position | None, vertical_m: float = _HOME_MOVE_M) -> bool:
     if a is None or b is None:
         return a is not b
-    return _dist_m(a, b) > _HOME_MOVE_M
+    horizontal = _dist_m(a, Position(lat_deg=b.lat_deg, lon_deg=b.lon_deg, alt_amsl_m=a.alt_amsl_m))
+    return horizontal > _HOME_MOVE_M or abs(a.alt_amsl_m - b.alt_amsl_m) > vertical_m
 
 
 @dataclass(slots=True)
@@ -265,6 +274,7 @@ class _Vehicle:
     failures: int = 0  # mission downloads failed in a row
     retry_at_s: float | None = None  # when a failed download is tried again
     uploading: FlightPlan | None = None  # the plan the USM is uploading (see expect_upload)
+    fixed: bool = True  # a 3D fix since its boot (False while a FlightState says none yet)
 
 
 class VehicleOps:
@@ -324,7 +334,12 @@ class VehicleOps:
         )
         self._download(sys_id)
 
-    def on_status(self, s: VehicleStatus) -> None:
+    def on_status(
+        self, s: VehicleStatus, flight: FlightState | None = None, changes: Sequence[str] = ()
+    ) -> None:
+        """One status; ``flight`` is the vehicle's state (:mod:`.flight_state`) and
+        ``changes`` its transitions at this status (without one, HOME_POSITION is taken as
+        it comes)."""
         v = self._vehicles.get(s.sys_id)
         if v is None:
             return
@@ -332,8 +347,19 @@ class VehicleOps:
             v.position = s.position
         v.total = s.mission_total
         v.mission_id = s.mission_id
-        if s.home is not None and _moved(v.home, s.home):
-            self._home(v, s.home, from_status=True)
+        if "rebooted" in changes:
+            v.home, v.home_from_status = None, False  # a new pre-flight: a new home
+        home = s.home
+        if flight is not None:
+            v.fixed, home = flight.had_fix, flight.home
+        arming = "armed" in changes
+        tolerance_m = self.settings.home_tolerance_m
+        if home is not None and (_moved(v.home, home, tolerance_m) or (arming and home != v.home)):
+            self._home(v, home, from_status=True, arming=arming)
+        elif "fix" in changes and v.items is not None:
+            self._file(v, changed=False)  # a mission that waited for the first fix
+        if arming and v.home is not None:
+            self._home_at_arming(v)
         self._maybe_download(v, self._mission_changed(v, s) or (s.armed and not v.armed))
         v.armed = s.armed
         flying = s.armed and s.mode in _FLYING_MODES
@@ -425,8 +451,10 @@ class VehicleOps:
 
     def _item0_home(self, v: _Vehicle) -> None:
         """ArduPilot keeps its home in mission item 0 (absolute altitude): the home until
-        HOME_POSITION gives one."""
+        HOME_POSITION gives one (after the first fix: before it, item 0 is not a home)."""
         if v.home_from_status or v.autopilot is not Autopilot.ARDUPILOT or not v.items:
+            return
+        if not v.fixed:
             return
         it = v.items[0]
         lat, lon = float(getattr(it, "x", 0)) / 1e7, float(getattr(it, "y", 0)) / 1e7
@@ -437,7 +465,9 @@ class VehicleOps:
             self._home(v, home, from_status=False)
 
     # ---- home ---------------------------------------------------------------------------
-    def _home(self, v: _Vehicle, home: Position, *, from_status: bool) -> None:
+    def _home(
+        self, v: _Vehicle, home: Position, *, from_status: bool, arming: bool = False
+    ) -> None:
         first = v.home is None
         v.home = home
         v.home_from_status = v.home_from_status or from_status
@@ -455,7 +485,15 @@ class VehicleOps:
             self._file(v, changed=False)  # a mission that waited for its home
         elif op.conops == CONOPS:
             why = "the vehicle reported its home" if first else "the vehicle's home moved"
-            self._file(v, changed=True, reason=why)
+            why = "the vehicle armed (its home at arming)" if arming else why
+            self._file(v, changed=True, reason=why, new_home=arming)
+
+    def _home_at_arming(self, v: _Vehicle) -> None:
+        """Any operation the vehicle flies takes its home at arming (TD's floor is that home
+        plus the minimum height): one filed elsewhere (scenario, MQTT) too."""
+        op = self.airspace.by_sys_id(v.sys_id)
+        if op is not None and v.home is not None and op.home != v.home and op.conops != CONOPS:
+            self.airspace.set_home(op.id, v.home)
 
     def _warn_ground(self, v: _Vehicle, home: Position) -> None:
         ground = self.settings.ground_elevation_amsl_m
@@ -501,7 +539,7 @@ class VehicleOps:
                 points,
                 op_id,
                 t_s=self.clock.now_s(),
-                current_seq=v.seq,
+                current_seq=v.seq if v.armed else None,  # on the ground: the whole mission
                 position=v.position,
                 version=version,
                 reason=reason,
@@ -510,11 +548,14 @@ class VehicleOps:
             self._log_event("vehicle", f"sysid {v.sys_id}: mission not usable: {exc}")
             return None
 
-    def _file(self, v: _Vehicle, *, changed: bool, reason: str = "") -> None:
+    def _file(
+        self, v: _Vehicle, *, changed: bool, reason: str = "", new_home: bool = False
+    ) -> None:
         """File the vehicle's mission as an operation, or as a new plan version of its
         operation when ``changed`` (or it filed that operation) and the mission is not already
-        its plan (or the home moved)."""
-        if v.items is None:
+        its plan (or the home moved; ``new_home``: changed at all). Not before the vehicle's
+        first 3D fix (its home and position are not known yet)."""
+        if v.items is None or not v.fixed:
             return
         op = self.airspace.by_sys_id(v.sys_id)
         if op is not None and not changed and op.conops != CONOPS:
@@ -535,7 +576,12 @@ class VehicleOps:
             if plan is not None:
                 self._add(v, plan)
             return
-        home_moved = op.conops == CONOPS and v.home is not None and _moved(op.home, v.home)
+        home_moved = (
+            op.conops == CONOPS
+            and v.home is not None
+            and (_moved(op.home, v.home, self.settings.home_tolerance_m) or new_home)
+            and op.home != v.home
+        )
         echo = v.uploading is not None and _flies_plan(v, points, v.uploading)
         if (echo or _flies_plan(v, points, op.plan)) and not home_moved:
             return

@@ -36,6 +36,7 @@ from gcs_utm.model import (
     OperationId,
     Recommendation,
     RecommendationState,
+    RemoteIdentity,
     Threat,
     ThreatStatus,
     Track,
@@ -74,9 +75,10 @@ class Connection(Protocol):
     def execute(self, sql: str, params: Sequence[Any] = ..., /) -> Any: ...
 
 
-def _flat_fields(cls: type) -> tuple[str, ...] | None:
-    """The field names of dataclass ``cls`` when each is annotated as a JSON scalar (str,
-    float, int, bool, a NewType of one, optional) or a tuple of floats, else None."""
+def _flat_fields(cls: type, skip: str) -> tuple[str, ...] | None:
+    """The field names of dataclass ``cls`` but the last, ``skip``, when each is annotated as
+    a JSON scalar (str, float, int, bool, a NewType of one, optional) or a tuple of floats,
+    else None."""
     scalars = (str, float, int, bool, type(None))
 
     def flat(tp: Any) -> bool:
@@ -92,11 +94,16 @@ def _flat_fields(cls: type) -> tuple[str, ...] | None:
 
     hints = typing.get_type_hints(cls)
     names = tuple(f.name for f in dataclasses.fields(cls))
+    if names[-1:] != (skip,):
+        return None
+    names = names[:-1]
     return names if all(flat(hints[n]) for n in names) else None
 
 
-_TRACK_FIELDS = _flat_fields(Track)
+# remote_id (a nested record, None on most tracks) is left to the generic path when it is set
+_TRACK_FIELDS = _flat_fields(Track, skip="remote_id")
 _track_values = operator.attrgetter(*_TRACK_FIELDS) if _TRACK_FIELDS else None
+_TRACK_KEYS = (*(_TRACK_FIELDS or ()), "remote_id")
 
 
 def track_doc(t: Track) -> str:
@@ -105,11 +112,11 @@ def track_doc(t: Track) -> str:
     scalar or a tuple of floats (checked on the annotations at import), ``json.dumps`` of the
     fields writes exactly the generic codec's :func:`encode` form (a tuple is an array); a
     value of another type at run time (a NumPy integer, say) takes the generic path."""
-    if _track_values is None or _TRACK_FIELDS is None:
+    if _track_values is None or _TRACK_FIELDS is None or t.remote_id is not None:
         return dumps(t)
     try:
         return json.dumps(
-            dict(zip(_TRACK_FIELDS, _track_values(t), strict=True)),
+            dict(zip(_TRACK_KEYS, (*_track_values(t), None), strict=True)),
             separators=(",", ":"),
             allow_nan=True,
         )
@@ -411,6 +418,36 @@ class StoreBase:
             )
         ]
 
+    # ---- Remote ID ----------------------------------------------------------------------
+    def save_remote_ids(self, rows: Sequence[tuple[TrackId, RemoteIdentity]]) -> None:
+        """The latest identity of each Remote ID source, on its track (one row per source;
+        an older identity never replaces a newer one)."""
+        with self.transaction() as c:
+            for track_id, ident in rows:
+                c.execute(
+                    "INSERT INTO remote_ids "
+                    "(source, track_id, updated_t_s, uas_id, operator_id, doc) "
+                    "VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT(source) DO UPDATE SET "
+                    "track_id=excluded.track_id, updated_t_s=excluded.updated_t_s, "
+                    "uas_id=excluded.uas_id, operator_id=excluded.operator_id, doc=excluded.doc "
+                    "WHERE excluded.updated_t_s >= remote_ids.updated_t_s",
+                    (
+                        ident.source,
+                        track_id,
+                        ident.updated_t_s,
+                        ident.uas_id,
+                        ident.operator_id,
+                        dumps(ident),
+                    ),
+                )
+
+    def load_remote_ids(self) -> list[tuple[TrackId, RemoteIdentity]]:
+        """(track id, identity) of every Remote ID source, by source."""
+        return [
+            (TrackId(tid), self._load(RemoteIdentity, d))
+            for tid, d in self._rows("SELECT track_id, doc FROM remote_ids ORDER BY source")
+        ]
+
     # ---- threats and recommendations ----------------------------------------------------
     def save_threat(self, threat: Threat) -> None:
         """Insert a threat or update it (its life cycle: OPEN, UPDATED, CLOSED). Only the life
@@ -631,6 +668,7 @@ TABLES = frozenset(
         "lives",
         "regions",
         "region_leases",
+        "remote_ids",
     }
 )
 

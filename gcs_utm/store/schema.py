@@ -119,6 +119,19 @@ MIGRATIONS: tuple[str, ...] = (
     """
     ALTER TABLE lives ADD COLUMN committed_batch INTEGER NOT NULL DEFAULT 0;
     """,
+    # 5: Remote ID (docs/remote-id.md): the latest identity and location each Remote ID
+    # source (sysid:<n> or rid:<hex>) gave, on the track it belongs on; doc is the
+    # RemoteIdentity as JSON.
+    """
+    CREATE TABLE remote_ids (
+        source TEXT PRIMARY KEY,
+        track_id TEXT NOT NULL,
+        updated_t_s REAL NOT NULL,
+        uas_id TEXT NOT NULL,
+        operator_id TEXT NOT NULL,
+        doc TEXT NOT NULL
+    );
+    """,
 )
 
 # The same schema in PostgreSQL, migration for migration (number n here is number n above):
@@ -225,5 +238,15 @@ PG_MIGRATIONS: tuple[str, ...] = (
     """,
     """
     ALTER TABLE lives ADD COLUMN committed_batch BIGINT NOT NULL DEFAULT 0;
+    """,
+    """
+    CREATE TABLE remote_ids (
+        source TEXT PRIMARY KEY,
+        track_id TEXT NOT NULL,
+        updated_t_s DOUBLE PRECISION NOT NULL,
+        uas_id TEXT NOT NULL,
+        operator_id TEXT NOT NULL,
+        doc TEXT NOT NULL
+    );
     """,
 )

@@ -36,8 +36,10 @@ from gcs_utm.model import (
     Operation,
     Recommendation,
     RecommendationState,
+    RemoteIdentity,
     Threat,
     Track,
+    TrackId,
 )
 from gcs_utm.store import journal
 from gcs_utm.store.base import Connection, StoreBase, StoreError
@@ -145,6 +147,13 @@ class StoreWriter:
     def write_tracks(self, tracks: Sequence[Track]) -> concurrent.futures.Future[None] | None:
         batch = list(tracks)
         return self.submit(lambda s: s.write_tracks(batch), droppable=True)
+
+    def write_remote_ids(
+        self, rows: Sequence[tuple[TrackId, RemoteIdentity]]
+    ) -> concurrent.futures.Future[None] | None:
+        """Latest-wins state like the tracks: dropped when the queue is full."""
+        batch = list(rows)
+        return self.submit(lambda s: s.save_remote_ids(batch), droppable=True)
 
     def save_operation(self, op: Operation) -> concurrent.futures.Future[None]:
         return self._must("save_operation", op)

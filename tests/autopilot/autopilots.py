@@ -21,8 +21,12 @@ import shutil
 import signal
 import subprocess
 import time
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
+
+from tests.autopilot.pilot import close_open_links
 
 REPO = Path(__file__).resolve().parents[2]
 SHARED = Path(os.environ.get("GCS_UTM_SHARED", REPO.parent / "shared"))
@@ -112,6 +116,36 @@ def px4_bin_dir(root: Path) -> Path:
     return out
 
 
+def launcher(
+    kind: str, start: Callable[..., SitlProcess], root: Path, failed: Callable[[], bool]
+) -> Iterator[Callable[..., SitlProcess]]:
+    """The body of the ``px4``/``ardupilot`` fixtures: yields ``launch(**kwargs)``, which starts
+    an autopilot with ``start(root, **kwargs)``. When the test ends, passed or failed, the pilot
+    links it left open are closed and every process it started is stopped (each one even if
+    stopping another raised); with ``failed()`` their logs are printed."""
+    started: list[SitlProcess] = []
+
+    def launch(**kwargs: Any) -> SitlProcess:
+        p = start(root, **kwargs)
+        started.append(p)
+        return p
+
+    try:
+        yield launch
+    finally:
+        close_open_links()
+        errors: list[BaseException] = []
+        for p in started:
+            try:
+                p.stop()
+            except BaseException as exc:  # stop the others first, then raise it
+                errors.append(exc)
+            if failed():
+                print(f"\n=== {kind} instance {p.instance} logs\n{p.log_tail()}")
+        if errors:
+            raise errors[0]
+
+
 @dataclass
 class SitlProcess:
     """One running autopilot. ``workdir`` holds its parameters and logs."""
@@ -187,11 +221,12 @@ def start_px4(
         env["PX4_HOME_LAT"] = str(round(home[0] * 1e7))
         env["PX4_HOME_LON"] = str(round(home[1] * 1e7))
     out, err = wd / "out.log", wd / "err.log"
-    # (PX4 gets a fresh /tmp: a caller's workdir, and the binary beside it, must be elsewhere)
     binary = px4_bin_dir(owned or (wd.parent if workdir and private_tmp else root)) / "px4"
-    argv = [str(binary), "-i", str(instance), "-d", str(PX4_DIR / "etc")]
+    # Real paths: a symlink under /tmp (e.g. ../shared) would dangle under PX4's own /tmp.
+    binary, etc, wd = binary.resolve(), (PX4_DIR / "etc").resolve(), wd.resolve()
+    argv = [str(binary), "-i", str(instance), "-d", str(etc)]
     if private_tmp:
-        argv = [*_PRIVATE_TMP, *argv]
+        argv = private_tmp_argv(argv, keep=(binary.parent, etc, wd), cwd=wd)
     with out.open("wb") as o, err.open("wb") as e:
         proc = subprocess.Popen(
             argv,
@@ -205,17 +240,50 @@ def start_px4(
     return SitlProcess("px4", instance, instance + 1, wd, proc, [out, err], owned)
 
 
-# Runs the command with a fresh tmpfs on /tmp in a private mount namespace.
-_PRIVATE_TMP = [
-    "unshare", "--mount", "--propagation", "private",
-    "sh", "-c", 'mount -t tmpfs gcs-utm-px4-tmp /tmp && exec "$0" "$@"',
-]  # fmt: skip
+# PX4 keeps its lock socket and lock file in /tmp (``/tmp/px4-sock-I``, ``/tmp/px4_lock-I``):
+# two PX4 instance I on one machine (two test runs, two helpers) collide there whatever
+# their network namespaces. Each PX4 therefore runs in a private mount namespace with a fresh
+# tmpfs on /tmp. Whatever PX4 needs that lives under /tmp itself (a clone with ../shared in a
+# temporary folder, pytest's tmp_path) is bound back at the same path inside that tmpfs: the
+# shell cds to /tmp first, so "." still names the real /tmp once the tmpfs hides it.
+# Arguments: $1 the directory to run in, $2 the count n of paths to keep (relative to /tmp),
+# then the n paths, then the command.
+_PRIVATE_TMP_SCRIPT = """set -e
+wd=$1; n=$2; shift 2
+cd /tmp
+mount -t tmpfs gcs-utm-px4-tmp /tmp
+while [ "$n" -gt 0 ]; do
+  mkdir -p "/tmp/$1"
+  mount --no-canonicalize --bind "./$1" "/tmp/$1"
+  n=$((n - 1)); shift
+done
+cd "$wd"
+exec "$@"
+"""
+
+
+def private_tmp_argv(argv: list[str], *, keep: Sequence[Path], cwd: Path) -> list[str]:
+    """``argv`` run with a fresh tmpfs on /tmp in a private mount namespace, in ``cwd``; the
+    directories ``keep`` (and ``cwd``) stay reachable at their paths when under /tmp."""
+    tmp = Path(os.path.realpath("/tmp"))
+    under: list[Path] = []
+    for path in sorted(
+        {Path(os.path.realpath(p)) for p in (*keep, cwd)}, key=lambda p: len(p.parts)
+    ):
+        if path.is_relative_to(tmp) and not any(path.is_relative_to(u) for u in under):
+            under.append(path)
+    rel = [str(p.relative_to(tmp)) for p in under]
+    return [
+        "unshare", "--mount", "--propagation", "private",
+        "sh", "-c", _PRIVATE_TMP_SCRIPT, "gcs-utm-px4-tmp", str(cwd), str(len(rel)), *rel, *argv,
+    ]  # fmt: skip
 
 
 def _private_tmp_works() -> bool:
     """Whether PX4 can get its own /tmp here (root, or user namespaces, and unshare)."""
+    argv = private_tmp_argv(["true"], keep=(), cwd=Path("/"))
     try:
-        done = subprocess.run([*_PRIVATE_TMP, "true"], capture_output=True, timeout=10, check=False)
+        done = subprocess.run(argv, capture_output=True, timeout=10, check=False)
     except (OSError, subprocess.TimeoutExpired):
         return False
     return done.returncode == 0

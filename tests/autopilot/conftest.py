@@ -1,7 +1,8 @@
 """Fixtures that start real PX4 / ArduPilot SITL processes (see autopilots.py).
 
-A test asks for ``px4`` or ``ardupilot`` and calls it to start instances; every process it
-started is stopped (and its logs printed on failure) when the test ends. Without ``../shared``
+A test asks for ``px4`` or ``ardupilot`` and calls it to start instances; when the test ends,
+passed or failed, every pilot link (pilot.py) it left open is closed and every process it
+started is stopped (and its logs printed on failure). Without ``../shared``
 the tests skip with the reason; on CI (``CI`` set) with ``../shared`` present, a missing
 private network namespace is a failure, not a skip, so the real-autopilot tests cannot
 silently stop running.
@@ -12,12 +13,12 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 from tests.autopilot.autopilots import (
     SitlProcess,
+    launcher,
     private_netns,
     start_ardupilot,
     start_px4,
@@ -38,19 +39,12 @@ def _factory(
     kind: str, start: Callable[..., SitlProcess], tmp_path: Path, request: pytest.FixtureRequest
 ) -> Iterator[Callable[..., SitlProcess]]:
     _require(kind)
-    started: list[SitlProcess] = []
 
-    def launch(**kwargs: Any) -> SitlProcess:
-        p = start(tmp_path, **kwargs)
-        started.append(p)
-        return p
+    def failed() -> bool:
+        rep = getattr(request.node, "rep_call", None)
+        return rep is not None and bool(rep.failed)
 
-    yield launch
-    failed = getattr(request.node, "rep_call", None)
-    for p in started:
-        p.stop()
-        if failed is not None and failed.failed:
-            print(f"\n=== {kind} instance {p.instance} logs\n{p.log_tail()}")
+    yield from launcher(kind, start, tmp_path, failed)
 
 
 @pytest.hookimpl(hookwrapper=True)

@@ -222,7 +222,8 @@ async def _take_off(rig: Rig, height_m: float) -> None:
             ),
         ]
         up = await hub.upload_items(SYS, items)
-        assert up.ok, up
+        assert up.ok and not up.mode_set, up  # disarmed: the mode stays the pilot's
+        assert (await hub.send_mode(SYS, FlightMode.MISSION)).ok  # the pilot's AUTO
         await _arm(rig)
     else:
         if case.autopilot is Autopilot.ARDUPILOT:

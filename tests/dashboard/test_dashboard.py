@@ -130,6 +130,22 @@ def test_operations_table_shows_track_and_plan_progress() -> None:
     assert "UAS1" in text
     assert "5.0 m/s" in text  # ground speed from the track's velocity (3, 4)
     assert "agriculture" in text
+    assert "Remote ID" not in text  # no column until some UAS broadcasts Remote ID
+
+
+def test_operations_table_shows_the_remote_id_once_heard() -> None:
+    from dataclasses import replace
+
+    from gcs_utm.model import RemoteIdentity
+
+    rid = RemoteIdentity(source="sysid:1", uas_id="1596A303716531B", operator_id="FIN87astr")
+    tracks = {k: replace(t, remote_id=rid) for k, t in _tracks().items()}
+    buf = StringIO()
+    Console(file=buf, width=200, color_system=None).print(
+        operations_table(collect(_usm(), lambda: tracks), width=200)
+    )
+    text = buf.getvalue()
+    assert "Remote ID" in text and "1596A303716531B / FIN87astr" in text
 
 
 def test_prompt_shows_threat_options_cost_risk_and_deadline() -> None:

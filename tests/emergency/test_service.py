@@ -117,3 +117,24 @@ async def test_cancel_is_clean() -> None:
     results = await asyncio.gather(task, return_exceptions=True)
     assert isinstance(results[0], asyncio.CancelledError)
     assert [t for t in asyncio.all_tasks() if t is not asyncio.current_task()] == []
+
+
+async def test_em_decides_nothing_for_a_threat_with_a_uas_on_the_ground() -> None:
+    """A mission on a disarmed PX4 quad was timed as if flying now: the conflict was decided
+    and both missions replaced before take-off (issue 31.2)."""
+    snap, threat = sc.scenario_los_2uas()
+    h = Harness(replace(snap, grounded=frozenset({OperationId("A")})))
+    task = asyncio.create_task(h.svc.run())
+    try:
+        await h.svc.submit_threats([threat])
+        await h.until(lambda: len(h.decisions) >= 1)
+        (d,) = h.decisions
+        assert d.recommendations == () and d.commands == ()
+        assert [a.action for a in d.audit] == ["not_decided"]
+        h.snap = replace(h.snap, grounded=frozenset(), airborne=frozenset({OperationId("A")}))
+        await h.svc.submit_threats([replace(threat, updated_at_s=snap.t_s + 1.0)])
+        await h.until(lambda: len(h.decisions) >= 2)
+        assert h.decisions[1].recommendations  # airborne: decided as usual
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)

@@ -80,6 +80,7 @@ class FakeVehicle(asyncio.DatagramProtocol):
         self.mission: list[Any] = []
         self.current = 0
         self.custom_mode = (4 << 16) | (3 << 24)  # AUTO.LOITER
+        self.armed = True  # HEARTBEAT's MAV_MODE_FLAG_SAFETY_ARMED
         self.boot_ms = 60_000
         self.received: list[Any] = []
         self.commands: list[Any] = []
@@ -117,7 +118,9 @@ class FakeVehicle(asyncio.DatagramProtocol):
 
     def heartbeat(self) -> None:
         self.send(
-            self.mav.heartbeat_encode(2, self.autopilot, 1 | 128, self.custom_mode, 4, 3),
+            self.mav.heartbeat_encode(
+                2, self.autopilot, 1 | (128 if self.armed else 0), self.custom_mode, 4, 3
+            ),
             lossy=False,
         )
 

@@ -357,8 +357,29 @@ def _mission_current_frame(seq: int, total: int, state: int, mission_id: int, n:
     return hdr + payload + crc.to_bytes(2, "little")
 
 
+def _gps_fix(v: Any, fix: int) -> None:
+    v.send(v.mav.gps_raw_int_encode(0, fix, 0, 0, 0, 80, 120, 0, 0, 12, 0, 1500, 2500, 0, 0))
+
+
+async def test_home_position_before_a_3d_fix_is_not_the_home(env: Any) -> None:
+    """PX4 sends HOME_POSITION 0.4 s after boot, before its fix (issue 31.3): not a home;
+    the one after the fix is."""
+    v = await env.vehicle(1)
+    _gps_fix(v, 0)
+    v.send(v.mav.home_position_encode(454671160, -737578370, 30340, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0))
+    await _settle()
+    assert all(s.home is None for s in env.sink.statuses)
+    _gps_fix(v, 3)
+    v.send(v.mav.home_position_encode(454671160, -737578370, 32340, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0))
+    await _settle()
+    home = env.sink.statuses[-1].home
+    assert home is not None and home.alt_amsl_m == 32.34
+    v.close()
+
+
 async def test_home_position_and_mission_changes_reach_the_status(env: Any) -> None:
     v = await env.vehicle(1)
+    _gps_fix(v, 3)
     v.send(v.mav.home_position_encode(454671160, -737578370, 32340, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0))
     await _settle()
     home = env.sink.statuses[-1].home

@@ -44,6 +44,20 @@ async def test_upload_verified_sets_current_and_mission_mode(env: Any) -> None:
     v.close()
 
 
+async def test_upload_to_a_disarmed_vehicle_sets_no_mission_mode(env: Any) -> None:
+    """After an upload, AUTO was set on disarmed vehicles, overriding the pilot's mode
+    (issue 31.2): on the ground the upload is verified and made current, the mode left."""
+    v = await env.vehicle(1)
+    v.armed = False
+    v.heartbeat()
+    await asyncio.sleep(0.05)
+    res = await env.hub.upload_plan(SysId(1), _plan(), start_index=3)
+    assert res.ok and res.verified and res.current_set, res
+    assert not res.mode_set
+    assert [c for c in v.commands if c.command == 176] == []  # no DO_SET_MODE
+    v.close()
+
+
 async def test_upload_answers_old_mission_request(env: Any) -> None:
     v = await env.vehicle(2)
     v.faults.old_request = True

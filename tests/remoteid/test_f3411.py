@@ -3,14 +3,15 @@
 Vectors (tests/data/remoteid, sources in tests/data/SOURCES.md), with the decoded values their
 publishers print:
 - ``librid_cli_location.hex``: the Location/Vector example of tuupola/librid's CLI README.
-- ``bkerler_droneid_selftest_ble.hex``: the BLE advertisement of bkerler/DroneID's decoder
-  self-test (OpenDroneID/selftest.py): a message pack of seven messages (two Basic IDs,
-  Location, Authentication page 0, Self-ID, System, Operator ID), with its expected JSON.
+- ``librid_basic_id.hex``, ``librid_system.hex``, ``librid_self_id.hex``,
+  ``librid_operator_id.hex``, ``librid_auth_pages.hex``: the outputs printed in the READMEs of
+  librid's examples (basic_id, system, self_id, operator_id, auth_page), with their values.
+- ``opendroneid_core_c_wifi_beacon.hex``: the expected buffer of opendroneid-core-c's Wi-Fi
+  beacon unit test (a frame prefix: the pack header and a complete Basic ID message).
 """
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
@@ -37,17 +38,10 @@ from adapters.remoteid.f3411 import (
 )
 
 DATA = Path(__file__).parent.parent / "data" / "remoteid"
-BLE_SERVICE_HEADER = 6  # AD length, AD type 0x16, UUID 0xFFFA, application code 0x0D, counter
 
 
 def _hex(name: str) -> bytes:
     return bytes.fromhex((DATA / name).read_text().strip())
-
-
-def _pack() -> list[f3411.Message]:
-    ad = _hex("bkerler_droneid_selftest_ble.hex")
-    assert ad[1:5] == bytes.fromhex("16faff0d")  # service data, ASTM UUID, app code
-    return f3411.decode(ad[BLE_SERVICE_HEADER:])
 
 
 def test_librid_location_example() -> None:
@@ -73,71 +67,74 @@ def test_librid_location_example() -> None:
     assert loc.time_accuracy_s == 0.1
 
 
-def test_bkerler_pack_identity_messages() -> None:
-    msgs = _pack()
-    assert [type(m) for m in msgs] == [
-        BasicId, BasicId, Location, AuthPage, SelfId, System, OperatorId
-    ]  # fmt: skip
-    serial, caa = msgs[0], msgs[1]
-    assert isinstance(serial, BasicId) and isinstance(caa, BasicId)
-    assert serial.protocol_version == 0
-    assert serial.id_type is IdType.SERIAL_NUMBER
-    assert serial.ua_type is UaType.HELICOPTER_OR_MULTIROTOR
-    assert serial.uas_id == "18656A24303"
-    assert caa.id_type is IdType.CAA_REGISTRATION_ID
-    assert caa.uas_id == "DJI"
-    self_id, operator = msgs[4], msgs[6]
+def test_librid_basic_id_example() -> None:
+    basic = f3411.decode_message(_hex("librid_basic_id.hex"))
+    assert isinstance(basic, BasicId)
+    assert basic.protocol_version == 2
+    assert basic.id_type is IdType.SERIAL_NUMBER  # librid prints "ID type: 1"
+    assert basic.ua_type is UaType.HELICOPTER_OR_MULTIROTOR  # "UA type: 2"
+    assert basic.uas_id == "1ABCD2345EF678XYZ"
+
+
+def test_librid_system_example() -> None:
+    system = f3411.decode_message(_hex("librid_system.hex"))
+    assert isinstance(system, System)
+    assert system.protocol_version == 2
+    assert system.operator_location_type is OperatorLocationType.TAKEOFF  # "loc type: 0"
+    assert system.classification_type is ClassificationType.EUROPEAN_UNION  # "1"
+    assert system.operator_latitude_deg == pytest.approx(60.2870324, abs=1e-9)  # 60.287032
+    assert system.operator_longitude_deg == pytest.approx(24.5397187, abs=1e-9)  # 24.539719
+    assert (system.area_count, system.area_radius_m) == (1, 100.0)
+    assert (system.area_ceiling_m, system.area_floor_m) == (120.0, 0.0)
+    assert system.eu_category is EuCategory.OPEN  # "UA category: 1"
+    assert system.eu_class is EuClass.CLASS_1  # "UA class: 2", the code F3411 names Class 1
+    assert system.operator_altitude_geodetic_m == 50.0
+    assert system.timestamp_s == f3411.ODID_EPOCH_UTC_S + 3600  # "Timestamp: 3600"
+
+
+def test_librid_self_id_and_operator_id_examples() -> None:
+    self_id = f3411.decode_message(_hex("librid_self_id.hex"))
+    operator = f3411.decode_message(_hex("librid_operator_id.hex"))
     assert isinstance(self_id, SelfId) and isinstance(operator, OperatorId)
     assert (self_id.protocol_version, self_id.description_type) == (2, 0)
-    assert self_id.description == "Drones ID test flight"
+    assert self_id.description == "Drone delivery test"
     assert (operator.protocol_version, operator.operator_id_type) == (2, 0)
-    assert operator.operator_id == ""
+    assert operator.operator_id == "FIN87astrdge12k8"
 
 
-def test_bkerler_pack_location() -> None:
-    loc = _pack()[2]
-    assert isinstance(loc, Location)
-    assert loc.protocol_version == 2
-    assert loc.status is OperationalStatus.AIRBORNE
-    assert loc.height_type is HeightType.ABOVE_TAKEOFF
-    assert loc.track_deg == 94  # east segment
-    assert loc.speed_horizontal_mps == 0.25
-    assert loc.speed_vertical_mps == 0.0
-    assert loc.latitude_deg == pytest.approx(33.6577004, abs=1e-9)
-    assert loc.longitude_deg == pytest.approx(-82.2156164, abs=1e-9)
-    assert loc.altitude_pressure_m is None  # "Undefined"
-    assert loc.altitude_geodetic_m == 76.0
-    assert loc.height_m == -9.0
-    assert loc.vertical_accuracy_m == 10.0  # "<10 m"
-    assert loc.horizontal_accuracy_m == 1.0  # "<1 m"
-    assert loc.baro_accuracy_m == 10.0  # "<10 m"
-    assert loc.speed_accuracy_mps == 0.3  # "<0.3 m/s"
-    # the self-test prints the raw 5470; F3411 counts tenths of a second since the hour
-    assert loc.time_since_hour_s == 547.0
-    assert loc.time_accuracy_s == 0.2  # "0.2 s"
+def test_librid_authentication_pages() -> None:
+    data = _hex("librid_auth_pages.hex")
+    pages = [f3411.decode_message(data[i : i + 25]) for i in range(0, len(data), 25)]
+    assert all(isinstance(p, AuthPage) for p in pages) and len(pages) == 3
+    first, second, last = (p for p in pages if isinstance(p, AuthPage))
+    assert first.auth_type == 3  # "Auth type: 3"
+    assert (first.page_number, first.last_page_index, first.length_bytes) == (0, 2, 56)
+    assert first.timestamp_s == f3411.ODID_EPOCH_UTC_S + 189302400  # "Timestamp: 189302400"
+    assert first.data == data[8:25]
+    assert (second.page_number, last.page_number) == (1, 2)
+    assert second.last_page_index is None and second.timestamp_s is None
+    assert second.data == data[27:50] and last.data == data[52:75]
+    signed = first.data + second.data + last.data
+    assert signed[:4] == bytes.fromhex("30820122")  # the 56 bytes start a DER sequence
+    assert signed[56:] == bytes(len(signed) - 56)  # null padding after "Length: 56"
 
 
-def test_bkerler_pack_auth_and_system() -> None:
-    msgs = _pack()
-    auth, system = msgs[3], msgs[5]
-    assert isinstance(auth, AuthPage) and isinstance(system, System)
-    stamp = datetime(2019, 1, 1, tzinfo=UTC).timestamp() + 170716129  # "timestamp_raw"
-    assert auth.auth_type == 3  # message set signature
-    assert (auth.page_number, auth.last_page_index, auth.length_bytes) == (0, 0, 17)
-    assert auth.timestamp_s == stamp
-    assert auth.data == bytes(17)
-    assert system.operator_location_type is OperatorLocationType.TAKEOFF
-    assert system.classification_type is ClassificationType.EUROPEAN_UNION
-    assert system.operator_latitude_deg == pytest.approx(33.6631981, abs=1e-9)
-    assert system.operator_longitude_deg == pytest.approx(-82.2205112, abs=1e-9)
-    assert (system.area_count, system.area_radius_m) == (1, 0.0)
-    assert (system.area_ceiling_m, system.area_floor_m) == (0.0, 0.0)
-    assert system.eu_category is EuCategory.OPEN
-    assert system.eu_class is EuClass.CLASS_1
-    assert system.operator_altitude_geodetic_m == 85.0
-    assert system.timestamp_s == stamp
-    when = datetime.fromtimestamp(stamp, UTC)
-    assert when.strftime("%Y-%m-%d %H:%M") == "2024-05-29 21:08"  # as the self-test prints
+def test_opendroneid_core_wifi_beacon_basic_id() -> None:
+    """The message pack in opendroneid-core-c's expected Wi-Fi beacon (a prefix of the frame)."""
+    frame = _hex("opendroneid_core_c_wifi_beacon.hex")
+    vendor_ie = frame.index(bytes.fromhex("dd53fa0bbc0d"))  # IE 221, ASD-STAN OUI, type 0x0D
+    pack = frame[vendor_ie + 7 :]  # after the message counter
+    assert pack[:3] == bytes([0xF2, f3411.MESSAGE_SIZE, 3])  # pack v2, 25-byte messages, 3
+    basic = f3411.decode_message(pack[3 : 3 + 25])
+    assert isinstance(basic, BasicId)
+    assert basic.protocol_version == 2
+    assert basic.id_type is IdType.SERIAL_NUMBER
+    assert basic.ua_type is UaType.HYBRID_LIFT
+    assert basic.uas_id == "USS-Enterprise"
+    assert basic.uas_id_raw == b"USS-Enterprise" + bytes(6)
+    assert pack[28:30] == bytes([0x12, 0x20])  # the Location that follows: v2, airborne
+    with pytest.raises(RemoteIdError, match="message pack"):
+        f3411.decode(pack)  # the published buffer stops after the Location's second byte
 
 
 def _location(**changes: int) -> bytearray:

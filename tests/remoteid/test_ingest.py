@@ -146,19 +146,21 @@ async def test_aircraft_heard_by_a_receiver_becomes_a_rid_track(env: Any) -> Non
 
 async def test_message_pack_decoded_into_the_record(env: Any) -> None:
     v = await env.vehicle(4)
-    ad = _hex("bkerler_droneid_selftest_ble.hex")
-    pack = ad[6 + 3 : 6 + 3 + 7 * 25]  # the 7 messages after the pack header
+    names = ("basic_id", "cli_location", "self_id", "system", "operator_id")
+    messages = [_hex(f"librid_{name}.hex") for name in names]  # librid's published messages
+    pack = b"".join(messages)
     v.send(
-        v.mav.open_drone_id_message_pack_encode(0, 0, MAC, 25, 7, list(pack.ljust(225, b"\0"))),
+        v.mav.open_drone_id_message_pack_encode(0, 0, MAC, 25, 5, list(pack.ljust(225, b"\0"))),
         lossy=False,
     )
     await _until(lambda: env.rid.counters.packs == 1)
     rec = env.rid.aircraft["rid:60601f010203"]
-    assert rec.uas_id == "DJI"  # the last Basic ID of the pack (after the serial number)
-    assert rec.self_id == "Drones ID test flight"
-    assert rec.position is not None and rec.position.lat_deg == pytest.approx(33.6577004)
+    assert rec.uas_id == "1ABCD2345EF678XYZ"
+    assert rec.self_id == "Drone delivery test"
+    assert rec.operator_id == "FIN87astrdge12k8"
+    assert rec.position is not None and rec.position.lat_deg == pytest.approx(62.683472)
     assert rec.operator_position is not None
-    assert rec.operator_position.lon_deg == pytest.approx(-82.2205112)
+    assert rec.operator_position.lon_deg == pytest.approx(24.5397187)
     # a broken pack is counted, not raised
     v.send(v.mav.open_drone_id_message_pack_encode(0, 0, MAC, 24, 1, [0] * 225), lossy=False)
     await _until(lambda: env.rid.counters.bad == 1)

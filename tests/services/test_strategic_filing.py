@@ -104,3 +104,49 @@ def test_a_failing_check_never_refuses_a_filing(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setattr(check._filed, "check", broken)
     airspace.add_operation(_line("A", 0.0))
     assert "A" in airspace.operations and check.counters["errors"] == 1
+
+
+def _airborne_check(airborne: set[str]) -> tuple[Airspace, FilingCheck]:
+    airspace = Airspace()
+    check = FilingCheck(
+        FRAME,
+        MonitoringConfig(),
+        operations=lambda: airspace.operations,
+        airborne=lambda: airborne,  # type: ignore[arg-type,return-value]
+    )
+    airspace._on_operation = check.on_operation
+    return airspace, check
+
+
+def test_an_airborne_uas_after_its_plan_is_traffic_for_a_filing() -> None:
+    """H's plan ended at (1000, 0) at T0 + 100 and it hovers there, in the air: a plan filed
+    through that point at T0 + 200 conflicts with it (issue 30 class 1); on the ground it
+    does not."""
+    for airborne, expected in (({"H"}, ["H"]), (set(), [])):
+        airspace, check = _airborne_check(airborne)
+        airspace.add_operation(_line("H", 0.0))
+        cross = operation(
+            "X", [(1000.0, -1000.0, 100.0, T0 + 100), (1000.0, 1000.0, 100.0, T0 + 300)]
+        )
+        airspace.add_operation(cross)
+        assert [c.b for c in check.conflicts["X"]] == expected
+    # The airborne UAS's own re-filed plan hovers at its end while the others fly.
+    airspace, check = _airborne_check({"H"})
+    airspace.add_operation(cross)
+    airspace.add_operation(_line("H", 0.0))
+    assert [c.b for c in check.conflicts["H"]] == ["X"]
+
+
+def test_at_activation_a_plan_is_checked_against_uas_that_ended_theirs_in_the_air() -> None:
+    """X is filed while H's plan is still running (H's hover is checked only from H's own
+    re-filing); when X's operation is activated, H has ended its plan and hovers in the air
+    on X's path: the check at activation finds it."""
+    airborne: set[str] = set()
+    airspace, check = _airborne_check(airborne)
+    airspace.add_operation(_line("H", 0.0))
+    cross = operation("X", [(1000.0, -1000.0, 100.0, T0 + 100), (1000.0, 1000.0, 100.0, T0 + 300)])
+    airspace.add_operation(cross)
+    assert check.conflicts["X"] == []
+    airborne.add("H")
+    airspace.set_state(cross.id, OperationState.ACTIVE)
+    assert [c.b for c in check.conflicts["X"]] == ["H"]

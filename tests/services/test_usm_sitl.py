@@ -80,3 +80,39 @@ async def test_connecting_vehicle_with_a_mission_gets_an_operation(autopilot: st
         dist = (dist**2 + (b.alt_amsl_m - a.alt_amsl_m) ** 2) ** 0.5
         assert b.t_s - a.t_s == pytest.approx(dist / speed, rel=0.01), k
     assert op.plan.waypoints[0].t_s == pytest.approx(clock.now_s(), abs=20.0)  # filed now
+
+
+async def test_a_mission_before_the_fix_is_filed_whole_with_the_home_after_it() -> None:
+    """A PX4 acquiring GNSS for 3 s after boot sends HOME_POSITION 2 m low before its fix (as
+    PX4 SIH does): the home is the one after the fix, and the mission is filed whole once the
+    fix comes, never before (issue 31.3)."""
+    clock = ScaledClock(5.0)
+    sim = sitl.SimTime(5.0, start_utc_s=clock.start_utc_s, start_mono_s=clock.start_mono_s)
+    airspace = Airspace()
+    usm = Usm(airspace, clock)
+    cfg = MavlinkConfig(links=("udpin:127.0.0.1:0",), heartbeat_period_s=0.2)
+    async with MavlinkHub(cfg, clock, usm) as hub:
+        usm.attach_vehicles(hub)
+        spec = sitl.VehicleSpec(
+            instance=0,
+            home_lat_deg=HOME[0],
+            home_lon_deg=HOME[1],
+            home_alt_amsl_m=HOME[2],
+            mission=MISSION,
+            gcs_port=hub.local_port(next(iter(hub._links))),
+            bind_port=0,
+            gnss_fix_after_s=3.0,
+        )
+        async with sitl.Fleet([spec], sim):
+            end = time.monotonic() + 15.0
+            while (op := airspace.by_sys_id(SysId(1))) is None or op.home is None:
+                assert time.monotonic() < end, "no operation with a home from the vehicle"
+                s = usm.statuses_by_sys_id().get(SysId(1))
+                assert s is None or s.home is None or (s.gnss_fix_type or 0) >= 3
+                if op is not None:  # filed: never before the fix, always whole
+                    assert usm.flight[(SysId(1), s.vehicle)].had_fix  # type: ignore[union-attr]
+                    assert len(op.plan.waypoints) >= len(MISSION)
+                await asyncio.sleep(0.02)
+            await usm.drain()
+    assert op.home.alt_amsl_m == pytest.approx(HOME[2], abs=0.01)  # not the one 2 m low
+    assert len(op.plan.waypoints) >= len(MISSION)  # every mission waypoint, not the last only

@@ -109,6 +109,9 @@ def _status(
     armed: bool = False,
     mode: FlightMode = FlightMode.HOLD,
     seq: int | None = None,
+    fix: int | None = 3,
+    landed: bool | None = None,
+    reboots: int = 0,
 ) -> VehicleStatus:
     return VehicleStatus(
         sys_id=SysId(1),
@@ -121,6 +124,9 @@ def _status(
         home=home,
         mission_id=mission_id,
         position=position,
+        gnss_fix_type=fix,
+        landed=landed,
+        reboots=reboots,
     )
 
 

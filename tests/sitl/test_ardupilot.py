@@ -55,6 +55,18 @@ async def test_ardupilot_copter_over_tcp() -> None:
         assert home.seq == 0 and home.x == round(spec.home_lat_deg * 1e7)
         assert v.mode == "GUIDED"
         assert any(m.get_type() == "HEARTBEAT" and m.custom_mode == 4 for m in msgs)
+        # As ArduPilot 4.6: EXTENDED_SYS_STATE is in no stream group, only asked for by id
+        assert "EXTENDED_SYS_STATE" not in kinds
+        writer.write(
+            mav.MAVLink_command_long_message(
+                3, 1, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0, 245, 250_000, 0, 0, 0, 0, 0
+            ).pack(enc)
+        )
+        await writer.drain()
+        msgs.clear()
+        await _collect(reader, dec, msgs, 1.0)
+        ess = [m for m in msgs if m.get_type() == "EXTENDED_SYS_STATE"]
+        assert ess and ess[-1].landed_state == mav.MAV_LANDED_STATE_ON_GROUND
         writer.close()
         await writer.wait_closed()
 

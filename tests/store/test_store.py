@@ -245,6 +245,21 @@ def test_geofence_deactivation_and_older_track_sample(db: str | Path) -> None:
         assert [t.t_s for t in store.track_history("UAS1")] == [3.0, 5.0]
 
 
+def test_remote_ids_keep_the_latest_of_each_source(db: str | Path) -> None:
+    from gcs_utm.model import RemoteIdentity
+
+    own = RemoteIdentity(source="sysid:1", uas_id="SN1", operator_id="OP1", updated_t_s=5.0)
+    heard = RemoteIdentity(source="rid:0a0b", uas_id="SN2", lat_deg=45.0, updated_t_s=6.0)
+    with open_store(db) as store:
+        store.save_remote_ids([(TrackId("UAS1"), own), (TrackId("rid:0a0b"), heard)])
+        store.save_remote_ids([(TrackId("UAS1"), replace(own, uas_id="OLD", updated_t_s=4.0))])
+        assert store.load_remote_ids() == [(TrackId("rid:0a0b"), heard), (TrackId("UAS1"), own)]
+        newer = replace(own, operator_id="OP2", updated_t_s=7.0)
+        store.save_remote_ids([(TrackId("sysid:1@x"), newer)])
+        assert store.load_remote_ids()[1] == (TrackId("sysid:1@x"), newer)
+        assert store.count("remote_ids") == 2
+
+
 def test_recommendation_states_filter(db: str | Path) -> None:
     with open_store(db) as store:
         rec = _rec()
@@ -455,6 +470,14 @@ def test_track_doc_is_the_codec_document() -> None:
         updates=np.int64(3),  # type: ignore[arg-type]
     )
     assert track_doc(odd) == dumps(odd)
+    from gcs_utm.model import RemoteIdentity
+    from gcs_utm.store import base
+
+    assert base._TRACK_FIELDS is not None  # the fast path is on for tracks without Remote ID
+    rid = RemoteIdentity(source="sysid:7", uas_id="1ABCD2345EF678XYZ", lat_deg=1.5, alt_m=None)
+    with_rid = replace(odd, updates=3, remote_id=rid)
+    assert track_doc(with_rid) == dumps(with_rid)
+    assert loads(Track, track_doc(with_rid)) == with_rid
 
 
 def test_write_tracks_large_batch_with_repeats_keeps_newest_latest_and_all_history(

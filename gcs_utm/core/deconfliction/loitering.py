@@ -1,4 +1,12 @@
-"""A fixed wing whose plan has ended, as traffic: its loiter circle, not its last point.
+"""An airborne UAS whose plan has ended, as traffic: its loiter circle or its hover, not its
+plan's end.
+
+A UAS in the air is traffic from take-off to landing whatever its plan says
+(``AirspaceSnapshot.airborne``, from its own messages): after its plan ends a multirotor
+hovers at the last waypoint (:func:`hover_plan`) and a fixed wing circles it (below). Until
+its circle is seen on its track a fixed wing is taken at the last waypoint, its circle's
+centre. An operation ends when its vehicle lands or disarms, not when its last waypoint time
+passes.
 
 A fixed wing cannot stop: when its mission ends the autopilot circles the last waypoint at the
 loiter radius (:mod:`gcs_utm.core.tracking.loiter`), and Tracking predicts it there. Its filed
@@ -37,6 +45,7 @@ from gcs_utm.model import (
     OperationId,
     OperationState,
     Track,
+    Waypoint4D,
 )
 
 CIRCLE_STEP_S = 2.0
@@ -113,6 +122,63 @@ def as_traffic(
     return None if plan is None else replace(op, plan=plan)
 
 
+def hover_plan(plan: FlightPlan, until_t_s: float) -> FlightPlan:
+    """``plan`` followed by a hover at its last waypoint up to ``until_t_s`` (``plan`` itself
+    when it lasts that long)."""
+    last = plan.waypoints[-1]
+    if last.t_s >= until_t_s:
+        return plan
+    return replace(plan, waypoints=(*plan.waypoints, replace(last, t_s=until_t_s)))
+
+
+def after_plan(
+    op: Operation, snapshot: AirspaceSnapshot, frame: LocalFrame, until_t_s: float
+) -> FlightPlan:
+    """Where an airborne UAS will be up to ``until_t_s``: where its track is now when its plan
+    has not started yet (it waits in the air), its plan, then its loiter circle (a fixed wing
+    seen on it) or a hover at its last waypoint. The plan itself for a UAS not in the air
+    (``snapshot.airborne``)."""
+    if op.id not in snapshot.airborne:
+        return op.plan
+    circle = loiter_plan(op, snapshot, frame, until_t_s)
+    plan = circle if circle is not None else hover_plan(op.plan, until_t_s)
+    tr = _track_of(op, snapshot)
+    if tr is not None and plan.start_t_s > max(tr.t_s, snapshot.t_s):
+        # waiting in the air for its plan: where it is until it must leave, at its cruise
+        # speed, to reach its first waypoint on time
+        first = plan.waypoints[0]
+        e0, n0 = frame.point_to_local(tr.lat_deg, tr.lon_deg)
+        e1, n1 = frame.point_to_local(first.lat_deg, first.lon_deg)
+        dist_m = math.hypot(e1 - e0, n1 - n0, first.alt_amsl_m - tr.alt_amsl_m)
+        leave_t_s = max(snapshot.t_s, plan.start_t_s - dist_m / op.cruise_speed_mps)
+        here = Waypoint4D(
+            lat_deg=tr.lat_deg, lon_deg=tr.lon_deg, alt_amsl_m=tr.alt_amsl_m, t_s=snapshot.t_s
+        )
+        plan = replace(plan, waypoints=(here, replace(here, t_s=leave_t_s), *plan.waypoints))
+    return plan
+
+
+def extended(
+    op: Operation, plan: FlightPlan, snapshot: AirspaceSnapshot, until_t_s: float
+) -> FlightPlan:
+    """``plan`` (an alternative of ``op``) with the hover after its end up to ``until_t_s``
+    when ``op`` is airborne: what the UAS does when it gets there."""
+    return hover_plan(plan, until_t_s) if op.id in snapshot.airborne else plan
+
+
+def involved(
+    op: Operation, snapshot: AirspaceSnapshot, frame: LocalFrame, until_t_s: float
+) -> Operation:
+    """An involved UAS as TD takes it: with its loiter circle (:func:`as_traffic`), or, airborne
+    with its plan ended, hovering at the end point (TD moves neither); else ``op``."""
+    circling = as_traffic(op, snapshot, frame, until_t_s)
+    if circling is not None:
+        return circling
+    if op.id in snapshot.airborne and op.plan.end_t_s <= snapshot.t_s:
+        return replace(op, plan=hover_plan(op.plan, until_t_s))
+    return op
+
+
 def traffic(
     snapshot: AirspaceSnapshot,
     exclude: Collection[OperationId],
@@ -120,12 +186,16 @@ def traffic(
     until_t_s: float,
     inactive: Collection[OperationState],
 ) -> list[Operation]:
-    """The operations other than ``exclude`` that are traffic at the snapshot: active ones
-    whose plan has not ended, and loitering fixed wings (whatever the state of their
-    operation: the aircraft is in the air) with their circle up to ``until_t_s``."""
+    """The operations other than ``exclude`` that are traffic at the snapshot: airborne ones
+    (whatever their plan and state: :func:`after_plan` up to ``until_t_s``), loitering fixed
+    wings with their circle, and active ones whose plan has not ended."""
     out = []
     for op in snapshot.operations.values():
         if op.id in exclude:
+            continue
+        if op.id in snapshot.airborne:
+            plan = after_plan(op, snapshot, frame, until_t_s)
+            out.append(op if plan is op.plan else replace(op, plan=plan))
             continue
         circling = as_traffic(op, snapshot, frame, until_t_s)
         if circling is not None:
@@ -133,3 +203,41 @@ def traffic(
         elif op.state not in inactive and op.plan.end_t_s >= snapshot.t_s:
             out.append(op)
     return out
+
+
+class Airborne:
+    """Which UAS of the snapshot being decided are airborne, and their plans extended past
+    their end with a hover (:func:`extended`) up to the decision's horizon, kept so that one
+    plan is extended (and converted) once per decision."""
+
+    def __init__(self, horizon_s: float) -> None:
+        self.horizon_s = horizon_s
+        self._snapshot: AirspaceSnapshot | None = None
+        self._plans: dict[int, tuple[FlightPlan, FlightPlan]] = {}
+
+    def until(self, snapshot: AirspaceSnapshot) -> float:
+        """The end of the decision's horizon on ``snapshot``, now the one being decided (TD
+        takes the traffic first in every decision: single UAS and intruders too)."""
+        self.at(snapshot)
+        return snapshot.t_s + self.horizon_s
+
+    def at(self, snapshot: AirspaceSnapshot) -> None:
+        """The snapshot being decided (also for :meth:`extend` calls without one)."""
+        if snapshot is not self._snapshot:
+            self._snapshot = snapshot
+            self._plans.clear()
+
+    def extend(
+        self, op: Operation, plan: FlightPlan, snapshot: AirspaceSnapshot | None = None
+    ) -> FlightPlan:
+        """``plan`` of ``op``, with the hover after it when ``op`` is airborne."""
+        if snapshot is not None:
+            self.at(snapshot)
+        snap = self._snapshot
+        if snap is None or op.id not in snap.airborne:
+            return plan
+        hit = self._plans.get(id(plan))
+        if hit is None or hit[0] is not plan:
+            hit = (plan, extended(op, plan, snap, snap.t_s + self.horizon_s))
+            self._plans[id(plan)] = hit
+        return hit[1]

@@ -165,6 +165,7 @@ class TacticalDeconfliction:
         self._speeds: dict[int, tuple[FlightPlan, tuple[float, float]]] = {}
         self._pair_configs: dict[tuple[float, float, float], MonitoringConfig] = {}
         self._loitering: set[OperationId] = set()  # involved fixed wings on their circle
+        self._air = lt.Airborne(config.horizon_s)  # airborne UAS hover after their plan
         self.tracking_buffers = True
         """Keep the vehicles' tracking tolerances free around new plans (:meth:`pair_minima`);
         EM switches them off for a second search when no combination keeps them."""
@@ -191,9 +192,8 @@ class TacticalDeconfliction:
     def others(
         self, snapshot: AirspaceSnapshot, exclude: Collection[OperationId]
     ) -> list[Operation]:
-        """The traffic other than ``exclude``: fixed wings that loiter with their circle."""
-        until = snapshot.t_s + self.config.horizon_s
-        return lt.traffic(snapshot, exclude, self.frame, until, _INACTIVE)
+        """The traffic other than ``exclude``, airborne UAS after their plan (loitering.py)."""
+        return lt.traffic(snapshot, exclude, self.frame, self._air.until(snapshot), _INACTIVE)
 
     def current_xyz(self, op: Operation, snapshot: AirspaceSnapshot) -> FloatArray:
         """Where the UAS is now: its track if tracked, else its plan at the snapshot time."""
@@ -322,9 +322,10 @@ class TacticalDeconfliction:
         others: Sequence[Operation],
         geofences: Sequence[Geofence],
     ) -> list[str]:
-        """What Monitoring would flag on ``plan`` (empty list = clean). With nothing to check
-        against, Monitoring is not asked (it would convert the plan and find nothing)."""
+        """What Monitoring would flag on ``plan`` (empty list = clean), hovering after its end
+        when the UAS is airborne. With nothing to check against, Monitoring is not asked."""
         flags: list[str] = []
+        plan = self._air.extend(op, plan)
         if geofences:
             flags += [
                 f"geofence {c.geofence_id} at t={c.entry_t_s:.1f}"
@@ -351,25 +352,22 @@ class TacticalDeconfliction:
         op_a = snapshot.operations[a.operation_id]
         op_b = snapshot.operations[b.operation_id]
         # Sound shortcuts either way (see separation_screen); only an undecided pair goes to
-        # Monitoring's exact closest-approach check.
+        # Monitoring's exact closest-approach check. An airborne UAS hovers after its plan.
+        pa, pb = self._air.extend(op_a, a.plan, snapshot), self._air.extend(op_b, b.plan, snapshot)
         h, v = self.pair_minima(op_a, op_b)
         broken, clear = separation_screen(
-            self.local_plan(a.plan),
-            self.local_plan(b.plan),
+            self.local_plan(pa),
+            self.local_plan(pb),
             h,
             v,
             spherical=self.monitoring.spherical,
-            speeds_a=self._max_speeds(a.plan),
-            speeds_b=self._max_speeds(b.plan),
+            speeds_a=self._max_speeds(pa),
+            speeds_b=self._max_speeds(pb),
         )
-        if broken:
-            return False
-        if clear:
-            return True
-        # Only now the operation with the alternative's plan (the screen needs none).
+        if broken or clear:
+            return not broken
         cfg = self._pair_config(op_a, op_b)
-        op_b = replace(op_b, plan=b.plan)
-        return not plan_vs_plans(a.plan, op_a, [op_b], self.frame, cfg)
+        return not plan_vs_plans(pa, op_a, [replace(op_b, plan=pb)], self.frame, cfg)
 
     def _reference(
         self, op: Operation, old: LocalPlan, neighbours: Sequence[Operation]
@@ -561,8 +559,9 @@ class TacticalDeconfliction:
         t0 = self.start_time(snapshot, start_t_s)
         self.set_lead_in(lead_in_from_t_s, t0)
         cfg = self.config
+        self._air.at(snapshot)
         involved = [
-            lt.as_traffic(op, snapshot, self.frame, t0 + cfg.horizon_s) or op
+            lt.involved(op, snapshot, self.frame, t0 + cfg.horizon_s)
             for op in (snapshot.operations[i] for i in threat.uas_ids if i in snapshot.operations)
         ]
         self._loitering = {op.id for op in involved if op is not snapshot.operations[op.id]}

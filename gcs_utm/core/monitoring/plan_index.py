@@ -21,7 +21,7 @@ conflict.
   nothing else is re-checked. Plans can be added and withdrawn one at a time.
 
 The exact check of each candidate pair is the strategic kernel
-(``strategic._pair_conflict``); the reference it is tested against is the all-pairs loop in
+(``pair_check.check_pairs``); the reference it is tested against is the all-pairs loop in
 ``tests/monitoring/strategic_oracle.py``.
 """
 

@@ -29,7 +29,8 @@ import numpy as np
 
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.fences import LocalFence, localise
-from gcs_utm.core.monitoring.geometry import FloatArray, SegmentSeparation, segment_separation
+from gcs_utm.core.monitoring.geometry import FloatArray
+from gcs_utm.core.monitoring.pair_check import PairFigures, check_pairs
 from gcs_utm.core.monitoring.plan_index import (
     PlanIndex,
     candidate_pairs,
@@ -96,14 +97,6 @@ def plans_local(plans: Sequence[FlightPlan], frame: LocalFrame) -> list[FloatArr
     return np.split(table, np.cumsum(counts)[:-1])
 
 
-def _at(pts: FloatArray, t: FloatArray) -> FloatArray:
-    """Positions (len(t), 3) of a piecewise-linear 4D polyline at times t (clamped)."""
-    tt = pts[:, 3]
-    if len(tt) == 1:
-        return np.repeat(pts[:, :3], len(t), axis=0)
-    return np.column_stack([np.interp(t, tt, pts[:, k]) for k in range(3)])
-
-
 @dataclass(frozen=True, slots=True)
 class _Pair:
     """One pair for the exact check: both plans' local points, ids and the pair's minima."""
@@ -116,119 +109,45 @@ class _Pair:
     min_v: float
 
 
-def _pair_samples(pair: _Pair, spherical: bool, step_s: float) -> FloatArray | None:
-    """The sample times of the pair's exact check (None: the pair cannot conflict): the
-    common time span cut at both plans' waypoint times and the ``step_s`` grid."""
-    pa, pb = pair.pa, pair.pb
-    t0 = max(pa[0, 3], pb[0, 3])
-    t1 = min(pa[-1, 3], pb[-1, 3])
-    if t0 > t1:
-        return None
-    # Cheap reject: the two plans' boxes over the common span are farther apart than the minima.
-    lo_a, hi_a = pa[:, :3].min(axis=0), pa[:, :3].max(axis=0)
-    lo_b, hi_b = pb[:, :3].min(axis=0), pb[:, :3].max(axis=0)
-    gap = np.maximum(np.maximum(lo_a - hi_b, lo_b - hi_a), 0.0)  # m per axis
-    if spherical:
-        if float(np.sqrt((gap**2).sum())) >= pair.min_h:
-            return None
-    elif float(np.hypot(gap[0], gap[1])) >= pair.min_h or gap[2] >= pair.min_v:
-        return None
-    grid = np.arange(t0, t1, step_s) if step_s > 0 and t1 > t0 else np.empty(0)
-    knots = np.concatenate([pa[:, 3], pb[:, 3], grid, [t0, t1]])
-    t: FloatArray = np.unique(knots[(knots >= t0) & (knots <= t1)])
-    if len(t) == 1:
-        t = np.array([t[0], t[0]])
-    return t
-
-
-# Segment pairs per vectorised pass of the exact kernel: bounds memory (~20 arrays of it).
-_CHUNK = 200_000
-
-
 def _pair_conflicts(
     pairs: Sequence[_Pair], *, spherical: bool, step_s: float
 ) -> list[PlanConflict | None]:
-    """The exact check of each pair (None: no conflict). Each pair's samples are taken on
-    their own (:func:`_pair_samples`), then the segment kernel runs over the segments of
-    many pairs at once; every figure is the one a pair alone gives (the kernel is element by
-    element)."""
-    out: list[PlanConflict | None] = [None] * len(pairs)
-    batch: list[tuple[int, FloatArray, FloatArray, FloatArray]] = []
-    size = 0
+    """The exact check of each pair (None: no conflict), all pairs at once
+    (:func:`.pair_check.check_pairs`)."""
+    local: list[FloatArray] = []
+    slots: dict[int, int] = {}
+    index = np.empty((len(pairs), 2), np.int64)
     for k, pair in enumerate(pairs):
-        t = _pair_samples(pair, spherical, step_s)
-        if t is None:
-            continue
-        batch.append((k, t, _at(pair.pa, t), _at(pair.pb, t)))
-        size += len(t) - 1
-        if size >= _CHUNK:
-            _check_batch(batch, pairs, out, spherical)
-            batch, size = [], 0
-    if batch:
-        _check_batch(batch, pairs, out, spherical)
+        for side, pts in enumerate((pair.pa, pair.pb)):
+            if id(pts) not in slots:
+                slots[id(pts)] = len(local)
+                local.append(pts)
+            index[k, side] = slots[id(pts)]
+    found = check_pairs(
+        local,
+        index[:, 0],
+        index[:, 1],
+        np.array([p.min_h for p in pairs], np.float64),
+        np.array([p.min_v for p in pairs], np.float64),
+        spherical=spherical,
+        step_s=step_s,
+    )
+    out: list[PlanConflict | None] = [None] * len(pairs)
+    for k in np.flatnonzero(found.conflict).tolist():
+        out[k] = _conflict(found, k, pairs[k].ida, pairs[k].idb)
     return out
 
 
-def _check_batch(
-    batch: list[tuple[int, FloatArray, FloatArray, FloatArray]],
-    pairs: Sequence[_Pair],
-    out: list[PlanConflict | None],
-    spherical: bool,
-) -> None:
-    nseg = np.array([len(t) - 1 for _, t, _, _ in batch])
-    mh = np.repeat([pairs[k].min_h for k, _, _, _ in batch], nseg)
-    mv = np.repeat([pairs[k].min_v for k, _, _, _ in batch], nseg)
-    seg = segment_separation(
-        np.concatenate([a[:-1] for _, _, a, _ in batch]),
-        np.concatenate([a[1:] for _, _, a, _ in batch]),
-        np.concatenate([b[:-1] for _, _, _, b in batch]),
-        np.concatenate([b[1:] for _, _, _, b in batch]),
-        min_h_m=mh,
-        min_v_m=mv,
-        spherical=spherical,
-    )
-    starts = np.cumsum(nseg) - nseg
-    any_loss = np.logical_or.reduceat(seg.loss, starts)
-    for m in np.flatnonzero(any_loss).tolist():
-        k, t, _, _ = batch[m]
-        s = slice(int(starts[m]), int(starts[m] + nseg[m]))
-        out[k] = _conflict(pairs[k], t, seg, s)
-
-
-def _conflict(pair: _Pair, t: FloatArray, seg: SegmentSeparation, s: slice) -> PlanConflict:
-    """The figures of a pair in conflict from its segments ``s`` of the kernel's result."""
-    loss = seg.loss[s]
-    first_loss_s = seg.first_loss_s[s]
-    cpa_m = seg.cpa_m[s]
-    dt = np.diff(t)
-    first_s = np.where(loss, first_loss_s, 0.0)  # avoids inf * 0 on still segments
-    k = int(np.argmin(np.where(loss, t[:-1] + first_s * dt, np.inf)))
-    c = int(np.argmin(cpa_m))
+def _conflict(found: PairFigures, k: int, ida: OperationId, idb: OperationId) -> PlanConflict:
     return PlanConflict(
-        a=pair.ida,
-        b=pair.idb,
-        first_loss_t_s=float(t[k] + first_loss_s[k] * dt[k]),
-        closest_t_s=float(t[c] + seg.cpa_s[s][c] * dt[c]),
-        min_distance_m=float(cpa_m[c]),
-        min_horizontal_m=float(seg.min_h_m[s].min()),
-        min_vertical_m=float(seg.min_v_m[s].min()),
+        a=ida,
+        b=idb,
+        first_loss_t_s=float(found.first_loss_t_s[k]),
+        closest_t_s=float(found.closest_t_s[k]),
+        min_distance_m=float(found.min_distance_m[k]),
+        min_horizontal_m=float(found.min_horizontal_m[k]),
+        min_vertical_m=float(found.min_vertical_m[k]),
     )
-
-
-def _pair_conflict(
-    pa: FloatArray,
-    pb: FloatArray,
-    *,
-    ida: OperationId,
-    idb: OperationId,
-    min_h: float,
-    min_v: float,
-    spherical: bool,
-    step_s: float,
-) -> PlanConflict | None:
-    """The exact check of one pair (what the every-pair reference calls)."""
-    pair = _Pair(pa, pb, ida, idb, min_h, min_v)
-    return _pair_conflicts([pair], spherical=spherical, step_s=step_s)[0]
 
 
 def _fence_crossing(pts: FloatArray, fence: LocalFence) -> float | None:
@@ -319,13 +238,23 @@ def _all_pair_conflicts(
     volume = np.array([op.operational_volume_m for op in operations], np.float64)
     boxes = window_boxes(local, growth_m(config, volume), window_s_of(config, step_s))
     codes = candidate_pairs(boxes, n, grid_cell_m(config, boxes))
-    pairs: list[_Pair] = []
-    for i, j in zip((codes // n).tolist(), (codes % n).tolist(), strict=True):
-        a, b = operations[i], operations[j]
-        mh, mv = config.effective_minima(a.operational_volume_m, b.operational_volume_m)
-        pairs.append(_Pair(local[i], local[j], a.id, b.id, mh, mv))
-    found = _pair_conflicts(pairs, spherical=config.spherical, step_s=step_s)
-    return [c for c in found if c is not None]
+    ia, ib = codes // n, codes % n
+    # the pairs' minima, one effective_minima call per distinct pair of volumes
+    vols, inverse = np.unique(
+        np.stack([volume[ia], volume[ib]], axis=1), axis=0, return_inverse=True
+    )
+    minima = np.array([config.effective_minima(va, vb) for va, vb in vols.tolist()]).reshape(-1, 2)
+    mh, mv = minima[inverse.ravel(), 0], minima[inverse.ravel(), 1]
+    found = check_pairs(local, ia, ib, mh, mv, spherical=config.spherical, step_s=step_s)
+    return [
+        _conflict(found, k, operations[i].id, operations[j].id)
+        for k, i, j in zip(
+            np.flatnonzero(found.conflict).tolist(),
+            ia[found.conflict].tolist(),
+            ib[found.conflict].tolist(),
+            strict=True,
+        )
+    ]
 
 
 def _crossings(

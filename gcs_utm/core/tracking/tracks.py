@@ -27,7 +27,8 @@ _TRACK_FIELDS = (
     "position_sigma_m", "cooperative", "operation_id", "icao24", "stale", "updates",
     "next_waypoint",
 )  # fmt: skip
-_SETTERS = slot_setters(Track, _TRACK_FIELDS)
+# the tracker has no Remote ID: the field is set to None (adapters/remoteid/tracks.py fills it)
+_SETTERS = slot_setters(Track, (*_TRACK_FIELDS, "remote_id"))
 
 
 def build_tracks(columns: dict[str, list[Any]], n: int, *, fast: bool = True) -> list[Track]:
@@ -46,8 +47,9 @@ def build_tracks(columns: dict[str, list[Any]], n: int, *, fast: bool = True) ->
         ]
     new = object.__new__
     out: list[Track] = list(map(new, repeat(Track, n)))
-    for name, setter in zip(_TRACK_FIELDS, _SETTERS, strict=True):
+    for name, setter in zip(_TRACK_FIELDS, _SETTERS, strict=False):
         deque(map(setter, out, columns[name]), maxlen=0)
+    deque(map(_SETTERS[-1], out, repeat(None, n)), maxlen=0)
     return out
 
 
