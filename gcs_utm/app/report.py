@@ -16,15 +16,11 @@ import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
-
-import numpy as np
-import numpy.typing as npt
+from typing import Any
 
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.fences import localise
-from gcs_utm.core.monitoring.geometry import points_in_edges
-from gcs_utm.core.monitoring.loss import is_loss
+from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     FlightPlan,
@@ -37,7 +33,26 @@ from gcs_utm.model import (
 )
 from gcs_utm.scenario import Scenario
 
+from .truth import (
+    SimVehicle,
+    TruthIntrusion,
+    TruthPair,
+    TruthReport,
+    finite,
+    inside_fence,
+    truth,
+)
 from .wiring import Runtime, TrackSample
+
+__all__ = [
+    "Report",
+    "SimVehicle",
+    "TruthIntrusion",
+    "TruthPair",
+    "TruthReport",
+    "build_report",
+    "truth",
+]
 
 Json = dict[str, Any]
 
@@ -163,10 +178,18 @@ class RecommendationReport:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SeparationReport:
+    """One pair on the UTM's tracks: the verdict against ``minimum_*`` (the pair's effective
+    minima, the only minima it is judged by); ``*_at_closest_m`` at the instant of the
+    smallest normalised separation ``min_ratio`` (below 1: a loss)."""
+
     pair: tuple[str, str]
+    minimum_horizontal_m: float
+    minimum_vertical_m: float
     min_horizontal_m: float | None
-    min_vertical_when_close_m: float | None
     min_distance_m: float | None
+    min_ratio: float | None
+    horizontal_at_closest_m: float | None
+    vertical_at_closest_m: float | None
     loss_of_separation: bool
 
 
@@ -182,18 +205,6 @@ class IntrusionReport:
 class EscalationReport:
     at_s: float | None
     text: str
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class TruthPair:
-    pair: tuple[str, str]
-    min_distance_m: float | None
-    loss_of_separation: bool
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
-class TruthReport:
-    pairs: tuple[TruthPair, ...]
 
 
 TrackRow = tuple[float, float, float, float]
@@ -268,16 +279,6 @@ def _jsonable(obj: object) -> Any:
 
 
 # ---- building ------------------------------------------------------------------------------
-
-
-class SimVehicle(Protocol):
-    """What the report reads of a simulated vehicle (``sitl.Vehicle``)."""
-
-    @property
-    def sys_id(self) -> int: ...
-
-    @property
-    def position_history(self) -> Sequence[tuple[float, float, float, float]]: ...
 
 
 def _rel(t_s: float | None, t0: float) -> float | None:
@@ -449,7 +450,7 @@ def build_report(
             for e in rt.usm.events
             if e.kind == "escalation"
         ),
-        truth=truth(vehicles, scenario, rt.frame, mon, flying_until_t_s=_plan_ends(rt))
+        truth=truth(vehicles, scenario, rt.frame, mon, geofences=rt.geofence_history)
         if vehicles
         else None,
         operator_quit=operator_quit,
@@ -461,41 +462,45 @@ def separation(
     ops: Mapping[OperationId, Operation],
     mon: MonitoringConfig,
 ) -> tuple[SeparationReport, ...]:
-    """Minimum achieved distances per UAS pair, from the tracks sampled during the run at the
-    same sample instants (both tracks' states are at most one sample period apart)."""
+    """Per UAS pair, from the tracks sampled during the run at the same sample instants (both
+    tracks' states at most one sample period apart): the verdict against the pair's one set
+    of effective minima (Monitoring's), and the closest approach at the instant of the
+    smallest normalised separation (:func:`~gcs_utm.core.monitoring.loss.separation_ratio`),
+    with the horizontal and vertical distances at that instant."""
     out = []
     ids = sorted(i for i in samples if OperationId(i) in ops)
     for i, a in enumerate(ids):
         for b in ids[i + 1 :]:
-            ov_a = ops[OperationId(a)].operational_volume_m
-            ov_b = ops[OperationId(b)].operational_volume_m
-            sa = {round(s[0], 1): s for s in samples[a]}
-            best_h = best_v = best_3d = math.inf
-            loss = False
-            for key, s in sa.items():
-                match = _nearest(samples[b], key)
+            h_min, v_min = mon.effective_minima(
+                ops[OperationId(a)].operational_volume_m, ops[OperationId(b)].operational_volume_m
+            )
+            best_h = best_3d = best_ratio = math.inf
+            at: tuple[float, float, float] | None = None  # (t_s, dh, dv) at the best ratio
+            for s in samples[a]:
+                match = _nearest(samples[b], round(s[0], 1))
                 if match is None:
                     continue
                 dh = math.hypot(s[4] - match[4], s[5] - match[5])
                 dv = abs(s[3] - match[3])
                 best_h = min(best_h, dh)
-                best_v = min(best_v, dv) if dh < mon.separation_horizontal_m * 3 else best_v
                 best_3d = min(best_3d, math.hypot(dh, dv))
-                loss = loss or is_loss(mon, dh, dv, ov_a, ov_b)
+                ratio = float(separation_ratio(dh, dv, h_min, v_min, spherical=mon.spherical))
+                if ratio < best_ratio:
+                    best_ratio, at = ratio, (s[0], dh, dv)
             out.append(
                 SeparationReport(
                     pair=(a, b),
-                    min_horizontal_m=_finite(best_h),
-                    min_vertical_when_close_m=_finite(best_v),
-                    min_distance_m=_finite(best_3d),
-                    loss_of_separation=loss,
+                    minimum_horizontal_m=h_min,
+                    minimum_vertical_m=v_min,
+                    min_horizontal_m=finite(best_h),
+                    min_distance_m=finite(best_3d),
+                    min_ratio=None if at is None else round(best_ratio, 4),
+                    horizontal_at_closest_m=None if at is None else round(at[1], 2),
+                    vertical_at_closest_m=None if at is None else round(at[2], 2),
+                    loss_of_separation=best_ratio < 1.0,
                 )
             )
     return tuple(out)
-
-
-def _finite(x: float) -> float | None:
-    return None if math.isinf(x) else round(x, 2)
 
 
 def _nearest(samples: Sequence[TrackSample], t_s: float) -> TrackSample | None:
@@ -525,7 +530,7 @@ def intrusions(
             if not g.applies_to(tid):
                 continue
             lf = localise(g, frame)
-            inside = [s for s in rows if g.active_at(s[0]) and _inside(lf, s[4], s[5], s[3])]
+            inside = [s for s in rows if g.active_at(s[0]) and inside_fence(lf, s[4], s[5], s[3])]
             if inside:
                 out.append(
                     IntrusionReport(
@@ -536,195 +541,3 @@ def intrusions(
                     )
                 )
     return tuple(out)
-
-
-def _inside(lf: Any, east_m: float, north_m: float, alt_amsl_m: float) -> bool:
-    """Is a point inside a localised geofence (altitude band, then cylinder or polygon)?"""
-    if not lf.z_lo <= alt_amsl_m <= lf.z_hi:
-        return False
-    if lf.center is not None:
-        return bool(math.hypot(east_m - lf.center[0], north_m - lf.center[1]) <= lf.radius_m)
-    inside = points_in_edges(np.array([east_m]), np.array([north_m]), lf.edges)
-    return bool(inside[0])
-
-
-def _plan_ends(rt: Runtime) -> dict[str, float]:
-    """End time (t_s) of each operation's latest plan."""
-    return {
-        op_id: plans[-1].waypoints[-1].t_s
-        for op_id, plans in rt.plan_history.items()
-        if plans and plans[-1].waypoints
-    }
-
-
-def truth(
-    vehicles: Sequence[SimVehicle],
-    scenario: Scenario,
-    frame: LocalFrame,
-    mon: MonitoringConfig,
-    *,
-    flying_until_t_s: Mapping[str, float] | None = None,
-) -> TruthReport:
-    """Ground truth from the simulated vehicles (their true positions, not the tracks), in
-    true metres (see :func:`_tangent_plane_m`) and metres AMSL, while both operations of a
-    pair are in progress: up to the end of the earlier one's latest plan
-    (``flying_until_t_s``, by operation id). A simulated vehicle stays in the air after its
-    mission (a fixed wing circles its last waypoint); a real operation ends there.
-
-    The vehicles record their position once a simulated second; between two records each
-    moves linearly, so one vehicle's records are interpolated at the other's record times and
-    every interval between records is checked exactly (closest approach and the instants in
-    loss of separation of linear relative motion), not only the sampled instants."""
-    by_sys = {int(v.sys_id): v for v in vehicles}
-    ops = {int(op.sys_id): op for op in scenario.operations if op.sys_id is not None}
-    local = {s: _local_history(frame, by_sys[s].position_history) for s in by_sys if s in ops}
-    pairs = []
-    ids = sorted(local)
-    for i, a in enumerate(ids):
-        for b in ids[i + 1 :]:
-            min_h, min_v = mon.effective_minima(
-                ops[a].operational_volume_m, ops[b].operational_volume_m
-            )
-            until = min(
-                (flying_until_t_s or {}).get(ops[a].id, math.inf),
-                (flying_until_t_s or {}).get(ops[b].id, math.inf),
-            )
-            best, loss = _pair_truth(
-                local[a][local[a][:, 0] <= until] if len(local[a]) else local[a],
-                local[b],
-                min_h,
-                min_v,
-                spherical=mon.spherical,
-            )
-            pairs.append(
-                TruthPair(
-                    pair=(ops[a].id, ops[b].id),
-                    min_distance_m=_finite(best),
-                    loss_of_separation=loss,
-                )
-            )
-    return TruthReport(pairs=tuple(pairs))
-
-
-def _local_history(
-    frame: LocalFrame, history: Sequence[tuple[float, float, float, float]]
-) -> npt.NDArray[np.float64]:
-    """(K, 4) rows of t_s, east_m, north_m, alt_amsl_m."""
-    if not history:
-        return np.zeros((0, 4))
-    h = np.asarray(history, dtype=np.float64)
-    east, north = _tangent_plane_m(frame.origin_lat_deg, frame.origin_lon_deg, h[:, 1], h[:, 2])
-    return np.column_stack((h[:, 0], east, north, h[:, 3]))
-
-
-_WGS84_A_M = 6378137.0
-_WGS84_E2 = 6.69437999014e-3
-
-
-def _tangent_plane_m(
-    lat0_deg: float,
-    lon0_deg: float,
-    lat_deg: npt.NDArray[np.float64],
-    lon_deg: npt.NDArray[np.float64],
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """(east_m, north_m) in the tangent plane at the origin, through Earth-centred
-    coordinates: true metres (no map projection's scale factor), so the truth does not share
-    the UTM frame the service computes in."""
-
-    def ecef(lat: npt.NDArray[np.float64], lon: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        la, lo = np.radians(lat), np.radians(lon)
-        n = _WGS84_A_M / np.sqrt(1.0 - _WGS84_E2 * np.sin(la) ** 2)
-        return np.stack(
-            (
-                n * np.cos(la) * np.cos(lo),
-                n * np.cos(la) * np.sin(lo),
-                n * (1 - _WGS84_E2) * np.sin(la),
-            )
-        )
-
-    o = ecef(np.array([lat0_deg]), np.array([lon0_deg]))[:, 0]
-    d = ecef(lat_deg, lon_deg) - o[:, None]
-    la, lo = math.radians(lat0_deg), math.radians(lon0_deg)
-    east = -math.sin(lo) * d[0] + math.cos(lo) * d[1]
-    north = (
-        -math.sin(la) * math.cos(lo) * d[0]
-        - math.sin(la) * math.sin(lo) * d[1]
-        + math.cos(la) * d[2]
-    )
-    return east, north
-
-
-def _pair_truth(
-    a: npt.NDArray[np.float64],
-    b: npt.NDArray[np.float64],
-    min_h_m: float,
-    min_v_m: float,
-    *,
-    spherical: bool,
-) -> tuple[float, bool]:
-    """(minimum 3D distance m, loss of separation) while both vehicles were recorded."""
-    if len(a) < 2 or len(b) < 2:
-        return math.inf, False
-    t = a[:, 0]
-    both = (t >= b[0, 0]) & (t <= b[-1, 0])
-    if both.sum() < 2:
-        return math.inf, False
-    t = t[both]
-    rel = a[both, 1:] - np.column_stack([np.interp(t, b[:, 0], b[:, k]) for k in (1, 2, 3)])
-    best = math.inf
-    loss = False
-    for k in range(len(rel) - 1):
-        r0 = (float(rel[k, 0]), float(rel[k, 1]), float(rel[k, 2]))
-        d = (
-            float(rel[k + 1, 0]) - r0[0],
-            float(rel[k + 1, 1]) - r0[1],
-            float(rel[k + 1, 2]) - r0[2],
-        )
-        dd = d[0] ** 2 + d[1] ** 2 + d[2] ** 2
-        u = (
-            0.0
-            if dd == 0.0
-            else max(0.0, min(1.0, -(r0[0] * d[0] + r0[1] * d[1] + r0[2] * d[2]) / dd))
-        )
-        best = min(best, math.dist((0.0, 0.0, 0.0), tuple(r0[i] + u * d[i] for i in range(3))))
-        loss = loss or _segment_in_loss(r0, d, min_h_m, min_v_m, spherical=spherical)
-    return best, loss
-
-
-def _below(a: float, b: float, c: float) -> tuple[float, float]:
-    """The interval of u where a u^2 + b u + c < 0 (a >= 0); empty when lo >= hi."""
-    if a <= 1e-12:
-        if abs(b) <= 1e-12:
-            return (-math.inf, math.inf) if c < 0.0 else (math.inf, -math.inf)
-        root = -c / b
-        return (-math.inf, root) if b > 0.0 else (root, math.inf)
-    disc = b * b - 4.0 * a * c
-    if disc <= 0.0:
-        return math.inf, -math.inf
-    s = math.sqrt(disc)
-    return (-b - s) / (2.0 * a), (-b + s) / (2.0 * a)
-
-
-def _segment_in_loss(
-    r0: tuple[float, float, float],
-    d: tuple[float, float, float],
-    min_h_m: float,
-    min_v_m: float,
-    *,
-    spherical: bool,
-) -> bool:
-    """Is the relative position r0 + u d inside the minima for some u in [0, 1]?"""
-    if spherical:
-        lo, hi = _below(
-            d[0] ** 2 + d[1] ** 2 + d[2] ** 2,
-            2.0 * (r0[0] * d[0] + r0[1] * d[1] + r0[2] * d[2]),
-            r0[0] ** 2 + r0[1] ** 2 + r0[2] ** 2 - min_h_m**2,
-        )
-        return max(0.0, lo) < min(1.0, hi)
-    h_lo, h_hi = _below(
-        d[0] ** 2 + d[1] ** 2,
-        2.0 * (r0[0] * d[0] + r0[1] * d[1]),
-        r0[0] ** 2 + r0[1] ** 2 - min_h_m**2,
-    )
-    v_lo, v_hi = _below(d[2] ** 2, 2.0 * r0[2] * d[2], r0[2] ** 2 - min_v_m**2)
-    return max(0.0, h_lo, v_lo) < min(1.0, h_hi, v_hi)

@@ -129,6 +129,7 @@ def vehicle_specs(
     from sitl import FaultKind, FaultSpec, MissionItemSpec, VehicleSpec
 
     frame = scenario.frame
+    envelopes = {op.id: op.performance() for op in scenario.operations}
     specs = []
     for i, v in enumerate(scenario.vehicles):
         wps = v.plan.waypoints
@@ -148,7 +149,6 @@ def vehicle_specs(
                 )
             )
         start_at = max(0.5, lead_s + (wps[0].t_s - scenario.t0_s) + v.start_delay_s)
-        fastest = max([it.speed_mps or 0.0 for it in items] + [v.cruise_speed_mps])
         faults = [
             FaultSpec(
                 kind=FaultKind[_FAULTS[ev.kind]],
@@ -172,7 +172,9 @@ def vehicle_specs(
                 home_lon_deg=v.home.lon_deg,
                 home_alt_amsl_m=v.home.alt_amsl_m,
                 cruise_speed_mps=v.cruise_speed_mps,
-                max_speed_mps=max(fastest * 1.2, v.cruise_speed_mps + 2.0),
+                # one envelope: the vehicle flies the speeds the UTM plans with
+                min_airspeed_mps=envelopes[v.operation_id].min_speed_mps,
+                max_speed_mps=envelopes[v.operation_id].max_speed_mps,
                 climb_rate_mps=v.max_climb_rate_mps,
                 mission=tuple(items),
                 auto_start_at_s=start_at,

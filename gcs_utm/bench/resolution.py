@@ -40,21 +40,24 @@ def run(args: argparse.Namespace) -> list[dict[str, Any]]:
         out = args.out or Path(tmp)
         paths = write_encounters(out / "scenarios", args.n, args.seed)
         s = run_eval(paths, Settings(), EvalOptions(out_dir=out, jobs=args.jobs))
+    t = s.totals
     return [
         {
             "benchmark": "resolution",
-            "n": s.scenarios,
+            "n": t.scenarios,
             "seed": args.seed,
-            "failed_runs": s.failed_runs,
-            "predicted_losses": s.predicted_losses,
-            "losses_avoided": s.losses_avoided,
-            "share_avoided": s.share_avoided,
-            "predicted_losses_flown": s.predicted_losses_flown,
-            "losses_created_by_accepted_plans": s.losses_created_by_accepted_plans,
-            "losses_missed": s.losses_missed,
-            "geofence_intrusions": s.geofence_intrusions,
-            "escalations": s.escalations,
-            "accepted_plans": s.accepted_plans,
+            "failed_runs": t.failed_runs,
+            "predicted_losses": t.predicted_losses,
+            "losses_avoided": t.losses_avoided,
+            "share_avoided": t.share_avoided,
+            "predicted_losses_flown": t.predicted_losses_flown,
+            "losses_created_by_accepted_plans": t.losses_created_by_accepted_plans,
+            "losses_missed": t.losses_missed,
+            "geofence_intrusions": t.geofence_intrusions,
+            "escalations": t.escalations,
+            "escalations_without_command": t.escalations_without_command,
+            "encounters_per_minute": s.encounters_per_minute,
+            "accepted_plans": t.accepted_plans,
             "median_extra_distance_m": s.median_extra_length_m,
             "median_extra_time_s": s.median_extra_time_s,
             "median_detection_to_verified_upload_s": s.median_detection_to_verified_upload_s,

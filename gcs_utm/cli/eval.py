@@ -1,4 +1,5 @@
-"""``gcs-utm eval SCENARIO... --out DIR [--jobs N] [--auto-reject] [--generate N --seed S]``:
+"""``gcs-utm eval SCENARIO... --out DIR [--jobs N] [--auto-reject] [--generate N --seed S
+--profile P]``:
 fast-time closed-loop evaluation (see :mod:`gcs_utm.eval`)."""
 
 from __future__ import annotations
@@ -7,6 +8,8 @@ import argparse
 import os
 import sys
 from pathlib import Path
+
+from gcs_utm.eval.generator import PROFILES
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -20,8 +23,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--jobs",
         type=int,
-        default=1,
-        help=f"scenarios run at once, one process each (this machine: {os.cpu_count()} CPUs)",
+        default=os.cpu_count() or 1,
+        help=f"scenarios run at once, one process each (default: this machine's "
+        f"{os.cpu_count()} CPUs)",
     )
     p.add_argument("--config", type=Path, default=None, help="settings TOML")
     p.add_argument(
@@ -37,6 +41,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="also generate N encounters (written to OUT/scenarios) and run them",
     )
     p.add_argument("--seed", type=int, default=1, help="seed of the generated encounters")
+    p.add_argument(
+        "--profile",
+        choices=(*PROFILES, "all"),
+        default="classic",
+        help="what the generated encounters stress (docs/evaluation.md); all: a mix cycling "
+        "through every profile",
+    )
     p.set_defaults(func=_eval)
 
 
@@ -57,7 +68,7 @@ def _eval(args: argparse.Namespace) -> int:
         return 2
     paths = list(args.scenarios)
     if args.generate:
-        paths += write_encounters(args.out / "scenarios", args.generate, args.seed)
+        paths += write_encounters(args.out / "scenarios", args.generate, args.seed, args.profile)
     if not paths:
         print("gcs-utm eval: give scenario files or --generate N", file=sys.stderr)
         return 2
@@ -73,4 +84,4 @@ def _eval(args: argparse.Namespace) -> int:
     )
     print(markdown(summary))
     print(f"reports in {args.out / 'reports'}, summary in {args.out / 'summary.json'}")
-    return 1 if summary.failed_runs else 0
+    return 1 if summary.totals.failed_runs else 0

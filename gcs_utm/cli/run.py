@@ -223,14 +223,28 @@ def summary_text(report: Report, path: Path) -> str:
             f"v{r.version} {r.decision}{who}, "
             + ("verified on the vehicle" if r.verified else f"{r.state}")
         )
-    minima = report.separation_minimum
     for s in report.separation:
+        # one set of minima (the pair's effective minima, the verdict's), and the distances
+        # at the closest normalised approach (the instant that decides it)
         lines.append(
-            f"  separation {s.pair[0]}-{s.pair[1]}: closest horizontal {s.min_horizontal_m} m "
-            f"(minimum {minima.horizontal_m}), vertical when close "
-            f"{s.min_vertical_when_close_m} m (minimum {minima.vertical_m}): "
+            f"  separation {s.pair[0]}-{s.pair[1]} (minima {s.minimum_horizontal_m:g} m "
+            f"horizontal / {s.minimum_vertical_m:g} m vertical): closest at "
+            f"{s.horizontal_at_closest_m} m horizontal, {s.vertical_at_closest_m} m vertical: "
             + ("LOSS OF SEPARATION" if s.loss_of_separation else "kept")
         )
+    if report.truth is not None:
+        for p in report.truth.pairs:
+            lines.append(
+                f"  flown {p.pair[0]}-{p.pair[1]} (minima {p.minimum_horizontal_m:g} m "
+                f"horizontal / {p.minimum_vertical_m:g} m vertical): closest at "
+                f"{p.horizontal_at_closest_m} m horizontal, {p.vertical_at_closest_m} m "
+                f"vertical: " + ("LOSS OF SEPARATION" if p.loss_of_separation else "kept")
+            )
+        for flown in report.truth.intrusions:
+            lines.append(
+                f"  FLOWN INTRUSION {flown.uas} into {flown.geofence} at {flown.first_at_s} s "
+                f"for {flown.duration_s:g} s"
+            )
     for g in report.geofence_intrusions:
         lines.append(f"  INTRUSION {g.uas} into {g.geofence} at {g.first_at_s} s")
     return "\n".join(lines)

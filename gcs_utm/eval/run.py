@@ -13,6 +13,8 @@ import json
 import logging
 import math
 import multiprocessing
+import os
+import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -29,10 +31,11 @@ _log = logging.getLogger(__name__)
 @dataclasses.dataclass(frozen=True, slots=True, kw_only=True)
 class EvalOptions:
     """``out_dir``: reports go to ``out_dir/reports``, the summary to ``out_dir``;
-    ``operator``: auto-accept (default) or auto-reject; ``jobs``: worker processes."""
+    ``operator``: auto-accept (default) or auto-reject; ``jobs``: worker processes (default:
+    this machine's CPUs)."""
 
     out_dir: Path
-    jobs: int = 1
+    jobs: int = dataclasses.field(default_factory=lambda: os.cpu_count() or 1)
     operator: str = OperatorMode.AUTO_ACCEPT
     keep_stores: bool = False
 
@@ -77,6 +80,7 @@ def run_eval(paths: Sequence[Path], settings: Settings, options: EvalOptions) ->
     """Run every scenario, then write ``summary.json`` and ``summary.md``."""
     options.out_dir.mkdir(parents=True, exist_ok=True)
     work = [(str(p), settings, options) for p in paths]
+    wall0 = time.perf_counter()
     if options.jobs == 1 or len(work) == 1:
         outcomes = [_worker(w) for w in work]
     else:
@@ -84,13 +88,16 @@ def run_eval(paths: Sequence[Path], settings: Settings, options: EvalOptions) ->
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=options.jobs, mp_context=ctx) as pool:
             outcomes = list(pool.map(_worker, work))
-    summary = summarise(outcomes)
+    summary = summarise(outcomes, elapsed_wall_s=time.perf_counter() - wall0, jobs=options.jobs)
     write_summary(summary, options.out_dir)
     return summary
 
 
 def summary_json(summary: EvalSummary) -> dict[str, Any]:
+    """The summary as JSON: the totals at the top level, then the rest (``profiles``: one
+    object per profile with its totals; ``outcomes``: one per run)."""
     out = dataclasses.asdict(summary)
+    out = {**out.pop("totals"), **out}
     for o, data in zip(summary.outcomes, out["outcomes"], strict=True):
         data["predicted"] = o.predicted
         data["avoided"] = o.avoided

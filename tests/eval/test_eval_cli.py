@@ -4,6 +4,7 @@ report plus summary.json and summary.md; bad input is one clear error."""
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -51,3 +52,19 @@ def test_eval_bad_input_is_one_clear_error(
     assert "no such scenario file" in capsys.readouterr().err
     assert main(["eval", "--out", str(tmp_path)]) == 2
     assert "give scenario files or --generate N" in capsys.readouterr().err
+
+
+def test_eval_generates_a_profile_and_reports_throughput(tmp_path: Path) -> None:
+    args = ["eval", "--generate", "1", "--seed", "3", "--profile", "vertical"]
+    assert main([*args, "--jobs", "1", "--out", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert [p["profile"] for p in summary["profiles"]] == ["vertical"]
+    assert summary["outcomes"][0]["scenario"].startswith("enc_3_0000_vertical_")
+    assert summary["jobs"] == 1 and summary["encounters_per_minute"] > 0.0
+    assert "| elapsed (jobs), encounters per minute |" in (tmp_path / "summary.md").read_text()
+
+
+def test_eval_runs_one_process_per_cpu_by_default(tmp_path: Path) -> None:
+    from gcs_utm.eval.run import EvalOptions
+
+    assert EvalOptions(out_dir=tmp_path).jobs == (os.cpu_count() or 1)

@@ -4,6 +4,7 @@ report's ground truth between position records (true metres, linear motion in be
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -12,6 +13,7 @@ import pytest
 from pyproj import Geod
 
 from gcs_utm.app.report import (
+    EscalationReport,
     OperationReport,
     OriginReport,
     PlanReport,
@@ -141,8 +143,26 @@ def _report() -> Report:
         truth=TruthReport(
             pairs=(
                 TruthPair(pair=("A", "B"), min_distance_m=80.0, loss_of_separation=False),
-                TruthPair(pair=("A", "C"), min_distance_m=20.0, loss_of_separation=True),
-                TruthPair(pair=("A", "D"), min_distance_m=20.0, loss_of_separation=True),
+                TruthPair(
+                    pair=("A", "C"),
+                    min_distance_m=20.0,
+                    loss_of_separation=True,
+                    minimum_horizontal_m=50.0,
+                    minimum_vertical_m=30.0,
+                    horizontal_at_closest_m=20.0,
+                    vertical_at_closest_m=3.5,
+                    first_loss_at_s=40.0,
+                ),
+                TruthPair(
+                    pair=("A", "D"),
+                    min_distance_m=20.0,
+                    loss_of_separation=True,
+                    minimum_horizontal_m=50.0,
+                    minimum_vertical_m=30.0,
+                    horizontal_at_closest_m=21.0,
+                    vertical_at_closest_m=0.5,
+                    first_loss_at_s=50.0,
+                ),
                 TruthPair(pair=("B", "D"), min_distance_m=90.0, loss_of_separation=False),
             )
         ),
@@ -165,17 +185,24 @@ def test_outcome_counts_predicted_flown_avoided_and_created_pairs() -> None:
 
 
 def test_summary_totals_and_markdown() -> None:
-    s = summarise([outcome(_report()), outcome(_report())])
-    assert (s.predicted_losses, s.losses_avoided, s.share_avoided) == (
+    s = summarise([outcome(_report()), outcome(_report())], elapsed_wall_s=30.0, jobs=2)
+    t = s.totals
+    assert (t.predicted_losses, t.losses_avoided, t.share_avoided) == (
         6,
         4,
         pytest.approx(4 / 6, abs=1e-4),
     )
-    assert s.losses_created_by_accepted_plans == 2
+    assert t.losses_created_by_accepted_plans == 2
+    assert (t.min_flown_horizontal_m, t.min_flown_vertical_m) == (20.0, 0.5)
     assert s.median_extra_length_m == pytest.approx(2 * (math.hypot(300, 100) - 300), abs=0.05)
+    assert s.encounters_per_minute == pytest.approx(4.0)
     text = markdown(s)
-    assert "| predicted losses avoided | 4 (66.7 %) |" in text
-    assert "| hand-made | 3 | 2 | 2 | 1 | 0 | 0 | A v2 (+32 / +5) | 1.5 |" in text
+    assert "| predicted losses avoided | 4 / 6 (66.7 %) |" in text
+    assert "| elapsed (jobs), encounters per minute | 30 s (2), 4 |" in text
+    assert (
+        "| hand-made | 3 | 2: A-C predicted 20 / 3.5 m (minima 50 / 30); A-D created 21 / 0.5 m "
+        "(minima 50 / 30) | 2 | 1 | 0 | 0 (0) | A v2 (+32 / +5) | 1.5 |"
+    ) in text
 
 
 @dataclass
@@ -254,18 +281,79 @@ def test_truth_measures_true_metres_not_map_metres(tmp_path: object) -> None:
     assert not pair.loss_of_separation
 
 
-def test_truth_ends_with_the_earlier_operation(tmp_path: object) -> None:
-    """A pass after one UAS's operation has ended (its last plan's end) is not counted: a
-    simulated vehicle stays airborne after its mission, a real operation ends there."""
+def test_truth_judges_a_pass_after_both_plans_have_ended(tmp_path: object) -> None:
+    """The truth has no notion of plan ends: a vehicle is traffic while it is in the air.
+    A pass at 40 m after both plans ended (A's and B's filed plans end at 100 s in the
+    scenario; the pass is at 130 s) is a flown loss, with its one set of minima and the
+    distances at the closest approach."""
     scenario = _scenario_two_uas(tmp_path)
-    a = [(float(t), *_ll(-915.0 + 30.0 * t, 0.0), 100.0) for t in range(61)]
-    b = [(float(t), *_ll(915.0 - 30.0 * t, 40.0), 100.0) for t in range(61)]
-    vehicles = [_Vehicle(1, a), _Vehicle(2, b)]
-    mon = MonitoringConfig()
+    a = [(float(t), *_ll(-3900.0 + 30.0 * t, 0.0), 50.0) for t in range(161)]
+    b = [(float(t), *_ll(3900.0 - 30.0 * t, 40.0), 52.0) for t in range(161)]
     frame = scenario.frame  # type: ignore[attr-defined]
-    (before,) = truth(vehicles, scenario, frame, mon, flying_until_t_s={"A": 20.0}).pairs  # type: ignore[arg-type]
-    (after,) = truth(vehicles, scenario, frame, mon, flying_until_t_s={"B": 31.0}).pairs  # type: ignore[arg-type]
-    assert not before.loss_of_separation and before.min_distance_m == pytest.approx(
-        math.hypot(40.0, 630.0), abs=0.1
+    (pair,) = truth([_Vehicle(1, a), _Vehicle(2, b)], scenario, frame, MonitoringConfig()).pairs  # type: ignore[arg-type]
+    assert pair.loss_of_separation
+    assert (pair.minimum_horizontal_m, pair.minimum_vertical_m) == (50.0, 20.0)
+    assert pair.closest_at_s == pytest.approx(130.0, abs=0.05)
+    assert pair.horizontal_at_closest_m == pytest.approx(40.0, abs=0.05)
+    assert pair.vertical_at_closest_m == pytest.approx(2.0, abs=0.01)
+    assert pair.first_loss_at_s == pytest.approx(130.0 - 15.0 / 30.0 * 1.0, abs=0.05)
+    assert pair.loss_duration_s == pytest.approx(1.0, abs=0.05)
+
+
+def test_truth_leaves_out_vehicles_on_the_ground(tmp_path: object) -> None:
+    """Two vehicles on the ground at their homes (the scenario's ground, 0 m AMSL) are not in
+    the air: no loss however close, until one takes off."""
+    scenario = _scenario_two_uas(tmp_path)
+    frame = scenario.frame  # type: ignore[attr-defined]
+    a = [(float(t), *_ll(0.0, 0.0), 0.0) for t in range(20)]
+    b = [(float(t), *_ll(5.0, 0.0), 0.0 if t < 10 else 3.0) for t in range(20)]
+    (ground,) = truth([_Vehicle(1, a), _Vehicle(2, b)], scenario, frame, MonitoringConfig()).pairs  # type: ignore[arg-type]
+    assert not ground.loss_of_separation and ground.min_distance_m is None
+    a_up = [(t, lat, lon, 2.0) for t, lat, lon, _ in a]
+    (flying,) = truth(
+        [_Vehicle(1, a_up), _Vehicle(2, b)], scenario, frame, MonitoringConfig()
+    ).pairs  # type: ignore[arg-type]
+    assert flying.loss_of_separation and flying.first_loss_at_s == pytest.approx(10.0)
+
+
+def test_truth_intrusions_on_true_positions_with_their_duration(tmp_path: object) -> None:
+    """A vehicle 12 s inside a cylinder that applies to it (records once a second), none for
+    the exempt one."""
+    from gcs_utm.model import Geofence, GeofenceShape, LatLon
+
+    scenario = _scenario_two_uas(tmp_path)
+    frame = scenario.frame  # type: ignore[attr-defined]
+    lat, lon = _ll(0.0, 500.0)
+    fence = Geofence(
+        id="G",
+        shape=GeofenceShape.CYLINDER,
+        center=LatLon(lat_deg=lat, lon_deg=lon),
+        radius_m=60.0,
+        min_alt_amsl_m=0.0,
+        max_alt_amsl_m=300.0,
+        exempt=("B",),
     )
-    assert after.loss_of_separation
+    path = [(float(t), *_ll(-205.0 + 10.0 * t, 500.0), 50.0) for t in range(41)]
+    vehicles = [_Vehicle(1, path), _Vehicle(2, list(path))]
+    report = truth(vehicles, scenario, frame, MonitoringConfig(), geofences={"G": fence})  # type: ignore[arg-type]
+    (g,) = report.intrusions
+    assert (g.uas, g.geofence, g.samples_inside) == ("A", "G", 12)  # east -55..55 m
+    assert g.first_at_s == 15.0 and g.duration_s == 12.0
+
+
+def test_escalations_without_a_proposed_command() -> None:
+    """An escalation counts as carrying a command when a recommendation of the threat it
+    names (else of a UAS it names) was proposed within a second of it."""
+    base = _report()
+    escalations = (
+        EscalationReport(at_s=10.5, text="t: no feasible alternative for A"),  # A's rec at 10
+        EscalationReport(at_s=31.0, text="t-B-D-30.0: no conflict-free combination"),
+        EscalationReport(at_s=31.0, text="r-B v1 (B) expired without an answer"),
+        EscalationReport(at_s=50.0, text="t: no feasible alternative for A"),
+    )
+    report = dataclasses.replace(base, escalations=escalations)
+    o = outcome(report)
+    # the rec of "t" proposed at 10 s: the first has a command; "t-B-D-30.0" has no rec
+    # (B's rec is of threat "t"): none; the third names no threat, B's rec at 31 s: one;
+    # the fourth is 40 s after any proposal: none
+    assert (o.escalations, o.escalations_without_command) == (4, 2)

@@ -1,0 +1,91 @@
+"""The evaluation that cannot be tuned to, in CI: a seeded mixed-profile set
+(``gcs-utm eval --generate 24 --seed 7 --profile all``: three encounters of each profile)
+flown end to end in fast time with every recommendation accepted, judged on the vehicles'
+true positions from take-off to landing.
+
+24 encounters rather than the issue's 40: 40 take about 90-150 s of wall time here with 2
+processes, 24 about 55-90 s. The judge's invariants are asserted; the issue's targets (at
+least 99 % of predicted losses avoided, no loss created by an accepted plan, no geofence
+intrusion, no escalation without a proposed command) are strict ``xfail`` while they do not
+hold, naming the failure classes of docs/evaluation.md, so each turns into a failure the day
+it passes."""
+
+from __future__ import annotations
+
+import pytest
+
+from gcs_utm.eval.generator import PROFILES, write_encounters
+from gcs_utm.eval.run import EvalOptions, run_eval
+from gcs_utm.eval.summary import EvalSummary, markdown
+from gcs_utm.settings import Settings
+
+SEED = 7
+N = 3 * len(PROFILES)
+
+pytestmark = [pytest.mark.slow, pytest.mark.network, pytest.mark.timeout(900)]
+
+
+@pytest.fixture(scope="module")
+def summary(tmp_path_factory: pytest.TempPathFactory) -> EvalSummary:
+    out = tmp_path_factory.mktemp("profiles")
+    paths = write_encounters(out / "scenarios", N, SEED, "all")
+    return run_eval(paths, Settings(), EvalOptions(out_dir=out, jobs=2))
+
+
+def test_every_run_completes_and_the_counts_agree(summary: EvalSummary) -> None:
+    s, t = summary, summary.totals
+    table = markdown(s)
+    assert t.failed_runs == 0, table
+    assert t.scenarios == N and {p.profile for p in s.profiles} == set(PROFILES), table
+    assert t.predicted_losses >= N, table  # the set does bring UAS into conflict
+    # every flown loss has exactly one cause
+    assert t.losses_flown_under_effective_minima == (
+        t.predicted_losses_flown + t.losses_created_by_accepted_plans + t.losses_missed
+    ), table
+    for o in s.outcomes:
+        assert len(o.flown_losses) == len(o.flown_loss_pairs), o
+        assert {f.pair for f in o.flown_losses if f.cause == "created"} == set(o.created_pairs)
+        for f in o.flown_losses:  # inside the one set of minima it is judged by
+            assert f.min_ratio is not None and f.min_ratio < 1.0 + 1e-3, f
+            assert f.minimum_horizontal_m is not None and f.minimum_vertical_m is not None
+        assert o.geofence_intrusions == len(o.intrusions)
+        assert all(i.duration_s > 0.0 for i in o.intrusions), o.intrusions
+        assert 0 <= o.escalations_without_command <= o.escalations
+    # the profiles add up to the totals
+    for field in ("predicted_losses", "losses_avoided", "geofence_intrusions", "escalations"):
+        assert sum(getattr(p.totals, field) for p in s.profiles) == getattr(t, field), field
+    assert s.encounters_per_minute is not None and s.encounters_per_minute > 0.0
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 30 class 1 (an aircraft after its plan is not traffic: endpoint losses "
+    "flown after the plan ended) and class 2 (late detection, no immediate command)",
+)
+def test_predicted_losses_are_avoided(summary: EvalSummary) -> None:
+    t = summary.totals
+    assert t.share_avoided is not None and t.share_avoided >= 0.99, markdown(summary)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 30 class 1 (plans sent next to a hovering or loitering aircraft) and class 2 "
+    "(a plan accepted 4 s before a late UAS's loss)",
+)
+def test_no_loss_is_created_by_an_accepted_plan(summary: EvalSummary) -> None:
+    assert summary.totals.losses_created_by_accepted_plans == 0, markdown(summary)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 30 class 3 (geofences crossing or touching filed paths and destinations)",
+)
+def test_no_geofence_intrusion(summary: EvalSummary) -> None:
+    assert summary.totals.geofence_intrusions == 0, markdown(summary)
+
+
+@pytest.mark.xfail(
+    strict=True, reason="issue 30 class 2 (escalations without a proposed safe command)"
+)
+def test_every_escalation_proposes_a_command(summary: EvalSummary) -> None:
+    assert summary.totals.escalations_without_command == 0, markdown(summary)
