@@ -35,6 +35,7 @@ from gcs_utm.model import (
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, PX4_DEFAULT_HOME, SitlProcess
+from tests.autopilot.pilot import PilotLink, mission_items
 from tests.mavlink.conftest import Sink
 
 SPEED = 5.0
@@ -136,8 +137,17 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
             p = ardupilot(instance=0, vehicle="copter", speed=SPEED)
             await _until(lambda: SysId(1) in rt.usm.health_by_sys_id(), 60.0, "not heard")
             await _until(lambda: op.id in rt.tracks(), 90.0, "no track of the operation")
-            os.killpg(p.proc.pid, signal.SIGKILL)
-            p.proc.wait(timeout=10.0)
+            # a link loss is an emergency in the air only (on the ground it is a pre-flight
+            # finding): the pilot takes off in GUIDED on SERIAL1 and hovers
+            pilot = await asyncio.to_thread(PilotLink, 0, "ardupilot", 5762)
+            try:
+                await asyncio.to_thread(pilot.wait_ready)
+                await asyncio.to_thread(pilot.arm_and_start, 60.0, 20.0, auto=False)
+                await _until(lambda: rt.airspace.airborne(op.id), 30.0, "not airborne")
+                os.killpg(p.proc.pid, signal.SIGKILL)
+                p.proc.wait(timeout=10.0)
+            finally:
+                pilot.close()
             await _until(lambda: lost(rt), 20.0, "no COMMUNICATION_FAILURE threat")
             t_restart = rt.clock.now_s()
             ardupilot(instance=0, vehicle="copter", speed=SPEED, workdir=p.workdir)
@@ -182,7 +192,8 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
             for a in s.load_audit()
             if a.actor == "usm" and a.action == "threat_closed"
         ]
-        assert any("flow again" in str(r) for r in reasons), reasons
+        # restarted, the copter is on the ground: its link is back, or it landed/disarmed
+        assert any(_cause_gone(str(r)) for r in reasons), reasons
         assert s.load_geofences(active_only=True) == []
 
 
@@ -215,8 +226,21 @@ async def test_serve_closes_the_link_loss_of_a_restarted_px4(
         try:
             p = px4(instance=0, speed=SPEED)
             await _until(lambda: TrackId(op.id) in rt.tracks(), 90.0, "no track of the operation")
-            os.killpg(p.proc.pid, signal.SIGKILL)
-            p.proc.wait(timeout=10.0)
+            # in the air (a grounded vehicle's link loss is a pre-flight finding): the pilot
+            # uploads a take-off and a waypoint on the API link and starts the mission
+            pilot = await asyncio.to_thread(PilotLink, 0)
+            try:
+                await asyncio.to_thread(pilot.wait_ready)
+                assert pilot.home is not None
+                alt_m = pilot.home[2] + 20.0
+                items = mission_items(1, (lat, lon), [(lat, lon, alt_m), (lat + 0.001, lon, alt_m)])
+                await asyncio.to_thread(pilot.upload, items)
+                await asyncio.to_thread(pilot.arm_and_start)
+                await _until(lambda: rt.airspace.airborne(op.id), 60.0, "not airborne")
+                os.killpg(p.proc.pid, signal.SIGKILL)
+                p.proc.wait(timeout=10.0)
+            finally:
+                pilot.close()
             await _until(lambda: lost(rt) and fenced(rt), 30.0, "no link loss and fence")
             t_restart = rt.clock.now_s()
             px4(instance=0, speed=SPEED)
@@ -248,7 +272,13 @@ async def test_serve_closes_the_link_loss_of_a_restarted_px4(
     with Store(db) as s:
         rows = [t for t in s.load_threats() if t.kind is ThreatKind.COMMUNICATION_FAILURE]
         assert rows and all(t.status is ThreatStatus.CLOSED for t in rows)
-        assert all("flow again" in t.message for t in rows), [t.message for t in rows]
+        closed_by = [t.message for t in rows]
+        assert all(_cause_gone(m) for m in closed_by), closed_by
+
+
+def _cause_gone(reason: str) -> bool:
+    """A link loss's closing reason: positions back, or the vehicle back on the ground."""
+    return any(k in reason for k in ("flow again", "on the ground", "landed"))
 
 
 def _operation(home: tuple[float, float, float] | None = None) -> Operation:
