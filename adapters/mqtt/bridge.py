@@ -39,7 +39,6 @@ import asyncio
 import contextlib
 import logging
 import random
-import ssl
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -47,10 +46,9 @@ from types import TracebackType
 from typing import Protocol, cast
 
 import aiomqtt
-from paho.mqtt.packettypes import PacketTypes
-from paho.mqtt.properties import Properties
 
 from adapters.mqtt.answers import AnswerOutcome
+from adapters.mqtt.client import session_client
 from adapters.mqtt.codec import (
     FlightPlanSubmission,
     FlightStatusReport,
@@ -209,29 +207,9 @@ class MqttBridge:
 
     def _client(self) -> aiomqtt.Client:
         cfg = self._config
-        tls_params = None
-        if cfg.tls.enabled:
-            tls_params = aiomqtt.TLSParameters(
-                ca_certs=cfg.tls.ca_path or None,
-                certfile=cfg.tls.cert_path or None,
-                keyfile=cfg.tls.key_path or None,
-                cert_reqs=ssl.CERT_REQUIRED,
-            )
-        connect = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
-        connect.SessionExpiryInterval = cfg.session_expiry_s
-        return aiomqtt.Client(
-            cfg.host,
-            cfg.port,
-            username=cfg.username or None,
-            password=cfg.password or None,
-            identifier=cfg.client_id,
-            protocol=aiomqtt.ProtocolVersion.V5,
-            clean_start=False,
-            properties=connect,
-            keepalive=cfg.keepalive_s,
-            timeout=cfg.publish_timeout_s,
-            tls_params=tls_params,
-            tls_insecure=cfg.tls.insecure if cfg.tls.enabled else None,
+        return session_client(
+            cfg,
+            cfg.client_id,
             max_queued_incoming_messages=cfg.queue_max,
             queue_type=self._inbox_factory(),
             will=aiomqtt.Will(

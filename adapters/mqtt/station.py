@@ -27,15 +27,13 @@ import contextlib
 import json
 import logging
 import random
-import ssl
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
 import aiomqtt
-from paho.mqtt.packettypes import PacketTypes
-from paho.mqtt.properties import Properties
 
+from adapters.mqtt.client import session_client
 from adapters.mqtt.config import MqttConfig
 from adapters.mqtt.topics import Topics
 from gcs_utm.clock import Clock
@@ -184,31 +182,7 @@ class PilotStation:
             await self._send(key)
 
     def _client_for(self) -> aiomqtt.Client:
-        cfg = self._config
-        tls_params = None
-        if cfg.tls.enabled:
-            tls_params = aiomqtt.TLSParameters(
-                ca_certs=cfg.tls.ca_path or None,
-                certfile=cfg.tls.cert_path or None,
-                keyfile=cfg.tls.key_path or None,
-                cert_reqs=ssl.CERT_REQUIRED,
-            )
-        connect = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
-        connect.SessionExpiryInterval = cfg.session_expiry_s
-        return aiomqtt.Client(
-            cfg.host,
-            cfg.port,
-            username=cfg.username or None,
-            password=cfg.password or None,
-            identifier=self.client_id,
-            protocol=aiomqtt.ProtocolVersion.V5,
-            clean_start=False,
-            properties=connect,
-            keepalive=cfg.keepalive_s,
-            timeout=cfg.publish_timeout_s,
-            tls_params=tls_params,
-            tls_insecure=cfg.tls.insecure if cfg.tls.enabled else None,
-        )
+        return session_client(self._config, self.client_id)
 
     async def _run(self) -> None:
         failures = 0
