@@ -13,7 +13,8 @@ and operator ID reached the autopilot.
 Phase 1: no operation is filed and ``[remote_id]`` has no operator location: gcs-utm sends
 Basic ID and Operator ID, no System; arming fails for exactly the Remote ID reason (once the
 other pre-arm checks pass). Phase 2: an operation is filed for the vehicle; gcs-utm sends its
-home as the operator location and the vehicle arms.
+home as the operator location and the vehicle arms, takes off, and goes on receiving the
+operator location in the air.
 
 ArduPilot measures the 3 s in simulated time: at SPEED x, a period P of real time is P x SPEED
 simulated, hence the shorter periods here (0.8 s simulated for both SYSTEM and ARM_STATUS).
@@ -45,6 +46,7 @@ from gcs_utm.model import (
     OperationState,
     Position,
     SysId,
+    TrackId,
     VehicleKind,
     Waypoint4D,
 )
@@ -62,6 +64,9 @@ MAV_CMD_COMPONENT_ARM_DISARM = 400
 MAV_COMP_ID_ODID_TXRX_1 = 236
 MAV_TYPE_ODID = 34
 ODID_REASON = "operator location must be set"
+MAV_CMD_DO_SET_MODE = 176  # (1 = custom mode, ArduCopter 4 GUIDED / 9 LAND)
+MAV_CMD_NAV_TAKEOFF = 22
+TAKEOFF_AGL_M = 10.0
 
 
 class Transmitter:
@@ -138,6 +143,12 @@ async def _arm(rt: Runtime, texts: Texts) -> tuple[bool, list[str]]:
     return res.ok, texts.since(t0)
 
 
+def _height_m(rt: Runtime, home: Position) -> float:
+    """Height of the vehicle's track above the home (0 before there is a track)."""
+    track = rt.tracks().get(TrackId("rid-1"))
+    return 0.0 if track is None else track.alt_amsl_m - home.alt_amsl_m
+
+
 def _operation(home: Position) -> Operation:
     oid = OperationId("rid-1")
     wp = Waypoint4D(
@@ -212,6 +223,8 @@ async def test_ardupilot_enforcing_remote_id_arms_with_gcs_utm_operator_location
                 20.0,
                 "the operator location did not reach the transmitter",
             )
+            # GUIDED, so that the armed copter can take off on command
+            await rt.hub.command_long(SysId(1), MAV_CMD_DO_SET_MODE, (1.0, 4.0, 0, 0, 0, 0, 0))
             ok, said = await _arm(rt, texts)
             for _ in range(5):  # a pre-arm check of its own may still be settling
                 if ok:
@@ -219,9 +232,16 @@ async def test_ardupilot_enforcing_remote_id_arms_with_gcs_utm_operator_location
                 await asyncio.sleep(1.0)
                 ok, said = await _arm(rt, texts)
             seen["armed"], seen["arm_texts"] = ok, said
-            await rt.hub.command_long(
-                SysId(1), MAV_CMD_COMPONENT_ARM_DISARM, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-            )
+            if ok:  # it flies: take off, and the operator location goes on in the air
+                await rt.hub.command_long(
+                    SysId(1), MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, TAKEOFF_AGL_M)
+                )
+                await _until(lambda: _height_m(rt, home) > 0.8 * TAKEOFF_AGL_M, 60.0, "no climb")
+                seen["height_m"] = _height_m(rt, home)
+                n_air = len(tx.got("OPEN_DRONE_ID_SYSTEM"))
+                await asyncio.sleep(2.0)
+                seen["system_in_air"] = len(tx.got("OPEN_DRONE_ID_SYSTEM")) - n_air
+                await rt.hub.command_long(SysId(1), MAV_CMD_DO_SET_MODE, (1.0, 9.0, 0, 0, 0, 0, 0))
             seen["counters"] = dataclasses.asdict(rt.remote_id.counters)
         finally:
             if tx_task is not None:
@@ -249,6 +269,7 @@ async def test_ardupilot_enforcing_remote_id_arms_with_gcs_utm_operator_location
     )
     # phase 2: armed with gcs-utm's operator location, which ArduPilot passed on
     assert seen["armed"], seen["arm_texts"]
+    assert seen["height_m"] > 0.8 * TAKEOFF_AGL_M and seen["system_in_air"] > 0, seen
     system = [m for m in tx.got("OPEN_DRONE_ID_SYSTEM") if m.operator_latitude != 0][-1]
     assert (system.operator_latitude, system.operator_longitude) == (
         round(lat * 1e7),
