@@ -147,4 +147,59 @@ class CommandKeys:
             await asyncio.gather(*list(self._tasks), return_exceptions=True)
 
 
-__all__ = ["HELP", "KEYS", "CommandKeys"]
+LINE_HELP = "hold|land|rtl|resume <UAS> + Enter, then y + Enter: operator command"
+
+
+class LineCommands:
+    """Operator commands typed on a line prompt: ``hold UAS1`` (``land``, ``rtl`` or
+    ``return``, ``resume``) asks for a confirmation, ``y`` on the next line sends it (anything
+    else cancels it). The command runs in a task of its own; ``write`` prints its outcome."""
+
+    def __init__(
+        self, usm: Usm, *, operator: str, source: str, write: Callable[[str], None]
+    ) -> None:
+        self._usm = usm
+        self._operator = operator
+        self._source = source
+        self._write = write
+        self.armed: tuple[str, str] | None = None  # (command, UAS) waiting for its yes
+        self.results: list[CommandResult] = []
+        self._tasks: set[asyncio.Task[None]] = set()
+
+    def handle(self, text: str) -> bool:
+        """Take one typed line (stripped); False when it is not about a command."""
+        from gcs_utm.services.operator_commands import parse_command_line
+
+        armed, self.armed = self.armed, None
+        if armed is not None:
+            if text.lower() in ("y", "yes"):
+                self._write(f"{armed[0]} {armed[1]}: sending ...")
+                task = asyncio.ensure_future(self._send(*armed))
+                self._tasks.add(task)
+                task.add_done_callback(self._tasks.discard)
+                return True
+            self._write(f"{armed[0]} {armed[1]} cancelled")
+            if text.lower() in ("n", "no"):
+                return True
+        parsed = parse_command_line(text)
+        if parsed is None:
+            return armed is not None and not text
+        self.armed = parsed
+        self._write(
+            f"{_WORDS[parsed[0]]} {parsed[1]}? y + Enter sends it, anything else cancels it"
+        )
+        return True
+
+    async def _send(self, command: str, uas: str) -> None:
+        result = await self._usm.operator_command(
+            uas, command, operator=self._operator, source=self._source
+        )
+        self.results.append(result)
+        self._write(result.text())
+
+    async def drain(self) -> None:
+        while self._tasks:
+            await asyncio.gather(*list(self._tasks), return_exceptions=True)
+
+
+__all__ = ["HELP", "KEYS", "LINE_HELP", "CommandKeys", "LineCommands"]

@@ -76,6 +76,17 @@ async def _until(what: str, check: Callable[[], bool], timeout_s: float = 30.0) 
         await asyncio.sleep(0.05)
 
 
+def _flying(usm: Usm) -> bool:
+    """Airborne in its mission (the mission filed as an operation)."""
+    flight = [f for (sys_id, _), f in usm.flight.items() if sys_id == 1]
+    return (
+        "sys1" in usm.airspace.operations
+        and bool(flight)
+        and flight[0].airborne
+        and _mode(usm) is FlightMode.MISSION
+    )
+
+
 def _mode(usm: Usm) -> FlightMode | None:
     s = usm.statuses_by_sys_id().get(SysId(1))
     return None if s is None else s.mode
@@ -86,17 +97,7 @@ async def test_h_then_y_holds_the_selected_uas_and_the_audit_records_it() -> Non
         usm = rig.usm
         app = DashboardApp(usm, dict, refresh_s=0.1)
         async with app.run_test(size=(80, 24)) as pilot:
-            await _until(
-                "the operation from the vehicle", lambda: "sys1" in usm.airspace.operations
-            )
-            await _until(
-                "the vehicle flying its mission",
-                lambda: (
-                    (f := usm.flight.get((SysId(1), next(iter(usm.flight))[1]))) is not None
-                    and f.airborne
-                    and _mode(usm) is FlightMode.MISSION
-                ),
-            )
+            await _until("the vehicle flying its mission", lambda: _flying(usm))
             await pilot.press("h")
             await pilot.pause()
             line = str(app.query_one("#command").render())
@@ -148,3 +149,31 @@ async def test_escape_cancels_and_a_disarmed_vehicle_is_refused_with_the_reason(
     refused = rig.audit("operator_land")
     assert len(refused) == 1 and refused[0].detail["reason"] == "sysid 1 is disarmed"
     assert rig.audit("command_land") == []  # nothing was sent
+
+
+async def test_typed_commands_on_the_line_prompt_ask_then_send() -> None:
+    from io import StringIO
+
+    from rich.console import Console
+
+    from gcs_utm.dashboard.line import LinePrompt
+
+    async with _rig(fly=True) as rig:
+        usm = rig.usm
+        out = StringIO()
+        prompt = LinePrompt(usm, dict, console=Console(file=out, width=100))
+        await _until("the vehicle flying its mission", lambda: _flying(usm))
+        for line in ("land nosuch", "y", "rtl sys1", "n", "hold sys1"):
+            assert await prompt.handle(line) is None
+        assert prompt.commands.results == [] or prompt.commands.results[0].uas == "nosuch"
+        assert _mode(usm) is FlightMode.MISSION  # asked, not sent yet
+        await prompt.handle("y")
+        await _until("two outcomes", lambda: len(prompt.commands.results) == 2)
+    text = out.getvalue()
+    first, second = prompt.commands.results
+    assert (first.outcome.value, first.reason) == ("refused", "unknown UAS 'nosuch'")
+    assert "RETURN TO LAUNCH sys1? y + Enter sends it" in text and "rtl sys1 cancelled" in text
+    assert second.outcome.value == "confirmed" and "hold sys1: confirmed" in text
+    assert [e.detail["outcome"] for e in rig.audit("operator_hold")] == ["confirmed"]
+    assert rig.audit("operator_rtl") == [] and rig.audit("command_rtl") == []
+    assert rig.audit("operator_hold")[0].detail["source"] == "console"
