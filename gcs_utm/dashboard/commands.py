@@ -138,8 +138,9 @@ class CommandKeys:
                 f"[bold reverse yellow] {_WORDS[command]} {escape(uas)}? [/] "
                 f"[bold]y[/] or [bold]{key}[/] again: yes   [bold]Esc[/]: no"
             )
-        tail = f"  [bold]{escape(self.note)}[/]" if self.note else ""
-        return f"UAS [bold]{escape(uas)}[/]  [dim]{HELP}[/]{tail}"
+        if self.note:  # the outcome first: the line may be narrow
+            return f"UAS [bold]{escape(uas)}[/]  [bold]{escape(self.note)}[/]  [dim]{HELP}[/]"
+        return f"UAS [bold]{escape(uas)}[/]  [dim]{HELP}[/]"
 
     async def drain(self) -> None:
         """Wait for the commands being sent (tests, shutdown)."""

@@ -68,7 +68,7 @@ class DashboardApp(App[None]):
     #left { width: 2fr; }
     #right { width: 1fr; }
     #prompt { height: auto; }
-    #command { height: 1; }
+    #command { height: auto; max-height: 2; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("a", "accept", "Accept highlighted"),

@@ -248,6 +248,7 @@ class OperatorCommands:
             self._audit(result, operator, source, uas)
             return result
         kind = COMMANDS[command]
+        before = self.view.statuses().get(op.sys_id)
         sent = await self._execute(
             Command(kind=kind, operation_id=op.id), f"operator {operator} ({source})"
         )
@@ -260,22 +261,30 @@ class OperatorCommands:
                 request_id=request_id,
             )
         else:
-            result = await self._verify(op.id, op.sys_id, kind, command, request_id)
+            was = before.mode if before is not None else FlightMode.UNKNOWN
+            result = await self._verify(op.id, op.sys_id, kind, command, request_id, was=was)
         self._audit(result, operator, source, op.id)
         return result
 
     async def _verify(
-        self, op_id: OperationId, sys_id: SysId, kind: CommandKind, command: str, request_id: str
+        self,
+        op_id: OperationId,
+        sys_id: SysId,
+        kind: CommandKind,
+        command: str,
+        request_id: str,
+        *,
+        was: FlightMode,
     ) -> CommandResult:
-        """Wait for the vehicle's status to report the commanded mode."""
+        """Wait for the vehicle's status to report the commanded mode (``was``: its mode
+        before the command)."""
         end_s = self.clock.now_s() + self.confirm_s
-        status = self.view.statuses().get(sys_id)
         while True:
             status = self.view.statuses().get(sys_id)
             mode = status.mode if status is not None else FlightMode.UNKNOWN
             wanted = _CONFIRMING[kind]
-            if kind is CommandKind.LAND and _plane(status):
-                wanted = _PLANE_LAND
+            if kind is CommandKind.LAND and _plane(status) and was is not FlightMode.MISSION:
+                wanted = _PLANE_LAND  # its landing mission: AUTO, when it was not in AUTO
             if mode in wanted:
                 return CommandResult(
                     uas=op_id,
