@@ -249,7 +249,15 @@ class MqttBridge:
         return ceiling / 2.0 + self._rng.uniform(0.0, ceiling / 2.0)
 
     async def run(self) -> None:
-        """Connect, serve, reconnect forever (until cancelled)."""
+        """Connect, serve, reconnect forever (until cancelled; operator commands still being
+        carried out are cancelled with it)."""
+        try:
+            await self._run()
+        finally:
+            for task in list(self._commands):
+                task.cancel()
+
+    async def _run(self) -> None:
         failures = 0
         while True:
             connects_before = self.stats.connects
