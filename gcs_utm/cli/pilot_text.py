@@ -15,7 +15,10 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-HELP = "answer with: a (accept the proposed option), a N (accept option N), r (reject)"
+HELP = (
+    "answer with: a (accept the proposed option), a N (accept option N), r (reject); "
+    "command a UAS with: hold|land|rtl|resume UAS, then y"
+)
 
 # the scoring terms Tactical Deconfliction appends to an alternative's detail ("k=v, ...")
 _TERM = re.compile(r"([a-z_]+)=(-?[0-9.]+(?:e-?[0-9]+)?)")

@@ -1,6 +1,8 @@
 """The headless line prompt: recommendations printed on a console, answered by typing a line
 on stdin (``a`` accept the proposed option, a number accept that option, ``r`` reject, then
-Enter). Used by ``--headless`` runs whose stdin is a terminal.
+Enter). Used by ``--headless`` runs whose stdin is a terminal. Operator commands are typed
+there too: ``hold UAS1`` (``land``, ``rtl``, ``resume``), then ``y`` to send it
+(:class:`gcs_utm.dashboard.commands.LineCommands`).
 
 The binding rule is the dashboard's: a line acts on the recommendation id and version printed
 last; a line arriving after a different prompt replaced it, or within ``guard_s`` wall seconds
@@ -18,6 +20,7 @@ from collections.abc import AsyncIterator, Callable
 
 from rich.console import Console
 
+from gcs_utm.dashboard.commands import LINE_HELP, LineCommands
 from gcs_utm.dashboard.view import Minima, collect, recommendation_panel
 from gcs_utm.messages import PilotAnswer, PilotDecision
 from gcs_utm.model import Recommendation, RecommendationId, RecommendationState, Track, TrackId
@@ -70,6 +73,12 @@ class LinePrompt:
         self._shown_at = -float("inf")
         self.outcomes: list[AnswerOutcome] = []
         self.ignored = 0
+        self.commands = LineCommands(
+            usm,
+            operator=operator,
+            source="console",
+            write=lambda text: self.console.print(text, markup=False, highlight=False),
+        )
 
     def _current(self) -> Recommendation | None:
         pending = sorted(self._usm.pending(), key=lambda r: r.deadline_t_s)
@@ -97,11 +106,14 @@ class LinePrompt:
 
     async def run(self) -> None:
         """Read answers until stdin closes (or cancelled)."""
+        self.console.print(f"operator commands: {LINE_HELP}")
         async for line in self._lines():
             await self.handle(line)
 
     async def handle(self, line: str) -> AnswerOutcome | None:
         """One typed line: answer the prompt printed last, under the binding rule."""
+        if self.commands.handle(line.strip()):
+            return None
         text = line.strip().lower()
         if not text:
             return None

@@ -11,6 +11,11 @@ Binding rule (what a key acts on):
   the prompt says so: the pilot reads the new prompt and presses again;
 - the USM refuses an answer to a version that is no longer proposed or past its deadline.
 
+Operator commands (:mod:`gcs_utm.dashboard.commands`): ``u`` picks the UAS, ``h``/``l``/``t``/``m``
+arm hold / land / return to launch / resume for it, ``y`` or the same key again confirms and
+``Esc`` cancels; the command line above the footer shows the selection, the question and the
+outcome.
+
 Deadlines are shown in wall-clock seconds (the clock's seconds divided by its speed) and
 counted down at every refresh; under 10 s the prompt turns red.
 """
@@ -29,6 +34,7 @@ from textual.css.query import NoMatches
 from textual.events import Resize
 from textual.widgets import Footer, Header, Static
 
+from gcs_utm.dashboard.commands import KEYS, CommandKeys
 from gcs_utm.dashboard.view import (
     DashboardData,
     Minima,
@@ -62,6 +68,7 @@ class DashboardApp(App[None]):
     #left { width: 2fr; }
     #right { width: 1fr; }
     #prompt { height: auto; }
+    #command { height: auto; max-height: 2; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("a", "accept", "Accept highlighted"),
@@ -69,6 +76,13 @@ class DashboardApp(App[None]):
         Binding("n", "next_alternative", "Next option"),
         Binding("p", "prev_alternative", "Prev option"),
         Binding("tab", "next_pending", "Next pending"),
+        Binding("u", "select_uas", "UAS"),
+        *(
+            Binding(k, f"command('{k}')", c.upper() if c == "rtl" else c.title())
+            for k, c in KEYS.items()
+        ),
+        Binding("y", "confirm_command", "Yes", show=False),
+        Binding("escape", "cancel_command", "No", show=False),
         Binding("q", "quit", "Quit"),
     ]
 
@@ -100,6 +114,9 @@ class DashboardApp(App[None]):
         self.ignored_keys = 0
         self.quit_requested = False
         self._mounted_once = False
+        self.commands = CommandKeys(
+            usm, operator=operator, monotonic=monotonic, on_done=self._refresh_view
+        )
 
     # ---- OperatorPort ----------------------------------------------------------------------
     async def present(self, rec: Recommendation) -> None:
@@ -125,6 +142,7 @@ class DashboardApp(App[None]):
                 yield Static(id="legend")
                 yield Static(id="events")
         yield Static(id="prompt")
+        yield Static(id="command")
         yield Footer()
 
     def on_mount(self) -> None:
@@ -178,6 +196,7 @@ class DashboardApp(App[None]):
             self.query_one("#map", Static).update(top_view(d, width=map_w, height=map_h))
             self.query_one("#legend", Static).update(map_legend(d))
             self.query_one("#events", Static).update(events_text(d))
+        self.query_one("#command", Static).update(self.commands.line())
         prompt = self.query_one("#prompt", Static)
         if rec is None:
             prompt.update("")
@@ -252,6 +271,24 @@ class DashboardApp(App[None]):
     def action_next_pending(self) -> None:
         if len(self._queue) > 1:
             self._queue.append(self._queue.pop(0))
+        self._refresh_view()
+
+    # ---- operator commands (gcs_utm.dashboard.commands) ----------------------------------------
+    def action_select_uas(self) -> None:
+        self.commands.select_next()
+        self._refresh_view()
+
+    def action_command(self, key: str) -> None:
+        self.commands.press(key)
+        self._refresh_view()
+
+    def action_confirm_command(self) -> None:
+        if not self.commands.confirm():
+            self.bell()
+        self._refresh_view()
+
+    def action_cancel_command(self) -> None:
+        self.commands.cancel()
         self._refresh_view()
 
     async def action_quit(self) -> None:

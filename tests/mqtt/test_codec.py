@@ -223,3 +223,33 @@ def test_a_sysid_conflict_is_published_as_a_valid_alert() -> None:
     obj = json.loads(encode_alert(claim))
     validate("alert", obj)
     assert obj["kind"] == "SYSID_CONFLICT" and obj["operation_ids"] == ["op"]
+
+
+def test_operator_command_decodes_with_the_topic_s_operator_and_refuses_the_rest() -> None:
+    from adapters.mqtt.codec import OperatorCommandRequest, encode_command_status
+
+    good = {"schema_version": 1, "type": "operator_command", "uas": "UAS1", "command": "rtl"}
+    msg = decode(T, T.commands("alice"), json.dumps({**good, "id": "c1"}), 5.0)
+    assert msg == OperatorCommandRequest(
+        uas="UAS1", command="rtl", request_id="c1", operator="alice", t_s=5.0
+    )
+    for field, obj in {
+        "command": {**good, "id": "c1", "command": "loop"},
+        "id": good,  # an id is needed to acknowledge it
+        "operator": {**good, "id": "c1", "operator": "bob"},  # the topic says who
+    }.items():
+        with pytest.raises(MqttMessageError) as err:
+            decode(T, T.commands("alice"), json.dumps(obj), 0.0)
+        assert field in str(err.value) or "additional" in str(err.value), err.value
+    status = json.loads(
+        encode_command_status(
+            request_id="c1",
+            uas="UAS1",
+            command="rtl",
+            t_s=1.0,
+            outcome="refused",
+            reason="sysid 1 is disarmed",
+            mode="",
+        )
+    )
+    validate("command_status", status)
