@@ -34,19 +34,19 @@ from textual.css.query import NoMatches
 from textual.events import Resize
 from textual.widgets import Footer, Header, Static
 
+from gcs_utm.dashboard.airspace_map import map_legend
+from gcs_utm.dashboard.airspace_scene import scene_of
 from gcs_utm.dashboard.commands import KEYS, CommandKeys
+from gcs_utm.dashboard.panels import geofences_panel
 from gcs_utm.dashboard.view import (
     DashboardData,
     Minima,
     collect,
-    events_text,
-    geofences_table,
-    map_legend,
     operations_table,
     recommendation_panel,
     threats_table,
-    top_view,
 )
+from gcs_utm.dashboard.widgets import AirspaceMap, EventLog
 from gcs_utm.messages import PilotAnswer, PilotDecision
 from gcs_utm.model import Recommendation, RecommendationId, RecommendationState, Track, TrackId
 from gcs_utm.services.recommendations import alternative_index_of_row, options_of
@@ -69,6 +69,8 @@ class DashboardApp(App[None]):
     #right { width: 1fr; }
     #prompt { height: auto; }
     #command { height: auto; max-height: 2; }
+    #map { height: 2fr; min-height: 6; }
+    #events { height: 1fr; min-height: 3; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("a", "accept", "Accept highlighted"),
@@ -138,9 +140,9 @@ class DashboardApp(App[None]):
                 yield Static(id="threats")
                 yield Static(id="geofences")
             with Vertical(id="right"):
-                yield Static(id="map")
+                yield AirspaceMap(id="map")
                 yield Static(id="legend")
-                yield Static(id="events")
+                yield EventLog(id="events")
         yield Static(id="prompt")
         yield Static(id="command")
         yield Footer()
@@ -189,13 +191,12 @@ class DashboardApp(App[None]):
             operations_table(d, width=width * 2 // 3 if right.display else width)
         )
         self.query_one("#threats", Static).update(threats_table(d))
-        self.query_one("#geofences", Static).update(geofences_table(d))
+        self.query_one("#geofences", Static).update(geofences_panel(d))
         if right.display:
-            map_w = max(20, width // 3 - 2)
-            map_h = max(6, min(map_w // 2, (self.size.height - 4) // 2))
-            self.query_one("#map", Static).update(top_view(d, width=map_w, height=map_h))
-            self.query_one("#legend", Static).update(map_legend(d))
-            self.query_one("#events", Static).update(events_text(d))
+            scene = scene_of(d)
+            self.query_one("#map", AirspaceMap).show(scene)
+            self.query_one("#legend", Static).update(map_legend(scene))
+            self.query_one("#events", EventLog).show(d.events, d.t_s)
         self.query_one("#command", Static).update(self.commands.line())
         prompt = self.query_one("#prompt", Static)
         if rec is None:

@@ -1,0 +1,46 @@
+"""Thin Textual widgets over the pure renderers: each keeps the last data it was shown and
+draws it at the size the layout gives it (so the map fits its box at any terminal size)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from rich.console import RenderableType
+from textual.widget import Widget
+
+from gcs_utm.dashboard.airspace_map import render_map
+from gcs_utm.dashboard.airspace_scene import MapScene
+from gcs_utm.dashboard.panels import event_log
+from gcs_utm.services.usm import UsmEvent
+
+
+class AirspaceMap(Widget):
+    """The airspace map (:func:`gcs_utm.dashboard.airspace_map.render_map`)."""
+
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.scene = MapScene()
+
+    def show(self, scene: MapScene) -> None:
+        self.scene = scene
+        self.refresh()
+
+    def render(self) -> RenderableType:
+        return render_map(self.scene, self.size.width, self.size.height).to_text()
+
+
+class EventLog(Widget):
+    """The event log, newest at the bottom, wrapped at words
+    (:func:`gcs_utm.dashboard.panels.event_log`)."""
+
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.events: Sequence[UsmEvent] = ()
+        self.now_s = 0.0
+
+    def show(self, events: Sequence[UsmEvent], now_s: float) -> None:
+        self.events, self.now_s = events, now_s
+        self.refresh()
+
+    def render(self) -> RenderableType:
+        return event_log(self.events, self.now_s, self.size.width, self.size.height)
