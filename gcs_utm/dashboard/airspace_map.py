@@ -300,23 +300,32 @@ def render_map(
     )
 
 
-def map_legend(scene: MapScene) -> Text:
-    """What the map's marks mean, one ``mark=meaning`` token each (a narrow column wraps
-    between tokens), with the radius of the separation rings drawn."""
-    out = Text()
-    marks = [
-        (COURSE_ARROWS[0], STYLE_UAS, "UAS"),
-        (INTRUDER_ARROWS[0], STYLE_INTRUDER, "intruder"),
-        (PLAN_GLYPH, STYLE_PLAN, "plan"),
-        (FENCE_GLYPH, STYLE_FENCE, "geofence"),
-    ]
+def map_legend(scene: MapScene, width: int | None = None) -> Text:
+    """What the marks on the map mean (only those drawn; the rings with their radius), as
+    ``mark=meaning`` entries broken into lines of ``width`` cells between entries only."""
+    marks = [(COURSE_ARROWS[0], STYLE_UAS, "UAS")]
+    if any(v.intruder for v in scene.vehicles):
+        marks.append((INTRUDER_ARROWS[0], STYLE_INTRUDER, "intruder"))
+    if scene.plans:
+        marks.append((PLAN_GLYPH, STYLE_PLAN, "plan"))
+    if scene.fences:
+        marks.append((FENCE_GLYPH, STYLE_FENCE, "geofence"))
     radii = sorted({r.radius_m for r in scene.rings})
     if radii:
         marks.append(
             (RING_GLYPH, STYLE_RING, "separation " + "/".join(f"{r:.0f}" for r in radii) + " m")
         )
-    for i, (mark, style, meaning) in enumerate(marks):
-        out.append(" " if i else "")
+    out = Text(no_wrap=True, overflow="ellipsis")
+    used = 0
+    for mark, style, meaning in marks:
+        n = len(mark) + 1 + len(meaning)
+        if used and width is not None and used + 1 + n > width:
+            out.append("\n")
+            used = 0
+        elif used:
+            out.append(" ")
+            used += 1
         out.append(mark, style=style)
         out.append("=" + meaning)
+        used += n
     return out

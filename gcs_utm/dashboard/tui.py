@@ -195,7 +195,7 @@ class DashboardApp(App[None]):
         if right.display:
             scene = scene_of(d)
             self.query_one("#map", AirspaceMap).show(scene)
-            self.query_one("#legend", Static).update(map_legend(scene))
+            self.query_one("#legend", Static).update(map_legend(scene, right.size.width))
             self.query_one("#events", EventLog).show(d.events, d.t_s)
         self.query_one("#command", Static).update(self.commands.line())
         prompt = self.query_one("#prompt", Static)

@@ -268,3 +268,10 @@ def test_scene_of_a_snapshot_rings_fences_plans_and_intruders() -> None:
     # without minima no ring is drawn (the radius would be a guess); the pair stays marked
     bare = scene_of(collect(usm, lambda: tracks))
     assert not bare.rings and all(v.in_threat for v in bare.vehicles)
+
+
+def test_legend_names_only_the_marks_drawn_and_breaks_between_entries() -> None:
+    legend = map_legend(SCENE, width=26).plain.splitlines()
+    assert legend == ["↑=UAS ⇑=intruder ·=plan", "#=geofence", "∘=separation 50 m"]
+    bare = map_legend(MapScene(vehicles=(MapVehicle("UAS1", 0.0, 0.0, None),))).plain
+    assert bare == "↑=UAS"
