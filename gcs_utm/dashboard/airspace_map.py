@@ -130,7 +130,7 @@ class _Canvas:
 
 
 def _round(x: float) -> int:
-    """Half away from zero (Python's round() goes to even: 2.5 -> 2, a cell's jitter)."""
+    """Nearest integer, halves up (round() goes to even: 2.5 -> 2 but 3.5 -> 4, uneven steps)."""
     return math.floor(x + 0.5)
 
 

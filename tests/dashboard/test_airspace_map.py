@@ -10,6 +10,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gcs_utm.dashboard.airspace_map import MapGrid, glyph, map_legend, render_map
 from gcs_utm.dashboard.airspace_scene import (
@@ -275,3 +277,32 @@ def test_legend_names_only_the_marks_drawn_and_breaks_between_entries() -> None:
     assert legend == ["↑=UAS ⇑=intruder ·=plan", "#=geofence", "∘=separation 50 m"]
     bare = map_legend(MapScene(vehicles=(MapVehicle("UAS1", 0.0, 0.0, None),))).plain
     assert bare == "↑=UAS"
+
+
+_coord = st.floats(min_value=-5000.0, max_value=5000.0, allow_nan=False)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    points=st.lists(st.tuples(_coord, _coord), min_size=1, max_size=6),
+    size=st.sampled_from([(26, 10), (80, 24), (120, 40)]),
+)
+def test_every_vehicle_is_drawn_where_it_is(
+    points: list[tuple[float, float]], size: tuple[int, int]
+) -> None:
+    """Any scene: each vehicle's cell is inside the map and within half a cell of where the
+    scale puts it; the first vehicle drawn in a cell keeps its glyph there."""
+    vehicles = tuple(MapVehicle(f"V{i}", e, n, None) for i, (e, n) in enumerate(points))
+    grid = render_map(MapScene(vehicles=vehicles), *size)
+    e_c = (min(p[0] for p in points) + max(p[0] for p in points)) / 2
+    n_c = (min(p[1] for p in points) + max(p[1] for p in points)) / 2
+    seen: set[tuple[int, int]] = set()
+    for e, n in points:
+        col_f = (size[0] - 1) / 2 + (e - e_c) / grid.m_per_col
+        row_f = (size[1] - 2) / 2 - (n - n_c) / grid.m_per_row
+        r, c = math.floor(row_f + 0.5), math.floor(col_f + 0.5)  # halves up, as drawn
+        assert abs(col_f - c) <= 0.5 + 1e-9 and abs(row_f - r) <= 0.5 + 1e-9
+        assert 0 <= r < size[1] - 1 and 0 <= c < size[0]
+        if (r, c) not in seen:
+            assert grid.rows[r][c].char == "●", (r, c, grid.plain())
+        seen.add((r, c))

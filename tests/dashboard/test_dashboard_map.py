@@ -1,4 +1,4 @@
-"""The airspace view in the running dashboard at 80x24 (Textual's pilot): the map shows the
+"""The airspace view in the running dashboard (Textual's pilot, 80x24 and 120x40): the map shows
 UAS by label with their headings, a scale and north; the geofence panel is one line when
 there are none; the event log wraps at words and keeps the newest event on screen."""
 
@@ -8,6 +8,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import pytest
 from textual.app import App
 from textual.geometry import Region
 
@@ -74,20 +75,23 @@ def _drawn(app: App[None], selector: str) -> list[str]:
     return [strip.text for strip in widget.render_lines(Region(0, 0, *widget.size))]
 
 
-async def _screen_80x24() -> tuple[str, list[str], list[str]]:
-    """The dashboard at 80x24 with no prompt: the whole screen, the map's and the event
+async def _screen(size: tuple[int, int] = (80, 24)) -> tuple[str, list[str], list[str]]:
+    """The dashboard at ``size`` with no prompt: the whole screen, the map's and the event
     log's rows."""
     usm, tracks = _two_uas_no_geofence()
     app = DashboardApp(
         usm, lambda: tracks, refresh_s=0.1, minima=Minima(horizontal_m=50.0, vertical_m=15.0)
     )
-    async with app.run_test(size=(80, 24)) as pilot:
+    async with app.run_test(size=size) as pilot:
         await pilot.pause()
         return screen_text(app), _drawn(app, "#map"), _drawn(app, "#events")
 
 
-async def test_map_at_80x24_shows_each_uas_by_label_with_heading_scale_and_north() -> None:
-    text, map_rows, _events_rows = await _screen_80x24()
+@pytest.mark.parametrize("size", [(80, 24), (120, 40)])
+async def test_map_shows_each_uas_by_label_with_heading_scale_and_north(
+    size: tuple[int, int],
+) -> None:
+    text, map_rows, _events_rows = await _screen(size)
     drawn = "\n".join(map_rows)
     assert len(map_rows) >= 8, text  # a map of its own, not a few dots in a corner
     assert "↗UAS1" in drawn and "↓UAS2" in drawn, drawn  # labels after the course arrows
@@ -97,7 +101,7 @@ async def test_map_at_80x24_shows_each_uas_by_label_with_heading_scale_and_north
 
 
 async def test_panels_at_80x24_say_no_geofences_and_keep_the_newest_event_whole() -> None:
-    text, _map_rows, event_rows = await _screen_80x24()
+    text, _map_rows, event_rows = await _screen()
     # no geofence: one line says so, no empty table
     assert "no geofences active" in text and "Band AMSL" not in text
     # the newest event is on screen, every word whole (no word split across lines)
