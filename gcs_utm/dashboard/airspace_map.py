@@ -112,7 +112,8 @@ class _Canvas:
 
     def __init__(self, width: int, height: int, fit: _Fit) -> None:
         self.width, self.height, self.fit = width, height, fit
-        self.cells = [[Cell() for _ in range(width)] for _ in range(height)]
+        blank = Cell()  # cells are immutable: one blank shared by all
+        self.cells = [[blank] * width for _ in range(height)]
         self.solid: set[tuple[int, int]] = set()
 
     def inside(self, r: int, c: int) -> bool:
@@ -125,8 +126,18 @@ class _Canvas:
                 self.solid.add((r, c))
 
     def stroke(self, cells: Iterable[tuple[int, int]], char: str, style: str) -> None:
+        """``char`` in every cell of ``cells`` on the map that is not solid (one Cell shared:
+        a plan across the map is hundreds of cells, drawn at every refresh)."""
+        mark, rows, width, grid, solid = (
+            Cell(char, style),
+            self.fit.rows,
+            self.width,
+            self.cells,
+            self.solid,
+        )
         for r, c in cells:
-            self.put(r, c, char, style)
+            if 0 <= r < rows and 0 <= c < width and (r, c) not in solid:
+                grid[r][c] = mark
 
 
 def _round(x: float) -> int:
@@ -154,9 +165,9 @@ class _Fit:
         """The cells of the straight line from ``a`` to ``b`` (every cell it crosses)."""
         (r0, c0), (r1, c1) = self.cell(a), self.cell(b)
         n = max(abs(r1 - r0), abs(c1 - c0), 1)
-        return [
-            (_round(r0 + (r1 - r0) * i / n), _round(c0 + (c1 - c0) * i / n)) for i in range(n + 1)
-        ]
+        dr, dc = (r1 - r0) / n, (c1 - c0) / n
+        floor = math.floor
+        return [(floor(r0 + dr * i + 0.5), floor(c0 + dc * i + 0.5)) for i in range(n + 1)]
 
     def circle(self, center: Point, radius_m: float) -> list[tuple[int, int]]:
         """The cells of a circle, sampled every half column of arc or finer (no gaps), the
