@@ -183,26 +183,53 @@ class _Fit:
         return list(dict.fromkeys(self.cell(p) for p in pts))
 
 
-def fit_scene(scene: MapScene, width: int, rows: int, cell_aspect: float = CELL_ASPECT) -> _Fit:
-    """The largest scale at which the scene's bounding box, with its margin, fits ``rows`` x
-    ``width`` cells (one empty column each side for labels at the edge)."""
+@dataclass(frozen=True, slots=True)
+class _Extent:
+    """The scene's bounding box centre and its extent with the margin, in metres."""
+
+    east_c_m: float
+    north_c_m: float
+    span_e_m: float
+    span_n_m: float
+
+
+def _extent(scene: MapScene, cell_aspect: float) -> _Extent:
     pts = scene.points() or [(0.0, 0.0)]
     e_lo, e_hi = min(p[0] for p in pts), max(p[0] for p in pts)
     n_lo, n_hi = min(p[1] for p in pts), max(p[1] for p in pts)
     pad_m = MARGIN_FRACTION * max(e_hi - e_lo, n_hi - n_lo)
-    span_e = max(e_hi - e_lo + 2 * pad_m, MIN_SPAN_M)
-    span_n = max(n_hi - n_lo + 2 * pad_m, MIN_SPAN_M / cell_aspect)
+    return _Extent(
+        east_c_m=(e_lo + e_hi) / 2.0,
+        north_c_m=(n_lo + n_hi) / 2.0,
+        span_e_m=max(e_hi - e_lo + 2 * pad_m, MIN_SPAN_M),
+        span_n_m=max(n_hi - n_lo + 2 * pad_m, MIN_SPAN_M / cell_aspect),
+    )
+
+
+def fit_scene(scene: MapScene, width: int, rows: int, cell_aspect: float = CELL_ASPECT) -> _Fit:
+    """The largest scale at which the scene's bounding box, with its margin, fits ``rows`` x
+    ``width`` cells (one empty column each side for labels at the edge)."""
+    ext = _extent(scene, cell_aspect)
     cols_between = max(1, width - 3)  # one margin column each side
     rows_between = max(1, rows - 1)
-    m_per_col = max(span_e / cols_between, span_n / (rows_between * cell_aspect))
+    m_per_col = max(ext.span_e_m / cols_between, ext.span_n_m / (rows_between * cell_aspect))
     return _Fit(
         width=width,
         rows=rows,
-        east_c_m=(e_lo + e_hi) / 2.0,
-        north_c_m=(n_lo + n_hi) / 2.0,
+        east_c_m=ext.east_c_m,
+        north_c_m=ext.north_c_m,
         m_per_col=m_per_col,
         m_per_row=m_per_col * cell_aspect,
     )
+
+
+def rows_to_fit(scene: MapScene, width: int, cell_aspect: float = CELL_ASPECT) -> int:
+    """The rows (bottom row included) a map ``width`` cells wide needs to show ``scene`` at
+    the scale its east-west extent sets: a flat scene needs few rows, a tall one many (the
+    widget caps them; the map then fits the rows it gets)."""
+    ext = _extent(scene, cell_aspect)
+    m_per_col = ext.span_e_m / max(1, width - 3)
+    return math.ceil(ext.span_n_m / (m_per_col * cell_aspect) - 1e-9) + 2
 
 
 def scale_bar_m(m_per_col: float, max_cols: int) -> float:

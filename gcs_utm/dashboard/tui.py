@@ -69,7 +69,7 @@ class DashboardApp(App[None]):
     #right { width: 1fr; }
     #prompt { height: auto; }
     #command { height: auto; max-height: 2; }
-    #map { height: 2fr; min-height: 6; }
+    #map { height: auto; min-height: 8; max-height: 65%; }
     #events { height: 1fr; min-height: 3; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [

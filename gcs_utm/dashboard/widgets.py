@@ -6,24 +6,32 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from rich.console import RenderableType
+from textual.geometry import Size
 from textual.widget import Widget
 
-from gcs_utm.dashboard.airspace_map import render_map
+from gcs_utm.dashboard.airspace_map import render_map, rows_to_fit
 from gcs_utm.dashboard.airspace_scene import MapScene
 from gcs_utm.dashboard.panels import event_log
 from gcs_utm.services.usm import UsmEvent
 
 
 class AirspaceMap(Widget):
-    """The airspace map (:func:`gcs_utm.dashboard.airspace_map.render_map`)."""
+    """The airspace map (:func:`gcs_utm.dashboard.airspace_map.render_map`). With ``height:
+    auto`` it asks for the rows the scene needs at its width (:func:`rows_to_fit`), so a
+    flat scene leaves the rows below to the event log; ``max-height`` caps a tall one."""
 
     def __init__(self, *, id: str | None = None) -> None:
         super().__init__(id=id)
         self.scene = MapScene()
 
     def show(self, scene: MapScene) -> None:
+        width = self.size.width
+        resized = rows_to_fit(scene, width) != rows_to_fit(self.scene, width)
         self.scene = scene
-        self.refresh()
+        self.refresh(layout=resized)
+
+    def get_content_height(self, container: Size, viewport: Size, width: int) -> int:
+        return rows_to_fit(self.scene, width)
 
     def render(self) -> RenderableType:
         return render_map(self.scene, self.size.width, self.size.height).to_text()

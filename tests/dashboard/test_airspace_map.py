@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs_utm.dashboard.airspace_map import MapGrid, glyph, map_legend, render_map
+from gcs_utm.dashboard.airspace_map import MapGrid, glyph, map_legend, render_map, rows_to_fit
 from gcs_utm.dashboard.airspace_scene import (
     MapFence,
     MapPlan,
@@ -306,3 +306,15 @@ def test_every_vehicle_is_drawn_where_it_is(
         if (r, c) not in seen:
             assert grid.rows[r][c].char == "●", (r, c, grid.plain())
         seen.add((r, c))
+
+
+@pytest.mark.parametrize("width", [26, 40, 80])
+def test_rows_to_fit_are_the_rows_the_east_west_scale_needs(width: int) -> None:
+    """The map widget asks for :func:`rows_to_fit` rows: with them the scene's east-west
+    extent sets the scale (696 m over ``width - 3`` columns); one row fewer and its
+    north-south extent would (a coarser scale)."""
+    rows = rows_to_fit(SCENE, width)
+    east_m_per_col = 696.0 / (width - 3)
+    assert rows == math.ceil(406.0 / (2 * east_m_per_col)) + 2
+    assert render_map(SCENE, width, rows).m_per_col == pytest.approx(east_m_per_col)
+    assert render_map(SCENE, width, rows - 1).m_per_col > east_m_per_col
