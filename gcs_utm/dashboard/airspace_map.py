@@ -1,6 +1,6 @@
 """The airspace map as a grid of styled characters: a pure function of a
 :class:`~gcs_utm.dashboard.airspace_scene.MapScene` and a size, so it is tested without a
-terminal; :mod:`gcs_utm.dashboard.airspace_widget` shows it in the dashboard.
+terminal; :mod:`gcs_utm.dashboard.widgets` shows it in the dashboard.
 
 What it draws, north up:
 
@@ -9,9 +9,11 @@ What it draws, north up:
   is about twice as tall as wide (``cell_aspect``), so a row spans ``cell_aspect`` times the
   metres of a column;
 - each UAS as an arrow pointing along its course over ground (``●`` when hovering) followed by
-  its label; intruders (ADS-B, Remote ID) as double arrows (``◆`` hovering), in red;
-- each operation's current plan as a faint dotted line (``·``), geofence outlines (``#``,
-  polygons and circles), separation rings (``∘``) around the two vehicles of a threat;
+  its label; intruders (ADS-B, Remote ID) as double arrows (``◆`` hovering), in red; the
+  glyphs of the two vehicles of an active separation threat white on red;
+- each operation's current plan as a faint dotted line (``·``), separation rings (``∘``)
+  around the two vehicles of a threat, geofence outlines (``#``, polygons and circles) over
+  them;
 - on the bottom row a scale bar of a round number of metres (``├───┤ 100 m``: the distance
   between the two ticks' cells) and the north mark ``↑N``.
 
@@ -309,14 +311,14 @@ def render_map(
         for a, b in zip(plan.points, plan.points[1:], strict=False):
             canvas.stroke(fit.segment(a, b), PLAN_GLYPH, STYLE_PLAN)
         canvas.stroke((fit.cell(p) for p in plan.points[:1]), PLAN_GLYPH, STYLE_PLAN)
-    for fence in scene.fences:
+    for sep in scene.rings:
+        canvas.stroke(fit.circle(sep.center, sep.radius_m), RING_GLYPH, STYLE_RING)
+    for fence in scene.fences:  # over the rings: a jamming geofence is often centred on a UAS
         if fence.center is not None:
             canvas.stroke(fit.circle(fence.center, fence.radius_m), FENCE_GLYPH, STYLE_FENCE)
         ring = list(fence.vertices)
         for a, b in zip(ring, ring[1:] + ring[:1], strict=False):
             canvas.stroke(fit.segment(a, b), FENCE_GLYPH, STYLE_FENCE)
-    for sep in scene.rings:
-        canvas.stroke(fit.circle(sep.center, sep.radius_m), RING_GLYPH, STYLE_RING)
     at = [fit.cell((v.east_m, v.north_m)) for v in scene.vehicles]
     for v, (r, c) in zip(scene.vehicles, at, strict=True):
         canvas.put(r, c, glyph(v), STYLE_THREAT if v.in_threat else _vehicle_style(v), solid=True)

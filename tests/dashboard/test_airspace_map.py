@@ -318,3 +318,18 @@ def test_rows_to_fit_are_the_rows_the_east_west_scale_needs(width: int) -> None:
     assert rows == math.ceil(406.0 / (2 * east_m_per_col)) + 2
     assert render_map(SCENE, width, rows).m_per_col == pytest.approx(east_m_per_col)
     assert render_map(SCENE, width, rows - 1).m_per_col > east_m_per_col
+
+
+def test_a_geofence_outline_stays_visible_over_a_ring_it_shares() -> None:
+    """A jamming geofence of 50 m around a UAS in a threat, with a 50 m ring: the outline
+    is drawn over the ring, the ring shows where it differs."""
+    uas = MapVehicle("UAS1", 0.0, 0.0, None, in_threat=True)
+    shared = MapScene(
+        vehicles=(uas,),
+        fences=(MapFence("jam", center=(0.0, 0.0), radius_m=50.0),),
+        rings=(MapRing((0.0, 0.0), 50.0), MapRing((0.0, 0.0), 80.0)),
+    )
+    grid = render_map(shared, 80, 24)
+    alone = render_map(replace(shared, rings=shared.rings[1:]), 80, 24)  # same bounding box
+    assert _cells(grid, "#") == _cells(alone, "#")
+    assert _cells(grid, "∘")  # the 80 m ring
