@@ -18,20 +18,28 @@ from gcs_utm.services.usm import UsmEvent
 class AirspaceMap(Widget):
     """The airspace map (:func:`gcs_utm.dashboard.airspace_map.render_map`). With ``height:
     auto`` it asks for the rows the scene needs at its width (:func:`rows_to_fit`), so a
-    flat scene leaves the rows below to the event log; ``max-height`` caps a tall one."""
+    flat scene leaves the rows below to the event log; ``max-height`` caps a tall one. The
+    rows asked for change only when the need moves by more than one row (a track wandering
+    at the edge of the scene does not make the layout jump; the map fits the rows it has)."""
 
     def __init__(self, *, id: str | None = None) -> None:
         super().__init__(id=id)
         self.scene = MapScene()
+        self._rows = 0
+        self._rows_width = -1
 
     def show(self, scene: MapScene) -> None:
-        width = self.size.width
-        resized = rows_to_fit(scene, width) != rows_to_fit(self.scene, width)
         self.scene = scene
-        self.refresh(layout=resized)
+        need = rows_to_fit(scene, self.size.width)
+        relayout = self._rows_width == self.size.width and abs(need - self._rows) > 1
+        if relayout:
+            self._rows = need
+        self.refresh(layout=relayout)
 
     def get_content_height(self, container: Size, viewport: Size, width: int) -> int:
-        return rows_to_fit(self.scene, width)
+        if width != self._rows_width:  # first layout or a resize: ask afresh
+            self._rows, self._rows_width = rows_to_fit(self.scene, width), width
+        return self._rows
 
     def render(self) -> RenderableType:
         return render_map(self.scene, self.size.width, self.size.height).to_text()

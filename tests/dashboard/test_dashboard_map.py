@@ -9,13 +9,16 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from textual.app import App
+from textual.app import App, ComposeResult
 from textual.geometry import Region
 
 from gcs_utm.clock import ManualClock
+from gcs_utm.dashboard.airspace_map import rows_to_fit
+from gcs_utm.dashboard.airspace_scene import MapPlan, MapScene
 from gcs_utm.dashboard.panels import event_log
 from gcs_utm.dashboard.tui import DashboardApp
 from gcs_utm.dashboard.view import Minima
+from gcs_utm.dashboard.widgets import AirspaceMap
 from gcs_utm.model import OperationId, SysId, Threat, ThreatId, ThreatKind, Track, TrackId
 from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.usm import Usm, UsmEvent
@@ -136,3 +139,38 @@ def test_a_word_longer_than_the_line_is_the_only_thing_cut() -> None:
     assert all(len(line) <= 20 for line in out)
     assert "".join(line.strip() for line in out[1:]) == "x" * 40 + " end"
     assert out[-1].split()[-1] == "end"
+
+
+class _MapOnly(App[None]):
+    CSS = "#map { height: auto; min-height: 8; max-height: 65%; }"
+
+    def compose(self) -> ComposeResult:
+        yield AirspaceMap(id="map")
+
+
+async def test_map_height_follows_the_scene_without_jumping_a_row() -> None:
+    """The map widget takes the rows its scene needs at its width (a flat scene few, a tall
+    one up to its cap) and ignores a change of one row."""
+    flat = MapScene(plans=(MapPlan("UAS1", ((0.0, 0.0), (2000.0, 300.0))),))
+    tall = MapScene(plans=(MapPlan("UAS1", ((0.0, 0.0), (300.0, 2000.0))),))
+    app = _MapOnly()
+    async with app.run_test(size=(40, 40)) as pilot:
+        widget = app.query_one(AirspaceMap)
+        heights = []
+        for scene in (flat, tall, flat, _one_row_taller(flat, 40)):
+            widget.show(scene)
+            await pilot.pause()
+            heights.append(widget.size.height)
+    flat_rows = rows_to_fit(flat, 40)
+    assert flat_rows < 15
+    assert heights == [max(8, flat_rows), 26, max(8, flat_rows), max(8, flat_rows)]
+
+
+def _one_row_taller(scene: MapScene, width: int) -> MapScene:
+    """``scene`` with its plan stretched north until it needs one row more at ``width``."""
+    (a, b) = scene.plans[0].points
+    for north_m in range(int(b[1]), int(b[1]) + 1000):
+        taller = MapScene(plans=(MapPlan("UAS1", (a, (b[0], float(north_m)))),))
+        if rows_to_fit(taller, width) == rows_to_fit(scene, width) + 1:
+            return taller
+    raise AssertionError("no scene one row taller")
