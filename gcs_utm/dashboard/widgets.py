@@ -29,9 +29,11 @@ class AirspaceMap(Widget):
         self._rows_width = -1
 
     def show(self, scene: MapScene) -> None:
+        first = not self.scene.points()  # the empty map before the first snapshot
         self.scene = scene
         need = rows_to_fit(scene, self.size.width)
-        relayout = self._rows_width == self.size.width and abs(need - self._rows) > 1
+        jump = abs(need - self._rows) > 1 or (first and need != self._rows)
+        relayout = self._rows_width == self.size.width and jump
         if relayout:
             self._rows = need
         self.refresh(layout=relayout)

@@ -151,7 +151,7 @@ class _MapOnly(App[None]):
 async def test_map_height_follows_the_scene_without_jumping_a_row() -> None:
     """The map widget takes the rows its scene needs at its width (a flat scene few, a tall
     one up to its cap) and ignores a change of one row."""
-    flat = MapScene(plans=(MapPlan("UAS1", ((0.0, 0.0), (2000.0, 300.0))),))
+    flat = MapScene(plans=(MapPlan("UAS1", ((0.0, 0.0), (2000.0, 700.0))),))
     tall = MapScene(plans=(MapPlan("UAS1", ((0.0, 0.0), (300.0, 2000.0))),))
     app = _MapOnly()
     async with app.run_test(size=(40, 40)) as pilot:
@@ -162,8 +162,8 @@ async def test_map_height_follows_the_scene_without_jumping_a_row() -> None:
             await pilot.pause()
             heights.append(widget.size.height)
     flat_rows = rows_to_fit(flat, 40)
-    assert flat_rows < 15
-    assert heights == [max(8, flat_rows), 26, max(8, flat_rows), max(8, flat_rows)]
+    assert 8 < flat_rows < 15
+    assert heights == [flat_rows, 26, flat_rows, flat_rows]
 
 
 def _one_row_taller(scene: MapScene, width: int) -> MapScene:
