@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from rich.cells import cell_len
 from rich.console import RenderableType
 from rich.text import Text
 
@@ -51,13 +52,13 @@ def _pieces(words: list[tuple[str, str]], width: int) -> list[tuple[str, str]]:
 
 
 def _wrap(words: list[tuple[str, str]], width: int) -> list[Text]:
-    """Greedy word wrap to ``width`` cells with a hanging indent: lines break between words
-    only (see :func:`_pieces` for words longer than a line)."""
+    """Greedy word wrap to ``width`` terminal cells with a hanging indent: lines break between
+    words only (see :func:`_pieces` for words longer than a line)."""
     lines: list[Text] = []
     line = Text()
     for word, style in _pieces(words, width):
         started = bool(line.plain.strip())
-        if started and len(line) + 1 + len(word) > width:
+        if started and line.cell_len + 1 + cell_len(word) > width:
             lines.append(line)
             line, started = Text(EVENT_INDENT), False
         line.append(" " if started else "")
