@@ -4,8 +4,11 @@
 Encoding of a 4D :class:`FlightPlan` (MAVLink waypoints carry no time):
 - every plan waypoint k becomes a NAV_WAYPOINT (MISSION_ITEM_INT, frame MAV_FRAME_GLOBAL,
   so ``z`` is metres AMSL, ``x``/``y`` are degrees * 1e7);
-- before waypoint k (k >= 1) a DO_CHANGE_SPEED sets the ground speed of segment k-1 -> k to
-  horizontal length / duration, so the vehicle keeps the plan's timing (a multirotor flies
+- before waypoint k (k >= 1) a DO_CHANGE_SPEED sets the speed of segment k-1 -> k to
+  horizontal length / duration, so the vehicle keeps the plan's timing: a ground speed
+  (speed type 1) for a multirotor, an airspeed (speed type 0) for a fixed wing, never below
+  its minimum airspeed (ArduPlane takes a type-1 speed as a minimum ground speed and keeps
+  flying its cruise airspeed; a plane cannot fly slower than it stalls) (a multirotor flies
   the straight 3D line, its climb within its limit); a segment with no horizontal length and
   no climb but a duration becomes a hold time (NAV_WAYPOINT param1) at its start; a climb
   (descent) on the spot is flown at the vehicle's vertical speed, and only the time the plan
@@ -50,6 +53,7 @@ MAV_CMD_DO_CHANGE_SPEED = 178
 NAV_COMMAND_MAX = 95  # MAV_CMD ids up to MAV_CMD_NAV_LAST (95) are navigation commands
 # Frame families: the same meaning under another number (the _INT variants of MAVLink 1).
 _FRAME_FAMILY = {0: 0, 5: 0, 3: 3, 6: 3, 10: 10, 11: 10, 2: 2}
+SPEED_TYPE_AIRSPEED = 0.0
 SPEED_TYPE_GROUND = 1.0
 _MIN_SEGMENT_M = 0.5  # below this a segment is "no horizontal motion": GNSS noise scale
 
@@ -110,13 +114,19 @@ def plan_to_mission_items(
     max_speed_mps: float = 25.0,
     climb_rate_mps: float | None = None,
     descent_rate_mps: float | None = None,
+    kind: VehicleKind | None = None,
+    min_speed_mps: float = 0.0,
 ) -> list[MissionItem]:
     """The MAVLink mission that flies ``plan`` (see the module docstring for the encoding).
 
     Speeds are clamped to ``max_speed_mps`` (a zero-duration segment would ask for infinity).
     ``climb_rate_mps``/``descent_rate_mps`` are the vehicle's vertical speeds (None: assume
-    the plan timed its climbs at them, no wait is added to a climb on the spot).
+    the plan timed its climbs at them, no wait is added to a climb on the spot). A
+    ``kind`` FIXED_WING gets airspeeds, raised to ``min_speed_mps`` (its minimum airspeed).
     """
+    fixed_wing = kind is VehicleKind.FIXED_WING
+    speed_type = SPEED_TYPE_AIRSPEED if fixed_wing else SPEED_TYPE_GROUND
+    floor_mps = min(min_speed_mps, max_speed_mps) if fixed_wing else 0.0
     wps = plan.waypoints
     if not 0 <= start_index < len(wps):
         raise ValueError(f"start_index {start_index} outside the plan's {len(wps)} waypoints")
@@ -154,8 +164,8 @@ def plan_to_mission_items(
                         seq=0,
                         command=MAV_CMD_DO_CHANGE_SPEED,
                         frame=MAV_FRAME_MISSION,
-                        param1=SPEED_TYPE_GROUND,
-                        param2=round(min(speed, max_speed_mps), 3),
+                        param1=speed_type,
+                        param2=round(max(floor_mps, min(speed, max_speed_mps)), 3),
                         param3=-1.0,
                     )
                 )
@@ -176,6 +186,27 @@ def plan_to_mission_items(
         ]
     out = [replace(it, seq=i, current=int(i == current)) for i, it in enumerate(items)]
     return out
+
+
+def landing_sequence(items: list[MissionItem] | None) -> list[MissionItem]:
+    """The landing sequence of a vehicle's mission: the items from its first DO_LAND_START
+    to the end (empty without one). A pilot's landing (approach and NAV_LAND, what ArduPlane's
+    RTL_AUTOLAND and DO_LAND_START jump to, PX4's mission landing) that no UTM plan removes."""
+    for i, it in enumerate(items or ()):
+        if it.command == MAV_CMD_DO_LAND_START:
+            return list(items[i:]) if items else []
+    return []
+
+
+def with_landing(items: list[MissionItem], landing: list[MissionItem]) -> list[MissionItem]:
+    """``items`` followed by ``landing`` (renumbered, not current) unless ``items`` already
+    has a landing sequence of its own: a plan uploaded to a vehicle whose mission ended in a
+    landing sequence keeps it at its end."""
+    if not landing or landing_sequence(items):
+        return items
+    n = len(items)
+    tail = [replace(it, seq=n + k, current=0) for k, it in enumerate(landing)]
+    return [*items, *tail]
 
 
 def current_seq(items: list[MissionItem]) -> int:
