@@ -28,9 +28,11 @@ to keep, not the bytes sent:
   global items in their INT frames (0 -> 5, 3 -> 6). ArduPilot keeps no frame for an item
   without a position and returns it in frame 0;
 - PX4 keeps every param as float32, NaN included;
-- ArduPilot keeps a NaN param as 0.0; NAV_WAYPOINT keeps only what its 15-byte command
-  holds: ArduCopter the hold time (param1, whole seconds), ArduPlane the acceptance and
-  pass-by radii (param2/param3, whole metres up to 255); the other params read back 0;
+- ArduPilot keeps a NaN param as 0.0 and no frame for a DO item (read back in frame 0),
+  except DO_LAND_START, whose position it stores with its frame; NAV_WAYPOINT keeps only
+  what its 15-byte command holds: ArduCopter the hold time (param1, whole seconds),
+  ArduPlane the acceptance and pass-by radii (param2/param3, whole metres up to 255); the
+  other params read back 0;
   NAV_LAND keeps of param4 only its sign (-1 or 1: ArduPlane's deep-stall direction);
 - ArduPilot's seq 0 is its own home, not compared.
 """
@@ -261,7 +263,7 @@ def stored_form(
         param3=_ap_param(sent.param3),
         param4=_ap_param(sent.param4),
     )
-    if not _positional(it):
+    if not _positional(it) and it.command != MAV_CMD_DO_LAND_START:
         it = replace(it, frame=MAV_FRAME_GLOBAL)  # no frame kept for a DO item
     if it.command == MAV_CMD_NAV_LAND:  # param4 keeps only a direction: -1 or 1
         it = replace(it, param4=-1.0 if it.param4 < 0.0 else 1.0)

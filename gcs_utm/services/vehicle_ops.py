@@ -80,6 +80,9 @@ _HOME_MOVE_M = 2.0
 """A home that moved less than this is the same home: PX4's HOME_POSITION wanders by about a
 metre while its estimator converges (measured on SIH), which would re-file every few seconds."""
 _FLYING_MODES = frozenset({FlightMode.MISSION, FlightMode.TAKEOFF})
+_TURN_FROM_M = 80.0
+"""A fixed wing this close to the waypoint it just reached is turning round it (ArduPlane
+accepts a waypoint WP_RADIUS, 50 m, before it): its re-timed plan starts there."""
 _CLIMB_RATE_MPS = 3.0
 """The climb rate of an operation filed here (``Operation.max_climb_rate_mps``'s default): a
 fixed wing's take-off climb-out and loiter-to-alt circles are timed at it."""
@@ -210,15 +213,22 @@ def plan_from_points(
     position: Position | None = None,
     version: int = 1,
     reason: str = "from the vehicle's mission",
+    turn_from_m: float = 0.0,
 ) -> FlightPlan | None:
     """The 4D plan of a vehicle flying ``points`` from ``position`` at ``t_s``: the items
     from ``current_seq`` on (MISSION_CURRENT; all when None), each reached at the speed it is
-    flown to. None when there is no point."""
+    flown to. None when there is no point. ``turn_from_m`` (a fixed wing): when the point
+    just reached (the one before ``current_seq``) is within that of ``position``, the plan
+    goes on through it: the autopilot accepted it early (ArduPlane's WP_RADIUS, 50 m) and
+    turns round it, it does not cut straight from where it is to the next point."""
     rest = [p for p in points if current_seq is None or p.seq >= current_seq]
     if not rest and points:
         rest = [points[-1]]  # mission flown: the last point
     if not rest:
         return None
+    done = [p for p in points if current_seq is not None and p.seq < current_seq]
+    if position is not None and done and _dist_m(position, done[-1]) <= turn_from_m:
+        rest = [done[-1], *rest]
     wps: list[Waypoint4D] = []
     if position is not None:
         first = rest[0]
@@ -591,6 +601,7 @@ class VehicleOps:
                 position=v.position,
                 version=version,
                 reason=reason,
+                turn_from_m=_TURN_FROM_M if v.kind is VehicleKind.FIXED_WING else 0.0,
             )
         except ValueError as exc:  # a plan the model refuses (malformed positions)
             self._log_event("vehicle", f"sysid {v.sys_id}: mission not usable: {exc}")

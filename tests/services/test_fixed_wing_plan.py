@@ -216,3 +216,20 @@ async def test_a_plane_on_the_ground_is_filed_with_its_climb_out() -> None:
         loiter_radius_m=80.0,
     )  # fmt: skip
     assert _north_m(out[0]) == pytest.approx(150.0, abs=1.0)
+
+
+def test_a_plane_retimed_at_a_new_item_turns_round_the_waypoint_it_reached() -> None:
+    """ArduPlane reports the next item 50 m before a waypoint (WP_RADIUS): re-timed from
+    there straight to the next waypoint, the plan cut the corner that the plane flies round,
+    and the plane was 41 m from it (UAS_OUT_OV) in its turn on the real ArduPlane."""
+    lat, lon = HOME.lat_deg, HOME.lon_deg
+    corner = NavPoint(2, lat + 800.0 / M_PER_DEG_LAT, lon, 725.0, 22.0, True)
+    west = NavPoint(3, corner.lat_deg, _east(-800.0) / 1e7, 725.0, 22.0, True)
+    at = Position(lat_deg=lat + 750.0 / M_PER_DEG_LAT, lon_deg=lon, alt_amsl_m=725.0)
+    args = {"t_s": 100.0, "current_seq": 3, "position": at}
+    plane = plan_from_points([corner, west], OperationId("p"), turn_from_m=80.0, **args)  # type: ignore[arg-type]
+    assert plane is not None
+    assert [round(_north_m(w)) for w in plane.waypoints] == [750, 800, 800]
+    assert plane.waypoints[1].t_s == pytest.approx(100.0 + 50.0 / 22.0, abs=0.05)
+    quad = plan_from_points([corner, west], OperationId("p"), **args)  # type: ignore[arg-type]
+    assert quad is not None and [round(_north_m(w)) for w in quad.waypoints] == [750, 800]

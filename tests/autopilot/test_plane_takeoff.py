@@ -1,0 +1,116 @@
+"""Issue 31.4 on real ArduPlane: a normal take-off raises no non-conformance threat.
+
+An ArduPlane 4.6 SITL with the pilot's typical mission (take-off to 30 m at 15 deg, two
+waypoints 800 m out at 50 m, then DO_LAND_START, an approach and NAV_LAND at home; it arms
+with that mission only with RTL_AUTOLAND set) sits beside ``gcs-utm serve --headless
+--auto-accept`` (on SERIAL1), which files its mission as an operation. It is armed in AUTO
+and flies its runway take-off, its climb-out along the heading to the first waypoint and
+its 24 m/s cruise. The take-off was filed as a vertical climb at home and the plan timed at
+5 m/s, so every ArduPlane take-off opened UAS_OUT_OV and the auto-accepted plans wiped the
+landing sequence. Now: no UAS_OUT_OV / UAS_IN_CV, no recommendation, and the mission on
+the plane still ends with its landing sequence.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from pymavlink.dialects.v20 import common as mav
+
+from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess, wait_tcp_listening
+from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, rows
+from tests.autopilot.pilot import PilotLink, offset_deg
+
+SPEED = 5.0
+AUTO = 10  # ArduPlane's AUTO custom mode
+PAST_SEQ = 3  # MISSION_CURRENT past the first waypoint: take-off, climb-out and first leg flown
+
+
+def _mission(lat0: float, lon0: float) -> list[object]:
+    """Home, NAV_TAKEOFF (15 deg, 30 m), 800 m north and then west at 50 m, DO_LAND_START,
+    the approach at 30 m and NAV_LAND at home (altitudes above home, as ground stations
+    send them)."""
+    rel = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+
+    def item(seq: int, cmd: int, east: float, north: float, alt: float, p1: float = 0.0) -> object:
+        lat, lon = offset_deg(lat0, lon0, east, north)
+        return mav.MAVLink_mission_item_int_message(
+            1, 1, seq, rel, cmd, 0, 1, p1, 0.0, 0.0, 0.0, round(lat * 1e7), round(lon * 1e7),
+            alt, 0,
+        )  # fmt: skip
+
+    takeoff = mav.MAVLink_mission_item_int_message(
+        1, 1, 1, rel, mav.MAV_CMD_NAV_TAKEOFF, 0, 1, 15.0, 0, 0, 0, 0, 0, 30.0, 0
+    )
+    return [
+        item(0, mav.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        takeoff,
+        item(2, mav.MAV_CMD_NAV_WAYPOINT, 0.0, 800.0, 50.0),
+        item(3, mav.MAV_CMD_NAV_WAYPOINT, -800.0, 800.0, 50.0),
+        item(4, mav.MAV_CMD_DO_LAND_START, -800.0, 0.0, 0.0),
+        item(5, mav.MAV_CMD_NAV_WAYPOINT, -400.0, -400.0, 30.0),
+        item(6, mav.MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0),
+    ]
+
+
+@pytest.mark.timeout(240)
+def test_arduplane_takeoff_raises_no_conformance_threat(
+    ardupilot: Callable[..., SitlProcess], tmp_path: Path
+) -> None:
+    lat0, lon0, ground, _heading = ARDUPILOT_DEFAULT_HOME  # heading 0: the runway points north
+    ardupilot(instance=0, vehicle="plane", speed=SPEED)
+    wait_tcp_listening(5760)
+    pilot = PilotLink(0, autopilot="ardupilot")
+    db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
+    crossing = Crossing(origin=(lat0, lon0), ground_amsl_m=ground)
+    cfg = _config(tmp_path / "serve.toml", crossing, ["tcp:127.0.0.1:5762"])
+    serve: subprocess.Popen[bytes] | None = None
+    try:
+        pilot.wait_ready()
+        pilot.set_params({"RTL_AUTOLAND": 2.0})  # else "Arm: DO_LAND_START set and ..."
+        pilot.upload(_mission(lat0, lon0))
+        with log_path.open("wb") as log:
+            serve = subprocess.Popen(
+                [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless",
+                 "--auto-accept", "--config", str(cfg), "--db", str(db),
+                 "--speed", str(SPEED)],
+                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            )  # fmt: skip
+        _wait_operations(db, 1, 40.0, serve)
+        pilot.set_mode(AUTO)
+        pilot._arm(60.0)
+        end = time.monotonic() + 90.0 / SPEED  # simulated: take-off and 800 m (about 40 s)
+        while not any(seq >= PAST_SEQ for _, seq, _ in pilot.mission_current):
+            assert time.monotonic() < end, f"mission not flown: {pilot.statustexts[-6:]}"
+            pilot.request_streams()
+            pilot.poll(0.5)
+        assert serve.poll() is None, "gcs-utm serve exited"
+        commands = [int(it.command) for it in _download(pilot)]
+    finally:
+        pilot.close()
+        if serve is not None and serve.poll() is None:
+            serve.terminate()
+            serve.wait(timeout=30)
+    tail = log_path.read_text(errors="replace")[-4000:]
+    kinds = [str(r[0]) for r in rows(db, "SELECT kind FROM threats")]
+    conformance = {"UAS_OUT_OV", "UAS_IN_CV"} & set(kinds)
+    assert not conformance, f"non-conformance on a normal take-off: {kinds}\n{tail}"
+    recs = rows(db, "SELECT state FROM recommendations")
+    assert recs == [], f"recommendations for a plane on its mission: {recs}\n{tail}"
+    assert commands[-3:] == [189, 16, 21], f"landing sequence gone: {commands}"
+
+
+def _download(pilot: PilotLink) -> list[object]:
+    """The plane's mission (MISSION_REQUEST_LIST, then each item)."""
+    pilot.send(mav.MAVLink_mission_request_list_message(1, 1, 0))
+    count = pilot.wait("MISSION_COUNT", 5.0).count
+    items = []
+    for seq in range(count):
+        pilot.send(mav.MAVLink_mission_request_int_message(1, 1, seq, 0))
+        items.append(pilot.wait("MISSION_ITEM_INT", 5.0, lambda m, s=seq: m.seq == s))
+    return items
