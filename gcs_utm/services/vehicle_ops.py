@@ -51,6 +51,7 @@ from gcs_utm.model import (
     default_envelope,
 )
 from gcs_utm.services import fixed_wing_plan as fw
+from gcs_utm.services import mission_order
 from gcs_utm.services.airspace import Airspace, AirspaceError
 from gcs_utm.services.flight_state import FlightState
 
@@ -136,7 +137,7 @@ def mission_points(
     speed = cruise_speed_mps
     out: list[NavPoint] = []
     landing = False
-    for i, it in enumerate(items):
+    for i, it in mission_order.flown_order(items):
         if skip_first and i == 0:
             continue
         command = int(getattr(it, "command", -1))
@@ -167,22 +168,9 @@ def mission_points(
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and math.isfinite(alt)):
             continue  # a malformed item is skipped, not fatal
         seq = int(getattr(it, "seq", i))
-        radius, amount = _item_params(it, command)
+        radius, amount = mission_order.item_params(it, command)
         out.append(NavPoint(seq, lat, lon, alt, speed, explicit, command, radius, amount, landing))
     return out
-
-
-def _item_params(it: object, command: int) -> tuple[float, float]:
-    """(radius, turns, seconds or pitch) of a loiter or take-off item (MAVLink:
-    LOITER_TO_ALT radius in param2; LOITER_TURNS and LOITER_TIME turns/seconds in param1,
-    radius in param3; NAV_TAKEOFF a fixed wing's minimum pitch in param1)."""
-    if command == _NAV_TAKEOFF:
-        return 0.0, float(getattr(it, "param1", 0.0))
-    if command == fw.NAV_LOITER_TO_ALT:
-        return float(getattr(it, "param2", 0.0)), 0.0
-    if command in (fw.NAV_LOITER_TURNS, fw.NAV_LOITER_TIME):
-        return float(getattr(it, "param3", 0.0)), float(getattr(it, "param1", 0.0))
-    return 0.0, 0.0
 
 
 class _Point(Protocol):
@@ -221,12 +209,17 @@ def plan_from_points(
     just reached (the one before ``current_seq``) is within that of ``position``, the plan
     goes on through it: the autopilot accepted it early (ArduPlane's WP_RADIUS, 50 m) and
     turns round it, it does not cut straight from where it is to the next point."""
-    rest = [p for p in points if current_seq is None or p.seq >= current_seq]
+    # from the first point at or after the current item (a loop repeats seqs: its first pass)
+    start = next(
+        (k for k, p in enumerate(points) if current_seq is None or p.seq >= current_seq),
+        len(points),
+    )
+    rest = list(points[start:])
     if not rest and points:
         rest = [points[-1]]  # mission flown: the last point
     if not rest:
         return None
-    done = [p for p in points if current_seq is not None and p.seq < current_seq]
+    done = list(points[:start])
     if position is not None and done and _dist_m(position, done[-1]) <= turn_from_m:
         rest = [done[-1], *rest]
     wps: list[Waypoint4D] = []
