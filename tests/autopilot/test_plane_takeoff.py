@@ -8,23 +8,32 @@ and flies its runway take-off, its climb-out along the heading to the first wayp
 its 24 m/s cruise. The take-off was filed as a vertical climb at home and the plan timed at
 5 m/s, so every ArduPlane take-off opened UAS_OUT_OV and the auto-accepted plans wiped the
 landing sequence. Now: no UAS_OUT_OV / UAS_IN_CV, no recommendation, and the mission on
-the plane still ends with its landing sequence.
+the plane still ends with its landing sequence. And a plan the hub uploads to that ArduPlane
+keeps the landing sequence at its end (read back equal) with airspeeds no lower than the
+minimum.
 """
 
 from __future__ import annotations
 
+import asyncio
 import subprocess
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 from pymavlink.dialects.v20 import common as mav
 
+from adapters.mavlink import MavlinkConfig, MavlinkHub
+from adapters.mavlink.mission import MissionItem
+from gcs_utm.clock import ScaledClock
+from gcs_utm.model import FlightPlan, OperationId, SysId, Waypoint4D
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess, wait_tcp_listening
 from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, rows
 from tests.autopilot.pilot import PilotLink, offset_deg
+from tests.mavlink.conftest import Sink
 
 SPEED = 5.0
 AUTO = 10  # ArduPlane's AUTO custom mode
@@ -114,3 +123,54 @@ def _download(pilot: PilotLink) -> list[object]:
         pilot.send(mav.MAVLink_mission_request_int_message(1, 1, seq, 0))
         items.append(pilot.wait("MISSION_ITEM_INT", 5.0, lambda m, s=seq: m.seq == s))
     return items
+
+
+@pytest.mark.timeout(180)
+async def test_arduplane_keeps_its_landing_sequence_after_a_utm_upload(
+    ardupilot: Callable[..., SitlProcess],
+) -> None:
+    """The hub uploads a plan (airspeeds at least AIRSPEED_MIN) to an ArduPlane whose mission
+    has a landing sequence: ArduPlane accepts it, its copy reads back equal by meaning
+    (DO_LAND_START with its position and frame), and it ends with the pilot's sequence."""
+    lat0, lon0, ground, _ = ARDUPILOT_DEFAULT_HOME
+    ardupilot(instance=0, vehicle="plane", speed=SPEED)
+    await asyncio.to_thread(wait_tcp_listening, 5760)
+    cfg = MavlinkConfig(links=("tcp:127.0.0.1:5760",), ardupilot_stream_hz=10.0)
+    async with MavlinkHub(cfg, ScaledClock(speed=SPEED), Sink()) as hub:
+        end = time.monotonic() + 60.0
+        while not any(v.key.sys_id == 1 for v in hub.vehicles()):
+            assert time.monotonic() < end, "ArduPlane not discovered"
+            await asyncio.sleep(0.2)
+        pilot = [_item(m) for m in _mission(lat0, lon0)]
+        for _ in range(30):  # NO_SPACE for a moment after boot: retried
+            if (await hub.upload_items(SysId(1), pilot, set_mission_mode=False)).ok:
+                break
+            await asyncio.sleep(0.5)
+        await hub.download_mission(SysId(1))
+        plan = FlightPlan(
+            operation_id=OperationId("plane"),
+            version=2,
+            waypoints=tuple(_north(lat0, lon0, ground + 60.0, k) for k in range(1, 4)),
+        )
+        res = await hub.upload_plan(SysId(1), plan, min_speed_mps=10.0, set_mission_mode=False)
+        assert res.ok and res.verified, res
+        got = await hub.download_mission(SysId(1))
+    commands = [it.command for it in got]
+    assert commands[-3:] == [189, 16, 21], commands
+    speeds = [(it.param1, it.param2) for it in got if it.command == 178]
+    assert speeds and all(s == (0.0, 10.0) for s in speeds), speeds  # 5 m/s asked: the minimum
+
+
+def _north(lat0: float, lon0: float, alt_m: float, k: int) -> Waypoint4D:
+    """Waypoint ``k`` of 300 m legs north at 5 m/s (below any plane's minimum airspeed)."""
+    return Waypoint4D(
+        lat_deg=lat0 + k * 300.0 / 110_540.0, lon_deg=lon0, alt_amsl_m=alt_m, t_s=k * 60.0
+    )
+
+
+def _item(m: Any) -> MissionItem:
+    return MissionItem(
+        seq=m.seq, command=m.command, frame=m.frame, autocontinue=m.autocontinue,
+        param1=m.param1, param2=m.param2, param3=m.param3, param4=m.param4,
+        x=m.x, y=m.y, z=m.z,
+    )  # fmt: skip
