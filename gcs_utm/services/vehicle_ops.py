@@ -248,15 +248,17 @@ def plan_from_points(
 
 def mission_is_plan(points: Sequence[NavPoint], plan: FlightPlan) -> bool:
     """True when every waypoint of the mission (with its own position; takeoff and land
-    items and the landing sequence, which uploaders keep around a plan, are not compared;
-    a fixed wing's circles are points of its plan too) is, in order, a waypoint of
-    ``plan`` (within half a metre): the vehicle flies the plan (e.g. the UTM uploaded it,
-    from some waypoint on)."""
+    items are not compared, nor the landing sequence when the plan has none of it: uploads
+    keep a pilot's landing after the UTM's plan; a fixed wing's circles are points of its
+    plan too) is, in order, a waypoint of ``plan`` (within half a metre): the vehicle flies
+    the plan (e.g. the UTM uploaded it, from some waypoint on)."""
     wps = plan.waypoints
+    compared = [p for p in points if p.explicit and p.command not in (_NAV_TAKEOFF, _NAV_LAND)]
+    landing = [p for p in points if p.landing and p.explicit]  # (its NAV_LAND included)
+    if not any(_same_place(p, w) for p in landing for w in wps):
+        compared = [p for p in compared if not p.landing]
     k = 0
-    for p in points:
-        if not p.explicit or p.command in (_NAV_TAKEOFF, _NAV_LAND) or p.landing:
-            continue
+    for p in compared:
         while k < len(wps) and not _same_place(p, wps[k]):
             k += 1
         if k == len(wps):

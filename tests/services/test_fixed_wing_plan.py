@@ -233,3 +233,14 @@ def test_a_plane_retimed_at_a_new_item_turns_round_the_waypoint_it_reached() -> 
     assert plane.waypoints[1].t_s == pytest.approx(100.0 + 50.0 / 22.0, abs=0.05)
     quad = plan_from_points([corner, west], OperationId("p"), **args)  # type: ignore[arg-type]
     assert quad is not None and [round(_north_m(w)) for w in quad.waypoints] == [750, 800]
+
+
+def test_a_changed_landing_sequence_is_a_new_mission_for_a_plan_that_has_one() -> None:
+    """A plan filed from the mission holds its landing: a pilot's new approach is a change."""
+    plane = _points()
+    plan = plan_from_points(plane, OperationId("p"), t_s=0.0)
+    assert plan is not None and mission_is_plan(plane, plan)
+    moved = [
+        p.moved(p.lat_deg + 0.001, p.lon_deg, p.alt_amsl_m) if p.seq == 6 else p for p in plane
+    ]
+    assert not mission_is_plan(moved, plan)
