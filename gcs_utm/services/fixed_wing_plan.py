@@ -7,9 +7,11 @@ hovers at a loiter. A fixed wing cannot:
   stands along the take-off heading, the heading to the next waypoint, to the take-off
   altitude: the climb ends ``height / tan(pitch)`` ahead with the item's minimum pitch
   (param1), else ``height * speed / climb_rate`` (at most at the next waypoint), not above
-  home. ArduPlane and PX4 (runway take-off) both climb straight out and turn only after it
-  (measured on ArduPlane 4.6 SITL, param1 15 deg, 30 m: lift-off about 40 m out, 30 m
-  reached 111 m out, where 30 / tan(15 deg) = 112 m).
+  home; the first :data:`ROLL_FRACTION` of that run is the ground roll (a point on the
+  ground, "no position of its own"). ArduPlane and PX4 (runway take-off) both climb straight
+  out and turn only after it (measured on ArduPlane 4.6 SITL, param1 15 deg, 30 m: lift-off
+  about 40 m out, 30 m reached 111 m out, where 30 / tan(15 deg) = 112 m; a straight line
+  from the start put the rolling plane 10.3 m below it, outside its flight geometry).
 - **NAV_LOITER_TO_ALT** (31) is a circle around its position (radius: the item's, else the
   vehicle's default loiter radius) flown until the altitude is reached at the climb
   (descent) rate; **NAV_LOITER_TURNS** (18) that many turns at the item's altitude;
@@ -35,6 +37,8 @@ NAV_LOITER_TIME = 19
 NAV_TAKEOFF = 22
 NAV_LOITER_TO_ALT = 31
 LOITER_COMMANDS = frozenset({NAV_LOITER_TURNS, NAV_LOITER_TIME, NAV_LOITER_TO_ALT})
+ROLL_FRACTION = 0.35
+"""The part of the take-off run on the ground (ArduPlane 4.6 SITL: 40 of 111 m)."""
 _STEP_RAD = math.pi / 4.0  # circle points every 45 degrees
 _MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
 _M_PER_DEG_LAT = 110_540.0
@@ -63,6 +67,7 @@ class Point(Protocol):
     @property
     def amount(self) -> float: ...
     def moved(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> Self: ...
+    def synthetic(self) -> Self: ...
 
 
 P = TypeVar("P", bound=Point)
@@ -95,7 +100,7 @@ def fixed_wing_points(
     out: list[P] = []
     for i, p in enumerate(points):
         if p.command == NAV_TAKEOFF and not p.explicit:
-            out.append(_climb_out(p, out[-1] if out else None, points[i + 1 :], ground_alt_m,
+            out.extend(_climb_out(p, out[-1] if out else None, points[i + 1 :], ground_alt_m,
                                   climb_rate_mps))  # fmt: skip
         elif p.command in LOITER_COMMANDS and out:
             rate = climb_rate_mps if p.alt_amsl_m >= out[-1].alt_amsl_m else descent_rate_mps
@@ -107,25 +112,28 @@ def fixed_wing_points(
 
 def _climb_out(
     p: P, before: Point | None, after: Sequence[Point], ground_alt_m: float | None, rate: float
-) -> P:
-    """The end of the take-off climb: along the heading to the next waypoint with a position
-    of its own; where it is (a vertical climb) without one."""
+) -> list[P]:
+    """The ground roll's end and the end of the take-off climb: along the heading to the next
+    waypoint with a position of its own; where it is (a vertical climb) without one."""
     nxt = next((q for q in after if q.explicit), None)
     base = before.alt_amsl_m if before is not None else ground_alt_m
     if nxt is None or base is None:
-        return p
+        return [p]
     height_m = p.alt_amsl_m - base
     east, north = _east_north(p, nxt)
     to_next_m = math.hypot(east, north)
     if height_m <= 0.0 or to_next_m < 1.0:
-        return p
+        return [p]
     if 1.0 <= p.amount < 89.0:  # the take-off's minimum pitch, degrees
         run_m = height_m / math.tan(math.radians(p.amount))
     else:
         run_m = height_m * max(p.speed_mps, 0.1) / max(rate, 0.1)
     run_m = min(to_next_m, run_m)
-    lat, lon = _offset(p, east / to_next_m * run_m, north / to_next_m * run_m)
-    return p.moved(lat, lon, p.alt_amsl_m)
+    roll_m = ROLL_FRACTION * run_m
+    ux, uy = east / to_next_m, north / to_next_m
+    lat_r, lon_r = _offset(p, ux * roll_m, uy * roll_m)
+    lat, lon = _offset(p, ux * run_m, uy * run_m)
+    return [p.moved(lat_r, lon_r, base).synthetic(), p.moved(lat, lon, p.alt_amsl_m)]
 
 
 def _circle(p: P, before: Point, rate: float, default_radius_m: float) -> list[P]:

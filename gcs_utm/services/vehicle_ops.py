@@ -123,6 +123,10 @@ class NavPoint:
     def moved(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> NavPoint:
         return dataclasses.replace(self, lat_deg=lat_deg, lon_deg=lon_deg, alt_amsl_m=alt_amsl_m)
 
+    def synthetic(self) -> NavPoint:
+        """A modelled point (not the item's own position): never compared with a plan."""
+        return dataclasses.replace(self, explicit=False)
+
 
 def mission_points(
     items: Sequence[object],

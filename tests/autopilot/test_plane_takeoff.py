@@ -1,11 +1,14 @@
 """Issue 31.4 on real ArduPlane: a normal take-off raises no non-conformance threat.
 
-An ArduPlane 4.6 SITL with the pilot's typical mission (take-off to 30 m at 15 deg, two
-waypoints 800 m out at 50 m, then DO_LAND_START, an approach and NAV_LAND at home; it arms
-with that mission only with RTL_AUTOLAND set) sits beside ``gcs-utm serve --headless
+An ArduPlane 4.6 SITL with the pilot's typical mission (take-off to 30 m at 15 deg, a
+speed item of 14 m/s as a ground speed, a 1600 m leg north and an 800 m leg west at 30 m,
+then DO_LAND_START, an approach and NAV_LAND at home; it arms with that mission only with
+RTL_AUTOLAND set) sits beside ``gcs-utm serve --headless
 --auto-accept`` (on SERIAL1), which files its mission as an operation. It is armed in AUTO
 and flies its runway take-off, its climb-out along the heading to the first waypoint and
-its 24 m/s cruise. The take-off was filed as a vertical climb at home and the plan timed at
+its 24 m/s cruise (its plan is filed at 14 m/s: 48 s ahead at the first waypoint, beyond
+the 30 s time tolerance; Monitoring re-times it along its track).
+The take-off was filed as a vertical climb at home and the plan timed at
 5 m/s, so every ArduPlane take-off opened UAS_OUT_OV and the auto-accepted plans wiped the
 landing sequence. Now: no UAS_OUT_OV / UAS_IN_CV, no recommendation, and the mission on
 the plane still ends with its landing sequence. And a plan the hub uploads to that ArduPlane
@@ -37,13 +40,13 @@ from tests.mavlink.conftest import Sink
 
 SPEED = 5.0
 AUTO = 10  # ArduPlane's AUTO custom mode
-PAST_SEQ = 3  # MISSION_CURRENT past the first waypoint: take-off, climb-out and first leg flown
+FILED_MPS = 14.0  # the mission's speed item: a ground speed, which ArduPlane flies past
 
 
-def _mission(lat0: float, lon0: float) -> list[object]:
-    """Home, NAV_TAKEOFF (15 deg, 30 m), 800 m north and then west at 50 m, DO_LAND_START,
-    the approach at 30 m and NAV_LAND at home (altitudes above home, as ground stations
-    send them)."""
+def _mission(lat0: float, lon0: float, filed_mps: float | None = None) -> list[object]:
+    """Home, NAV_TAKEOFF (15 deg, 30 m), [DO_CHANGE_SPEED ground speed ``filed_mps``,]
+    1600 m north and then 800 m west at 30 m, DO_LAND_START, the approach at 30 m and
+    NAV_LAND at home (altitudes above home, as ground stations send them)."""
     rel = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 
     def item(seq: int, cmd: int, east: float, north: float, alt: float, p1: float = 0.0) -> object:
@@ -56,14 +59,25 @@ def _mission(lat0: float, lon0: float) -> list[object]:
     takeoff = mav.MAVLink_mission_item_int_message(
         1, 1, 1, rel, mav.MAV_CMD_NAV_TAKEOFF, 0, 1, 15.0, 0, 0, 0, 0, 0, 30.0, 0
     )
+    speed = []
+    if filed_mps is not None:  # speed type 1: ArduPlane's minimum ground speed
+        change = mav.MAV_CMD_DO_CHANGE_SPEED
+        frame = mav.MAV_FRAME_MISSION
+        speed = [
+            mav.MAVLink_mission_item_int_message(
+                1, 1, 2, frame, change, 0, 1, 1.0, filed_mps, -1.0, 0, 0, 0, 0.0, 0
+            )
+        ]
+    k = len(speed)
     return [
         item(0, mav.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0),
         takeoff,
-        item(2, mav.MAV_CMD_NAV_WAYPOINT, 0.0, 800.0, 50.0),
-        item(3, mav.MAV_CMD_NAV_WAYPOINT, -800.0, 800.0, 50.0),
-        item(4, mav.MAV_CMD_DO_LAND_START, -800.0, 0.0, 0.0),
-        item(5, mav.MAV_CMD_NAV_WAYPOINT, -400.0, -400.0, 30.0),
-        item(6, mav.MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0),
+        *speed,
+        item(2 + k, mav.MAV_CMD_NAV_WAYPOINT, 0.0, 1600.0, 30.0),
+        item(3 + k, mav.MAV_CMD_NAV_WAYPOINT, -800.0, 1600.0, 30.0),
+        item(4 + k, mav.MAV_CMD_DO_LAND_START, -800.0, 0.0, 0.0),
+        item(5 + k, mav.MAV_CMD_NAV_WAYPOINT, -400.0, -400.0, 30.0),
+        item(6 + k, mav.MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0),
     ]
 
 
@@ -82,7 +96,7 @@ def test_arduplane_takeoff_raises_no_conformance_threat(
     try:
         pilot.wait_ready()
         pilot.set_params({"RTL_AUTOLAND": 2.0})  # else "Arm: DO_LAND_START set and ..."
-        pilot.upload(_mission(lat0, lon0))
+        pilot.upload(_mission(lat0, lon0, FILED_MPS))
         with log_path.open("wb") as log:
             serve = subprocess.Popen(
                 [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless",
@@ -93,8 +107,9 @@ def test_arduplane_takeoff_raises_no_conformance_threat(
         _wait_operations(db, 1, 40.0, serve)
         pilot.set_mode(AUTO)
         pilot._arm(60.0)
-        end = time.monotonic() + 90.0 / SPEED  # simulated: take-off and 800 m (about 40 s)
-        while not any(seq >= PAST_SEQ for _, seq, _ in pilot.mission_current):
+        end = time.monotonic() + 150.0 / SPEED  # simulated: take-off and 1600 m (about 75 s)
+        # MISSION_CURRENT past the first waypoint: take-off, climb-out and first leg flown
+        while not any(seq >= 4 for _, seq, _ in pilot.mission_current):
             assert time.monotonic() < end, f"mission not flown: {pilot.statustexts[-6:]}"
             pilot.request_streams()
             pilot.poll(0.5)

@@ -101,7 +101,10 @@ def test_takeoff_is_a_climb_out_along_the_heading_to_the_next_waypoint() -> None
     assert pts is not None
     assert _north_m(pts[0]) == pytest.approx(0.0, abs=0.1)  # the multirotor model: at home
     plane = _points()
-    takeoff = plane[0]
+    roll, takeoff = plane[0], plane[1]
+    # the ground roll: a third of the run, on the ground (ArduPlane: lift-off 40 m out)
+    assert not roll.explicit and roll.alt_amsl_m == pytest.approx(HOME.alt_amsl_m)
+    assert _north_m(roll) == pytest.approx(fw.ROLL_FRACTION * 112.0, abs=1.0)
     # 30 m at the item's 15 deg pitch: the climb ends 112 m north of home (ArduPlane 4.6:
     # 30 m reached 111 m out, ground roll included)
     assert _north_m(takeoff) == pytest.approx(30.0 / math.tan(math.radians(15.0)), abs=1.0)
@@ -202,7 +205,7 @@ async def test_a_plane_on_the_ground_is_filed_with_its_climb_out() -> None:
     await usm.drain()
     op = usm.airspace.by_sys_id(SysId(1))
     assert op is not None
-    first, climb = op.plan.waypoints[:2]
+    first, _roll, climb = op.plan.waypoints[:3]
     assert _north_m(first) == pytest.approx(0.0, abs=0.5) and first.t_s == 1000.0
     assert climb.alt_amsl_m == pytest.approx(HOME.alt_amsl_m + 30.0)
     assert _north_m(climb) == pytest.approx(112.0, abs=1.0)
@@ -215,7 +218,7 @@ async def test_a_plane_on_the_ground_is_filed_with_its_climb_out() -> None:
         pts, ground_alt_m=HOME.alt_amsl_m, climb_rate_mps=3.0, descent_rate_mps=3.0,
         loiter_radius_m=80.0,
     )  # fmt: skip
-    assert _north_m(out[0]) == pytest.approx(150.0, abs=1.0)
+    assert _north_m(out[1]) == pytest.approx(150.0, abs=1.0)
 
 
 def test_a_plane_retimed_at_a_new_item_turns_round_the_waypoint_it_reached() -> None:
