@@ -231,6 +231,9 @@ class CommandHandling(Telemetry):
             self._speed_override = None
             self._mission_speed = None
         elif p[1] > 0:
-            self._speed_override = p[1]
-            self._mission_speed = p[1]
+            as_item = mp.RawItem(0, 2, mp.CMD_CHANGE_SPEED, 0, 1, p[0], p[1], p[2], 0, 0, 0, 0.0)
+            speed = self.speed_item(as_item)  # (the same rules as the mission item)
+            if speed is not None:
+                self._speed_override = speed
+                self._mission_speed = speed
         return R_ACCEPTED

@@ -159,10 +159,15 @@ COUNTER_NAMES = (
 
 
 def mission_items_from_specs(
-    specs: tuple[MissionItemSpec, ...], *, ardupilot: bool, home: tuple[float, float, float]
+    specs: tuple[MissionItemSpec, ...],
+    *,
+    ardupilot: bool,
+    home: tuple[float, float, float],
+    fixed_wing: bool = False,
 ) -> list[mp.RawItem]:
-    """Preloaded mission: DO_CHANGE_SPEED before each waypoint with a speed; AMSL frame;
-    ArduPilot gets its home as item 0."""
+    """Preloaded mission: DO_CHANGE_SPEED before each waypoint with a speed (an airspeed
+    for a fixed wing, a ground speed otherwise); AMSL frame; ArduPilot gets its home as
+    item 0."""
     out: list[mp.RawItem] = []
 
     def add(  # noqa: PLR0917 - mirrors MISSION_ITEM_INT's field order
@@ -198,7 +203,8 @@ def mission_items_from_specs(
         )
     for s in specs:
         if s.speed_mps is not None:
-            add(mp.CMD_CHANGE_SPEED, mp.FRAME_MISSION, 1.0, s.speed_mps, -1.0, 0, 0, 0.0)
+            kind = 0.0 if fixed_wing else 1.0  # speed type: airspeed / ground speed
+            add(mp.CMD_CHANGE_SPEED, mp.FRAME_MISSION, kind, s.speed_mps, -1.0, 0, 0, 0.0)
         acc = s.acceptance_radius_m if s.acceptance_radius_m is not None else 0.0
         add(
             mp.CMD_WAYPOINT,
@@ -258,7 +264,20 @@ class VehicleCore:
             "NAV_ACC_RAD": self.lim.acceptance_radius_m,
             "MPC_XY_CRUISE": self.cruise_mps,
             "FW_AIRSPD_TRIM": self.cruise_mps,
+            "RTL_AUTOLAND": 0.0,  # ArduPlane: arming refused with a DO_LAND_START while 0
         }
+
+    def speed_item(self, it: mp.RawItem) -> float | None:
+        """The speed a DO_CHANGE_SPEED item (or command params) sets, None when it sets
+        none: ArduPlane takes a ground speed (type 1) as a minimum ground speed and keeps
+        flying its airspeed; a fixed wing flies no slower than its minimum airspeed."""
+        if it.command != mp.CMD_CHANGE_SPEED or it.param2 <= 0.0:
+            return None
+        if not self.is_fixed_wing:
+            return it.param2
+        if self.is_ardupilot and it.param1 == 1.0:
+            return None
+        return max(it.param2, self.lim.min_airspeed_mps)
 
     def _init_flight(self, spec: VehicleSpec) -> None:
         """Flight state at boot: on the ground, disarmed (ArduCopter boots in STABILIZE)."""
@@ -280,7 +299,7 @@ class VehicleCore:
     def _init_mission(self, spec: VehicleSpec) -> None:
         """The mission the vehicle boots with (ArduPilot: item 0 is home, current item 1)."""
         self._items: list[mp.RawItem] = mission_items_from_specs(
-            spec.mission, ardupilot=self.is_ardupilot, home=self.home
+            spec.mission, ardupilot=self.is_ardupilot, home=self.home, fixed_wing=self.is_fixed_wing
         )
         self._seq = 1 if self.is_ardupilot and self._items else 0
         self._mission_state = (

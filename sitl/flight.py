@@ -22,6 +22,7 @@ from sitl.core import (
     POSCTL,
     R_ACCEPTED,
     R_DENIED,
+    R_FAILED,
     RTL,
     SEV_CRITICAL,
     SEV_EMERGENCY,
@@ -174,8 +175,7 @@ class Flight(VehicleCore):
         speed = self.cruise_mps
         if len(navs) > 1:
             for it in items[i0 + 1 : navs[1]]:
-                if it.command == mp.CMD_CHANGE_SPEED and it.param2 > 0:
-                    speed = it.param2
+                speed = self.speed_item(it) or speed
             n1, e1, _alt1 = self._item_target(items[navs[1]])
             dist = math.hypot(n1 - n0, e1 - e0)
             if dist > 0.0:
@@ -407,8 +407,7 @@ class Flight(VehicleCore):
             and guard < len(items)
         ):
             it = items[self._seq]
-            if it.command == mp.CMD_CHANGE_SPEED and it.param2 > 0:
-                self._mission_speed = it.param2
+            self._mission_speed = self.speed_item(it) or self._mission_speed
             self._seq += 1
             guard += 1
             self._send_mission_current()
@@ -515,10 +514,22 @@ class Flight(VehicleCore):
             if self.battery_pct < BAT_EMERG_PCT:
                 self.statustext(SEV_CRITICAL, "Preflight Fail: battery unhealthy")
                 return R_DENIED
+            if self._land_start_without_autoland():
+                self.statustext(SEV_CRITICAL, "Arm: DO_LAND_START set and RTL_AUTOLAND disabled")
+                return R_FAILED
         self._armed = True
         self._armed_at = self._t
         self.statustext(SEV_INFO, "Armed by external command")
         return R_ACCEPTED
+
+    def _land_start_without_autoland(self) -> bool:
+        """ArduPlane 4.6 refuses to arm with a DO_LAND_START in its mission while
+        RTL_AUTOLAND is 0 (measured on the real SITL: COMMAND_ACK 4)."""
+        if not (self.is_ardupilot and self.is_fixed_wing):
+            return False
+        if self._params.get("RTL_AUTOLAND", 0.0) != 0.0:
+            return False
+        return any(it.command == mp.CMD_LAND_START for it in self._items)
 
     def _disarm(self) -> None:
         if self._armed:

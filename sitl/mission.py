@@ -195,7 +195,7 @@ def ardupilot_stored(item: RawItem, *, fixed_wing: bool) -> RawItem:
         param3=_zero_nan(item.param3),
         param4=_zero_nan(item.param4),
     )
-    if it.command not in POSITIONAL:
+    if it.command not in POSITIONAL and it.command != CMD_LAND_START:  # (stored with its frame)
         it = replace(it, frame=FRAME_GLOBAL)
     elif it.frame in (FRAME_GLOBAL_INT, FRAME_GLOBAL_REL_INT):
         it = replace(it, frame=FRAME_GLOBAL if it.frame == FRAME_GLOBAL_INT else FRAME_GLOBAL_REL)

@@ -4,8 +4,11 @@
 Encoding of a 4D :class:`FlightPlan` (MAVLink waypoints carry no time):
 - every plan waypoint k becomes a NAV_WAYPOINT (MISSION_ITEM_INT, frame MAV_FRAME_GLOBAL,
   so ``z`` is metres AMSL, ``x``/``y`` are degrees * 1e7);
-- before waypoint k (k >= 1) a DO_CHANGE_SPEED sets the ground speed of segment k-1 -> k to
-  horizontal length / duration, so the vehicle keeps the plan's timing (a multirotor flies
+- before waypoint k (k >= 1) a DO_CHANGE_SPEED sets the speed of segment k-1 -> k to
+  horizontal length / duration, so the vehicle keeps the plan's timing: a ground speed
+  (speed type 1) for a multirotor, an airspeed (speed type 0) for a fixed wing, never below
+  its minimum airspeed (ArduPlane takes a type-1 speed as a minimum ground speed and keeps
+  flying its cruise airspeed; a plane cannot fly slower than it stalls) (a multirotor flies
   the straight 3D line, its climb within its limit); a segment with no horizontal length and
   no climb but a duration becomes a hold time (NAV_WAYPOINT param1) at its start; a climb
   (descent) on the spot is flown at the vehicle's vertical speed, and only the time the plan
@@ -25,9 +28,11 @@ to keep, not the bytes sent:
   global items in their INT frames (0 -> 5, 3 -> 6). ArduPilot keeps no frame for an item
   without a position and returns it in frame 0;
 - PX4 keeps every param as float32, NaN included;
-- ArduPilot keeps a NaN param as 0.0; NAV_WAYPOINT keeps only what its 15-byte command
-  holds: ArduCopter the hold time (param1, whole seconds), ArduPlane the acceptance and
-  pass-by radii (param2/param3, whole metres up to 255); the other params read back 0;
+- ArduPilot keeps a NaN param as 0.0 and no frame for a DO item (read back in frame 0),
+  except DO_LAND_START, whose position it stores with its frame; NAV_WAYPOINT keeps only
+  what its 15-byte command holds: ArduCopter the hold time (param1, whole seconds),
+  ArduPlane the acceptance and pass-by radii (param2/param3, whole metres up to 255); the
+  other params read back 0;
   NAV_LAND keeps of param4 only its sign (-1 or 1: ArduPlane's deep-stall direction);
 - ArduPilot's seq 0 is its own home, not compared.
 """
@@ -50,6 +55,7 @@ MAV_CMD_DO_CHANGE_SPEED = 178
 NAV_COMMAND_MAX = 95  # MAV_CMD ids up to MAV_CMD_NAV_LAST (95) are navigation commands
 # Frame families: the same meaning under another number (the _INT variants of MAVLink 1).
 _FRAME_FAMILY = {0: 0, 5: 0, 3: 3, 6: 3, 10: 10, 11: 10, 2: 2}
+SPEED_TYPE_AIRSPEED = 0.0
 SPEED_TYPE_GROUND = 1.0
 _MIN_SEGMENT_M = 0.5  # below this a segment is "no horizontal motion": GNSS noise scale
 
@@ -110,13 +116,19 @@ def plan_to_mission_items(
     max_speed_mps: float = 25.0,
     climb_rate_mps: float | None = None,
     descent_rate_mps: float | None = None,
+    kind: VehicleKind | None = None,
+    min_speed_mps: float = 0.0,
 ) -> list[MissionItem]:
     """The MAVLink mission that flies ``plan`` (see the module docstring for the encoding).
 
     Speeds are clamped to ``max_speed_mps`` (a zero-duration segment would ask for infinity).
     ``climb_rate_mps``/``descent_rate_mps`` are the vehicle's vertical speeds (None: assume
-    the plan timed its climbs at them, no wait is added to a climb on the spot).
+    the plan timed its climbs at them, no wait is added to a climb on the spot). A
+    ``kind`` FIXED_WING gets airspeeds, raised to ``min_speed_mps`` (its minimum airspeed).
     """
+    fixed_wing = kind is VehicleKind.FIXED_WING
+    speed_type = SPEED_TYPE_AIRSPEED if fixed_wing else SPEED_TYPE_GROUND
+    floor_mps = min(min_speed_mps, max_speed_mps) if fixed_wing else 0.0
     wps = plan.waypoints
     if not 0 <= start_index < len(wps):
         raise ValueError(f"start_index {start_index} outside the plan's {len(wps)} waypoints")
@@ -154,8 +166,8 @@ def plan_to_mission_items(
                         seq=0,
                         command=MAV_CMD_DO_CHANGE_SPEED,
                         frame=MAV_FRAME_MISSION,
-                        param1=SPEED_TYPE_GROUND,
-                        param2=round(min(speed, max_speed_mps), 3),
+                        param1=speed_type,
+                        param2=round(max(floor_mps, min(speed, max_speed_mps)), 3),
                         param3=-1.0,
                     )
                 )
@@ -176,6 +188,27 @@ def plan_to_mission_items(
         ]
     out = [replace(it, seq=i, current=int(i == current)) for i, it in enumerate(items)]
     return out
+
+
+def landing_sequence(items: list[MissionItem] | None) -> list[MissionItem]:
+    """The landing sequence of a vehicle's mission: the items from its first DO_LAND_START
+    to the end (empty without one). A pilot's landing (approach and NAV_LAND, what ArduPlane's
+    RTL_AUTOLAND and DO_LAND_START jump to, PX4's mission landing) that no UTM plan removes."""
+    for i, it in enumerate(items or ()):
+        if it.command == MAV_CMD_DO_LAND_START:
+            return list(items[i:]) if items else []
+    return []
+
+
+def with_landing(items: list[MissionItem], landing: list[MissionItem]) -> list[MissionItem]:
+    """``items`` followed by ``landing`` (renumbered, not current) unless ``items`` already
+    has a landing sequence of its own: a plan uploaded to a vehicle whose mission ended in a
+    landing sequence keeps it at its end."""
+    if not landing or landing_sequence(items):
+        return items
+    n = len(items)
+    tail = [replace(it, seq=n + k, current=0) for k, it in enumerate(landing)]
+    return [*items, *tail]
 
 
 def current_seq(items: list[MissionItem]) -> int:
@@ -230,7 +263,7 @@ def stored_form(
         param3=_ap_param(sent.param3),
         param4=_ap_param(sent.param4),
     )
-    if not _positional(it):
+    if not _positional(it) and it.command != MAV_CMD_DO_LAND_START:
         it = replace(it, frame=MAV_FRAME_GLOBAL)  # no frame kept for a DO item
     if it.command == MAV_CMD_NAV_LAND:  # param4 keeps only a direction: -1 or 1
         it = replace(it, param4=-1.0 if it.param4 < 0.0 else 1.0)

@@ -253,9 +253,11 @@ class Transfers:
         end = _loop_time() + self._budget_s(deadline_t_s)
         async with self._exchange(st) as box:
             try:
-                return await self._download(st, box, end, st.reboots)
+                got = await self._download(st, box, end, st.reboots)
             except TransferError as exc:
                 raise MavlinkError(f"download from {sys_id} failed: {exc}") from exc
+        st.mission = got  # what the vehicle flies (its landing sequence is kept by uploads)
+        return got
 
     async def _download(
         self, st: VehicleState, box: asyncio.Queue[wire.MavMsg], end: float, reboots: int
@@ -288,22 +290,22 @@ class Transfers:
     ) -> int | None:
         """MISSION_SET_CURRENT(seqs.start) until MISSION_CURRENT reports a seq in ``seqs``
         (PX4 in mission mode runs a DO item at once and reports the waypoint after it);
-        returns that seq, or None. Resent on the same adaptive timeout as mission items (not
-        the 0.5 s command timeout: on a lossy link that one wait would cost more than the
-        whole transfer)."""
+        returns that seq, or None. Sent once, then again only after ``command_timeout_s``
+        (growing by half per silent retry) without that MISSION_CURRENT: both autopilots
+        answer at once, and a resend on the mission items' millisecond timeout put about 16
+        requests on the link in 0.45 s after each upload."""
         enc = self._encoder(st)
-        step = _Step(self.config)
-        for attempt in range(self.config.max_retries + 1):
-            for _ in range(1 if attempt == 0 else 2):  # retries twice, as in _download
-                self._to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seqs.start))
-            wait_end = min(end, _loop_time() + step.rto)
+        wait_s = self.config.command_timeout_s
+        for _attempt in range(self.config.max_retries + 1):
+            self._to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seqs.start))
+            wait_end = min(end, _loop_time() + wait_s)
             while (left := wait_end - _loop_time()) > 0:
                 self._check(st, reboots, end)
                 m = await self._get(box, left)
                 if m is not None and m._header.msgId == wire.MISSION_CURRENT and m.seq in seqs:
                     return int(m.seq)
             self._check(st, reboots, end)
-            step.backoff()
+            wait_s *= 1.5
         return None
 
     async def send_mode(

@@ -10,6 +10,9 @@ One upload (:meth:`Uploads.upload_items`) is, for each try:
    PX4 starts at the flagged item, a DO_CHANGE_SPEED included; ArduPilot at the navigation
    item after it (a DO item as current fails to restart), and the skipped speed item is then
    sent as a DO_CHANGE_SPEED command;
+A plan (:meth:`Uploads.upload_plan`) sent to a vehicle whose mission (as last read from it:
+download or readback) has a landing sequence (DO_LAND_START to the end) ends with that
+sequence: no UTM plan removes a pilot's landing.
 4. with ``set_mission_mode``, DO_SET_MODE to the autopilot's mission mode (PX4 AUTO.MISSION,
    ArduPilot AUTO) until HEARTBEAT shows it -- only on an armed vehicle: on the ground the
    mode is the pilot's (it would override the mode the pilot takes off in).
@@ -29,9 +32,11 @@ from adapters.mavlink.mission import (
     MAV_CMD_DO_CHANGE_SPEED,
     MissionItem,
     is_nav,
+    landing_sequence,
     plan_to_mission_items,
     same_item,
     start_item,
+    with_landing,
 )
 from adapters.mavlink.transfer import (
     MODE_CONFIRM_S,
@@ -77,11 +82,13 @@ class Uploads(Transfers):
         set_mission_mode: bool = True,
         climb_rate_mps: float | None = None,
         descent_rate_mps: float | None = None,
+        min_speed_mps: float = 0.0,
     ) -> UploadResult:
         """Upload ``plan`` as a mission, verify it, start it at plan waypoint ``start_index``
         (see :meth:`upload_items`); the vertical speeds let a climb on the spot keep the
-        plan's time (see :func:`plan_to_mission_items`). Never raises for vehicle behaviour:
-        failures are in the result."""
+        plan's time, and a fixed wing's speeds are airspeeds no lower than ``min_speed_mps``
+        (see :func:`plan_to_mission_items`). Never raises for vehicle behaviour: failures are
+        in the result."""
         t0 = time.monotonic()
         try:
             st = self.state(sys_id)
@@ -95,7 +102,11 @@ class Uploads(Transfers):
             max_speed_mps=self.config.max_speed_mps,
             climb_rate_mps=climb_rate_mps,
             descent_rate_mps=descent_rate_mps,
+            kind=st.kind,
+            min_speed_mps=min_speed_mps,
         )
+        # the pilot's landing sequence (last mission read from the vehicle) stays at the end
+        items = with_landing(items, landing_sequence(st.mission))
         return await self.upload_items(
             st.key, items, deadline_t_s=deadline_t_s, set_mission_mode=set_mission_mode, _t0=t0
         )
@@ -161,6 +172,7 @@ class Uploads(Transfers):
             tried.attempts = await self._upload(st, box, items, end, reboots)
             got = await self._download(st, box, end, reboots)
             self._verify_readback(st, items, got)
+            st.mission = got
             tried.verified = True
             # PX4 in mission mode runs a DO item at once: MISSION_CURRENT may already show
             # the navigation item after it

@@ -29,6 +29,7 @@ from typing import Protocol
 
 from adapters.mavlink import modes, wire
 from adapters.mavlink.config import MavlinkConfig
+from adapters.mavlink.mission import MissionItem
 from gcs_utm.messages import FlightMode, HazardReport, LinkHealth, VehicleKey, VehicleStatus
 from gcs_utm.model import (
     Autopilot,
@@ -78,6 +79,10 @@ class Events(Protocol):
 
 class VehicleState:
     """Everything we know about one vehicle component on one link."""
+
+    mission: list[MissionItem] | None = None
+    """The vehicle's mission as last downloaded or read back after an upload (uploads keep
+    its landing sequence)."""
 
     def __init__(
         self,

@@ -86,6 +86,7 @@ class VehiclePort(Protocol):
         start_index: int = 0,
         climb_rate_mps: float | None = None,
         descent_rate_mps: float | None = None,
+        min_speed_mps: float = 0.0,
     ) -> UploadOutcome: ...
 
     async def send_command(self, sys_id: SysId, command: Command) -> CommandOutcome: ...
@@ -435,6 +436,7 @@ class RecommendationLifecycle:
                 start_index=resume_index(new_plan, self.clock.now_s()),
                 climb_rate_mps=op.performance().climb_rate_mps,
                 descent_rate_mps=op.performance().descent_rate_mps,
+                min_speed_mps=op.performance().min_speed_mps,
             )
             record.uploaded = record.uploaded or result.ok
             if result.ok and result.verified:

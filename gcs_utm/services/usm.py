@@ -147,6 +147,13 @@ class UsmConfig:
         min=0.1,
         unit="m/s",
     )
+    default_fixed_wing_cruise_speed_mps: float = setting(
+        22.0,
+        "a fixed wing's cruise airspeed, for its downloaded mission without speed items "
+        "(ArduPlane AIRSPEED_CRUISE in its SITL defaults; PX4 FW_AIRSPD_TRIM is 15)",
+        min=0.1,
+        unit="m/s",
+    )
     home_tolerance_m: float = setting(
         1.0,
         "a vehicle's home (HOME_POSITION after its first 3D fix) moving more than this "
@@ -292,6 +299,7 @@ class Usm(RecommendationLifecycle):
                 flight_geometry_m=cfg.default_flight_geometry_m,
                 operational_volume_m=cfg.default_operational_volume_m,
                 cruise_speed_mps=cfg.default_cruise_speed_mps,
+                fixed_wing_cruise_speed_mps=cfg.default_fixed_wing_cruise_speed_mps,
                 ground_warning_m=cfg.ground_warning_m,
                 home_tolerance_m=cfg.home_tolerance_m,
                 ground_elevation_amsl_m=ground_elevation_amsl_m,

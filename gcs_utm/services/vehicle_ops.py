@@ -30,6 +30,7 @@ mission changes after discovery to something other than its plan.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Awaitable, Callable, Sequence
@@ -47,7 +48,10 @@ from gcs_utm.model import (
     SysId,
     VehicleKind,
     Waypoint4D,
+    default_envelope,
 )
+from gcs_utm.services import fixed_wing_plan as fw
+from gcs_utm.services import mission_order
 from gcs_utm.services.airspace import Airspace, AirspaceError
 from gcs_utm.services.flight_state import FlightState
 
@@ -61,7 +65,8 @@ _NAV_LOITER_TIME = 19
 _NAV_LAND = 21
 _NAV_TAKEOFF = 22
 _DO_CHANGE_SPEED = 178
-_NAV_COMMANDS = frozenset({_NAV_WAYPOINT, _NAV_LOITER_TIME, _NAV_LAND, _NAV_TAKEOFF})
+_DO_LAND_START = 189
+_NAV_COMMANDS = frozenset({_NAV_WAYPOINT, _NAV_LAND, _NAV_TAKEOFF}) | fw.LOITER_COMMANDS
 _ABSOLUTE_FRAMES = frozenset({0, 5})  # MAV_FRAME_GLOBAL(_INT): metres AMSL
 _RELATIVE_FRAMES = frozenset({3, 6})  # MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT): metres above home
 _MATCH_H_M = 0.5  # a mission point within this of a plan waypoint is that waypoint (float32 z)
@@ -76,6 +81,12 @@ _HOME_MOVE_M = 2.0
 """A home that moved less than this is the same home: PX4's HOME_POSITION wanders by about a
 metre while its estimator converges (measured on SIH), which would re-file every few seconds."""
 _FLYING_MODES = frozenset({FlightMode.MISSION, FlightMode.TAKEOFF})
+_TURN_FROM_M = 80.0
+"""A fixed wing this close to the waypoint it just reached is turning round it (ArduPlane
+accepts a waypoint WP_RADIUS, 50 m, before it): its re-timed plan starts there."""
+_CLIMB_RATE_MPS = 3.0
+"""The climb rate of an operation filed here (``Operation.max_climb_rate_mps``'s default): a
+fixed wing's take-off climb-out and loiter-to-alt circles are timed at it."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -87,6 +98,7 @@ class VehicleOpsSettings:
     operational_volume_m: float
     cruise_speed_mps: float
     ground_warning_m: float
+    fixed_wing_cruise_speed_mps: float = 22.0
     ground_elevation_amsl_m: float | None = None
     home_tolerance_m: float = 1.0
 
@@ -103,6 +115,17 @@ class NavPoint:
     speed_mps: float
     explicit: bool  # its own lat/lon (not "here": a takeoff or land at 0, 0)
     command: int = _NAV_WAYPOINT
+    radius_m: float = 0.0  # a loiter's radius (0: the vehicle's default; < 0 anticlockwise)
+    # a loiter's turns (NAV_LOITER_TURNS) or seconds (NAV_LOITER_TIME); a take-off's pitch (deg)
+    amount: float = 0.0
+    landing: bool = False  # in the landing sequence (after a DO_LAND_START)
+
+    def moved(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> NavPoint:
+        return dataclasses.replace(self, lat_deg=lat_deg, lon_deg=lon_deg, alt_amsl_m=alt_amsl_m)
+
+    def synthetic(self) -> NavPoint:
+        """A modelled point (not the item's own position): never compared with a plan."""
+        return dataclasses.replace(self, explicit=False)
 
 
 def mission_points(
@@ -117,10 +140,12 @@ def mission_points(
     A takeoff or land without a position is where the previous point (else home) is."""
     speed = cruise_speed_mps
     out: list[NavPoint] = []
-    for i, it in enumerate(items):
+    landing = False
+    for i, it in mission_order.flown_order(items):
         if skip_first and i == 0:
             continue
         command = int(getattr(it, "command", -1))
+        landing = landing or command == _DO_LAND_START
         if command == _DO_CHANGE_SPEED:
             value = float(getattr(it, "param2", 0.0))
             if value > 0.0:
@@ -147,7 +172,8 @@ def mission_points(
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and math.isfinite(alt)):
             continue  # a malformed item is skipped, not fatal
         seq = int(getattr(it, "seq", i))
-        out.append(NavPoint(seq, lat, lon, alt, speed, explicit, command))
+        radius, amount = mission_order.item_params(it, command)
+        out.append(NavPoint(seq, lat, lon, alt, speed, explicit, command, radius, amount, landing))
     return out
 
 
@@ -179,15 +205,27 @@ def plan_from_points(
     position: Position | None = None,
     version: int = 1,
     reason: str = "from the vehicle's mission",
+    turn_from_m: float = 0.0,
 ) -> FlightPlan | None:
     """The 4D plan of a vehicle flying ``points`` from ``position`` at ``t_s``: the items
     from ``current_seq`` on (MISSION_CURRENT; all when None), each reached at the speed it is
-    flown to. None when there is no point."""
-    rest = [p for p in points if current_seq is None or p.seq >= current_seq]
+    flown to. None when there is no point. ``turn_from_m`` (a fixed wing): when the point
+    just reached (the one before ``current_seq``) is within that of ``position``, the plan
+    goes on through it: the autopilot accepted it early (ArduPlane's WP_RADIUS, 50 m) and
+    turns round it, it does not cut straight from where it is to the next point."""
+    # from the first point at or after the current item (a loop repeats seqs: its first pass)
+    start = next(
+        (k for k, p in enumerate(points) if current_seq is None or p.seq >= current_seq),
+        len(points),
+    )
+    rest = list(points[start:])
     if not rest and points:
         rest = [points[-1]]  # mission flown: the last point
     if not rest:
         return None
+    done = list(points[:start])
+    if position is not None and done and _dist_m(position, done[-1]) <= turn_from_m:
+        rest = [done[-1], *rest]
     wps: list[Waypoint4D] = []
     if position is not None:
         first = rest[0]
@@ -214,14 +252,17 @@ def plan_from_points(
 
 def mission_is_plan(points: Sequence[NavPoint], plan: FlightPlan) -> bool:
     """True when every waypoint of the mission (with its own position; takeoff and land
-    items, which uploaders add around a plan, are not compared) is, in order, a waypoint of
-    ``plan`` (within half a metre): the vehicle flies the plan (e.g. the UTM uploaded it,
-    from some waypoint on)."""
+    items are not compared, nor the landing sequence when the plan has none of it: uploads
+    keep a pilot's landing after the UTM's plan; a fixed wing's circles are points of its
+    plan too) is, in order, a waypoint of ``plan`` (within half a metre): the vehicle flies
+    the plan (e.g. the UTM uploaded it, from some waypoint on)."""
     wps = plan.waypoints
+    compared = [p for p in points if p.explicit and p.command not in (_NAV_TAKEOFF, _NAV_LAND)]
+    landing = [p for p in points if p.landing and p.explicit]  # (its NAV_LAND included)
+    if not any(_same_place(p, w) for p in landing for w in wps):
+        compared = [p for p in compared if not p.landing]
     k = 0
-    for p in points:
-        if not p.explicit or p.command in (_NAV_TAKEOFF, _NAV_LAND):
-            continue
+    for p in compared:
         while k < len(wps) and not _same_place(p, wps[k]):
             k += 1
         if k == len(wps):
@@ -518,9 +559,18 @@ class VehicleOps:
         points = mission_points(
             v.items or (),
             home=v.home,
-            cruise_speed_mps=self.settings.cruise_speed_mps,
+            cruise_speed_mps=self._cruise_mps(v),
             skip_first=v.autopilot is Autopilot.ARDUPILOT,
         )
+        if points is not None and v.kind is VehicleKind.FIXED_WING:
+            env = default_envelope(v.kind, self._cruise_mps(v), _CLIMB_RATE_MPS)
+            points = fw.fixed_wing_points(
+                points,
+                ground_alt_m=v.home.alt_amsl_m if v.home is not None else None,
+                climb_rate_mps=env.climb_rate_mps,
+                descent_rate_mps=env.descent_rate_mps,
+                loiter_radius_m=env.turn_radius_m,
+            )
         if points is None and not v.waiting_logged:
             v.waiting_logged = True
             self._log_event(
@@ -529,6 +579,13 @@ class VehicleOps:
                 "not reported yet: the operation is filed when it does",
             )
         return points
+
+    def _cruise_mps(self, v: _Vehicle) -> float:
+        """The speed a mission without speed items is flown at: a fixed wing's cruise
+        airspeed, else the multirotor default."""
+        if v.kind is VehicleKind.FIXED_WING:
+            return self.settings.fixed_wing_cruise_speed_mps
+        return self.settings.cruise_speed_mps
 
     def _plan(
         self, v: _Vehicle, points: list[NavPoint], op_id: OperationId, version: int, reason: str
@@ -543,6 +600,7 @@ class VehicleOps:
                 position=v.position,
                 version=version,
                 reason=reason,
+                turn_from_m=_TURN_FROM_M if v.kind is VehicleKind.FIXED_WING else 0.0,
             )
         except ValueError as exc:  # a plan the model refuses (malformed positions)
             self._log_event("vehicle", f"sysid {v.sys_id}: mission not usable: {exc}")
@@ -601,7 +659,7 @@ class VehicleOps:
             priority=s.priority,
             plan=plan,
             vehicle_kind=v.kind,
-            cruise_speed_mps=s.cruise_speed_mps,
+            cruise_speed_mps=self._cruise_mps(v),
             flight_geometry_m=s.flight_geometry_m,
             operational_volume_m=s.operational_volume_m,
             conops=CONOPS,

@@ -53,6 +53,7 @@ class Faults:
     drop_commands: int = 0  # ignore the first N COMMAND_LONG
     corrupt_readback: bool = False
     refuse_readback: int = 0  # answer the first N readback item requests with MISSION_ACK error
+    current_delay_s: float = 0.0  # MISSION_CURRENT this long after MISSION_SET_CURRENT
 
 
 class FakeVehicle(asyncio.DatagramProtocol):
@@ -232,7 +233,12 @@ class FakeVehicle(asyncio.DatagramProtocol):
         elif t == "MISSION_SET_CURRENT":
             if m.seq < len(self.mission):
                 self.current = m.seq
-            self.send(self.mav.mission_current_encode(self.current, len(self.mission)))
+            answer = self.mav.mission_current_encode(self.current, len(self.mission))
+            if self.faults.current_delay_s > 0.0:
+                loop = asyncio.get_running_loop()
+                loop.call_later(self.faults.current_delay_s, self.send, answer)
+            else:
+                self.send(answer)
         elif t in ("COMMAND_LONG", "COMMAND_INT"):
             self.commands.append(m)
             if t == "COMMAND_LONG" and m.command == 511:

@@ -57,6 +57,7 @@ class FakeVehicles:
         self.uploads: list[FlightPlan] = []
         self.start_indices: list[int] = []
         self.rates: list[tuple[float | None, float | None]] = []
+        self.min_speeds: list[float] = []
         self.commands: list[Command] = []
         self.verified = verified
         self.command_ok = command_ok
@@ -71,8 +72,10 @@ class FakeVehicles:
         start_index: int = 0,
         climb_rate_mps: float | None = None,
         descent_rate_mps: float | None = None,
+        min_speed_mps: float = 0.0,
     ) -> Result:
         self.uploads.append(plan)
+        self.min_speeds.append(min_speed_mps)
         self.start_indices.append(start_index)
         self.rates.append((climb_rate_mps, descent_rate_mps))
         return Result(ok=True, verified=self.verified, error="" if self.verified else "mismatch")

@@ -138,3 +138,35 @@ def test_ardupilot_refuses_uploads_until_its_storage_is_up() -> None:
     v = make(autopilot="ardupilot")
     v.advance(2.0)
     assert v.storage_ready()
+
+
+def test_arduplane_refuses_to_arm_with_do_land_start_unless_rtl_autoland() -> None:
+    """Measured on ArduPlane 4.6: "Arm: DO_LAND_START set and RTL_AUTOLAND disabled",
+    COMMAND_ACK 4, until RTL_AUTOLAND is set (issue 31.4)."""
+    land_start = mp.RawItem(2, mp.FRAME_MISSION, mp.CMD_LAND_START, 0, 1, 0, 0, 0, 0, 0, 0, 0)
+    mission = [wp(0, 0.0, 488.0), wp(1, 0.01, 550.0), land_start]
+    for autopilot, kind, refused in (
+        ("ardupilot", "fixed_wing", True),
+        ("ardupilot", "multirotor", False),
+        ("px4", "fixed_wing", False),
+    ):
+        v = make(autopilot=autopilot, kind=kind)
+        v.advance(30.0)  # a fix
+        v.accept_mission(mission, None)
+        assert (v.arm() == 4) is refused, (autopilot, kind)
+        if refused:
+            assert any("RTL_AUTOLAND disabled" in s for _, _, s in v.statustexts)
+            v._params["RTL_AUTOLAND"] = 2.0
+            assert v.arm() == 0
+
+
+def test_a_plane_flies_airspeeds_not_below_its_minimum() -> None:
+    """ArduPlane takes a ground-speed item (type 1) as a minimum ground speed and keeps its
+    airspeed; an airspeed item (type 0) below the minimum airspeed is flown at the minimum."""
+    plane = make(autopilot="ardupilot", kind="fixed_wing")
+    ground = speed(1, mp.FRAME_MISSION)  # type 1, 5 m/s
+    assert plane.speed_item(ground) is None
+    air = mp.RawItem(1, mp.FRAME_MISSION, mp.CMD_CHANGE_SPEED, 0, 1, 0.0, 5.0, -1.0, 0, 0, 0, 0)
+    assert plane.speed_item(air) == plane.lim.min_airspeed_mps > 5.0
+    quad = make(autopilot="ardupilot", kind="multirotor")
+    assert quad.speed_item(ground) == 5.0

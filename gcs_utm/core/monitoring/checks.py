@@ -323,15 +323,22 @@ def pack_plans(plans: Sequence[FloatArray]) -> PlanTable:
 
 
 def plan_distance(
-    table: PlanTable, pos: FloatArray, t_s: FloatArray, tolerance_s: float
+    table: PlanTable,
+    pos: FloatArray,
+    t_s: FloatArray,
+    tolerance_s: float,
+    window: tuple[FloatArray, FloatArray] | None = None,
 ) -> FloatArray:
     """3D distance (M,) from positions (M, 3) to each plan's portion within
-    [t - tolerance, t + tolerance] (clamped to the plan's time span)."""
+    [t - tolerance, t + tolerance] (clamped to the plan's time span), or within the plan
+    times ``window`` (earliest, latest; per row) when given (along_track.py)."""
     p = table.points
     ta = p[:, :-1, 3]  # s, segment start times (M, K-1)
     tb = p[:, 1:, 3]
-    lo_t = (t_s - tolerance_s)[:, None]
-    hi_t = (t_s + tolerance_s)[:, None]
+    if window is None:
+        window = (t_s - tolerance_s, t_s + tolerance_s)
+    lo_t = window[0][:, None]
+    hi_t = window[1][:, None]
     dur = tb - ta
     safe = np.where(dur > 0, dur, 1.0)
     u0 = np.clip((lo_t - ta) / safe, 0.0, 1.0)  # clip each segment to the time window

@@ -5,7 +5,8 @@ threats OPENED, UPDATED or CLOSED in this cycle; ``active()`` lists the open one
 
 Conditions, each keyed so a persisting one stays ONE threat with a stable id:
 - conformance per operation (UAS_IN_CV / UAS_OUT_OV; the kind follows the worst state),
-  gated during take-off and landing near home (config);
+  gated during take-off and landing near home (config); a fixed wing's plan re-timed to the
+  progress its envelope allows (along_track.py);
 - geofence per (operation, fence) (GEOFENCE_CONFLICT with the predicted entry time, or
   GEOFENCE_INTRUSION when inside now; the kind follows);
 - loss of separation per pair of operations (first loss, closest approach);
@@ -28,6 +29,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import numpy.typing as npt
 
+from gcs_utm.core.monitoring.along_track import plan_time_window, progress_ratios
 from gcs_utm.core.monitoring.checks import (
     PlanTable,
     check_geofences,
@@ -60,8 +62,9 @@ from gcs_utm.model import (
 Key = tuple[str, ...]
 IntArray = npt.NDArray[np.intp]
 BoolArray = npt.NDArray[np.bool_]
-# flight geometry m, operational volume m, plan start s, plan end s; per operation
-_Limits = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+# flight geometry m, operational volume m, plan start s, plan end s, slowest and fastest
+# progress along the plan (along_track.py); per operation
+_Limits = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 
 
 @dataclass(slots=True)
@@ -344,10 +347,12 @@ class Monitor:
         fresh_ids = [cols.operation_ids[i] for i in rows.tolist()]
         ev.fresh_parts.append(fresh_ids)
         ops = [snapshot.operations[o] for o in fresh_ids]
-        table, anchors, (fg, ovol, start, end) = self._conformance_table(ops)
+        table, anchors, (fg, ovol, start, end, slow, fast) = self._conformance_table(ops)
         pos = cols.pos[rows]  # m
         ts = cols.t_s[rows]  # s
-        dist = plan_distance(table, pos, ts, cfg.conformance_time_tolerance_s)  # m
+        # a fixed wing flying its own cruise is re-timed along its track (along_track.py)
+        window = plan_time_window(ts, start, slow, fast, cfg.conformance_time_tolerance_s)
+        dist = plan_distance(table, pos, ts, cfg.conformance_time_tolerance_s, window)  # m
         gated = np.zeros(len(ops), bool)
         if cfg.gate_takeoff_landing:
             # Near the first or last waypoint or home (NaN when none), horizontally within
@@ -398,6 +403,7 @@ class Monitor:
             np.array([o.operational_volume_m for o in ops]),  # m
             np.array([o.plan.start_t_s for o in ops]),  # s
             np.array([o.plan.end_t_s for o in ops]),  # s
+            *progress_ratios(ops),
         )
         self._conf_cache = (ops, table, anchors, limits)
         return table, anchors, limits

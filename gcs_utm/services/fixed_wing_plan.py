@@ -1,0 +1,164 @@
+"""A fixed wing's mission as the autopilot flies it, as the points of its 4D plan
+(docs/autopilots.md, "Fixed wings: take-off, loiters, landing"). Pure.
+
+A multirotor flies a mission's items as points: it climbs on the spot at NAV_TAKEOFF and
+hovers at a loiter. A fixed wing cannot:
+- **NAV_TAKEOFF** (no position of its own: "here") is a climb-out from where the vehicle
+  stands along the take-off heading, the heading to the next waypoint, to the take-off
+  altitude: the climb ends ``height / tan(pitch)`` ahead with the item's minimum pitch
+  (param1), else ``height * speed / climb_rate`` (at most at the next waypoint), not above
+  home; the first :data:`ROLL_FRACTION` of that run is the ground roll (a point on the
+  ground, "no position of its own"). ArduPlane and PX4 (runway take-off) both climb straight
+  out and turn only after it (measured on ArduPlane 4.6 SITL, param1 15 deg, 30 m: lift-off
+  about 40 m out, 30 m reached 111 m out, where 30 / tan(15 deg) = 112 m; a straight line
+  from the start put the rolling plane 10.3 m below it, outside its flight geometry).
+- **NAV_LOITER_TO_ALT** (31) is a circle around its position (radius: the item's, else the
+  vehicle's default loiter radius) flown until the altitude is reached at the climb
+  (descent) rate; **NAV_LOITER_TURNS** (18) that many turns at the item's altitude;
+  **NAV_LOITER_TIME** (19) a circle for that long. Circles are points every 45 degrees
+  (a chord is at most 8 % of the radius inside the arc), clockwise (a negative radius:
+  counter-clockwise, as both autopilots take it), entered at the point nearest the
+  previous one.
+- a **landing sequence** (DO_LAND_START, its approach waypoints, NAV_LAND) is already a
+  descent along the track: its points are kept as they are.
+Every point made from an item keeps the item's mission seq (the plan from the current item
+on includes the whole of a circle being flown).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Protocol, Self, TypeVar
+
+NAV_LOITER_UNLIM = 17
+NAV_LOITER_TURNS = 18
+NAV_LOITER_TIME = 19
+NAV_TAKEOFF = 22
+NAV_LOITER_TO_ALT = 31
+LOITER_COMMANDS = frozenset({NAV_LOITER_TURNS, NAV_LOITER_TIME, NAV_LOITER_TO_ALT})
+ROLL_FRACTION = 0.35
+"""The part of the take-off run on the ground (ArduPlane 4.6 SITL: 40 of 111 m)."""
+_STEP_RAD = math.pi / 4.0  # circle points every 45 degrees
+_MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
+_M_PER_DEG_LAT = 110_540.0
+_M_PER_DEG_LON = 111_320.0
+
+
+class Point(Protocol):
+    """What this module reads and writes of a mission point (vehicle_ops.NavPoint)."""
+
+    @property
+    def seq(self) -> int: ...
+    @property
+    def lat_deg(self) -> float: ...
+    @property
+    def lon_deg(self) -> float: ...
+    @property
+    def alt_amsl_m(self) -> float: ...
+    @property
+    def speed_mps(self) -> float: ...
+    @property
+    def explicit(self) -> bool: ...
+    @property
+    def command(self) -> int: ...
+    @property
+    def radius_m(self) -> float: ...
+    @property
+    def amount(self) -> float: ...
+    def moved(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> Self: ...
+    def synthetic(self) -> Self: ...
+
+
+P = TypeVar("P", bound=Point)
+
+
+def _offset(p: Point, east_m: float, north_m: float) -> tuple[float, float]:
+    k = math.cos(math.radians(p.lat_deg))
+    return (
+        p.lat_deg + north_m / _M_PER_DEG_LAT,
+        p.lon_deg + east_m / (_M_PER_DEG_LON * k),
+    )
+
+
+def _east_north(a: Point, b: Point) -> tuple[float, float]:
+    """b relative to a, metres east and north (flat earth: mission legs are short)."""
+    k = math.cos(math.radians(a.lat_deg))
+    return (b.lon_deg - a.lon_deg) * _M_PER_DEG_LON * k, (b.lat_deg - a.lat_deg) * _M_PER_DEG_LAT
+
+
+def fixed_wing_points(
+    points: Sequence[P],
+    *,
+    ground_alt_m: float | None,
+    climb_rate_mps: float,
+    descent_rate_mps: float,
+    loiter_radius_m: float,
+) -> list[P]:
+    """``points`` (mission order, AMSL) as a fixed wing flies them (module docstring).
+    ``ground_alt_m``: where a take-off starts (the vehicle's home; None: the point before)."""
+    out: list[P] = []
+    for i, p in enumerate(points):
+        if p.command == NAV_TAKEOFF and not p.explicit:
+            out.extend(_climb_out(p, out[-1] if out else None, points[i + 1 :], ground_alt_m,
+                                  climb_rate_mps))  # fmt: skip
+        elif p.command in LOITER_COMMANDS and out:
+            rate = climb_rate_mps if p.alt_amsl_m >= out[-1].alt_amsl_m else descent_rate_mps
+            out.extend(_circle(p, out[-1], rate, loiter_radius_m))
+        else:
+            out.append(p)
+    return out
+
+
+def _climb_out(
+    p: P, before: Point | None, after: Sequence[Point], ground_alt_m: float | None, rate: float
+) -> list[P]:
+    """The ground roll's end and the end of the take-off climb: along the heading to the next
+    waypoint with a position of its own; where it is (a vertical climb) without one."""
+    nxt = next((q for q in after if q.explicit), None)
+    base = before.alt_amsl_m if before is not None else ground_alt_m
+    if nxt is None or base is None:
+        return [p]
+    height_m = p.alt_amsl_m - base
+    east, north = _east_north(p, nxt)
+    to_next_m = math.hypot(east, north)
+    if height_m <= 0.0 or to_next_m < 1.0:
+        return [p]
+    if 1.0 <= p.amount < 89.0:  # the take-off's minimum pitch, degrees
+        run_m = height_m / math.tan(math.radians(p.amount))
+    else:
+        run_m = height_m * max(p.speed_mps, 0.1) / max(rate, 0.1)
+    run_m = min(to_next_m, run_m)
+    roll_m = ROLL_FRACTION * run_m
+    ux, uy = east / to_next_m, north / to_next_m
+    lat_r, lon_r = _offset(p, ux * roll_m, uy * roll_m)
+    lat, lon = _offset(p, ux * run_m, uy * run_m)
+    return [p.moved(lat_r, lon_r, base).synthetic(), p.moved(lat, lon, p.alt_amsl_m)]
+
+
+def _circle(p: P, before: Point, rate: float, default_radius_m: float) -> list[P]:
+    """A loiter item as points on its circle (module docstring)."""
+    radius = p.radius_m if p.radius_m != 0.0 else default_radius_m
+    r = abs(radius)
+    if r < 1.0:
+        return [p]
+    sense = -1.0 if radius > 0.0 else 1.0  # clockwise: the angle (from east) decreases
+    speed = max(p.speed_mps, 0.1)
+    turn_s = 2.0 * math.pi * r / speed
+    if p.command == NAV_LOITER_TO_ALT:
+        turns = abs(p.alt_amsl_m - before.alt_amsl_m) / max(rate, 0.1) / turn_s
+    elif p.command == NAV_LOITER_TIME:
+        turns = max(p.amount, 0.0) / turn_s
+    else:
+        turns = max(p.amount, 0.0)
+    steps = max(1, math.ceil(min(turns, _MAX_TURNS) * 2.0 * math.pi / _STEP_RAD))
+    east, north = _east_north(p, before)
+    start = math.atan2(north, east) if math.hypot(east, north) > 0.0 else 0.0
+    z0 = before.alt_amsl_m if p.command == NAV_LOITER_TO_ALT else p.alt_amsl_m
+    out: list[P] = []
+    for k in range(steps + 1):
+        a = start + sense * k * _STEP_RAD
+        lat, lon = _offset(p, r * math.cos(a), r * math.sin(a))
+        alt = z0 + (p.alt_amsl_m - z0) * k / steps
+        out.append(p.moved(lat, lon, alt))
+    return out
