@@ -29,6 +29,7 @@ from gcs_utm.core.emergency.decision import (
     Case,
     Decision,
 )
+from gcs_utm.core.emergency.expiry import expire
 from gcs_utm.core.emergency.geofences import area, link_loss, suspend
 from gcs_utm.core.emergency.immediate import held_by, keep_all, propose, too_late
 from gcs_utm.core.emergency.lead import ResponseTimes
@@ -231,22 +232,11 @@ class EmergencyManager:
         return d.merge(self._replan(new, snapshot, "rejected"))
 
     def on_expired(self, rec: Recommendation, snapshot: AirspaceSnapshot) -> Decision:
-        now = snapshot.t_s
-        cur = self._recs.get(rec.id)
-        if (
-            cur is None
-            or cur.version != rec.version
-            or cur.state is not RecommendationState.PROPOSED
-        ):
-            return Decision()
-        new = cur.transition(RecommendationState.EXPIRED, now, "no answer before the deadline")
-        self._recs[new.id] = new
-        msg = f"{rec.id} v{rec.version} ({rec.operation_id}) expired without an answer"
-        d = Decision(
-            recommendations=(new,),
-            escalations=(msg,),
-            audit=(self.audit(now, "expired", rec.id, {"version": rec.version}),),
-        )
+        """No answer in time: see :mod:`.expiry` (the safe command proposed again, or a
+        re-plan as after a rejection: ``expiry_action``)."""
+        d, new = expire(self, rec, snapshot)
+        if new is None or self.config.expiry_action != "replan":
+            return d
         return d.merge(self._replan(new, snapshot, "expired"))
 
     def on_threat_closed(self, threat: Threat) -> Decision:
