@@ -12,7 +12,9 @@ Binding rule (what a key acts on):
 - the USM refuses an answer to a version that is no longer proposed or past its deadline.
 
 Deadlines are shown in wall-clock seconds (the clock's seconds divided by its speed) and
-counted down at every refresh; under 10 s the prompt turns red.
+counted down at every refresh; under 10 s the prompt turns red. A recommendation that expires
+unanswered raises an alarm (:mod:`.alarm`): a red banner naming it and what followed (EM's
+re-proposal), a notification and the terminal bell. ``d`` shows or hides the raw scores.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from textual.css.query import NoMatches
 from textual.events import Resize
 from textual.widgets import Footer, Header, Static
 
+from gcs_utm.dashboard.alarm import ExpiryAlarms
 from gcs_utm.dashboard.view import (
     DashboardData,
     Minima,
@@ -62,12 +65,14 @@ class DashboardApp(App[None]):
     #left { width: 2fr; }
     #right { width: 1fr; }
     #prompt { height: auto; }
+    #alarm { height: auto; background: red; color: white; text-style: bold; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("a", "accept", "Accept highlighted"),
         Binding("r", "reject", "Reject"),
         Binding("n", "next_alternative", "Next option"),
         Binding("p", "prev_alternative", "Prev option"),
+        Binding("d", "details", "Scores"),
         Binding("tab", "next_pending", "Next pending"),
         Binding("q", "quit", "Quit"),
     ]
@@ -100,17 +105,31 @@ class DashboardApp(App[None]):
         self.ignored_keys = 0
         self.quit_requested = False
         self._mounted_once = False
+        self.alarms = ExpiryAlarms()
+        self._details = False
 
     # ---- OperatorPort ----------------------------------------------------------------------
     async def present(self, rec: Recommendation) -> None:
         if rec.id not in self._queue:
             self._queue.append(rec.id)
+        if line := self.alarms.proposed(rec, self._monotonic()):
+            self._alarm(line)
         self._refresh_view()
 
     async def update(self, rec: Recommendation) -> None:
         if rec.state is not RecommendationState.PROPOSED and rec.id in self._queue:
             self._queue.remove(rec.id)
+        if rec.state is RecommendationState.EXPIRED:
+            self._alarm(self.alarms.expired(rec, self._monotonic()))
         self._refresh_view()
+
+    def _alarm(self, line: str) -> None:
+        """Make an expiry impossible to miss: bell, notification (the banner is drawn by
+        the refresh)."""
+        _log.warning("%s", line)
+        if self._mounted_once:
+            self.bell()
+            self.notify(line, severity="error", timeout=10.0)
 
     # ---- layout ------------------------------------------------------------------------------
     def compose(self) -> ComposeResult:
@@ -124,6 +143,7 @@ class DashboardApp(App[None]):
                 yield Static(id="map")
                 yield Static(id="legend")
                 yield Static(id="events")
+        yield Static(id="alarm")
         yield Static(id="prompt")
         yield Footer()
 
@@ -178,6 +198,9 @@ class DashboardApp(App[None]):
             self.query_one("#map", Static).update(top_view(d, width=map_w, height=map_h))
             self.query_one("#legend", Static).update(map_legend(d))
             self.query_one("#events", Static).update(events_text(d))
+        alarm = self.query_one("#alarm", Static)
+        alarm.update(self.alarms.current(self._monotonic()))
+        alarm.display = bool(self.alarms.current(self._monotonic()))
         prompt = self.query_one("#prompt", Static)
         if rec is None:
             prompt.update("")
@@ -186,7 +209,12 @@ class DashboardApp(App[None]):
         prompt.display = True
         prompt.update(
             recommendation_panel(
-                rec, d, viewing=self._row(rec), queue=len(self._queue), note=self._note
+                rec,
+                d,
+                viewing=self._row(rec),
+                queue=len(self._queue),
+                note=self._note,
+                details=self._details,
             )
         )
 
@@ -224,6 +252,7 @@ class DashboardApp(App[None]):
             )
         )
         self.outcomes.append(outcome)
+        self.alarms.acknowledge()
         if outcome.reason:
             self.notify(f"{rec.id} v{rec.version}: {outcome.status.value} ({outcome.reason})")
         self._refresh_view()
@@ -248,6 +277,11 @@ class DashboardApp(App[None]):
 
     def action_prev_alternative(self) -> None:
         self._move(-1)
+
+    def action_details(self) -> None:
+        """Show or hide the raw scores (cost, risk, scoring terms) under the words."""
+        self._details = not self._details
+        self._refresh_view()
 
     def action_next_pending(self) -> None:
         if len(self._queue) > 1:
