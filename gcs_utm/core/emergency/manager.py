@@ -18,6 +18,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 from gcs_utm.core.deconfliction import TacticalDeconfliction
+from gcs_utm.core.emergency.clearance import with_clearance
 from gcs_utm.core.emergency.config import EmergencyConfig
 from gcs_utm.core.emergency.decision import (
     ACTOR,
@@ -557,13 +558,14 @@ class EmergencyManager:
             shown = [
                 x for x in options[op_id] if x is not alt and all(compatible(x, c) for c in others)
             ]
+            ops = case.operations  # the separation each option keeps from the others' choice
             d = d.merge(
                 self.issue(
                     case,
                     op_id,
                     now,
-                    selected=alt,
-                    alternatives=shown,
+                    selected=with_clearance(self.td, ops, others, alt),
+                    alternatives=[with_clearance(self.td, ops, others, x) for x in shown],
                     reason=f"{t.kind.value}: {alt.maneuver.value} (joint selection, "
                     f"score {sel.total:.3f})",
                 )
