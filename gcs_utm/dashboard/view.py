@@ -279,12 +279,10 @@ def _predicted(rec: Recommendation, d: DashboardData) -> str:
     return what
 
 
-def _prompt_head(rec: Recommendation, d: DashboardData, left_s: float, alarm: str) -> Text:
-    """The prompt's top lines: alarm, threat, prediction, proposal, why, time left."""
+def _prompt_head(rec: Recommendation, d: DashboardData, left_s: float) -> Text:
+    """The prompt's top lines: threat, prediction, proposal, why, time left."""
     urgent = left_s < 10.0
     head = Text()
-    if alarm:
-        head.append(alarm + "\n", style="bold white on red")
     head.append(f"{rec.threat_kind.value}", style="bold red")
     head.append(f"  UAS {rec.operation_id}  recommendation {rec.id} v{rec.version}\n")
     head.append("Predicted: ", style="bold")
@@ -348,19 +346,20 @@ def recommendation_panel(
     keys: str | None = None,
     note: str = "",
     details: bool = False,
-    alarm: str = "",
 ) -> Panel:
     """The pilot prompt: what is predicted, each option as an action and its effect in the
     pilot's words (row ``viewing`` highlighted: it is what ``a`` accepts), why the proposed
     one, the wall-clock time left and how to answer. ``details`` adds the raw scores (cost,
     risk, the scoring terms, EM's reason). ``keys`` replaces the key line (e.g. for a line
     prompt); an empty string says that nothing on this screen answers. ``note`` is shown in
-    bold (e.g. "key ignored"), ``alarm`` (an expiry) as a red banner on top."""
+    bold (e.g. "key ignored")."""
     left_s = max(0.0, wall_s(d, rec.deadline_t_s - d.t_s))
-    head = _prompt_head(rec, d, left_s, alarm)
+    head = _prompt_head(rec, d, left_s)
     head.append(f"   {queue} pending")
-    parts: list[RenderableType] = [head, _options_table(rec, viewing, details)]
+    parts: list[RenderableType] = [head]
     options = options_of(rec)
+    if options:
+        parts.append(_options_table(rec, viewing, details))
     if details and 0 <= viewing < len(options):
         alt = options[viewing]
         detail = Text(f"{viewing} {alt.maneuver.value}: ", style="bold")
@@ -376,7 +375,7 @@ def recommendation_panel(
     return Panel(
         Group(*parts),
         title=f"Pilot confirmation: {left_s:.0f} s left",
-        border_style="red" if left_s < 10.0 or alarm else "yellow",
+        border_style="red" if left_s < 10.0 else "yellow",
     )
 
 
