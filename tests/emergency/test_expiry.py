@@ -55,5 +55,5 @@ def test_replan_on_expiry_is_a_choice() -> None:
 
 
 def test_an_unknown_expiry_action_is_refused() -> None:
-    with pytest.raises(ValueError, match="emergency.expiry_action"):
+    with pytest.raises(ValueError, match=r"emergency\.expiry_action"):
         EmergencyConfig(expiry_action="execute")

@@ -164,3 +164,29 @@ def test_why_names_what_made_the_proposed_option_the_choice() -> None:
     )
     hold = _rec(None, command=Command(kind=CommandKind.HOLD, operation_id=OP), reason="expired")
     assert why_text(hold) == "safe command: expired"
+
+
+def test_a_joint_decision_words_the_separation_from_the_other_uas_in_metres() -> None:
+    """TD scores options against traffic outside the conflict; the words say how far each
+    option keeps from the other UAS's chosen plan, against the pair's effective minima (the
+    vertical minimum is the sum of the operational volumes here, not the configured one)."""
+    import sys
+    from pathlib import Path
+
+    from gcs_utm.bench import deconfliction as sc
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_em import MON, make_em
+
+    snap, threat = sc.scenario_los_2uas()
+    ops = snap.operations
+    floor_m = sum(o.operational_volume_m for o in ops.values())
+    h_min, v_min = MON.effective_minima(*(o.operational_volume_m for o in ops.values()))
+    assert v_min == floor_m > MON.separation_vertical_m  # the OV floor decides
+    (rec,) = make_em().on_threat(threat, snap).recommendations
+    other = next(k for k in threat.uas_ids if k != rec.operation_id)
+    for alt in (rec.selected, *rec.alternatives):
+        assert alt is not None and alt.closest is not None
+        assert alt.closest.other == other
+        assert (alt.closest.min_horizontal_m, alt.closest.min_vertical_m) == (h_min, v_min)
+        assert f"from {other} (min {h_min:.0f} m h / {v_min:.0f} m v)" in option_text(alt)

@@ -304,9 +304,9 @@ def score_many(  # noqa: C901, PLR0912, PLR0915 - every candidate scored in one 
             ratio = np.maximum(dh / nb.h_min_m, dv / nb.v_min_m)
         ratio[~ok] = np.inf
         per_plan = np.minimum.reduceat(ratio, s0)
-        for i in np.flatnonzero(per_plan < min_ratio):  # this neighbour is now the closest
-            k = int(s0[i]) + int(np.argmin(ratio[int(s0[i]) : int(s0[i] + cnt[i])]))
-            closest[int(i)] = Closest(
+        for j in np.flatnonzero(per_plan < min_ratio).tolist():  # this neighbour is closer
+            k = int(s0[j]) + int(np.argmin(ratio[int(s0[j]) : int(s0[j] + cnt[j])]))
+            closest[j] = Closest(
                 other=nb.name,
                 horizontal_m=float(dh[k]),
                 vertical_m=float(dv[k]),
