@@ -43,14 +43,15 @@ class ExpiryAlarms:
         return self.text(rec.id)
 
     def proposed(self, rec: Recommendation, now_wall_s: float) -> str:
-        """A new proposal: when it follows an expiry of the same id, the alarm says so and
-        its line is returned ("" otherwise)."""
+        """A new proposal: when it follows an expiry of the same id, the alarm says so (see
+        :meth:`text`) and a line announcing it is returned ("" otherwise)."""
         alarm = self._alarms.get(rec.id)
         if alarm is None or rec.version <= alarm.version:
             return ""
-        alarm.next = f"v{rec.version} proposed instead: {proposal_text(rec)}; answer it now"
+        what = f"{proposal_text(rec)}; answer it now"
+        alarm.next = f"v{rec.version} proposed instead: {what}"
         alarm.at_wall_s = now_wall_s
-        return self.text(rec.id)
+        return f"!!! {rec.id} v{rec.version} proposed instead of expired v{alarm.version}: {what}"
 
     def text(self, rec_id: RecommendationId) -> str:
         alarm = self._alarms.get(rec_id)

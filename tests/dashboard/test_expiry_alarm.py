@@ -117,4 +117,7 @@ async def test_the_line_prompt_shows_words_and_a_loud_expiry() -> None:
     await usm.expire_due()
     assert "!!! EXPIRED t1/UAS1 v1 (UAS1): nobody answered in time (Turn left" in buf.getvalue()
     await usm.on_recommendation(_hold())  # type: ignore[arg-type]
-    assert "v2 proposed instead: Hold at the current position" in buf.getvalue()
+    assert (
+        "!!! t1/UAS1 v2 proposed instead of expired v1: Hold at the current position"
+        in buf.getvalue()
+    )
