@@ -63,10 +63,20 @@ class ExpiryAlarms:
             f"in time ({alarm.proposed}). {nxt}"
         )
 
+    def _live(self, now_wall_s: float) -> list[RecommendationId]:
+        return [k for k, a in self._alarms.items() if now_wall_s - a.at_wall_s < self.hold_s]
+
     def current(self, now_wall_s: float) -> str:
         """The newest alarm still up ("" when none)."""
-        live = [k for k, a in self._alarms.items() if now_wall_s - a.at_wall_s < self.hold_s]
+        live = self._live(now_wall_s)
         return self.text(live[-1]) if live else ""
+
+    def short(self, now_wall_s: float) -> str:
+        """The newest alarm still up in a few words, for a prompt's title ("" when none)."""
+        live = self._live(now_wall_s)
+        if not live:
+            return ""
+        return f"!!! EXPIRED {live[-1]} v{self._alarms[live[-1]].version}: nobody answered"
 
     def acknowledge(self) -> None:
         """The pilot answered: the alarms have been seen."""

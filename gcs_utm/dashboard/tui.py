@@ -13,8 +13,9 @@ Binding rule (what a key acts on):
 
 Deadlines are shown in wall-clock seconds (the clock's seconds divided by its speed) and
 counted down at every refresh; under 10 s the prompt turns red. A recommendation that expires
-unanswered raises an alarm (:mod:`.alarm`): a red banner naming it and what followed (EM's
-re-proposal), a notification and the terminal bell. ``d`` shows or hides the raw scores.
+unanswered raises an alarm (:mod:`.alarm`): a red banner naming it (in the title of the next
+prompt, EM's re-proposal, while one is shown), a notification and the terminal bell. ``d``
+shows or hides the raw scores.
 """
 
 from __future__ import annotations
@@ -126,7 +127,6 @@ class DashboardApp(App[None]):
     def _alarm(self, line: str) -> None:
         """Make an expiry impossible to miss: bell, notification (the banner is drawn by
         the refresh)."""
-        _log.warning("%s", line)
         if self._mounted_once:
             self.bell()
             self.notify(line, severity="error", timeout=10.0)
@@ -198,9 +198,12 @@ class DashboardApp(App[None]):
             self.query_one("#map", Static).update(top_view(d, width=map_w, height=map_h))
             self.query_one("#legend", Static).update(map_legend(d))
             self.query_one("#events", Static).update(events_text(d))
+        # the alarm in full when no prompt is up; with a prompt (the re-proposal), in its
+        # title: the prompt keeps its room at 80x24
+        now_wall_s = self._monotonic()
         alarm = self.query_one("#alarm", Static)
-        alarm.update(self.alarms.current(self._monotonic()))
-        alarm.display = bool(self.alarms.current(self._monotonic()))
+        alarm.update(self.alarms.current(now_wall_s))
+        alarm.display = rec is None and bool(self.alarms.current(now_wall_s))
         prompt = self.query_one("#prompt", Static)
         if rec is None:
             prompt.update("")
@@ -215,6 +218,7 @@ class DashboardApp(App[None]):
                 queue=len(self._queue),
                 note=self._note,
                 details=self._details,
+                alarm=self.alarms.short(now_wall_s),
             )
         )
 

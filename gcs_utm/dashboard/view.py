@@ -346,13 +346,14 @@ def recommendation_panel(
     keys: str | None = None,
     note: str = "",
     details: bool = False,
+    alarm: str = "",
 ) -> Panel:
     """The pilot prompt: what is predicted, each option as an action and its effect in the
     pilot's words (row ``viewing`` highlighted: it is what ``a`` accepts), why the proposed
     one, the wall-clock time left and how to answer. ``details`` adds the raw scores (cost,
     risk, the scoring terms, EM's reason). ``keys`` replaces the key line (e.g. for a line
     prompt); an empty string says that nothing on this screen answers. ``note`` is shown in
-    bold (e.g. "key ignored")."""
+    bold (e.g. "key ignored"); ``alarm`` (an expiry, in a few words) heads the title."""
     left_s = max(0.0, wall_s(d, rec.deadline_t_s - d.t_s))
     head = _prompt_head(rec, d, left_s)
     head.append(f"   {queue} pending")
@@ -372,10 +373,13 @@ def recommendation_panel(
     keys = _key_line(rec, viewing, details) if keys is None else keys
     if keys:
         parts.append(Text(keys, style="bold"))
+    title = Text(f"Pilot confirmation: {left_s:.0f} s left")
+    if alarm:
+        title = Text.assemble((alarm, "bold white on red"), "  ", title)
     return Panel(
         Group(*parts),
-        title=f"Pilot confirmation: {left_s:.0f} s left",
-        border_style="red" if left_s < 10.0 else "yellow",
+        title=title,
+        border_style="red" if left_s < 10.0 or alarm else "yellow",
     )
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 from rich.console import Console
 
 from gcs_utm.clock import ManualClock
+from gcs_utm.dashboard.headless import HeadlessView
 from gcs_utm.dashboard.line import LinePrompt
 from gcs_utm.dashboard.tui import DashboardApp
 from gcs_utm.dashboard.view import Minima
@@ -80,14 +81,19 @@ async def test_an_expiry_raises_the_alarm_then_the_reproposal_is_shown_and_audit
         await usm.on_recommendation(_hold())  # type: ignore[arg-type]
         await pilot.pause()
         text = " ".join(screen_text(app).split())  # the banner wraps
-        assert "v2 proposed instead: Hold at the current position" in text
+        assert "!!! EXPIRED t1/UAS1 v1: nobody answered" in text  # heads the new prompt
         assert "Proposed command: Hold at the current position" in text
         assert bells == [1, 1]
+        assert app.alarms.current(mono.t_s).endswith(
+            "v2 proposed instead: Hold at the current position (brake and hover; a fixed wing "
+            "circles); answer it now"
+        )
         # the banner stays up until answered (or 30 s without news)
         mono.t_s += 2.0
         await pilot.press("a")
         await pilot.pause()
         assert not app.query_one("#alarm").display
+        assert "!!! EXPIRED" not in screen_text(app)
     audit = _audit(records)
     assert [(action, version) for action, version, _ in audit] == [
         ("recommendation_expired", 1),
@@ -121,3 +127,38 @@ async def test_the_line_prompt_shows_words_and_a_loud_expiry() -> None:
         "!!! t1/UAS1 v2 proposed instead of expired v1: Hold at the current position"
         in buf.getvalue()
     )
+
+
+async def test_at_80x24_the_alarm_heads_the_reproposal_and_the_prompt_fits() -> None:
+    usm, _records = _usm_recording()
+    mono = FakeMonotonic()
+    app = DashboardApp(usm, _tracks, refresh_s=0.1, monotonic=mono)
+    usm.attach_operator(app)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await usm.on_recommendation(_rec(deadline_t_s=25.0))
+        usm.clock.advance(16.0)  # type: ignore[attr-defined]
+        await usm.expire_due()
+        await pilot.pause()
+        assert app.query_one("#alarm").display  # nothing else to show: the full banner
+        mono.t_s += 1.0
+        await usm.on_recommendation(_rec(2, deadline_t_s=45.0))  # re-planned (replan)
+        await pilot.pause()
+        prompt = app.query_one("#prompt")
+        assert prompt.region.bottom <= 23  # above the footer, border included
+        text = screen_text(app)
+    assert "!!! EXPIRED t1/UAS1 v1: nobody answered" in text
+    assert "recommendation t1/UAS1 v2" in text and "[a] accept 0 go_left" in text
+
+
+async def test_the_headless_view_prints_a_loud_expiry() -> None:
+    usm, _records = _usm_recording()
+    buf = StringIO()
+    view = HeadlessView(usm, _tracks, Console(file=buf, width=200, color_system=None))
+    usm.attach_operator(view)
+    await usm.on_recommendation(_rec(deadline_t_s=25.0))
+    usm.clock.advance(16.0)  # type: ignore[attr-defined]
+    await usm.expire_due()
+    await usm.on_recommendation(_hold())  # type: ignore[arg-type]
+    out = buf.getvalue()
+    assert "!!! EXPIRED t1/UAS1 v1 (UAS1): nobody answered in time (Turn left" in out
+    assert "!!! t1/UAS1 v2 proposed instead of expired v1: Hold at the current position" in out
