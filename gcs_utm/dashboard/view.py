@@ -291,7 +291,9 @@ def _prompt_head(rec: Recommendation, d: DashboardData, left_s: float) -> Text:
         head.append(f"Proposed: {action_text(rec.selected)}", style="bold")
         head.append(f" ({rec.selected.maneuver.value})\n")
     elif rec.command is not None:
-        head.append(f"Proposed command: {command_text(rec.command)}\n", style="bold")
+        track = d.tracks.get(TrackId(rec.operation_id))
+        what = command_text(rec.command, None if track is None else track.alt_amsl_m)
+        head.append(f"Proposed command: {what}\n", style="bold")
     head.append("Why: ", style="bold")
     head.append(why_text(rec) + "\n")
     head.append(

@@ -131,6 +131,16 @@ def test_commands_read_as_what_the_vehicle_does(cmd: Command, text: str) -> None
     assert command_text(cmd) == text
 
 
+def test_a_goto_in_place_says_climb_or_descend_by_how_much_when_the_altitude_is_known() -> None:
+    goto = Command(
+        kind=CommandKind.GOTO,
+        operation_id=OP,
+        target=Position(lat_deg=60.0, lon_deg=24.0, alt_amsl_m=152.4),
+    )
+    assert command_text(goto, 120.0) == "Climb 32 m in place to 152 m AMSL and hover"
+    assert command_text(goto, 180.0) == "Descend 28 m in place to 152 m AMSL and hover"
+
+
 def _rec(selected: Alternative | None, *alternatives: Alternative, **kw: object) -> Recommendation:
     return Recommendation(
         id=RecommendationId("t1/UAS1"),

@@ -124,10 +124,15 @@ def option_text(alt: Alternative) -> str:
     return f"{action_text(alt)}: {effect}" if effect else action_text(alt)
 
 
-def command_text(cmd: Command) -> str:
-    """A command as what the vehicle will do (a GOTO in place names its altitude)."""
+def command_text(cmd: Command, alt_now_amsl_m: float | None = None) -> str:
+    """A command as what the vehicle will do (a GOTO in place names its altitude, and with
+    the UAS's altitude now, whether it climbs or descends and by how much)."""
     if cmd.kind is CommandKind.GOTO and cmd.target is not None:
-        return f"Climb or descend in place to {cmd.target.alt_amsl_m:.0f} m AMSL and hover"
+        to = cmd.target.alt_amsl_m
+        if alt_now_amsl_m is None:
+            return f"Climb or descend in place to {to:.0f} m AMSL and hover"
+        verb = "Climb" if to >= alt_now_amsl_m else "Descend"
+        return f"{verb} {abs(to - alt_now_amsl_m):.0f} m in place to {to:.0f} m AMSL and hover"
     return _COMMANDS.get(cmd.kind, cmd.kind.value)
 
 
