@@ -115,11 +115,6 @@ def _number(x: float) -> str:
     return str(int(x)) if x.is_integer() and abs(x) < 1e16 else repr(x)
 
 
-def field_docs(cls: type[Any]) -> dict[str, str]:
-    """Field name -> doc of a settings dataclass."""
-    return {f.name: str(f.metadata.get("doc", "")) for f in dataclasses.fields(cls)}
-
-
 def has_default(f: dataclasses.Field[Any]) -> bool:
     return f.default is not MISSING or f.default_factory is not MISSING
 

@@ -17,7 +17,7 @@ from adapters.mavlink.traffic_out import TrafficOutConfig
 from adapters.mqtt.config import MqttConfig
 from adapters.remoteid.config import RemoteIdConfig
 from gcs_utm.cluster.config import ClusterConfig
-from gcs_utm.config import ConfigError, build, load_toml, render_toml, setting
+from gcs_utm.config import ConfigError, build, load_toml, setting
 from gcs_utm.core.deconfliction.config import DeconflictionConfig
 from gcs_utm.core.emergency.config import EmergencyConfig
 from gcs_utm.core.monitoring.config import MonitoringConfig
@@ -107,7 +107,3 @@ def load_settings(path: str | Path | None = None) -> Settings:
     settings = settings_from_mapping(load_toml(path), source=str(path))
     check_settings(settings, source=str(path))
     return settings
-
-
-def default_toml() -> str:
-    return render_toml(SECTIONS)

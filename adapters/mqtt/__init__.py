@@ -5,7 +5,6 @@
   JSON, schemas, the error type), :mod:`.topics` (topic names) and :mod:`.encode` (outbound).
 - :mod:`adapters.mqtt.answers`: :class:`AnswerBook`, the id+version matching rules of pilot
   answers (pure, reusable by the USM).
-- :mod:`adapters.mqtt.paper`: conversion of the paper's original message templates.
 - :mod:`adapters.mqtt.bridge`: the aiomqtt client with reconnect, bounded outgoing queue and
   error reporting.
 """

@@ -1,7 +1,7 @@
 """The mosquitto ACL that enforces per-operator topics (rendered, so docs and tests use the
 same text). An operator's broker user name IS its operator name: mosquitto's ``%u`` pattern
 binds ``<prefix>/operators/<user>/...`` to the authenticated user, so one operator cannot
-publish answers, plans or states for another's UAS, nor read another's recommendations.
+publish answers, commands, plans or states for another's UAS, nor read another's recommendations.
 """
 
 from __future__ import annotations
@@ -56,6 +56,7 @@ def mosquitto_acl(
         f"pattern write {p}/operators/%u/flight_plans",
         f"pattern write {p}/operators/%u/flight_status",
         f"pattern write {p}/operators/%u/answers",
+        f"pattern write {p}/operators/%u/commands",
         f"pattern read {p}/operators/%u/alerts",
         f"pattern read {p}/operators/%u/recommendations",
         f"pattern read {p}/operators/%u/status",

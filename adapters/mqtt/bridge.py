@@ -50,15 +50,18 @@ import aiomqtt
 from adapters.mqtt.answers import AnswerOutcome
 from adapters.mqtt.client import session_client
 from adapters.mqtt.codec import (
+    CommandAck,
     FlightPlanSubmission,
     FlightStatusReport,
     Inbound,
     MqttMessageError,
+    OperatorCommandRequest,
     RpaState,
     Topics,
     decode,
     encode_alert,
     encode_bridge_status,
+    encode_command_status,
     encode_error,
     encode_geofence_event,
     encode_geofences,
@@ -112,6 +115,11 @@ class MqttHandler(Protocol):
 
     async def on_flight_status(self, s: FlightStatusReport) -> None: ...
 
+    async def on_operator_command(self, c: OperatorCommandRequest) -> CommandAck:
+        """An operator's hold / land / rtl / resume (``c.operator`` is the topic's operator).
+        Return what became of it; the bridge publishes it on the operator's status topic."""
+        ...
+
 
 @dataclass(slots=True)
 class BridgeStats:
@@ -162,6 +170,7 @@ class MqttBridge:
         self._connected = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
         self._abandoned: set[asyncio.Task[None]] = set()
+        self._commands: set[asyncio.Task[None]] = set()  # operator commands being carried out
         self._rec_operator: dict[RecommendationId, str] = {}
         # recommendations still waiting for an answer: re-published on every reconnect
         self._outstanding: dict[RecommendationId, tuple[Recommendation, str]] = {}
@@ -240,7 +249,15 @@ class MqttBridge:
         return ceiling / 2.0 + self._rng.uniform(0.0, ceiling / 2.0)
 
     async def run(self) -> None:
-        """Connect, serve, reconnect forever (until cancelled)."""
+        """Connect, serve, reconnect forever (until cancelled; operator commands still being
+        carried out are cancelled with it)."""
+        try:
+            await self._run()
+        finally:
+            for task in list(self._commands):
+                task.cancel()
+
+    async def _run(self) -> None:
         failures = 0
         while True:
             connects_before = self.stats.connects
@@ -443,6 +460,43 @@ class MqttBridge:
         )
         self._enqueue(self.topics.status(operator), payload, qos=QOS_AT_LEAST_ONCE)
 
+    async def _operator_command(self, topic: str, c: OperatorCommandRequest) -> None:
+        """Carry out one operator command and publish its outcome; report, never raise."""
+        try:
+            ack = await self._handler.on_operator_command(c)
+        except ValueError as exc:
+            self.stats.rejected += 1
+            self.publish_error(topic, "", f"refused: {exc}")
+            return
+        except Exception as exc:
+            self.stats.handler_errors += 1
+            _log.exception("mqtt: operator command from %s failed", c.operator)
+            self.publish_error(topic, "", f"internal error while handling: {type(exc).__name__}")
+            return
+        _log.info(
+            "mqtt: command %s %s id %s from %s: %s %s",
+            c.command,
+            c.uas,
+            c.request_id,
+            c.operator,
+            ack.outcome,
+            ack.reason,
+        )
+        self.publish_command_status(ack, c.operator)
+
+    def publish_command_status(self, ack: CommandAck, operator: str) -> None:
+        """The outcome of one operator command on ``operator``'s status topic (QoS 1)."""
+        payload = encode_command_status(
+            request_id=ack.request_id,
+            uas=ack.uas,
+            command=ack.command,
+            t_s=self._clock.now_s(),
+            outcome=ack.outcome,
+            reason=ack.reason,
+            mode=ack.mode,
+        )
+        self._enqueue(self.topics.status(operator), payload, qos=QOS_AT_LEAST_ONCE)
+
     def publish_geofences(self, active: Iterable[Geofence]) -> None:
         """The complete active set, retained on ``<prefix>/geofences`` (a late subscriber
         gets it at once), plus one ``geofence_event`` per created/changed/removed geofence on
@@ -565,6 +619,11 @@ class MqttBridge:
                 outcome.reason,
             )
             self.publish_answer_outcome(outcome, msg.operator)
+        elif isinstance(msg, OperatorCommandRequest):
+            # in a task: a command waits for the vehicle, the next message must not
+            task = asyncio.create_task(self._operator_command(topic, msg))
+            self._commands.add(task)
+            task.add_done_callback(self._commands.discard)
         elif isinstance(msg, FlightPlanSubmission):
             await h.on_flight_plan(msg)
         else:

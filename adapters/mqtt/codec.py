@@ -19,11 +19,12 @@ its broker user name so the broker ACL can bind topics to identities)::
     in   P/operators/<op>/flight_plans    flight_plan      plan submission
     in   P/operators/<op>/flight_status   flight_status    start / stop
     in   P/operators/<op>/answers         pilot_answer     accept / reject (QoS 1)
+    in   P/operators/<op>/commands        operator_command hold / land / rtl / resume (QoS 1)
     in   P/surveillance/adsb              adsb             surveillance provider
     in   P/authority/alerts               airspace_alert   fire brigade / authority
     out  P/operators/<op>/alerts          alert            threats for that operator's UAS
     out  P/operators/<op>/recommendations recommendation   alternative plans (QoS 1)
-    out  P/operators/<op>/status          recommendation_status (QoS 1)
+    out  P/operators/<op>/status          recommendation_status, command_status (QoS 1)
     out  P/operators/<op>/errors          error            errors caused by that operator
     out  P/alerts                         alert            alerts for everyone
     out  P/geofences                      geofences        retained: all active geofences
@@ -44,6 +45,7 @@ from typing import Any
 from adapters.mqtt.encode import (
     encode_alert,
     encode_bridge_status,
+    encode_command_status,
     encode_error,
     encode_geofence_event,
     encode_geofences,
@@ -94,6 +96,30 @@ from gcs_utm.model import (
     normalise_icao24,
 )
 from gcs_utm.validation import altitude_problem, latlon_problem, polygon_problem, radius_problem
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class OperatorCommandRequest:
+    """An operator's hold / land / rtl / resume for one UAS (``operator`` from the topic)."""
+
+    uas: str
+    command: str
+    request_id: str
+    operator: str
+    t_s: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CommandAck:
+    """What became of an :class:`OperatorCommandRequest` (``outcome``: confirmed,
+    acknowledged, failed or refused; ``mode`` the vehicle reports, "" when unknown)."""
+
+    request_id: str
+    uas: str
+    command: str
+    outcome: str
+    reason: str = ""
+    mode: str = ""
 
 
 class FlightStatusKind(Enum):
@@ -245,7 +271,13 @@ class FlightPlanSubmission:
 
 
 Inbound = (
-    RpaState | Measurement | FlightStatusReport | FlightPlanSubmission | PilotAnswer | HazardReport
+    RpaState
+    | Measurement
+    | FlightStatusReport
+    | FlightPlanSubmission
+    | PilotAnswer
+    | HazardReport
+    | OperatorCommandRequest
 )
 
 
@@ -493,6 +525,18 @@ def _decode_pilot_answer(
     )
 
 
+def _decode_operator_command(
+    obj: dict[str, Any], topic: str, operator: str, receipt_t_s: float
+) -> OperatorCommandRequest:
+    return OperatorCommandRequest(
+        uas=str(obj["uas"]),
+        command=str(obj["command"]),
+        request_id=str(obj["id"]),
+        operator=operator,
+        t_s=float(obj.get("t_s", receipt_t_s)),
+    )
+
+
 def _decode_airspace_alert(
     obj: dict[str, Any], topic: str, operator: str, receipt_t_s: float
 ) -> HazardReport:
@@ -522,6 +566,7 @@ _DECODERS: dict[InboundKind, Callable[[dict[str, Any], str, str, float], Inbound
     InboundKind.FLIGHT_PLAN: _decode_flight_plan,
     InboundKind.PILOT_ANSWER: _decode_pilot_answer,
     InboundKind.AIRSPACE_ALERT: _decode_airspace_alert,
+    InboundKind.OPERATOR_COMMAND: _decode_operator_command,
 }
 
 
@@ -532,12 +577,14 @@ __all__ = [
     "OUTBOUND_OPERATOR_LEAVES",
     "OUTBOUND_TYPES",
     "SCHEMA_VERSION",
+    "CommandAck",
     "FlightPlanSubmission",
     "FlightStatusKind",
     "FlightStatusReport",
     "GnssIntegrity",
     "InboundKind",
     "MqttMessageError",
+    "OperatorCommandRequest",
     "RpaState",
     "Topics",
     "decode",
@@ -545,6 +592,7 @@ __all__ = [
     "dumps",
     "encode_alert",
     "encode_bridge_status",
+    "encode_command_status",
     "encode_error",
     "encode_geofence_event",
     "encode_geofences",

@@ -146,6 +146,24 @@ def encode_recommendation_status(
     )
 
 
+def encode_command_status(
+    *, request_id: str, uas: str, command: str, t_s: float, outcome: str, reason: str, mode: str
+) -> bytes:
+    """The outcome of one operator command (``command_status``, on the status topic)."""
+    return dumps(
+        {
+            **_header("command_status"),
+            "id": request_id,
+            "uas": uas,
+            "command": command,
+            "t_s": t_s,
+            "outcome": outcome,
+            "reason": reason,
+            "mode": mode,
+        }
+    )
+
+
 def encode_geofences(active: Iterable[Geofence], t_s: float) -> bytes:
     return dumps(
         {**_header("geofences"), "t_s": t_s, "geofences": [geofence_json(g) for g in active]}

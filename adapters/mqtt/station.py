@@ -15,6 +15,10 @@ delivery"):
 - gcs-utm takes a repeated answer as a ``duplicate`` and changes nothing, so re-sending
   never changes a decision; it does add an ``answers`` row and an audit entry each time.
 
+Operator commands (hold, land, rtl, resume for one UAS) follow the same rule: each carries an
+id, is kept and re-sent until a ``command_status`` naming that id comes back on the ``status``
+topic, and gcs-utm carries out an id only once (a repeat gets the first outcome again).
+
 The session is MQTT 5 with a fixed client id, clean start off and the configured session
 expiry, subscriptions at QoS 1 (a broker that keeps the session delivers what was published
 while the station was away). Reconnects back off like the bridge's (equal jitter).
@@ -27,6 +31,7 @@ import contextlib
 import json
 import logging
 import random
+import uuid
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
@@ -55,6 +60,25 @@ class AnswerAck:
     outcome: str
     state: str | None
     reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class CommandAck:
+    """gcs-utm's outcome of one operator command: ``outcome`` is ``confirmed`` (the vehicle
+    reports the mode), ``acknowledged``, ``failed`` or ``refused`` (``reason`` says why)."""
+
+    request_id: str
+    uas: str
+    command: str
+    outcome: str
+    reason: str
+    mode: str
+
+
+@dataclass(slots=True)
+class _PendingCommand:
+    payload: bytes
+    acked: asyncio.Future[CommandAck]
 
 
 @dataclass(slots=True)
@@ -98,6 +122,7 @@ class PilotStation:
         # why the last connection attempt failed or the connection dropped ("" if none yet)
         self.last_error = ""
         self._pending: dict[tuple[str, int], _Pending] = {}
+        self._commands: dict[str, _PendingCommand] = {}  # by request id, until acknowledged
         self._client: aiomqtt.Client | None = None
         self._task: asyncio.Task[None] | None = None
         self.connects = 0
@@ -164,6 +189,40 @@ class PilotStation:
             await self._send(key)
         return await asyncio.wait_for(asyncio.shield(pending.acked), timeout_s)
 
+    async def command(
+        self, uas: str, command: str, *, request_id: str = "", timeout_s: float | None = None
+    ) -> CommandAck:
+        """Send an operator command (``hold``, ``land``, ``rtl``, ``resume``) for ``uas`` and
+        wait for gcs-utm's outcome (raises TimeoutError after ``timeout_s``; the command is
+        still re-sent, with the same id, until acknowledged or the station stops)."""
+        rid = request_id or uuid.uuid4().hex
+        pending = self._commands.get(rid)
+        if pending is None:
+            body = {
+                "schema_version": 1,
+                "type": "operator_command",
+                "uas": uas,
+                "command": command,
+                "id": rid,
+                "t_s": self._clock.now_s(),
+            }
+            pending = _PendingCommand(
+                json.dumps(body).encode(), asyncio.get_running_loop().create_future()
+            )
+            self._commands[rid] = pending
+            await self._send_command(rid)
+        return await asyncio.wait_for(asyncio.shield(pending.acked), timeout_s)
+
+    async def _send_command(self, rid: str) -> None:
+        pending = self._commands.get(rid)
+        client = self._client
+        if pending is None or client is None:
+            return
+        try:
+            await client.publish(self.topics.commands(self.operator), pending.payload, qos=_QOS)
+        except aiomqtt.MqttError as exc:  # the connection loop reconnects and re-sends
+            _log.info("station %s: command %s not sent: %s", self.operator, rid, exc)
+
     # ---- the connection ------------------------------------------------------------------
     async def _send(self, key: tuple[str, int]) -> None:
         """Send one unacknowledged answer now if connected (else the next connection will)."""
@@ -180,6 +239,8 @@ class PilotStation:
     async def _send_all(self) -> None:
         for key in list(self._pending):
             await self._send(key)
+        for rid in list(self._commands):
+            await self._send_command(rid)
 
     def _client_for(self) -> aiomqtt.Client:
         return session_client(self._config, self.client_id)
@@ -249,6 +310,8 @@ class PilotStation:
             return
         if kind == "recommendation_status":
             self._on_status(msg)
+        elif kind == "command_status":
+            self._on_command_status(msg)
         elif kind == "bridge_status" and msg.get("online"):
             await self._send_all()  # gcs-utm is subscribed again
         elif kind == "recommendation":
@@ -256,6 +319,21 @@ class PilotStation:
                 await self._send(key)  # asked again: gcs-utm has no answer for it
             else:
                 self.recommendations.put_nowait(msg)
+
+    def _on_command_status(self, msg: dict[str, Any]) -> None:
+        pending = self._commands.pop(str(msg.get("id")), None)
+        if pending is None or pending.acked.done():
+            return
+        pending.acked.set_result(
+            CommandAck(
+                request_id=str(msg.get("id")),
+                uas=str(msg.get("uas", "")),
+                command=str(msg.get("command", "")),
+                outcome=str(msg.get("outcome", "")),
+                reason=str(msg.get("reason", "")),
+                mode=str(msg.get("mode", "")),
+            )
+        )
 
     def _on_status(self, msg: dict[str, Any]) -> None:
         answer = msg.get("answer")
@@ -281,4 +359,4 @@ class PilotStation:
             )
 
 
-__all__ = ["AnswerAck", "PilotStation"]
+__all__ = ["AnswerAck", "CommandAck", "PilotStation"]

@@ -21,6 +21,7 @@ class InboundKind(Enum):
     PILOT_ANSWER = "pilot_answer"
     ADSB = "adsb"
     AIRSPACE_ALERT = "airspace_alert"
+    OPERATOR_COMMAND = "operator_command"
 
 
 OUTBOUND_OPERATOR_LEAVES = frozenset({"alerts", "recommendations", "status", "errors"})
@@ -33,6 +34,7 @@ _OPERATOR_SUFFIX = {
     "flight_plans": InboundKind.FLIGHT_PLAN,
     "flight_status": InboundKind.FLIGHT_STATUS,
     "answers": InboundKind.PILOT_ANSWER,
+    "commands": InboundKind.OPERATOR_COMMAND,
 }
 
 
@@ -63,6 +65,9 @@ class Topics:
 
     def answers(self, operator: str) -> str:
         return self.operator(operator, "answers")
+
+    def commands(self, operator: str) -> str:
+        return self.operator(operator, "commands")
 
     def alerts_for(self, operator: str) -> str:
         return self.operator(operator, "alerts")

@@ -33,6 +33,7 @@ INBOUND_TYPES = (
     "flight_plan",
     "pilot_answer",
     "airspace_alert",
+    "operator_command",
 )
 OUTBOUND_TYPES = (
     "alert",
@@ -43,6 +44,7 @@ OUTBOUND_TYPES = (
     "traffic",
     "error",
     "bridge_status",
+    "command_status",
 )
 MESSAGE_TYPES = INBOUND_TYPES + OUTBOUND_TYPES
 

@@ -6,7 +6,9 @@ section of ``--config`` (the user name and password there are the pilot's own br
 credentials; an empty user name means the operator name). It prints each recommendation
 addressed to the operator as it arrives (:mod:`gcs_utm.cli.pilot_text`), reads ``a`` /
 ``a N`` / ``r`` from stdin, sends the answer and prints gcs-utm's acknowledgement; the
-station keeps re-sending an unacknowledged answer, across broker restarts. End of input
+station keeps re-sending an unacknowledged answer, across broker restarts. Operator commands
+are typed too: ``hold UAS1`` (``land``, ``rtl``, ``resume``) asks for a confirmation, ``y``
+sends it on the operator's ``commands`` topic and gcs-utm's outcome is printed. End of input
 (Ctrl-D) or Ctrl-C exits with 0.
 """
 
@@ -17,7 +19,7 @@ import asyncio
 import contextlib
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -162,6 +164,7 @@ class _Console:
         self._current: dict[str, Any] | None = None  # the recommendation an answer is for
         self._versions: dict[str, int] = {}  # the latest version shown, by recommendation id
         self._deliveries: set[asyncio.Task[None]] = set()
+        self._armed: tuple[str, str] | None = None  # an operator command waiting for its yes
 
     async def serve(self, lines: asyncio.Queue[str | None]) -> None:
         station = self._station
@@ -221,7 +224,7 @@ class _Console:
     def on_line(self, line: str) -> None:
         from gcs_utm.cli.pilot_text import HELP, alternative_index, parse_choice
 
-        if not line.strip():
+        if not line.strip() or self._operator_command(line.strip()):
             return
         rec = self._current
         if line.strip().lower() in ("d", "details"):
@@ -241,6 +244,53 @@ class _Console:
         task = asyncio.create_task(self._deliver(rec, choice.accept, index))
         self._deliveries.add(task)
         task.add_done_callback(self._deliveries.discard)
+
+    def _operator_command(self, text: str) -> bool:
+        """``hold UAS1`` (``land``, ``rtl``, ``resume``) then ``y``: True when the line was
+        about an operator command (asked, sent or cancelled)."""
+        from gcs_utm.services.operator_commands import parse_command_line
+
+        armed, self._armed = self._armed, None
+        if armed is not None:
+            if text.lower() in ("y", "yes"):
+                self._start(self._command(*armed))
+                return True
+            self._write(f"{armed[0]} {armed[1]} cancelled")
+            if text.lower() in ("n", "no"):
+                return True
+        parsed = parse_command_line(text)
+        if parsed is None:
+            return False
+        self._armed = parsed
+        self._write(f"{parsed[0]} {parsed[1]}? type y + Enter to send it, anything else cancels")
+        return True
+
+    def _start(self, coro: Coroutine[Any, Any, None]) -> None:
+        task = asyncio.create_task(coro)
+        self._deliveries.add(task)
+        task.add_done_callback(self._deliveries.discard)
+
+    async def _command(self, command: str, uas: str) -> None:
+        """Send one operator command until gcs-utm answers; print its outcome."""
+        import uuid
+
+        station = self._station
+        rid = uuid.uuid4().hex[:12]
+        self._write(f"sending {command} for {uas} (id {rid})")
+        said_waiting = False
+        while True:
+            try:
+                ack = await station.command(
+                    uas, command, request_id=rid, timeout_s=station.resend_s
+                )
+            except TimeoutError:
+                if not said_waiting:
+                    self._write(f"no outcome from gcs-utm yet for {command} {uas}; waiting")
+                    said_waiting = True
+                continue
+            tail = f" ({ack.reason})" if ack.reason else ""
+            self._write(f"gcs-utm: {command} {ack.uas or uas} {ack.outcome}{tail}")
+            return
 
     async def _deliver(self, rec: dict[str, Any], accept: bool, index: int | None) -> None:
         from gcs_utm.cli.pilot_text import ack_text

@@ -17,7 +17,7 @@ from typing import Any
 
 HELP = (
     "answer with: a (accept the proposed option), a N (accept option N), r (reject); "
-    "details: the raw scores"
+    "details (the raw scores); command a UAS with: hold|land|rtl|resume UAS, then y"
 )
 
 # the scoring terms Tactical Deconfliction appends to an alternative's detail ("k=v, ...")

@@ -1,6 +1,8 @@
 """The headless line prompt: recommendations printed on a console, answered by typing a line
 on stdin (``a`` accept the proposed option, a number accept that option, ``r`` reject, ``details``
-the raw scores, then Enter). Used by ``--headless`` runs whose stdin is a terminal.
+the raw scores, then Enter). Used by ``--headless`` runs whose stdin is a terminal. Operator
+commands are typed there too: ``hold UAS1`` (``land``, ``rtl``, ``resume``), then ``y`` to
+send it (:class:`gcs_utm.dashboard.commands.LineCommands`).
 
 A recommendation that expires unanswered is a loud ``!!! EXPIRED ...`` line (with the
 terminal bell), and its re-proposal another one (:mod:`.alarm`).
@@ -22,6 +24,7 @@ from collections.abc import AsyncIterator, Callable
 from rich.console import Console
 
 from gcs_utm.dashboard.alarm import ExpiryAlarms
+from gcs_utm.dashboard.commands import LINE_HELP, LineCommands
 from gcs_utm.dashboard.view import Minima, collect, recommendation_panel
 from gcs_utm.messages import PilotAnswer, PilotDecision
 from gcs_utm.model import Recommendation, RecommendationId, RecommendationState, Track, TrackId
@@ -78,6 +81,12 @@ class LinePrompt:
         self.outcomes: list[AnswerOutcome] = []
         self.ignored = 0
         self.alarms = ExpiryAlarms()
+        self.commands = LineCommands(
+            usm,
+            operator=operator,
+            source="console",
+            write=lambda text: self.console.print(text, markup=False, highlight=False),
+        )
 
     def _current(self) -> Recommendation | None:
         pending = sorted(self._usm.pending(), key=lambda r: r.deadline_t_s)
@@ -111,29 +120,31 @@ class LinePrompt:
         self.console.bell()
         self.console.print(line, style="bold white on red", markup=False)
 
-    def _details(self) -> None:
-        """The prompt again with the raw scores (cost, risk, scoring terms)."""
+    def _details(self, text: str) -> bool:
+        """``details`` (or ``d``): the prompt again with the raw scores (cost, risk, scoring
+        terms). False for any other line."""
+        if text not in ("d", "details"):
+            return False
         rec = self._current()
         if rec is None:
             self.console.print("nothing to answer")
-            return
+            return True
         d = collect(self._usm, self._tracks, self._minima)
         self.console.print(
             recommendation_panel(rec, d, queue=len(d.pending), keys=LINE_KEYS, details=True)
         )
+        return True
 
     async def run(self) -> None:
         """Read answers until stdin closes (or cancelled)."""
+        self.console.print(f"operator commands: {LINE_HELP}")
         async for line in self._lines():
             await self.handle(line)
 
     async def handle(self, line: str) -> AnswerOutcome | None:
         """One typed line: answer the prompt printed last, under the binding rule."""
         text = line.strip().lower()
-        if not text:
-            return None
-        if text in ("d", "details"):
-            self._details()
+        if self.commands.handle(line.strip()) or not text or self._details(text):
             return None
         rec = self._current()
         if rec is None:

@@ -11,6 +11,11 @@ Binding rule (what a key acts on):
   the prompt says so: the pilot reads the new prompt and presses again;
 - the USM refuses an answer to a version that is no longer proposed or past its deadline.
 
+Operator commands (:mod:`gcs_utm.dashboard.commands`): ``u`` picks the UAS, ``h``/``l``/``t``/``m``
+arm hold / land / return to launch / resume for it, ``y`` or the same key again confirms and
+``Esc`` cancels; the command line above the footer shows the selection, the question and the
+outcome.
+
 Deadlines are shown in wall-clock seconds (the clock's seconds divided by its speed) and
 counted down at every refresh; under 10 s the prompt turns red. A recommendation that expires
 unanswered raises an alarm (:mod:`.alarm`): a red banner naming it (in the title of the next
@@ -32,19 +37,20 @@ from textual.css.query import NoMatches
 from textual.events import Resize
 from textual.widgets import Footer, Header, Static
 
+from gcs_utm.dashboard.airspace_map import map_legend
+from gcs_utm.dashboard.airspace_scene import scene_of
 from gcs_utm.dashboard.alarm import ExpiryAlarms
+from gcs_utm.dashboard.commands import KEYS, CommandKeys
+from gcs_utm.dashboard.panels import geofences_panel
 from gcs_utm.dashboard.view import (
     DashboardData,
     Minima,
     collect,
-    events_text,
-    geofences_table,
-    map_legend,
     operations_table,
     recommendation_panel,
     threats_table,
-    top_view,
 )
+from gcs_utm.dashboard.widgets import AirspaceMap, EventLog
 from gcs_utm.messages import PilotAnswer, PilotDecision
 from gcs_utm.model import Recommendation, RecommendationId, RecommendationState, Track, TrackId
 from gcs_utm.services.recommendations import alternative_index_of_row, options_of
@@ -67,6 +73,9 @@ class DashboardApp(App[None]):
     #right { width: 1fr; }
     #prompt { height: auto; }
     #alarm { height: auto; background: red; color: white; text-style: bold; }
+    #command { height: auto; max-height: 2; }
+    #map { height: auto; min-height: 8; max-height: 65%; }
+    #events { height: 1fr; min-height: 3; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("a", "accept", "Accept highlighted"),
@@ -75,6 +84,13 @@ class DashboardApp(App[None]):
         Binding("p", "prev_alternative", "Prev option"),
         Binding("d", "details", "Scores"),
         Binding("tab", "next_pending", "Next pending"),
+        Binding("u", "select_uas", "UAS"),
+        *(
+            Binding(k, f"command('{k}')", c.upper() if c == "rtl" else c.title())
+            for k, c in KEYS.items()
+        ),
+        Binding("y", "confirm_command", "Yes", show=False),
+        Binding("escape", "cancel_command", "No", show=False),
         Binding("q", "quit", "Quit"),
     ]
 
@@ -108,6 +124,9 @@ class DashboardApp(App[None]):
         self._mounted_once = False
         self.alarms = ExpiryAlarms()
         self._details = False
+        self.commands = CommandKeys(
+            usm, operator=operator, monotonic=monotonic, on_done=self._refresh_view
+        )
 
     # ---- OperatorPort ----------------------------------------------------------------------
     async def present(self, rec: Recommendation) -> None:
@@ -140,11 +159,12 @@ class DashboardApp(App[None]):
                 yield Static(id="threats")
                 yield Static(id="geofences")
             with Vertical(id="right"):
-                yield Static(id="map")
+                yield AirspaceMap(id="map")
                 yield Static(id="legend")
-                yield Static(id="events")
+                yield EventLog(id="events")
         yield Static(id="alarm")
         yield Static(id="prompt")
+        yield Static(id="command")
         yield Footer()
 
     def on_mount(self) -> None:
@@ -191,13 +211,13 @@ class DashboardApp(App[None]):
             operations_table(d, width=width * 2 // 3 if right.display else width)
         )
         self.query_one("#threats", Static).update(threats_table(d))
-        self.query_one("#geofences", Static).update(geofences_table(d))
+        self.query_one("#geofences", Static).update(geofences_panel(d))
         if right.display:
-            map_w = max(20, width // 3 - 2)
-            map_h = max(6, min(map_w // 2, (self.size.height - 4) // 2))
-            self.query_one("#map", Static).update(top_view(d, width=map_w, height=map_h))
-            self.query_one("#legend", Static).update(map_legend(d))
-            self.query_one("#events", Static).update(events_text(d))
+            scene = scene_of(d)
+            self.query_one("#map", AirspaceMap).show(scene)
+            self.query_one("#legend", Static).update(map_legend(scene, right.size.width))
+            self.query_one("#events", EventLog).show(d.events, d.t_s)
+        self.query_one("#command", Static).update(self.commands.line())
         # the alarm in full when no prompt is up; with a prompt (the re-proposal), in its
         # title: the prompt keeps its room at 80x24
         now_wall_s = self._monotonic()
@@ -290,6 +310,24 @@ class DashboardApp(App[None]):
     def action_next_pending(self) -> None:
         if len(self._queue) > 1:
             self._queue.append(self._queue.pop(0))
+        self._refresh_view()
+
+    # ---- operator commands (gcs_utm.dashboard.commands) ----------------------------------------
+    def action_select_uas(self) -> None:
+        self.commands.select_next()
+        self._refresh_view()
+
+    def action_command(self, key: str) -> None:
+        self.commands.press(key)
+        self._refresh_view()
+
+    def action_confirm_command(self) -> None:
+        if not self.commands.confirm():
+            self.bell()
+        self._refresh_view()
+
+    def action_cancel_command(self) -> None:
+        self.commands.cancel()
         self._refresh_view()
 
     async def action_quit(self) -> None:

@@ -6,7 +6,6 @@ in ``--headless`` log lines and in tests (``Console(file=StringIO(), width=100)`
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -383,81 +382,6 @@ def recommendation_panel(
         title=title,
         border_style="red" if left_s < 10.0 or alarm else "yellow",
     )
-
-
-def events_text(d: DashboardData, limit: int = 12) -> Text:
-    out = Text()
-    for e in d.events[-limit:]:
-        out.append(f"{e.t_s - d.t_s:+6.0f}s ", style="dim")
-        out.append(f"{e.kind:<14}", style="cyan")
-        out.append(e.text + "\n")
-    return out
-
-
-def top_view(d: DashboardData, *, width: int = 60, height: int = 20) -> Text:
-    """A character map of the airspace seen from above: plans (.), tracks (letters) and
-    geofences (#), scaled to fit. Uses lat/lon scaled by cos(lat): fine at city scale."""
-    pts: list[tuple[float, float]] = []
-    for op in d.operations:
-        pts.extend((w.lat_deg, w.lon_deg) for w in op.plan.waypoints)
-    pts.extend((t.lat_deg, t.lon_deg) for t in d.tracks.values())
-    for g in d.geofences:
-        if g.center is not None:
-            pts.append((g.center.lat_deg, g.center.lon_deg))
-        pts.extend((v.lat_deg, v.lon_deg) for v in g.vertices)
-    if not pts:
-        return Text("(empty airspace)")
-    lat0 = sum(p[0] for p in pts) / len(pts)
-    k = math.cos(math.radians(lat0))
-    xs = [p[1] * k for p in pts]
-    ys = [p[0] for p in pts]
-    x_min, x_max, y_min, y_max = min(xs), max(xs), min(ys), max(ys)
-    span = max(x_max - x_min, y_max - y_min, 1e-6)
-    grid = [[" "] * width for _ in range(height)]
-
-    def put(lat: float, lon: float, ch: str) -> None:
-        col = int((lon * k - x_min) / span * (width - 1))
-        row = height - 1 - int((lat - y_min) / span * (height - 1))
-        if 0 <= row < height and 0 <= col < width:
-            grid[row][col] = ch
-
-    for g in d.geofences:
-        if g.center is not None and g.radius_m is not None:
-            r_deg = g.radius_m / 111_320.0
-            for i in range(24):
-                a = 2 * math.pi * i / 24
-                put(
-                    g.center.lat_deg + r_deg * math.sin(a),
-                    g.center.lon_deg + r_deg * math.cos(a) / k,
-                    "#",
-                )
-        for v in g.vertices:
-            put(v.lat_deg, v.lon_deg, "#")
-    for op in d.operations:
-        wps = op.plan.waypoints
-        for w0, w1 in itertools.pairwise(wps):
-            for step in range(8):
-                f = step / 8
-                put(
-                    w0.lat_deg + f * (w1.lat_deg - w0.lat_deg),
-                    w0.lon_deg + f * (w1.lon_deg - w0.lon_deg),
-                    ".",
-                )
-    for i, t in enumerate(sorted(d.tracks.values(), key=lambda t: t.id)):
-        put(t.lat_deg, t.lon_deg, chr(ord("A") + i % 26) if t.cooperative else "!")
-    return Text("\n".join("".join(r) for r in grid))
-
-
-def map_legend(d: DashboardData) -> Text:
-    """What the map's characters mean: a letter per cooperative track (as drawn by
-    :func:`top_view`), ``!`` intruders, ``.`` plans, ``#`` geofences; and the map's north."""
-    out = Text()
-    for i, t in enumerate(sorted(d.tracks.values(), key=lambda t: t.id)):
-        if t.cooperative:
-            out.append(f"{chr(ord('A') + i % 26)}", style="bold")
-            out.append(f"={t.id}  ")
-    out.append("! intruder  . plan  # geofence  (north up)", style="dim")
-    return out
 
 
 def headless_line(d: DashboardData) -> str:

@@ -2,8 +2,9 @@
 
 In (the bridge calls this as its :class:`~adapters.mqtt.bridge.MqttHandler`): positions and
 hazards go to the USM; pilot answers go to :meth:`Usm.answer` (the USM matches id + version and
-refuses an operator that does not fly the UAS); flight plans become operations in the
-airspace; start/stop change the operation's state.
+refuses an operator that does not fly the UAS); operator commands (hold, land, rtl, resume) go
+to :meth:`Usm.operator_command`, their outcome back on the status topic; flight plans become
+operations in the airspace; start/stop change the operation's state.
 Out (this is also an :class:`~gcs_utm.services.usm.OperatorPort`, a threat sink and a geofence
 listener of the USM): recommendations and their state changes to the operator of the
 operation, alerts for new threats, the active geofence set (retained; republished when it
@@ -27,7 +28,13 @@ from collections.abc import Callable, Mapping, Sequence
 
 from adapters.mqtt import answers as mqtt_answers
 from adapters.mqtt.bridge import MqttBridge
-from adapters.mqtt.codec import FlightPlanSubmission, FlightStatusKind, FlightStatusReport
+from adapters.mqtt.codec import (
+    CommandAck,
+    FlightPlanSubmission,
+    FlightStatusKind,
+    FlightStatusReport,
+    OperatorCommandRequest,
+)
 from adapters.mqtt.config import MqttConfig
 from gcs_utm.core.monitoring.filing import plan_in_fences
 from gcs_utm.flyable import plan_speed_problem
@@ -154,6 +161,21 @@ class MqttGateway:
             decision=a.decision,
             reason=outcome.reason,
             state=None if record is None else record.rec.state,
+        )
+
+    async def on_operator_command(self, c: OperatorCommandRequest) -> CommandAck:
+        """An operator's hold / land / rtl / resume: the USM's one entry point for them
+        (refused unless the operator flies the UAS, or is ``admin``)."""
+        result = await self.usm.operator_command(
+            c.uas, c.command, operator=c.operator, source="mqtt", request_id=c.request_id
+        )
+        return CommandAck(
+            request_id=c.request_id,
+            uas=result.uas,
+            command=result.command,
+            outcome=result.outcome.value,
+            reason=result.reason,
+            mode=result.mode,
         )
 
     async def on_flight_plan(self, s: FlightPlanSubmission) -> None:

@@ -56,6 +56,7 @@ from gcs_utm.model import (
 from gcs_utm.ratelog import RateLimitedLog
 from gcs_utm.services.airspace import Airspace, AirspaceError
 from gcs_utm.services.flight_state import FlightState, Phase
+from gcs_utm.services.operator_commands import CommandResult, OperatorCommands, VehicleView
 from gcs_utm.services.recommendations import (
     AnswerOutcome,
     AnswerStatus,
@@ -297,6 +298,20 @@ class Usm(RecommendationLifecycle):
             ),
             log_event=self.log_event,
             spawn=self._spawn,
+        )
+        # the operator's hold / land / rtl / resume (docs/usm.md, "Operator commands")
+        self.operator_commands = OperatorCommands(
+            airspace,
+            clock,
+            VehicleView(
+                statuses=self.statuses_by_sys_id,
+                health=self.health_by_sys_id,
+                flight=self._flight_by_sys_id.get,
+                linked=lambda: self._vehicles is not None,
+            ),
+            execute=lambda command, reason: self.execute_command(command, reason=reason),
+            record=self._record,
+            log_event=self.log_event,
         )
 
     # ---- wiring ---------------------------------------------------------------------------
@@ -696,6 +711,15 @@ class Usm(RecommendationLifecycle):
         if result.ok and command.kind is CommandKind.RESUME:
             self.airspace.set_state(op.id, OperationState.ACTIVE)
         return result.ok
+
+    async def operator_command(
+        self, uas: str, command: str, *, operator: str, source: str, request_id: str = ""
+    ) -> CommandResult:
+        """An operator's hold / land / rtl / resume for ``uas`` from any channel: checked,
+        sent as EM's commands are, verified and audited (:mod:`.operator_commands`)."""
+        return await self.operator_commands.command(
+            uas, command, operator=operator, source=source, request_id=request_id
+        )
 
     def _spawn(self, coro: Awaitable[None]) -> None:
         task = asyncio.ensure_future(coro)

@@ -8,9 +8,11 @@ from io import StringIO
 from rich.console import Console
 
 from gcs_utm.clock import ManualClock
+from gcs_utm.dashboard.airspace_map import render_map
+from gcs_utm.dashboard.airspace_scene import scene_of
 from gcs_utm.dashboard.headless import HeadlessView
 from gcs_utm.dashboard.tui import DashboardApp
-from gcs_utm.dashboard.view import collect, operations_table, recommendation_panel, top_view
+from gcs_utm.dashboard.view import collect, operations_table, recommendation_panel
 from gcs_utm.messages import PilotAnswer
 from gcs_utm.model import (
     Alternative,
@@ -162,9 +164,9 @@ def test_prompt_shows_threat_options_in_words_scores_behind_details_and_deadline
     assert "[a] accept 0 go_left" in text
 
 
-def test_top_view_draws_geofence_plan_and_track() -> None:
-    text = top_view(collect(_usm(), _tracks), width=40, height=12).plain
-    assert "#" in text and "." in text and "A" in text
+def test_map_draws_geofence_plan_and_track() -> None:
+    text = render_map(scene_of(collect(_usm(), _tracks)), 40, 12).plain()
+    assert "#" in text and "·" in text and "↗UAS1" in text  # course 37 deg: north-east
 
 
 async def _run_keys(keys: list[str]) -> tuple[Usm, list[PilotAnswer], DashboardApp]:

@@ -26,7 +26,13 @@ import pytest
 
 from adapters.mqtt.acl import mosquitto_acl
 from adapters.mqtt.answers import AnswerBook, AnswerOutcome
-from adapters.mqtt.codec import FlightPlanSubmission, FlightStatusReport, validate
+from adapters.mqtt.codec import (
+    CommandAck,
+    FlightPlanSubmission,
+    FlightStatusReport,
+    OperatorCommandRequest,
+    validate,
+)
 from adapters.mqtt.config import MqttConfig
 from gcs_utm.clock import ManualClock
 from gcs_utm.messages import HazardReport, PilotAnswer
@@ -161,6 +167,7 @@ class FakeUsm:
         self.outcomes: list[AnswerOutcome] = []
         self.plans: list[FlightPlanSubmission] = []
         self.statuses: list[FlightStatusReport] = []
+        self.commands: list[OperatorCommandRequest] = []
         self.event = asyncio.Event()
 
     def _poke(self) -> None:
@@ -189,6 +196,27 @@ class FakeUsm:
     async def on_flight_status(self, s: FlightStatusReport) -> None:
         self.statuses.append(s)
         self._poke()
+
+    async def on_operator_command(self, c: OperatorCommandRequest) -> CommandAck:
+        """Every command is carried out once per id (refused for a UAS named ``nope``)."""
+        self.commands.append(c)
+        self._poke()
+        if c.uas == "nope":
+            return CommandAck(
+                request_id=c.request_id,
+                uas=c.uas,
+                command=c.command,
+                outcome="refused",
+                reason="unknown UAS 'nope'",
+            )
+        return CommandAck(
+            request_id=c.request_id,
+            uas=c.uas,
+            command=c.command,
+            outcome="confirmed",
+            reason=f"vehicle reports {c.command}",
+            mode=c.command,
+        )
 
     async def wait_for(self, cond: Any, timeout_s: float = 5.0) -> None:
         async with asyncio.timeout(timeout_s):

@@ -1,19 +1,17 @@
-"""Sans-IO tests: AnswerBook rules, paper template conversion, schema errors, queue policy."""
+"""Sans-IO tests: AnswerBook rules, schema errors, queue policy."""
 
 from __future__ import annotations
 
 import json
-import re
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 from mqtt_helpers import T0
 
-from adapters.mqtt import paper
 from adapters.mqtt.answers import AnswerBook, AnswerStatus
 from adapters.mqtt.bridge import MqttBridge
-from adapters.mqtt.codec import MqttMessageError, RpaState, Topics, decode, validate
+from adapters.mqtt.codec import MqttMessageError, Topics, decode, validate
 from adapters.mqtt.config import MqttConfig
 from gcs_utm.clock import ManualClock
 from gcs_utm.messages import HazardReport, PilotAnswer, PilotDecision
@@ -28,7 +26,6 @@ from gcs_utm.model import (
     ThreatKind,
 )
 
-TEMPLATES = Path(__file__).resolve().parents[1] / "data" / "gauss" / "mqtt_messages"
 T = Topics()
 REC = Recommendation(
     id=RecommendationId("r"),
@@ -98,107 +95,6 @@ def test_answer_book_deadline_is_inclusive_and_uses_the_later_time() -> None:
     assert late.status is AnswerStatus.REFUSED and late.state is RecommendationState.EXPIRED
     again = book2.answer(_ans(3, PilotDecision.ACCEPT, t_s=50.0), 100.6)
     assert again.status is AnswerStatus.REFUSED and "expired" in again.reason
-
-
-def _template_keys(name: str) -> set[str]:
-    text = (TEMPLATES / f"{name}.json").read_text()
-    return set(re.findall(r'"(\w+)"\s*[:;]', text))
-
-
-@pytest.mark.data
-def test_paper_templates_convert_with_every_field_mapped() -> None:
-    rpa = {
-        "icao": 0x34A1B2,
-        "latitude": 40.0,
-        "longitude": -3.0,
-        "altitude": 700.0,
-        "yaw": 10.0,
-        "pitch": 1.0,
-        "roll": -1.0,
-        "groundspeed": 12.0,
-        "covariance_h": 9.0,
-        "covariance_v": 16.0,
-        "hpl": 30.0,
-        "hal": 40.0,
-        "hpe": 3.0,
-        "vpl": 50.0,
-        "val": 45.0,
-        "vpe": 4.0,
-        "solution_mode": 2,
-        "timestamp": T0 * 1000,
-        "jamming": False,
-        "spoofing": True,
-        "anomalous_clock_drift": False,
-        "anomalous_pos_drift": False,
-        "signal_noise_ratio": 42.0,
-        "received_power": -130.0,
-    }
-    assert set(rpa) == _template_keys("RPA_STATE_INFO")
-    msg = decode(T, T.state("alice"), json.dumps(paper.rpa_state_from_paper(rpa)), T0)
-    assert isinstance(msg, RpaState)
-    assert msg.measurement.icao24 == "34a1b2" and msg.measurement.capture_t_s == T0
-    assert msg.measurement.eph_m == 3.0 and msg.gnss is not None and msg.gnss.cn0_dbhz == 42.0
-    assert {h.kind for h in msg.hazards} == {
-        ThreatKind.SPOOFING_ATTACK,
-        ThreatKind.GNSS_DEGRADATION,
-    }
-
-    adsb = {
-        "icao": "4CA1FE",
-        "callsign": "IBE1",
-        "latitude": 40.1,
-        "longitude": -3.1,
-        "altitude": 1500,
-        "heading": 180,
-        "speed": 90,
-        "timestamp": T0 * 1000,
-    }
-    assert set(adsb) == _template_keys("ADSB_SURVEILLANCE")
-    m = decode(T, T.adsb, json.dumps(paper.adsb_from_paper(adsb)), T0)
-    assert m.vel_ned_mps == pytest.approx((-90.0, 0.0, 0.0), abs=1e-9)  # type: ignore[union-attr]
-
-    status = {"icao": 1, "flight_plan_id": "op-1", "status": "STARTED", "timestamp": T0 * 1000}
-    assert set(status) == _template_keys("RPS_CHANGE_FLIGHT_STATUS")
-    assert decode(T, T.flight_status("a"), json.dumps(paper.flight_status_from_paper(status)), T0)
-
-    accept = {"icao": 1, "flight_plan_id": "rec-1", "accept": True}
-    assert set(accept) == _template_keys("RPS_FLIGHT_PLAN_ACCEPT")
-    a = decode(
-        T, T.answers("a"), json.dumps(paper.pilot_answer_from_paper(accept, version=2, t_s=T0)), T0
-    )
-    assert isinstance(a, PilotAnswer) and a.version == 2 and a.decision is PilotDecision.ACCEPT
-
-    plan = {
-        "icao": 1,
-        "waypoints": (
-            "LINESTRING(23.369827 35.916399 10.5,23.389827 35.516399 30.5,"
-            "23.349827 35.616399 130.5)"
-        ),
-    }
-    assert set(plan) == _template_keys("GCS_FLIGHT_PLAN")
-    conv = paper.flight_plan_from_paper(
-        plan, operation_id="op-1", start_t_s=T0, ground_speed_mps=20
-    )
-    sub = decode(T, T.flight_plans("a"), json.dumps(conv), T0)
-    wps = sub.plan.waypoints  # type: ignore[union-attr]
-    assert wps[0].lon_deg == 23.369827 and wps[0].lat_deg == 35.916399
-    assert wps[1].t_s - wps[0].t_s == pytest.approx(44_500 / 20, rel=0.01)  # ~44.5 km leg
-
-    update = {
-        "id": "e25bed06",
-        "name": "Wildfire",
-        "type": "wildfire",
-        "country": "SPAIN",
-        "state": "a",
-        "city": "Madrid",
-        "last_updated": T0 * 1000,
-        "date_effective": T0 * 1000,
-        "geometry": "CIRCLE(40.4, -3.7, 1500)",
-    }
-    assert set(update) == _template_keys("AIRSPACE_UPDATE")
-    h = decode(T, T.airspace_alerts, json.dumps(paper.airspace_alert_from_paper(update)), T0)
-    assert isinstance(h, HazardReport) and h.area is not None
-    assert h.area.center is not None and h.area.center.lat_deg == 40.4 and h.area.radius_m == 1500
 
 
 def test_schema_errors_name_the_field() -> None:
@@ -327,3 +223,33 @@ def test_a_sysid_conflict_is_published_as_a_valid_alert() -> None:
     obj = json.loads(encode_alert(claim))
     validate("alert", obj)
     assert obj["kind"] == "SYSID_CONFLICT" and obj["operation_ids"] == ["op"]
+
+
+def test_operator_command_decodes_with_the_topic_s_operator_and_refuses_the_rest() -> None:
+    from adapters.mqtt.codec import OperatorCommandRequest, encode_command_status
+
+    good = {"schema_version": 1, "type": "operator_command", "uas": "UAS1", "command": "rtl"}
+    msg = decode(T, T.commands("alice"), json.dumps({**good, "id": "c1"}), 5.0)
+    assert msg == OperatorCommandRequest(
+        uas="UAS1", command="rtl", request_id="c1", operator="alice", t_s=5.0
+    )
+    for field, obj in {
+        "command": {**good, "id": "c1", "command": "loop"},
+        "id": good,  # an id is needed to acknowledge it
+        "operator": {**good, "id": "c1", "operator": "bob"},  # the topic says who
+    }.items():
+        with pytest.raises(MqttMessageError) as err:
+            decode(T, T.commands("alice"), json.dumps(obj), 0.0)
+        assert field in str(err.value) or "additional" in str(err.value), err.value
+    status = json.loads(
+        encode_command_status(
+            request_id="c1",
+            uas="UAS1",
+            command="rtl",
+            t_s=1.0,
+            outcome="refused",
+            reason="sysid 1 is disarmed",
+            mode="",
+        )
+    )
+    validate("command_status", status)

@@ -139,3 +139,31 @@ async def test_refused_credentials_are_one_line_not_a_traceback(broker: Broker) 
     async with _pilot(cfg) as pilot:
         line = await pilot.until("cannot connect to the MQTT broker")
         assert "authori" in line.lower()  # mosquitto: "Not authorized"
+
+
+async def test_typed_operator_commands_ask_first_then_print_gcs_utm_s_outcome(
+    broker: Broker,
+) -> None:
+    clock = ManualClock(T0)
+    usm = FakeUsm(clock)
+    async with MqttBridge(broker.config(), clock, usm) as bridge:
+        await bridge.wait_connected(5.0)
+        async with _pilot(broker.config("alice")) as pilot:
+            await pilot.until("connected to")
+            pilot.lines.put_nowait("rtl UAS1\n")
+            await pilot.until("rtl UAS1? type y + Enter to send it, anything else cancels")
+            pilot.lines.put_nowait("no\n")
+            await pilot.until("rtl UAS1 cancelled")
+            pilot.lines.put_nowait("hold UAS1\n")
+            await pilot.until("hold UAS1?")
+            pilot.lines.put_nowait("y\n")
+            line = await pilot.until("gcs-utm: hold")
+            assert line == "gcs-utm: hold UAS1 confirmed (vehicle reports hold)"
+            pilot.lines.put_nowait("land nope\n")
+            pilot.lines.put_nowait("y\n")
+            line = await pilot.until("gcs-utm: land")
+            assert line == "gcs-utm: land nope refused (unknown UAS 'nope')"
+    assert [(c.operator, c.uas, c.command) for c in usm.commands] == [
+        ("alice", "UAS1", "hold"),
+        ("alice", "nope", "land"),
+    ]

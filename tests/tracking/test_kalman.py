@@ -1,5 +1,6 @@
-"""The batched closed-form filter equals filterpy's 6-state KalmanFilter (to 1e-9) and keeps
-its covariance symmetric positive semi-definite."""
+"""The batched closed-form filter (:func:`kalman.step`, the tracker's one Python step) equals
+filterpy's 6-state KalmanFilter (to 1e-9) and keeps its covariance symmetric positive
+semi-definite."""
 
 from __future__ import annotations
 
@@ -43,6 +44,41 @@ def _ref_step(
         kf.update(np.concatenate([z, zv]), R=np.diag(np.concatenate([r, rv])), H=np.eye(6))
 
 
+def _step_rows(
+    x: np.ndarray,
+    p: np.ndarray,
+    dt: np.ndarray,
+    q: np.ndarray,
+    z: np.ndarray,
+    r: np.ndarray,
+    zv: np.ndarray | None = None,
+    rv: np.ndarray | None = None,
+) -> None:
+    """kalman.step on rows (x (N, 3, 2), p (N, 3, 3)), in place: the rows gathered into planes
+    as the tracker does, stepped, written back."""
+    planes_x = np.ascontiguousarray(x.transpose(2, 1, 0))
+    planes_p = np.ascontiguousarray(p.transpose(2, 1, 0))
+    if zv is None:
+        kalman.step(planes_x, planes_p, dt, q[:, None], z.T.copy(), r.T.copy())
+    else:
+        assert rv is not None
+        kalman.step(
+            planes_x, planes_p, dt, q[:, None], z.T.copy(), r.T.copy(), zv.T.copy(), rv.T.copy()
+        )
+    x[...] = planes_x.transpose(2, 1, 0)
+    p[...] = planes_p.transpose(2, 1, 0)
+
+
+def _predicted_cov_max(p_row: np.ndarray, dt: float, q: np.ndarray) -> float:
+    """Largest entry of the prior covariance that the update subtracts from (one row, after
+    predicting by ``dt``)."""
+    a, b, c = p_row[:, kalman.PP], p_row[:, kalman.PV], p_row[:, kalman.VV]
+    dt2 = dt * dt
+    prior = [a + 2 * dt * b + dt2 * c + q * dt2 * dt2 / 4, b + dt * c + q * dt2 * dt / 2]
+    prior.append(c + q * dt2)
+    return float(np.abs(np.array(prior)).max())
+
+
 step = st.tuples(
     st.floats(0.0, 5.0),  # dt
     st.lists(st.floats(-1e4, 1e4), min_size=3, max_size=3),  # z
@@ -79,15 +115,12 @@ def test_batched_filter_equals_filterpy(
         # sigmas) and the prior covariance the update subtracts from (a large prior and a tiny
         # measurement sigma cancel almost completely): 1e-9 relative to the largest magnitude.
         scale = max(scale, float(np.abs(z).max()), float(np.abs(zv).max()), *sig_l)
-        kalman.predict(x, p, np.array([dt]), q)
-        scale = max(scale, float(np.abs(p).max()))
+        scale = max(scale, _predicted_cov_max(p[0], dt, q))
         if with_vel:
-            kalman.update_position_velocity(
-                x, p, z[None], zv[None], r_m2=r[None], rv_m2ps2=rv[None]
-            )
+            _step_rows(x, p, np.array([dt]), q, z[None], r[None], zv[None], rv[None])
             _ref_step(kf, dt, q, z, r, zv, rv)
         else:
-            kalman.update_position(x, p, z[None], r[None])
+            _step_rows(x, p, np.array([dt]), q, z[None], r[None])
             _ref_step(kf, dt, q, z, r, None, None)
         state, cov = kalman.to_full(x, p)
         np.testing.assert_allclose(state[0], kf.x, rtol=1e-9, atol=1e-9 * scale)
@@ -110,12 +143,10 @@ def test_rows_are_independent() -> None:
     z = rng.normal(size=(n, 3)) * 100
     r = rng.uniform(1, 20, size=(n, 3))
     xb, pb = x.copy(), p.copy()
-    kalman.predict(xb, pb, dt, q)
-    kalman.update_position(xb, pb, z, r)
+    _step_rows(xb, pb, dt, q, z, r)
     for i in range(n):
         xi, pi = x[i : i + 1].copy(), p[i : i + 1].copy()
-        kalman.predict(xi, pi, dt[i : i + 1], q)
-        kalman.update_position(xi, pi, z[i : i + 1], r[i : i + 1])
+        _step_rows(xi, pi, dt[i : i + 1], q, z[i : i + 1], r[i : i + 1])
         np.testing.assert_allclose(xb[i], xi[0], rtol=1e-12)
         np.testing.assert_allclose(pb[i], pi[0], rtol=1e-12)
 
@@ -149,14 +180,11 @@ def test_as_accurate_as_filterpy_against_exact_arithmetic() -> None:
             with_vel = bool(rng.random() < 0.3)
             zv = rng.uniform(-50, 50, size=3) * rng.choice([0.0, 1.0])
             rv = r / 10
-            kalman.predict(x, p, np.array([dt]), q)
             if with_vel:
-                kalman.update_position_velocity(
-                    x, p, z[None], zv[None], r_m2=r[None], rv_m2ps2=rv[None]
-                )
+                _step_rows(x, p, np.array([dt]), q, z[None], r[None], zv[None], rv[None])
                 _ref_step(kf, dt, q, z, r, zv, rv)
             else:
-                kalman.update_position(x, p, z[None], r[None])
+                _step_rows(x, p, np.array([dt]), q, z[None], r[None])
                 _ref_step(kf, dt, q, z, r, None, None)
             # The same step exactly, east axis only (the axes are independent).
             d = Fraction(dt)
@@ -189,37 +217,28 @@ def test_as_accurate_as_filterpy_against_exact_arithmetic() -> None:
 
 
 @settings(max_examples=40, deadline=None)
-@given(
-    m=st.integers(1, 12), with_vel=st.booleans(), predicted=st.booleans(), seed=st.integers(0, 99)
-)
-def test_step_on_planes_equals_predict_then_update_bit_for_bit(
-    m: int, with_vel: bool, predicted: bool, seed: int
+@given(m=st.integers(1, 12), with_vel=st.booleans(), seed=st.integers(0, 99))
+def test_positions_predicted_by_the_caller_give_the_same_step_bit_for_bit(
+    m: int, with_vel: bool, seed: int
 ) -> None:
-    """kalman.step (the tracker's layout) is predict + update_* exactly, not just closely."""
+    """The tracker moves positions by vel * dt itself to gate, then steps with
+    ``positions_predicted``: the result must be the plain step's, exactly."""
     rng = np.random.default_rng(seed)
-    x = rng.normal(size=(m, 3, 2)) * 100
-    p = np.zeros((m, 3, 3))
-    p[:, :, kalman.PP] = rng.uniform(0.1, 50, size=(m, 3))
-    p[:, :, kalman.PV] = rng.uniform(-1, 1, size=(m, 3))
-    p[:, :, kalman.VV] = rng.uniform(0.1, 50, size=(m, 3))
+    x = rng.normal(size=(2, 3, m)) * 100
+    p = np.zeros((3, 3, m))
+    p[kalman.PP] = rng.uniform(0.1, 50, size=(3, m))
+    p[kalman.PV] = rng.uniform(-1, 1, size=(3, m))
+    p[kalman.VV] = rng.uniform(0.1, 50, size=(3, m))
     dt = rng.uniform(0, 5, size=m)
-    q = np.array([4.0, 4.0, 1.0])
-    z = rng.normal(size=(m, 3)) * 100
-    r = rng.uniform(0.01, 20, size=(m, 3))
-    zv = rng.normal(size=(m, 3)) * 10
-    rv = np.repeat(rng.uniform(0.01, 5, size=(m, 1)), 3, axis=1)
-    planes_x = np.ascontiguousarray(x.transpose(2, 1, 0))
-    planes_p = np.ascontiguousarray(p.transpose(2, 1, 0))
-    if predicted:
-        planes_x[kalman.POS] += planes_x[kalman.VEL] * dt
-    kalman.predict(x, p, dt, q)
-    if with_vel:
-        kalman.update_position_velocity(x, p, z, zv, r_m2=r, rv_m2ps2=rv)
-        kalman.step(
-            planes_x, planes_p, dt, q[:, None], z.T, r.T, zv.T, rv.T, positions_predicted=predicted
-        )
-    else:
-        kalman.update_position(x, p, z, r)
-        kalman.step(planes_x, planes_p, dt, q[:, None], z.T, r.T, positions_predicted=predicted)
-    assert np.array_equal(planes_x.transpose(2, 1, 0), x)
-    assert np.array_equal(planes_p.transpose(2, 1, 0), p)
+    q = np.array([[4.0], [4.0], [1.0]])
+    z = rng.normal(size=(3, m)) * 100
+    r = rng.uniform(0.01, 20, size=(3, m))
+    zv = rng.normal(size=(3, m)) * 10 if with_vel else None
+    rv = np.repeat(rng.uniform(0.01, 5, size=(1, m)), 3, axis=0) if with_vel else None
+    plain_x, plain_p = x.copy(), p.copy()
+    kalman.step(plain_x, plain_p, dt, q, z, r, zv, rv)
+    moved_x, moved_p = x.copy(), p.copy()
+    moved_x[kalman.POS] += moved_x[kalman.VEL] * dt
+    kalman.step(moved_x, moved_p, dt, q, z, r, zv, rv, positions_predicted=True)
+    assert np.array_equal(plain_x, moved_x)
+    assert np.array_equal(plain_p, moved_p)

@@ -13,7 +13,6 @@ obstacle edges at once (orientation tests), which keeps 20 geofences at a few mi
 from __future__ import annotations
 
 import heapq
-import itertools
 import math
 from collections.abc import Sequence
 
@@ -179,7 +178,3 @@ def _walk(parent: npt.NDArray[np.int64], pts: FloatArray) -> list[FloatArray]:
     while parent[idx[-1]] >= 0:
         idx.append(int(parent[idx[-1]]))
     return [pts[i] for i in reversed(idx)]
-
-
-def polyline_length(points: Sequence[FloatArray]) -> float:
-    return float(sum(np.hypot(*(b - a)) for a, b in itertools.pairwise(points)))

@@ -263,56 +263,6 @@ def _trusted_waypoint(lat: float, lon: float, alt: float, t: float) -> Waypoint4
     return w
 
 
-def retime(
-    xyz: FloatArray, t0_s: float, speed_mps: float, climb_mps: float, min_dt: FloatArray | None
-) -> FloatArray:
-    """Times through ``xyz`` from ``t0_s``: each segment takes the longer of its horizontal
-    length at ``speed_mps`` and its climb at ``climb_mps``, and at least ``min_dt`` (the
-    original timing, so a plan is never sped up beyond what it asked for)."""
-    d = np.diff(xyz, axis=0)
-    h = np.hypot(d[:, 0], d[:, 1])
-    need = np.maximum(h / speed_mps, np.abs(d[:, 2]) / climb_mps)
-    if min_dt is not None:
-        need = np.maximum(need, min_dt)
-    return np.concatenate([[t0_s], t0_s + np.cumsum(need)])
-
-
-def simplify(lp: LocalPlan, tolerance_m: float) -> LocalPlan:
-    """Ramer-Douglas-Peucker on the 4D points (time scaled by the mean speed, so a hover or a
-    change of pace is a corner too)."""
-    if len(lp) <= 2:
-        return lp
-    xyz = lp.xyz()
-    span_t = float(lp.t[-1] - lp.t[0])
-    speed = lp.length_m() / span_t if span_t > 0 else 1.0
-    pts = np.column_stack([xyz, (lp.t - lp.t[0]) * max(speed, 1e-3)])
-    keep = np.zeros(len(lp), dtype=bool)
-    keep[0] = keep[-1] = True
-    stack = [(0, len(lp) - 1)]
-    while stack:
-        a, b = stack.pop()
-        if b <= a + 1:
-            continue
-        seg = pts[b] - pts[a]
-        rel = pts[a + 1 : b] - pts[a]
-        ll = float(seg @ seg)
-        if ll > 0:
-            u = np.clip(rel @ seg / ll, 0.0, 1.0)
-            dist = np.linalg.norm(rel - np.outer(u, seg), axis=1)
-        else:
-            dist = np.linalg.norm(rel, axis=1)
-        i = int(np.argmax(dist))
-        if dist[i] > tolerance_m:
-            k = a + 1 + i
-            keep[k] = True
-            stack.append((a, k))
-            stack.append((k, b))
-    return LocalPlan(lp.e[keep], lp.n[keep], lp.z[keep], lp.t[keep])
-
-
-# ---- geofences -------------------------------------------------------------------------------
-
-
 @dataclass(frozen=True, slots=True, eq=False)
 class LocalFence:
     """A geofence in the local frame: its exact 2D shape and its altitude/time window."""

@@ -12,11 +12,14 @@ Layout (struct of arrays, N rows):
 - ``x``: (N, 3, 2) per axis (east, north, up) the pair (position_m, velocity_mps);
 - ``p``: (N, 3, 3) per axis the unique covariance entries (pp [m^2], pv [m^2/s], vv [m^2/s^2]).
 Symmetry of the covariance holds by construction (one pv entry); positive semi-definiteness
-is kept by the update formulas below (see :func:`update_position`).
+is kept by the update formulas of :func:`step`.
 
-Planes (:func:`step`): the same rows gathered axis-major, ``x`` (2, 3, M) and ``p`` (3, 3, M), so
-that every quantity is one contiguous (3, M) array: a small batch costs one NumPy call per
-arithmetic operation, with no strided (M, 3) views (several times slower per call).
+The tracker stores its rows (``x`` (N, 3, 2), ``p`` (N, 3, 3)) and gathers the rows of a round
+axis-major into planes for :func:`step`, ``x`` (2, 3, M) and ``p`` (3, 3, M), so that every
+quantity is one contiguous (3, M) array: a small batch costs one NumPy call per arithmetic
+operation, with no strided (M, 3) views (several times slower per call). :func:`step` is the
+one Python implementation of the filter step; the optional C kernel (``_kalman_c.c``) is
+checked against it.
 
 Process noise: ``q`` (3,) white-acceleration variances [m^2/s^4]; for a step ``dt`` it is
 ``q * [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]`` -- filterpy's ``Q_discrete_white_noise(dim=2)``.
@@ -33,27 +36,11 @@ PP, PV, VV = 0, 1, 2
 POS, VEL = 0, 1
 
 
-def predict(x: FloatArray, p: FloatArray, dt_s: FloatArray, q: FloatArray) -> None:
-    """Propagate rows in place by ``dt_s`` (N,) seconds. ``q``: (3,) or (N, 3) variances."""
-    dt = dt_s[:, None]
-    a = p[:, :, PP]
-    b = p[:, :, PV]
-    c = p[:, :, VV]
-    dt2 = dt * dt
-    a_new = a + 2.0 * dt * b + dt2 * c + q * (dt2 * dt2 / 4.0)
-    b_new = b + dt * c + q * (dt2 * dt / 2.0)
-    c_new = c + q * dt2
-    x[:, :, POS] += x[:, :, VEL] * dt
-    p[:, :, PP] = a_new
-    p[:, :, PV] = b_new
-    p[:, :, VV] = c_new
-
-
 def predicted_position_var(p: FloatArray, tau_s: FloatArray, q: FloatArray) -> FloatArray:
     """Position variance per axis after ``tau_s`` without updates.
 
-    ``p``: (N, 3, 3); ``tau_s``: (N, K); returns (N, K, 3) [m^2]. Same formula as
-    :func:`predict` (a zero-noise velocity would give exactly ``a + 2 tau b + tau^2 c``)."""
+    ``p``: (N, 3, 3); ``tau_s``: (N, K); returns (N, K, 3) [m^2]. The prediction of
+    :func:`step` (a zero-noise velocity would give exactly ``a + 2 tau b + tau^2 c``)."""
     tau = tau_s[:, :, None]
     a = p[:, None, :, PP]
     b = p[:, None, :, PV]
@@ -61,66 +48,6 @@ def predicted_position_var(p: FloatArray, tau_s: FloatArray, q: FloatArray) -> F
     tau2 = tau * tau
     out: FloatArray = a + 2.0 * tau * b + tau2 * c + q * (tau2 * tau2 / 4.0)
     return out
-
-
-def update_position(x: FloatArray, p: FloatArray, z_m: FloatArray, r_m2: FloatArray) -> None:
-    """Measurement update in place with positions ``z_m`` (N, 3) of variance ``r_m2`` (N, 3).
-
-    Per axis S = pp + r, K = (pp, pv) / S. The posterior entries are written as
-    pp' = pp r / S, pv' = pv r / S, vv' = vv - pv^2 / S, whose determinant is
-    (r / S) (pp vv - pv^2) >= 0: positive semi-definite whenever the prior is."""
-    a = p[:, :, PP]
-    b = p[:, :, PV]
-    c = p[:, :, VV]
-    s = a + r_m2
-    y = z_m - x[:, :, POS]
-    k_pos = a / s
-    k_vel = b / s
-    x[:, :, POS] += k_pos * y
-    x[:, :, VEL] += k_vel * y
-    rs = r_m2 / s
-    vv = c - b * k_vel
-    p[:, :, PP] = a * rs
-    p[:, :, PV] = b * rs
-    p[:, :, VV] = vv
-
-
-def update_position_velocity(
-    x: FloatArray,
-    p: FloatArray,
-    z_m: FloatArray,
-    zv_mps: FloatArray,
-    *,
-    r_m2: FloatArray,
-    rv_m2ps2: FloatArray,
-) -> None:
-    """Update in place with positions (N, 3) and velocities (N, 3) measured together.
-
-    Per axis S = P + diag(r, rv) (2x2), K = P S^-1, P' = K diag(r, rv); written out with
-    the determinant of S, which is positive because r, rv > 0. P' is symmetric (one pv
-    entry; k12 rv = k21 r exactly) and its determinant det(P) r rv / det(S) >= 0."""
-    a = p[:, :, PP]
-    b = p[:, :, PV]
-    c = p[:, :, VV]
-    s11 = a + r_m2
-    s22 = c + rv_m2ps2
-    det = s11 * s22 - b * b
-    # K = P S^-1 with S^-1 = [[s22, -b], [-b, s11]] / det
-    k11 = (a * s22 - b * b) / det
-    k12 = (b * s11 - a * b) / det
-    k21 = (b * s22 - c * b) / det
-    k22 = (c * s11 - b * b) / det
-    y1 = z_m - x[:, :, POS]
-    y2 = zv_mps - x[:, :, VEL]
-    x[:, :, POS] += k11 * y1 + k12 * y2
-    x[:, :, VEL] += k21 * y1 + k22 * y2
-    # P' = P - K P = P S^-1 (S - P) = K R: products, no subtraction. The textbook
-    # P - K P subtracts two nearly equal numbers when a long prediction made the prior
-    # large and the measurement precise (900 m^2 - 899.985 m^2): a 1e-11 error in K became
-    # a 1e-6 error in the state one update later.
-    p[:, :, PP] = k11 * r_m2
-    p[:, :, PV] = k12 * rv_m2ps2
-    p[:, :, VV] = k22 * rv_m2ps2
 
 
 def step(  # noqa: PLR0917 (the arrays of one filter step, as the other functions)
@@ -135,13 +62,21 @@ def step(  # noqa: PLR0917 (the arrays of one filter step, as the other function
     *,
     positions_predicted: bool = False,
 ) -> None:
-    """:func:`predict` by ``dt_s`` then :func:`update_position` (``zv_mps is None``) or
-    :func:`update_position_velocity`, in place, on planes: ``x`` (2, 3, M) positions and
+    """One predict-then-update step, in place, on planes: ``x`` (2, 3, M) positions and
     velocities, ``p`` (3, 3, M) pp, pv, vv; ``dt_s`` (M,); ``q`` (3, 1); ``z_m``, ``r_m2``,
     ``zv_mps``, ``rv_m2ps2`` (3, M). ``positions_predicted``: the caller already moved the
-    positions by ``vel * dt_s`` (it needed them to gate). The same operations in the same
-    order as those functions, so the results are equal bit for bit (tests check it); every
-    operand has the same shape (broadcasting costs a small batch more than the arithmetic)."""
+    positions by ``vel * dt_s`` (it needed them to gate). Every operand has the same shape
+    (broadcasting costs a small batch more than the arithmetic).
+
+    Position only (``zv_mps is None``), per axis: S = pp + r, K = (pp, pv) / S; the posterior
+    pp' = pp r / S, pv' = pv r / S, vv' = vv - pv^2 / S has the determinant
+    (r / S) (pp vv - pv^2) >= 0: positive semi-definite whenever the prior is.
+    Position and velocity: S = P + diag(r, rv) (2x2), K = P S^-1, P' = K diag(r, rv), written
+    out with det(S) > 0 (r, rv > 0); P' is symmetric (k12 rv = k21 r exactly) and its
+    determinant det(P) r rv / det(S) >= 0. P' = K R rather than the textbook P - K P: the
+    latter subtracts two nearly equal numbers when a long prediction made the prior large and
+    the measurement precise (900 m^2 - 899.985 m^2), and a 1e-11 error in K became a 1e-6
+    error in the state one update later."""
     pos = x[POS]
     vel = x[VEL]
     a = p[PP]
