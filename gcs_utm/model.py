@@ -602,6 +602,25 @@ class Alternative:
     plan in range."""
     fence_distance_m: float | None = None
     """Closest horizontal distance to an active geofence (negative: inside). None: none near."""
+    offset_m: float | None = None
+    """How far (3D) the new path goes from the current one at most: the manoeuvre's size."""
+    closest: Closest | None = None
+    """Where :attr:`separation_ratio` is reached, in metres (None: not known)."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Closest:
+    """The closest predicted separation of an option from another plan, in metres, and the
+    minima the ratio was taken against (the pair's effective minima: what a loss is)."""
+
+    other: str
+    """The other UAS ("" when not known)."""
+    horizontal_m: float
+    vertical_m: float
+    min_horizontal_m: float
+    min_vertical_m: float
+    spherical: bool = False
+    """Sphere mode: the separation is the 3D distance, the minimum ``min_horizontal_m``."""
 
 
 class CommandKind(Enum):

@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 
 from adapters.mqtt.wire import SCHEMA_VERSION, dumps, short
+from gcs_utm.core.emergency.wording import command_text, option_text, proposal_text, why_text
 from gcs_utm.model import (
     Alternative,
     Geofence,
@@ -68,6 +69,7 @@ def _alternative(a: Alternative) -> dict[str, object]:
         "cost": a.cost,
         "risk": a.risk,
         "detail": a.detail,
+        "text": option_text(a),
         "plan_version": None if a.plan is None else a.plan.version,
         "waypoints": [] if a.plan is None else [_wp(w) for w in a.plan.waypoints],
     }
@@ -111,7 +113,9 @@ def encode_recommendation(rec: Recommendation) -> bytes:
             "alternatives": [_alternative(a) for a in rec.alternatives],
             "command": None
             if cmd is None
-            else {"kind": cmd.kind.value, "target": _pos(cmd.target)},
+            else {"kind": cmd.kind.value, "target": _pos(cmd.target), "text": command_text(cmd)},
+            "text": proposal_text(rec),
+            "why": why_text(rec),
             "new_geofence": None if rec.new_geofence is None else geofence_json(rec.new_geofence),
             "reason": rec.reason,
         }

@@ -409,6 +409,7 @@ def minima(settings: Settings) -> Minima:
         vertical_m=mon.separation_vertical_m,
         intruder_horizontal_m=mon.intruder_horizontal_m,
         intruder_vertical_m=mon.intruder_vertical_m,
+        safety_distance_m=mon.safety_distance_m if mon.spherical else None,
     )
 
 

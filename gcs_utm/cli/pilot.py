@@ -227,6 +227,11 @@ class _Console:
         if not line.strip() or self._operator_command(line.strip()):
             return
         rec = self._current
+        if line.strip().lower() in ("d", "details"):
+            from gcs_utm.cli.pilot_text import recommendation_text
+
+            self._write(recommendation_text(rec, details=True) if rec else "nothing shown")
+            return
         try:
             choice = parse_choice(line)
             if rec is None:

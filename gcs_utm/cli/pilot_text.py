@@ -17,7 +17,7 @@ from typing import Any
 
 HELP = (
     "answer with: a (accept the proposed option), a N (accept option N), r (reject); "
-    "command a UAS with: hold|land|rtl|resume UAS, then y"
+    "details (the raw scores); command a UAS with: hold|land|rtl|resume UAS, then y"
 )
 
 # the scoring terms Tactical Deconfliction appends to an alternative's detail ("k=v, ...")
@@ -100,8 +100,17 @@ def _utc(t_s: float) -> str:
     return datetime.datetime.fromtimestamp(t_s, datetime.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
-def recommendation_text(rec: dict[str, Any]) -> str:
-    """The lines shown for one recommendation."""
+def option_text(alt: dict[str, Any], *, details: bool = False) -> str:
+    """One option in the pilot's words (the ``text`` gcs-utm sends with it; an older
+    gcs-utm without it: :func:`option_summary`), ``details``: with the raw scores."""
+    text = str(alt.get("text") or "")
+    if not text:
+        return option_summary(alt)
+    return f"{text} [{option_summary(alt)}]" if details else text
+
+
+def recommendation_text(rec: dict[str, Any], *, details: bool = False) -> str:
+    """The lines shown for one recommendation (``details``: with the raw scores)."""
     created_s = float(rec.get("created_t_s", 0.0))
     deadline_s = float(rec.get("deadline_t_s", 0.0))
     lines = [
@@ -109,15 +118,17 @@ def recommendation_text(rec: dict[str, Any]) -> str:
         f"for UAS {rec.get('operation_id')}: {_words(rec.get('threat_kind'))} "
         f"(threat {rec.get('threat_id')})"
     ]
-    if rec.get("reason"):
+    if rec.get("why"):
+        lines.append(f"  why: {rec['why']}")
+    if rec.get("reason") and (details or not rec.get("why")):
         lines.append(f"  reason: {rec['reason']}")
     command = rec.get("command")
     if isinstance(command, dict):
-        lines.append(f"  command: {command.get('kind')}")
+        lines.append(f"  command: {command.get('text') or command.get('kind')}")
     opts = options(rec)
     for row, alt in enumerate(opts):
         proposed = " (proposed)" if row == 0 and isinstance(rec.get("selected"), dict) else ""
-        lines.append(f"  [{row}] {option_summary(alt)}{proposed}")
+        lines.append(f"  [{row}] {option_text(alt, details=details)}{proposed}")
     if not opts:
         lines.append("  (no alternative flight plan)")
     lines.append(
@@ -143,7 +154,9 @@ def status_text(status: dict[str, Any]) -> str:
     state = status.get("state")
     reason = status.get("reason") or ""
     tail = f": {reason}" if reason else ""
-    if state in ("expired", "superseded"):
+    if state == "expired":
+        return f"!!! EXPIRED {what}: nobody answered in time - no longer answerable{tail}"
+    if state == "superseded":
         return f"{what} {state} - no longer answerable{tail}"
     return f"{what} is now {state}{tail}"
 
@@ -154,6 +167,7 @@ __all__ = [
     "ack_text",
     "alternative_index",
     "option_summary",
+    "option_text",
     "options",
     "parse_choice",
     "recommendation_text",

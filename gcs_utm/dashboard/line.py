@@ -1,8 +1,11 @@
 """The headless line prompt: recommendations printed on a console, answered by typing a line
-on stdin (``a`` accept the proposed option, a number accept that option, ``r`` reject, then
-Enter). Used by ``--headless`` runs whose stdin is a terminal. Operator commands are typed
-there too: ``hold UAS1`` (``land``, ``rtl``, ``resume``), then ``y`` to send it
-(:class:`gcs_utm.dashboard.commands.LineCommands`).
+on stdin (``a`` accept the proposed option, a number accept that option, ``r`` reject, ``details``
+the raw scores, then Enter). Used by ``--headless`` runs whose stdin is a terminal. Operator
+commands are typed there too: ``hold UAS1`` (``land``, ``rtl``, ``resume``), then ``y`` to
+send it (:class:`gcs_utm.dashboard.commands.LineCommands`).
+
+A recommendation that expires unanswered is a loud ``!!! EXPIRED ...`` line (with the
+terminal bell), and its re-proposal another one (:mod:`.alarm`).
 
 The binding rule is the dashboard's: a line acts on the recommendation id and version printed
 last; a line arriving after a different prompt replaced it, or within ``guard_s`` wall seconds
@@ -20,6 +23,7 @@ from collections.abc import AsyncIterator, Callable
 
 from rich.console import Console
 
+from gcs_utm.dashboard.alarm import ExpiryAlarms
 from gcs_utm.dashboard.commands import LINE_HELP, LineCommands
 from gcs_utm.dashboard.view import Minima, collect, recommendation_panel
 from gcs_utm.messages import PilotAnswer, PilotDecision
@@ -27,7 +31,10 @@ from gcs_utm.model import Recommendation, RecommendationId, RecommendationState,
 from gcs_utm.services.recommendations import alternative_index_of_row, options_of
 from gcs_utm.services.usm import AnswerOutcome, Usm
 
-LINE_KEYS = "type a + Enter: accept 0   a number + Enter: accept that option   r + Enter: reject"
+LINE_KEYS = (
+    "type a + Enter: accept 0   a number + Enter: accept that option   r + Enter: reject   "
+    "details + Enter: scores"
+)
 
 
 async def stdin_lines() -> AsyncIterator[str]:
@@ -73,6 +80,7 @@ class LinePrompt:
         self._shown_at = -float("inf")
         self.outcomes: list[AnswerOutcome] = []
         self.ignored = 0
+        self.alarms = ExpiryAlarms()
         self.commands = LineCommands(
             usm,
             operator=operator,
@@ -97,12 +105,35 @@ class LinePrompt:
             self.console.print(recommendation_panel(rec, d, queue=len(d.pending), keys=LINE_KEYS))
 
     async def present(self, rec: Recommendation) -> None:
+        if line := self.alarms.proposed(rec, self._monotonic()):
+            self._loud(line)
         self._show()
 
     async def update(self, rec: Recommendation) -> None:
-        if rec.state is not RecommendationState.PROPOSED:
+        if rec.state is RecommendationState.EXPIRED:
+            self._loud(self.alarms.expired(rec, self._monotonic()))
+        elif rec.state is not RecommendationState.PROPOSED:
             self.console.print(f"{rec.id} v{rec.version}: {rec.state.value} {rec.reason}")
         self._show()
+
+    def _loud(self, line: str) -> None:
+        self.console.bell()
+        self.console.print(line, style="bold white on red", markup=False)
+
+    def _details(self, text: str) -> bool:
+        """``details`` (or ``d``): the prompt again with the raw scores (cost, risk, scoring
+        terms). False for any other line."""
+        if text not in ("d", "details"):
+            return False
+        rec = self._current()
+        if rec is None:
+            self.console.print("nothing to answer")
+            return True
+        d = collect(self._usm, self._tracks, self._minima)
+        self.console.print(
+            recommendation_panel(rec, d, queue=len(d.pending), keys=LINE_KEYS, details=True)
+        )
+        return True
 
     async def run(self) -> None:
         """Read answers until stdin closes (or cancelled)."""
@@ -112,10 +143,8 @@ class LinePrompt:
 
     async def handle(self, line: str) -> AnswerOutcome | None:
         """One typed line: answer the prompt printed last, under the binding rule."""
-        if self.commands.handle(line.strip()):
-            return None
         text = line.strip().lower()
-        if not text:
+        if self.commands.handle(line.strip()) or not text or self._details(text):
             return None
         rec = self._current()
         if rec is None:

@@ -17,7 +17,10 @@ arm hold / land / return to launch / resume for it, ``y`` or the same key again 
 outcome.
 
 Deadlines are shown in wall-clock seconds (the clock's seconds divided by its speed) and
-counted down at every refresh; under 10 s the prompt turns red.
+counted down at every refresh; under 10 s the prompt turns red. A recommendation that expires
+unanswered raises an alarm (:mod:`.alarm`): a red banner naming it (in the title of the next
+prompt, EM's re-proposal, while one is shown), a notification and the terminal bell. ``d``
+shows or hides the raw scores.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from textual.widgets import Footer, Header, Static
 
 from gcs_utm.dashboard.airspace_map import map_legend
 from gcs_utm.dashboard.airspace_scene import scene_of
+from gcs_utm.dashboard.alarm import ExpiryAlarms
 from gcs_utm.dashboard.commands import KEYS, CommandKeys
 from gcs_utm.dashboard.panels import geofences_panel
 from gcs_utm.dashboard.view import (
@@ -68,6 +72,7 @@ class DashboardApp(App[None]):
     #left { width: 2fr; }
     #right { width: 1fr; }
     #prompt { height: auto; }
+    #alarm { height: auto; background: red; color: white; text-style: bold; }
     #command { height: auto; max-height: 2; }
     #map { height: auto; min-height: 8; max-height: 65%; }
     #events { height: 1fr; min-height: 3; }
@@ -77,6 +82,7 @@ class DashboardApp(App[None]):
         Binding("r", "reject", "Reject"),
         Binding("n", "next_alternative", "Next option"),
         Binding("p", "prev_alternative", "Prev option"),
+        Binding("d", "details", "Scores"),
         Binding("tab", "next_pending", "Next pending"),
         Binding("u", "select_uas", "UAS"),
         *(
@@ -116,6 +122,8 @@ class DashboardApp(App[None]):
         self.ignored_keys = 0
         self.quit_requested = False
         self._mounted_once = False
+        self.alarms = ExpiryAlarms()
+        self._details = False
         self.commands = CommandKeys(
             usm, operator=operator, monotonic=monotonic, on_done=self._refresh_view
         )
@@ -124,12 +132,23 @@ class DashboardApp(App[None]):
     async def present(self, rec: Recommendation) -> None:
         if rec.id not in self._queue:
             self._queue.append(rec.id)
+        if line := self.alarms.proposed(rec, self._monotonic()):
+            self._alarm(line)
         self._refresh_view()
 
     async def update(self, rec: Recommendation) -> None:
         if rec.state is not RecommendationState.PROPOSED and rec.id in self._queue:
             self._queue.remove(rec.id)
+        if rec.state is RecommendationState.EXPIRED:
+            self._alarm(self.alarms.expired(rec, self._monotonic()))
         self._refresh_view()
+
+    def _alarm(self, line: str) -> None:
+        """Make an expiry impossible to miss: bell, notification (the banner is drawn by
+        the refresh)."""
+        if self._mounted_once:
+            self.bell()
+            self.notify(line, severity="error", timeout=10.0)
 
     # ---- layout ------------------------------------------------------------------------------
     def compose(self) -> ComposeResult:
@@ -143,6 +162,7 @@ class DashboardApp(App[None]):
                 yield AirspaceMap(id="map")
                 yield Static(id="legend")
                 yield EventLog(id="events")
+        yield Static(id="alarm")
         yield Static(id="prompt")
         yield Static(id="command")
         yield Footer()
@@ -198,6 +218,12 @@ class DashboardApp(App[None]):
             self.query_one("#legend", Static).update(map_legend(scene, right.size.width))
             self.query_one("#events", EventLog).show(d.events, d.t_s)
         self.query_one("#command", Static).update(self.commands.line())
+        # the alarm in full when no prompt is up; with a prompt (the re-proposal), in its
+        # title: the prompt keeps its room at 80x24
+        now_wall_s = self._monotonic()
+        alarm = self.query_one("#alarm", Static)
+        alarm.update(self.alarms.current(now_wall_s))
+        alarm.display = rec is None and bool(self.alarms.current(now_wall_s))
         prompt = self.query_one("#prompt", Static)
         if rec is None:
             prompt.update("")
@@ -206,7 +232,13 @@ class DashboardApp(App[None]):
         prompt.display = True
         prompt.update(
             recommendation_panel(
-                rec, d, viewing=self._row(rec), queue=len(self._queue), note=self._note
+                rec,
+                d,
+                viewing=self._row(rec),
+                queue=len(self._queue),
+                note=self._note,
+                details=self._details,
+                alarm=self.alarms.short(now_wall_s),
             )
         )
 
@@ -244,6 +276,7 @@ class DashboardApp(App[None]):
             )
         )
         self.outcomes.append(outcome)
+        self.alarms.acknowledge()
         if outcome.reason:
             self.notify(f"{rec.id} v{rec.version}: {outcome.status.value} ({outcome.reason})")
         self._refresh_view()
@@ -268,6 +301,11 @@ class DashboardApp(App[None]):
 
     def action_prev_alternative(self) -> None:
         self._move(-1)
+
+    def action_details(self) -> None:
+        """Show or hide the raw scores (cost, risk, scoring terms) under the words."""
+        self._details = not self._details
+        self._refresh_view()
 
     def action_next_pending(self) -> None:
         if len(self._queue) > 1:

@@ -15,9 +15,9 @@ from rich.panel import Panel
 from rich.table import Table
 from rich.text import Text
 
+from gcs_utm.core.emergency.wording import action_text, command_text, option_text, why_text
 from gcs_utm.messages import LinkHealth, VehicleStatus
 from gcs_utm.model import (
-    Alternative,
     Geofence,
     GeofenceShape,
     Operation,
@@ -42,12 +42,21 @@ class Minima:
     vertical_m: float
     intruder_horizontal_m: float | None = None
     intruder_vertical_m: float | None = None
+    safety_distance_m: float | None = None
+    """Sphere mode (``separation_mode = "sphere"``): the 3D minimum, on both axes."""
 
-    def for_threat(self, kind: ThreatKind) -> tuple[float | None, float | None]:
-        """(horizontal, vertical) minima that apply to a threat of ``kind``."""
+    def for_threat(
+        self, kind: ThreatKind, ov_sum_m: float = 0.0
+    ) -> tuple[float | None, float | None]:
+        """(horizontal, vertical) minima that apply to a threat of ``kind``: for a pair of
+        operations the *effective* minima Monitoring judged it by, never below the sum
+        ``ov_sum_m`` of their operational volumes (``MonitoringConfig.effective_minima``)."""
         if kind is ThreatKind.INTRUDER:
             return self.intruder_horizontal_m, self.intruder_vertical_m
-        return self.horizontal_m, self.vertical_m
+        if self.safety_distance_m is not None:
+            s = max(self.safety_distance_m, ov_sum_m)
+            return s, s
+        return max(self.horizontal_m, ov_sum_m), max(self.vertical_m, ov_sum_m)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -245,7 +254,10 @@ def _predicted(rec: Recommendation, d: DashboardData) -> str:
     if threat.predicted_event_at_s is not None:
         ahead = threat.predicted_event_at_s - d.t_s
         what += f" in {wall_s(d, ahead):.0f} s" if ahead > 0 else " now"
-    min_h, min_v = d.minima.for_threat(threat.kind) if d.minima else (None, None)
+    ovs = {o.id: o.operational_volume_m for o in d.operations}
+    pair = len(threat.uas_ids) == 2 and all(u in ovs for u in threat.uas_ids)
+    ov_sum_m = sum(ovs[u] for u in threat.uas_ids) if pair else 0.0
+    min_h, min_v = d.minima.for_threat(threat.kind, ov_sum_m) if d.minima else (None, None)
     parts = []
     if threat.horizontal_m is not None:
         parts.append(
@@ -266,19 +278,64 @@ def _predicted(rec: Recommendation, d: DashboardData) -> str:
     return what
 
 
-def changes_text(alt: Alternative) -> str:
-    """What an option changes: the new closest separation and the extra length and time."""
-    parts = []
-    if alt.separation_ratio is not None:
-        parts.append(f"closest {alt.separation_ratio:.1f}x minima")
-    if alt.fence_distance_m is not None:
-        inside = alt.fence_distance_m < 0
-        parts.append("inside geofence" if inside else f"geofence {alt.fence_distance_m:.0f} m away")
-    if alt.extra_length_m is not None:
-        parts.append(f"+{alt.extra_length_m:.0f} m")
-    if alt.extra_time_s is not None:
-        parts.append(f"+{alt.extra_time_s:.0f} s")
-    return ", ".join(parts) or "-"
+def _prompt_head(rec: Recommendation, d: DashboardData, left_s: float) -> Text:
+    """The prompt's top lines: threat, prediction, proposal, why, time left."""
+    urgent = left_s < 10.0
+    head = Text()
+    head.append(f"{rec.threat_kind.value}", style="bold red")
+    head.append(f"  UAS {rec.operation_id}  recommendation {rec.id} v{rec.version}\n")
+    head.append("Predicted: ", style="bold")
+    head.append(_predicted(rec, d) + "\n")
+    if rec.selected is not None:
+        head.append(f"Proposed: {action_text(rec.selected)}", style="bold")
+        head.append(f" ({rec.selected.maneuver.value})\n")
+    elif rec.command is not None:
+        track = d.tracks.get(TrackId(rec.operation_id))
+        what = command_text(rec.command, None if track is None else track.alt_amsl_m)
+        head.append(f"Proposed command: {what}\n", style="bold")
+    head.append("Why: ", style="bold")
+    head.append(why_text(rec) + "\n")
+    head.append(
+        f"{'ANSWER NOW: ' if urgent else ''}{left_s:.0f} s left",
+        style="bold white on red" if urgent else "bold yellow",
+    )
+    speed = f", clock x{d.speed:g}" if d.speed != 1.0 else ""
+    head.append(f" (wall clock{speed})")
+    return head
+
+
+def _options_table(rec: Recommendation, viewing: int, details: bool) -> Table:
+    """One row per option in words (``details``: with the manoeuvre, cost and risk)."""
+    table = Table(expand=True, box=None, pad_edge=False, show_edge=False)
+    table.add_column("#", no_wrap=True, width=3)
+    if details:
+        table.add_column("Manoeuvre", no_wrap=True)
+    table.add_column("Option: what the UAS does, and its effect", overflow="fold", ratio=3)
+    if details:
+        table.add_column("Cost", no_wrap=True, justify="right")
+        table.add_column("Risk", no_wrap=True, justify="right")
+    for i, alt in enumerate(options_of(rec)):
+        proposed = " (proposed)" if i == 0 and rec.selected is not None else ""
+        row = [(">" if i == viewing else " ") + str(i)]
+        if details:
+            row += [alt.maneuver.value + proposed, option_text(alt)]
+            row += [f"{alt.cost:.3f}", f"{alt.risk:.3f}"]
+        else:
+            row.append(option_text(alt) + proposed)
+        table.add_row(*row, style="reverse" if i == viewing else None)
+    return table
+
+
+def _key_line(rec: Recommendation, viewing: int, details: bool) -> str:
+    options = options_of(rec)
+    if 0 <= viewing < len(options):
+        target = f"{viewing} {options[viewing].maneuver.value}"
+    else:
+        target = rec.command.kind.value if rec.command is not None else "the proposal"
+    return (
+        f"[a] accept {target}   [r] reject   [n]/[p] option   "
+        f"[d] {'hide' if details else 'show'} scores   [tab] next pending   [q] quit"
+    )
 
 
 def recommendation_panel(
@@ -289,73 +346,41 @@ def recommendation_panel(
     queue: int = 1,
     keys: str | None = None,
     note: str = "",
+    details: bool = False,
+    alarm: str = "",
 ) -> Panel:
-    """The pilot prompt: what is predicted, the proposed action, every option with what it
-    changes (row ``viewing`` highlighted: it is what ``a`` accepts), the wall-clock time left
-    and how to answer. ``keys`` replaces the key line (e.g. for a line prompt); an empty
-    string says that nothing on this screen answers. ``note`` is shown in bold (e.g. "key
-    ignored")."""
+    """The pilot prompt: what is predicted, each option as an action and its effect in the
+    pilot's words (row ``viewing`` highlighted: it is what ``a`` accepts), why the proposed
+    one, the wall-clock time left and how to answer. ``details`` adds the raw scores (cost,
+    risk, the scoring terms, EM's reason). ``keys`` replaces the key line (e.g. for a line
+    prompt); an empty string says that nothing on this screen answers. ``note`` is shown in
+    bold (e.g. "key ignored"); ``alarm`` (an expiry, in a few words) heads the title."""
     left_s = max(0.0, wall_s(d, rec.deadline_t_s - d.t_s))
-    head = Text()
-    head.append(f"{rec.threat_kind.value}", style="bold red")
-    head.append(f"  UAS {rec.operation_id}  recommendation {rec.id} v{rec.version}\n")
-    head.append("Predicted: ", style="bold")
-    head.append(_predicted(rec, d) + "\n")
-    if rec.selected is not None:
-        head.append(f"Proposed: {rec.selected.maneuver.value}", style="bold")
-        changes = changes_text(rec.selected)
-        head.append(f"  ({changes})\n" if changes != "-" else "\n")
-    elif rec.command is not None:
-        head.append(f"Proposed command: {rec.command.kind.value}\n", style="bold")
-    urgent = left_s < 10.0
-    head.append(
-        f"{'ANSWER NOW: ' if urgent else ''}{left_s:.0f} s left",
-        style="bold white on red" if urgent else "bold yellow",
-    )
-    speed = f", clock x{d.speed:g}" if d.speed != 1.0 else ""
-    head.append(f" (wall clock{speed})   {queue} pending")
+    head = _prompt_head(rec, d, left_s)
+    head.append(f"   {queue} pending")
+    parts: list[RenderableType] = [head]
     options = options_of(rec)
-    table = Table(expand=True, box=None, pad_edge=False, show_edge=False)
-    table.add_column("#", no_wrap=True, width=3)
-    table.add_column("Manoeuvre", no_wrap=True)
-    table.add_column("Changes", overflow="fold", ratio=3)
-    table.add_column("Cost", no_wrap=True, justify="right")
-    table.add_column("Risk", no_wrap=True, justify="right")
-    for i, alt in enumerate(options):
-        chosen = i == viewing
-        table.add_row(
-            (">" if chosen else " ") + str(i),
-            alt.maneuver.value + (" (proposed)" if i == 0 and rec.selected is not None else ""),
-            changes_text(alt),
-            f"{alt.cost:.3f}",
-            f"{alt.risk:.3f}",
-            style="reverse" if chosen else None,
-        )
-    parts: list[RenderableType] = [head, table]
-    if options and 0 <= viewing < len(options):
+    if options:
+        parts.append(_options_table(rec, viewing, details))
+    if details and 0 <= viewing < len(options):
         alt = options[viewing]
         detail = Text(f"{viewing} {alt.maneuver.value}: ", style="bold")
         detail.append(alt.detail or "(no detail)")
         parts.append(detail)
-    if rec.reason:
-        parts.append(Text(f"Why: {rec.reason}", style="dim"))
+    if details and rec.reason:
+        parts.append(Text(f"EM: {rec.reason}", style="dim"))
     if note:
         parts.append(Text(note, style="bold magenta"))
-    if keys is None:
-        if 0 <= viewing < len(options):
-            target = f"{viewing} {options[viewing].maneuver.value}"
-        else:
-            target = rec.command.kind.value if rec.command is not None else "the proposal"
-        keys = (
-            f"[a] accept {target}   [r] reject   [n]/[p] highlight option   "
-            "[tab] next pending   [q] quit"
-        )
+    keys = _key_line(rec, viewing, details) if keys is None else keys
     if keys:
         parts.append(Text(keys, style="bold"))
+    title = Text(f"Pilot confirmation: {left_s:.0f} s left")
+    if alarm:
+        title = Text.assemble((alarm, "bold white on red"), "  ", title)
     return Panel(
         Group(*parts),
-        title="Pilot confirmation",
-        border_style="red" if urgent else "yellow",
+        title=title,
+        border_style="red" if left_s < 10.0 or alarm else "yellow",
     )
 
 

@@ -31,6 +31,7 @@ from enum import Enum
 from typing import TYPE_CHECKING, Protocol
 
 from gcs_utm.clock import Clock
+from gcs_utm.core.emergency.wording import proposal_text
 from gcs_utm.messages import PilotAnswer, PilotDecision
 from gcs_utm.model import (
     RECOMMENDATION_TRANSITIONS,
@@ -188,6 +189,23 @@ def with_choice(rec: Recommendation, alternative_index: int | None) -> Recommend
     return dataclasses.replace(rec, selected=chosen, alternatives=tuple(alts))
 
 
+def expiry_audit(
+    action: str, rec: Recommendation, t_s: float, expired_version: int | None = None
+) -> AuditEntry:
+    """The audit of an expiry (``recommendation_expired``: ``rec`` nobody answered) or of
+    what followed it (``reproposed_after_expiry``: ``rec`` is the new version), with the
+    proposal in words."""
+    detail: dict[str, object] = {
+        "version": rec.version,
+        "operation_id": rec.operation_id,
+        "proposed": proposal_text(rec),
+        "deadline_t_s": rec.deadline_t_s,
+    }
+    if expired_version is not None:
+        detail["expired_version"] = expired_version
+    return AuditEntry(t_s=t_s, actor="usm", action=action, subject=rec.id, detail=detail)
+
+
 def _what(rec: Recommendation) -> str:
     if rec.selected is not None:
         return rec.selected.maneuver.value
@@ -240,6 +258,8 @@ class RecommendationLifecycle:
             return
         if old is not None and old.rec.state is RecommendationState.PROPOSED:
             await self._set_state(old, RecommendationState.SUPERSEDED, f"by v{rec.version}")
+        if old is not None and old.rec.state is RecommendationState.EXPIRED:
+            self._record(expiry_audit("reproposed_after_expiry", rec, now, old.rec.version))
         threat = self.threats.get(rec.threat_id)
         detected = threat.detected_at_s if threat is not None else rec.created_t_s
         speed = self.clock.speed
@@ -479,6 +499,8 @@ class RecommendationLifecycle:
         record.rec = rec.transition(state, now, reason)
         record.history.append((now, f"{state.value} v{rec.version}: {reason}"))
         self._record(record.rec)
+        if state is RecommendationState.EXPIRED:
+            self._record(expiry_audit("recommendation_expired", rec, now))
         self.log_event("recommendation", f"{rec.id} v{rec.version} {state.value} {reason}")
         for op in self._operators:
             await op.update(record.rec)

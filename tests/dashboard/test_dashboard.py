@@ -150,12 +150,16 @@ def test_operations_table_shows_the_remote_id_once_heard() -> None:
     assert "Remote ID" in text and "1596A303716531B / FIN87astr" in text
 
 
-def test_prompt_shows_threat_options_cost_risk_and_deadline() -> None:
+def test_prompt_shows_threat_options_in_words_scores_behind_details_and_deadline() -> None:
     usm = _usm()
     text = _render(recommendation_panel(_rec(), collect(usm, _tracks)))
     assert "LOSS_OF_SEPARATION" in text
-    assert "go_left" in text and "go_down" in text
-    assert "0.200" in text and "0.070" in text
+    assert "Turn left" in text and "Descend below the plan" in text
+    assert "0.200" not in text  # the raw scores are behind [d]
+    assert "[d] show scores" in text
+    details = _render(recommendation_panel(_rec(), collect(usm, _tracks), details=True))
+    assert "go_left" in details and "go_down" in details
+    assert "0.200" in details and "0.070" in details
     assert "30 s left" in text
     assert "[a] accept 0 go_left" in text
 
@@ -217,4 +221,4 @@ async def test_headless_view_prints_recommendation() -> None:
     await view.present(_rec())
     view.status()
     out = buf.getvalue()
-    assert "go_left" in out and "1 ops" in out
+    assert "Turn left" in out and "1 ops" in out

@@ -58,7 +58,7 @@ async def test_line_prompt_accepts_a_numbered_option_under_the_binding_rule() ->
     line = LinePrompt(usm, _tracks, console=console, lines=_no_lines, monotonic=mono)
     usm.attach_operator(line)
     await usm.on_recommendation(_rec(1))
-    assert "a number + Enter" in buf.getvalue() and "go_up" in buf.getvalue()
+    assert "a number + Enter" in buf.getvalue() and "Climb above the plan" in buf.getvalue()
     mono.t_s += 3.0
     await usm.on_recommendation(_rec(2))  # EM replaced the prompt just before the answer
     mono.t_s += 0.2

@@ -52,3 +52,41 @@ def test_loss_of_separation_shows_the_uas_minima() -> None:
     text = _prompt(ThreatKind.LOSS_OF_SEPARATION)
     assert f"90 m horizontal (min {mon.separation_horizontal_m:.0f})" in text
     assert f"20 m vertical (min {mon.separation_vertical_m:.0f})" in text
+
+
+def test_loss_of_separation_shows_the_effective_minima_of_the_pair() -> None:
+    """Monitoring judges a pair by minima never below the sum of their operational volumes
+    (``MonitoringConfig.effective_minima``): the prompt states those, not the configured
+    ones, when they differ."""
+    from gcs_utm.model import OperationId
+
+    usm = _usm()
+    op = usm.airspace.operation(OP)
+    uas2 = OperationId("UAS2")
+    other = replace(
+        op, id=uas2, plan=replace(op.plan, operation_id=uas2), operational_volume_m=25.0
+    )
+    usm.airspace.load([replace(op, operational_volume_m=25.0), other], [])
+    threat = Threat(
+        id=ThreatId("t1"),
+        kind=ThreatKind.LOSS_OF_SEPARATION,
+        uas_ids=(OP, OperationId("UAS2")),
+        detected_at_s=10.0,
+        predicted_event_at_s=30.0,
+        horizontal_m=40.0,
+        vertical_m=20.0,
+    )
+    mon = Settings().monitoring
+    assert (
+        mon.effective_minima(25.0, 25.0)
+        == (50.0, 50.0)
+        != (
+            mon.separation_horizontal_m,
+            mon.separation_vertical_m,
+        )
+    )
+    data = replace(collect(usm, _tracks, minima(Settings())), threats=(threat,))
+    buf = StringIO()
+    Console(file=buf, width=200, color_system=None).print(recommendation_panel(_rec(), data))
+    text = " ".join(buf.getvalue().split())
+    assert "40 m horizontal (min 50), 20 m vertical (min 50)" in text

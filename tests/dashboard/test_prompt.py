@@ -188,7 +188,7 @@ async def test_deadline_in_wall_seconds_and_warning_under_ten() -> None:
     assert "ANSWER NOW: 3 s left (wall clock, clock x5)" in text
     assert "loss of separation with UAS2 in 4 s" in text
     assert "31 m horizontal (min 50)" in text and "8 m vertical (min 30)" in text
-    assert "closest 1.2x minima, +42 m, +8 s" in text
+    assert "8 s and 42 m more flight; keeps 1.2x the minima" in text
 
 
 async def test_prompt_fully_readable_at_80x24() -> None:
@@ -204,14 +204,13 @@ async def test_prompt_fully_readable_at_80x24() -> None:
     for needed in (
         "LOSS_OF_SEPARATION",
         "recommendation t1/UAS1 v1",
-        "Proposed: go_left",
+        "Proposed: Turn left",
         "s left (wall clock)",
-        "go_up",
-        "go_down",
         "[a] accept 0 go_left",
         "[r] reject",
-        "must wrap",  # the highlighted option's full detail, wrapped
-        "characters",
+        "Climb above the plan: 8 s and 42 m more flight",  # every option in words
+        "Descend below the plan",
+        "Why: lowest cost and risk among 3 safe options",
     ):
         assert needed in text, (needed, text)
     # nothing of the prompt is cut: every line of the panel sits inside its border
@@ -272,4 +271,5 @@ def test_a_command_proposal_names_the_command_it_accepts() -> None:
         recommendation_panel(rec, collect(_usm(), _tracks))
     )
     text = buf.getvalue()
-    assert "Proposed command: hold" in text and "[a] accept hold" in text
+    assert "Proposed command: Hold at the current position" in text
+    assert "[a] accept hold" in text

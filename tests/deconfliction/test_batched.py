@@ -8,9 +8,12 @@ batched (kept here as the oracle), and one frame conversion per plan.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Sequence
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -242,7 +245,19 @@ def test_score_many_equals_scoring_each_plan_alone(
     for i, new in enumerate(news):
         mine = [f for f, ok in zip(fences, applies[i], strict=True) if ok]
         want = oracle_score(new, old, filed, ov, mine, nbs, weight, levels, abandons[i], spherical)
-        assert got[i] == want, i
+        assert dataclasses.replace(got[i], closest=None) == want, i
+        # the closest separation in metres is where the ratio is reached
+        c = got[i].closest
+        if not math.isfinite(want.min_separation_ratio):
+            assert c is None
+        else:
+            assert c is not None
+            ratio = (
+                math.hypot(c.horizontal_m, c.vertical_m) / c.min_horizontal_m
+                if spherical
+                else max(c.horizontal_m / c.min_horizontal_m, c.vertical_m / c.min_vertical_m)
+            )
+            assert ratio == pytest.approx(want.min_separation_ratio, rel=1e-9, abs=1e-12)
 
 
 @settings(max_examples=100, deadline=None)

@@ -49,6 +49,10 @@ def _rec(t0: float) -> Recommendation:
         risk=0.1,
         detail="climb; cost=0.25, risk=0.1, extra_distance_m=40.0, extra_time_s=6.5, "
         "min_separation_ratio=1.8",
+        extra_length_m=40.0,
+        extra_time_s=6.5,
+        offset_m=30.0,
+        separation_ratio=1.8,
     )
     hold = Alternative(operation_id=OP, maneuver=Maneuver.HOLD, plan=None, cost=0.5, risk=0.05)
     return Recommendation(
@@ -141,12 +145,14 @@ async def test_pilot_command_accepts_option_0_and_gcs_utm_applies_it(tmp_path: P
             await usm.on_recommendation(_rec(t0))
             await pilot.until("recommendation r1 v1 for UAS UAS1: loss of separation")
             line0 = await pilot.until("[0] ")
-            assert "go up, +40 m, +6.5 s, min separation 1.80x" in line0
+            assert "Climb up to 30 m above the plan: 6 s and 40 m more flight" in line0
             assert "(proposed)" in line0
-            assert "hold" in await pilot.until("[1] ")
+            assert "Hold at the current position" in await pilot.until("[1] ")
             await pilot.until("deadline ")
             await pilot.type("x")  # bad input: one line saying what is accepted
             assert "a N (accept option N)" in await pilot.until("is not an answer")
+            await pilot.type("details")  # the raw figures, on request
+            assert "+40 m, +6.5 s, min separation 1.80x" in await pilot.until("[go up, ")
             await pilot.type("a 0")
             await pilot.until("gcs-utm accepted the answer to recommendation r1 v1")
             await pilot.until("recommendation r1 v1 is now applied")

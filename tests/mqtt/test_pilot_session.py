@@ -100,8 +100,9 @@ async def test_superseded_and_expired_recommendations_are_said_so(broker: Broker
             bridge.publish_recommendation(v2, "alice")  # as after a reconnect: not shown again
             expired = dataclasses.replace(v2, state=RecommendationState.EXPIRED)
             bridge.publish_recommendation_status(expired, "alice")
-            assert await pilot.until("expired") == (
-                "recommendation rec-1 v2 expired - no longer answerable"
+            assert await pilot.until("EXPIRED") == (
+                "!!! EXPIRED recommendation rec-1 v2: nobody answered in time - no longer "
+                "answerable"
             )
             pilot.lines.put_nowait("a\n")
             await pilot.until("no recommendation to answer now")

@@ -19,6 +19,7 @@ from gcs_utm.cli.pilot_text import (
     recommendation_text,
     status_text,
 )
+from gcs_utm.model import Command, CommandKind, OperationId
 
 
 def _json(**changes: object) -> dict[str, object]:
@@ -61,8 +62,13 @@ def test_recommendation_text_shows_uas_threat_options_and_deadline() -> None:
     assert lines[0] == (
         "recommendation rec-1 v1 for UAS op-alice-1: loss of separation (threat thr-1)"
     )
-    assert lines[1].startswith("  [0] go up, cost 0.20, risk 0.10") and "(proposed)" in lines[1]
-    assert lines[2].startswith("  [1] go up") and lines[3].startswith("  [2] hold")
+    assert lines[1] == "  why: lowest cost among 3 safe options"
+    # each option in the pilot's words (the recommendation's "text"), scores behind details
+    assert lines[2] == "  [0] Climb above the plan (proposed)"
+    assert lines[3] == "  [1] Climb above the plan"
+    assert lines[4] == "  [2] Hold at the current position"
+    detailed = recommendation_text(_json(), details=True).splitlines()
+    assert detailed[2] == "  [0] Climb above the plan [go up, cost 0.20, risk 0.10] (proposed)"
     # _rec: deadline T0 + 60 s = 2023-11-14 22:14:20 UTC
     assert "  deadline 2023-11-14 22:14:20 UTC (60 s after it was issued)" in lines
     assert lines[-1].strip().startswith("answer with: a")
@@ -96,6 +102,21 @@ def test_acknowledgements_and_state_changes_read_plainly() -> None:
         "gcs-utm refused the answer to recommendation r1 v2: deadline passed"
     )
     status = {"recommendation_id": "r1", "version": 2, "state": "expired", "reason": ""}
-    assert status_text(status) == "recommendation r1 v2 expired - no longer answerable"
+    assert status_text(status) == (
+        "!!! EXPIRED recommendation r1 v2: nobody answered in time - no longer answerable"
+    )
     applied = {**status, "state": "applied"}
     assert status_text(applied) == "recommendation r1 v2 is now applied"
+
+
+def test_the_recommendation_carries_each_option_in_words() -> None:
+    rec = _json()
+    assert rec["text"] == "Climb above the plan"
+    assert rec["why"] == "lowest cost among 3 safe options"
+    assert [a["text"] for a in rec["alternatives"]] == [  # type: ignore[attr-defined]
+        "Climb above the plan",
+        "Hold at the current position",
+    ]
+    assert rec["selected"]["maneuver"] == "go_up"  # type: ignore[index]  # raw fields stay
+    command = _json(command=Command(kind=CommandKind.HOLD, operation_id=OperationId("op-alice-1")))
+    assert command["command"]["text"].startswith("Hold at the current position")  # type: ignore[index]

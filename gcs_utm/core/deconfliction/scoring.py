@@ -37,13 +37,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from gcs_utm.core.deconfliction.config import DeconflictionConfig
 from gcs_utm.core.deconfliction.geometry import LocalFence, LocalPlan
-from gcs_utm.model import FloatArray
+from gcs_utm.model import Closest, FloatArray
 
 SAMPLE_DT_S = 1.0
 """Sampling step of the risk terms: 1 s is below a metre-scale error at UAS speeds."""
@@ -54,6 +55,8 @@ class Neighbour:
     plan: LocalPlan
     h_min_m: float
     v_min_m: float
+    name: str = ""
+    """The other UAS (for the pilot's wording of the closest separation)."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -67,6 +70,8 @@ class Score:
     outside_ov_m: float
     min_fence_distance_m: float
     min_separation_ratio: float
+    closest: Closest | None = None
+    """Where ``min_separation_ratio`` is reached, in metres (None: no neighbour in range)."""
 
     def as_dict(self) -> dict[str, float]:
         return {
@@ -286,6 +291,7 @@ def score_many(  # noqa: C901, PLR0912, PLR0915 - every candidate scored in one 
 
     # -- the closest normalised separation to every other plan, per plan.
     min_ratio = np.full(m, np.inf)
+    closest: list[Closest | None] = [None] * m
     for nb in ref.neighbours:
         other, ok = nb.plan.sample(times)
         if not ok.any():
@@ -297,7 +303,18 @@ def score_many(  # noqa: C901, PLR0912, PLR0915 - every candidate scored in one 
         else:
             ratio = np.maximum(dh / nb.h_min_m, dv / nb.v_min_m)
         ratio[~ok] = np.inf
-        min_ratio = np.minimum(min_ratio, np.minimum.reduceat(ratio, s0))
+        per_plan = np.minimum.reduceat(ratio, s0)
+        for j in np.flatnonzero(per_plan < min_ratio).tolist():  # this neighbour is closer
+            k = int(s0[j]) + int(np.argmin(ratio[int(s0[j]) : int(s0[j] + cnt[j])]))
+            closest[j] = Closest(
+                other=nb.name,
+                horizontal_m=float(dh[k]),
+                vertical_m=float(dv[k]),
+                min_horizontal_m=nb.h_min_m,
+                min_vertical_m=nb.v_min_m,
+                spherical=spherical,
+            )
+        min_ratio = np.minimum(min_ratio, per_plan)
 
     factor = config.risk_proximity_factor
     out = []
@@ -337,6 +354,22 @@ def score_many(  # noqa: C901, PLR0912, PLR0915 - every candidate scored in one 
                 outside_ov_m=outside_m,
                 min_fence_distance_m=fence_m,
                 min_separation_ratio=ratio_i,
+                closest=closest[i],
             )
         )
     return out
+
+
+def alternative_terms(sc: Score) -> dict[str, Any]:
+    """What an :class:`~gcs_utm.model.Alternative` shows the pilot from its score (keyword
+    arguments): extra length and time, the manoeuvre's size, the closest separation (ratio
+    and metres) and fence distance (None where nothing is in range)."""
+    ratio, fence = sc.min_separation_ratio, sc.min_fence_distance_m
+    return {
+        "extra_length_m": sc.extra_distance_m,
+        "extra_time_s": sc.extra_time_s,
+        "offset_m": sc.offset_m,
+        "separation_ratio": ratio if math.isfinite(ratio) else None,
+        "fence_distance_m": fence if math.isfinite(fence) else None,
+        "closest": sc.closest if math.isfinite(ratio) else None,
+    }

@@ -49,7 +49,14 @@ from gcs_utm.core.deconfliction.geometry import (
 from gcs_utm.core.deconfliction.intruder import intruder_plan, resolve_intruder
 from gcs_utm.core.deconfliction.overshoot import overshoot_flags
 from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags, turn_flags
-from gcs_utm.core.deconfliction.scoring import Neighbour, Reference, Score, reference, score_many
+from gcs_utm.core.deconfliction.scoring import (
+    Neighbour,
+    Reference,
+    Score,
+    alternative_terms,
+    reference,
+    score_many,
+)
 from gcs_utm.core.deconfliction.single import resolve_single
 from gcs_utm.core.deconfliction.timing import timing_candidates
 from gcs_utm.core.deconfliction.tolerance import pair_buffers
@@ -375,7 +382,7 @@ class TacticalDeconfliction:
         nbs = []
         for o in neighbours:
             h, v = self.monitoring.effective_minima(op.operational_volume_m, o.operational_volume_m)
-            nbs.append(Neighbour(plan=self.local_plan(o.plan), h_min_m=h, v_min_m=v))
+            nbs.append(Neighbour(plan=self.local_plan(o.plan), h_min_m=h, v_min_m=v, name=o.id))
         return reference(old, self.local_plan(op.plan), op.operational_volume_m, nbs)
 
     def finish(
@@ -487,14 +494,7 @@ class TacticalDeconfliction:
                     cost=0.0 if c.keep else sc.cost,
                     risk=sc.risk,
                     detail=f"{c.detail}; {terms}",
-                    extra_length_m=sc.extra_distance_m,
-                    extra_time_s=sc.extra_time_s,
-                    separation_ratio=ratio
-                    if math.isfinite(ratio := sc.min_separation_ratio)
-                    else None,
-                    fence_distance_m=fence
-                    if math.isfinite(fence := sc.min_fence_distance_m)
-                    else None,
+                    **alternative_terms(sc),
                 )
             )
 

@@ -25,6 +25,9 @@ ACTIONS = (
     "vertical_avoidance",  # climb or descend away from an intruder
 )
 
+EXPIRY_ACTIONS = ("repropose", "replan")
+"""What EM does with a recommendation nobody answered in time (``expiry_action``)."""
+
 DEFAULT_POLICY: dict[str, str] = {
     ThreatKind.LOSS_OF_SEPARATION.value: "alternative_plans",
     ThreatKind.GEOFENCE_CONFLICT.value: "reroute",
@@ -125,6 +128,13 @@ class EmergencyConfig:
         min=1.0,
         unit="s",
     )
+    expiry_action: str = setting(
+        "repropose",
+        "what EM does when a recommendation expires without an answer: 'repropose' (the "
+        "safe command proposed again as a new version, every time it expires: the operator "
+        "keeps being asked, nothing is carried out unanswered) or 'replan' (a new plan "
+        "without the expired manoeuvre, the safe command after max_replans)",
+    )
     suspend_command: str = setting(
         "hold", "command for a suspended operation (jamming/spoofing): 'hold' or 'land'"
     )
@@ -174,6 +184,11 @@ class EmergencyConfig:
                 raise ValueError(
                     f"emergency.policy.{kind}: expected one of {ACTIONS}, got {action!r}"
                 )
+        if self.expiry_action not in EXPIRY_ACTIONS:
+            raise ValueError(
+                f"emergency.expiry_action: expected one of {EXPIRY_ACTIONS}, got "
+                f"{self.expiry_action!r}"
+            )
         if self.suspend_command not in ("hold", "land"):
             raise ValueError(
                 f"emergency.suspend_command: expected 'hold' or 'land', got "

@@ -18,6 +18,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 from gcs_utm.core.deconfliction import TacticalDeconfliction
+from gcs_utm.core.emergency.clearance import with_clearance
 from gcs_utm.core.emergency.config import EmergencyConfig
 from gcs_utm.core.emergency.decision import (
     ACTOR,
@@ -29,6 +30,7 @@ from gcs_utm.core.emergency.decision import (
     Case,
     Decision,
 )
+from gcs_utm.core.emergency.expiry import expire
 from gcs_utm.core.emergency.geofences import area, link_loss, suspend
 from gcs_utm.core.emergency.immediate import held_by, keep_all, propose, too_late
 from gcs_utm.core.emergency.lead import ResponseTimes
@@ -231,22 +233,11 @@ class EmergencyManager:
         return d.merge(self._replan(new, snapshot, "rejected"))
 
     def on_expired(self, rec: Recommendation, snapshot: AirspaceSnapshot) -> Decision:
-        now = snapshot.t_s
-        cur = self._recs.get(rec.id)
-        if (
-            cur is None
-            or cur.version != rec.version
-            or cur.state is not RecommendationState.PROPOSED
-        ):
-            return Decision()
-        new = cur.transition(RecommendationState.EXPIRED, now, "no answer before the deadline")
-        self._recs[new.id] = new
-        msg = f"{rec.id} v{rec.version} ({rec.operation_id}) expired without an answer"
-        d = Decision(
-            recommendations=(new,),
-            escalations=(msg,),
-            audit=(self.audit(now, "expired", rec.id, {"version": rec.version}),),
-        )
+        """No answer in time: see :mod:`.expiry` (the safe command proposed again, or a
+        re-plan as after a rejection: ``expiry_action``)."""
+        d, new = expire(self, rec, snapshot)
+        if new is None or self.config.expiry_action != "replan":
+            return d
         return d.merge(self._replan(new, snapshot, "expired"))
 
     def on_threat_closed(self, threat: Threat) -> Decision:
@@ -567,13 +558,14 @@ class EmergencyManager:
             shown = [
                 x for x in options[op_id] if x is not alt and all(compatible(x, c) for c in others)
             ]
+            ops = case.operations  # the separation each option keeps from the others' choice
             d = d.merge(
                 self.issue(
                     case,
                     op_id,
                     now,
-                    selected=alt,
-                    alternatives=shown,
+                    selected=with_clearance(self.td, ops, others, alt),
+                    alternatives=[with_clearance(self.td, ops, others, x) for x in shown],
                     reason=f"{t.kind.value}: {alt.maneuver.value} (joint selection, "
                     f"score {sel.total:.3f})",
                 )
