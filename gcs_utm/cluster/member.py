@@ -11,6 +11,12 @@ monitoring cycle can cost a lease):
 3. as a standby, take over a region whose lease has expired (its owner died or was cut
    off), and one never claimed once it has been seen free for ``lease_s`` (which gives its
    configured owner the head start at cluster start).
+Every connection of the member runs under a statement timeout of ``lease_s`` (a renewal or a
+read that takes longer is worthless: the lease has run out by then) and TCP keepalive; the
+read connection is checked (``SELECT 1``) every round, so a standby that holds nothing and
+never reads finds a connection broken by a PostgreSQL restart before a takeover needs it. A
+region whose takeover cannot be loaded is handed back (:meth:`ClusterMember.drop`): released
+on the next round, and taken again by a later one.
 A region gained calls ``on_gained`` (the instance then loads that region's operations,
 geofences and pending recommendations from the store, :mod:`gcs_utm.cluster.resume`). Stopping
 releases every lease, so a clean shutdown hands the regions over at once.
@@ -21,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import logging
+import queue
 import threading
 import time
 from collections.abc import Awaitable, Callable
@@ -84,14 +91,49 @@ class ClusterMember:
         self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="cluster-read")
         self._stop = threading.Event()
         self._closed = False
+        self._dropped: queue.SimpleQueue[str] = queue.SimpleQueue()
+        self._ping_pending = False
+
+    def _open(self) -> StoreBase:
+        """A connection of the member: connect and every statement bounded by ``lease_s``."""
+        bound_s = self.config.lease_s
+        return open_store(self._location, busy_timeout_s=bound_s, statement_timeout_s=bound_s)
 
     # ---- reads for the node, on their own thread and connection ------------------------------
     def _reader(self) -> StoreBase:
         if self._read_db is None or getattr(self._read_db, "broken", False):
             if self._read_db is not None:
                 self._read_db.close()
-            self._read_db = open_store(self._location)
+            self._read_db = self._open()
         return self._read_db
+
+    def _ping(self) -> None:
+        """On the read thread: ``SELECT 1`` on the read connection; a broken one is closed
+        here, so the next read opens a new one instead of failing on the old."""
+        try:
+            self._reader()._rows("SELECT 1")
+        except StoreError as exc:
+            _log.warning("cluster: read connection broken, reconnecting: %s", exc)
+            if self._read_db is not None:
+                db, self._read_db = self._read_db, None
+                db.close()
+        finally:
+            self._ping_pending = False
+
+    def _check_reader(self) -> None:
+        """Queue a check of the read connection behind the reads (one at a time)."""
+        if self._closed or self._ping_pending:
+            return
+        self._ping_pending = True
+        try:
+            self._pool.submit(self._ping)
+        except RuntimeError:  # the pool was shut down by close()
+            self._ping_pending = False
+
+    def drop(self, region_id: str) -> None:
+        """Hand a region back (its takeover could not be loaded): the next round releases its
+        lease and forgets it, and a later round may take it again."""
+        self._dropped.put(region_id)
 
     async def read(self, fn: Callable[[StoreBase], object]) -> object:
         """Run ``fn`` on the member's read connection (off the loop)."""
@@ -107,12 +149,14 @@ class ClusterMember:
         if self._lease_db is None or getattr(self._lease_db, "broken", False):
             if self._lease_db is not None:
                 self._lease_db.close()
-            self._lease_db = open_store(self._location)
+            self._lease_db = self._open()
         return self._lease_db
 
     def round(self) -> list[tuple[str, str, Lease | None]]:
         """Renew, claim, take over: one round; returns the (event, region, lease) changes."""
         events: list[tuple[str, str, Lease | None]] = []
+        self._check_reader()
+        self._release_dropped()
         try:
             db = self._leases()
             snapshot = leases_.leases(db)
@@ -123,6 +167,22 @@ class ClusterMember:
         for region_id in [*self.owned, *self._candidates(snapshot, now_db)]:
             events += self._try(region_id)
         return events
+
+    def _release_dropped(self) -> None:
+        while True:
+            try:
+                region_id = self._dropped.get_nowait()
+            except queue.Empty:
+                return
+            if region_id not in self.owned:
+                continue
+            self.owned = {r: lease for r, lease in self.owned.items() if r != region_id}
+            self._renewed_mono.pop(region_id, None)
+            try:
+                leases_.release(self._leases(), region_id, self.holder)
+            except StoreError as exc:  # it expires by itself
+                _log.warning("cluster: release of %s failed: %s", region_id, exc)
+            _log.warning("cluster: %s handed region %s back", self.holder, region_id)
 
     def _candidates(self, snapshot: dict[str, Lease], now_db: float) -> list[str]:
         out = []

@@ -192,9 +192,17 @@ class ClusterNode:
     async def _gained(self, region_id: str, lease: Lease | None) -> None:
         region_map = self.member.map
         epoch = self.member.epoch
-        state = await self.member.read(
-            lambda s: load_region(s, region_id, region_map, self._frame, epoch)
-        )
+        try:
+            state = await self.member.read(
+                lambda s: load_region(s, region_id, region_map, self._frame, epoch)
+            )
+        except StoreError as exc:
+            # nothing of the region is installed yet: hand it back, a later round retries
+            text = f"region {region_id} not taken: loading it failed ({exc}); handed back"
+            _log.warning("cluster: %s", text)
+            self._usm.log_event("cluster", text)
+            self.member.drop(region_id)
+            return
         assert isinstance(state, RegionState)
         self.resumed[region_id] = state
         for op in state.operations:
@@ -208,11 +216,14 @@ class ClusterNode:
         generation = lease.generation if lease is not None else 0
         self.fence.gained(region_id, generation)
         for rec in state.pending:
-            await self.decisions.adopt(
-                rec,
-                f"resumed by {self.member.holder} (region {region_id}, lease "
-                f"generation {generation})",
-            )
+            try:
+                await self.decisions.adopt(
+                    rec,
+                    f"resumed by {self.member.holder} (region {region_id}, lease "
+                    f"generation {generation})",
+                )
+            except StoreError as exc:  # a fenced write stops the instance (_fenced_out)
+                _log.warning("cluster: %s v%d not resumed: %s", rec.id, rec.version, exc)
         self.decisions.continue_after(state.highest)
         new_ops = [op.id for op in state.operations if op.id not in known]
         watched = [op.id for op in state.operations if op.id in known]
