@@ -5,8 +5,12 @@ queue of track batches nor behind the event loop, so neither a busy writer nor a
 monitoring cycle can cost a lease):
 1. renew each region held; one that cannot be renewed is *lost* (``on_lost``): an instance
    that cannot reach the database for ``lease_s`` stops deciding for its regions, because a
-   standby may hold them by then (self-fencing on this instance's monotonic clock, measured
-   from the last renewal the database confirmed);
+   standby may hold them by then. Self-fencing runs on this instance's monotonic clock: a
+   region's *deadline* is ``lease_s`` after the moment its last confirmed renewal was *sent*
+   (the database stamps the expiry later than that, so the deadline never falls after the
+   expiry a standby sees); :meth:`ClusterMember.expired` is the cheap local check the node
+   makes before every decision and every command, and a round first gives up every region
+   whose deadline passed (a stall, a slow renewal), whatever the database would answer now;
 2. claim the configured ``region`` (the preferred owner claims it at once);
 3. as a standby, take over a region whose lease has expired (its owner died or was cut
    off), and one never claimed once it has been seen free for ``lease_s`` (which gives its
@@ -164,6 +168,8 @@ class ClusterMember:
         except StoreError as exc:
             _log.warning("cluster: lease table unreachable: %s", exc)
             return self._fence()
+        for region_id in self.expired():  # past its deadline: fenced, whatever comes next
+            events += self._lose(region_id, "lease deadline passed before a renewal")
         for region_id in [*self.owned, *self._candidates(snapshot, now_db)]:
             events += self._try(region_id)
         return events
@@ -177,7 +183,7 @@ class ClusterMember:
             if region_id not in self.owned:
                 continue
             self.owned = {r: lease for r, lease in self.owned.items() if r != region_id}
-            self._renewed_mono.pop(region_id, None)
+            self._renewed_mono = {r: t for r, t in self._renewed_mono.items() if r != region_id}
             try:
                 leases_.release(self._leases(), region_id, self.holder)
             except StoreError as exc:  # it expires by itself
@@ -206,6 +212,7 @@ class ClusterMember:
         return out
 
     def _try(self, region_id: str) -> list[tuple[str, str, Lease | None]]:
+        sent_mono = time.monotonic()  # before the request: the deadline is measured from here
         try:
             got = leases_.acquire(
                 self._leases(), region_id, self.holder, self.epoch, self.config.lease_s
@@ -217,7 +224,7 @@ class ClusterMember:
             if region_id in self.owned:
                 return self._lose(region_id, "held by another instance")
             return []
-        self._renewed_mono[region_id] = time.monotonic()
+        self._renewed_mono = {**self._renewed_mono, region_id: sent_mono}
         gained = region_id not in self.owned
         self.owned = {**self.owned, region_id: got}
         if not gained:
@@ -235,6 +242,21 @@ class ClusterMember:
             if mono - self._renewed_mono.get(region_id, mono) >= self.config.lease_s:
                 out += self._lose(region_id, "lease not renewed in time")
         return out
+
+    def deadline_mono(self, region_id: str) -> float | None:
+        """When this life stops holding ``region_id`` on the local monotonic clock: ``lease_s``
+        after its last confirmed renewal was sent (None: not held)."""
+        sent = self._renewed_mono.get(region_id)
+        if sent is None or region_id not in self.owned:
+            return None
+        return sent + self.config.lease_s
+
+    def expired(self, now_mono: float | None = None) -> list[str]:
+        """The regions held whose deadline has passed (thread-safe, no I/O): such a region
+        may already be another instance's."""
+        now = time.monotonic() if now_mono is None else now_mono
+        renewed = self._renewed_mono
+        return [r for r in self.owned if now >= renewed.get(r, float("-inf")) + self.config.lease_s]
 
     def _lose(self, region_id: str, why: str) -> list[tuple[str, str, Lease | None]]:
         self.owned = {r: lease for r, lease in self.owned.items() if r != region_id}

@@ -147,6 +147,36 @@ class ClusterNode:
             emergency=emergency,
         )
         self.policy.filer = self.decisions.file
+        self.policy.may_act = self.may_act
+
+    # ---- self-fencing on the local clock (gcs_utm.cluster.member, .selffence) ---------------
+    def may_act(self) -> bool:
+        """True while every region held is within its lease deadline (a local check, no
+        I/O) and the instance was not fenced out; the first expired deadline found stops the
+        instance (fail-stop, exit code 3)."""
+        if self._failed:
+            return False
+        expired = self.member.expired()
+        if not expired:
+            return True
+        self._failed = True
+        text = (
+            f"lease deadline of {', '.join(expired)} passed before a renewal was confirmed: "
+            "this instance stops (self-fenced)"
+        )
+        _log.error("cluster: %s", text)
+        self._usm.log_event("cluster", text)
+        for region_id in expired:
+            self._record(
+                AuditEntry(
+                    t_s=self._clock.now_s(),
+                    actor=self.member.holder,
+                    action="lease_expired",
+                    subject=region_id,
+                )
+            )
+        self._on_fail(text)
+        return False
 
     # ---- lease fencing (gcs_utm.cluster.fence) ----------------------------------------------
     def _region_of(self, op_id: str) -> str | None:
@@ -257,7 +287,9 @@ class ClusterNode:
                 subject=region_id,
             )
         )
-        self._on_fail(f"region {region_id} lost: this instance stops (fail-stop)")
+        if not self._failed:
+            self._failed = True
+            self._on_fail(f"region {region_id} lost: this instance stops (fail-stop)")
 
     # ---- traffic of other instances -------------------------------------------------------
     def _in_halo(self, t: RemoteTrack) -> bool:
