@@ -88,6 +88,9 @@ class ClusterMember:
         self._on_gained = on_gained
         self._on_lost = on_lost
         self.owned: dict[str, Lease] = {}
+        # regions lost (not renewed in time, taken over): read by the loop's may_act before
+        # the loss event reaches it
+        self.lost: list[str] = []
         self._renewed_mono: dict[str, float] = {}
         self._free_since_mono: dict[str, float] = {}
         self._lease_db: StoreBase | None = None
@@ -259,6 +262,7 @@ class ClusterMember:
         return [r for r in self.owned if now >= renewed.get(r, float("-inf")) + self.config.lease_s]
 
     def _lose(self, region_id: str, why: str) -> list[tuple[str, str, Lease | None]]:
+        self.lost = [*self.lost, region_id]  # before owned: a reader never sees neither
         self.owned = {r: lease for r, lease in self.owned.items() if r != region_id}
         _log.warning("cluster: %s lost region %s: %s", self.holder, region_id, why)
         return [("lost", region_id, None)]
