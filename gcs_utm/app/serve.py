@@ -97,6 +97,7 @@ async def join_cluster(
         emergency=rt.emergency,
     )
     rt.store.writer.set_fence(node.fence)  # region-owned rows carry the lease generation
+    rt.usm.vehicle_ops.owns = node.files  # behind a router: only our regions' vehicles
     try:
         await node.member.start()
     except RegionError as exc:

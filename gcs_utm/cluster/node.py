@@ -14,8 +14,10 @@ drive what this instance's airspace holds.
 - traffic: the tracks of the operations it owns go out on their regions' MQTT topics; the
   tracks of other instances' operations inside the halo of its regions come in
   (:mod:`gcs_utm.cluster.exchange`): such an operation is loaded from the store as *foreign*
-  (without its system id and ICAO address, so none of this instance's vehicles is taken for
-  it) and its tracks are fed to the tracker as its measurements; foreign plans and the
+  with its system id (unique across the cluster: behind a MAVLink router this instance hears
+  the vehicle too, and both feed one track) and its tracks are fed to the tracker as its
+  measurements; a vehicle this instance hears is filed as an operation here only when its
+  mission departs in a region it holds (:meth:`ClusterNode.files`); foreign plans and the
   active geofences are refreshed from the store every ``renew_s``;
 - decisions: who decides is :mod:`gcs_utm.cluster.policy`; what crosses instances goes
   through the store (:mod:`gcs_utm.cluster.decisions`): a recommendation another life filed
@@ -31,7 +33,6 @@ Every gain and loss is audited (actor: this instance's lease holder name).
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import logging
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
@@ -50,6 +51,7 @@ from gcs_utm.cluster.resume import RegionState, departure_region, load_region
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AuditEntry,
+    FlightPlan,
     Geofence,
     Measurement,
     MeasurementSource,
@@ -156,12 +158,12 @@ class ClusterNode:
         instance (fail-stop, exit code 3)."""
         if self._failed:
             return False
-        expired = self.member.expired()
+        expired = self.member.expired() or self.member.lost
         if not expired:
             return True
         self._failed = True
         text = (
-            f"lease deadline of {', '.join(expired)} passed before a renewal was confirmed: "
+            f"lease of {', '.join(expired)} expired or lost before a renewal was confirmed: "
             "this instance stops (self-fenced)"
         )
         _log.error("cluster: %s", text)
@@ -338,9 +340,23 @@ class ClusterNode:
         return True
 
     def _install_foreign(self, ops: list[Operation]) -> None:
-        stripped = [dataclasses.replace(op, sys_id=None, icao24=None) for op in ops]
-        self._airspace.load(stripped, ())
+        """A foreign operation keeps its system id and ICAO address (unique across the
+        cluster): behind a MAVLink router this instance hears the vehicle itself, and its
+        telemetry then feeds the same track as the exchanged one, not an intruder."""
+        self._airspace.load(ops, ())
         self._tracking.set_operations(self._airspace.operations.values())
+
+    def files(self, op_id: OperationId, plan: FlightPlan | None) -> bool:
+        """Whether this instance files or changes the operation of a vehicle it hears
+        (gcs_utm.services.vehicle_ops): one it owns, or a new one departing in a region it
+        holds."""
+        if op_id in self._airspace.operations:
+            return self.policy.owns(op_id)
+        if plan is None or not plan.waypoints:
+            return False
+        first = plan.waypoints[0]
+        east_m, north_m = self._frame.point_to_local(first.lat_deg, first.lon_deg)
+        return self.member.owns(self.member.map.region_of(east_m, north_m))
 
     async def refresh(self) -> None:
         """Foreign operations' plans and the active geofences as filed in the store (their
