@@ -21,7 +21,7 @@ from collections.abc import Awaitable, Callable, Sequence
 
 _log = logging.getLogger(__name__)
 
-FENCED_BUDGET_S = 4.0
+FENCED_BUDGET_S = 3.0
 STOP_BUDGET_S = 40.0
 # the share of the budget the service tasks get to end after their cancellation
 TASKS_SHARE = 0.4
