@@ -27,6 +27,7 @@ from gcs_utm.settings import Settings
 from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
 
 from .restart import start_review
+from .stopping import Stopping, run_steps
 from .wiring import (
     FrontendOptions,
     Persistence,
@@ -96,6 +97,7 @@ async def join_cluster(
         emergency=rt.emergency,
     )
     rt.store.writer.set_fence(node.fence)  # region-owned rows carry the lease generation
+    rt.usm.vehicle_ops.owns = node.files  # behind a router: only our regions' vehicles
     try:
         await node.member.start()
     except RegionError as exc:
@@ -193,6 +195,7 @@ async def serve(
     if on_runtime is not None:
         await on_runtime(rt)
     loop = asyncio.get_running_loop()
+    stopping: Stopping | None = None
     for sig in (signal.SIGINT, signal.SIGTERM):
         with contextlib.suppress(NotImplementedError):
             loop.add_signal_handler(sig, stop.set)
@@ -206,16 +209,29 @@ async def serve(
                 if t.get_name() == "dashboard":
                     t.add_done_callback(lambda _t: stop.set())
             await stop.wait()
-            for t in tasks:
-                t.cancel()
+            stopping = Stopping(fenced=bool(failed))
+            if await stopping.cancel(tasks):  # some task ignores its cancellation
+                await run_steps(stopping, _closing(rt, store, recorder))
+                stopping.exit_now(3 if failed else 1, " ".join(["gcs-utm serve: stopped", *failed]))
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.remove_signal_handler(sig)
-        await rt.usm.close()
-        await rt.hub.close()
-        if recorder is not None:
-            recorder.close()
-        store.close()
+        await run_steps(stopping or Stopping(fenced=bool(failed)), _closing(rt, store, recorder))
     print("gcs-utm serve: stopped", *failed, file=sys.stderr)
     return 3 if failed else 0
+
+
+def _closing(
+    rt: Runtime, store: Persistence, recorder: object | None
+) -> list[tuple[str, Callable[[], object]]]:
+    """The steps of a stop, in order (each bounded by gcs_utm.app.stopping)."""
+    steps: list[tuple[str, Callable[[], object]]] = [
+        ("usm.close", rt.usm.close),
+        ("links (hub.close)", rt.hub.close),
+    ]
+    close = getattr(recorder, "close", None)
+    if close is not None:
+        steps.append(("recorder.close", close))
+    steps.append(("store.close", store.close))
+    return steps

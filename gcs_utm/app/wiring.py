@@ -30,6 +30,7 @@ from adapters.remoteid.ingest import (
 from adapters.remoteid.operator import RemoteIdOperator
 from adapters.remoteid.tracks import RidTracks
 from gcs_utm.clock import Clock
+from gcs_utm.cluster.selffence import FencedVehicles
 from gcs_utm.core.deconfliction import TacticalDeconfliction
 from gcs_utm.core.deconfliction.retime import retime_snapshot
 from gcs_utm.core.emergency import Decision, EmergencyManager
@@ -212,8 +213,8 @@ def build_runtime(
         geofences=airspace.geofences,
     )
 
-    async def tracking_hazard(h: HazardReport) -> None:
-        usm.on_hazard(h)
+    on_hazard = usm.on_hazard if policy is None else _admitted(usm.on_hazard, policy)
+    tracking_hazard = _in_loop(on_hazard)
 
     # Remote ID records (rid_ingest, below) on the tracks: docs/remote-id.md
     rid_tracks = RidTracks(
@@ -250,6 +251,7 @@ def build_runtime(
             store,
             owns=None if policy is None else policy.owns,
             file=None if policy is None else policy.filer,
+            policy=policy,
         )
 
     def em_snapshot(t_s: float) -> Any:
@@ -276,7 +278,7 @@ def build_runtime(
     # safe command), so a failed upload never leaves its threat without a pending decision.
     usm.attach_operator(emergency)
     hub = MavlinkHub(settings.mavlink, clock, usm)
-    usm.attach_vehicles(hub)
+    usm.attach_vehicles(hub if policy is None else FencedVehicles(hub, policy.may_act))
 
     def rid_identity(rec: RidAircraft, text: str) -> None:
         usm.log_event("remote_id", text)
@@ -309,7 +311,7 @@ def build_runtime(
             known=hub.vehicles,
             operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
             on_problem=lambda text: usm.log_event("remote_id", text),
-            on_hazard=usm.on_hazard,
+            on_hazard=on_hazard,
         ),
         remote_id_ingest=rid_ingest,
         remote_id_tracks=rid_tracks,
@@ -322,6 +324,25 @@ def build_runtime(
         plan_history=plan_history,
         geofence_history=geofence_history,
     )
+
+
+def _in_loop(fn: Callable[[HazardReport], None]) -> Callable[[HazardReport], Awaitable[None]]:
+    async def called(h: HazardReport) -> None:
+        fn(h)
+
+    return called
+
+
+def _admitted(
+    on_hazard: Callable[[HazardReport], None], policy: OwnershipPolicy
+) -> Callable[[HazardReport], None]:
+    """A cluster member's hazards: see :meth:`OwnershipPolicy.admits_hazard`."""
+
+    def admitted(h: HazardReport) -> None:
+        if policy.admits_hazard(h):
+            on_hazard(h)
+
+    return admitted
 
 
 def _filtered(
@@ -342,13 +363,18 @@ async def apply_decision(
     *,
     owns: Callable[[OperationId], bool] | None = None,
     file: Callable[[Recommendation], Awaitable[None]] | None = None,
+    policy: OwnershipPolicy | None = None,
 ) -> None:
     """Carry an EM decision to the world through the USM. Order matters: geofences first so
     the operator sees why, then superseded proposals, then new recommendations. ``owns``
     (cluster): a recommendation for an operation of another instance is filed in the store
     for its owner (gcs_utm.cluster.policy), not proposed here: by ``file`` (the cluster
     node's version allocation) when given; a command for such an operation travels with its
-    filed recommendation and its owner sends it (gcs_utm.cluster.decisions)."""
+    filed recommendation and its owner sends it (gcs_utm.cluster.decisions). ``policy``: a
+    cluster member whose lease deadline passed (``policy.may_act``) carries out nothing."""
+    if policy is not None and not policy.may_act():
+        policy.dropped_stale += 1
+        return
     for entry in decision.audit:
         store.record(entry)
     if decision.geofences:

@@ -14,8 +14,10 @@ drive what this instance's airspace holds.
 - traffic: the tracks of the operations it owns go out on their regions' MQTT topics; the
   tracks of other instances' operations inside the halo of its regions come in
   (:mod:`gcs_utm.cluster.exchange`): such an operation is loaded from the store as *foreign*
-  (without its system id and ICAO address, so none of this instance's vehicles is taken for
-  it) and its tracks are fed to the tracker as its measurements; foreign plans and the
+  with its system id (unique across the cluster: behind a MAVLink router this instance hears
+  the vehicle too, and both feed one track) and its tracks are fed to the tracker as its
+  measurements; a vehicle this instance hears is filed as an operation here only when its
+  mission departs in a region it holds (:meth:`ClusterNode.files`); foreign plans and the
   active geofences are refreshed from the store every ``renew_s``;
 - decisions: who decides is :mod:`gcs_utm.cluster.policy`; what crosses instances goes
   through the store (:mod:`gcs_utm.cluster.decisions`): a recommendation another life filed
@@ -31,7 +33,6 @@ Every gain and loss is audited (actor: this instance's lease holder name).
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import logging
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
@@ -50,6 +51,7 @@ from gcs_utm.cluster.resume import RegionState, departure_region, load_region
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AuditEntry,
+    FlightPlan,
     Geofence,
     Measurement,
     MeasurementSource,
@@ -147,6 +149,36 @@ class ClusterNode:
             emergency=emergency,
         )
         self.policy.filer = self.decisions.file
+        self.policy.may_act = self.may_act
+
+    # ---- self-fencing on the local clock (gcs_utm.cluster.member, .selffence) ---------------
+    def may_act(self) -> bool:
+        """True while every region held is within its lease deadline (a local check, no
+        I/O) and the instance was not fenced out; the first expired deadline found stops the
+        instance (fail-stop, exit code 3)."""
+        if self._failed:
+            return False
+        expired = self.member.expired() or self.member.lost
+        if not expired:
+            return True
+        self._failed = True
+        text = (
+            f"lease of {', '.join(expired)} expired or lost before a renewal was confirmed: "
+            "this instance stops (self-fenced)"
+        )
+        _log.error("cluster: %s", text)
+        self._usm.log_event("cluster", text)
+        for region_id in expired:
+            self._record(
+                AuditEntry(
+                    t_s=self._clock.now_s(),
+                    actor=self.member.holder,
+                    action="lease_expired",
+                    subject=region_id,
+                )
+            )
+        self._on_fail(text)
+        return False
 
     # ---- lease fencing (gcs_utm.cluster.fence) ----------------------------------------------
     def _region_of(self, op_id: str) -> str | None:
@@ -192,9 +224,17 @@ class ClusterNode:
     async def _gained(self, region_id: str, lease: Lease | None) -> None:
         region_map = self.member.map
         epoch = self.member.epoch
-        state = await self.member.read(
-            lambda s: load_region(s, region_id, region_map, self._frame, epoch)
-        )
+        try:
+            state = await self.member.read(
+                lambda s: load_region(s, region_id, region_map, self._frame, epoch)
+            )
+        except StoreError as exc:
+            # nothing of the region is installed yet: hand it back, a later round retries
+            text = f"region {region_id} not taken: loading it failed ({exc}); handed back"
+            _log.warning("cluster: %s", text)
+            self._usm.log_event("cluster", text)
+            self.member.drop(region_id)
+            return
         assert isinstance(state, RegionState)
         self.resumed[region_id] = state
         for op in state.operations:
@@ -208,11 +248,14 @@ class ClusterNode:
         generation = lease.generation if lease is not None else 0
         self.fence.gained(region_id, generation)
         for rec in state.pending:
-            await self.decisions.adopt(
-                rec,
-                f"resumed by {self.member.holder} (region {region_id}, lease "
-                f"generation {generation})",
-            )
+            try:
+                await self.decisions.adopt(
+                    rec,
+                    f"resumed by {self.member.holder} (region {region_id}, lease "
+                    f"generation {generation})",
+                )
+            except StoreError as exc:  # a fenced write stops the instance (_fenced_out)
+                _log.warning("cluster: %s v%d not resumed: %s", rec.id, rec.version, exc)
         self.decisions.continue_after(state.highest)
         new_ops = [op.id for op in state.operations if op.id not in known]
         watched = [op.id for op in state.operations if op.id in known]
@@ -246,7 +289,9 @@ class ClusterNode:
                 subject=region_id,
             )
         )
-        self._on_fail(f"region {region_id} lost: this instance stops (fail-stop)")
+        if not self._failed:
+            self._failed = True
+            self._on_fail(f"region {region_id} lost: this instance stops (fail-stop)")
 
     # ---- traffic of other instances -------------------------------------------------------
     def _in_halo(self, t: RemoteTrack) -> bool:
@@ -295,9 +340,23 @@ class ClusterNode:
         return True
 
     def _install_foreign(self, ops: list[Operation]) -> None:
-        stripped = [dataclasses.replace(op, sys_id=None, icao24=None) for op in ops]
-        self._airspace.load(stripped, ())
+        """A foreign operation keeps its system id and ICAO address (unique across the
+        cluster): behind a MAVLink router this instance hears the vehicle itself, and its
+        telemetry then feeds the same track as the exchanged one, not an intruder."""
+        self._airspace.load(ops, ())
         self._tracking.set_operations(self._airspace.operations.values())
+
+    def files(self, op_id: OperationId, plan: FlightPlan | None) -> bool:
+        """Whether this instance files or changes the operation of a vehicle it hears
+        (gcs_utm.services.vehicle_ops): one it owns, or a new one departing in a region it
+        holds."""
+        if op_id in self._airspace.operations:
+            return self.policy.owns(op_id)
+        if plan is None or not plan.waypoints:
+            return False
+        first = plan.waypoints[0]
+        east_m, north_m = self._frame.point_to_local(first.lat_deg, first.lon_deg)
+        return self.member.owns(self.member.map.region_of(east_m, north_m))
 
     async def refresh(self) -> None:
         """Foreign operations' plans and the active geofences as filed in the store (their

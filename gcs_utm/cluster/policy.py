@@ -13,13 +13,19 @@ border is detected on both sides; then:
 - a recommendation the decider makes for a foreign operation is filed in the store and not
   presented here: the operation's owner proposes it to its pilot as the next version in its
   own life and uploads it; a command decided for it (autonomous mode) is sent by its owner
-  (:mod:`gcs_utm.cluster.decisions`).
+  (:mod:`gcs_utm.cluster.decisions`);
+- **no act without a live lease**: ``may_act`` (set by the cluster node: no held region past
+  its local lease deadline, and the instance not fenced out) is checked before every
+  threat is filed or decided, every decision is carried out and every command or plan
+  reaches a vehicle (:mod:`gcs_utm.cluster.selffence`). A stale owner waking from a stall
+  files nothing and commands nothing for a region that may be another instance's by then.
 """
 
 from __future__ import annotations
 
 from collections.abc import Awaitable, Callable, Mapping
 
+from gcs_utm.messages import HazardReport
 from gcs_utm.model import Operation, OperationId, Recommendation, Threat
 
 
@@ -33,6 +39,10 @@ class OwnershipPolicy:
         # how a decision for a foreign operation is filed for its owner (set by the cluster
         # node: gcs_utm.cluster.decisions.DecisionRelay.file); None: the plain store write
         self.filer: Callable[[Recommendation], Awaitable[None]] | None = None
+        # False while this instance may not act for its regions (see module); the cluster
+        # node sets it
+        self.may_act: Callable[[], bool] = lambda: True
+        self.dropped_stale = 0  # threats, hazards and decisions dropped for want of a lease
 
     def owns(self, op_id: OperationId) -> bool:
         return op_id not in self.foreign and op_id in self.operations_of()
@@ -49,6 +59,9 @@ class OwnershipPolicy:
     def filter_threats(self, threats: list[Threat]) -> list[Threat]:
         """The threats this instance decides for (a threat naming no operation, a hazard of
         the service itself, is always kept)."""
+        if not self.may_act():
+            self.dropped_stale += len(threats)
+            return []
         if not self.foreign:
             return threats
         ops = self.operations_of()
@@ -58,6 +71,14 @@ class OwnershipPolicy:
             if not t.uas_ids or (decider is not None and decider not in self.foreign):
                 kept.append(t)
         return kept
+
+    def admits_hazard(self, h: HazardReport) -> bool:
+        """A hazard (a lost link, a degraded GNSS, ...) becomes a threat here only while this
+        instance may act, and not for a foreign operation (its owner raises it)."""
+        if not self.may_act():
+            self.dropped_stale += 1
+            return False
+        return h.operation_id is None or h.operation_id not in self.foreign
 
 
 __all__ = ["OwnershipPolicy"]

@@ -23,6 +23,11 @@ that flies a mission is an operation, filed from the mission it has, kept in ste
 - A warning, once per vehicle, when its home is far from the airspace's ground elevation
   (AGL inputs would then be converted with the wrong ground).
 
+A cluster member (``owns`` set, :mod:`gcs_utm.cluster.node`) hears every vehicle behind a
+MAVLink router: it files only a vehicle whose mission departs in a region it holds, and
+re-files, re-times or re-homes only the operations it owns (another instance's are that
+instance's to change).
+
 Only operations this module filed (``conops`` = :data:`CONOPS`) are re-timed or follow home
 moves; an operation filed elsewhere (scenario, MQTT) is re-filed only when the vehicle's
 mission changes after discovery to something other than its plan.
@@ -337,13 +342,19 @@ class VehicleOps:
         self._spawn = spawn
         self._port: Callable[[SysId], Awaitable[Sequence[object]]] | None = None
         self._vehicles: dict[SysId, _Vehicle] = {}
+        # cluster: may this instance file (plan: a new operation's) or change this operation
+        self.owns: Callable[[OperationId, FlightPlan | None], bool] | None = None
         self.counters: dict[str, int] = {
             "filed": 0,
             "refiled": 0,
             "retimed": 0,
             "downloads": 0,
             "download_failures": 0,
+            "not_ours": 0,
         }
+
+    def _ours(self, op_id: OperationId, plan: FlightPlan | None = None) -> bool:
+        return self.owns is None or self.owns(op_id, plan)
 
     def attach(self, port: object) -> None:
         """The MAVLink side; without ``download_mission`` no operation is filed."""
@@ -533,7 +544,9 @@ class VehicleOps:
         """Any operation the vehicle flies takes its home at arming (TD's floor is that home
         plus the minimum height): one filed elsewhere (scenario, MQTT) too."""
         op = self.airspace.by_sys_id(v.sys_id)
-        if op is not None and v.home is not None and op.home != v.home and op.conops != CONOPS:
+        if op is None or v.home is None or op.home == v.home or op.conops == CONOPS:
+            return
+        if self._ours(op.id):
             self.airspace.set_home(op.id, v.home)
 
     def _warn_ground(self, v: _Vehicle, home: Position) -> None:
@@ -616,8 +629,11 @@ class VehicleOps:
         if v.items is None or not v.fixed:
             return
         op = self.airspace.by_sys_id(v.sys_id)
-        if op is not None and not changed and op.conops != CONOPS:
-            return  # filed elsewhere (scenario, MQTT, store): its plan stands
+        if op is not None and (
+            (not changed and op.conops != CONOPS)  # filed elsewhere: its plan stands
+            or not self._ours(op.id)  # another cluster member's operation
+        ):
+            return
         points = self._points(v)
         if points is None:
             return  # waits for the home
@@ -631,8 +647,10 @@ class VehicleOps:
             plan = self._plan(
                 v, points, OperationId(f"sys{v.sys_id}"), 1, "from the vehicle's mission"
             )
-            if plan is not None:
+            if plan is not None and self._ours(plan.operation_id, plan):
                 self._add(v, plan)
+            elif plan is not None:
+                self.counters["not_ours"] += 1  # departs in another member's region
             return
         home_moved = (
             op.conops == CONOPS
@@ -701,7 +719,7 @@ class VehicleOps:
         if v.downloading:
             v.start_pending = v.start_pending or started
             return  # (the arming that started it also downloads the mission: after that)
-        if op is None or op.conops != CONOPS or v.items is None:
+        if op is None or op.conops != CONOPS or v.items is None or not self._ours(op.id):
             return
         points = self._points(v)
         if not points or not _flies_plan(v, points, op.plan):

@@ -35,15 +35,23 @@ def open_store(
     readonly: bool = False,
     synchronous: str = "normal",
     busy_timeout_s: float = 5.0,
+    statement_timeout_s: float = 0.0,
 ) -> StoreBase:
     """The store at ``location``: PostgreSQL for a ``postgresql://`` URL, else the SQLite file
-    (``synchronous`` and ``busy_timeout_s`` apply to SQLite only)."""
+    (``synchronous`` applies to SQLite only; ``busy_timeout_s`` is SQLite's lock wait and
+    PostgreSQL's connect timeout; ``statement_timeout_s`` > 0, PostgreSQL only, makes the
+    server cancel a statement running longer)."""
     if is_postgres(location):
         try:
             from gcs_utm.store.postgres import PgStore
         except ImportError as exc:
             raise StoreError(str(exc)) from exc
-        return PgStore(str(location), readonly=readonly, connect_timeout_s=busy_timeout_s)
+        return PgStore(
+            str(location),
+            readonly=readonly,
+            connect_timeout_s=busy_timeout_s,
+            statement_timeout_s=statement_timeout_s,
+        )
     if isinstance(location, str) and "://" in location:
         raise StoreError(
             f"{location.split('://', 1)[0]}://: not a store location (expected a SQLite file "

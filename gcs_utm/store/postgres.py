@@ -59,6 +59,27 @@ def _paramstyle(sql: str) -> str:
     return re.sub(r"\?", "%s", sql.replace("%", "%%"))
 
 
+# TCP keepalive of every connection: a peer that vanished (host loss, a cut network) is
+# found within idle + interval * count seconds instead of the kernel's two hours. Ignored
+# on a unix socket, where the kernel reports a closed peer at once.
+KEEPALIVE = {
+    "keepalives": 1,
+    "keepalives_idle": 5,
+    "keepalives_interval": 2,
+    "keepalives_count": 3,
+}
+
+
+def _session_options(statement_timeout_s: float) -> dict[str, Any]:
+    """libpq keywords of a connection: keepalive, and with ``statement_timeout_s`` > 0 a
+    server-side ``statement_timeout`` (a statement running longer is cancelled by the server
+    and fails with a StoreError, so no call waits on a lock or a stalled server for ever)."""
+    opts: dict[str, Any] = dict(KEEPALIVE)
+    if statement_timeout_s > 0:
+        opts["options"] = f"-c statement_timeout={max(1, round(statement_timeout_s * 1000))}"
+    return opts
+
+
 class _PgConnection:
     """A psycopg connection behind the one ``execute`` the typed API calls."""
 
@@ -97,7 +118,12 @@ class PgStore(StoreBase):
         c.execute(f"SELECT pg_advisory_xact_lock({_KEY_LOCKS}, hashtext(?))", (key,))
 
     def __init__(
-        self, url: str, *, readonly: bool = False, connect_timeout_s: float = 10.0
+        self,
+        url: str,
+        *,
+        readonly: bool = False,
+        connect_timeout_s: float = 10.0,
+        statement_timeout_s: float = 0.0,
     ) -> None:
         self.url = url
         self.where = redact(url)
@@ -106,7 +132,10 @@ class PgStore(StoreBase):
         self._init_state()
         try:
             raw = psycopg.connect(
-                url, autocommit=True, connect_timeout=max(1, round(connect_timeout_s))
+                url,
+                autocommit=True,
+                connect_timeout=max(1, round(connect_timeout_s)),
+                **_session_options(statement_timeout_s),
             )
         except psycopg.Error as exc:
             raise StoreError(f"{self.where}: cannot connect: {one_line(exc)}") from exc

@@ -6,6 +6,7 @@ test (no background task), so a test can also stall one member past its lease ex
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -127,6 +128,19 @@ class Member:
             else:
                 await self.node._lost(region_id, lease)
         return [f"{kind} {region_id}" for kind, region_id, _ in events]
+
+    async def step_until(self, wanted: str, timeout_s: float = 10.0) -> list[str]:
+        """Lease rounds every ``renew_s`` (as the lease thread makes them: a member that
+        skips renewals for ``lease_s`` fences itself) until ``wanted`` happens."""
+        seen: list[str] = []
+        deadline = time.monotonic() + timeout_s
+        while wanted not in seen:
+            if time.monotonic() > deadline:
+                raise AssertionError(f"{wanted!r} not within {timeout_s} s: {seen}")
+            seen += await self.step()
+            if wanted not in seen:
+                await asyncio.sleep(self.node.member.config.renew_s)
+        return seen
 
     def flush(self) -> None:
         self.writer.flush(10.0)

@@ -1,0 +1,100 @@
+"""A standby survives a database that dropped its connections: every member connection is
+checked each lease round and bounded by a statement timeout, and a takeover whose region
+cannot be loaded hands the region back and takes it again on a later round, instead of
+ending the process."""
+
+from __future__ import annotations
+
+import pytest
+
+from gcs_utm.cluster import lease
+from gcs_utm.cluster import node as node_module
+from gcs_utm.model import OperationId
+from gcs_utm.store import StoreError, open_store
+from tests.cluster.harness import Member, config, file_airspace, member
+from tests.store.conftest import raw_execute
+
+
+def _kill_backends(url: str) -> None:
+    """Terminate every other session of the test database (what a PostgreSQL restart does
+    to its clients: 'terminating connection due to administrator command')."""
+    raw_execute(
+        url,
+        "SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+        "WHERE datname = current_database() AND pid <> pg_backend_pid()",
+    )
+
+
+def _expire(url: str, region_id: str) -> None:
+    """The owner died: its lease runs out (on the database clock)."""
+    raw_execute(url, f"UPDATE region_leases SET expires_unix_s = 0 WHERE region_id = '{region_id}'")
+
+
+async def _step_until(m: Member, wanted: str, rounds: int = 5) -> list[str]:
+    seen: list[str] = []
+    for _ in range(rounds):
+        seen += await m.step()
+        if wanted in seen:
+            return seen
+    raise AssertionError(f"{wanted!r} not within {rounds} rounds: {seen}")
+
+
+@pytest.mark.timeout(60)
+async def test_a_standby_takes_over_after_its_connections_were_cut(pg_url: str) -> None:
+    file_airspace(pg_url)
+    a = await member(pg_url, config("A", "c0r0", standby=False))
+    b = await member(pg_url, config("B", "c1r0", standby=True))
+    try:
+        assert await a.step() == ["gained c0r0"] and await b.step() == ["gained c1r0"]
+        # B holds a region but never read since: its read connection is idle
+        _kill_backends(pg_url)
+        _expire(pg_url, "c0r0")  # A is gone too
+        seen = await _step_until(b, "gained c0r0")
+        assert "lost c1r0" not in seen and b.failed == []
+        assert OperationId("UAS1") in b.airspace.ops  # the region was loaded
+        with open_store(pg_url) as s:
+            held = {r: h for r, h in lease.owners(s).items()}
+        assert held == {"c0r0": b.node.member.holder, "c1r0": b.node.member.holder}
+    finally:
+        await a.close()
+        await b.close()
+
+
+@pytest.mark.timeout(60)
+async def test_a_takeover_that_cannot_load_hands_the_region_back_and_retries(
+    pg_url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    file_airspace(pg_url)
+    b = await member(pg_url, config("B", "c1r0", standby=True))
+    real_load = node_module.load_region
+    calls: list[str] = []
+
+    def failing_once(*args: object, **kwargs: object) -> object:
+        calls.append(str(args[1]))
+        if len(calls) == 1:
+            raise StoreError("terminating connection due to administrator command")
+        return real_load(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(node_module, "load_region", failing_once)
+    try:
+        # B first takes its own region: the load fails, the region is handed back
+        assert await b.step() == ["gained c1r0"]
+        assert b.failed == [] and "c1r0" not in b.node.resumed
+        assert any("c1r0 not taken" in e and "handed back" in e for e in b.usm.events)
+        # the next round releases it, finds it free, and takes it again: loaded this time
+        assert await b.step() == ["gained c1r0"]
+        assert calls == ["c1r0", "c1r0"] and "c1r0" in b.node.resumed
+        assert OperationId("UAS2") in b.airspace.ops and b.failed == []
+    finally:
+        await b.close()
+
+
+def test_member_connections_carry_a_statement_timeout_and_keepalive(pg_url: str) -> None:
+    from gcs_utm.store.postgres import PgStore
+
+    with open_store(pg_url, statement_timeout_s=0.25) as s:
+        assert isinstance(s, PgStore)
+        assert s._rows("SHOW statement_timeout") == [("250ms",)]
+        with pytest.raises(StoreError, match="statement timeout"):
+            s._rows("SELECT pg_sleep(2)")
+        assert s._conn.raw.info.get_parameters()["keepalives"] == "1"
