@@ -52,6 +52,7 @@ class FencedVehicles:
         start_index: int = 0,
         climb_rate_mps: float | None = None,
         descent_rate_mps: float | None = None,
+        min_speed_mps: float = 0.0,
     ) -> UploadOutcome:
         if not self._may_act():
             self.refused += 1
@@ -64,6 +65,7 @@ class FencedVehicles:
             start_index=start_index,
             climb_rate_mps=climb_rate_mps,
             descent_rate_mps=descent_rate_mps,
+            min_speed_mps=min_speed_mps,
         )
 
     async def send_command(self, sys_id: SysId, command: Command) -> CommandOutcome:
