@@ -56,6 +56,7 @@ from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.emergency import EmergencyService
 from gcs_utm.services.monitoring import MonitoringService
 from gcs_utm.services.operator import AutoOperator
+from gcs_utm.services.retention import Retention
 from gcs_utm.services.strategic import FilingCheck
 from gcs_utm.services.surveillance import SurveillanceService
 from gcs_utm.services.tracking import TrackingService
@@ -153,6 +154,7 @@ class Runtime:
     plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
+    retention: Retention | None = None  # forgets what ended long ago (services/retention.py)
 
     def tracks(self) -> dict[TrackId, Track]:
         return self.remote_id_tracks.attach(self.tracking.tracks_now())
@@ -288,6 +290,12 @@ def build_runtime(
         on_identity=rid_identity,
     )
     rid_ingest.register(hub.remote_id)
+
+    def forgotten(op_ids: list[OperationId]) -> None:
+        tracking.set_operations(airspace.operations.values())  # drops their tracks
+        for op_id in op_ids:
+            plan_history.pop(op_id, None)
+
     return Runtime(
         settings=settings,
         clock=clock,
@@ -321,6 +329,7 @@ def build_runtime(
         ),
         plan_history=plan_history,
         geofence_history=geofence_history,
+        retention=Retention(airspace=airspace, on_forgotten=forgotten),
     )
 
 
@@ -478,6 +487,8 @@ def start_service_tasks(
         tg.create_task(rt.remote_id.run(), name="remote-id"),
         tg.create_task(rt.traffic_out.run(), name="traffic-out"),
     ]
+    if rt.retention is not None:
+        tasks.append(tg.create_task(rt.retention.run(rt.clock), name="retention"))
     if frontends.headless is not None:
         tasks.append(tg.create_task(_headless_status(rt, frontends.headless), name="status"))
     if frontends.line is not None:
