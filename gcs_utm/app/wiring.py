@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -291,11 +292,6 @@ def build_runtime(
     )
     rid_ingest.register(hub.remote_id)
 
-    def forgotten(op_ids: list[OperationId]) -> None:
-        tracking.set_operations(airspace.operations.values())  # drops their tracks
-        for op_id in op_ids:
-            plan_history.pop(op_id, None)
-
     return Runtime(
         settings=settings,
         clock=clock,
@@ -329,8 +325,35 @@ def build_runtime(
         ),
         plan_history=plan_history,
         geofence_history=geofence_history,
-        retention=Retention(airspace=airspace, on_forgotten=forgotten),
+        retention=_retention(
+            clock, airspace, tracking, usm, plans=plan_history, fences=geofence_history
+        ),
     )
+
+
+def _retention(
+    clock: Clock,
+    airspace: Airspace,
+    tracking: TrackingService,
+    usm: Usm,
+    *,
+    plans: dict[OperationId, list[FlightPlan]],
+    fences: dict[str, Geofence],
+) -> Retention:
+    """What ended an hour ago leaves memory (services/retention.py): the operations' tracks,
+    their USM records and histories, and the geofences that ended as long ago."""
+
+    def forgotten(op_ids: list[OperationId]) -> None:
+        tracking.set_operations(airspace.operations.values())  # drops their tracks
+        usm.forget_operations(set(op_ids))
+        for op_id in op_ids:
+            plans.pop(op_id, None)
+        old_s = clock.now_s() - retention.keep_s
+        for g in [g for g in fences.values() if (g.end_t_s or math.inf) < old_s]:
+            del fences[g.id]
+
+    retention = Retention(airspace=airspace, on_forgotten=forgotten)
+    return retention
 
 
 def _filtered(

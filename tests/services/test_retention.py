@@ -11,19 +11,24 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tracking"))
 from tracking_helpers import T0, meas, new_tracker, operation, plan_from_local
-from usm_fakes import make_operation
+from usm_fakes import OP, make_operation
 
+from gcs_utm.clock import ManualClock
 from gcs_utm.model import (
     Geofence,
     GeofenceId,
     GeofenceShape,
     LatLon,
+    Measurement,
+    MeasurementSource,
     OperationId,
     OperationState,
+    SysId,
     TrackId,
 )
 from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.retention import Retention
+from gcs_utm.services.usm import Usm
 
 
 def _fence(gid: str, end_t_s: float | None) -> Geofence:
@@ -73,3 +78,26 @@ def test_the_tracker_drops_the_tracks_of_forgotten_operations() -> None:
     assert set(tr.tracks()) == {TrackId("op1"), TrackId("op2")}
     tr.set_operations(ops[1:])
     assert set(tr.tracks()) == {TrackId("op2")}
+
+
+def test_the_usm_forgets_the_sources_and_recommendations_of_forgotten_operations() -> None:
+    clock = ManualClock(T0)
+    airspace = Airspace()
+    airspace.load([make_operation(T0)], [])
+    usm = Usm(airspace, clock, record=lambda _obj: None)
+    for source, sys_id in ((MeasurementSource.MQTT, None), (MeasurementSource.TELEMETRY, 1)):
+        usm.on_measurement(
+            Measurement(
+                source=source,
+                capture_t_s=T0,
+                receipt_t_s=T0,
+                lat_deg=47.0,
+                lon_deg=8.0,
+                alt_amsl_m=500.0,
+                operation_id=OP if sys_id is None else None,
+                sys_id=None if sys_id is None else SysId(sys_id),
+            )
+        )
+    assert set(usm.telemetry) == {f"mqtt:{OP}", "telemetry:1"}
+    usm.forget_operations({OP})
+    assert set(usm.telemetry) == {"telemetry:1"}  # a vehicle's own link stays
