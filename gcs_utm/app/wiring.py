@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -57,6 +58,7 @@ from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.emergency import EmergencyService
 from gcs_utm.services.monitoring import MonitoringService
 from gcs_utm.services.operator import AutoOperator
+from gcs_utm.services.retention import Retention
 from gcs_utm.services.strategic import FilingCheck
 from gcs_utm.services.surveillance import SurveillanceService
 from gcs_utm.services.tracking import TrackingService
@@ -154,6 +156,7 @@ class Runtime:
     plan_history: dict[OperationId, list[FlightPlan]] = field(default_factory=dict)
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
+    retention: Retention | None = None  # forgets what ended long ago (services/retention.py)
 
     def tracks(self) -> dict[TrackId, Track]:
         return self.remote_id_tracks.attach(self.tracking.tracks_now())
@@ -290,6 +293,7 @@ def build_runtime(
         on_identity=rid_identity,
     )
     rid_ingest.register(hub.remote_id)
+
     return Runtime(
         settings=settings,
         clock=clock,
@@ -323,6 +327,9 @@ def build_runtime(
         ),
         plan_history=plan_history,
         geofence_history=geofence_history,
+        retention=_retention(
+            clock, airspace, tracking, usm, plans=plan_history, fences=geofence_history
+        ),
     )
 
 
@@ -343,6 +350,31 @@ def _admitted(
             on_hazard(h)
 
     return admitted
+
+
+def _retention(
+    clock: Clock,
+    airspace: Airspace,
+    tracking: TrackingService,
+    usm: Usm,
+    *,
+    plans: dict[OperationId, list[FlightPlan]],
+    fences: dict[str, Geofence],
+) -> Retention:
+    """What ended an hour ago leaves memory (services/retention.py): the operations' tracks,
+    their USM records and histories, and the geofences that ended as long ago."""
+
+    def forgotten(op_ids: list[OperationId]) -> None:
+        tracking.set_operations(airspace.operations.values())  # drops their tracks
+        usm.forget_operations(set(op_ids))
+        for op_id in op_ids:
+            plans.pop(op_id, None)
+        old_s = clock.now_s() - retention.keep_s
+        for g in [g for g in fences.values() if (g.end_t_s or math.inf) < old_s]:
+            del fences[g.id]
+
+    retention = Retention(airspace=airspace, on_forgotten=forgotten)
+    return retention
 
 
 def _filtered(
@@ -505,6 +537,8 @@ def start_service_tasks(
         tg.create_task(rt.remote_id.run(), name="remote-id"),
         tg.create_task(rt.traffic_out.run(), name="traffic-out"),
     ]
+    if rt.retention is not None:
+        tasks.append(tg.create_task(rt.retention.run(rt.clock), name="retention"))
     if frontends.headless is not None:
         tasks.append(tg.create_task(_headless_status(rt, frontends.headless), name="status"))
     if frontends.line is not None:

@@ -202,6 +202,14 @@ class Airspace:
             self._on_geofence(g, False)
         return True
 
+    def forget_operation(self, op_id: OperationId) -> bool:
+        """Drop an operation from memory (the store keeps it): one that ended long ago, so
+        that a day of traffic does not accumulate (gcs_utm.services.retention)."""
+        if self._operations.pop(op_id, None) is None:
+            return False
+        self.version += 1
+        return True
+
     def snapshot(self, t_s: float, tracks: TrackSource) -> AirspaceSnapshot:
         """One consistent view at ``t_s``: tracking's (tracks, prediction) pair is taken at
         once, then joined with the operations, the geofences not expired at ``t_s`` and which

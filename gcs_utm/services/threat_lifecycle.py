@@ -21,7 +21,8 @@ any kind with a UAS           the UAS is on the ground (disarmed and not reporte
 
 A cause must stay gone for ``clear_s`` (checked on every :meth:`ThreatCloser.check`) before
 the threat closes, and a link loss needs positions that kept coming over that time: a link
-that flaps back for one frame closes nothing. JAMMING_ATTACK,
+that flaps back for one frame closes nothing (a link loss of an operation that landed or
+ended closes on that alone: the flight sends nothing more). JAMMING_ATTACK,
 SPOOFING_ATTACK, LACK_OF_BATTERY and TECHNICAL_FAILURE close on the ground only: nothing the
 vehicle reports says they are over. What closing does (the store, EM dropping the geofences
 the threat created, the audit) is the caller's ``close``.
@@ -118,6 +119,8 @@ class ThreatCloser:
         t = w.threat
         if t.kind is not ThreatKind.COMMUNICATION_FAILURE or w.gone_since_t_s is None:
             return True
+        if t.uas_ids and self._operation_over(t.uas_ids[0]):
+            return True  # a flight that ended sends nothing more: its link loss is over
         if t.uas_ids:
             last = self.evidence.last_position_t_s(t.uas_ids[0])
         else:
@@ -159,6 +162,10 @@ class ThreatCloser:
         if t.kind is ThreatKind.COMMUNICATION_FAILURE:
             return None  # heard again: decided by its positions (below)
         return f"{op.id} is on the ground (disarmed)"
+
+    def _operation_over(self, op_id: OperationId) -> bool:
+        op = self.evidence.operation(op_id)
+        return op is None or op.state in (OperationState.LANDED, OperationState.ENDED)
 
     def _heard_again(
         self, op_id: OperationId | None, sys_id: SysId | None, t: Threat, now_s: float

@@ -19,7 +19,7 @@ import asyncio
 import itertools
 import logging
 from collections import deque
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Awaitable, Callable, Collection, Sequence
 from dataclasses import dataclass, replace
 
 from adapters.mavlink.senders import idle_keys, over_cap_keys
@@ -438,6 +438,17 @@ class Usm(RecommendationLifecycle):
             del seen[k]
             self._hazard_threats.pop(k, None)
         self.counters["hazard_keys_evicted"] += len(old)
+
+    def forget_operations(self, op_ids: Collection[OperationId]) -> None:
+        """Operations the airspace forgot (services/retention.py): their recommendations and
+        the statistics of sources named by them leave memory (the store keeps the record)."""
+        # sources named by the operation alone (kind, sys id, ICAO, operation, vehicle)
+        named = [k for k in self._sources if k[3] in op_ids and k[1] is None and k[2] is None]
+        gone = {id(self._sources.pop(k).stats) for k in named}
+        for key in [k for k, stats in self._telemetry.items() if id(stats) in gone]:
+            del self._telemetry[key]
+        for rid in [r for r, x in self.recommendations.items() if x.rec.operation_id in op_ids]:
+            del self.recommendations[rid]
 
     @property
     def telemetry(self) -> dict[str, TelemetryStats]:

@@ -285,3 +285,15 @@ def test_persisting_conflict_over_many_cycles_is_one_threat() -> None:
         raised += mon.cycle(_snapshot(k, states, ops))
     assert len({t.id for t in raised}) == 1
     assert [t.status for t in raised] == [ThreatStatus.OPEN]  # same event time: no updates
+
+
+def test_cached_plans_and_fences_of_departed_operations_are_dropped() -> None:
+    """A day of traffic comes and goes: the projections cached per operation and geofence
+    stay bounded by what the airspace holds (they grew with every operation ever seen)."""
+    mon = Monitor(FRAME, MonitoringConfig(**LOOSE))
+    for i in range(100):
+        op = _line_op(f"U{i}", 0)
+        fence = cylinder(f"G{i}", (3000.0, 3000.0), 50.0)
+        mon.cycle(_snapshot(i, {op.id: ((0, 0, 100), (10, 0, 0))}, [op], fences=(fence,)))
+    assert 0 < len(mon._plan_cache) <= 20
+    assert 0 < len(mon._fence_cache) <= 20

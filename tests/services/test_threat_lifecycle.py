@@ -14,6 +14,7 @@ from gcs_utm.model import (
     AuditEntry,
     Autopilot,
     OperationId,
+    OperationState,
     SysId,
     Threat,
     ThreatKind,
@@ -171,3 +172,21 @@ async def test_a_disarmed_vehicle_of_a_planned_operation_is_on_the_ground() -> N
         await _tick(usm, clock, 1.0)
     assert usm.threats == {}
     assert _reasons(recorded) == ["UAS1 is on the ground (disarmed)"]
+
+
+async def test_link_loss_of_an_ended_operation_closes_without_positions() -> None:
+    """A flight that ended sends no more positions: its link loss (raised when its track went
+    stale after the end) closes on the end alone; it stayed open for ever before (the soak)."""
+    usm, clock, recorded, positions = _usm()
+    positions[OP] = T0 - 6.0
+    usm.on_hazard(
+        HazardReport(kind=ThreatKind.COMMUNICATION_FAILURE, t_s=T0, operation_id=OP, source="t")
+    )
+    await usm.drain()
+    (tid,) = usm.threats
+    usm.airspace.set_state(OP, OperationState.ENDED)
+    for _ in range(4):
+        await _tick(usm, clock, 1.0)
+    assert tid not in usm.threat_closer.watching()
+    assert [t.id for t in _closed(recorded)] == [tid]
+    assert _reasons(recorded) == [f"operation {OP} ended"]

@@ -23,8 +23,9 @@ changes; ``active()`` always holds the latest figures.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field, replace
+from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -156,6 +157,8 @@ class Monitor:
 
     def cycle(self, snapshot: AirspaceSnapshot) -> list[Threat]:
         ev = self._evaluate(snapshot)
+        _prune(self._plan_cache, snapshot.operations)
+        _prune(self._fence_cache, {g.id for g in snapshot.geofences})
         return self._update(snapshot, ev)
 
     # ---- evaluation ---------------------------------------------------------------------
@@ -543,3 +546,15 @@ class Monitor:
             updated_at_s=updated if updated is not None else detected,
             status=status,
         )
+
+
+K = TypeVar("K")
+V = TypeVar("V")
+
+
+def _prune(cache: dict[K, V], current: Collection[K]) -> None:
+    """Drop the cached projections of operations and geofences no longer in the airspace (a
+    day of traffic came and went), once the cache holds twice what is current."""
+    if len(cache) > 2 * len(current) + 16:
+        for key in [k for k in cache if k not in current]:
+            del cache[key]

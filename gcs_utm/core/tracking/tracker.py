@@ -178,7 +178,8 @@ class Tracker:
     def set_operations(self, operations: Iterable[Operation]) -> None:
         """Replace the known operations (association maps and plans). Call again whenever a
         plan or an assignment changes. Intruder tracks whose ICAO address or system id now
-        belongs to an operation are removed, so one aircraft never shows up twice."""
+        belongs to an operation are removed, so one aircraft never shows up twice, and so are
+        the tracks of operations no longer given (the airspace forgot them)."""
         ops = list(operations)
         claimed = self._intake.set_operations(ops)
         self._plans = PlanTable([op.plan for op in ops], self.frame)
@@ -190,12 +191,12 @@ class Tracker:
             self._plan_row[row] = j
             self._geom_m[row] = ops[j].flight_geometry_m if j >= 0 else 0.0
             self._loiter_m[row] = loiter.loiter_radius_m(ops[j]) if j >= 0 else 0.0
-        keep = np.array(
-            [tid.partition("@")[0] not in claimed for tid in self._ids[: self._n]], dtype=bool
-        )
-        if not keep.all():
-            self._counters["intruders_dropped"] += int((~keep).sum())
-            self._compact(keep)
+        n, known = self._n, self._plan_of_op
+        gone = np.array([o is not None and o not in known for o in self._op_ids[:n]], bool)
+        taken = np.array([tid.partition("@")[0] in claimed for tid in self._ids[:n]], bool)
+        if gone.any() or taken.any():
+            self._counters["intruders_dropped"] += int(taken.sum())
+            self._compact(~(gone | taken))
 
     # ---- storage ----------------------------------------------------------------------------
     def _grow(self, need: int) -> None:

@@ -1,0 +1,46 @@
+"""A short soak (``gcs-utm bench soak``) of serve's services in fast time: operations come
+and go, threats are raised and decided, and what the services hold stays flat."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from gcs_utm.bench.soak import Traffic, soak
+
+# what the services hold per operation, geofence or threat: bounded by what is current
+PER_OPERATION = (
+    "airspace._operations",
+    "airspace._geofences",
+    "tracker._ids",
+    "monitoring.monitor._plan_cache",
+    "monitoring.monitor._fence_cache",
+    "usm.threats",
+    "usm.threat_closer._watched",
+    "emergency.em._cases",
+    "plan_history",
+)
+
+
+def test_a_short_soak_holds_flat(tmp_path: Path) -> None:
+    traffic = Traffic(
+        hours=0.4,
+        every_s=20.0,
+        flight_s=90.0,
+        conflict_every=3,
+        sample_s=240.0,
+        keep_s=60.0,
+        top=40,
+    )
+    *samples, summary = soak(traffic, tmp_path / "soak.sqlite")
+    assert summary["benchmark"] == "soak.summary" and len(samples) == 6
+    rows = [s["store"]["rows_by_table"] for s in samples]
+    assert rows[-1]["operations"] >= 70  # traffic came and went ...
+    assert rows[-1]["threats"] > rows[1]["threats"] > 0  # ... and met
+    steady, last = samples[2]["containers"], samples[-1]["containers"]
+    for name in PER_OPERATION:
+        assert last.get(name, 0) <= steady.get(name, 0) + 6, (name, steady, last)
+    assert last["airspace._operations"] <= 15  # of 72 filed
+    held = [s["objects_grown_since_first"].get("Operation", 0) for s in samples[2:]]
+    assert max(held) - min(held) <= 6, held  # Operation objects: what is current, not all
+    assert samples[-1]["tasks"] <= samples[2]["tasks"] + 6
+    assert samples[-1]["sockets"] == samples[0]["sockets"]
