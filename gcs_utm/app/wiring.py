@@ -328,7 +328,7 @@ def build_runtime(
         plan_history=plan_history,
         geofence_history=geofence_history,
         retention=_retention(
-            clock, airspace, tracking, usm, plans=plan_history, fences=geofence_history
+            clock, airspace, tracking, (usm, em), plans=plan_history, fences=geofence_history
         ),
     )
 
@@ -356,17 +356,19 @@ def _retention(
     clock: Clock,
     airspace: Airspace,
     tracking: TrackingService,
-    usm: Usm,
+    keepers: tuple[Usm, EmergencyManager],
     *,
     plans: dict[OperationId, list[FlightPlan]],
     fences: dict[str, Geofence],
 ) -> Retention:
     """What ended an hour ago leaves memory (services/retention.py): the operations' tracks,
-    their USM records and histories, and the geofences that ended as long ago."""
+    their USM and EM recommendations, their histories, and the geofences that ended as long
+    ago."""
 
     def forgotten(op_ids: list[OperationId]) -> None:
         tracking.set_operations(airspace.operations.values())  # drops their tracks
-        usm.forget_operations(set(op_ids))
+        for keeper in keepers:
+            keeper.forget_operations(set(op_ids))
         for op_id in op_ids:
             plans.pop(op_id, None)
         old_s = clock.now_s() - retention.keep_s

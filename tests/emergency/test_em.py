@@ -426,3 +426,22 @@ def test_a_conflict_between_two_unchanged_neighbours_does_not_block_the_decision
     from gcs_utm.core.monitoring.strategic import plan_vs_plans
 
     assert plan_vs_plans(rec.selected.plan, a, [b, c], sc.FRAME, mon) == []
+
+
+def test_forgotten_operations_take_their_settled_recommendations_with_them() -> None:
+    """A day of traffic must not accumulate in EM (``gcs-utm bench soak``): the
+    recommendations of operations the airspace forgot leave memory once their threat is
+    closed; while a case still refers to one it stays."""
+    snap, threat = sc.scenario_los_2uas()
+    em = make_em()
+    recs = em.on_threat(threat, snap).recommendations
+    assert recs
+    ops = {r.operation_id for r in recs}
+    em.forget_operations(ops)  # the threat is still open: nothing goes
+    assert all(em.recommendation(r.id) is not None for r in recs)
+    em.on_threat_closed(replace(threat, status=ThreatStatus.CLOSED))
+    em.forget_operations({OperationId("nobody")})
+    assert all(em.recommendation(r.id) is not None for r in recs)
+    em.forget_operations(ops)
+    assert all(em.recommendation(r.id) is None for r in recs)
+    assert em.pending() == []

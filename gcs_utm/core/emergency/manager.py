@@ -14,7 +14,7 @@ Guarantees:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import replace
 
 from gcs_utm.core.deconfliction import TacticalDeconfliction
@@ -137,6 +137,15 @@ class EmergencyManager:
         """Store ``rec`` as the current version of its id; returns it."""
         self._recs[rec.id] = rec
         return rec
+
+    def forget_operations(self, op_ids: Collection[OperationId]) -> None:
+        """Operations the airspace forgot (services/retention.py): their recommendations leave
+        memory, except one an open case still refers to (the store keeps the record)."""
+        kept = {rid for case in self._cases.values() for rid in case.rec_ids}
+        for rid in [r for r, x in self._recs.items() if x.operation_id in op_ids]:
+            if rid not in kept:
+                del self._recs[rid]
+                self._floors.pop(rid, None)
 
     def continue_after(self, rec_id: RecommendationId, version: int) -> None:
         """The next version of ``rec_id`` is numbered above ``version`` (taken elsewhere)."""
