@@ -73,6 +73,7 @@ def test_bench_collects_every_benchmark() -> None:
         "resolution",
         "cluster",
         "service_cycle",
+        "soak",
     }
     # each one is also reachable by name
     for name in discover():
