@@ -9,6 +9,7 @@ see docs/testing.md); the collection hook below orders and groups them for that.
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import pytest
 from hypothesis import settings
@@ -17,12 +18,12 @@ settings.register_profile("local", deadline=None)
 settings.register_profile("ci", deadline=None, derandomize=True, print_blob=True)
 settings.load_profile("ci" if os.environ.get("CI") else "local")
 
-_SHARED_SCOPES = {"module", "class", "package"}
-# The real PX4 / ArduPilot tests: one worker runs them one after the other (their timing
-# margins were set with the machine's cores to themselves); a module there may name a group of
-# its own (the 30-minute serve soak, one PX4, runs beside them on the other worker).
+# With pytest-xdist (tests/check.sh), the scheduler below hands out whole modules, longest
+# first. The real PX4 / ArduPilot tests form one group that one worker runs one after the other
+# (their timing margins were set with the machine's cores to themselves), except the 30-minute
+# serve soak (one PX4), which runs beside them on the other worker.
 _REAL_AUTOPILOT_DIR = "tests/autopilot/"
-_REAL_AUTOPILOT_GROUP = "real-autopilot"
+_GROUPS = {"tests/autopilot/test_serve_soak.py": "serve-soak"}
 
 
 def _timeout_s(item: pytest.Item) -> float:
@@ -33,23 +34,21 @@ def _timeout_s(item: pytest.Item) -> float:
     return float(item.config.getini("timeout") or 0.0)
 
 
-def _shares_a_fixture(item: pytest.Item) -> bool:
-    """Whether the test uses a module-, class- or package-scoped fixture (an expensive set-up
-    its module's other tests reuse)."""
-    info = getattr(item, "_fixtureinfo", None)
-    if info is None:
-        return False
-    return any(fd.scope in _SHARED_SCOPES for defs in info.name2fixturedefs.values() for fd in defs)
+def group_of(nodeid: str) -> str:
+    """The unit of work a test belongs to: its module, the real-autopilot group, or a group of
+    ``_GROUPS``. A whole module goes to one worker, so module-scoped fixtures (e.g. a whole
+    closed-loop evaluation) are built once."""
+    module = nodeid.split("::", 1)[0]
+    if module in _GROUPS:
+        return _GROUPS[module]
+    return "real-autopilot" if module.startswith(_REAL_AUTOPILOT_DIR) else module
 
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Longest first, so that parallel workers do not end on one long test: the real-autopilot
     modules, then the others, each by its longest test's timeout (the authors' bound on its
-    duration), each module's tests kept together and in order. With pytest-xdist, the
-    real-autopilot tests form one group (``_REAL_AUTOPILOT_GROUP``), and the tests of a module
-    that shares a module-scoped fixture another, so that fixture (e.g. a whole closed-loop
-    evaluation) is built once, on one worker, not once per worker."""
+    duration), each module's tests kept together and in order."""
     by_module: dict[str, list[pytest.Item]] = {}
     for item in items:
         by_module.setdefault(item.nodeid.split("::", 1)[0], []).append(item)
@@ -61,14 +60,17 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         ),
     )
     items[:] = [item for its in ordered for item in its]
-    if not config.pluginmanager.hasplugin("xdist"):
-        return
-    for module, its in by_module.items():
-        group = None
-        if module.startswith(_REAL_AUTOPILOT_DIR):
-            group = _REAL_AUTOPILOT_GROUP
-        elif any(map(_shares_a_fixture, its)):
-            group = module
-        for item in its:
-            if group is not None and item.get_closest_marker("xdist_group") is None:
-                item.add_marker(pytest.mark.xdist_group(group))
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """``--dist loadgroup`` with the groups of :func:`group_of` (decided from the test's id in
+    the controller: xdist's own ``xdist_group`` marks do not reach it with pytest 9.2)."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class _ModuleGroups(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return group_of(nodeid)
+
+    return _ModuleGroups(config, log)

@@ -40,10 +40,6 @@ SOAK_SPEED = 8.0  # PX4_SIM_SPEED_FACTOR and serve --speed
 SOAK_SIM_S = 1800.0
 STALE_AFTER_S = 30.0
 
-# One PX4 for minutes: with pytest-xdist it runs on a worker of its own, beside the other
-# real-autopilot tests (tests/conftest.py), not after them.
-pytestmark = pytest.mark.xdist_group("serve-soak")
-
 
 @pytest.mark.timeout(420)
 async def test_serve_30_minutes_against_px4(
