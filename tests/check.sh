@@ -19,9 +19,9 @@ echo "== pytest"
 # runs them in this process): most of the suite's time is spent waiting on autopilots, servers
 # and subprocesses. Each worker gets a private network namespace of its own (tests/netns.sh),
 # so two real-autopilot tests on two workers cannot collide on the autopilots' fixed ports.
-# --dist loadgroup hands out single tests, except modules that share a module-scoped fixture
-# (tests/conftest.py groups those); --no-loadscope-reorder keeps the conftest's order, the
-# longest modules first.
+# --dist loadgroup hands out whole modules, the real-autopilot tests as one group (the
+# scheduler and the order, longest first, are tests/conftest.py's; --no-loadscope-reorder
+# keeps that order).
 jobs="${GCS_UTM_TEST_JOBS:-2}"
 xdist=()
 if [ "$jobs" -gt 1 ]; then
