@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import pytest
@@ -18,6 +18,15 @@ from gcs_utm.core.tracking import IngestStats
 from gcs_utm.messages import HazardReport
 from gcs_utm.model import Measurement, OperationId, ThreatKind, Track, TrackId
 from gcs_utm.services.tracking import TrackingService
+
+
+async def _until(cond: Callable[[], bool], timeout_s: float = 10.0) -> None:
+    """Let the loop run until ``cond()`` holds (fails after ``timeout_s`` of real time)."""
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
+    while not cond():
+        assert loop.time() - t0 < timeout_s, f"not within {timeout_s} s"
+        await asyncio.sleep(0.001)
 
 
 def _service(
@@ -138,17 +147,12 @@ async def test_while_running_a_measurement_updates_its_track_within_the_ingest_d
     svc.submit(meas(0, 0, 100, T0))
     svc.submit(meas(5, 0, 100, T0 + 0.5))  # the next report within the window: one batch
     assert len(tracker) == 0  # not synchronously: batched with what arrives within 2 ms
-    loop = asyncio.get_running_loop()
-    t0 = loop.time()
-    while len(tracker) == 0 and loop.time() - t0 < 1.0:
-        await asyncio.sleep(0.001)
+    await _until(lambda: len(tracker) > 0)
     assert len(tracker) == 1 and svc.stats["batches"] == 1
     assert tracker.tracks()[TrackId("sysid:1")].updates == 2
     # a later one gets its own batch, again without waiting for the clock's next step
     svc.submit(meas(100, 0, 100, T0 + 1))
-    t0 = loop.time()
-    while svc.stats["batches"] < 2 and loop.time() - t0 < 1.0:
-        await asyncio.sleep(0.001)
+    await _until(lambda: svc.stats["batches"] >= 2)
     assert tracker.tracks()[TrackId("sysid:1")].updates == 3
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
@@ -198,8 +202,7 @@ async def test_a_busy_loop_ingests_inline_but_tracking_takes_at_most_a_third_of_
     _time.sleep(0.003)
     svc.submit(meas(5, 0, 100, T0 + 0.5))  # 3 ms >= 2 ms old, but within 2 x 10 ms: wait
     assert svc.stats["batches"] == 2
-    while svc.stats["batches"] < 3:
-        await asyncio.sleep(0.001)
+    await _until(lambda: svc.stats["batches"] >= 3)
     assert _time.monotonic() - t_end >= 0.015
     assert tracker.tracks()[TrackId("sysid:1")].updates == 6
     task.cancel()
@@ -221,12 +224,14 @@ async def test_a_failing_ingest_is_logged_and_counted_and_tracking_goes_on(
 
     tracker.ingest = broken  # type: ignore[method-assign]
     svc.submit(meas(0, 0, 100, T0))
-    await asyncio.sleep(0.01)
+    await _until(lambda: svc.stats["ingest_errors"] > 0)
     assert svc.stats["ingest_errors"] == 1
     assert "1 measurements not used" in caplog.text
     tracker.ingest = real_ingest  # type: ignore[method-assign]
+    # the next ingest waits 2 x the failed one's duration (logging included): on a loaded
+    # machine that is more than any fixed pause, so wait for the batch itself
     svc.submit(meas(1, 0, 100, T0 + 1))
-    await asyncio.sleep(0.01)
+    await _until(lambda: svc.stats["batches"] > 0)
     assert tracker.tracks()[TrackId("sysid:1")].updates == 1
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
