@@ -1,8 +1,8 @@
 """Operator commands reach real autopilots (PX4 v1.15.2 SIH quad, ArduCopter 4.6 SITL) through
 the USM's one entry point and the project's ``MavlinkHub``: refused while the vehicle is
-disarmed on the ground; in flight, an operator ``hold`` then ``resume`` are acknowledged and
-confirmed by the mode the autopilot's HEARTBEAT reports (PX4 AUTO.LOITER then AUTO.MISSION;
-ArduCopter BRAKE then AUTO), and both are audited.
+disarmed on the ground; in flight, an operator ``hold``, ``resume``, ``rtl`` then ``land`` are
+acknowledged and confirmed by the mode the autopilot's HEARTBEAT reports (PX4 AUTO.LOITER,
+AUTO.MISSION, AUTO.RTL, AUTO.LAND; ArduCopter BRAKE, AUTO, RTL, LAND), and all are audited.
 
 Needs ``../shared`` and a private network namespace
 (``bash tests/netns.sh .venv/bin/python -m pytest tests/autopilot/test_operator_commands.py``);
@@ -40,7 +40,7 @@ REAL = [c for c in CASES if c.real and c.kind is VehicleKind.MULTIROTOR]
 
 
 @pytest.mark.parametrize("case", REAL, ids=[c.name for c in REAL])
-async def test_operator_hold_then_resume_reach_the_autopilot(
+async def test_operator_hold_resume_rtl_and_land_reach_the_autopilot(
     case: Case, request: pytest.FixtureRequest
 ) -> None:
     start: Callable[..., SitlProcess] = request.getfixturevalue(
@@ -100,6 +100,10 @@ async def test_operator_hold_then_resume_reach_the_autopilot(
         resumed = await usm.operator_command(uas, "resume", operator="pilot", source="test")
         assert (resumed.outcome.value, resumed.mode) == ("confirmed", "mission"), resumed
         assert usm.statuses_by_sys_id()[SYS].mode is FlightMode.MISSION
+        returned = await usm.operator_command(uas, "rtl", operator="pilot", source="test")
+        assert (returned.outcome.value, returned.mode) == ("confirmed", "rtl"), returned
+        landing = await usm.operator_command(uas, "land", operator="pilot", source="test")
+        assert (landing.outcome.value, landing.mode) == ("confirmed", "land"), landing
         await usm.drain()
     audit = [
         (r.action, r.detail["outcome"])
@@ -110,4 +114,6 @@ async def test_operator_hold_then_resume_reach_the_autopilot(
         ("operator_hold", "refused"),
         ("operator_hold", "confirmed"),
         ("operator_resume", "confirmed"),
+        ("operator_rtl", "confirmed"),
+        ("operator_land", "confirmed"),
     ]
