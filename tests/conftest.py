@@ -20,8 +20,8 @@ settings.load_profile("ci" if os.environ.get("CI") else "local")
 
 # With pytest-xdist (tests/check.sh), the scheduler below hands out whole modules, longest
 # first. The real PX4 / ArduPilot tests form one group that one worker runs one after the other
-# (their timing margins were set with the machine's cores to themselves: with the 30-minute
-# serve soak's PX4 beside them, PX4's use case 1 missed its upload deadline on CI).
+# (their timing margins were set with the machine's cores to themselves; the whole suite runs
+# them in a step of their own, see tests/check.sh).
 _REAL_AUTOPILOT_DIR = "tests/autopilot/"
 
 
