@@ -86,8 +86,18 @@ async def _screen(size: tuple[int, int] = (80, 24)) -> tuple[str, list[str], lis
         usm, lambda: tracks, refresh_s=0.1, minima=Minima(horizontal_m=50.0, vertical_m=15.0)
     )
     async with app.run_test(size=size) as pilot:
-        await pilot.pause()
-        return screen_text(app), _drawn(app, "#map"), _drawn(app, "#events")
+        # the map takes the rows its first scene needs and the panels refill at the next
+        # refresh (0.1 s): read once two refreshes in a row draw the same screen (a loaded
+        # machine may need several)
+        shown: tuple[str, list[str], list[str]] | None = None
+        for _ in range(50):
+            await pilot.pause(0.1)
+            now = (screen_text(app), _drawn(app, "#map"), _drawn(app, "#events"))
+            if now == shown:
+                break
+            shown = now
+        assert shown is not None
+        return shown
 
 
 @pytest.mark.parametrize("size", [(80, 24), (120, 40)])
