@@ -108,6 +108,8 @@ class ClusterMember:
 
     # ---- reads for the node, on their own thread and connection ------------------------------
     def _reader(self) -> StoreBase:
+        if self._closed:  # a read queued behind close() must not open a connection nobody closes
+            raise StoreError("cluster member closed")
         if self._read_db is None or getattr(self._read_db, "broken", False):
             if self._read_db is not None:
                 self._read_db.close()
@@ -118,6 +120,8 @@ class ClusterMember:
         """On the read thread: ``SELECT 1`` on the read connection; a broken one is closed
         here, so the next read opens a new one instead of failing on the old."""
         try:
+            if self._closed:
+                return
             self._reader()._rows("SELECT 1")
         except StoreError as exc:
             _log.warning("cluster: read connection broken, reconnecting: %s", exc)
@@ -313,10 +317,15 @@ class ClusterMember:
             return
         self._closed = True
         self._stop.set()
+        # on the read thread, after the reads and checks queued before: one of them may have
+        # (re)opened the read connection
+        await asyncio.get_running_loop().run_in_executor(self._pool, self._close_reader)
+        self._pool.shutdown(wait=False)
+
+    def _close_reader(self) -> None:
         if self._read_db is not None:
             db, self._read_db = self._read_db, None
-            await asyncio.get_running_loop().run_in_executor(self._pool, db.close)
-        self._pool.shutdown(wait=False)
+            db.close()
 
     def owns(self, region_id: str) -> bool:
         return region_id in self.owned

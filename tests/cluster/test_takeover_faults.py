@@ -5,6 +5,9 @@ ending the process."""
 
 from __future__ import annotations
 
+import asyncio
+import threading
+
 import pytest
 
 from gcs_utm.cluster import lease
@@ -98,3 +101,30 @@ def test_member_connections_carry_a_statement_timeout_and_keepalive(pg_url: str)
         with pytest.raises(StoreError, match="statement timeout"):
             s._rows("SELECT pg_sleep(2)")
         assert s._conn.raw.info.get_parameters()["keepalives"] == "1"
+
+
+async def test_a_connection_check_queued_before_close_leaves_no_connection_open(
+    pg_url: str,
+) -> None:
+    """A lease round queues a check of the read connection; a stop right behind it must not
+    leave the connection that check opens behind, unclosed (the ResourceWarning then fails
+    whatever test the garbage collector happens to run in)."""
+    file_airspace(pg_url)
+    a = await member(pg_url, config("A", "c0r0", standby=False))
+    cm = a.node.member
+
+    def forget_reader() -> None:  # as a member that has not read yet
+        if cm._read_db is not None:
+            cm._read_db.close()
+            cm._read_db = None
+
+    await asyncio.to_thread(forget_reader)
+    busy = threading.Event()
+    cm._pool.submit(busy.wait)  # the read thread is busy with an earlier read ...
+    cm._check_reader()  # ... a check of the connection queues behind it ...
+    stopping = asyncio.create_task(a.close())  # ... and the member stops
+    await asyncio.sleep(0.2)
+    busy.set()
+    await stopping
+    await asyncio.to_thread(cm._pool.shutdown, wait=True)
+    assert cm._read_db is None
