@@ -460,7 +460,9 @@ class MavlinkHub(Commands):
         new = handler(st, m, t, self.sink)
         if new:
             self._senders.discovered(st)
-        if st.autopilot is Autopilot.ARDUPILOT and (new or id(st) in self._restream):
+        if st.autopilot is Autopilot.ARDUPILOT and (
+            new or id(st) in self._restream or _streams_unanswered(st, t)
+        ):
             self._restream.discard(id(st))
             self._request_streams(st)
 
@@ -629,6 +631,7 @@ class MavlinkHub(Commands):
         enc = self._encoder(st)
         ts, tc = st.sys_id, st.key.comp_id
         hz = self.config.ardupilot_stream_hz
+        st.streams_asked_t_s = self.clock.now_s()
         self._to(st, enc.request_data_stream(ts, tc, MAV_DATA_STREAM_ALL, max(1, round(hz))))
         for mid in _ARDUPILOT_STREAM_MSGS:
             params = (float(mid), 1e6 / hz, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -693,3 +696,16 @@ def _parse_addr(text: str) -> Address | None:
         return (host, int(port))
     except ValueError:
         return (host, 0)
+
+
+STREAM_RETRY_S = 5.0
+"""Seconds after asking an ArduPilot for its streams without a position back before asking
+again."""
+
+
+def _streams_unanswered(st: VehicleState, t_s: float) -> bool:
+    """An ArduPilot that heartbeats but sent no position ``STREAM_RETRY_S`` after its streams
+    were asked for: the request was lost or undone (SITL reloads its parameter defaults, the
+    stream rates among them, while it boots), so it is asked again."""
+    asked = st.streams_asked_t_s
+    return st.last_position is None and asked is not None and t_s - asked >= STREAM_RETRY_S

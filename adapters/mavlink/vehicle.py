@@ -80,6 +80,9 @@ class Events(Protocol):
 class VehicleState:
     """Everything we know about one vehicle component on one link."""
 
+    streams_asked_t_s: float | None = None
+    """When the hub last asked this (ArduPilot) vehicle for its streams (hub clock, s)."""
+
     mission: list[MissionItem] | None = None
     """The vehicle's mission as last downloaded or read back after an upload (uploads keep
     its landing sequence)."""

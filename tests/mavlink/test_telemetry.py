@@ -187,6 +187,30 @@ async def test_ardupilot_streams_requested(env: Any, fake_vehicle_cls: Any) -> N
     v.close()
 
 
+async def test_ardupilot_asked_again_while_it_sends_no_position(
+    env: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A request lost or undone while the autopilot boots (ArduPilot SITL reloads its
+    parameter defaults, the stream rates among them): a vehicle that heartbeats without a
+    position is asked again, not left silent for good."""
+    import adapters.mavlink.hub as hub_module
+
+    monkeypatch.setattr(hub_module, "STREAM_RETRY_S", 0.2)
+    v = await env.vehicle(12, autopilot=3)
+    await _settle()
+
+    def asked() -> int:
+        return sum(m.get_type() == "REQUEST_DATA_STREAM" for m in v.received)
+
+    first = asked()
+    assert first >= 1
+    await asyncio.sleep(0.3)
+    v.heartbeat()
+    await _settle()
+    assert asked() > first
+    v.close()
+
+
 # ---- the vehicle clock filter (VehicleState, no sockets) -----------------------------------
 
 
