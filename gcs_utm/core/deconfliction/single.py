@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gcs_utm.core.deconfliction.astar import VisibilityPlanner
+from gcs_utm.core.deconfliction.fenced_goal import destination_blocked, goal_outside
 from gcs_utm.core.deconfliction.geometry import LocalPlan, merged_obstacles, relevant_fences
 from gcs_utm.core.deconfliction.router import Router
 from gcs_utm.model import (
@@ -141,6 +142,8 @@ def _routes(
     lp = router.lp
     if Maneuver.REROUTE in want:
         add(Maneuver.REROUTE, router.reroute(), "replace the crossing part of the plan")
+        if destination_blocked(router):  # the others lead there too: end outside the fence
+            add(Maneuver.REROUTE, goal_outside(router), "end at the closest point outside")
     if Maneuver.DIRECT_TO_GOAL in want:
         add(
             Maneuver.DIRECT_TO_GOAL,

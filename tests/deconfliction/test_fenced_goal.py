@@ -1,0 +1,62 @@
+"""A plan whose destination lies inside an active geofence gets a reroute that ends outside
+it (for a fixed wing, its loiter circle outside too): reroute, direct to goal and next
+waypoint all lead into the fence, and before this nothing was offered (a fixed wing bound
+for a point inside a fence was told to hold and circled through the traffic around it,
+enc_1_0076_fence_head_on)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from gcs_utm.bench import deconfliction as sc
+from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
+from gcs_utm.core.deconfliction.geometry import plan_to_local
+from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.core.monitoring.strategic import plan_vs_geofences
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    Alternative,
+    GeofenceId,
+    Maneuver,
+    Operation,
+    OperationId,
+    ThreatKind,
+    VehicleKind,
+)
+
+MON = MonitoringConfig()
+RADIUS_M = 40.0
+
+
+def _fenced_goal(
+    kind: VehicleKind, speed_mps: float
+) -> tuple[list[Alternative], Operation, AirspaceSnapshot]:
+    fence = sc.cylinder("F", 0.0, 0.0, RADIUS_M)
+    op = sc.make_operation("A", [(-1500, 0, 100), (8, 5, 100)], speed_mps=speed_mps, ov_m=25.0)
+    op = replace(op, vehicle_kind=kind)
+    t = sc.T0_S + 20.0
+    snap = AirspaceSnapshot(t_s=t, operations={op.id: op}, tracks={}, geofences=(fence,))
+    threat = sc.threat(ThreatKind.GEOFENCE_CONFLICT, ["A"], t_s=t, geofence_id=GeofenceId("F"))
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(min_height_above_home_m=0.0), MON)
+    alts = td.resolve_single(threat, OperationId("A"), snap)
+    return alts, op, snap
+
+
+def test_a_destination_inside_a_fence_gets_an_end_point_outside_it() -> None:
+    for kind, speed in ((VehicleKind.MULTIROTOR, 8.0), (VehicleKind.FIXED_WING, 20.0)):
+        alts, op, snap = _fenced_goal(kind, speed)
+        got = [a for a in alts if a.maneuver is Maneuver.REROUTE]
+        assert got, kind
+        a = got[0]
+        assert a.plan is not None
+        assert plan_vs_geofences(a.plan, op, snap.geofences, sc.FRAME, MON) == []
+        lp = plan_to_local(a.plan, sc.FRAME)
+        end_m = float(np.hypot(lp.e[-1], lp.n[-1]))
+        env = op.performance()
+        circle_m = 0.0 if env.can_hover else env.turn_radius_m
+        # outside the fence grown by the volume, and the loiter circle with it
+        assert end_m - circle_m >= RADIUS_M + op.operational_volume_m, (kind, end_m)
+        # the closest point outside, not anywhere: on the side the destination is nearest
+        assert end_m - circle_m < RADIUS_M + op.operational_volume_m + 40.0, (kind, end_m)
