@@ -211,7 +211,8 @@ def test_a_new_plan_carries_timed_points_of_the_path_before_it_starts() -> None:
     for x in mine:
         assert x.plan is not None
         lead = [w for w in x.plan.waypoints if w.t_s < start - 1e-6]
-        assert [w.t_s - sc.T0_S for w in lead] == pytest.approx([5.0, 10.0, 15.0, 20.0])
+        # from the receipt itself (see test_lead_times), then every 5 s back from the start
+        assert [w.t_s - sc.T0_S for w in lead] == pytest.approx([3.0, 5.0, 10.0, 15.0, 20.0])
         for w in lead:
             e, n = sc.FRAME.point_to_local(w.lat_deg, w.lon_deg)
             assert np.allclose([e, n, w.alt_amsl_m], lp_a.position_at(w.t_s), atol=0.01)

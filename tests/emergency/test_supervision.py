@@ -69,8 +69,8 @@ def test_a_plan_starts_after_the_answer_the_upload_and_a_margin(
     """Pilot: the expected answer (5 s; never past the deadline, 20 s) + upload 3 s + margin
     2 s; an automatic operator: its delay; autonomous: no answer at all. The plan EM proposes
     leaves the UAS's path then; before that it carries the path's points every 5 s back to
-    the earliest the vehicle can have it (an immediate answer plus the upload), so no leg
-    but the first is untimed."""
+    the earliest the vehicle can have it (an immediate answer plus the upload), and one at
+    that instant, so the plan covers every instant the vehicle may fly it."""
     snap, threat = sc.scenario_los_2uas()
     em = make_em(delay, autonomous=autonomous, expected_answer_s=expected)
     assert em.plan_start(threat, snap.t_s) == pytest.approx(snap.t_s + start_in_s)
@@ -81,9 +81,11 @@ def test_a_plan_starts_after_the_answer_the_upload_and_a_margin(
     assert any(abs(t - start_in_s) < 1e-3 for t in times)
     earliest = 3.0 + (delay or 0.0)
     lead = [t for t in times if t < start_in_s - 1e-3]
-    assert lead == pytest.approx([start_in_s - 5.0 * k for k in range(len(lead), 0, -1)])
-    assert all(t >= earliest - 1e-6 for t in lead)
-    assert len(lead) == int((start_in_s - earliest) // 5.0)
+    assert lead[0] == pytest.approx(earliest)  # from the earliest receipt on (.lead_times)
+    back = lead[1:]
+    assert back == pytest.approx([start_in_s - 5.0 * k for k in range(len(back), 0, -1)])
+    assert all(t > earliest for t in back)
+    assert len(back) == int((start_in_s - earliest) // 5.0)
     assert em.manoeuvre_start(rec) == pytest.approx(snap.t_s + start_in_s)
 
 
@@ -96,8 +98,7 @@ def accept_all(em: EmergencyManager, d: Decision, snap: AirspaceSnapshot) -> lis
 
 
 def test_a_threat_still_predicted_after_the_accepted_plan_gets_a_new_version() -> None:
-    """Used to be blocked for as long as the accepted recommendation lived. (Monitoring
-    still predicts the event well ahead: a new plan can start in time.)"""
+    """Used to be blocked for as long as the accepted recommendation lived."""
     snap, threat = sc.scenario_los_2uas()
     threat = replace(threat, predicted_event_at_s=sc.T0_S + 300.0)
     em = make_em(max_replans=1)
@@ -112,19 +113,17 @@ def test_a_threat_still_predicted_after_the_accepted_plan_gets_a_new_version() -
     assert em.on_threat(updated, at(snap, 5.0)) == Decision()  # plan not started yet
     assert em.supervise(at(snap, settled - 1.0)) == Decision()
     d = em.on_threat(updated, at(snap, settled + 0.5))
-    (v2,) = plans(d)
-    assert v2.id == acc.id and v2.version == acc.version + 1
+    # The snapshot still holds the filed plans, which meet 3.5 s later: from the earliest
+    # receipt on no plan separates them, so the new versions are immediate commands.
+    (v2,) = [r for r in plans(d) if r.id == acc.id]
+    assert v2.version == acc.version + 1 and v2.command is not None
     assert any(a.action == "supervision" for a in d.audit)
-    # Accepted again, and the threat still does not close: escalate with the safe command.
-    (acc2,) = accept_all(em, d, at(snap, settled + 1.0))
-    assert acc2.selected is not None and acc2.selected.plan is not None
-    due2 = em.supervision_due(acc2)
-    assert due2 is not None
-    later = due2 - sc.T0_S + 1.0
-    later = max(later, settled + 0.5 + em.config.retry_after_s + 1.0)
+    # Accepted, and the threat still does not close: escalate with the safe command.
+    accept_all(em, d, at(snap, settled + 1.0))
+    later = settled + 0.5 + 4.0 * em.config.retry_after_s
     d3 = em.supervise(at(snap, later))
     assert d3.escalations and "still predicted" in d3.escalations[0]
-    (cmd,) = plans(d3)
+    cmd = next(r for r in plans(d3) if r.id == acc.id)
     assert cmd.command is not None and cmd.command.kind is CommandKind.HOLD
 
 

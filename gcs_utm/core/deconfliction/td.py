@@ -47,6 +47,7 @@ from gcs_utm.core.deconfliction.geometry import (
     separation_screen,
 )
 from gcs_utm.core.deconfliction.intruder import intruder_plan, resolve_intruder
+from gcs_utm.core.deconfliction.lead_times import lead_times, needs_lead_in
 from gcs_utm.core.deconfliction.overshoot import overshoot_flags
 from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags, turn_flags
 from gcs_utm.core.deconfliction.scoring import (
@@ -219,7 +220,7 @@ class TacticalDeconfliction:
         """Give every new plan of this call timed lead-in points from ``from_t_s`` (the
         earliest the vehicle can have the plan) up to ``start_t_s``: see :meth:`lead_in`."""
         self._lead_off = {}
-        ok = from_t_s is not None and from_t_s < start_t_s - LEAD_IN_STEP_S
+        ok = needs_lead_in(from_t_s, start_t_s)  # see .lead_times
         self._lead_window = (from_t_s, start_t_s) if ok and from_t_s is not None else None
 
     def lead_in(self, op: Operation) -> LocalPlan | None:
@@ -232,8 +233,7 @@ class TacticalDeconfliction:
         if self._lead_window is None:
             return None
         t_from, t0 = self._lead_window
-        k = np.arange(int((t0 - t_from) // LEAD_IN_STEP_S), 0, -1, dtype=np.float64)
-        times: FloatArray = t0 - LEAD_IN_STEP_S * k
+        times: FloatArray = lead_times(t_from, t0, LEAD_IN_STEP_S)
         e, n, z = self.local_plan(op.plan).coords(times)
         off = self._lead_off.get(op.id)
         if off is not None:
