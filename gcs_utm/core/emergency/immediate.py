@@ -42,6 +42,7 @@ import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
 from gcs_utm.core.emergency.decision import Case, Decision
+from gcs_utm.core.emergency.fly_on import fly_on, flying_on
 from gcs_utm.core.emergency.supervision import escalate_safe
 from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.model import (
@@ -261,7 +262,7 @@ def choose_commands(  # noqa: PLR0917 - one call site
         if best is None or key < best[0]:
             cmds = {m.op_id: m.command for m in moves}
             best = (key, Choice(cmds, actions, ratio, clear, tried))
-    return None if best is None else best[1]
+    return None if best is None else fly_on(best[1], _combo_ratio(td, cands, others, [], paths))
 
 
 def _combo_ratio(
@@ -273,6 +274,7 @@ def _combo_ratio(
 ) -> float:
     """The smallest separation ratio of a combination: between the threat's UAS and from
     each of them to all other traffic."""
+    combo = list(combo) or [None] * len(cands)  # none: every UAS flies on
     xyz = {c.id: (paths[c.id] if m is None else m.xyz) for c, m in zip(cands, combo, strict=True)}
     slack = {c.id: (0.0 if m is None else m.slack_m) for c, m in zip(cands, combo, strict=True)}
     worst = np.inf
@@ -366,6 +368,8 @@ def propose(
     )
     if choice is None:
         return escalate_safe(em, case, list(candidates), now, why)
+    if not choice.commands:  # every command separates them less than flying on (.fly_on)
+        return flying_on(em, case, now, why, choice)
     if _standing(em, case, choice):
         stand: dict[str, object] = {"reason": f"{why}; the immediate commands stand"}
         stand["selected"] = choice.actions

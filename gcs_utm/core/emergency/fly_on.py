@@ -1,0 +1,48 @@
+"""No immediate command when every command separates the UAS less than flying on.
+
+:func:`~.immediate.choose_commands` flies every combination of hold, climb and descend
+forward and keeps the best; when none keeps the minima it took the one with the largest
+separation, even when that was smaller than with no command at all. A fixed wing cannot
+stop: held, it circles where it is (two turn radii of room), so its hold was often far worse
+than its plan: a fixed wing on schedule was held (ratio 0.06) and circled into another UAS
+(enc_1_0102_merge_overtaking, 9.3 m against 50 m); another was sent to circle down to the
+floor next to a third (enc_5_0042_merge_overtaking, seed 5). Now the combination without a
+command competes too: when it keeps the larger separation EM proposes nothing, warns the
+operator with the numbers, and decides the case again after ``retry_after_s`` (a command
+proposed then may be better). An escalation still always carries a command: this is not
+one. Pure."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from gcs_utm.core.emergency.decision import Case, Decision
+
+if TYPE_CHECKING:
+    from gcs_utm.core.emergency.immediate import Choice
+    from gcs_utm.core.emergency.manager import EmergencyManager
+
+FLY_ON = "fly on"
+"""The audit's name for the combination without a command."""
+
+
+def fly_on(best: Choice, none_ratio: float) -> Choice:
+    """``best`` unless it keeps the minima or separates at least as well as no command
+    (``none_ratio``); else the choice without a command (empty ``commands``)."""
+    if best.clear or best.ratio >= none_ratio:
+        return best
+    tried = [*best.tried, {"commands": FLY_ON, "ratio": round(none_ratio, 3)}]
+    return replace(best, commands={}, actions={}, ratio=none_ratio, tried=tried)
+
+
+def flying_on(em: EmergencyManager, case: Case, now: float, why: str, choice: Choice) -> Decision:
+    """Warn that no command is proposed because flying on separates best, with the numbers
+    in the audit; the case is decided again after ``retry_after_s``."""
+    text = (
+        f"{why}; no immediate command: every command separates less than flying on "
+        f"(ratio {choice.ratio:.2f}); decided again in {em.config.retry_after_s:.0f} s"
+    )
+    detail: dict[str, object] = {"reason": text, "selected": FLY_ON, "tried": choice.tried}
+    case.attempt_t_s = now
+    return Decision(warnings=(text,), audit=(em.audit(now, "immediate", case.threat.id, detail),))
