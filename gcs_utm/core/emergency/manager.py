@@ -31,7 +31,6 @@ from gcs_utm.core.emergency.decision import (
     Decision,
 )
 from gcs_utm.core.emergency.expiry import expire
-from gcs_utm.core.emergency.fence_wait import no_alternative
 from gcs_utm.core.emergency.geofences import area, link_loss, suspend
 from gcs_utm.core.emergency.immediate import held_by, keep_all, propose, too_late
 from gcs_utm.core.emergency.lead import ResponseTimes
@@ -46,6 +45,7 @@ from gcs_utm.core.emergency.selection import (
 )
 from gcs_utm.core.emergency.supervision import (
     deviation_start,
+    escalate_safe,
     on_outcome,
     safe_command,
     settled_at,
@@ -670,7 +670,7 @@ class EmergencyManager:
                 d = self.issue(case, op_id, now, command=cmd, reason=msg)
                 return d.merge(Decision(escalations=(msg,), audit=audit))
             msg = f"{case.threat.id}: no feasible alternative for {op_id} ({t.kind.value})"
-            return Decision(audit=audit).merge(no_alternative(self, case, [op_id], now, msg))
+            return Decision(audit=audit).merge(escalate_safe(self, case, [op_id], now, msg))
         d = Decision(audit=(self.audit(now, "decision", case.threat.id, detail),))
         return d.merge(
             self.issue(
