@@ -5,8 +5,7 @@ forward and keeps the best; when none keeps the minima it took the one with the 
 separation, even when that was smaller than with no command at all. A fixed wing cannot
 stop: held, it circles where it is (two turn radii of room), so its hold was often far worse
 than its plan: a fixed wing on schedule was held (ratio 0.06) and circled into another UAS
-(enc_1_0102_merge_overtaking, 9.3 m against 50 m); another was sent to circle down to the
-floor next to a third (enc_5_0042_merge_overtaking, seed 5). Now the combination without a
+(enc_1_0102_merge_overtaking, 9.3 m against 50 m). Now the combination without a
 command competes too: when it keeps the larger separation EM proposes nothing, warns the
 operator with the numbers, and decides the case again after ``retry_after_s`` (a command
 proposed then may be better). An escalation still always carries a command: this is not
