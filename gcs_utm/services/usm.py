@@ -120,8 +120,9 @@ class UsmConfig:
     event_log_size: int = setting(500, "events kept for the dashboard", min=10)
     threat_log_size: int = setting(
         10_000,
-        "threat openings and closings kept in memory for the run report (the store keeps "
-        "every one); the oldest are dropped and counted beyond it",
+        "threat openings and closings kept in memory for the run report, without the "
+        "prediction each was computed on (the store keeps every one); the oldest are dropped "
+        "and counted beyond it",
         min=10,
     )
     upload_attempts: int = setting(
@@ -663,7 +664,10 @@ class Usm(RecommendationLifecycle):
             if first or t.status is ThreatStatus.CLOSED:
                 if len(self.threat_log) == self.threat_log.maxlen:
                     self.counters["threat_log_dropped"] += 1
-                self.threat_log.append(t)
+                # The log is for the run report: without the prediction the threat was
+                # computed on (every track's trajectory, tens of kB), which would make a
+                # full log hold hundreds of MB.
+                self.threat_log.append(replace(t, snapshot=None))
                 self._record(t)
                 uas = ",".join(t.uas_ids) or "-"
                 self.log_event(
