@@ -38,6 +38,7 @@ from sitl.core import (
     Announcer,
     Timeline,
 )
+from sitl.executor import MissionExecutor
 from sitl.faults import Faults
 from sitl.flight import Flight
 from sitl.links import Link, send_ack
@@ -58,6 +59,7 @@ class CommandHandler:
         *,
         time: Timeline,
         flight: Flight,
+        mission: MissionExecutor,
         faults: Faults,
         telemetry: Telemetry,
         counters: dict[str, int],
@@ -65,6 +67,7 @@ class CommandHandler:
     ) -> None:
         self._time = time
         self._flight = flight
+        self._mission = mission
         self._faults = faults
         self._telemetry = telemetry
         self._counters = counters
@@ -172,7 +175,7 @@ class CommandHandler:
             const("MAV_CMD_SET_MESSAGE_INTERVAL"): self._telemetry.cmd_set_interval,
             const("MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES"): self._telemetry.cmd_capabilities,
             const("MAV_CMD_DO_SET_MISSION_CURRENT"): lambda _l, _m, p: (
-                R_ACCEPTED if self._flight.set_current(int(p[0])) else R_DENIED
+                R_ACCEPTED if self._mission.set_current(int(p[0])) else R_DENIED
             ),
             const("MAV_CMD_GET_HOME_POSITION"): self._telemetry.cmd_home,
             const("MAV_CMD_INJECT_FAILURE"): self._cmd_inject_failure,
@@ -204,7 +207,7 @@ class CommandHandler:
         if self._faults.motor_failed and target != LAND:
             self._announce.statustext(SEV_CRITICAL, "Mode change denied: motor failure")
             return R_DENIED
-        if target == MISSION and not self._flight.items:
+        if target == MISSION and not self._mission.items:
             self._announce.statustext(SEV_CRITICAL, "Mode change denied: no valid mission")
             return R_DENIED
         if target == TAKEOFF and not self._flight.armed:
@@ -247,8 +250,8 @@ class CommandHandler:
         seq = next(
             (
                 i
-                for i in range(first, len(self._flight.items))
-                if self._flight.items[i].command == mp.CMD_LAND_START
+                for i in range(first, len(self._mission.items))
+                if self._mission.items[i].command == mp.CMD_LAND_START
             ),
             None,
         )
@@ -257,15 +260,15 @@ class CommandHandler:
             return R_FAILED
         result = self.request_mode(MISSION)
         if result == R_ACCEPTED:
-            self._flight.set_current(seq)
+            self._mission.set_current(seq)
         return result
 
     def _cmd_mission_start(self, _l: Link, _m: Inbound, p: list[float]) -> int:
-        if not self._flight.items:
+        if not self._mission.items:
             return R_DENIED
         first = int(p[0])
-        if 0 < first < len(self._flight.items):
-            self._flight.seq = first
+        if 0 < first < len(self._mission.items):
+            self._mission.seq = first
         return self.request_mode(MISSION)
 
     def _cmd_reposition(self, _l: Link, _m: Inbound, p: list[float]) -> int:
@@ -288,13 +291,13 @@ class CommandHandler:
     def _cmd_change_speed(self, _l: Link, _m: Inbound, p: list[float]) -> int:
         if p[1] == -2:
             self._flight.speed_override = None
-            self._flight.mission_speed = None
+            self._mission.speed = None
         elif p[1] > 0:
             as_item = mp.RawItem(0, 2, mp.CMD_CHANGE_SPEED, 0, 1, p[0], p[1], p[2], 0, 0, 0, 0.0)
-            speed = self._flight.speed_item(as_item)  # (the same rules as the mission item)
+            speed = self._mission.speed_item(as_item)  # (the same rules as the mission item)
             if speed is not None:
                 self._flight.speed_override = speed
-                self._flight.mission_speed = speed
+                self._mission.speed = speed
         return R_ACCEPTED
 
     def _cmd_inject_failure(self, _l: Link, _m: Inbound, p: list[float]) -> int:

@@ -38,6 +38,7 @@ from sitl.core import (
     TAKEOFF,
     Timeline,
 )
+from sitl.executor import MissionExecutor
 from sitl.faults import Faults
 from sitl.flight import Flight
 from sitl.links import Link, StreamState, send_ack
@@ -59,6 +60,7 @@ class Telemetry:
         spec: VehicleSpec,
         time: Timeline,
         flight: Flight,
+        mission: MissionExecutor,
         faults: Faults,
         links: list[Link],
         rng: random.Random,
@@ -67,6 +69,7 @@ class Telemetry:
         self.spec = spec
         self._time = time
         self._flight = flight
+        self._mission = mission
         self._faults = faults
         self._links = links
         self._rng = rng
@@ -300,10 +303,10 @@ class Telemetry:
         in_mission = 1 if self._flight.mode == MISSION else 2
         link.send(
             "MISSION_CURRENT",
-            seq=self._flight.seq,
-            total=len(self._flight.items),
-            mission_state=self._flight.mission_state,
-            mission_mode=in_mission if self._flight.items else 0,
+            seq=self._mission.seq,
+            total=len(self._mission.items),
+            mission_state=self._mission.state,
+            mission_mode=in_mission if self._mission.items else 0,
         )
 
     def _tx_attitude(self, link: Link) -> None:

@@ -68,6 +68,7 @@ class Vehicle:
             spec=spec, time=self.time, rng=self._rng, counters=self.counters, announce=self
         )
         self.flight = Flight(spec=spec, time=self.time, faults=self.faults, announce=self)
+        self.executor = self.flight.mission
         self.transport = Transport(
             spec=spec,
             time=self.time,
@@ -80,6 +81,7 @@ class Vehicle:
             spec=spec,
             time=self.time,
             flight=self.flight,
+            mission=self.executor,
             faults=self.faults,
             links=self.transport.links,
             rng=self._rng,
@@ -88,6 +90,7 @@ class Vehicle:
         self.commands = CommandHandler(
             time=self.time,
             flight=self.flight,
+            mission=self.executor,
             faults=self.faults,
             telemetry=self.telemetry,
             counters=self.counters,
@@ -141,8 +144,8 @@ class Vehicle:
         return self.flight.lim
 
     def speed_item(self, it: mp.RawItem) -> float | None:
-        """The speed a DO_CHANGE_SPEED item sets (see :meth:`Flight.speed_item`)."""
-        return self.flight.speed_item(it)
+        """The speed a DO_CHANGE_SPEED item sets (see :meth:`MissionExecutor.speed_item`)."""
+        return self.executor.speed_item(it)
 
     @property
     def mode(self) -> str:
@@ -158,11 +161,11 @@ class Vehicle:
 
     @property
     def mission(self) -> tuple[mp.RawItem, ...]:
-        return tuple(self.flight.items)
+        return tuple(self.executor.items)
 
     @property
     def mission_current_seq(self) -> int:
-        return self.flight.seq
+        return self.executor.seq
 
     @property
     def battery_pct(self) -> float:
@@ -229,7 +232,7 @@ class Vehicle:
     # MissionHost ----------------------------------------------------------------------
 
     def mission_items(self) -> list[mp.RawItem]:
-        return self.flight.mission_items()
+        return self.executor.wire_items()
 
     def accept_mission(self, items: list[mp.RawItem], flagged_current: int | None) -> None:
         self.flight.accept_mission(items, flagged_current)
@@ -238,7 +241,7 @@ class Vehicle:
         self.flight.clear_mission()
 
     def set_current(self, seq: int) -> bool:
-        return self.flight.set_current(seq)
+        return self.executor.set_current(seq)
 
     def send(self, peer: object, name: str, **fields: Any) -> None:
         if isinstance(peer, Link):
