@@ -56,12 +56,22 @@ def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
     return None
 
 
-def test_the_sitl_import_graph_has_no_cycle() -> None:
+def _graph() -> dict[str, set[str]]:
     mods = _modules()
     names = set(mods)
-    graph = {name: _imports(tree, names) - {name} for name, tree in mods.items()}
+    return {name: _imports(tree, names) - {name} for name, tree in mods.items()}
+
+
+def test_the_sitl_import_graph_has_no_cycle() -> None:
+    graph = _graph()
     assert graph.get("sitl.vehicle")  # the walk sees the imports
     assert _cycle(graph) is None, f"import cycle: {' -> '.join(_cycle(graph) or [])}"
+
+
+def test_only_the_fleet_imports_the_vehicle() -> None:
+    """The vehicle's parts are given what they need; none imports the vehicle back."""
+    importers = {name for name, deps in _graph().items() if "sitl.vehicle" in deps}
+    assert importers == {"sitl", "sitl.fleet"}
 
 
 def test_cycle_finder_finds_a_cycle() -> None:
