@@ -39,6 +39,9 @@ from .wiring import (
 
 _log = logging.getLogger(__name__)
 
+# how long a plain stop waits for the USM's uploads in progress before cancelling them
+DRAIN_BUDGET_S = 10.0
+
 
 def check_cluster(settings: Settings, location: str | Path) -> None:
     """``serve --cluster`` needs the shared database and a region on the grid."""
@@ -211,27 +214,49 @@ async def serve(
             await stop.wait()
             stopping = Stopping(fenced=bool(failed))
             if await stopping.cancel(tasks):  # some task ignores its cancellation
-                await run_steps(stopping, _closing(rt, store, recorder))
+                await _close(stopping, rt, store, recorder)
                 stopping.exit_now(3 if failed else 1, " ".join(["gcs-utm serve: stopped", *failed]))
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.remove_signal_handler(sig)
-        await run_steps(stopping or Stopping(fenced=bool(failed)), _closing(rt, store, recorder))
+        await _close(stopping or Stopping(fenced=bool(failed)), rt, store, recorder)
     print("gcs-utm serve: stopped", *failed, file=sys.stderr)
     return 3 if failed else 0
 
 
-def _closing(
-    rt: Runtime, store: Persistence, recorder: object | None
+async def _close(
+    stopping: Stopping, rt: Runtime, store: Persistence, recorder: object | None
+) -> None:
+    await run_steps(stopping, closing_steps(rt, store, recorder, stopping))
+
+
+def closing_steps(
+    rt: Runtime, store: Persistence, recorder: object | None, stopping: Stopping
 ) -> list[tuple[str, Callable[[], object]]]:
-    """The steps of a stop, in order (each bounded by gcs_utm.app.stopping)."""
-    steps: list[tuple[str, Callable[[], object]]] = [
-        ("usm.close", rt.usm.close),
-        ("links (hub.close)", rt.hub.close),
-    ]
+    """The steps of a stop, in order (each bounded by gcs_utm.app.stopping).
+
+    A plain stop first lets the USM's work in progress (uploads, hazard forwarding) finish,
+    within :data:`DRAIN_BUDGET_S`, as ``run`` does: an upload cut in the middle would leave
+    a vehicle and the store disagreeing about its mission. A fenced member does not: its
+    region may be another instance's by now, so it sends nothing more."""
+    steps: list[tuple[str, Callable[[], object]]] = []
+    if not stopping.fenced:
+
+        async def drain() -> None:
+            await _drain(rt)
+
+        steps.append(("usm.drain (work in progress)", drain))
+    steps += [("usm.close", rt.usm.close), ("links (hub.close)", rt.hub.close)]
     close = getattr(recorder, "close", None)
     if close is not None:
         steps.append(("recorder.close", close))
     steps.append(("store.close", store.close))
     return steps
+
+
+async def _drain(rt: Runtime) -> None:
+    try:
+        await asyncio.wait_for(rt.usm.drain(), DRAIN_BUDGET_S)
+    except TimeoutError:
+        _log.warning("stop: USM work still running after %.0f s; cancelling it", DRAIN_BUDGET_S)
