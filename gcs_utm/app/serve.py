@@ -14,6 +14,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 from gcs_utm.clock import Clock, RealClock, ScaledClock
+from gcs_utm.cluster.commands import CommandGate
 from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
 from gcs_utm.cluster.member import region_map_of
 from gcs_utm.cluster.node import ClusterNode
@@ -98,6 +99,8 @@ async def join_cluster(
     )
     rt.store.writer.set_fence(node.fence)  # region-owned rows carry the lease generation
     rt.usm.vehicle_ops.owns = node.files  # behind a router: only our regions' vehicles
+    # an operator's command: carried out by the owner of the UAS's region only
+    rt.usm.operator_commands.gate = CommandGate(node.member, policy, rt.frame, node.may_act)
     try:
         await node.member.start()
     except RegionError as exc:
