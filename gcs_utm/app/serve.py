@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import os
 import signal
@@ -25,7 +26,7 @@ from gcs_utm.geo import LocalFrame
 from gcs_utm.model import Geofence, Operation
 from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
-from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
+from gcs_utm.store import StoreConfig, StoreError, StoreWriter, describe, is_postgres, open_store
 
 from .restart import start_review
 from .stopping import Stopping, run_steps
@@ -109,6 +110,17 @@ async def join_cluster(
     return node
 
 
+def _writer_config(settings: Settings, cluster: bool) -> StoreConfig:
+    """A cluster member's writer statements (and a stall inside its transaction) are bounded
+    by ``lease_s``: a write holds its fence's lock on a lease row (``FOR SHARE``) until it
+    commits, so a takeover of that region never waits longer than that on a stuck writer."""
+    config = settings.store
+    bound_s = settings.cluster.lease_s
+    if not cluster or 0.0 < config.statement_timeout_s <= bound_s:
+        return config
+    return dataclasses.replace(config, statement_timeout_s=bound_s)
+
+
 def _stored_airspace(
     settings: Settings, db_path: Path, *, cluster: bool
 ) -> tuple[str | Path, list[Operation], list[Geofence]]:
@@ -166,7 +178,7 @@ async def serve(
     location, operations, geofences = _stored_airspace(settings, db_path, cluster=cluster)
     # a PostgreSQL outage at stop leaves the writes not yet taken in a local journal
     pending = Path(settings.store.journal) if is_postgres(location) else None
-    store = Persistence(StoreWriter(location, settings.store, journal=pending))
+    store = Persistence(StoreWriter(location, _writer_config(settings, cluster), journal=pending))
     policy = OwnershipPolicy() if cluster else None
     rt = build_runtime(settings, clock, frame, store, policy=policy)
     store.writer.on_event = lambda text: rt.usm.log_event("store", text)

@@ -330,6 +330,11 @@ class ClusterNode:
         self._loading.add(op_id)
         try:
             found = await self.member.read(lambda s: _operation(s, op_id))
+        except StoreError as exc:
+            # the database is away or cut this connection (a restart): the operation's next
+            # traffic message tries again; it must not end the exchange, and the process
+            _log.warning("cluster: %s of another instance not loaded: %s", op_id, exc)
+            return False
         finally:
             self._loading.discard(op_id)
         if not isinstance(found, Operation):
