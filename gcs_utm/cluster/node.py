@@ -126,6 +126,9 @@ class ClusterNode:
         self.exchange = exchange
         self._tracks = tracks
         self._loading: set[OperationId] = set()
+        # operations of vehicles heard here (behind a router) whose region another instance
+        # holds, not yet in the airspace: loaded as foreign once their owner filed them
+        self._heard: set[OperationId] = set()
         self.foreign_measurements = 0
         self._regions_of_ops: dict[OperationId, str] = {}
         self._failed = False
@@ -242,6 +245,7 @@ class ClusterNode:
             self._regions_of_ops[op.id] = region_id  # the fence's map, filled ahead of writes
         if self.exchange is not None:
             self.exchange.watch(self.member.owned)
+        self._heard.difference_update(op.id for op in state.operations)
         known = set(self._airspace.operations)
         self._airspace.load(state.operations, state.geofences)
         self._tracking.set_operations(self._airspace.operations.values())
@@ -361,7 +365,32 @@ class ClusterNode:
             return False
         first = plan.waypoints[0]
         east_m, north_m = self._frame.point_to_local(first.lat_deg, first.lon_deg)
-        return self.member.owns(self.member.map.region_of(east_m, north_m))
+        if self.member.owns(self.member.map.region_of(east_m, north_m)):
+            return True
+        self._heard.add(op_id)  # another instance's vehicle: watched once filed there
+        return False
+
+    async def watch_heard(self) -> None:
+        """The vehicles heard here whose operation another instance filed become foreign
+        operations (with their system id), so their telemetry feeds a vehicle track of
+        that operation rather than an intruder ``sysid:<n>@<address>``; one not filed yet is
+        looked for again on the next call."""
+        wanted = self._heard - set(self._airspace.operations)
+        self._heard = wanted
+        if not wanted:
+            return
+        found = await self.member.read(
+            lambda s: [op for op in s.load_operations() if op.id in wanted]
+        )
+        assert isinstance(found, list)
+        ops = [op for op in found if op.id not in self._airspace.operations]
+        if not ops:
+            return
+        self.policy.foreign.update(op.id for op in ops)
+        self._heard -= {op.id for op in ops}
+        self._install_foreign(ops)
+        for op in ops:
+            self._usm.log_event("cluster", f"watching {op.id} of another instance (heard)")
 
     async def refresh(self) -> None:
         """Foreign operations' plans and the active geofences as filed in the store (their
@@ -406,14 +435,18 @@ class ClusterNode:
         next_refresh = 0.0
         loop = asyncio.get_running_loop()
         while True:
-            if self.member.owned:
-                self.publish()
-                if loop.time() >= next_refresh:
-                    next_refresh = loop.time() + self.member.config.renew_s
-                    try:
+            due = loop.time() >= next_refresh
+            if due:
+                next_refresh = loop.time() + self.member.config.renew_s
+            try:
+                if due:
+                    await self.watch_heard()  # a standby too: it hears every vehicle
+                if self.member.owned:
+                    self.publish()
+                    if due:
                         await self.refresh()
-                    except StoreError as exc:
-                        _log.warning("cluster: refresh from the store failed: %s", exc)
+            except StoreError as exc:
+                _log.warning("cluster: refresh from the store failed: %s", exc)
             await asyncio.sleep(PUBLISH_PERIOD_S)
 
 

@@ -146,6 +146,17 @@ def test_kill_stall_and_database_restart_leave_one_decider_and_tracked_vehicles(
         assert "sys1 filed from sysid 1" in filed["A"] and "sys2 filed" not in filed["A"]
         assert "sys2 filed from sysid 2" in filed["B"] and "sys1 filed" not in filed["B"]
         assert "filed from sysid" not in filed["C"]
+        # the standby (no region) watches both vehicles as the operations their owners
+        # filed: ordinary vehicle tracks, not intruders sysid:<n>@<address>
+        _wait(
+            lambda: all(
+                f"watching {op} of another instance (heard)" in logs[2].read_text()
+                for op in ("sys1", "sys2")
+            ),
+            10.0,
+            "C watches both vehicles",
+            logs,
+        )
         rows_before = {
             t: int(str(_one(pg_url, f"SELECT COUNT(*) FROM {t}")))
             for t in ("operations", "flight_plans", "threats", "recommendations")
@@ -195,6 +206,9 @@ def test_kill_stall_and_database_restart_leave_one_decider_and_tracked_vehicles(
         _wait(lambda: all(track_t(t) > t_stall[t] + 3.0 for t in t_stall), 15.0, "C tracks", logs)
         assert _holders(pg_url) == {"c0r0": "C", "c1r0": "C"}
         assert inst["C"].poll() is None, logs[2].read_text()[-3000:]
+        # an intruder track a vehicle got before its operation was filed is not fed since
+        intruders = raw_execute(pg_url, "SELECT id, t_s FROM tracks_latest WHERE id LIKE 'sysid:%'")
+        assert all(float(str(t)) < t_kill for _, t in intruders), intruders
         lost = raw_execute(pg_url, "SELECT id FROM threats WHERE kind = 'COMMUNICATION_FAILURE'")
         assert lost == [], lost
         assert raw_execute(pg_url, "SELECT id FROM geofences WHERE active = 1") == []
