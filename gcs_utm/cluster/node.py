@@ -17,8 +17,10 @@ drive what this instance's airspace holds.
   with its system id (unique across the cluster: behind a MAVLink router this instance hears
   the vehicle too, and both feed one track) and its tracks are fed to the tracker as its
   measurements; a vehicle this instance hears is filed as an operation here only when its
-  mission departs in a region it holds (:meth:`ClusterNode.files`); foreign plans and the
-  active geofences are refreshed from the store every ``renew_s``;
+  mission departs in a region it holds (:meth:`ClusterNode.files`), else its operation,
+  once its owner filed it, is loaded as foreign (:meth:`ClusterNode.watch_heard`), so even a
+  standby holding nothing tracks it as that operation, not as an intruder; foreign plans and
+  the active geofences are refreshed from the store every ``renew_s``;
 - decisions: who decides is :mod:`gcs_utm.cluster.policy`; what crosses instances goes
   through the store (:mod:`gcs_utm.cluster.decisions`): a recommendation another life filed
   for an operation this instance owns is adopted (proposed again as a new version allocated
