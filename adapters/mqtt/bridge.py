@@ -115,9 +115,10 @@ class MqttHandler(Protocol):
 
     async def on_flight_status(self, s: FlightStatusReport) -> None: ...
 
-    async def on_operator_command(self, c: OperatorCommandRequest) -> CommandAck:
+    async def on_operator_command(self, c: OperatorCommandRequest) -> CommandAck | None:
         """An operator's hold / land / rtl / resume (``c.operator`` is the topic's operator).
-        Return what became of it; the bridge publishes it on the operator's status topic."""
+        Return what became of it; the bridge publishes it on the operator's status topic.
+        None: another service instance answers it (nothing is published here)."""
         ...
 
 
@@ -472,6 +473,11 @@ class MqttBridge:
             self.stats.handler_errors += 1
             _log.exception("mqtt: operator command from %s failed", c.operator)
             self.publish_error(topic, "", f"internal error while handling: {type(exc).__name__}")
+            return
+        if ack is None:
+            _log.debug(
+                "mqtt: command %s %s id %s: answered elsewhere", c.command, c.uas, c.request_id
+            )
             return
         _log.info(
             "mqtt: command %s %s id %s from %s: %s %s",

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import os
 import signal
@@ -14,6 +15,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 from gcs_utm.clock import Clock, RealClock, ScaledClock
+from gcs_utm.cluster.commands import CommandGate
 from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
 from gcs_utm.cluster.member import region_map_of
 from gcs_utm.cluster.node import ClusterNode
@@ -24,7 +26,7 @@ from gcs_utm.geo import LocalFrame
 from gcs_utm.model import Geofence, Operation
 from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
-from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
+from gcs_utm.store import StoreConfig, StoreError, StoreWriter, describe, is_postgres, open_store
 
 from .restart import start_review
 from .stopping import Stopping, run_steps
@@ -101,12 +103,25 @@ async def join_cluster(
     )
     rt.store.writer.set_fence(node.fence)  # region-owned rows carry the lease generation
     rt.usm.vehicle_ops.owns = node.files  # behind a router: only our regions' vehicles
+    # an operator's command: carried out by the owner of the UAS's region only
+    rt.usm.operator_commands.gate = CommandGate(node.member, policy, rt.frame, node.may_act)
     try:
         await node.member.start()
     except RegionError as exc:
         await node.member.close()
         raise StoreError(str(exc)) from exc
     return node
+
+
+def _writer_config(settings: Settings, cluster: bool) -> StoreConfig:
+    """A cluster member's writer statements (and a stall inside its transaction) are bounded
+    by ``lease_s``: a write holds its fence's lock on a lease row (``FOR SHARE``) until it
+    commits, so a takeover of that region never waits longer than that on a stuck writer."""
+    config = settings.store
+    bound_s = settings.cluster.lease_s
+    if not cluster or 0.0 < config.statement_timeout_s <= bound_s:
+        return config
+    return dataclasses.replace(config, statement_timeout_s=bound_s)
 
 
 def _stored_airspace(
@@ -166,7 +181,7 @@ async def serve(
     location, operations, geofences = _stored_airspace(settings, db_path, cluster=cluster)
     # a PostgreSQL outage at stop leaves the writes not yet taken in a local journal
     pending = Path(settings.store.journal) if is_postgres(location) else None
-    store = Persistence(StoreWriter(location, settings.store, journal=pending))
+    store = Persistence(StoreWriter(location, _writer_config(settings, cluster), journal=pending))
     policy = OwnershipPolicy() if cluster else None
     rt = build_runtime(settings, clock, frame, store, policy=policy)
     store.writer.on_event = lambda text: rt.usm.log_event("store", text)

@@ -31,7 +31,7 @@ from adapters.remoteid.ingest import (
 from adapters.remoteid.operator import RemoteIdOperator
 from adapters.remoteid.tracks import RidTracks
 from gcs_utm.clock import Clock
-from gcs_utm.cluster.selffence import FencedVehicles
+from gcs_utm.cluster.selffence import FencedVehicles, OwnedTraffic
 from gcs_utm.core.deconfliction import TacticalDeconfliction
 from gcs_utm.core.deconfliction.retime import retime_snapshot
 from gcs_utm.core.emergency import Decision, EmergencyManager
@@ -321,7 +321,7 @@ def build_runtime(
         remote_id_tracks=rid_tracks,
         traffic_out=TrafficOut(
             settings.traffic_out,
-            hub,
+            hub if policy is None else OwnedTraffic(hub, policy, airspace.by_sys_id),
             tracks=tracking.tracks_now,
             operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
         ),
