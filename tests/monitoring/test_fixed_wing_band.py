@@ -74,6 +74,19 @@ def test_inside_its_arc_or_outside_the_corner_it_is_not() -> None:
     assert _kinds(_corner(), 50.0, (x, y, 115.0)) == [ThreatKind.UAS_IN_CV]
 
 
+def test_a_plane_overshooting_the_next_leg_after_its_turn_is_conformant() -> None:
+    """Real ArduPlane turned 50 m before a 90 deg corner and ran on 26 m outside the next leg
+    about 100 m past the corner, back within 10 m by 200 m: allowed up to
+    R (1 - cos 90) - 50 sin 90 = 30 m outside for R past the corner, back to 0 at 3 R."""
+    assert _kinds(_corner(), 54.0, (1100.0 + 26.0, 90.0, 100.0)) == []
+    assert _kinds(_corner(), 58.0, (1100.0 + 20.0, 180.0, 100.0)) == []
+    late = (1100.0 + 20.0, 400.0, 100.0)  # 400 m on, past 3 R: it should be back
+    assert _kinds(_corner(), 50.0 + 400.0 / 22.0, late) == [ThreatKind.UAS_IN_CV]
+    assert _kinds(_corner(VehicleKind.MULTIROTOR), 54.0, (1126.0, 90.0, 100.0)) == [
+        ThreatKind.UAS_IN_CV
+    ]
+
+
 def test_a_multirotor_flies_its_corner() -> None:
     assert _kinds(_corner(VehicleKind.MULTIROTOR), 50.0, _inside(12.0)) == [ThreatKind.UAS_IN_CV]
 

@@ -1,23 +1,26 @@
 """The band a fixed wing flies around its plan's polyline, for conformance. Pure.
 
 A plan is a polyline; a fixed wing does not fly one (docs/monitoring.md, "Fixed wings"):
-- **Turns.** It cannot turn on the spot: at a waypoint it turns on an arc of its turn radius
-  ``R = v^2 / (g tan(roll_limit))`` (ArduPlane ROLL_LIMIT_DEG, PX4 FW_R_LIM), starting before
-  the waypoint (ArduPlane accepts a waypoint up to WP_RADIUS early, PX4 its acceptance radius
-  or the L1 turn distance). The arc tangent to both legs cuts the corner by
-  ``R (1 / cos(theta / 2) - 1)`` for a turn of ``theta``; real ArduPlane 4.6 (ROLL_LIMIT_DEG
-  65 in its SITL defaults, 24 m/s: R = 27 m, a cut of 11 m at 90 deg) ran 10-13 m inside the
-  corner of a 90 deg turn, beyond a 10 m flight geometry. So at each corner the band holds
-  the region between the legs and the arc of the vehicle's turn radius (the kite
-  O-A-C-B of the arc's centre O, its tangent points A and B and the corner C): a vehicle
-  there is on its plan; inside the arc it is that far from it. A vehicle turning tighter
-  than ``R`` (a lower speed, a steeper bank) flies inside the band too.
-- **Climbs and descents.** ArduPlane's TECS climbs at up to its climb rate towards a higher
-  waypoint, reaching it early (11.6 m above a straight climb on a 1600 m leg), and PX4 sets
-  the next waypoint's altitude at once; a glide slope (ArduPlane above 20 m) is the straight
-  line. So vertically a leg is the band between the straight line and "climb first": from
-  the leg's start at the steepest gradient of the envelope (climb rate over minimum speed,
-  descent rate over minimum speed for a descent) until the leg's end altitude.
+- **Turns.** It cannot turn on the spot. Inside a corner it may cut it on an arc of its
+  turn radius ``R`` (the envelope's; ``v^2 / (g tan(roll_limit))``, ArduPlane ROLL_LIMIT_DEG,
+  PX4 FW_R_LIM): the band holds the region between the legs and the arc tangent to both
+  (the kite O-A-C-B of the arc's centre O, its tangent points A and B, the corner C); a
+  vehicle there is on its plan, inside the arc it is that far from it (a vehicle turning
+  tighter than ``R`` is inside the band too). Outside, it starts its turn at the latest
+  :data:`TURN_START_M` before the waypoint (ArduPlane accepts a waypoint WP_RADIUS early) and,
+  turning on ``R``, runs on up to ``min(R, R (1 - cos(theta)) - TURN_START_M sin(theta))``
+  outside the next leg for ``R`` past the corner, then converges back to it by ``3 R``.
+  Measured on real ArduPlane 4.6 (22-24 m/s, ROLL_LIMIT_DEG 65, NAVL1_PERIOD 15 in its SITL
+  defaults): it started its turns about 50 m before the waypoints and ran 26, 31 and 41 m
+  outside the next leg after turns of 90, 101 and 124 deg (about 100 m past the corner,
+  back within 10 m 200 m past it), where the allowance is 30, 46 and 80 m with R = 80 m.
+- **Climbs and descents.** ArduPlane in AUTO climbs at once (TECS, up to its climb rate)
+  towards a higher waypoint below 20 m above home or with FLIGHT_OPTIONS bit 14
+  (IMMEDIATE_CLIMB_IN_AUTO), and flies a glide slope (the straight line) otherwise and when
+  descending; climbing first it ran 21 m above the straight 30 m climb of a 1600 m leg. So
+  vertically a leg is the band between the straight line and "climb first": from the leg's
+  start at the steepest gradient of the envelope (climb rate over minimum speed, descent
+  rate over minimum speed for a descent) until the leg's end altitude.
 The band is used only for vehicles that cannot hover; a multirotor flies its polyline.
 """
 
@@ -25,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -34,6 +38,9 @@ from gcs_utm.model import Operation
 
 _MIN_LEG_M = 0.5  # shorter horizontal legs are climbs on the spot or padding: no band
 _MAX_TURN_RAD = math.pi - 0.02  # a U-turn's tangent points are bounded by the legs anyway
+TURN_START_M = 50.0
+"""How far before a waypoint a fixed wing starts its turn at the latest: ArduPlane accepts a
+waypoint WP_RADIUS before it (50 m in its SITL defaults)."""
 
 
 def band_parameters(ops: Sequence[Operation]) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -154,5 +161,46 @@ def _corner_distance(
     t_b = corner[..., 3] + fb * (nxt[..., 3] - corner[..., 3])
     in_time = (t_b >= window[0][:, None]) & (t_a <= window[1][:, None])
     d = np.where(real & kite & in_time & (reach > 0.0), np.hypot(dh, dv), np.inf)
+    d = np.minimum(d, _overshoot(_Corners(corner, nxt, ub, nb, turn), radius, pos, window))
     out: FloatArray = d.min(axis=1)
+    return out
+
+
+class _Corners(NamedTuple):
+    """The interior waypoints (M, K-2, 4), the next ones, the outgoing legs' directions and
+    inner normals (M, K-2, 2), the turns (rad)."""
+
+    corner: FloatArray
+    nxt: FloatArray
+    ub: FloatArray
+    nb: FloatArray
+    turn: FloatArray
+
+
+def _overshoot(
+    c: _Corners, radius: FloatArray, pos: FloatArray, window: tuple[FloatArray, FloatArray]
+) -> FloatArray:
+    """Distance to the overshoot region outside each outgoing leg (module docstring): up to
+    ``min(R, R (1 - cos(theta)) - d sin(theta))`` outside it for ``R`` past the corner, then
+    back to the leg by ``3 R``."""
+    corner, nxt, ub, nb, turn = c
+    r = radius[:, None]
+    peak = np.clip(r * (1.0 - np.cos(turn)) - TURN_START_M * np.sin(turn), 0.0, r)  # m
+    lb = np.hypot(*np.moveaxis(nxt[..., :2] - corner[..., :2], -1, 0))
+    rel = pos[:, None, :2] - corner[..., :2]
+    along = (rel * ub).sum(axis=-1)  # m past the corner
+    outside = -(rel * nb).sum(axis=-1)  # m outside the leg (nb is the inner normal)
+    span = np.minimum(3.0 * r, lb)  # m
+    allowed = peak * np.clip((3.0 * r - along) / np.maximum(2.0 * r, 1e-9), 0.0, 1.0)
+    dh = np.maximum(outside - allowed, 0.0)
+    frac = np.clip(along / np.where(lb > 0.0, lb, 1.0), 0.0, 1.0)
+    z = corner[..., 2] + frac * (nxt[..., 2] - corner[..., 2])
+    low = np.minimum(z, corner[..., 2])
+    high = np.maximum(z, corner[..., 2])
+    zp = pos[:, None, 2]
+    dv = np.maximum(np.maximum(low - zp, zp - high), 0.0)
+    t_end = corner[..., 3] + span / np.where(lb > 0.0, lb, 1.0) * (nxt[..., 3] - corner[..., 3])
+    in_time = (t_end >= window[0][:, None]) & (corner[..., 3] <= window[1][:, None])
+    there = (along >= 0.0) & (along <= span) & (outside >= 0.0) & (peak > 0.0) & (lb >= _MIN_LEG_M)
+    out: FloatArray = np.where(there & in_time, np.hypot(dh, dv), np.inf)
     return out
