@@ -2,7 +2,7 @@
 
 A PX4 v1.15.2 SIH plane (airframe 10041, ``PX4_SIH_PLANE_PARAMS``) with a pilot's mission
 (NAV_TAKEOFF to 30 m with the position a ground station gives it, 250 m ahead on the runway
-heading, then a 1000 m leg north at 30 m) sits beside ``gcs-utm serve --headless
+heading, then a 500 m leg north at 30 m) sits beside ``gcs-utm serve --headless
 --auto-accept``, which files its mission as an operation. It is armed and started: a runway
 take-off towards the take-off position (lift-off about 18 m out, 30 m reached 95-99 m out),
 then the leg at about 14 m/s. The take-off was filed as a straight line from home to the
@@ -29,11 +29,11 @@ from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 SPEED = 4.0  # as tests/autopilot/test_fly_plane.py
 TAKEOFF_AGL_M = 30.0
 TAKEOFF_AHEAD_M = 250.0
-LEG_M = 1000.0
+LEG_M = 500.0
 
 
 def _mission(lat0: float, lon0: float, ground_m: float) -> list[object]:
-    """NAV_TAKEOFF 250 m north at 30 m, then a waypoint 1000 m north at 30 m (AMSL, as PX4's
+    """NAV_TAKEOFF 250 m north at 30 m, then a waypoint 500 m north at 30 m (AMSL, as PX4's
     ground stations send a global frame)."""
     frame = mav.MAV_FRAME_GLOBAL_INT
     alt = ground_m + TAKEOFF_AGL_M
@@ -75,7 +75,7 @@ def test_px4_plane_takeoff_raises_no_conformance_threat(
             )  # fmt: skip
         _wait_operations(db, 1, 60.0, serve)
         pilot.arm_and_start(90.0)
-        end = time.monotonic() + 2.0 * 120.0 / SPEED  # simulated: take-off and 1000 m
+        end = time.monotonic() + 2.0 * 120.0 / SPEED  # simulated: take-off and 500 m
         while not pilot.samples or _north_m(pilot) < LEG_M - 50.0:  # near the waypoint
             assert time.monotonic() < end, f"mission not flown: {pilot.statustexts[-6:]}"
             pilot.poll(0.5)
