@@ -114,10 +114,10 @@ def test_arduplane_mission_raises_no_conformance_threat(
         _wait_operations(db, 1, 40.0, serve)
         pilot.set_mode(AUTO)
         pilot._arm(60.0)
-        commands = [int(it.command) for it in _download(pilot)]
         # simulated about 300 s (5.2 km at 22-24 m/s, take-off and landing); twice for load
         _fly_to_touchdown(pilot, ground, time.monotonic() + 2.0 * 300.0 / SPEED)
         assert serve.poll() is None, "gcs-utm serve exited"
+        commands = [int(it.command) for it in _download(pilot)]
     finally:
         pilot.close()
         if serve is not None and serve.poll() is None:
