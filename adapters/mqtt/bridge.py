@@ -1,8 +1,9 @@
 """The MQTT bridge of the USM: one aiomqtt client, reconnecting, with a bounded outgoing queue.
 
 Role: translate between the broker and the USM's :class:`MqttHandler`; decide nothing about
-the airspace. The USM decides what an answer means (:class:`~adapters.mqtt.answers.AnswerBook`
-holds the rules) and the bridge publishes that outcome on the operator's status topic.
+the airspace. The USM decides what an answer means (:meth:`gcs_utm.services.usm.Usm.answer`)
+and the bridge publishes that outcome (:class:`~adapters.mqtt.answers.AnswerOutcome`) on the
+operator's status topic.
 
 Invariants and policies:
 
