@@ -30,6 +30,7 @@ from gcs_utm.model import (
     ThreatStatus,
     Track,
     TrackId,
+    VehicleKind,
 )
 from gcs_utm.services.emergency import EmergencyService
 
@@ -204,3 +205,25 @@ def test_a_conformance_decision_does_not_undo_an_immediate_command() -> None:
     # once the loss case is closed, conformance decides as usual again
     em.on_threat(replace(threat, status=ThreatStatus.CLOSED), snap)
     assert em.on_threat(replace(out, id=ThreatId("t3")), snap).audit[0].action != "deferred"
+
+
+def test_a_fixed_wing_hold_takes_the_room_it_can_reach_not_its_whole_circle_at_once() -> None:
+    """A fixed wing (22 m/s) 230 m behind a multirotor (8 m/s) on the same track, closing at
+    14 m/s: told to circle where it is, it is anywhere within two turn radii (160 m) of
+    where the command reached it, but no farther than its top speed carries it by then. The
+    multirotor flies on and away; the circle never comes within the minima, so holding the
+    fixed wing is clear. Counting the whole 160 m from the command's first instant made
+    every fixed-wing command look 42 m from a loss (ratio 0.65) and nothing clear."""
+    now = sc.T0_S + 89.0
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], speed_mps=8.0, ov_m=15.0)
+    b = sc.make_operation("B", [(-1000, 0, 100), (1000, 0, 100)], speed_mps=22.0, ov_m=25.0)
+    b = replace(b, vehicle_kind=VehicleKind.FIXED_WING, max_climb_rate_mps=5.0)
+    tracks = {
+        TrackId("A"): _track("A", 0.0, 0.0, 8.0, 0.0, now),
+        TrackId("B"): _track("B", -230.0, 0.0, 22.0, 0.0, now),
+    }
+    snap = replace(sc.snapshot([a, b], t_s=now), tracks=tracks)
+    choice = choose_commands(sc_td(), snap, [A, B], now + 2.0, now + 11.8, {A: 5, B: 1})
+    assert choice is not None and choice.clear, choice
+    assert choice.actions == {B: "hold"}
+    assert 1.0 <= choice.ratio < 1.6  # the circle's 160 m still counts once it is reached

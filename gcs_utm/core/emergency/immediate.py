@@ -22,9 +22,9 @@ stops, the vertical minimum plus a margin higher or lower, within the altitude b
 above the safety floor). Each UAS of the threat gets none or one of them; every combination
 is flown forward on a 0.5 s grid: a commanded UAS at its track's velocity up to the command
 time, then braking at :data:`BRAKE_MPS2` to a stop (a fixed wing: anywhere within two turn
-radii of where it was commanded) while climbing or descending at its rates; every other UAS
-on its predicted path (the snapshot's prediction row of its track, else its velocity, else
-its plan). The combination is kept that
+radii of where it was commanded, and within its top speed's reach of there) while climbing
+or descending at its rates; every other UAS on its predicted path (the snapshot's
+prediction row of its track, else its velocity, else its plan). The combination is kept that
 keeps TD's minima (effective minima plus tracking tolerances) from the other UAS of the
 threat and from all other traffic with the fewest commanded UAS, then the lowest priorities,
 then the largest separation; when none keeps them, the one with the largest separation. The
@@ -87,7 +87,7 @@ class _Move:
     op_id: OperationId
     action: str
     xyz: FloatArray
-    slack_m: float
+    slack_m: FloatArray
     command: Command
 
 
@@ -159,10 +159,15 @@ def _moves(
         tb = np.minimum(tau, t_stop)
         run = speed * tb - 0.5 * BRAKE_MPS2 * tb * tb
         stop_xy = p0[:2] + v / speed * run[:, None]
-        slack = 0.0
+        slack = np.zeros_like(grid)
     else:
         stop_xy = np.repeat(p0[None, :2], grid.shape[0], axis=0)
-        slack = 0.0 if env.can_hover else 2.0 * env.turn_radius_m
+        # A fixed wing circles somewhere within two turn radii of where it was commanded,
+        # and it cannot be farther from there than its top speed carries it: the room grows
+        # from nothing at the command (a constant 2 r from the command on hid the separation
+        # a climb or descent builds up while it is still far away).
+        reach = env.max_speed_mps * tau
+        slack = np.zeros_like(grid) if env.can_hover else np.minimum(reach, 2 * env.turn_radius_m)
     lo, hi = td.alt_limits(op)
     out = []
     for action, target_z, rate in (
@@ -190,8 +195,8 @@ def _moves(
     return out
 
 
-_Flown = tuple[Operation, FloatArray, float]
-"""A UAS, its positions on the grid and the horizontal room its hold takes."""
+_Flown = tuple[Operation, FloatArray, FloatArray | float]
+"""A UAS, its positions on the grid and the horizontal room its hold takes (per grid time)."""
 
 
 def _ratio(td: TacticalDeconfliction, fa: _Flown, fb: _Flown) -> float:
@@ -274,7 +279,9 @@ def _combo_ratio(
     """The smallest separation ratio of a combination: between the threat's UAS and from
     each of them to all other traffic."""
     xyz = {c.id: (paths[c.id] if m is None else m.xyz) for c, m in zip(cands, combo, strict=True)}
-    slack = {c.id: (0.0 if m is None else m.slack_m) for c, m in zip(cands, combo, strict=True)}
+    slack: dict[OperationId, FloatArray | float] = {
+        c.id: (0.0 if m is None else m.slack_m) for c, m in zip(cands, combo, strict=True)
+    }
     worst = np.inf
     for i, a in enumerate(cands):
         for b in cands[i + 1 :]:
