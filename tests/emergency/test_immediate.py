@@ -100,14 +100,15 @@ async def _nothing(d: Decision) -> None:
 def test_a_loss_sooner_than_the_measured_lead_gets_an_immediate_command() -> None:
     """The same threat, 10 s ahead: with the configured lead (2 + 3 + 2 s) EM proposes
     plans; once A's uploads were measured at 9 s a plan would start after the event, so EM
-    proposes an immediate command instead (and says why)."""
+    proposes an immediate command instead (and says why). No margin beyond the lead here
+    (``immediate_margin_s``: see the test below)."""
     snap, threat = sc.scenario_los_2uas()
     threat = replace(threat, predicted_event_at_s=snap.t_s + 10.0)
-    em = make_em()
+    em = make_em(immediate_margin_s=0.0)
     d = em.on_threat(threat, snap)
     assert d.recommendations and all(r.selected is not None for r in d.recommendations)
     assert not d.escalations
-    em2 = make_em()
+    em2 = make_em(immediate_margin_s=0.0)
     em2.lead.observe("upload", A, 9.0)
     d2 = em2.on_threat(threat, snap)
     assert d2.recommendations and all(r.command is not None for r in d2.recommendations)
@@ -227,3 +228,42 @@ def test_a_fixed_wing_hold_takes_the_room_it_can_reach_not_its_whole_circle_at_o
     assert choice is not None and choice.clear, choice
     assert choice.actions == {B: "hold"}
     assert 1.0 <= choice.ratio < 1.6  # the circle's 160 m still counts once it is reached
+
+
+def _crossing(d_m: float) -> AirspaceSnapshot:
+    """A (priority 2) east and B (priority 1) north at 10 m/s, each ``d_m`` before the
+    crossing, plans timed where the tracks are."""
+    now = sc.T0_S + 89.0
+    t0 = now - (1000.0 - d_m) / 10.0
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], priority=2, t0_s=t0)
+    b = sc.make_operation("B", [(0, -1000, 100), (0, 1000, 100)], priority=1, t0_s=t0)
+    tracks = {
+        TrackId("A"): _track("A", -d_m, 0.0, 10.0, 0.0, now),
+        TrackId("B"): _track("B", 0.0, -d_m, 0.0, 10.0, now),
+    }
+    return replace(sc.snapshot([a, b], t_s=now), tracks=tracks)
+
+
+@pytest.mark.parametrize(("event_in_s", "immediate"), [(11.0, True), (13.0, False)])
+def test_a_loss_just_beyond_the_lead_gets_the_immediate_command_when_it_keeps_the_minima(
+    event_in_s: float, immediate: bool
+) -> None:
+    """A plan decided 11 s before the event starts 7 s later (answer 2 + upload 3 + margin
+    2), 4 s before it: a re-route that starts that late was flown inside the minima. Within
+    the lead plus ``immediate_margin_s`` (5 s) EM proposes the immediate command (B, the
+    lower priority, holds) since it keeps the minima; 13 s ahead, and with no margin, the
+    plans stand as before."""
+    snap = _crossing(200.0)
+    threat = sc.threat(
+        ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], t_s=snap.t_s, event_in_s=event_in_s
+    )
+    d = make_em().on_threat(threat, snap)
+    (rec,) = d.recommendations
+    assert rec.operation_id == B
+    if immediate:
+        assert rec.command is not None and rec.command.kind is CommandKind.HOLD
+        assert d.escalations and "within a new plan's lead (7.0 s) plus 5.0 s" in d.escalations[0]
+    else:
+        assert rec.command is None and rec.selected is not None and not d.escalations
+    plans = make_em(immediate_margin_s=0.0).on_threat(threat, snap)
+    assert all(r.selected is not None for r in plans.recommendations) and not plans.escalations
