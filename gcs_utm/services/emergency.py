@@ -35,6 +35,7 @@ from gcs_utm.core.emergency import Decision, EmergencyManager
 from gcs_utm.core.emergency.adoption import adopt_case
 from gcs_utm.core.emergency.closing import close_threat
 from gcs_utm.core.emergency.ground import not_decided, on_ground
+from gcs_utm.core.emergency.recheck import plan_problem
 from gcs_utm.model import (
     AirspaceSnapshot,
     Geofence,
@@ -137,6 +138,11 @@ class EmergencyService:
 
     def pending(self) -> list[Recommendation]:
         return self.em.pending()
+
+    def plan_problem(self, rec: Recommendation) -> str:
+        """Why the accepted plan of ``rec`` must not be uploaded now (core.emergency.recheck,
+        on a fresh snapshot): the USM asks right before the upload."""
+        return plan_problem(self.em, rec, self._snapshot(self._clock.now_s()))
 
     async def run(self) -> None:
         getter: asyncio.Future[_Item] | None = None

@@ -252,6 +252,10 @@ class RecommendationLifecycle:
         self._record = hooks.record
         self.log_event = hooks.log_event
         self.recommendations: dict[RecommendationId, RecommendationRecord] = {}
+        self.plan_check: Callable[[Recommendation], str] | None = None
+        """Asked right before an accepted plan is uploaded: why it must not be ("" when it
+        may; EM's re-check against the airspace as it is now, core.emergency.recheck). A
+        reason fails the recommendation, and EM decides again."""
 
     # ---- decisions from EM ----------------------------------------------------------------
     async def on_recommendation(self, rec: Recommendation) -> None:
@@ -451,6 +455,10 @@ class RecommendationLifecycle:
         vehicles = self._hooks.vehicles()
         if vehicles is None or op.sys_id is None:
             await self._fail(record, "no MAVLink link to this vehicle")
+            return
+        problem = "" if self.plan_check is None else self.plan_check(rec)
+        if problem:
+            await self._fail(record, f"not uploaded: {problem}")
             return
         maneuver = rec.selected.maneuver.value if rec.selected is not None else ""
         new_plan = dataclasses.replace(

@@ -319,7 +319,6 @@ def too_late(em: EmergencyManager, threat: Threat, now: float) -> str:
     )
 
 
-
 def late_reason(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> str:
     """Why the loss of ``case`` gets the immediate command now rather than new plans ("" when
     plans are tried): the event is nearer than a new plan's lead (:func:`too_late`), or
@@ -347,6 +346,7 @@ def late_reason(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) ->
         f"{t.id}: loss predicted in {event - now:.1f} s, within a new plan's lead "
         f"({lead_s:.1f} s) plus {margin_s:.1f} s, and an immediate command keeps the minima"
     )
+
 
 IMMINENT_S = 10.0
 """With every plan kept, the immediate command waits until the event is this much beyond
