@@ -137,6 +137,15 @@ class EmergencyConfig:
         min=1.0,
         unit="s",
     )
+    escalation_window_s: float = setting(
+        120.0,
+        "an escalation that repeats an earlier one (the same UAS, cause and proposed command; "
+        "threat ids and numbers aside) within this long after it is not raised again: it "
+        "updates the earlier one (a warning and an escalation_updated audit entry). 0: every "
+        "escalation is raised",
+        min=0.0,
+        unit="s",
+    )
     expiry_action: str = setting(
         "repropose",
         "what EM does when a recommendation expires without an answer: 'repropose' (the "
