@@ -29,8 +29,10 @@ or descending at its rates; every other UAS on its predicted path (the snapshot'
 prediction row of its track, else its velocity, else its plan). The combination is kept that
 keeps TD's minima (effective minima plus tracking tolerances) from the other UAS of the
 threat and from all other traffic with the fewest commanded UAS, then the lowest priorities,
-then the largest separation; when none keeps them, the one with the largest separation. The
-audit lists every combination with its separation ratio.
+then the largest separation; when none keeps them, the one with the largest separation.
+Either way a combination that takes no UAS into a geofence (:mod:`.command_fences`) comes
+before one that does. The audit lists every combination with its separation ratio (and the
+geofences it enters).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
+from gcs_utm.core.emergency.command_fences import fence_entered
 from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.emergency.supervision import escalate_safe
 from gcs_utm.core.monitoring.loss import separation_ratio
@@ -251,6 +254,12 @@ def choose_commands(  # noqa: PLR0917 - one call site
         options.append(
             [None, *_moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)]
         )
+    fenced = {
+        id(m): fence_entered(td, snapshot, m.op_id, m.xyz, m.slack_m, grid, t_cmd)
+        for opts in options
+        for m in opts
+        if m is not None
+    }
     best: tuple[tuple[float, ...], Choice] | None = None
     tried: list[dict[str, object]] = []
     for combo in itertools.product(*options):
@@ -259,16 +268,31 @@ def choose_commands(  # noqa: PLR0917 - one call site
             continue
         ratio = _combo_ratio(td, cands, others, combo, paths)
         clear = ratio >= 1.0
-        prio = sum(priority_of.get(m.op_id, 0) for m in moves)
-        key = (0.0, len(moves), prio, -ratio) if clear else (1.0, -ratio, len(moves), prio)
+        fences = sorted({fenced[id(m)] for m in moves} - {""})
+        key = _rank(ratio, bool(fences), moves, priority_of)
         actions = {m.op_id: m.action for m in moves}
-        tried.append(
-            {"commands": {str(k): v for k, v in actions.items()}, "ratio": round(ratio, 3)}
-        )
+        record: dict[str, object] = {"commands": {str(k): v for k, v in actions.items()}}
+        record["ratio"] = round(ratio, 3)
+        if fences:
+            record["geofences"] = fences
+        tried.append(record)
         if best is None or key < best[0]:
             cmds = {m.op_id: m.command for m in moves}
             best = (key, Choice(cmds, actions, ratio, clear, tried))
     return None if best is None else best[1]
+
+
+def _rank(
+    ratio: float, fenced: bool, moves: list[_Move], priority_of: dict[OperationId, int]
+) -> tuple[float, ...]:
+    """Order of combinations: those that keep the minima first, then those that take no UAS
+    into a geofence; among the first, the fewest commanded UAS, the lowest priorities, the
+    largest separation; among the others, the largest separation."""
+    prio = float(sum(priority_of.get(m.op_id, 0) for m in moves))
+    fence = 1.0 if fenced else 0.0
+    if ratio >= 1.0:
+        return (0.0, fence, float(len(moves)), prio, -ratio)
+    return (1.0, fence, -ratio, float(len(moves)), prio)
 
 
 def _combo_ratio(
