@@ -186,16 +186,19 @@ def sc_td() -> TacticalDeconfliction:
     return TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MON)
 
 
-def test_a_conformance_decision_does_not_undo_an_immediate_command() -> None:
+@pytest.mark.parametrize("answered", [True, False], ids=["accepted", "still-proposed"])
+def test_a_conformance_decision_does_not_undo_an_immediate_command(answered: bool) -> None:
     """A UAS told to hold is off its plan on purpose: the conformance threat that follows
-    (UAS_OUT_OV, back to plan) must not send it back into the loss it avoids."""
+    (UAS_OUT_OV, back to plan) must not send it back into the loss it avoids; nor while the
+    command is still proposed (the answer may come in the same second: a plan back accepted
+    right after it undid the command on a late encounter and created a loss)."""
     snap, threat = sc.scenario_los_2uas()
     threat = replace(threat, predicted_event_at_s=snap.t_s + 5.0)
     em = make_em()
     d = em.on_threat(threat, snap)
     cmds = [r for r in d.recommendations if r.command is not None]
     assert cmds, d
-    for r in cmds:
+    for r in cmds if answered else ():
         em.on_answer(r, True, snap)
     held = cmds[0].operation_id
     out = sc.threat(ThreatKind.UAS_OUT_OV, [held], tid="t2", event_in_s=0.0)

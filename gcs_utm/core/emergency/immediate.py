@@ -444,14 +444,16 @@ def propose(
 
 def held_by(em: EmergencyManager, op_id: OperationId, other: Case) -> str:
     """The loss-of-separation case (other than ``other``) whose immediate command for
-    ``op_id`` is accepted or applied ("" when none): the UAS is off its plan on purpose, and
-    a conformance decision must not send it back into the loss (back to plan)."""
+    ``op_id`` is proposed, accepted or applied ("" when none): the UAS is off its plan on
+    purpose (or about to be: the pilot's answer may come in the same second, and the plan
+    back would undo the command), and a conformance decision must not send it back into the
+    loss (back to plan)."""
     for tid in em.open_threats():
         case = em.case(tid)
         if case is None or case is other or case.threat.kind is not ThreatKind.LOSS_OF_SEPARATION:
             continue
         rec = em.recommendation(RecommendationId(f"{tid}/{op_id}"))
-        if rec is not None and rec.command is not None and rec.state in _LIVE[1:]:
+        if rec is not None and rec.command is not None and rec.state in _LIVE:
             return str(tid)
     return ""
 
