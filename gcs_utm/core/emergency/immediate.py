@@ -368,7 +368,7 @@ def late_reason(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) ->
         return ""
     return (
         f"{t.id}: loss predicted in {event - now:.1f} s, within a new plan's lead "
-        f"({lead_s:.1f} s) plus {margin_s:.1f} s, and an immediate command keeps the minima"
+        f"({lead_s:.1f} s) plus {margin_s:.1f} s"
     )
 
 
