@@ -272,12 +272,18 @@ def test_a_loss_just_beyond_the_lead_gets_the_immediate_command_when_it_keeps_th
     assert all(r.selected is not None for r in plans.recommendations) and not plans.escalations
 
 
-def test_the_command_keeps_its_uas_out_of_geofences_when_another_keeps_the_minima() -> None:
+@pytest.mark.parametrize(
+    ("north_m", "radius_m"), [(-62.0, 5.0), (-45.0, 6.0)], ids=["inside", "within-its-volume"]
+)
+def test_the_command_keeps_its_uas_out_of_geofences_when_another_keeps_the_minima(
+    north_m: float, radius_m: float
+) -> None:
     """The crossing above: B (priority 1) would stop 60 m before the crossing, inside a no-fly
-    zone of 5 m there; A's command keeps the minima too and enters nothing, so it is A's
-    (the combinations that enter the fence say so in the audit)."""
+    zone of 5 m there, or 9 m from one (less than its 10 m operational volume: TD keeps its
+    plans that far from fences); A's command keeps the minima too and enters nothing, so it
+    is A's (the combinations that enter the fence say so in the audit)."""
     snap = _tracked([(0, -1000, 100), (0, 1000, 100)], (0.0, -110.0, 0.0, 10.0), (2, 1))
-    snap = replace(snap, geofences=(sc.cylinder("G1", 0.0, -62.0, 5.0),))
+    snap = replace(snap, geofences=(sc.cylinder("G1", 0.0, north_m, radius_m),))
     prio = {A: 2, B: 1}
     choice = choose_commands(sc_td(), snap, [A, B], snap.t_s + 3.0, snap.t_s + 11.0, prio)
     assert choice is not None and choice.clear

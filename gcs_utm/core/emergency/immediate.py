@@ -220,6 +220,8 @@ class Choice:
     ratio: float
     clear: bool
     tried: list[dict[str, object]]
+    geofences: tuple[str, ...] = ()
+    """The geofences the chosen commands take their UAS into (see .command_fences)."""
 
 
 def choose_commands(  # noqa: PLR0917 - one call site
@@ -278,7 +280,7 @@ def choose_commands(  # noqa: PLR0917 - one call site
         tried.append(record)
         if best is None or key < best[0]:
             cmds = {m.op_id: m.command for m in moves}
-            best = (key, Choice(cmds, actions, ratio, clear, tried))
+            best = (key, Choice(cmds, actions, ratio, clear, tried, tuple(fences)))
     return None if best is None else best[1]
 
 
@@ -347,9 +349,9 @@ def late_reason(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) ->
     """Why the loss of ``case`` gets the immediate command now rather than new plans ("" when
     plans are tried): the event is nearer than a new plan's lead (:func:`too_late`), or
     nearer than the lead plus ``emergency.immediate_margin_s`` and the immediate command
-    keeps the minima. A plan that starts just before the event leaves no room for the
-    vehicles' tracking error: on generated late encounters plans starting 1-3 s before the
-    event were flown 0.5-1.6 m inside the minima."""
+    keeps the minima without taking a UAS into a geofence. A plan that starts just before
+    the event leaves no room for the vehicles' tracking error: on generated late encounters
+    plans starting 1-3 s before the event were flown 0.5-1.6 m inside the minima."""
     t = case.threat
     now = snapshot.t_s
     late = too_late(em, t, now)
@@ -364,8 +366,8 @@ def late_reason(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) ->
     ids = list(t.uas_ids)
     prio = {k: ops[k].priority for k in ids if k in ops}
     choice = choose_commands(em.td, snapshot, ids, em.lead.command_at(ids, now), event, prio)
-    if choice is None or not choice.clear:
-        return ""
+    if choice is None or not choice.clear or choice.geofences:
+        return ""  # the plans (kept off geofences by TD) are tried
     return (
         f"{t.id}: loss predicted in {event - now:.1f} s, within a new plan's lead "
         f"({lead_s:.1f} s) plus {margin_s:.1f} s"
