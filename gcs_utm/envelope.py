@@ -121,7 +121,20 @@ MULTIROTOR_HORIZONTAL_ACCEL_MPS2 = 2.5
 """ArduCopter's WPNAV_ACCEL default (PX4's MPC_ACC_HOR is 3 m/s^2): the lower of the two, so
 the stopping distance is not underestimated."""
 FIXED_WING_TURN_RADIUS_M = 80.0
-"""PX4's NAV_LOITER_RAD default, a turn a small fixed wing flies at cruise speed."""
+"""PX4's NAV_LOITER_RAD default, a turn a small fixed wing flies at cruise speed: the radius
+(:func:`turn_radius_m`) at ArduPlane's default roll limit (ROLL_LIMIT_DEG 45) at 28 m/s, and
+above PX4's (FW_R_LIM 50) at 30 m/s."""
+GRAVITY_MPS2 = 9.80665
+
+
+def turn_radius_m(speed_mps: float, roll_limit_deg: float) -> float:
+    """The radius of a coordinated level turn at ``speed_mps`` banked ``roll_limit_deg``:
+    ``v^2 / (g tan(roll))`` (ArduPlane ROLL_LIMIT_DEG, PX4 FW_R_LIM)."""
+    if not (math.isfinite(speed_mps) and speed_mps >= 0.0):
+        raise EnvelopeError("speed_mps", f"must be a finite number >= 0, got {speed_mps!r}")
+    if not (math.isfinite(roll_limit_deg) and 0.0 < roll_limit_deg < 90.0):
+        raise EnvelopeError("roll_limit_deg", f"must be in (0, 90) degrees, got {roll_limit_deg!r}")
+    return speed_mps * speed_mps / (GRAVITY_MPS2 * math.tan(math.radians(roll_limit_deg)))
 
 
 def implied(

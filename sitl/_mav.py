@@ -1,7 +1,7 @@
 """Typed seam around pymavlink (which is untyped): encode, sans-IO parse, and message access.
 
 Everything else in `sitl` talks to MAVLink only through this module, so mypy --strict sees
-plain `str`/`int`/`float`/`bytes` values. MAVLink 2 is forced (MAVLINK20=1 before import).
+plain `str`/`int`/`float`/`bytes` values. MAVLink 2 framing comes from the v20 dialect.
 
 Invariants:
 - one `Encoder` per link (PX4 keeps one sequence counter per MAVLink instance);
@@ -16,10 +16,6 @@ Invariants:
 """
 
 from __future__ import annotations
-
-import os
-
-os.environ["MAVLINK20"] = "1"
 
 import time
 from dataclasses import dataclass, field

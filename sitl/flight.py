@@ -1,5 +1,11 @@
-"""Flight of a simulated vehicle: modes, mission execution (the MissionHost side of
-:mod:`sitl.mission`), take-off/landing detection, battery, and one physics step."""
+"""Flight of a simulated vehicle: modes and their goals, take-off/landing detection, battery,
+arming, and one physics step.
+
+:class:`Flight` holds the kinematic state, the mode, the goal and the flight parameters, and
+its :class:`sitl.executor.MissionExecutor` (the mission and its progress), whose current item
+gives the goal in mission mode. It reads the fault state (:class:`sitl.faults.Faults`) and
+tells the ground through an :class:`sitl.core.Announcer`; it is the
+:class:`sitl.faults.FaultTarget` of the faults."""
 
 from __future__ import annotations
 
@@ -29,154 +35,163 @@ from sitl.core import (
     SEV_INFO,
     SEV_WARNING,
     TAKEOFF,
-    VehicleCore,
+    Announcer,
+    Timeline,
 )
-from sitl.physics import Goal, l1_distance_m, step_fixed_wing, step_multirotor, turn_radius_m
+from sitl.executor import MissionExecutor
+from sitl.faults import Faults
+from sitl.physics import (
+    Goal,
+    KinState,
+    LocalTangent,
+    step_fixed_wing,
+    step_multirotor,
+)
+from sitl.spec import ARDUPILOT, FIXED_WING, VehicleSpec
 
 _log = logging.getLogger(__name__)
 
 
-class Flight(VehicleCore):
-    """Modes and mission execution (see the module docstring)."""
+class Flight:
+    """Modes, goals and physics (see the module docstring)."""
 
-    # Fixed wing: where the current mission leg starts (north, east); None until the leg's
-    # first goal, which then starts it at the aircraft (a new current item, a new mission).
-    _leg_from_ne: tuple[float, float] | None = None
+    def __init__(
+        self, *, spec: VehicleSpec, time: Timeline, faults: Faults, announce: Announcer
+    ) -> None:
+        self.spec = spec
+        self._time = time
+        self._faults = faults
+        self._announce = announce
+        self.sys_id = spec.system_id
+        self.is_ardupilot = spec.autopilot == ARDUPILOT
+        self.is_fixed_wing = spec.kind == FIXED_WING
+        self.lim = spec.limits()
+        self.frame = LocalTangent(spec.home_lat_deg, spec.home_lon_deg)
+        self.home = (spec.home_lat_deg, spec.home_lon_deg, spec.home_alt_amsl_m)
+        self.ground_alt_m = spec.home_alt_amsl_m
+        self.k = KinState(alt_amsl_m=spec.home_alt_amsl_m)
+        self.battery_pct = 100.0
+        self.bat_level = 0  # 0 ok, 1 low, 2 critical, 3 emergency
+        self._auto_started = False
+        self._init_flight(spec)
+        self.mission = MissionExecutor(
+            spec=spec, time=time, k=self.k, frame=self.frame, announce=announce
+        )
+        self.params: dict[str, float] = {
+            "MIS_TAKEOFF_ALT": self.takeoff_alt_rel_m,
+            "RTL_RETURN_ALT": self.rtl_alt_rel_m,
+            "NAV_ACC_RAD": self.lim.acceptance_radius_m,
+            "MPC_XY_CRUISE": self.cruise_mps,
+            "FW_AIRSPD_TRIM": self.cruise_mps,
+            "RTL_AUTOLAND": 0.0,  # ArduPlane: arming refused with a DO_LAND_START while 0
+        }
 
-    def mission_items(self) -> list[mp.RawItem]:
-        if self.is_ardupilot and self._items:
-            home = mp.RawItem(
-                0,
-                mp.FRAME_GLOBAL_INT,
-                mp.CMD_WAYPOINT,
-                0,
-                1,
-                0,
-                0,
-                0,
-                0,
-                round(self.home[0] * 1e7),
-                round(self.home[1] * 1e7),
-                self.home[2],
-            )
-            return [home, *self._items[1:]]
-        return list(self._items)
+    def _init_flight(self, spec: VehicleSpec) -> None:
+        """Flight state at boot: on the ground, disarmed (ArduCopter boots in STABILIZE)."""
+        self.mode = POSCTL if self.is_ardupilot and not self.is_fixed_wing else HOLD
+        self.armed = False
+        self.landed = True
+        self._armed_at = 0.0
+        self._landed_at = 0.0
+        self.goal_ne: tuple[float, float] = (0.0, 0.0)
+        self.goal_alt = spec.home_alt_amsl_m
+        self.speed_override: float | None = None
+        self.rtl_phase = 0
+        self._rtl_alt = spec.home_alt_amsl_m + spec.rtl_alt_rel_m
+        self.takeoff_alt_m = spec.home_alt_amsl_m + spec.takeoff_alt_rel_m
+        self.takeoff_alt_rel_m = spec.takeoff_alt_rel_m
+        self.rtl_alt_rel_m = spec.rtl_alt_rel_m
+        self.cruise_mps = self.lim.cruise_speed_mps
+
+    @property
+    def lat_deg(self) -> float:
+        return self.frame.to_latlon(self.k.north_m, self.k.east_m)[0]
+
+    @property
+    def lon_deg(self) -> float:
+        return self.frame.to_latlon(self.k.north_m, self.k.east_m)[1]
+
+    # FaultTarget ---------------------------------------------------------------------
+
+    def drop_battery(self, pct: float) -> None:
+        self.battery_pct = min(self.battery_pct, pct)
+
+    def land_now(self) -> None:
+        if self.armed and not self.landed:
+            self.enter_mode(LAND)
+
+    # Mission uploads (the flight's side: a stalled restart holds) ------------------------
 
     def accept_mission(self, items: list[mp.RawItem], flagged_current: int | None) -> None:
-        flying_mission = self._mode == MISSION and self._armed and not self._landed
-        old_seq = self._seq
-        if self.is_ardupilot:
-            items = [mp.ardupilot_stored(it, fixed_wing=self.is_fixed_wing) for it in items]
-            flagged_current = None  # ArduPilot ignores the current flag of an upload
-        else:
-            items = [mp.px4_stored(it) for it in items]
-        self._items = items
-        first = 1 if self.is_ardupilot else 0
-        self._stalled = False
-        if flagged_current is not None:
-            self._seq = max(first, flagged_current)
-        elif flying_mission:
-            # PX4 keeps the current index; ArduPilot restarts the command at the same index,
-            # which fails on a DO item: the vehicle then holds until told another item
-            self._seq = min(old_seq, len(items) - 1)
-            if self.is_ardupilot and items[self._seq].command not in mp.NAV_COMMANDS:
-                self._stalled = True  # it stops where it is and hovers
-                self._goal_ne = (self.k.north_m, self.k.east_m)
-                self._goal_alt = self.k.alt_amsl_m
-                self.statustext(SEV_WARNING, "Auto mission changed but failed to restart command")
-            elif self.is_ardupilot:
-                self.statustext(SEV_INFO, "Auto mission changed, restarted command")
-        else:
-            self._seq = first
-        self._seq = max(0, min(self._seq, len(items) - 1))
-        self._item_reached_at = None
-        self._leg_from_ne = None
-        self._mission_state = (
-            const("MISSION_STATE_ACTIVE") if flying_mission else const("MISSION_STATE_NOT_STARTED")
-        )
-        self._send_mission_current()
+        flying = self.mode == MISSION and self.armed and not self.landed
+        if self.mission.accept(items, flagged_current, flying=flying):
+            self.goal_ne = (self.k.north_m, self.k.east_m)  # stalled: hold here
+            self.goal_alt = self.k.alt_amsl_m
 
     def clear_mission(self) -> None:
-        self._items = []
-        self._seq = 0
-        self._mission_state = const("MISSION_STATE_NO_MISSION")
-        if self._mode == MISSION and not self._landed:
+        self.mission.clear()
+        if self.mode == MISSION and not self.landed:
             self._enter_hold()
-        self._send_mission_current()
-
-    def set_current(self, seq: int) -> bool:
-        if not 0 <= seq < len(self._items) or (self.is_ardupilot and seq == 0):
-            return False
-        self._seq = seq
-        self._item_reached_at = None
-        self._leg_from_ne = None
-        self._stalled = False
-        self._send_mission_current()
-        return True
+        self._announce.mission_current_changed()
 
     def _enter_hold(self) -> None:
-        self._mode = GUIDED if self.is_ardupilot and self._mode == GUIDED else HOLD
-        self._goal_ne = (self.k.north_m, self.k.east_m)
-        self._goal_alt = self.k.alt_amsl_m if not self._landed else self.ground_alt_m
+        self.mode = GUIDED if self.is_ardupilot and self.mode == GUIDED else HOLD
+        self.goal_ne = (self.k.north_m, self.k.east_m)
+        self.goal_alt = self.k.alt_amsl_m if not self.landed else self.ground_alt_m
 
-    def _enter_mode(self, target: str) -> None:
-        prev = self._mode
-        self._mode = target
+    def enter_mode(self, target: str) -> None:
+        prev = self.mode
+        self.mode = target
         if target in (HOLD, POSCTL, GUIDED):
-            self._goal_ne = (self.k.north_m, self.k.east_m)
-            self._goal_alt = self.k.alt_amsl_m
+            self.goal_ne = (self.k.north_m, self.k.east_m)
+            self.goal_alt = self.k.alt_amsl_m
         elif target in (LAND, LOITER):
-            self._goal_ne = (self.k.north_m, self.k.east_m)
+            self.goal_ne = (self.k.north_m, self.k.east_m)
         elif target == RTL:
-            self._rtl_phase = 0
+            self.rtl_phase = 0
         elif target == TAKEOFF:
-            self._goal_ne = (self.k.north_m, self.k.east_m)
+            self.goal_ne = (self.k.north_m, self.k.east_m)
         elif target == MISSION:
-            if self.is_ardupilot and self._seq == 0:
-                self._seq = 1 if len(self._items) > 1 else 0
-            self._mission_state = const("MISSION_STATE_ACTIVE")
-            self._item_reached_at = None
-            self._leg_from_ne = None
-            self._mission_climb = self._landed
-        if target != MISSION and prev == MISSION and self._items:
-            self._mission_state = const("MISSION_STATE_PAUSED")
+            self.mission.start(on_ground=self.landed)
+        if target != MISSION and prev == MISSION:
+            self.mission.pause()
         if prev != target:
             _log.info("sysid %d: mode %s -> %s", self.sys_id, prev, target)
 
-    def _auto_start(self) -> None:
+    def auto_start(self) -> None:
         at = self.spec.auto_start_at_s
-        if self._auto_started or at is None or self._t < at:
+        if self._auto_started or at is None or self._time.t_s < at:
             return
         self._auto_started = True
         if self.arm() != R_ACCEPTED:
             return
-        if self._items and self.spec.start_airborne:
+        if self.mission.items and self.spec.start_airborne:
             self._place_airborne()
-        if self._items:
-            self._enter_mode(MISSION)
+        if self.mission.items:
+            self.enter_mode(MISSION)
         else:
-            self._takeoff_alt = self.ground_alt_m + self.takeoff_alt_rel_m
-            self._enter_mode(TAKEOFF)
+            self.takeoff_alt_m = self.ground_alt_m + self.takeoff_alt_rel_m
+            self.enter_mode(TAKEOFF)
 
     def _place_airborne(self) -> None:
         """Scenario start in flight: put the vehicle at its first mission waypoint, at its
         altitude, already moving towards the next one at the mission speed (see
         VehicleSpec.start_airborne)."""
-        items = self._items
+        items = self.mission.items
         first = 1 if self.is_ardupilot else 0
         navs = [i for i in range(first, len(items)) if items[i].command in mp.NAV_COMMANDS]
         if not navs:
             return
         i0 = navs[0]
-        n0, e0, alt0 = self._item_target(items[i0])
+        n0, e0, alt0 = self.mission.item_target(items[i0])
         self.k.north_m, self.k.east_m, self.k.alt_amsl_m = n0, e0, alt0
-        self._landed = False
-        self._seq = i0
+        self.landed = False
+        self.mission.seq = i0
         speed = self.cruise_mps
         if len(navs) > 1:
             for it in items[i0 + 1 : navs[1]]:
-                speed = self.speed_item(it) or speed
-            n1, e1, _alt1 = self._item_target(items[navs[1]])
+                speed = self.mission.speed_item(it) or speed
+            n1, e1, _alt1 = self.mission.item_target(items[navs[1]])
             dist = math.hypot(n1 - n0, e1 - e0)
             if dist > 0.0:
                 speed = min(speed, self.lim.max_speed_mps)
@@ -184,39 +199,39 @@ class Flight(VehicleCore):
                 self.k.vn_mps = speed * (n1 - n0) / dist
                 self.k.ve_mps = speed * (e1 - e0) / dist
                 self.k.airspeed_mps = speed
-        self.statustext(SEV_INFO, "Scenario start in flight")
+        self._announce.statustext(SEV_INFO, "Scenario start in flight")
 
     def _speed(self) -> float:
-        v = self._speed_override or self._mission_speed or self.cruise_mps
+        v = self.speed_override or self.mission.speed or self.cruise_mps
         return min(v, self.lim.max_speed_mps)
 
-    def _step(self, dt: float) -> None:
+    def step(self, dt: float) -> None:
         self._battery(dt)
-        if not self._armed:
-            if not self._landed:  # disarmed in the air: falls
+        if not self.armed:
+            if not self.landed:  # disarmed in the air: falls
                 self.k.vup_mps = max(self.k.vup_mps - 9.81 * dt, -30.0)
                 self.k.alt_amsl_m += self.k.vup_mps * dt
                 self._touchdown_check()
             return
         if (
-            self._landed
-            and self._t - self._armed_at > DISARM_PREFLIGHT_S
-            and self._mode not in (TAKEOFF, MISSION)
+            self.landed
+            and self._time.t_s - self._armed_at > DISARM_PREFLIGHT_S
+            and self.mode not in (TAKEOFF, MISSION)
         ):
-            self.statustext(SEV_INFO, "Disarmed by auto preflight disarming")
-            self._armed = False
+            self._announce.statustext(SEV_INFO, "Disarmed by auto preflight disarming")
+            self.armed = False
             return
         goal = self._mode_goal()
         if goal is None:
             return
-        if self._landed:
+        if self.landed:
             if goal.alt_amsl_m <= self.ground_alt_m + 0.3:
-                if self._t - self._landed_at > DISARM_AFTER_LAND_S and self._mode == LAND:
-                    self._armed = False
-                    self.statustext(SEV_INFO, "Landing detected, disarmed")
+                if self._time.t_s - self._landed_at > DISARM_AFTER_LAND_S and self.mode == LAND:
+                    self.armed = False
+                    self._announce.statustext(SEV_INFO, "Landing detected, disarmed")
                 return
-            self._landed = False
-            self.statustext(SEV_INFO, "Takeoff detected")
+            self.landed = False
+            self._announce.statustext(SEV_INFO, "Takeoff detected")
             if self.is_fixed_wing:
                 self.k.airspeed_mps = self.lim.min_airspeed_mps
         if self.is_fixed_wing:
@@ -233,18 +248,18 @@ class Flight(VehicleCore):
             self.k.vn_mps = self.k.ve_mps = self.k.vup_mps = 0.0
             self.k.roll_rad = self.k.pitch_rad = 0.0
             self.k.airspeed_mps = 0.0
-            if not self._landed:
-                self._landed = True
-                self._landed_at = self._t
-                if self._mode == MISSION:
-                    self._mission_state = const("MISSION_STATE_COMPLETE")
-                    self._mode = LAND  # lands are finished by the land logic (auto-disarm)
+            if not self.landed:
+                self.landed = True
+                self._landed_at = self._time.t_s
+                if self.mode == MISSION:
+                    self.mission.state = const("MISSION_STATE_COMPLETE")
+                    self.mode = LAND  # lands are finished by the land logic (auto-disarm)
 
     def _battery(self, dt: float) -> None:
         rate = 0.0
-        if self._armed:
-            rate = 100.0 / self.spec.battery_capacity_s * (1.0 if not self._landed else 0.3)
-        self.battery_pct = max(0.0, self.battery_pct - (rate + self._drain_pct_s) * dt)
+        if self.armed:
+            rate = 100.0 / self.spec.battery_capacity_s * (1.0 if not self.landed else 0.3)
+        self.battery_pct = max(0.0, self.battery_pct - (rate + self._faults.drain_pct_s) * dt)
         level = (
             3
             if self.battery_pct < BAT_EMERG_PCT
@@ -254,19 +269,21 @@ class Flight(VehicleCore):
             if self.battery_pct < BAT_LOW_PCT
             else 0
         )
-        if level > self._bat_level:
-            self._bat_level = level
-            flying = self._armed and not self._landed
+        if level > self.bat_level:
+            self.bat_level = level
+            flying = self.armed and not self.landed
             if level == 1:
-                self.statustext(SEV_WARNING, "Low battery level! Return advised")
+                self._announce.statustext(SEV_WARNING, "Low battery level! Return advised")
             elif level == 2:
-                self.statustext(SEV_CRITICAL, "Critical battery level! Executing RTL")
-                if flying and self._mode not in (LAND, RTL):
-                    self._enter_mode(RTL)
+                self._announce.statustext(SEV_CRITICAL, "Critical battery level! Executing RTL")
+                if flying and self.mode not in (LAND, RTL):
+                    self.enter_mode(RTL)
             else:
-                self.statustext(SEV_EMERGENCY, "Emergency battery level! Landing immediately")
-                if flying and self._mode != LAND:
-                    self._enter_mode(LAND)
+                self._announce.statustext(
+                    SEV_EMERGENCY, "Emergency battery level! Landing immediately"
+                )
+                if flying and self.mode != LAND:
+                    self.enter_mode(LAND)
 
     def _goal(
         self,
@@ -281,9 +298,9 @@ class Flight(VehicleCore):
         return Goal(n, e, alt, self._speed() if speed is None else speed, stop, descent)
 
     def _mode_goal(self) -> Goal | None:
-        mode = self._mode
+        mode = self.mode
         if mode in (HOLD, POSCTL, GUIDED):
-            return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
+            return self._goal(self.goal_ne[0], self.goal_ne[1], self.goal_alt, stop=True)
         if mode == TAKEOFF:
             return self._takeoff_goal()
         if mode in (LOITER, LAND):
@@ -295,33 +312,33 @@ class Flight(VehicleCore):
         return None
 
     def _takeoff_goal(self) -> Goal | None:
-        alt = self._takeoff_alt
+        alt = self.takeoff_alt_m
         if self.k.alt_amsl_m >= alt - 0.5:
-            self._enter_mode(GUIDED if self.is_ardupilot else HOLD)
-            self.statustext(SEV_INFO, "Takeoff complete")
+            self.enter_mode(GUIDED if self.is_ardupilot else HOLD)
+            self._announce.statustext(SEV_INFO, "Takeoff complete")
             return self._mode_goal()
         if self.is_fixed_wing:
             # climb out straight ahead, far target along the heading
             n = self.k.north_m + 1000.0 * math.cos(self.k.yaw_rad)
             e = self.k.east_m + 1000.0 * math.sin(self.k.yaw_rad)
             return self._goal(n, e, alt + 1.0, stop=False)
-        return self._goal(self._goal_ne[0], self._goal_ne[1], alt + 0.6, stop=True)
+        return self._goal(self.goal_ne[0], self.goal_ne[1], alt + 0.6, stop=True)
 
     def _descent_goal(self, mode: str) -> Goal:
         """LAND, or ArduCopter's LOITER at minimum RC throttle (straight down)."""
         if mode == LOITER:
             return self._goal(
-                self._goal_ne[0],
-                self._goal_ne[1],
+                self.goal_ne[0],
+                self.goal_ne[1],
                 self.ground_alt_m - 1.0,
                 stop=True,
                 descent=self.lim.descent_rate_mps,
             )
-        descent = self.lim.descent_rate_mps * (1.7 if self._motor_failed else 1.0)
+        descent = self.lim.descent_rate_mps * (1.7 if self._faults.motor_failed else 1.0)
         speed = self.lim.min_airspeed_mps if self.is_fixed_wing else self._speed()
         return self._goal(
-            self._goal_ne[0],
-            self._goal_ne[1],
+            self.goal_ne[0],
+            self.goal_ne[1],
             self.ground_alt_m - 1.0,
             stop=True,
             speed=speed,
@@ -330,43 +347,33 @@ class Flight(VehicleCore):
 
     def _rtl_goal(self) -> Goal:
         rtl_alt = max(self.k.alt_amsl_m, self.ground_alt_m + self.rtl_alt_rel_m)
-        if self._rtl_phase == 0:
+        if self.rtl_phase == 0:
             self._rtl_alt = rtl_alt
-            self._rtl_phase = 1
-        if self._rtl_phase == 1:
+            self.rtl_phase = 1
+        if self.rtl_phase == 1:
             if self.k.alt_amsl_m < self._rtl_alt - 1.0 and not self.is_fixed_wing:
                 return self._goal(self.k.north_m, self.k.east_m, self._rtl_alt, stop=True)
-            self._rtl_phase = 2
+            self.rtl_phase = 2
         dist = math.hypot(self.k.north_m, self.k.east_m)
         if self.is_fixed_wing:
             return self._goal(0.0, 0.0, self._rtl_alt, stop=True)  # loiter over home
-        if self._rtl_phase == 2 and dist > 1.0:
+        if self.rtl_phase == 2 and dist > 1.0:
             return self._goal(0.0, 0.0, self._rtl_alt, stop=True)
-        self._rtl_phase = 3
+        self.rtl_phase = 3
         return self._goal(0.0, 0.0, self.ground_alt_m - 1.0, stop=True)
 
-    def _item_target(self, it: mp.RawItem) -> tuple[float, float, float]:
-        if it.x == 0 and it.y == 0:
-            n, e = self.k.north_m, self.k.east_m
-        else:
-            n, e = self._frame.to_ne(it.lat_deg, it.lon_deg)
-        alt = it.z if math.isfinite(it.z) else self.k.alt_amsl_m
-        if it.frame in mp.RELATIVE_FRAMES:
-            alt += self.home[2]
-        return n, e, alt
-
     def _mission_goal(self) -> Goal:
-        items = self._items
+        items = self.mission.items
         first = 1 if self.is_ardupilot else 0
-        if self._mission_state == const("MISSION_STATE_COMPLETE") or self._stalled:
-            return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
-        self._run_do_items()
-        if self._seq >= len(items) or self._seq < first:
-            self._seq = max(first, min(self._seq, len(items) - 1))
-            self._mission_state = const("MISSION_STATE_COMPLETE")
-            return self._goal(self._goal_ne[0], self._goal_ne[1], self._goal_alt, stop=True)
-        it = items[self._seq]
-        n, e, alt = self._item_target(it)
+        if self.mission.state == const("MISSION_STATE_COMPLETE") or self.mission.stalled:
+            return self._goal(self.goal_ne[0], self.goal_ne[1], self.goal_alt, stop=True)
+        self.mission.run_do_items()
+        if self.mission.seq >= len(items) or self.mission.seq < first:
+            self.mission.seq = max(first, min(self.mission.seq, len(items) - 1))
+            self.mission.state = const("MISSION_STATE_COMPLETE")
+            return self._goal(self.goal_ne[0], self.goal_ne[1], self.goal_alt, stop=True)
+        it = items[self.mission.seq]
+        n, e, alt = self.mission.item_target(it)
         if it.command == mp.CMD_TAKEOFF:
             n, e = self.k.north_m, self.k.east_m
             if not math.isfinite(it.z):
@@ -374,152 +381,60 @@ class Flight(VehicleCore):
         special = self._special_goal(it, n, e, alt)
         if special is not None:
             return special
-        self._goal_ne, self._goal_alt = (n, e), alt
-        last_nav = not any(x.command in mp.NAV_COMMANDS for x in items[self._seq + 1 :])
+        self.goal_ne, self.goal_alt = (n, e), alt
+        last_nav = not any(x.command in mp.NAV_COMMANDS for x in items[self.mission.seq + 1 :])
         hold_s = it.param1 if it.command in (mp.CMD_WAYPOINT, mp.CMD_LOITER_TIME) else 0.0
-        if self._reached(it, n, e, alt) and self._done_with(hold_s, last_nav):
+        if self.mission.reached(it, n, e, alt) and self.mission.done_with(hold_s, last_nav):
             return self._goal(n, e, alt, stop=True)  # mission finished: stay on the last point
         stop = last_nav or hold_s > 0 or it.command in (mp.CMD_LOITER_UNLIM, mp.CMD_LOITER_TIME)
         goal = self._goal(n, e, alt, stop=stop)
-        if self.is_fixed_wing and it.command == mp.CMD_WAYPOINT and self._item_reached_at is None:
+        if self.is_fixed_wing and it.command == mp.CMD_WAYPOINT and self.mission.reached_at is None:
             # on the way to a waypoint (a hold at it, and a loiter item, circle the point)
-            goal.line_from_ne = self._leg_start(n, e)
+            goal.line_from_ne = self.mission.leg_start(n, e)
         return goal
-
-    def _leg_start(self, n: float, e: float) -> tuple[float, float]:
-        """Start of the line a fixed wing tracks to the point (n, e): the previous mission
-        point, or where the aircraft was when the item became current. As ArduPlane
-        (set_next_WP), an aircraft already past the line's finish starts it where it is."""
-        here = (self.k.north_m, self.k.east_m)
-        frm = self._leg_from_ne
-        if frm is None or _past_finish(frm, (n, e), here):
-            frm = here
-        self._leg_from_ne = frm
-        return frm
-
-    def _run_do_items(self) -> None:
-        """Execute DO items from the current index up to the next navigation item."""
-        items = self._items
-        guard = 0
-        while (
-            self._seq < len(items)
-            and items[self._seq].command not in mp.NAV_COMMANDS
-            and guard < len(items)
-        ):
-            it = items[self._seq]
-            self._mission_speed = self.speed_item(it) or self._mission_speed
-            self._seq += 1
-            guard += 1
-            self._send_mission_current()
 
     def _special_goal(self, it: mp.RawItem, n: float, e: float, alt: float) -> Goal | None:
         """The goal of the initial climb, of an RTL item or of a LAND item (else None)."""
-        if self._mission_climb:
+        if self.mission.climb:
             climb_alt = max(alt, self.ground_alt_m + self.takeoff_alt_rel_m)
             if self.k.alt_amsl_m < climb_alt - 1.0:
                 if self.is_fixed_wing:
                     return self._goal(n, e, climb_alt, stop=False)
                 return self._goal(self.k.north_m, self.k.east_m, climb_alt, stop=True)
-            self._mission_climb = False
+            self.mission.climb = False
         if it.command == mp.CMD_RTL:
-            self._enter_mode(RTL)
+            self.enter_mode(RTL)
             return self._rtl_goal()
         if it.command == mp.CMD_LAND:
             dist = math.hypot(n - self.k.north_m, e - self.k.east_m)
-            if dist > self._acceptance(it) and not self.is_fixed_wing:
+            if dist > self.mission.acceptance(it) and not self.is_fixed_wing:
                 return self._goal(n, e, self.k.alt_amsl_m, stop=True)
             return self._goal(
                 n, e, self.ground_alt_m - 1.0, stop=True, descent=self.lim.descent_rate_mps
             )
         return None
 
-    def _reached(self, it: mp.RawItem, n: float, e: float, alt: float) -> bool:
-        if it.command == mp.CMD_LOITER_UNLIM:
-            return False
-        if it.command == mp.CMD_TAKEOFF:
-            return self.k.alt_amsl_m >= alt - 1.0
-        dist = math.hypot(n - self.k.north_m, e - self.k.east_m)
-        if self.is_fixed_wing:
-            return abs(alt - self.k.alt_amsl_m) <= 10.0 and self._fixed_wing_reached(it, n, e, dist)
-        return dist <= self._acceptance(it) and abs(alt - self.k.alt_amsl_m) <= 1.5
-
-    def _fixed_wing_reached(self, it: mp.RawItem, n: float, e: float, dist: float) -> bool:
-        """A fixed wing is done with a waypoint when it is within the acceptance radius or the
-        distance at which the turn onto the next leg begins (its turn radius times
-        tan(turn / 2), at most the look-ahead distance: PX4 and ArduPlane both switch early
-        so that the turn ends on the next line), or when it has passed the waypoint's finish
-        line (ArduPlane's "Passed waypoint"; an overshoot never makes it circle back)."""
-        frm = self._leg_from_ne
-        if frm is not None and _past_finish(frm, (n, e), (self.k.north_m, self.k.east_m)):
-            return True
-        turn = self._next_turn_rad(n, e)
-        v = max(self.k.airspeed_mps, self.lim.min_airspeed_mps)
-        anticipate = min(
-            turn_radius_m(v, self.lim) * math.tan(min(turn, math.radians(150.0)) / 2.0),
-            l1_distance_m(v),
-        )
-        return dist <= max(self._acceptance(it), anticipate)
-
-    def _next_turn_rad(self, n: float, e: float) -> float:
-        """Course change at the point (n, e) from the current leg onto the next one (0 when
-        the mission ends there or the leg has no start yet)."""
-        frm = self._leg_from_ne
-        nxt = next((x for x in self._items[self._seq + 1 :] if x.command == mp.CMD_WAYPOINT), None)
-        if frm is None or nxt is None:
-            return 0.0
-        n2, e2, _ = self._item_target(nxt)
-        a = math.atan2(e - frm[1], n - frm[0])
-        b = math.atan2(e2 - e, n2 - n)
-        if math.hypot(n - frm[0], e - frm[1]) < 1.0 or math.hypot(n2 - n, e2 - e) < 1.0:
-            return 0.0
-        return abs((b - a + math.pi) % (2.0 * math.pi) - math.pi)
-
-    def _done_with(self, hold_s: float, last_nav: bool) -> bool:
-        """The current item is reached: after its hold time go on to the next item; True when
-        that ends the mission."""
-        if self._item_reached_at is None:
-            self._item_reached_at = self._t
-            self._broadcast("MISSION_ITEM_REACHED", seq=self._seq)
-        if self._t - self._item_reached_at < max(0.0, hold_s):
-            return False
-        self._item_reached_at = None
-        if self.is_fixed_wing:
-            it = self._items[self._seq]
-            n, e, _ = self._item_target(it)
-            self._leg_from_ne = (n, e)  # the next leg starts at this point
-        if last_nav:
-            self._mission_state = const("MISSION_STATE_COMPLETE")
-            self._seq = max(self._seq, len(self._items) - 1)
-            self.statustext(SEV_INFO, "Mission finished, loitering")
-            return True
-        self._seq += 1
-        self._send_mission_current()
-        return False
-
-    def _acceptance(self, it: mp.RawItem) -> float:
-        if it.command == mp.CMD_WAYPOINT and it.param2 > 0:
-            return it.param2
-        return self.lim.acceptance_radius_m
-
     def arm(self, *, force: bool = False) -> int:
-        if self._armed:
+        if self.armed:
             return R_ACCEPTED
         if not force:
-            if self._motor_failed:
-                self.statustext(SEV_CRITICAL, "Preflight Fail: motor failure")
+            if self._faults.motor_failed:
+                self._announce.statustext(SEV_CRITICAL, "Preflight Fail: motor failure")
                 return R_DENIED
-            if self._gps_fix_type() < 3:
-                self.statustext(SEV_CRITICAL, "Preflight Fail: GPS fix too low")
+            if self._faults.gps_fix_type() < 3:
+                self._announce.statustext(SEV_CRITICAL, "Preflight Fail: GPS fix too low")
                 return R_DENIED
             if self.battery_pct < BAT_EMERG_PCT:
-                self.statustext(SEV_CRITICAL, "Preflight Fail: battery unhealthy")
+                self._announce.statustext(SEV_CRITICAL, "Preflight Fail: battery unhealthy")
                 return R_DENIED
             if self._land_start_without_autoland():
-                self.statustext(SEV_CRITICAL, "Arm: DO_LAND_START set and RTL_AUTOLAND disabled")
+                self._announce.statustext(
+                    SEV_CRITICAL, "Arm: DO_LAND_START set and RTL_AUTOLAND disabled"
+                )
                 return R_FAILED
-        self._armed = True
-        self._armed_at = self._t
-        self.statustext(SEV_INFO, "Armed by external command")
+        self.armed = True
+        self._armed_at = self._time.t_s
+        self._announce.statustext(SEV_INFO, "Armed by external command")
         return R_ACCEPTED
 
     def _land_start_without_autoland(self) -> bool:
@@ -527,23 +442,13 @@ class Flight(VehicleCore):
         RTL_AUTOLAND is 0 (measured on the real SITL: COMMAND_ACK 4)."""
         if not (self.is_ardupilot and self.is_fixed_wing):
             return False
-        if self._params.get("RTL_AUTOLAND", 0.0) != 0.0:
+        if self.params.get("RTL_AUTOLAND", 0.0) != 0.0:
             return False
-        return any(it.command == mp.CMD_LAND_START for it in self._items)
+        return any(it.command == mp.CMD_LAND_START for it in self.mission.items)
 
-    def _disarm(self) -> None:
-        if self._armed:
-            self._armed = False
-            self.statustext(
-                SEV_INFO, "Disarmed by external command" if not self._landed else "Disarmed"
+    def disarm(self) -> None:
+        if self.armed:
+            self.armed = False
+            self._announce.statustext(
+                SEV_INFO, "Disarmed by external command" if not self.landed else "Disarmed"
             )
-
-
-def _past_finish(
-    frm: tuple[float, float], to: tuple[float, float], here: tuple[float, float]
-) -> bool:
-    """Is ``here`` beyond the line through ``to`` perpendicular to the leg ``frm`` -> ``to``?"""
-    ln, le = to[0] - frm[0], to[1] - frm[1]
-    if ln * ln + le * le < 1e-6:
-        return False
-    return (here[0] - to[0]) * ln + (here[1] - to[1]) * le > 0.0

@@ -1,11 +1,15 @@
 """Telemetry of a simulated vehicle: the streams each link carries (rates set by
 SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM), one-shot messages (REQUEST_MESSAGE), and the
-content of each message (HEARTBEAT mode numbers, positions as reported, GPS quality)."""
+content of each message (HEARTBEAT mode numbers, positions as reported, GPS quality).
+
+:class:`Telemetry` reads the flight and fault state it is given and writes to the vehicle's
+links (the list the transport keeps)."""
 
 from __future__ import annotations
 
 import logging
 import math
+import random
 import time
 from collections.abc import Callable
 
@@ -32,9 +36,13 @@ from sitl.core import (
     SENSORS_PRESENT,
     STREAMS,
     TAKEOFF,
+    Timeline,
 )
+from sitl.executor import MissionExecutor
 from sitl.faults import Faults
-from sitl.links import Link, StreamState
+from sitl.flight import Flight
+from sitl.links import Link, StreamState, send_ack
+from sitl.spec import VehicleSpec
 
 _log = logging.getLogger(__name__)
 
@@ -43,35 +51,59 @@ HOME_PRE_FIX_OFFSET_M = -2.0
 by up to 2 m while its estimator converged)."""
 
 
-class Telemetry(Faults):
+class Telemetry:
     """Streams and message content (see the module docstring)."""
 
-    def _send_mission_current(self) -> None:
-        if self._booted:
+    def __init__(
+        self,
+        *,
+        spec: VehicleSpec,
+        time: Timeline,
+        flight: Flight,
+        mission: MissionExecutor,
+        faults: Faults,
+        links: list[Link],
+        rng: random.Random,
+        counters: dict[str, int],
+    ) -> None:
+        self.spec = spec
+        self._time = time
+        self._flight = flight
+        self._mission = mission
+        self._faults = faults
+        self._links = links
+        self._rng = rng
+        self._counters = counters
+        self.sys_id = spec.system_id
+        self.is_ardupilot = flight.is_ardupilot
+        self.is_fixed_wing = flight.is_fixed_wing
+
+    def send_mission_current(self) -> None:
+        if self._time.booted:
             for link in list(self._links):
                 if (
                     link.streams.get("MISSION_CURRENT", StreamState(0.0)).period_s > 0
                     or not self.is_ardupilot
                 ):
-                    self._send_stream(link, "MISSION_CURRENT")
+                    self.send_stream(link, "MISSION_CURRENT")
 
-    def _send_streams(self) -> None:
-        if not self._booted:
+    def send_streams(self) -> None:
+        if not self._time.booted:
             return
         now_real = time.monotonic()
         min_real = 1.0 / self.spec.max_real_stream_hz
         for link in list(self._links):
             for name, st in link.streams.items():
-                if st.period_s <= 0 or self._t < st.next_due_s:
+                if st.period_s <= 0 or self._time.t_s < st.next_due_s:
                     continue
                 if now_real - st.last_real_s < min_real:
                     continue
-                st.next_due_s = max(st.next_due_s + st.period_s, self._t)
+                st.next_due_s = max(st.next_due_s + st.period_s, self._time.t_s)
                 st.last_real_s = now_real
-                self._send_stream(link, name)
+                self.send_stream(link, name)
 
-    def _custom_mode(self) -> tuple[int, int]:
-        mode = self._mode
+    def custom_mode(self) -> tuple[int, int]:
+        mode = self._flight.mode
         if self.is_ardupilot:
             table = PLANE_MODES if self.is_fixed_wing else COPTER_MODES
             return const("MAV_MODE_FLAG_CUSTOM_MODE_ENABLED") | 16, table[mode]
@@ -82,40 +114,40 @@ class Telemetry(Faults):
         )
 
     def _system_status(self) -> int:
-        if self._motor_failed or self._bat_level >= 3:
+        if self._faults.motor_failed or self._flight.bat_level >= 3:
             return const("MAV_STATE_EMERGENCY")
-        if self._bat_level == 2 or self._jam_level() >= 0.8:
+        if self._flight.bat_level == 2 or self._faults.jam_level() >= 0.8:
             return const("MAV_STATE_CRITICAL")
-        return const("MAV_STATE_ACTIVE") if self._armed else const("MAV_STATE_STANDBY")
+        return const("MAV_STATE_ACTIVE") if self._flight.armed else const("MAV_STATE_STANDBY")
 
-    def _health(self) -> int:
+    def health(self) -> int:
         h = SENSORS_PRESENT
-        if self._jam_level() >= 0.4:
+        if self._faults.jam_level() >= 0.4:
             h &= ~SENSOR_GPS
-        if self._motor_failed:
+        if self._faults.motor_failed:
             h &= ~SENSOR_MOTORS
-        if self._bat_level >= 2:
+        if self._flight.bat_level >= 2:
             h &= ~SENSOR_BATTERY
         return h
 
     def _noisy_reported(self) -> tuple[float, float, float]:
-        n = self.k.north_m + self._spoof_north_m + self._jam_offset[0]
-        e = self.k.east_m + self._jam_offset[1]
+        n = self._flight.k.north_m + self._faults.spoof_north_m + self._faults.jam_offset[0]
+        e = self._flight.k.east_m + self._faults.jam_offset[1]
         if self.spec.gnss_noise_m > 0:
             n += self._rng.gauss(0.0, self.spec.gnss_noise_m)
             e += self._rng.gauss(0.0, self.spec.gnss_noise_m)
-        lat, lon = self._frame.to_latlon(n, e)
-        return lat, lon, self.k.alt_amsl_m
+        lat, lon = self._flight.frame.to_latlon(n, e)
+        return lat, lon, self._flight.k.alt_amsl_m
 
-    def _send_stream(self, link: Link, name: str) -> None:
+    def send_stream(self, link: Link, name: str) -> None:
         """Send one ``name`` message (a stream or a one-shot request) on ``link``."""
         sender = _SENDERS.get(name)
         if sender is not None:
             sender(self, link)
 
     def _tx_heartbeat(self, link: Link) -> None:
-        base, custom = self._custom_mode()
-        if self._armed:
+        base, custom = self.custom_mode()
+        if self._flight.armed:
             base |= const("MAV_MODE_FLAG_SAFETY_ARMED")
         mav_type = (
             const("MAV_TYPE_FIXED_WING") if self.is_fixed_wing else const("MAV_TYPE_QUADROTOR")
@@ -136,10 +168,10 @@ class Telemetry(Faults):
         )
 
     def _tx_global_position_int(self, link: Link) -> None:
-        k = self.k
-        tb = self._time_boot_ms()
+        k = self._flight.k
+        tb = self._time.time_boot_ms()
         lat, lon, alt = self._noisy_reported()
-        if self._acquiring_gnss():
+        if self._faults.acquiring_gnss():
             lat = lon = 0.0  # no global position before the first fix
         link.send(
             "GLOBAL_POSITION_INT",
@@ -147,7 +179,7 @@ class Telemetry(Faults):
             lat=round(lat * 1e7),
             lon=round(lon * 1e7),
             alt=round(alt * 1000),
-            relative_alt=round((alt - self.home[2]) * 1000),
+            relative_alt=round((alt - self._flight.home[2]) * 1000),
             vx=round(k.vn_mps * 100),
             vy=round(k.ve_mps * 100),
             vz=round(-k.vup_mps * 100),
@@ -155,19 +187,19 @@ class Telemetry(Faults):
         )
 
     def _tx_gps_raw_int(self, link: Link) -> None:
-        k = self.k
+        k = self._flight.k
         lat, lon, alt = self._noisy_reported()
-        lvl = self._jam_level()
-        fix = self._gps_fix_type()
+        lvl = self._faults.jam_level()
+        fix = self._faults.gps_fix_type()
         hdop = 0.8 + 30.0 * lvl * lvl  # eph grows with the jamming level
         h_acc_m = 1.0 + self.spec.gnss_noise_m + 60.0 * lvl * lvl
-        if fix == 0 and self._acquiring_gnss():
+        if fix == 0 and self._faults.acquiring_gnss():
             h_acc_m = 100.0  # (PX4 SIH without a fix: 100 m)
         sats = max(0, round(14 - 12 * lvl))
         gs = math.hypot(k.vn_mps, k.ve_mps)
         link.send(
             "GPS_RAW_INT",
-            time_usec=int(self.sim_now_utc_s() * 1e6),
+            time_usec=int(self._time.sim_now_utc_s() * 1e6),
             fix_type=fix,
             lat=round(lat * 1e7),
             lon=round(lon * 1e7),
@@ -191,13 +223,13 @@ class Telemetry(Faults):
             "SYS_STATUS",
             onboard_control_sensors_present=SENSORS_PRESENT,
             onboard_control_sensors_enabled=SENSORS_PRESENT,
-            onboard_control_sensors_health=self._health(),
+            onboard_control_sensors_health=self.health(),
             load=250,
             voltage_battery=mv,
             current_battery=ca,
-            battery_remaining=round(self.battery_pct),
+            battery_remaining=round(self._flight.battery_pct),
             drop_rate_comm=0,
-            errors_comm=self.counters["bad_crc"] + self.counters["garbage"] % 65535,
+            errors_comm=self._counters["bad_crc"] + self._counters["garbage"] % 65535,
             errors_count1=0,
             errors_count2=0,
             errors_count3=0,
@@ -212,8 +244,8 @@ class Telemetry(Faults):
             const("MAV_BATTERY_CHARGE_STATE_LOW"),
             const("MAV_BATTERY_CHARGE_STATE_CRITICAL"),
             const("MAV_BATTERY_CHARGE_STATE_EMERGENCY"),
-        ][self._bat_level]
-        remaining_s = int(self.battery_pct / 100.0 * self.spec.battery_capacity_s)
+        ][self._flight.bat_level]
+        remaining_s = int(self._flight.battery_pct / 100.0 * self.spec.battery_capacity_s)
         link.send(
             "BATTERY_STATUS",
             id=0,
@@ -222,19 +254,21 @@ class Telemetry(Faults):
             temperature=2500,
             voltages=[cell, cell, cell, cell, 65535, 65535, 65535, 65535, 65535, 65535],
             current_battery=ca,
-            current_consumed=round((100.0 - self.battery_pct) * 50),
+            current_consumed=round((100.0 - self._flight.battery_pct) * 50),
             energy_consumed=-1,
-            battery_remaining=round(self.battery_pct),
+            battery_remaining=round(self._flight.battery_pct),
             time_remaining=remaining_s,
             charge_state=charge,
         )
 
     def _tx_extended_sys_state(self, link: Link) -> None:
-        if self._landed:
+        if self._flight.landed:
             landed = const("MAV_LANDED_STATE_ON_GROUND")
-        elif self._mode == TAKEOFF:
+        elif self._flight.mode == TAKEOFF:
             landed = const("MAV_LANDED_STATE_TAKEOFF")
-        elif self._mode == LAND or (self._mode == RTL and self._rtl_phase == 3):
+        elif self._flight.mode == LAND or (
+            self._flight.mode == RTL and self._flight.rtl_phase == 3
+        ):
             landed = const("MAV_LANDED_STATE_LANDING")
         else:
             landed = const("MAV_LANDED_STATE_IN_AIR")
@@ -245,15 +279,15 @@ class Telemetry(Faults):
         )
 
     def _tx_home_position(self, link: Link) -> None:
-        alt = self.home[2]
-        if self._acquiring_gnss():  # (VehicleSpec.gnss_fix_after_s)
+        alt = self._flight.home[2]
+        if self._faults.acquiring_gnss():  # (VehicleSpec.gnss_fix_after_s)
             if self.is_ardupilot:
                 return
             alt += HOME_PRE_FIX_OFFSET_M
         link.send(
             "HOME_POSITION",
-            latitude=round(self.home[0] * 1e7),
-            longitude=round(self.home[1] * 1e7),
+            latitude=round(self._flight.home[0] * 1e7),
+            longitude=round(self._flight.home[1] * 1e7),
             altitude=round(alt * 1000),
             x=0.0,
             y=0.0,
@@ -262,22 +296,22 @@ class Telemetry(Faults):
             approach_x=0.0,
             approach_y=0.0,
             approach_z=0.0,
-            time_usec=int(self.sim_now_utc_s() * 1e6),
+            time_usec=int(self._time.sim_now_utc_s() * 1e6),
         )
 
     def _tx_mission_current(self, link: Link) -> None:
-        in_mission = 1 if self._mode == MISSION else 2
+        in_mission = 1 if self._flight.mode == MISSION else 2
         link.send(
             "MISSION_CURRENT",
-            seq=self._seq,
-            total=len(self._items),
-            mission_state=self._mission_state,
-            mission_mode=in_mission if self._items else 0,
+            seq=self._mission.seq,
+            total=len(self._mission.items),
+            mission_state=self._mission.state,
+            mission_mode=in_mission if self._mission.items else 0,
         )
 
     def _tx_attitude(self, link: Link) -> None:
-        k = self.k
-        tb = self._time_boot_ms()
+        k = self._flight.k
+        tb = self._time.time_boot_ms()
         link.send(
             "ATTITUDE",
             time_boot_ms=tb,
@@ -290,17 +324,19 @@ class Telemetry(Faults):
         )
 
     def _tx_system_time(self, link: Link) -> None:
-        tb = self._time_boot_ms()
-        link.send("SYSTEM_TIME", time_unix_usec=int(self.sim_now_utc_s() * 1e6), time_boot_ms=tb)
+        tb = self._time.time_boot_ms()
+        link.send(
+            "SYSTEM_TIME", time_unix_usec=int(self._time.sim_now_utc_s() * 1e6), time_boot_ms=tb
+        )
 
     def _tx_vfr_hud(self, link: Link) -> None:
-        k = self.k
+        k = self._flight.k
         link.send(
             "VFR_HUD",
             airspeed=k.airspeed_mps,
             groundspeed=math.hypot(k.vn_mps, k.ve_mps),
             heading=round(math.degrees(k.yaw_rad) % 360) % 360,
-            throttle=50 if self._armed else 0,
+            throttle=50 if self._flight.armed else 0,
             alt=k.alt_amsl_m,
             climb=k.vup_mps,
         )
@@ -333,11 +369,11 @@ class Telemetry(Faults):
 
     def _battery_electrics(self) -> tuple[int, int]:
         """(pack millivolts, centiamps) of a 4S LiPo: 16.8 V full, 13.2 V empty."""
-        mv = round((13.2 + 3.6 * self.battery_pct / 100.0) * 1000)
-        ca = 0 if not self._armed else (1500 if self._landed else 2500)
+        mv = round((13.2 + 3.6 * self._flight.battery_pct / 100.0) * 1000)
+        ca = 0 if not self._flight.armed else (1500 if self._flight.landed else 2500)
         return mv, ca
 
-    def _on_request_data_stream(self, link: Link, m: Inbound) -> None:
+    def on_request_data_stream(self, link: Link, m: Inbound) -> None:
         sid, rate, on = m.i("req_stream_id"), m.i("req_message_rate"), m.i("start_stop")
         if sid == 0:
             names: tuple[str, ...] = tuple(n for g in AP_STREAM_GROUPS.values() for n in g)
@@ -346,7 +382,7 @@ class Telemetry(Faults):
         for n in names:
             link.set_rate(n, float(rate) if on else 0.0)
 
-    def _cmd_set_interval(self, link: Link, _m: Inbound, p: list[float]) -> int:
+    def cmd_set_interval(self, link: Link, _m: Inbound, p: list[float]) -> int:
         name = name_of(int(p[0]))
         if name is None or name not in STREAMS:
             return R_UNSUPPORTED
@@ -359,22 +395,22 @@ class Telemetry(Faults):
             link.set_rate(name, 1e6 / interval_us)
         return R_ACCEPTED
 
-    def _cmd_request_message(self, link: Link, m: Inbound, p: list[float]) -> int | None:
+    def cmd_request_message(self, link: Link, m: Inbound, p: list[float]) -> int | None:
         name = name_of(int(p[0]))
         if name is None or name not in REQUESTABLE:
             return R_UNSUPPORTED
-        self._ack(link, m, const("MAV_CMD_REQUEST_MESSAGE"), R_ACCEPTED)
-        self._send_stream(link, name)
+        send_ack(link, m, const("MAV_CMD_REQUEST_MESSAGE"), R_ACCEPTED)
+        self.send_stream(link, name)
         return None
 
-    def _cmd_capabilities(self, link: Link, m: Inbound, _p: list[float]) -> int | None:
-        self._ack(link, m, const("MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES"), R_ACCEPTED)
-        self._send_stream(link, "AUTOPILOT_VERSION")
+    def cmd_capabilities(self, link: Link, m: Inbound, _p: list[float]) -> int | None:
+        send_ack(link, m, const("MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES"), R_ACCEPTED)
+        self.send_stream(link, "AUTOPILOT_VERSION")
         return None
 
-    def _cmd_home(self, link: Link, m: Inbound, _p: list[float]) -> int | None:
-        self._ack(link, m, const("MAV_CMD_GET_HOME_POSITION"), R_ACCEPTED)
-        self._send_stream(link, "HOME_POSITION")
+    def cmd_home(self, link: Link, m: Inbound, _p: list[float]) -> int | None:
+        send_ack(link, m, const("MAV_CMD_GET_HOME_POSITION"), R_ACCEPTED)
+        self.send_stream(link, "HOME_POSITION")
         return None
 
 

@@ -1,188 +1,261 @@
-"""One simulated vehicle: its links, the receive path, and ``advance``.
+"""One simulated vehicle: the object that holds its parts and drives them.
+
+The parts, each given what it needs and none importing this module: :class:`Faults` (fault
+state, GNSS quality), :class:`Flight` (modes, mission execution, physics, battery),
+:class:`Transport` (links, receive path), :class:`Telemetry` (streams),
+:class:`CommandHandler` (commands, parameters) and :class:`MissionServer` (the mission
+protocol). The vehicle is the :class:`sitl.core.Announcer` of the parts (STATUSTEXT and
+other messages on every link) and the :class:`sitl.mission.MissionHost` of the mission server.
 
 The vehicle is driven by `advance(t_s)` (simulated seconds since fleet start) from the fleet
 ticker, which integrates the kinematics in fixed steps of at most PHYSICS_DT_S, runs the mode
-logic and sends due streams. Sockets feed `_receive`; nothing here blocks and nothing a peer
-sends can raise out of a handler (bad input is counted in `counters`). The behaviour lives in
-the layers :class:`Vehicle` inherits (see :mod:`sitl.core`).
+logic and sends due streams. Sockets feed the transport; nothing here blocks and nothing a
+peer sends can raise out of a handler (bad input is counted in `counters`).
 """
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import logging
 import math
+import random
 import time
-from collections.abc import Callable
+from typing import Any
 
 from sitl import mission as mp
-from sitl._mav import Inbound, msg_id_of, name_of
-from sitl.commands import CommandHandling
+from sitl._mav import Inbound, msg_id_of
+from sitl.commands import CommandHandler
 from sitl.core import (
+    COUNTER_NAMES,
     HISTORY_PERIOD_S,
     PHYSICS_DT_S,
     PLANE_MODES,
     SEV_INFO,
+    Timeline,
     mission_items_from_specs,
 )
-from sitl.links import Link, TcpLink, UdpLink
-from sitl.spec import (
-    ARDUPILOT,
-    SimClock,
-    VehicleSpec,
-)
+from sitl.faults import Faults
+from sitl.flight import Flight
+from sitl.links import Link
+from sitl.physics import KinState
+from sitl.spec import ARDUPILOT, FIXED_WING, FaultKind, Limits, SimClock, VehicleSpec
+from sitl.telemetry import Telemetry
+from sitl.transport import Transport
 
 _log = logging.getLogger(__name__)
 
 AP_STORAGE_READY_S = 1.5  # simulated s after boot before ArduPilot takes an upload
+IGNORED_MESSAGES = frozenset({"SYSTEM_TIME", "COMMAND_ACK", "STATUSTEXT", "PING"})
 
 __all__ = ["PHYSICS_DT_S", "PLANE_MODES", "Vehicle", "mission_items_from_specs", "stream_msg_id"]
 
 
-class Vehicle(CommandHandling):
+class Vehicle:
     """A PX4-like (or ArduPilot-like) vehicle. Read-only state is exposed for tests/reports."""
 
     def __init__(self, spec: VehicleSpec, sim_time: SimClock, *, t0_elapsed_s: float = 0.0) -> None:
-        super().__init__(spec, sim_time, t0_elapsed_s=t0_elapsed_s)
-        self.mission_server = mp.MissionServer(
-            self, max_items=spec.max_mission_items, ardupilot=spec.autopilot == ARDUPILOT
+        self.spec = spec
+        self.sys_id = spec.system_id
+        self.is_ardupilot = spec.autopilot == ARDUPILOT
+        self.is_fixed_wing = spec.kind == FIXED_WING
+        self.counters: dict[str, int] = dict.fromkeys(COUNTER_NAMES, 0)
+        self.statustexts: list[tuple[float, int, str]] = []
+        self.position_history: list[tuple[float, float, float, float]] = []
+        self.time = Timeline(spec, sim_time, t0_elapsed_s)
+        self._next_history_t = 0.0
+        # one random stream for the vehicle: jamming drift, GNSS noise, packet loss draws
+        self._rng = random.Random(spec.seed * 1000003 + self.sys_id)
+        self.faults = Faults(
+            spec=spec, time=self.time, rng=self._rng, counters=self.counters, announce=self
         )
+        self.flight = Flight(spec=spec, time=self.time, faults=self.faults, announce=self)
+        self.executor = self.flight.mission
+        self.transport = Transport(
+            spec=spec,
+            time=self.time,
+            faults=self.faults,
+            rng=self._rng,
+            counters=self.counters,
+            deliver=self._handle,
+        )
+        self.telemetry = Telemetry(
+            spec=spec,
+            time=self.time,
+            flight=self.flight,
+            mission=self.executor,
+            faults=self.faults,
+            links=self.transport.links,
+            rng=self._rng,
+            counters=self.counters,
+        )
+        self.commands = CommandHandler(
+            time=self.time,
+            flight=self.flight,
+            mission=self.executor,
+            faults=self.faults,
+            telemetry=self.telemetry,
+            counters=self.counters,
+            announce=self,
+        )
+        self._handlers = self.commands.handlers()
+        self.mission_server = mp.MissionServer(
+            self, max_items=spec.max_mission_items, ardupilot=self.is_ardupilot
+        )
+
+    # Read-only state ------------------------------------------------------------------
+
+    @property
+    def signing_key(self) -> bytes | None:
+        return self.transport.signing_key
+
+    @property
+    def rejected_messages(self) -> dict[str, int]:
+        """Signing on: message name -> count of incoming messages dropped for their signature."""
+        return self.transport.rejected_messages
+
+    @property
+    def lat_deg(self) -> float:
+        return self.flight.lat_deg
+
+    @property
+    def lon_deg(self) -> float:
+        return self.flight.lon_deg
+
+    @property
+    def alt_amsl_m(self) -> float:
+        return self.flight.k.alt_amsl_m
+
+    @property
+    def k(self) -> KinState:
+        """The true kinematic state (local frame around home)."""
+        return self.flight.k
+
+    @property
+    def home(self) -> tuple[float, float, float]:
+        """(lat deg, lon deg, alt AMSL m) of home."""
+        return self.flight.home
+
+    @property
+    def ground_alt_m(self) -> float:
+        return self.flight.ground_alt_m
+
+    @property
+    def lim(self) -> Limits:
+        """The flight envelope of the vehicle's kind (``VehicleSpec.limits()``)."""
+        return self.flight.lim
+
+    def speed_item(self, it: mp.RawItem) -> float | None:
+        """The speed a DO_CHANGE_SPEED item sets (see :meth:`MissionExecutor.speed_item`)."""
+        return self.executor.speed_item(it)
+
+    @property
+    def mode(self) -> str:
+        return self.flight.mode
+
+    @property
+    def armed(self) -> bool:
+        return self.flight.armed
+
+    @property
+    def landed(self) -> bool:
+        return self.flight.landed
+
+    @property
+    def mission(self) -> tuple[mp.RawItem, ...]:
+        return tuple(self.executor.items)
+
+    @property
+    def mission_current_seq(self) -> int:
+        return self.executor.seq
+
+    @property
+    def battery_pct(self) -> float:
+        return self.flight.battery_pct
+
+    @property
+    def motor_failed(self) -> bool:
+        return self.faults.motor_failed
 
     @property
     def local_port(self) -> int:
-        return self._udp.local_port if self._udp is not None else 0
+        return self.transport.local_port
 
     @property
     def api_local_port(self) -> int:
-        return self._api.local_port if self._api is not None else 0
+        return self.transport.api_local_port
 
     @property
     def tcp_port(self) -> int:
-        if self._tcp_server is None or not self._tcp_server.sockets:
-            return 0
-        return int(self._tcp_server.sockets[0].getsockname()[1])
+        return self.transport.tcp_port
+
+    def reported_position(self) -> tuple[float, float, float]:
+        """Position as telemetry reports it (spoofing offset, jamming drift; without noise)."""
+        k, faults = self.flight.k, self.faults
+        n = k.north_m + faults.spoof_north_m + faults.jam_offset[0]
+        e = k.east_m + faults.jam_offset[1]
+        lat, lon = self.flight.frame.to_latlon(n, e)
+        return lat, lon, k.alt_amsl_m
+
+    def sim_now_utc_s(self) -> float:
+        return self.time.sim_now_utc_s()
+
+    # Actions --------------------------------------------------------------------------
+
+    def inject_fault(
+        self, kind: FaultKind, *, duration_s: float | None = None, value: float | None = None
+    ) -> None:
+        """Start a fault now (the "on command" path of fault injection)."""
+        self.faults.inject(kind, self.flight, duration_s=duration_s, value=value)
+
+    def arm(self, *, force: bool = False) -> int:
+        """Arm as COMPONENT_ARM_DISARM would (the MAV_RESULT)."""
+        return self.flight.arm(force=force)
 
     async def start(self) -> None:
-        loop = asyncio.get_running_loop()
-        spec = self.spec
-        streaming = dict(spec.stream_rates_hz)
-        if self.is_ardupilot:
-            # ArduPilot streams nothing but HEARTBEAT until asked (SRx_ params at 0).
-            streaming = {"HEARTBEAT": streaming.get("HEARTBEAT", 1.0)}
-        want_udp = not self.is_ardupilot or spec.bind_port is not None
-        if want_udp:
-            port = spec.bind_port if spec.bind_port is not None else 18570 + spec.instance
-            link = UdpLink(self, "gcs", streaming, (spec.gcs_host, spec.gcs_port))
-            await loop.create_datagram_endpoint(lambda: link, local_addr=(spec.bind_host, port))
-            self._udp = link
-            self._links.append(link)
-        if spec.api_link:
-            port = spec.api_bind_port if spec.api_bind_port is not None else 18580 + spec.instance
-            # PX4's API link binds 14580+i: keep the convention unless a port is given.
-            if spec.api_bind_port is None:
-                port = 14580 + spec.instance
-            remote = (
-                spec.gcs_host,
-                spec.api_port if spec.api_port is not None else 14540 + spec.instance,
-            )
-            api = UdpLink(self, "api", streaming, remote, link_id=1)
-            await loop.create_datagram_endpoint(lambda: api, local_addr=(spec.bind_host, port))
-            self._api = api
-            self._links.append(api)
-        if self.is_ardupilot:
-            tport = spec.tcp_port if spec.tcp_port is not None else 5760 + 10 * spec.instance
-            self._tcp_server = await loop.create_server(
-                lambda: TcpLink(self, {"HEARTBEAT": 1.0}), host=spec.bind_host, port=tport
-            )
+        await self.transport.start()
 
     async def stop(self) -> None:
-        for link in list(self._links):
-            link.closed = True
-            tr = getattr(link, "transport", None)
-            if tr is not None:
-                tr.close()
-        self._links.clear()
-        if self._tcp_server is not None:
-            self._tcp_server.close()
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(self._tcp_server.wait_closed(), 1.0)
+        await self.transport.stop()
 
-    def _out(self, link: Link, data: bytes) -> None:
-        if not self._booted:
-            return
-        if self._link_loss:
-            self.counters["dropped_link_loss"] += 1
-            return
-        if self._packet_loss > 0 and self._rng.random() < self._packet_loss:
-            self.counters["dropped_packet_loss"] += 1
-            return
-        self.counters["tx_messages"] += 1
-        if self._latency_s > 0:
-            self.counters["delayed_latency"] += 1
-            asyncio.get_running_loop().call_later(
-                self._clock.real_delay_s(self._latency_s), link.transmit, data
-            )
-        else:
-            link.transmit(data)
+    # Announcer ------------------------------------------------------------------------
 
-    def _in(self, link: Link, data: bytes, peer: tuple[str, int] | None) -> None:
-        if not self._booted:
-            return
-        self.counters["rx_datagrams"] += 1
-        if self._link_loss:
-            self.counters["dropped_link_loss"] += 1
-            return
-        if self._packet_loss > 0 and self._rng.random() < self._packet_loss:
-            self.counters["dropped_packet_loss"] += 1
-            return
-        if self._latency_s > 0:
-            self.counters["delayed_latency"] += 1
-            asyncio.get_running_loop().call_later(
-                self._clock.real_delay_s(self._latency_s), self._receive, link, data, peer
-            )
-        else:
-            self._receive(link, data, peer)
+    def statustext(self, severity: int, text: str) -> None:
+        self.statustexts.append((self.sim_now_utc_s(), severity, text))
+        _log.info("sysid %d: %s", self.sys_id, text)
+        self.broadcast("STATUSTEXT", severity=severity, text=text.encode()[:50])
 
-    def _receive(self, link: Link, data: bytes, peer: tuple[str, int] | None) -> None:
-        try:
-            if isinstance(link, UdpLink) and peer is not None:
-                res = link.parser_for(peer).parse_datagram(data)
-            elif isinstance(link, TcpLink):
-                res = link.parser.parse_stream(data)
-            else:
-                return
-            c = self.counters
-            c["garbage"] += res.garbage
-            c["bad_crc"] += res.bad_crc
-            c["bad_frame"] += res.bad_frame
-            c["truncated"] += res.truncated
-            c["unknown_msgid"] += res.unknown_msgid
-            if res.rejected_msg_ids:
-                c["rejected_unsigned"] += res.unsigned_rejected
-                c["rejected_bad_signature"] += res.bad_signature
-                for mid in res.rejected_msg_ids:
-                    name = name_of(mid) or f"MSG_{mid}"
-                    self.rejected_messages[name] = self.rejected_messages.get(name, 0) + 1
-            if (
-                res.messages
-                and isinstance(link, UdpLink)
-                and peer is not None
-                and not link.remote_learned
-            ):
-                # As PX4: the first peer that talks to us becomes the reply address.
-                link.remote = peer
-                link.remote_learned = True
-            for m in res.messages:
-                c["rx_messages"] += 1
-                try:
-                    self._handle(link, m)
-                except Exception:
-                    c["handler_errors"] += 1
-                    _log.exception("sysid %d: error handling %s", self.sys_id, m.type)
-        except Exception:
-            self.counters["handler_errors"] += 1
-            _log.exception("sysid %d: error receiving", self.sys_id)
+    def broadcast(self, name: str, **fields: Any) -> None:
+        self.transport.broadcast(name, **fields)
+
+    def mission_current_changed(self) -> None:
+        self.telemetry.send_mission_current()
+
+    # MissionHost ----------------------------------------------------------------------
+
+    def mission_items(self) -> list[mp.RawItem]:
+        return self.executor.wire_items()
+
+    def accept_mission(self, items: list[mp.RawItem], flagged_current: int | None) -> None:
+        self.flight.accept_mission(items, flagged_current)
+
+    def clear_mission(self) -> None:
+        self.flight.clear_mission()
+
+    def set_current(self, seq: int) -> bool:
+        return self.executor.set_current(seq)
+
+    def send(self, peer: object, name: str, **fields: Any) -> None:
+        if isinstance(peer, Link):
+            peer.send(name, **fields)
+
+    def count(self, counter: str) -> None:
+        self.counters[counter] = self.counters.get(counter, 0) + 1
+
+    def storage_ready(self) -> bool:
+        """ArduPilot refuses uploads (MAV_MISSION_NO_SPACE) until its mission storage is up,
+        about 1.5 simulated s after it starts (measured at speed 1 and 5); PX4 at once."""
+        return not self.is_ardupilot or self.time.t_s - self.spec.boot_at_s >= AP_STORAGE_READY_S
+
+    # Receive path and time ------------------------------------------------------------
 
     def _handle(self, link: Link, m: Inbound) -> None:
         if m.has("target_system"):
@@ -198,74 +271,43 @@ class Vehicle(CommandHandling):
             return
         if self.mission_server.handle(link, m, time.monotonic()):
             return
-        handler = _HANDLERS.get(t)
+        handler = self._handlers.get(t)
         if handler is not None:
-            handler(self, link, m)
-        elif t not in ("SYSTEM_TIME", "COMMAND_ACK", "STATUSTEXT", "PING"):
+            handler(link, m)
+        elif t not in IGNORED_MESSAGES:
             self.counters["unhandled_msg"] += 1
-
-    def storage_ready(self) -> bool:
-        """ArduPilot refuses uploads (MAV_MISSION_NO_SPACE) until its mission storage is up,
-        about 1.5 simulated s after it starts (measured at speed 1 and 5); PX4 at once."""
-        return not self.is_ardupilot or self._t - self.spec.boot_at_s >= AP_STORAGE_READY_S
-
-    def _on_command_message(self, link: Link, m: Inbound) -> None:
-        self.counters["commands"] += 1
-        self._on_command(link, m)
-
-    def _on_set_mode(self, _link: Link, m: Inbound) -> None:
-        self._set_mode_numbers(m.i("base_mode"), m.i("custom_mode"))
-
-    def _on_param_list(self, link: Link, _m: Inbound) -> None:
-        for i, name in enumerate(self._params):
-            self._send_param(link, name, i)
-
-    def _on_timesync(self, link: Link, m: Inbound) -> None:
-        if m.i("tc1") == 0:
-            link.send("TIMESYNC", tc1=int(self.sim_now_utc_s() * 1e9), ts1=m.i("ts1"))
 
     def advance(self, t_s: float) -> None:
         """Advance the vehicle to `t_s` simulated seconds after fleet start."""
+        clock = self.time
         if t_s < self.spec.boot_at_s:
-            self._t = t_s
+            clock.t_s = t_s
             return
-        if not self._booted:
-            self._booted = True
-            self._t = max(self._t, self.spec.boot_at_s)
+        if not clock.booted:
+            clock.booted = True
+            clock.t_s = max(clock.t_s, self.spec.boot_at_s)
             self.statustext(
                 SEV_INFO, "Ready for takeoff!" if not self.is_ardupilot else "ArduPilot Ready"
             )
-        dt_total = t_s - self._t
+        dt_total = t_s - clock.t_s
         if dt_total > 0:
             n = max(1, math.ceil(dt_total / PHYSICS_DT_S - 1e-9))
             n = min(n, 400)  # after a long stall take bigger steps rather than freezing the loop
             dt = dt_total / n
             for _ in range(n):
-                self._t += dt
-                self._update_faults()
-                self._drift_jam(dt)
-                self._auto_start()
-                self._step(dt)
-        self._t = t_s
+                clock.t_s += dt
+                self.faults.update(self.flight)
+                self.faults.drift_jam(dt)
+                self.flight.auto_start()
+                self.flight.step(dt)
+        clock.t_s = t_s
         self.mission_server.tick(time.monotonic())
-        if self._t >= self._next_history_t:
-            self._next_history_t = self._t + HISTORY_PERIOD_S
+        if clock.t_s >= self._next_history_t:
+            self._next_history_t = clock.t_s + HISTORY_PERIOD_S
             self.position_history.append(
                 (self.sim_now_utc_s(), self.lat_deg, self.lon_deg, self.alt_amsl_m)
             )
-        self._send_streams()
-
-
-_HANDLERS: dict[str, Callable[[Vehicle, Link, Inbound], None]] = {
-    "COMMAND_LONG": Vehicle._on_command_message,
-    "COMMAND_INT": Vehicle._on_command_message,
-    "SET_MODE": Vehicle._on_set_mode,
-    "REQUEST_DATA_STREAM": Vehicle._on_request_data_stream,
-    "PARAM_REQUEST_LIST": Vehicle._on_param_list,
-    "PARAM_REQUEST_READ": Vehicle._on_param_read,
-    "PARAM_SET": Vehicle._on_param_set,
-    "TIMESYNC": Vehicle._on_timesync,
-}
+        self.telemetry.send_streams()
 
 
 def stream_msg_id(name: str) -> int:

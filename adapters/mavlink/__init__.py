@@ -3,7 +3,8 @@ readback verification, commands, MAVLink 2 signing. See docs/usm.md."""
 
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.endpoint import Endpoint, EndpointError, EndpointKind, parse_endpoint
-from adapters.mavlink.hub import HubCounters, MavlinkHub, TelemetrySink
+from adapters.mavlink.hub import MavlinkHub, TelemetrySink
+from adapters.mavlink.hub_report import HubCounters
 from adapters.mavlink.mission import MissionItem, plan_to_mission_items
 from adapters.mavlink.transfer import CommandResult, MavlinkError, UploadFailure, UploadResult
 from adapters.mavlink.transport import LinkError

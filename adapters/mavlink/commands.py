@@ -23,7 +23,7 @@ import logging
 import math
 
 from adapters.mavlink.mission import MAV_CMD_DO_LAND_START, MAV_CMD_NAV_LAND, MissionItem
-from adapters.mavlink.transfer import CommandResult, MavlinkError
+from adapters.mavlink.transfer import CommandResult, MavlinkError, Transfers
 from adapters.mavlink.upload import Uploads
 from adapters.mavlink.vehicle import VehicleState
 from gcs_utm.geo import haversine_m
@@ -42,8 +42,14 @@ PLANE_MIN_APPROACH_M = 400.0  # shortest approach to the fallback landing point
 _TRACK_SAMPLE_S = 0.3  # real seconds between the two positions that give the track
 
 
-class Commands(Uploads):
-    """:meth:`send_command` (see the module docstring)."""
+class Commands:
+    """:meth:`send_command` (see the module docstring): a part the
+    :class:`~adapters.mavlink.hub.MavlinkHub` holds, sending through its ``transfers`` and
+    (for ArduPlane's landing mission) ``uploads`` parts."""
+
+    def __init__(self, transfers: Transfers, uploads: Uploads) -> None:
+        self.transfers = transfers
+        self.uploads = uploads
 
     async def send_command(
         self,
@@ -54,7 +60,7 @@ class Commands(Uploads):
     ) -> CommandResult:
         """HOLD / RESUME / RTL / LAND / GOTO mapped to the vehicle's autopilot."""
         try:
-            st = self.state(sys_id)
+            st = self.transfers.link.state(sys_id)
         except MavlinkError as exc:
             return CommandResult(ok=False, result=None, attempts=0, error=str(exc))
         kind = command.kind
@@ -64,24 +70,30 @@ class Commands(Uploads):
             CommandKind.RTL: FlightMode.RTL,
         }.get(kind)
         if mode is not None:
-            return await self.send_mode(st.key, mode, deadline_t_s=deadline_t_s)
+            return await self.transfers.send_mode(st.key, mode, deadline_t_s=deadline_t_s)
         if kind is CommandKind.LAND:
             return await self._land(st, deadline_t_s)
         target = command.target
         if target is None:
             return CommandResult(ok=False, result=None, attempts=0, error="GOTO needs a target")
         # DO_REPOSITION: speed -1 (default), flag CHANGE_MODE (switch to guided/hold), yaw NaN
-        return await self._command_int(
+        return await self.transfers.send_command_int(
             st, MAV_CMD_DO_REPOSITION, (-1.0, 1.0, 0.0, _NAN), target, deadline_t_s
         )
 
     async def _land(self, st: VehicleState, deadline_t_s: float | None) -> CommandResult:
         if st.autopilot is not Autopilot.ARDUPILOT:
             params = (0.0, 0.0, 0.0, _NAN, _NAN, _NAN, _NAN)
-            return await self._command_long(st, MAV_CMD_NAV_LAND, params, deadline_t_s)
+            return await self.transfers.send_command_long(
+                st, MAV_CMD_NAV_LAND, params, deadline_t_s
+            )
         if st.kind is not VehicleKind.FIXED_WING:
-            return await self.send_mode(st.key, FlightMode.LAND, deadline_t_s=deadline_t_s)
-        res = await self._command_long(st, MAV_CMD_DO_LAND_START, (0.0,) * 7, deadline_t_s)
+            return await self.transfers.send_mode(
+                st.key, FlightMode.LAND, deadline_t_s=deadline_t_s
+            )
+        res = await self.transfers.send_command_long(
+            st, MAV_CMD_DO_LAND_START, (0.0,) * 7, deadline_t_s
+        )
         if res.ok:
             return res
         _log.warning("%s: DO_LAND_START failed (%s): landing mission instead", st.key, res.error)
@@ -123,7 +135,7 @@ class Commands(Uploads):
                 z=0.0,  # the home's altitude
             ),
         ]
-        up = await self.upload_items(st.key, items, deadline_t_s=deadline_t_s)
+        up = await self.uploads.upload_items(st.key, items, deadline_t_s=deadline_t_s)
         error = f"DO_LAND_START: {land_start.error}; landing mission {dist_m:.0f} m ahead"
         if not up.ok:
             error += f" failed: {up.error}"
@@ -132,7 +144,7 @@ class Commands(Uploads):
     async def _home_alt_amsl_m(self, st: VehicleState, default_m: float) -> float:
         """ArduPilot's home altitude: its mission item 0 (``default_m`` when unreadable)."""
         try:
-            items = await self.download_mission(st.key)
+            items = await self.transfers.download_mission(st.key)
         except MavlinkError as exc:
             _log.warning("%s: home not read (%s)", st.key, exc)
             return default_m

@@ -2,10 +2,14 @@
 
 Threading model: everything runs on the asyncio loop; receive callbacks parse and dispatch
 synchronously (no per-frame task), protocol exchanges (upload, download, commands) are
-coroutines that wait on a per-vehicle mailbox with timeouts; they live in the base classes
-:class:`~adapters.mavlink.transfer.Transfers` (mission protocol, commands),
-:class:`~adapters.mavlink.upload.Uploads` (upload, readback, current item, mission mode) and
-:class:`~adapters.mavlink.commands.Commands` (per-autopilot command mapping). A bad frame
+coroutines that wait on a per-vehicle mailbox with timeouts. The hub is the link/dispatch
+core and holds the parts that run the exchanges, each passed what it needs and none importing
+the hub: :attr:`MavlinkHub.transfers` (:class:`~adapters.mavlink.transfer.Transfers`: mission
+protocol, commands, the mailboxes; it reaches the hub through the small
+:class:`~adapters.mavlink.transfer.VehicleLink` protocol), :attr:`MavlinkHub.uploads`
+(:class:`~adapters.mavlink.upload.Uploads`: upload, readback, current item, mission mode) and
+:attr:`MavlinkHub.commands` (:class:`~adapters.mavlink.commands.Commands`: per-autopilot
+command mapping); the hub's mission and command methods hand over to them. A bad frame
 is counted in :attr:`MavlinkHub.counters` and logged at debug level; nothing from the wire
 raises into the loop.
 
@@ -46,21 +50,31 @@ from adapters.mavlink.commands import Commands
 from adapters.mavlink.config import MavlinkConfig
 from adapters.mavlink.endpoint import parse_endpoint
 from adapters.mavlink.handlers import message_handlers
+from adapters.mavlink.hub_report import HubCounters, LinkState
+from adapters.mavlink.mission import MissionItem
 from adapters.mavlink.senders import Senders, idle_keys, over_cap_keys
 from adapters.mavlink.signing import SignatureCheck
 from adapters.mavlink.transfer import (
+    CommandResult,
     MavlinkError,
+    Params7,
     TransferError,
+    Transfers,
+    UploadResult,
 )
 from adapters.mavlink.transport import Address, Backoff, Transport
+from adapters.mavlink.upload import Uploads
 from adapters.mavlink.vehicle import VehicleInfo, VehicleState
 from adapters.remoteid.vehicles import RidVehicles
 from gcs_utm.clock import Clock
-from gcs_utm.messages import HazardReport, LinkHealth, VehicleKey, VehicleStatus
+from gcs_utm.messages import FlightMode, HazardReport, LinkHealth, VehicleKey, VehicleStatus
 from gcs_utm.model import (
     LANE_STRIDE,
     Autopilot,
+    Command,
+    FlightPlan,
     Measurement,
+    Position,
     PositionLane,
     SysId,
     ThreatKind,
@@ -120,38 +134,6 @@ class TelemetrySink(Protocol):
 
 
 @dataclass(slots=True)
-class HubCounters:
-    datagrams: int = 0
-    bytes: int = 0
-    frames: int = 0
-    bad_crc: int = 0
-    garbage: int = 0
-    unknown_msg: int = 0
-    truncated: int = 0
-    bad_signature: int = 0
-    not_for_us: int = 0
-    address_changes: int = 0
-    sysid_collisions: int = 0
-    handler_errors: int = 0
-    send_errors: int = 0
-    uploads_failed: int = 0
-    uploads_verified: int = 0
-    mission_retries: int = 0  # our own timeouts in mission transfers (upload, readback)
-    # per-sender bookkeeping and sender checks (see the module docstring)
-    senders_evicted: int = 0
-    vehicles_evicted: int = 0
-    sysid_zero: int = 0
-    sysid_claims: int = 0
-    unsigned: int = 0  # frames of a keyed vehicle without a signature
-    replayed: int = 0  # frames of a keyed vehicle with an old signing timestamp
-    links_down: int = 0  # times a stream link went down
-    dropped_link_down: int = 0  # frames not sent because their link was down
-
-    def snapshot(self) -> dict[str, int]:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
-
-
-@dataclass(slots=True)
 class _Link:
     name: str
     transport: Transport
@@ -163,20 +145,7 @@ class _Link:
     datagram: bool = False  # UDP: each chunk a datagram, parsed on its own
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
-class LinkState:
-    """One link as the hub sees it (:meth:`MavlinkHub.links`)."""
-
-    name: str
-    up: bool
-    connects: int  # successful opens of a stream link (reconnects = connects - 1)
-    failures: int  # failed opens in a row
-    dropped_down: int  # frames not sent while down
-    senders: int  # source addresses with parser state
-    last_error: str
-
-
-class MavlinkHub(Commands):
+class MavlinkHub:
     """See the module docstring. Use ``async with MavlinkHub(...)`` or start()/close()."""
 
     def __init__(
@@ -201,8 +170,10 @@ class MavlinkHub(Commands):
             self._lane = self._lane_ready = None
         self._lane_values: list[float] = self._lane.values if self._lane is not None else []
         self._links: dict[str, _Link] = {}
-        self._mailbox: dict[int, asyncio.Queue[wire.MavMsg]] = {}
-        self._locks: dict[int, asyncio.Lock] = {}
+        # the exchanges (the hub is their VehicleLink: vehicle table and send path)
+        self.transfers = Transfers(self, config, clock, self.counters)
+        self.uploads = Uploads(self.transfers)
+        self.commands = Commands(self.transfers, self.uploads)
         # repeated warnings: at most one line per cause per interval of clock time
         self._ratelog = RateLimitedLog(_log, config.warn_interval_s, now=clock.now_s)
         self._senders = Senders(config, sink, self._lane, self._busy, self._ratelog)
@@ -296,9 +267,7 @@ class MavlinkHub(Commands):
         for st in self._senders.on_link(link.name):
             if st.autopilot is Autopilot.ARDUPILOT:
                 self._restream.add(id(st))  # a restarted ArduPilot sends nothing unasked
-            box = self._mailbox.get(id(st))
-            if box is not None:
-                box.put_nowait(None)  # wake a transfer: its frames cannot go out
+            self.transfers.wake(st)  # its frames cannot go out
             if st.info is None:
                 continue
             self.sink.on_hazard(
@@ -373,6 +342,81 @@ class MavlinkHub(Commands):
         if st is None:
             raise MavlinkError(f"no vehicle {vehicle} heard on any link")
         return st
+
+    # --- missions and commands (the parts: see the module docstring) -----------------------
+    async def upload_plan(
+        self,
+        sys_id: SysId | VehicleKey,
+        plan: FlightPlan,
+        *,
+        autopilot: Autopilot | None = None,
+        start_index: int = 0,
+        home: Position | None = None,
+        deadline_t_s: float | None = None,
+        set_mission_mode: bool = True,
+        climb_rate_mps: float | None = None,
+        descent_rate_mps: float | None = None,
+        min_speed_mps: float = 0.0,
+    ) -> UploadResult:
+        """Upload ``plan`` as a mission, verified, started (:meth:`Uploads.upload_plan`)."""
+        return await self.uploads.upload_plan(
+            sys_id,
+            plan,
+            autopilot=autopilot,
+            start_index=start_index,
+            home=home,
+            deadline_t_s=deadline_t_s,
+            set_mission_mode=set_mission_mode,
+            climb_rate_mps=climb_rate_mps,
+            descent_rate_mps=descent_rate_mps,
+            min_speed_mps=min_speed_mps,
+        )
+
+    async def upload_items(
+        self,
+        vehicle: SysId | VehicleKey,
+        items: list[MissionItem],
+        *,
+        deadline_t_s: float | None = None,
+        set_mission_mode: bool = True,
+    ) -> UploadResult:
+        """Upload raw mission items (:meth:`Uploads.upload_items`)."""
+        return await self.uploads.upload_items(
+            vehicle, items, deadline_t_s=deadline_t_s, set_mission_mode=set_mission_mode
+        )
+
+    async def download_mission(
+        self, sys_id: SysId | VehicleKey, *, deadline_t_s: float | None = None
+    ) -> list[MissionItem]:
+        """The vehicle's mission (:meth:`Transfers.download_mission`)."""
+        return await self.transfers.download_mission(sys_id, deadline_t_s=deadline_t_s)
+
+    async def send_command(
+        self, sys_id: SysId | VehicleKey, command: Command, *, deadline_t_s: float | None = None
+    ) -> CommandResult:
+        """HOLD / RESUME / RTL / LAND / GOTO for the vehicle's autopilot (:class:`Commands`)."""
+        return await self.commands.send_command(sys_id, command, deadline_t_s=deadline_t_s)
+
+    async def send_mode(
+        self, sys_id: SysId | VehicleKey, mode: FlightMode, *, deadline_t_s: float | None = None
+    ) -> CommandResult:
+        """DO_SET_MODE to ``mode`` until its COMMAND_ACK."""
+        return await self.transfers.send_mode(sys_id, mode, deadline_t_s=deadline_t_s)
+
+    async def command_long(
+        self,
+        vehicle: SysId | VehicleKey,
+        cmd: int,
+        params: Params7,
+        *,
+        deadline_t_s: float | None = None,
+    ) -> CommandResult:
+        """One COMMAND_LONG until its COMMAND_ACK (arming, take-off, any MAV_CMD)."""
+        return await self.transfers.command_long(vehicle, cmd, params, deadline_t_s=deadline_t_s)
+
+    async def wait_mode(self, st: VehicleState, mode: FlightMode, timeout_s: float) -> bool:
+        """True once the vehicle's HEARTBEAT shows ``mode`` (within ``timeout_s`` real s)."""
+        return await self.transfers.wait_mode(st, mode, timeout_s)
 
     # --- receive path ---------------------------------------------------------------------
     def _on_chunk(self, link: _Link, data: bytes, addr: Address | None) -> None:
@@ -473,9 +517,7 @@ class MavlinkHub(Commands):
         if target not in (0, self.config.gcs_sys_id):
             self.counters.not_for_us += 1
             return
-        box = self._mailbox.get(id(st))
-        if box is not None:
-            box.put_nowait(m)
+        self.transfers.deliver(st, m)
 
     def _new_state(
         self, link: _Link, addr: Address | None, sys_id: int, comp_id: int, t: float
@@ -532,12 +574,11 @@ class MavlinkHub(Commands):
 
     def _busy(self, st: VehicleState) -> bool:
         """A transfer or command exchange with ``st`` is in progress: keep it."""
-        lock = self._locks.get(id(st))
-        return lock is not None and lock.locked()
+        return self.transfers.busy(st)
 
     def _forgotten(self, st: VehicleState) -> None:
         """``st`` was evicted: drop what the hub keeps by its id."""
-        self._locks.pop(id(st), None)
+        self.transfers.forget(st)
         self._restream.discard(id(st))
 
     def _new_parser(self, link: _Link, addr: Address | None) -> wire.Parser:
@@ -589,9 +630,7 @@ class MavlinkHub(Commands):
             _log.log(level, "mavlink senders in the last %.0f s: %s", _DROPS_REPORT_S, text)
 
     def _on_reboot(self, st: VehicleState) -> None:
-        box = self._mailbox.get(id(st))
-        if box is not None:
-            box.put_nowait(None)  # wake a transfer: it checks st.reboots and fails
+        self.transfers.wake(st)  # a transfer checks st.reboots and fails
         if st.autopilot is Autopilot.ARDUPILOT:
             self._request_streams(st)
 
@@ -601,7 +640,8 @@ class MavlinkHub(Commands):
         if self.raw_tap is not None:
             self.raw_tap(link.name, frame, self.clock.now_s())
 
-    def _encoder(self, st: VehicleState) -> wire.Encoder:
+    def encoder(self, st: VehicleState) -> wire.Encoder:
+        """The encoder for frames to ``st``: signed with its key, if it has one."""
         key = self._keys.get(st.sys_id)
         if key is None:
             enc = self._links[st.key.link].encoder
@@ -614,7 +654,8 @@ class MavlinkHub(Commands):
             )
         return enc2
 
-    def _to(self, st: VehicleState, frame: bytes) -> None:
+    def send_to(self, st: VehicleState, frame: bytes) -> None:
+        """``frame`` to where ``st`` was last heard (TransferError: its link is closed)."""
         link = self._links.get(st.key.link)
         if link is None:
             raise TransferError(f"link {st.key.link} closed")
@@ -623,19 +664,19 @@ class MavlinkHub(Commands):
     def send_raw(self, vehicle: SysId | VehicleKey, name: str, *args: object) -> None:
         """Send message ``name`` (its pymavlink encoder name) from us to ``vehicle``."""
         st = self.state(vehicle)
-        self._to(st, self._encoder(st).raw(name, *args))
+        self.send_to(st, self.encoder(st).raw(name, *args))
 
     def _request_streams(self, st: VehicleState) -> None:
         """ArduPilot sends no telemetry until asked: REQUEST_DATA_STREAM (old) and
         SET_MESSAGE_INTERVAL (new) for the messages we use."""
-        enc = self._encoder(st)
+        enc = self.encoder(st)
         ts, tc = st.sys_id, st.key.comp_id
         hz = self.config.ardupilot_stream_hz
         st.streams_asked_t_s = self.clock.now_s()
-        self._to(st, enc.request_data_stream(ts, tc, MAV_DATA_STREAM_ALL, max(1, round(hz))))
+        self.send_to(st, enc.request_data_stream(ts, tc, MAV_DATA_STREAM_ALL, max(1, round(hz))))
         for mid in _ARDUPILOT_STREAM_MSGS:
             params = (float(mid), 1e6 / hz, 0.0, 0.0, 0.0, 0.0, 0.0)
-            self._to(st, enc.command_long(ts, tc, MAV_CMD_SET_MESSAGE_INTERVAL, 0, params))
+            self.send_to(st, enc.command_long(ts, tc, MAV_CMD_SET_MESSAGE_INTERVAL, 0, params))
 
     def _heartbeats_for(self, link: _Link, addr: Address | None, *, any_addr: bool) -> list[bytes]:
         """The GCS heartbeats for one peer: signed with the key of each keyed vehicle heard
@@ -652,7 +693,7 @@ class MavlinkHub(Commands):
                 continue
             if sys_id in self._keys:
                 if sys_id not in signed:
-                    signed[sys_id] = self._encoder(st).heartbeat()
+                    signed[sys_id] = self.encoder(st).heartbeat()
             else:
                 unsigned = True
         out = list(signed.values())

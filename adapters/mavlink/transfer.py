@@ -2,11 +2,13 @@
 upload and download state machines, MISSION_SET_CURRENT, COMMAND_LONG/COMMAND_INT with
 retries, and waiting for a mode to show in HEARTBEAT.
 
-:class:`Transfers` is a base class of :class:`~adapters.mavlink.hub.MavlinkHub`: it uses the
-hub's send path (``_to``, ``_encoder``), its vehicle table (``state``) and the per-vehicle
-mailbox that the receive path fills with protocol messages (``_mailbox``). One exchange per
-vehicle at a time (``_exchange`` holds a per-vehicle lock). Timeouts are real (loop) seconds:
-the vehicle's protocol timers run on its own clock, whatever the simulation speed.
+:class:`Transfers` is a part the :class:`~adapters.mavlink.hub.MavlinkHub` holds. It is
+passed the hub's link/dispatch core as a :class:`VehicleLink` (the vehicle table and the send
+path) and owns the per-vehicle mailboxes: the hub's receive path hands protocol messages to
+:meth:`Transfers.deliver` and wakes a waiting exchange with :meth:`Transfers.wake`. One
+exchange per vehicle at a time (:meth:`Transfers.exchange` holds a per-vehicle lock).
+Timeouts are real (loop) seconds: the vehicle's protocol timers run on its own clock,
+whatever the simulation speed.
 """
 
 from __future__ import annotations
@@ -141,26 +143,61 @@ class TransferError(Exception):
         self.failure = failure
 
 
-class Transfers:
-    """Protocol exchanges; see the module docstring. The hub provides the attributes and the
-    three methods below."""
-
-    config: MavlinkConfig
-    clock: Clock
-    counters: TransferCounters
-    _mailbox: dict[int, asyncio.Queue[wire.MavMsg]]
-    _locks: dict[int, asyncio.Lock]
+class VehicleLink(Protocol):
+    """What the exchanges need of the hub's link/dispatch core."""
 
     def state(self, vehicle: SysId | VehicleKey) -> VehicleState:
-        raise NotImplementedError
+        """The vehicle's state; raises :class:`MavlinkError` for an unknown vehicle."""
+        ...
 
-    def _to(self, st: VehicleState, frame: bytes) -> None:
-        raise NotImplementedError
+    def encoder(self, st: VehicleState) -> wire.Encoder:
+        """The encoder for frames to ``st`` (signed with its key, if it has one)."""
+        ...
 
-    def _encoder(self, st: VehicleState) -> wire.Encoder:
-        raise NotImplementedError
+    def send_to(self, st: VehicleState, frame: bytes) -> None:
+        """Send ``frame`` to where ``st`` was last heard; raises :class:`TransferError`
+        when its link is closed."""
+        ...
 
-    def _budget_s(self, deadline_t_s: float | None) -> float:
+
+class Transfers:
+    """Protocol exchanges; see the module docstring."""
+
+    def __init__(
+        self, link: VehicleLink, config: MavlinkConfig, clock: Clock, counters: TransferCounters
+    ) -> None:
+        self.link = link
+        self.config = config
+        self.clock = clock
+        self.counters = counters
+        self._mailbox: dict[int, asyncio.Queue[wire.MavMsg]] = {}  # by id(state)
+        self._locks: dict[int, asyncio.Lock] = {}
+
+    # --- the receive path's side (the hub calls these) --------------------------------------
+    def deliver(self, st: VehicleState, m: wire.MavMsg) -> None:
+        """A protocol message of ``st`` to the exchange waiting on it (dropped when none)."""
+        box = self._mailbox.get(id(st))
+        if box is not None:
+            box.put_nowait(m)
+
+    def wake(self, st: VehicleState) -> None:
+        """Wake the exchange waiting on ``st`` (its link went down, it rebooted): it checks
+        and fails."""
+        box = self._mailbox.get(id(st))
+        if box is not None:
+            box.put_nowait(None)
+
+    def busy(self, st: VehicleState) -> bool:
+        """An exchange with ``st`` is in progress."""
+        lock = self._locks.get(id(st))
+        return lock is not None and lock.locked()
+
+    def forget(self, st: VehicleState) -> None:
+        """``st`` was evicted: drop its lock."""
+        self._locks.pop(id(st), None)
+
+    # --- exchanges ----------------------------------------------------------------------------
+    def budget_s(self, deadline_t_s: float | None) -> float:
         """Real (loop) seconds left for a transfer."""
         budget = self.config.transfer_timeout_s
         if deadline_t_s is not None:
@@ -173,7 +210,8 @@ class Transfers:
         return budget
 
     @contextlib.asynccontextmanager
-    async def _exchange(self, st: VehicleState) -> AsyncIterator[asyncio.Queue[wire.MavMsg]]:
+    async def exchange(self, st: VehicleState) -> AsyncIterator[asyncio.Queue[wire.MavMsg]]:
+        """Hold ``st``'s exchange lock; yields the mailbox its protocol messages come to."""
         lock = self._locks.setdefault(id(st), asyncio.Lock())
         async with lock:
             box: asyncio.Queue[wire.MavMsg] = asyncio.Queue()
@@ -198,14 +236,14 @@ class Transfers:
 
     def _cancel(self, st: VehicleState) -> None:
         with contextlib.suppress(TransferError):
-            self._to(
+            self.link.send_to(
                 st,
-                self._encoder(st).mission_ack(
+                self.link.encoder(st).mission_ack(
                     st.sys_id, st.key.comp_id, MAV_MISSION_OPERATION_CANCELLED
                 ),
             )
 
-    async def _upload(
+    async def upload(
         self,
         st: VehicleState,
         box: asyncio.Queue[wire.MavMsg],
@@ -249,19 +287,21 @@ class Transfers:
         self, sys_id: SysId | VehicleKey, *, deadline_t_s: float | None = None
     ) -> list[MissionItem]:
         """The vehicle's mission (MISSION_REQUEST_LIST). Raises :class:`MavlinkError`."""
-        st = self.state(sys_id)
-        end = _loop_time() + self._budget_s(deadline_t_s)
-        async with self._exchange(st) as box:
+        st = self.link.state(sys_id)
+        end = _loop_time() + self.budget_s(deadline_t_s)
+        async with self.exchange(st) as box:
             try:
-                got = await self._download(st, box, end, st.reboots)
+                got = await self.download(st, box, end, st.reboots)
             except TransferError as exc:
                 raise MavlinkError(f"download from {sys_id} failed: {exc}") from exc
         st.mission = got  # what the vehicle flies (its landing sequence is kept by uploads)
         return got
 
-    async def _download(
+    async def download(
         self, st: VehicleState, box: asyncio.Queue[wire.MavMsg], end: float, reboots: int
     ) -> list[MissionItem]:
+        """The vehicle's mission, read within a held :meth:`exchange` (``box``) by ``end``
+        (loop time); raises :class:`TransferError`."""
         # drain protocol leftovers of the upload (late re-requests, duplicate ACKs)
         while not box.empty():
             box.get_nowait()
@@ -280,7 +320,7 @@ class Transfers:
             self._cancel(st)
             raise
 
-    async def _set_current(
+    async def set_current(
         self,
         st: VehicleState,
         box: asyncio.Queue[wire.MavMsg],
@@ -294,10 +334,10 @@ class Transfers:
         (growing by half per silent retry) without that MISSION_CURRENT: both autopilots
         answer at once, and a resend on the mission items' millisecond timeout put about 16
         requests on the link in 0.45 s after each upload."""
-        enc = self._encoder(st)
+        enc = self.link.encoder(st)
         wait_s = self.config.command_timeout_s
         for _attempt in range(self.config.max_retries + 1):
-            self._to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seqs.start))
+            self.link.send_to(st, enc.mission_set_current(st.sys_id, st.key.comp_id, seqs.start))
             wait_end = min(end, _loop_time() + wait_s)
             while (left := wait_end - _loop_time()) > 0:
                 self._check(st, reboots, end)
@@ -311,7 +351,7 @@ class Transfers:
     async def send_mode(
         self, sys_id: SysId | VehicleKey, mode: FlightMode, *, deadline_t_s: float | None = None
     ) -> CommandResult:
-        st = self.state(sys_id)
+        st = self.link.state(sys_id)
         p = set_mode_params(st.autopilot, st.kind, mode)
         if p is None:
             return CommandResult(
@@ -321,16 +361,17 @@ class Transfers:
                 error=f"{st.autopilot.value} has no mode {mode.value}",
             )
         params = (p[0], p[1], p[2], 0.0, 0.0, 0.0, 0.0)
-        return await self._command_long(st, MAV_CMD_DO_SET_MODE, params, deadline_t_s)
+        return await self.send_command_long(st, MAV_CMD_DO_SET_MODE, params, deadline_t_s)
 
-    async def _command_long(
+    async def send_command_long(
         self,
         st: VehicleState,
         cmd: int,
         params: tuple[float, float, float, float, float, float, float],
         deadline_t_s: float | None,
     ) -> CommandResult:
-        enc = self._encoder(st)
+        """COMMAND_LONG ``cmd`` to ``st`` until its COMMAND_ACK."""
+        enc = self.link.encoder(st)
         return await self._command(
             st,
             cmd,
@@ -348,12 +389,12 @@ class Transfers:
     ) -> CommandResult:
         """One COMMAND_LONG until its COMMAND_ACK (arming, take-off, any MAV_CMD)."""
         try:
-            st = self.state(vehicle)
+            st = self.link.state(vehicle)
         except MavlinkError as exc:
             return CommandResult(ok=False, result=None, attempts=0, error=str(exc))
-        return await self._command_long(st, cmd, params, deadline_t_s)
+        return await self.send_command_long(st, cmd, params, deadline_t_s)
 
-    async def _command_int(
+    async def send_command_int(
         self,
         st: VehicleState,
         cmd: int,
@@ -362,7 +403,7 @@ class Transfers:
         deadline_t_s: float | None,
     ) -> CommandResult:
         """COMMAND_INT at ``target`` (frame MAV_FRAME_GLOBAL: altitude AMSL)."""
-        enc = self._encoder(st)
+        enc = self.link.encoder(st)
         frame = enc.command_int(
             st.sys_id,
             st.key.comp_id,
@@ -391,17 +432,17 @@ class Transfers:
         build: Callable[[int], bytes],
         deadline_t_s: float | None,
     ) -> CommandResult:
-        end = _loop_time() + self._budget_s(deadline_t_s)
+        end = _loop_time() + self.budget_s(deadline_t_s)
         attempts = 0
         result: int | None = None
-        async with self._exchange(st) as box:
+        async with self.exchange(st) as box:
             reboots = st.reboots
             try:
                 for conf in range(self.config.command_retries + 1):
                     if _loop_time() >= end:
                         break
                     attempts += 1
-                    self._to(st, build(min(conf, 255)))
+                    self.link.send_to(st, build(min(conf, 255)))
                     wait_end = min(end, _loop_time() + self.config.command_timeout_s)
                     while (left := wait_end - _loop_time()) > 0:
                         self._check(st, reboots, end + 1.0)
@@ -430,13 +471,14 @@ class Transfers:
 
 
 class _UploadState:
-    """Our side of one upload: what the vehicle asked for and what we sent (see _upload)."""
+    """Our side of one upload: what the vehicle asked for and what we sent (see
+    Transfers.upload)."""
 
     def __init__(self, owner: Transfers, st: VehicleState, items: list[MissionItem]) -> None:
         self.owner = owner
         self.st = st
         self.items = items
-        self.enc = owner._encoder(st)
+        self.enc = owner.link.encoder(st)
         self.step = _Step(owner.config)
         self.attempts = 1
         self.sent_t = _loop_time()
@@ -447,11 +489,15 @@ class _UploadState:
 
     def _send_item(self, seq: int) -> None:
         st = self.st
-        self.owner._to(st, self.enc.mission_item_int(st.sys_id, st.key.comp_id, self.items[seq]))
+        self.owner.link.send_to(
+            st, self.enc.mission_item_int(st.sys_id, st.key.comp_id, self.items[seq])
+        )
 
     def send_count(self) -> None:
         st = self.st
-        self.owner._to(st, self.enc.mission_count(st.sys_id, st.key.comp_id, len(self.items)))
+        self.owner.link.send_to(
+            st, self.enc.mission_count(st.sys_id, st.key.comp_id, len(self.items))
+        )
         self.sent_t = _loop_time()
 
     def on_silence(self) -> bool:
@@ -477,7 +523,7 @@ class _UploadState:
             return False
         # the vehicle expects one of highest .. sent_hi + 1
         top = min(n - 1, self.sent_hi + 1, self.highest + _UPLOAD_WINDOW - 1)
-        for _ in range(2):  # twice, as the retries of _download
+        for _ in range(2):  # twice, as the retries of download
             for seq in range(self.highest, top + 1):
                 self._send_item(seq)
         self.sent_hi = max(self.sent_hi, top)
@@ -504,12 +550,12 @@ class _UploadState:
 
 class _DownloadState:
     """Our side of one download (MISSION_REQUEST_LIST, then each item in turn; see
-    _download)."""
+    Transfers.download)."""
 
     def __init__(self, owner: Transfers, st: VehicleState) -> None:
         self.owner = owner
         self.st = st
-        self.enc = owner._encoder(st)
+        self.enc = owner.link.encoder(st)
         self.step = _Step(owner.config)
         self.count: int | None = None
         self.got: list[MissionItem] = []
@@ -522,9 +568,9 @@ class _DownloadState:
         st = self.st
         ts, tc = st.sys_id, st.key.comp_id
         if self.count is None:
-            self.owner._to(st, self.enc.mission_request_list(ts, tc))
+            self.owner.link.send_to(st, self.enc.mission_request_list(ts, tc))
         else:
-            self.owner._to(st, self.enc.mission_request_int(ts, tc, len(self.got)))
+            self.owner.link.send_to(st, self.enc.mission_request_int(ts, tc, len(self.got)))
         self.sent_t = _loop_time()
 
     def on_silence(self) -> None:
@@ -556,7 +602,7 @@ class _DownloadState:
         self.silent = 0
         if self.count is not None and len(self.got) >= self.count:
             st = self.st
-            self.owner._to(
+            self.owner.link.send_to(
                 st, self.enc.mission_ack(st.sys_id, st.key.comp_id, MAV_MISSION_ACCEPTED)
             )
             return True

@@ -1,8 +1,11 @@
 """Uploading a plan so that the vehicle flies it: transfer, readback verification by meaning,
 current item, mission mode, one retry.
 
+:class:`Uploads` is a part the :class:`~adapters.mavlink.hub.MavlinkHub` holds; it runs its
+steps through the hub's :class:`~adapters.mavlink.transfer.Transfers` part.
+
 One upload (:meth:`Uploads.upload_items`) is, for each try:
-1. the mission protocol (:meth:`Transfers._upload`) until MISSION_ACK ACCEPTED;
+1. the mission protocol (:meth:`Transfers.upload`) until MISSION_ACK ACCEPTED;
 2. the vehicle's copy downloaded back and compared item by item by what the autopilot is
    documented to keep (:func:`~adapters.mavlink.mission.same_item`);
 3. the intended current item set with MISSION_SET_CURRENT and confirmed by MISSION_CURRENT
@@ -67,8 +70,11 @@ class _Try:
     mode_set: bool = False
 
 
-class Uploads(Transfers):
-    """Plan and mission uploads (see the module docstring)."""
+class Uploads:
+    """Plan and mission uploads (see the module docstring), run through ``transfers``."""
+
+    def __init__(self, transfers: Transfers) -> None:
+        self.transfers = transfers
 
     async def upload_plan(
         self,
@@ -91,7 +97,7 @@ class Uploads(Transfers):
         in the result."""
         t0 = time.monotonic()
         try:
-            st = self.state(sys_id)
+            st = self.transfers.link.state(sys_id)
         except MavlinkError as exc:
             return _failed(0, 0, t0, (str(exc), UploadFailure.NO_VEHICLE), _Try())
         items = plan_to_mission_items(
@@ -99,7 +105,7 @@ class Uploads(Transfers):
             autopilot or st.autopilot,
             home,
             start_index=start_index,
-            max_speed_mps=self.config.max_speed_mps,
+            max_speed_mps=self.transfers.config.max_speed_mps,
             climb_rate_mps=climb_rate_mps,
             descent_rate_mps=descent_rate_mps,
             kind=st.kind,
@@ -122,14 +128,14 @@ class Uploads(Transfers):
     ) -> UploadResult:
         """Upload raw mission items; the item flagged ``current`` is the one to start at."""
         t0 = time.monotonic() if _t0 is None else _t0
-        end = t0 + self._budget_s(deadline_t_s)
+        end = t0 + self.transfers.budget_s(deadline_t_s)
         failure = UploadFailure.NO_VEHICLE
         errors: list[str] = []
         tried = _Try()
         for tries in range(1, UPLOAD_TRIES + 1):
             tried = _Try()
             try:
-                st = self.state(vehicle)
+                st = self.transfers.link.state(vehicle)
                 await self._try_upload(st, items, end, set_mission_mode, tried)
             except MavlinkError as exc:
                 failure, error = UploadFailure.NO_VEHICLE, str(exc)
@@ -138,7 +144,7 @@ class Uploads(Transfers):
                 failure, error = exc.failure, str(exc)
                 errors.append(f"try {tries}: {error}")
             else:
-                self.counters.uploads_verified += 1
+                self.transfers.counters.uploads_verified += 1
                 return UploadResult(
                     ok=True,
                     verified=True,
@@ -154,7 +160,7 @@ class Uploads(Transfers):
             if failure in _NO_RETRY or tries == UPLOAD_TRIES:
                 break
             await asyncio.sleep(max(0.0, min(RETRY_PAUSE_S, end - time.monotonic() - 1.0)))
-        self.counters.uploads_failed += 1
+        self.transfers.counters.uploads_failed += 1
         return _failed(len(items), tries, t0, ("; ".join(errors), failure), tried)
 
     async def _try_upload(
@@ -167,10 +173,11 @@ class Uploads(Transfers):
     ) -> None:
         """One try; fills ``tried`` as it goes and raises TransferError on a failed step."""
         start, skipped_speed = start_item(items, st.autopilot)
-        async with self._exchange(st) as box:
+        t = self.transfers
+        async with t.exchange(st) as box:
             reboots = st.reboots
-            tried.attempts = await self._upload(st, box, items, end, reboots)
-            got = await self._download(st, box, end, reboots)
+            tried.attempts = await t.upload(st, box, items, end, reboots)
+            got = await t.download(st, box, end, reboots)
             self._verify_readback(st, items, got)
             st.mission = got
             tried.verified = True
@@ -179,7 +186,7 @@ class Uploads(Transfers):
             last = start
             while last < len(items) - 1 and not is_nav(items[last].command):
                 last += 1
-            seq = await self._set_current(st, box, range(start, last + 1), end, reboots)
+            seq = await t.set_current(st, box, range(start, last + 1), end, reboots)
             if seq is None:
                 raise TransferError(
                     f"MISSION_CURRENT never showed item {start} (last seen {st.mission_seq})",
@@ -193,7 +200,7 @@ class Uploads(Transfers):
             _log.info("%s: disarmed, mission mode not set after the upload", st.key)
         if skipped_speed is not None:
             p = skipped_speed
-            res = await self._command_long(
+            res = await t.send_command_long(
                 st,
                 MAV_CMD_DO_CHANGE_SPEED,
                 (p.param1, p.param2, p.param3, 0.0, 0.0, 0.0, 0.0),
@@ -221,13 +228,13 @@ class Uploads(Transfers):
 
     async def _ensure_mission_mode(self, st: VehicleState, end: float) -> None:
         if st.mode is not FlightMode.MISSION:
-            res = await self.send_mode(st.key, FlightMode.MISSION)
+            res = await self.transfers.send_mode(st.key, FlightMode.MISSION)
             if not res.ok:
                 raise TransferError(
                     f"mission mode refused: {res.error}", UploadFailure.MODE_NOT_SET
                 )
         wait_s = max(0.0, min(MODE_CONFIRM_S, end - time.monotonic()))
-        if not await self.wait_mode(st, FlightMode.MISSION, wait_s):
+        if not await self.transfers.wait_mode(st, FlightMode.MISSION, wait_s):
             raise TransferError(
                 f"HEARTBEAT still shows {st.mode.value} after the mission mode was accepted",
                 UploadFailure.MODE_NOT_SET,

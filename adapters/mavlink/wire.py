@@ -27,7 +27,6 @@ counted as pymavlink classifies them.
 
 from __future__ import annotations
 
-import os
 import struct
 import time
 from collections import namedtuple
@@ -37,9 +36,6 @@ from functools import partial
 from typing import Any, NamedTuple
 
 from fastcrc import crc16
-
-os.environ["MAVLINK20"] = "1"
-
 from pymavlink.dialects.v20 import common as mav
 
 MavMsg = Any

@@ -1,8 +1,9 @@
 """The MQTT bridge of the USM: one aiomqtt client, reconnecting, with a bounded outgoing queue.
 
 Role: translate between the broker and the USM's :class:`MqttHandler`; decide nothing about
-the airspace. The USM decides what an answer means (:class:`~adapters.mqtt.answers.AnswerBook`
-holds the rules) and the bridge publishes that outcome on the operator's status topic.
+the airspace. The USM decides what an answer means (:meth:`gcs_utm.services.usm.Usm.answer`)
+and the bridge publishes that outcome (:class:`~adapters.mqtt.answers.AnswerOutcome`) on the
+operator's status topic.
 
 Invariants and policies:
 
@@ -115,9 +116,10 @@ class MqttHandler(Protocol):
 
     async def on_flight_status(self, s: FlightStatusReport) -> None: ...
 
-    async def on_operator_command(self, c: OperatorCommandRequest) -> CommandAck:
+    async def on_operator_command(self, c: OperatorCommandRequest) -> CommandAck | None:
         """An operator's hold / land / rtl / resume (``c.operator`` is the topic's operator).
-        Return what became of it; the bridge publishes it on the operator's status topic."""
+        Return what became of it; the bridge publishes it on the operator's status topic.
+        None: another service instance answers it (nothing is published here)."""
         ...
 
 
@@ -472,6 +474,11 @@ class MqttBridge:
             self.stats.handler_errors += 1
             _log.exception("mqtt: operator command from %s failed", c.operator)
             self.publish_error(topic, "", f"internal error while handling: {type(exc).__name__}")
+            return
+        if ack is None:
+            _log.debug(
+                "mqtt: command %s %s id %s: answered elsewhere", c.command, c.uas, c.request_id
+            )
             return
         _log.info(
             "mqtt: command %s %s id %s from %s: %s %s",

@@ -4,10 +4,7 @@ checked and decoded too."""
 
 from __future__ import annotations
 
-import os
 from typing import Any
-
-os.environ["MAVLINK20"] = "1"
 
 from pymavlink.dialects.v20 import all as _dialect
 from pymavlink.generator.mavcrc import x25crc

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import os
 import signal
@@ -14,6 +15,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 from gcs_utm.clock import Clock, RealClock, ScaledClock
+from gcs_utm.cluster.commands import CommandGate
 from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
 from gcs_utm.cluster.member import region_map_of
 from gcs_utm.cluster.node import ClusterNode
@@ -24,7 +26,7 @@ from gcs_utm.geo import LocalFrame
 from gcs_utm.model import Geofence, Operation
 from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
-from gcs_utm.store import StoreError, StoreWriter, describe, is_postgres, open_store
+from gcs_utm.store import StoreConfig, StoreError, StoreWriter, describe, is_postgres, open_store
 
 from .restart import start_review
 from .stopping import Stopping, run_steps
@@ -38,6 +40,9 @@ from .wiring import (
 )
 
 _log = logging.getLogger(__name__)
+
+# how long a plain stop waits for the USM's uploads in progress before cancelling them
+DRAIN_BUDGET_S = 10.0
 
 
 def check_cluster(settings: Settings, location: str | Path) -> None:
@@ -98,12 +103,25 @@ async def join_cluster(
     )
     rt.store.writer.set_fence(node.fence)  # region-owned rows carry the lease generation
     rt.usm.vehicle_ops.owns = node.files  # behind a router: only our regions' vehicles
+    # an operator's command: carried out by the owner of the UAS's region only
+    rt.usm.operator_commands.gate = CommandGate(node.member, policy, rt.frame, node.may_act)
     try:
         await node.member.start()
     except RegionError as exc:
         await node.member.close()
         raise StoreError(str(exc)) from exc
     return node
+
+
+def _writer_config(settings: Settings, cluster: bool) -> StoreConfig:
+    """A cluster member's writer statements (and a stall inside its transaction) are bounded
+    by ``lease_s``: a write holds its fence's lock on a lease row (``FOR SHARE``) until it
+    commits, so a takeover of that region never waits longer than that on a stuck writer."""
+    config = settings.store
+    bound_s = settings.cluster.lease_s
+    if not cluster or 0.0 < config.statement_timeout_s <= bound_s:
+        return config
+    return dataclasses.replace(config, statement_timeout_s=bound_s)
 
 
 def _stored_airspace(
@@ -163,7 +181,7 @@ async def serve(
     location, operations, geofences = _stored_airspace(settings, db_path, cluster=cluster)
     # a PostgreSQL outage at stop leaves the writes not yet taken in a local journal
     pending = Path(settings.store.journal) if is_postgres(location) else None
-    store = Persistence(StoreWriter(location, settings.store, journal=pending))
+    store = Persistence(StoreWriter(location, _writer_config(settings, cluster), journal=pending))
     policy = OwnershipPolicy() if cluster else None
     rt = build_runtime(settings, clock, frame, store, policy=policy)
     store.writer.on_event = lambda text: rt.usm.log_event("store", text)
@@ -211,27 +229,49 @@ async def serve(
             await stop.wait()
             stopping = Stopping(fenced=bool(failed))
             if await stopping.cancel(tasks):  # some task ignores its cancellation
-                await run_steps(stopping, _closing(rt, store, recorder))
+                await _close(stopping, rt, store, recorder)
                 stopping.exit_now(3 if failed else 1, " ".join(["gcs-utm serve: stopped", *failed]))
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.remove_signal_handler(sig)
-        await run_steps(stopping or Stopping(fenced=bool(failed)), _closing(rt, store, recorder))
+        await _close(stopping or Stopping(fenced=bool(failed)), rt, store, recorder)
     print("gcs-utm serve: stopped", *failed, file=sys.stderr)
     return 3 if failed else 0
 
 
-def _closing(
-    rt: Runtime, store: Persistence, recorder: object | None
+async def _close(
+    stopping: Stopping, rt: Runtime, store: Persistence, recorder: object | None
+) -> None:
+    await run_steps(stopping, closing_steps(rt, store, recorder, stopping))
+
+
+def closing_steps(
+    rt: Runtime, store: Persistence, recorder: object | None, stopping: Stopping
 ) -> list[tuple[str, Callable[[], object]]]:
-    """The steps of a stop, in order (each bounded by gcs_utm.app.stopping)."""
-    steps: list[tuple[str, Callable[[], object]]] = [
-        ("usm.close", rt.usm.close),
-        ("links (hub.close)", rt.hub.close),
-    ]
+    """The steps of a stop, in order (each bounded by gcs_utm.app.stopping).
+
+    A plain stop first lets the USM's work in progress (uploads, hazard forwarding) finish,
+    within :data:`DRAIN_BUDGET_S`, as ``run`` does: an upload cut in the middle would leave
+    a vehicle and the store disagreeing about its mission. A fenced member does not: its
+    region may be another instance's by now, so it sends nothing more."""
+    steps: list[tuple[str, Callable[[], object]]] = []
+    if not stopping.fenced:
+
+        async def drain() -> None:
+            await _drain(rt)
+
+        steps.append(("usm.drain (work in progress)", drain))
+    steps += [("usm.close", rt.usm.close), ("links (hub.close)", rt.hub.close)]
     close = getattr(recorder, "close", None)
     if close is not None:
         steps.append(("recorder.close", close))
     steps.append(("store.close", store.close))
     return steps
+
+
+async def _drain(rt: Runtime) -> None:
+    try:
+        await asyncio.wait_for(rt.usm.drain(), DRAIN_BUDGET_S)
+    except TimeoutError:
+        _log.warning("stop: USM work still running after %.0f s; cancelling it", DRAIN_BUDGET_S)

@@ -31,6 +31,7 @@ class Stopping:
     """The time left for a stop; ``fenced``: the short budget of a fenced member."""
 
     def __init__(self, *, fenced: bool) -> None:
+        self.fenced = fenced
         self.budget_s = FENCED_BUDGET_S if fenced else STOP_BUDGET_S
         self._end = time.monotonic() + self.budget_s
         self.overrun: list[str] = []

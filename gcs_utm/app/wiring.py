@@ -31,7 +31,7 @@ from adapters.remoteid.ingest import (
 from adapters.remoteid.operator import RemoteIdOperator
 from adapters.remoteid.tracks import RidTracks
 from gcs_utm.clock import Clock
-from gcs_utm.cluster.selffence import FencedVehicles
+from gcs_utm.cluster.selffence import FencedVehicles, OwnedTraffic
 from gcs_utm.core.deconfliction import TacticalDeconfliction
 from gcs_utm.core.deconfliction.retime import retime_snapshot
 from gcs_utm.core.emergency import Decision, EmergencyManager
@@ -279,7 +279,7 @@ def build_runtime(
     usm.attach_answer_sink(answer_sink)
     # EM hears how each accepted recommendation ended (applied, or failed: re-plan, then the
     # safe command), so a failed upload never leaves its threat without a pending decision.
-    usm.attach_operator(emergency)
+    _attach_emergency(usm, emergency)
     hub = MavlinkHub(settings.mavlink, clock, usm)
     usm.attach_vehicles(hub if policy is None else FencedVehicles(hub, policy.may_act))
 
@@ -321,7 +321,7 @@ def build_runtime(
         remote_id_tracks=rid_tracks,
         traffic_out=TrafficOut(
             settings.traffic_out,
-            hub,
+            hub if policy is None else OwnedTraffic(hub, policy, airspace.by_sys_id),
             tracks=tracking.tracks_now,
             operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
         ),
@@ -331,6 +331,13 @@ def build_runtime(
             clock, airspace, tracking, (usm, em), plans=plan_history, fences=geofence_history
         ),
     )
+
+
+def _attach_emergency(usm: Usm, emergency: EmergencyService) -> None:
+    """EM hears how each accepted recommendation ends, and checks each accepted plan again
+    against the airspace as it is right before its upload (gcs_utm.core.emergency.recheck)."""
+    usm.attach_operator(emergency)
+    usm.lifecycle.plan_check = emergency.plan_problem
 
 
 def _in_loop(fn: Callable[[HazardReport], None]) -> Callable[[HazardReport], Awaitable[None]]:

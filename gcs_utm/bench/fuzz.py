@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import gc
-import os
 import random
 import time
 from collections.abc import Callable, Iterator
@@ -125,7 +124,6 @@ class Mutator:
     """Seeded datagrams for the fuzz (module docstring)."""
 
     def __init__(self, seed: int) -> None:
-        os.environ["MAVLINK20"] = "1"
         from pymavlink.dialects.v10 import common as mav1
         from pymavlink.dialects.v20 import common as mav2
 
@@ -434,7 +432,6 @@ def _held(hub: MavlinkHub) -> tuple[int, int]:
 
 async def spoof_idle(identities: int, idle_s: float) -> dict[str, Any]:
     """The ``fuzz_spoof_idle`` record (module docstring), with the default settings."""
-    os.environ["MAVLINK20"] = "1"
     from pymavlink.dialects.v20 import common as mav2
 
     from adapters.mavlink import MavlinkConfig, MavlinkHub

@@ -26,7 +26,6 @@ import asyncio
 import contextlib
 import gc
 import multiprocessing as mp
-import os
 import socket
 import statistics
 import tempfile
@@ -86,7 +85,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _sender(port: int, n: int, *, vehicles: int, rate: float, start: float, out: object) -> None:
     """Send ``n`` datagrams to ``port`` at ``rate`` msg/s (1 ms slots; 0 = unpaced) and put
     ``(sent, seconds)`` on the queue ``out``."""
-    os.environ["MAVLINK20"] = "1"
     from pymavlink.dialects.v20 import common as mav
 
     socks = [
@@ -175,7 +173,6 @@ class _Sink:
 
 
 def _frames(n: int, vehicles: int, boot0: int = 1000) -> list[bytes]:
-    os.environ["MAVLINK20"] = "1"
     from pymavlink.dialects.v20 import common as mav
 
     encs = [mav.MAVLink(None, srcSystem=i % 250 + 1, srcComponent=1) for i in range(vehicles)]

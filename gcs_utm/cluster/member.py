@@ -100,6 +100,9 @@ class ClusterMember:
         self._closed = False
         self._dropped: queue.SimpleQueue[str] = queue.SimpleQueue()
         self._ping_pending = False
+        # region -> holder of its live lease as the last round read it (replaced, never
+        # mutated: the loop reads it to name another instance, e.g. in a refusal)
+        self.holders: dict[str, str] = {}
 
     def _open(self) -> StoreBase:
         """A connection of the member: connect and every statement bounded by ``lease_s``."""
@@ -175,6 +178,7 @@ class ClusterMember:
         except StoreError as exc:
             _log.warning("cluster: lease table unreachable: %s", exc)
             return self._fence()
+        self.holders = {r: x.holder for r, x in snapshot.items() if x.expires_unix_s > now_db}
         for region_id in self.expired():  # past its deadline: fenced, whatever comes next
             events += self._lose(region_id, "lease deadline passed before a renewal")
         for region_id in [*self.owned, *self._candidates(snapshot, now_db)]:

@@ -17,8 +17,10 @@ drive what this instance's airspace holds.
   with its system id (unique across the cluster: behind a MAVLink router this instance hears
   the vehicle too, and both feed one track) and its tracks are fed to the tracker as its
   measurements; a vehicle this instance hears is filed as an operation here only when its
-  mission departs in a region it holds (:meth:`ClusterNode.files`); foreign plans and the
-  active geofences are refreshed from the store every ``renew_s``;
+  mission departs in a region it holds (:meth:`ClusterNode.files`), else its operation,
+  once its owner filed it, is loaded as foreign (:meth:`ClusterNode.watch_heard`), so even a
+  standby holding nothing tracks it as that operation, not as an intruder; foreign plans and
+  the active geofences are refreshed from the store every ``renew_s``;
 - decisions: who decides is :mod:`gcs_utm.cluster.policy`; what crosses instances goes
   through the store (:mod:`gcs_utm.cluster.decisions`): a recommendation another life filed
   for an operation this instance owns is adopted (proposed again as a new version allocated
@@ -126,6 +128,9 @@ class ClusterNode:
         self.exchange = exchange
         self._tracks = tracks
         self._loading: set[OperationId] = set()
+        # operations of vehicles heard here (behind a router) whose region another instance
+        # holds, not yet in the airspace: loaded as foreign once their owner filed them
+        self._heard: set[OperationId] = set()
         self.foreign_measurements = 0
         self._regions_of_ops: dict[OperationId, str] = {}
         self._failed = False
@@ -242,6 +247,7 @@ class ClusterNode:
             self._regions_of_ops[op.id] = region_id  # the fence's map, filled ahead of writes
         if self.exchange is not None:
             self.exchange.watch(self.member.owned)
+        self._heard.difference_update(op.id for op in state.operations)
         known = set(self._airspace.operations)
         self._airspace.load(state.operations, state.geofences)
         self._tracking.set_operations(self._airspace.operations.values())
@@ -330,6 +336,11 @@ class ClusterNode:
         self._loading.add(op_id)
         try:
             found = await self.member.read(lambda s: _operation(s, op_id))
+        except StoreError as exc:
+            # the database is away or cut this connection (a restart): the operation's next
+            # traffic message tries again; it must not end the exchange, and the process
+            _log.warning("cluster: %s of another instance not loaded: %s", op_id, exc)
+            return False
         finally:
             self._loading.discard(op_id)
         if not isinstance(found, Operation):
@@ -356,7 +367,32 @@ class ClusterNode:
             return False
         first = plan.waypoints[0]
         east_m, north_m = self._frame.point_to_local(first.lat_deg, first.lon_deg)
-        return self.member.owns(self.member.map.region_of(east_m, north_m))
+        if self.member.owns(self.member.map.region_of(east_m, north_m)):
+            return True
+        self._heard.add(op_id)  # another instance's vehicle: watched once filed there
+        return False
+
+    async def watch_heard(self) -> None:
+        """The vehicles heard here whose operation another instance filed become foreign
+        operations (with their system id), so their telemetry feeds a vehicle track of
+        that operation rather than an intruder ``sysid:<n>@<address>``; one not filed yet is
+        looked for again on the next call."""
+        wanted = self._heard - set(self._airspace.operations)
+        self._heard = wanted
+        if not wanted:
+            return
+        found = await self.member.read(
+            lambda s: [op for op in s.load_operations() if op.id in wanted]
+        )
+        assert isinstance(found, list)
+        ops = [op for op in found if op.id not in self._airspace.operations]
+        if not ops:
+            return
+        self.policy.foreign.update(op.id for op in ops)
+        self._heard -= {op.id for op in ops}
+        self._install_foreign(ops)
+        for op in ops:
+            self._usm.log_event("cluster", f"watching {op.id} of another instance (heard)")
 
     async def refresh(self) -> None:
         """Foreign operations' plans and the active geofences as filed in the store (their
@@ -401,14 +437,18 @@ class ClusterNode:
         next_refresh = 0.0
         loop = asyncio.get_running_loop()
         while True:
-            if self.member.owned:
-                self.publish()
-                if loop.time() >= next_refresh:
-                    next_refresh = loop.time() + self.member.config.renew_s
-                    try:
+            due = loop.time() >= next_refresh
+            if due:
+                next_refresh = loop.time() + self.member.config.renew_s
+            try:
+                if due:
+                    await self.watch_heard()  # a standby too: it hears every vehicle
+                if self.member.owned:
+                    self.publish()
+                    if due:
                         await self.refresh()
-                    except StoreError as exc:
-                        _log.warning("cluster: refresh from the store failed: %s", exc)
+            except StoreError as exc:
+                _log.warning("cluster: refresh from the store failed: %s", exc)
             await asyncio.sleep(PUBLISH_PERIOD_S)
 
 

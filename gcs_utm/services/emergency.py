@@ -15,6 +15,10 @@ Every state change also goes to ``EmergencyManager.lead`` (answer, upload and co
 measured per vehicle: how soon a new plan can start, ``gcs_utm.core.emergency.lead``).
 Wire it with ``usm.attach_operator(emergency)``.
 
+An escalation that repeats one raised less than ``emergency.escalation_window_s`` earlier (the
+same UAS, cause and command) is not raised again but updates it
+(``gcs_utm.core.emergency.coalesce``): a case retried every cycle no longer swamps the pilot.
+
 Queue policy: bounded (``queue_size``); submitters wait when it is full (threats and answers
 are never dropped). A failure while deciding is logged and turned into an escalation
 Decision, so the operator hears about it and the loop keeps going. Cancelling ``run`` cancels
@@ -34,7 +38,9 @@ from gcs_utm.clock import Clock
 from gcs_utm.core.emergency import Decision, EmergencyManager
 from gcs_utm.core.emergency.adoption import adopt_case
 from gcs_utm.core.emergency.closing import close_threat
+from gcs_utm.core.emergency.coalesce import EscalationCoalescer
 from gcs_utm.core.emergency.ground import not_decided, on_ground
+from gcs_utm.core.emergency.recheck import plan_problem
 from gcs_utm.model import (
     AirspaceSnapshot,
     Geofence,
@@ -89,6 +95,7 @@ class EmergencyService:
         self._queue: asyncio.Queue[_Item] = asyncio.Queue(maxsize=queue_size)
         self._supervise_s = supervise_s
         self._supervised_t_s = -math.inf
+        self._coalesce = EscalationCoalescer(em.config.escalation_window_s)
         self.processed = 0
         self.failures = 0
         self.adoptions: dict[ThreatId, Adoptable] = {}
@@ -137,6 +144,11 @@ class EmergencyService:
 
     def pending(self) -> list[Recommendation]:
         return self.em.pending()
+
+    def plan_problem(self, rec: Recommendation) -> str:
+        """Why the accepted plan of ``rec`` must not be uploaded now (core.emergency.recheck,
+        on a fresh snapshot): the USM asks right before the upload."""
+        return plan_problem(self.em, rec, self._snapshot(self._clock.now_s()))
 
     async def run(self) -> None:
         getter: asyncio.Future[_Item] | None = None
@@ -242,5 +254,6 @@ class EmergencyService:
             self.failures += 1
             _log.exception("emergency decision on %s failed", subject)
             decision = Decision(escalations=(f"EM failed on {subject}: {exc!r}",))
+        decision = self._coalesce.apply(decision, self._clock.now_s())  # repeats: updates
         if decision != Decision():
             await self._on_decision(decision)

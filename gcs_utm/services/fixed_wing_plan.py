@@ -6,12 +6,19 @@ hovers at a loiter. A fixed wing cannot:
 - **NAV_TAKEOFF** (no position of its own: "here") is a climb-out from where the vehicle
   stands along the take-off heading, the heading to the next waypoint, to the take-off
   altitude: the climb ends ``height / tan(pitch)`` ahead with the item's minimum pitch
-  (param1), else ``height * speed / climb_rate`` (at most at the next waypoint), not above
-  home; the first :data:`ROLL_FRACTION` of that run is the ground roll (a point on the
-  ground, "no position of its own"). ArduPlane and PX4 (runway take-off) both climb straight
-  out and turn only after it (measured on ArduPlane 4.6 SITL, param1 15 deg, 30 m: lift-off
-  about 40 m out, 30 m reached 111 m out, where 30 / tan(15 deg) = 112 m; a straight line
-  from the start put the rolling plane 10.3 m below it, outside its flight geometry).
+  (param1), else at :data:`TAKEOFF_CLIMB_RATE_MPS` at the take-off (minimum) airspeed,
+  ``height * 0.7 * speed / 5`` (at most at the next waypoint), not above home; the first
+  :data:`ROLL_FRACTION` of that run is the ground roll (a point on the ground, "no position
+  of its own"). ArduPlane and PX4 (runway take-off) both climb straight out and turn only
+  after it (measured on ArduPlane 4.6 SITL, param1 15 deg, 30 m: lift-off about 40 m out,
+  30 m reached 111 m out, where 30 / tan(15 deg) = 112 m; a straight line from the start
+  put the rolling plane 10.3 m below it, outside its flight geometry).
+- **NAV_TAKEOFF with a position** (PX4: its runway take-off heads for it) is the same
+  climb-out from the vehicle's home towards that position, then level to it. PX4 v1.15.2
+  SIH keeps no pitch in the item (read back without it): lift-off about 18 m out, 30 m
+  reached 95-99 m out (the model: 32 and 92 m at 22 m/s filed), 5 m above it after, then
+  level; a straight line from home to a take-off position 250 m out put it 18-28 m above
+  its plan.
 - **NAV_LOITER_TO_ALT** (31) is a circle around its position (radius: the item's, else the
   vehicle's default loiter radius) flown until the altitude is reached at the climb
   (descent) rate; **NAV_LOITER_TURNS** (18) that many turns at the item's altitude;
@@ -31,12 +38,17 @@ import math
 from collections.abc import Sequence
 from typing import Protocol, Self, TypeVar
 
+from gcs_utm.envelope import FIXED_WING_MIN_SPEED_FACTOR
+
 NAV_LOITER_UNLIM = 17
 NAV_LOITER_TURNS = 18
 NAV_LOITER_TIME = 19
 NAV_TAKEOFF = 22
 NAV_LOITER_TO_ALT = 31
 LOITER_COMMANDS = frozenset({NAV_LOITER_TURNS, NAV_LOITER_TIME, NAV_LOITER_TO_ALT})
+TAKEOFF_CLIMB_RATE_MPS = 5.0
+"""A take-off without a pitch climbs at the autopilot's maximum climb rate: ArduPlane
+TECS_CLMB_MAX and PX4 FW_T_CLMB_MAX default to 5 m/s."""
 ROLL_FRACTION = 0.35
 """The part of the take-off run on the ground (ArduPlane 4.6 SITL: 40 of 111 m)."""
 _STEP_RAD = math.pi / 4.0  # circle points every 45 degrees
@@ -94,14 +106,18 @@ def fixed_wing_points(
     climb_rate_mps: float,
     descent_rate_mps: float,
     loiter_radius_m: float,
+    home_deg: tuple[float, float] | None = None,
 ) -> list[P]:
     """``points`` (mission order, AMSL) as a fixed wing flies them (module docstring).
-    ``ground_alt_m``: where a take-off starts (the vehicle's home; None: the point before)."""
+    ``ground_alt_m``: where a take-off starts (the vehicle's home; None: the point before);
+    ``home_deg`` (lat, lon): where a take-off with a position of its own starts when no point
+    is before it (PX4)."""
     out: list[P] = []
     for i, p in enumerate(points):
         if p.command == NAV_TAKEOFF and not p.explicit:
-            out.extend(_climb_out(p, out[-1] if out else None, points[i + 1 :], ground_alt_m,
-                                  climb_rate_mps))  # fmt: skip
+            out.extend(_climb_out(p, out[-1] if out else None, points[i + 1 :], ground_alt_m))
+        elif p.command == NAV_TAKEOFF:
+            out.extend(_climb_out_to(p, out[-1] if out else None, home_deg, ground_alt_m))
         elif p.command in LOITER_COMMANDS and out:
             rate = climb_rate_mps if p.alt_amsl_m >= out[-1].alt_amsl_m else descent_rate_mps
             out.extend(_circle(p, out[-1], rate, loiter_radius_m))
@@ -110,8 +126,28 @@ def fixed_wing_points(
     return out
 
 
+def _climb_out_to(
+    p: P,
+    before: P | None,
+    home_deg: tuple[float, float] | None,
+    ground_alt_m: float | None,
+) -> list[P]:
+    """A take-off with a position of its own (PX4: the runway take-off heads for it): the
+    climb-out from where the vehicle stands (the point before, else home) towards it, then
+    level to it."""
+    start_deg = (before.lat_deg, before.lon_deg) if before is not None else home_deg
+    if start_deg is None:
+        return [p]
+    start = p.moved(start_deg[0], start_deg[1], p.alt_amsl_m).synthetic()
+    climb = _climb_out(start, before, [p], ground_alt_m)
+    if len(climb) < 2:  # no climb to model
+        return [p]
+    ends = [q.synthetic() for q in climb if math.hypot(*_east_north(q, p)) >= 1.0]
+    return [*ends, p]
+
+
 def _climb_out(
-    p: P, before: Point | None, after: Sequence[Point], ground_alt_m: float | None, rate: float
+    p: P, before: Point | None, after: Sequence[Point], ground_alt_m: float | None
 ) -> list[P]:
     """The ground roll's end and the end of the take-off climb: along the heading to the next
     waypoint with a position of its own; where it is (a vertical climb) without one."""
@@ -127,7 +163,9 @@ def _climb_out(
     if 1.0 <= p.amount < 89.0:  # the take-off's minimum pitch, degrees
         run_m = height_m / math.tan(math.radians(p.amount))
     else:
-        run_m = height_m * max(p.speed_mps, 0.1) / max(rate, 0.1)
+        # at the autopilot's maximum climb rate and its take-off (lowest) airspeed
+        run_m = height_m * FIXED_WING_MIN_SPEED_FACTOR * max(p.speed_mps, 0.1)
+        run_m /= TAKEOFF_CLIMB_RATE_MPS
     run_m = min(to_next_m, run_m)
     roll_m = ROLL_FRACTION * run_m
     ux, uy = east / to_next_m, north / to_next_m

@@ -163,12 +163,16 @@ class MqttGateway:
             state=None if record is None else record.rec.state,
         )
 
-    async def on_operator_command(self, c: OperatorCommandRequest) -> CommandAck:
+    async def on_operator_command(self, c: OperatorCommandRequest) -> CommandAck | None:
         """An operator's hold / land / rtl / resume: the USM's one entry point for them
-        (refused unless the operator flies the UAS, or is ``admin``)."""
+        (refused unless the operator flies the UAS, or is ``admin``). None (nothing
+        published) when another cluster instance commands the UAS: it heard the same message
+        and answers (gcs_utm.cluster.commands)."""
         result = await self.usm.operator_command(
             c.uas, c.command, operator=c.operator, source="mqtt", request_id=c.request_id
         )
+        if result.elsewhere:
+            return None
         return CommandAck(
             request_id=c.request_id,
             uas=result.uas,

@@ -88,6 +88,9 @@ class CommandResult:
     reason: str = ""
     request_id: str = ""
     mode: str = ""  # the mode the vehicle reports at the end ("" when unknown)
+    # refused because another cluster instance commands this UAS (``OperatorCommands.gate``):
+    # over MQTT that instance answers, so this refusal is not published
+    elsewhere: bool = False
 
     @property
     def ok(self) -> bool:
@@ -136,6 +139,9 @@ class OperatorCommands:
         self._done: OrderedDict[tuple[str, str], CommandResult] = OrderedDict()
         self._running: set[tuple[str, str]] = set()
         self.results: list[CommandResult] = []  # every outcome, in order (tests, reports)
+        # a cluster member's rule (gcs_utm.cluster.commands): why this instance may not
+        # command the UAS named (its operation here, or None), "" when it may; None: always
+        self.gate: Callable[[str, Operation | None], str] | None = None
 
     def operation_of(self, uas: str) -> Operation | None:
         """The operation named ``uas`` (an operation id, else a system id: ``3`` or
@@ -235,7 +241,10 @@ class OperatorCommands:
     async def _command(
         self, uas: str, command: str, operator: str, source: str, request_id: str
     ) -> CommandResult:
-        reason = self.problem(uas, command, operator=operator, source=source)
+        elsewhere = ""
+        if self.gate is not None and command in COMMANDS:
+            elsewhere = self.gate(uas, self.operation_of(uas))
+        reason = elsewhere or self.problem(uas, command, operator=operator, source=source)
         op = None if reason else self.operation_of(uas)
         if op is None or op.sys_id is None:
             result = CommandResult(
@@ -244,6 +253,7 @@ class OperatorCommands:
                 outcome=Outcome.REFUSED,
                 reason=reason,
                 request_id=request_id,
+                elsewhere=bool(elsewhere),
             )
             self._audit(result, operator, source, uas)
             return result

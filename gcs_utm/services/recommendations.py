@@ -1,9 +1,10 @@
 """The recommendation and pilot-answer lifecycle of the USM (paper §4.1): proposals from EM
 shown to the operators, answers matched to them, accepted plans uploaded and verified.
 
-:class:`RecommendationLifecycle` is a part of :class:`~gcs_utm.services.usm.Usm` (a base
-class sharing its state); it is a module of its own because it changes with the pilot prompt,
-not with telemetry.
+:class:`RecommendationLifecycle` is a part the :class:`~gcs_utm.services.usm.Usm` holds: it
+is passed what it needs (the airspace, the clock, the USM's threats, counters, operators and
+answer sinks, and callbacks to send commands, record, log and spawn) and does not import the
+USM; it is a module of its own because it changes with the pilot prompt, not with telemetry.
 
 Invariants:
 - an answer acts on exactly the recommendation id and version it names; it is refused when
@@ -25,10 +26,10 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 from gcs_utm.clock import Clock
 from gcs_utm.core.emergency.wording import proposal_text
@@ -48,10 +49,6 @@ from gcs_utm.model import (
     ThreatId,
 )
 from gcs_utm.services.airspace import Airspace, AirspaceError
-
-if TYPE_CHECKING:
-    from gcs_utm.services.usm import UsmConfig
-    from gcs_utm.services.vehicle_ops import VehicleOps
 
 _log = logging.getLogger(__name__)
 
@@ -206,6 +203,20 @@ def expiry_audit(
     return AuditEntry(t_s=t_s, actor="usm", action=action, subject=rec.id, detail=detail)
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LifecycleHooks:
+    """What the lifecycle calls back into: the vehicle link (None until attached), the
+    expectation of an upload's echo (VehicleOps), commands, the record, the event log and
+    background tasks."""
+
+    vehicles: Callable[[], VehiclePort | None]
+    expect_upload: Callable[[SysId, FlightPlan | None], None]
+    execute_command: Callable[[Command, str], Awaitable[bool]]
+    record: Callable[[object], None]
+    log_event: Callable[[str, str], None]
+    spawn: Callable[[Awaitable[None]], None]
+
+
 def _what(rec: Recommendation) -> str:
     if rec.selected is not None:
         return rec.selected.maneuver.value
@@ -213,28 +224,38 @@ def _what(rec: Recommendation) -> str:
 
 
 class RecommendationLifecycle:
-    """Proposals, answers, uploads (the state is the :class:`Usm`'s, see its constructor)."""
+    """Proposals, answers, uploads (see the module docstring). The containers passed in are
+    the USM's own (shared, not copied): ``threats`` (read), ``counters`` (``answers_refused``,
+    ``uploads_ok``, ``uploads_failed`` incremented), ``operators`` and ``answer_sinks``
+    (attached to later)."""
 
-    airspace: Airspace
-    clock: Clock
-    config: UsmConfig
-    counters: dict[str, int]
-    recommendations: dict[RecommendationId, RecommendationRecord]
-    _record: Callable[[object], None]
-    _vehicles: VehiclePort | None
-    vehicle_ops: VehicleOps
-    _operators: list[OperatorPort]
-    _answer_sinks: list[Callable[[Recommendation, bool], Awaitable[None]]]
-    threats: dict[ThreatId, Threat]
-
-    def log_event(self, kind: str, text: str) -> None:
-        raise NotImplementedError
-
-    def _spawn(self, coro: Awaitable[None]) -> None:
-        raise NotImplementedError
-
-    async def execute_command(self, command: Command, *, reason: str = "") -> bool:
-        raise NotImplementedError
+    def __init__(
+        self,
+        airspace: Airspace,
+        clock: Clock,
+        *,
+        upload_attempts: int,
+        threats: Mapping[ThreatId, Threat],
+        counters: dict[str, int],
+        operators: Sequence[OperatorPort],
+        answer_sinks: Sequence[Callable[[Recommendation, bool], Awaitable[None]]],
+        hooks: LifecycleHooks,
+    ) -> None:
+        self.airspace = airspace
+        self.clock = clock
+        self.upload_attempts = upload_attempts
+        self.threats = threats
+        self.counters = counters
+        self._operators = operators
+        self._answer_sinks = answer_sinks
+        self._hooks = hooks
+        self._record = hooks.record
+        self.log_event = hooks.log_event
+        self.recommendations: dict[RecommendationId, RecommendationRecord] = {}
+        self.plan_check: Callable[[Recommendation], str] | None = None
+        """Asked right before an accepted plan is uploaded: why it must not be ("" when it
+        may; EM's re-check against the airspace as it is now, core.emergency.recheck). A
+        reason fails the recommendation, and EM decides again."""
 
     # ---- decisions from EM ----------------------------------------------------------------
     async def on_recommendation(self, rec: Recommendation) -> None:
@@ -357,7 +378,7 @@ class RecommendationLifecycle:
         )
         for sink in self._answer_sinks:
             await sink(record.rec, True)
-        self._spawn(self._apply(record))
+        self._hooks.spawn(self._apply(record))
         return outcome
 
     def _check_answer(self, record: RecommendationRecord | None, a: PilotAnswer) -> AnswerOutcome:
@@ -419,7 +440,7 @@ class RecommendationLifecycle:
             return
         if rec.command is not None and (rec.selected is None or rec.selected.plan is None):
             await self._set_state(record, RecommendationState.UPLOADING, "sending command")
-            ok = await self.execute_command(rec.command, reason=f"recommendation {rec.id}")
+            ok = await self._hooks.execute_command(rec.command, f"recommendation {rec.id}")
             if ok:
                 record.verified = True
                 await self._set_state(record, RecommendationState.APPLIED, "command acknowledged")
@@ -431,8 +452,13 @@ class RecommendationLifecycle:
             # advisory only (e.g. keep plan / warn): nothing to send
             await self._set_state(record, RecommendationState.APPLIED, "advisory")
             return
-        if self._vehicles is None or op.sys_id is None:
+        vehicles = self._hooks.vehicles()
+        if vehicles is None or op.sys_id is None:
             await self._fail(record, "no MAVLink link to this vehicle")
+            return
+        problem = "" if self.plan_check is None else self.plan_check(rec)
+        if problem:
+            await self._fail(record, f"not uploaded: {problem}")
             return
         maneuver = rec.selected.maneuver.value if rec.selected is not None else ""
         new_plan = dataclasses.replace(
@@ -446,9 +472,9 @@ class RecommendationLifecycle:
             record, RecommendationState.UPLOADING, f"{maneuver} as plan v{new_plan.version}"
         )
         error = ""
-        self.vehicle_ops.expect_upload(op.sys_id, new_plan)
-        for attempt in range(1, self.config.upload_attempts + 1):
-            result = await self._vehicles.upload_plan(
+        self._hooks.expect_upload(op.sys_id, new_plan)
+        for attempt in range(1, self.upload_attempts + 1):
+            result = await vehicles.upload_plan(
                 op.sys_id,
                 new_plan,
                 autopilot=op.autopilot,
@@ -465,7 +491,7 @@ class RecommendationLifecycle:
             error = result.error or "readback did not match"
             self.log_event("upload", f"{rec.id} attempt {attempt} failed: {error}")
         if not record.verified:
-            self.vehicle_ops.expect_upload(op.sys_id, None)
+            self._hooks.expect_upload(op.sys_id, None)
             self.counters["uploads_failed"] += 1
             await self._fail(record, error)
             return
@@ -476,7 +502,7 @@ class RecommendationLifecycle:
             _log.warning("plan of %s not installed: %s", op.id, exc)
         # installed: a later echo matches the operation's own plan; an expectation left
         # standing would hide a pilot's later upload of this same mission
-        self.vehicle_ops.expect_upload(op.sys_id, None)
+        self._hooks.expect_upload(op.sys_id, None)
         await self._set_state(
             record, RecommendationState.APPLIED, f"{maneuver}: mission verified by readback"
         )
@@ -515,12 +541,6 @@ class RecommendationLifecycle:
                 await self._set_state(
                     record, RecommendationState.EXPIRED, "without an answer (deadline passed)"
                 )
-
-    async def run(self, period_s: float = 0.5) -> None:
-        """Housekeeping: enforce recommendation deadlines (clock seconds)."""
-        while True:
-            await self.expire_due()
-            await self.clock.sleep(period_s)
 
     def pending(self) -> list[Recommendation]:
         return [

@@ -7,10 +7,10 @@ Out: recommendations to the operator(s); accepted plans uploaded to the vehicle 
 mission (verified by readback) and then installed as a new plan version; commands; new
 geofences into the airspace; everything recorded.
 
-The recommendation and answer lifecycle (proposals, answers, uploads, final states) lives in
-:mod:`gcs_utm.services.recommendations`, a base class of :class:`Usm`; its invariants are
-stated there. Nothing is dropped silently: every outcome goes to the record callback and the
-event log.
+The recommendation and answer lifecycle (proposals, answers, uploads, final states) is a part
+the USM holds (:attr:`Usm.lifecycle`, :mod:`gcs_utm.services.recommendations`); its
+invariants are stated there. Nothing is dropped silently: every outcome goes to the record
+callback and the event log.
 """
 
 from __future__ import annotations
@@ -24,11 +24,11 @@ from dataclasses import dataclass, replace
 
 from adapters.mavlink.senders import idle_keys, over_cap_keys
 from gcs_utm.clock import Clock
-from gcs_utm.config import setting
 from gcs_utm.messages import (
     FlightMode,
     HazardReport,
     LinkHealth,
+    PilotAnswer,
     VehicleStatus,
 )
 from gcs_utm.model import (
@@ -61,6 +61,7 @@ from gcs_utm.services.recommendations import (
     AnswerOutcome,
     AnswerStatus,
     CommandOutcome,
+    LifecycleHooks,
     OperatorPort,
     RecommendationLifecycle,
     RecommendationRecord,
@@ -75,6 +76,7 @@ from gcs_utm.services.telemetry_stats import (
     latest_per_sys_id,
 )
 from gcs_utm.services.threat_lifecycle import Evidence, ThreatCloser
+from gcs_utm.services.usm_config import UsmConfig
 from gcs_utm.services.vehicle_ops import VehicleOps, VehicleOpsSettings
 
 __all__ = [
@@ -108,107 +110,13 @@ _VEHICLE_HAZARDS = frozenset(
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class UsmConfig:
-    """USM behaviour (section ``[usm]``)."""
-
-    hazard_cooldown_s: float = setting(
-        30.0,
-        "a hazard of the same kind for the same UAS within this time is coalesced, not re-raised",
-        min=0.0,
-        unit="s",
-    )
-    event_log_size: int = setting(500, "events kept for the dashboard", min=10)
-    threat_log_size: int = setting(
-        10_000,
-        "threat openings and closings kept in memory for the run report (the store keeps "
-        "every one); the oldest are dropped and counted beyond it",
-        min=10,
-    )
-    upload_attempts: int = setting(
-        2,
-        "whole-mission upload attempts (each with the link's own per-item retries) before a "
-        "recommendation is marked failed",
-        min=1,
-        max=10,
-    )
-    default_priority: int = setting(1, "priority of an operation created from a vehicle")
-    default_flight_geometry_m: float = setting(
-        10.0, "flight-geometry radius of an operation created from a vehicle", min=0.1, unit="m"
-    )
-    default_operational_volume_m: float = setting(
-        30.0,
-        "operational-volume radius of an operation created from a vehicle",
-        min=0.1,
-        unit="m",
-    )
-    default_cruise_speed_mps: float = setting(
-        5.0,
-        "cruise speed assumed for a vehicle's downloaded mission without speed items",
-        min=0.1,
-        unit="m/s",
-    )
-    default_fixed_wing_cruise_speed_mps: float = setting(
-        22.0,
-        "a fixed wing's cruise airspeed, for its downloaded mission without speed items "
-        "(ArduPlane AIRSPEED_CRUISE in its SITL defaults; PX4 FW_AIRSPD_TRIM is 15)",
-        min=0.1,
-        unit="m/s",
-    )
-    home_tolerance_m: float = setting(
-        1.0,
-        "a vehicle's home (HOME_POSITION after its first 3D fix) moving more than this "
-        "vertically (2 m horizontally) re-files its operation, and at arming whatever the move",
-        min=0.01,
-        unit="m",
-    )
-    ground_warning_m: float = setting(
-        50.0,
-        "warn (once per vehicle) when a vehicle's home altitude is further than this from "
-        "[airspace] ground_elevation_amsl_m",
-        min=0.0,
-        unit="m",
-    )
-    # Bounds of state keyed by identities a sender chooses (ICAO addresses, alert ids).
-    max_adsb_sources: int = setting(
-        4096,
-        "ADS-B sources (ICAO addresses) with statistics of their own; when full, the least "
-        "recently heard eighth is folded into 'adsb:evicted' (counted in adsb_sources_evicted)",
-        min=8,
-        max=1_000_000,
-    )
-    threat_clear_s: float = setting(
-        3.0,
-        "a threat raised from a hazard closes when its cause (link loss, GNSS degradation, "
-        "...) has been gone this long (docs/emergency.md, 'When a threat closes')",
-        min=0.0,
-        max=600.0,
-        unit="s",
-    )
-    restart_review_s: float = setting(
-        30.0,
-        "after a restart, threats an earlier life left open that the new life does not detect "
-        "again within this time are closed (docs/emergency.md, 'After a restart')",
-        min=0.0,
-        max=3600.0,
-        unit="s",
-    )
-    max_hazard_keys: int = setting(
-        4096,
-        "hazard coalescing keys kept (one per kind and UAS or alert); a key older than "
-        "hazard_cooldown_s is forgotten, and when full the oldest eighth (hazard_keys_evicted)",
-        min=8,
-        max=1_000_000,
-    )
-
-
-@dataclass(frozen=True, slots=True, kw_only=True)
 class UsmEvent:
     t_s: float
     kind: str
     text: str
 
 
-class Usm(RecommendationLifecycle):
+class Usm:
     """The U-space Service Manager. Construct it, then ``attach_*`` the parts."""
 
     def __init__(
@@ -253,7 +161,6 @@ class Usm(RecommendationLifecycle):
         self.health: dict[tuple[SysId, str], LinkHealth] = {}
         self.threats: dict[ThreatId, Threat] = {}
         self.threat_log: deque[Threat] = deque(maxlen=self.config.threat_log_size)
-        self.recommendations: dict[RecommendationId, RecommendationRecord] = {}
         self._telemetry: dict[str, TelemetryStats] = {}
         self._sources: dict[tuple[object, ...], SourceStats] = {}
         self.events: deque[UsmEvent] = deque(maxlen=self.config.event_log_size)
@@ -306,6 +213,29 @@ class Usm(RecommendationLifecycle):
             ),
             log_event=self.log_event,
             spawn=self._spawn,
+        )
+        # proposals, answers and uploads; ``recommendations`` is its table
+        self.lifecycle = RecommendationLifecycle(
+            airspace,
+            clock,
+            upload_attempts=cfg.upload_attempts,
+            threats=self.threats,
+            counters=self.counters,
+            operators=self._operators,
+            answer_sinks=self._answer_sinks,
+            hooks=LifecycleHooks(
+                vehicles=lambda: self._vehicles,
+                expect_upload=self.vehicle_ops.expect_upload,
+                execute_command=lambda command, reason: self.execute_command(
+                    command, reason=reason
+                ),
+                record=self._record,
+                log_event=self.log_event,
+                spawn=self._spawn,
+            ),
+        )
+        self.recommendations: dict[RecommendationId, RecommendationRecord] = (
+            self.lifecycle.recommendations
         )
         # the operator's hold / land / rtl / resume (docs/usm.md, "Operator commands")
         self.operator_commands = OperatorCommands(
@@ -646,7 +576,7 @@ class Usm(RecommendationLifecycle):
         """Housekeeping every ``period_s`` clock seconds: recommendation deadlines, and the
         threats of hazards whose cause is gone."""
         while True:
-            await self.expire_due()
+            await self.lifecycle.expire_due()
             await self.threat_closer.check(self.clock.now_s())
             await self.clock.sleep(period_s)
 
@@ -663,7 +593,10 @@ class Usm(RecommendationLifecycle):
             if first or t.status is ThreatStatus.CLOSED:
                 if len(self.threat_log) == self.threat_log.maxlen:
                     self.counters["threat_log_dropped"] += 1
-                self.threat_log.append(t)
+                # The log is for the run report: without the prediction the threat was
+                # computed on (every track's trajectory, tens of kB), which would make a
+                # full log hold hundreds of MB.
+                self.threat_log.append(replace(t, snapshot=None))
                 self._record(t)
                 uas = ",".join(t.uas_ids) or "-"
                 self.log_event(
@@ -703,6 +636,28 @@ class Usm(RecommendationLifecycle):
                 detail={"text": text},
             )
         )
+
+    # ---- recommendations (the lifecycle part: gcs_utm.services.recommendations) -----------
+    async def on_recommendation(self, rec: Recommendation) -> None:
+        """A proposal (or a new version, or EM's end of one) from EM to the operators."""
+        await self.lifecycle.on_recommendation(rec)
+
+    async def on_superseded(self, rec_id: RecommendationId) -> None:
+        await self.lifecycle.on_superseded(rec_id)
+
+    async def on_expired(self, rec_id: RecommendationId) -> None:
+        await self.lifecycle.on_expired(rec_id)
+
+    async def answer(self, a: PilotAnswer) -> AnswerOutcome:
+        """An operator's answer, matched to the exact id and version it names."""
+        return await self.lifecycle.answer(a)
+
+    async def expire_due(self) -> None:
+        await self.lifecycle.expire_due()
+
+    def pending(self) -> list[Recommendation]:
+        """The recommendations waiting for an answer."""
+        return self.lifecycle.pending()
 
     async def execute_command(self, command: Command, *, reason: str = "") -> bool:
         """Send a command (autonomous mode or an accepted recommendation)."""

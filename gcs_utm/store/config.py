@@ -43,6 +43,15 @@ class StoreConfig:
         min=0.0,
         unit="s",
     )
+    statement_timeout_s: float = setting(
+        30.0,
+        "PostgreSQL: the server cancels a writer statement running longer, and ends the "
+        "writer's session when it stays this long inside a transaction without a statement "
+        "(a stalled writer); the batch is then retried on a new connection. 0: no bound. "
+        "A cluster member (serve --cluster) bounds it by [cluster] lease_s",
+        min=0.0,
+        unit="s",
+    )
 
     def __post_init__(self) -> None:
         if self.url and not self.url.startswith(("postgresql://", "postgres://")):

@@ -73,10 +73,14 @@ KEEPALIVE = {
 def _session_options(statement_timeout_s: float) -> dict[str, Any]:
     """libpq keywords of a connection: keepalive, and with ``statement_timeout_s`` > 0 a
     server-side ``statement_timeout`` (a statement running longer is cancelled by the server
-    and fails with a StoreError, so no call waits on a lock or a stalled server for ever)."""
+    and fails with a StoreError, so no call waits on a lock or a stalled server for ever) and
+    the same ``idle_in_transaction_session_timeout`` (a client that stalls inside a
+    transaction, between two statements, has its session ended by the server: the locks it
+    holds, e.g. a lease fence's ``FOR SHARE``, cannot outlive the bound either)."""
     opts: dict[str, Any] = dict(KEEPALIVE)
     if statement_timeout_s > 0:
-        opts["options"] = f"-c statement_timeout={max(1, round(statement_timeout_s * 1000))}"
+        ms = max(1, round(statement_timeout_s * 1000))
+        opts["options"] = f"-c statement_timeout={ms} -c idle_in_transaction_session_timeout={ms}"
     return opts
 
 
@@ -169,6 +173,9 @@ class PgStore(StoreBase):
 
     def _migrate(self) -> None:
         with self.transaction() as c:
+            # a migration (or the wait for another instance's) is not bounded by the
+            # session's statement timeout: stopping it halfway helps nobody
+            c.execute("SET LOCAL statement_timeout = 0")
             c.execute("SELECT pg_advisory_xact_lock(?)", (_MIGRATE_LOCK,))
             c.execute("CREATE TABLE IF NOT EXISTS gcs_utm_schema (version INTEGER NOT NULL)")
             row = c.execute("SELECT version FROM gcs_utm_schema").fetchone()

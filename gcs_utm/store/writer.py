@@ -227,6 +227,7 @@ class StoreWriter:
             self.location,
             synchronous=self.config.synchronous,
             busy_timeout_s=self.config.busy_timeout_s,
+            statement_timeout_s=self.config.statement_timeout_s,
         )
 
     def _tell(self, level: int, text: str) -> None:

@@ -1,19 +1,21 @@
-"""Issue 31.4 on real ArduPlane: a normal take-off raises no non-conformance threat.
+"""Issue 31.4 on real ArduPlane: a normal mission raises no non-conformance threat.
 
 An ArduPlane 4.6 SITL with the pilot's typical mission (take-off to 30 m at 15 deg, a
-speed item of 14 m/s as a ground speed, a 1600 m leg north and an 800 m leg west at 30 m,
-then DO_LAND_START, an approach and NAV_LAND at home; it arms with that mission only with
-RTL_AUTOLAND set) sits beside ``gcs-utm serve --headless
---auto-accept`` (on SERIAL1), which files its mission as an operation. It is armed in AUTO
-and flies its runway take-off, its climb-out along the heading to the first waypoint and
-its 24 m/s cruise (its plan is filed at 14 m/s: 48 s ahead at the first waypoint, beyond
-the 30 s time tolerance; Monitoring re-times it along its track).
-The take-off was filed as a vertical climb at home and the plan timed at
-5 m/s, so every ArduPlane take-off opened UAS_OUT_OV and the auto-accepted plans wiped the
-landing sequence. Now: no UAS_OUT_OV / UAS_IN_CV, no recommendation, and the mission on
-the plane still ends with its landing sequence. And a plan the hub uploads to that ArduPlane
-keeps the landing sequence at its end (read back equal) with airspeeds no lower than the
-minimum.
+speed item of 14 m/s as a ground speed, a 1600 m leg north climbing to 60 m and an 800 m
+leg west at 60 m, then DO_LAND_START, an approach descending to 30 m and NAV_LAND at home;
+it arms with that mission only with RTL_AUTOLAND set; FLIGHT_OPTIONS makes it climb first)
+sits beside ``gcs-utm serve --headless --auto-accept`` (on SERIAL1), which files its
+mission as an operation. It is armed in AUTO and flies its runway take-off, its climb-out
+along the heading to the first waypoint, its 24 m/s cruise (its plan is filed at 14 m/s:
+48 s ahead at the first waypoint, beyond the 30 s time tolerance; Monitoring re-times it
+along its track), its climb (21 m above the straight climb), three turns (90, 101 and
+124 deg, up to 41 m outside the next leg) and its landing to touchdown.
+The take-off was filed as a vertical climb at home and the plan timed at 5 m/s, so every
+ArduPlane take-off opened UAS_OUT_OV and the auto-accepted plans wiped the landing
+sequence; the climb and each turn opened UAS_IN_CV against the plan's polyline. Now: no
+UAS_OUT_OV / UAS_IN_CV, no recommendation, and the mission on the plane still ends with its
+landing sequence. And a plan the hub uploads to that ArduPlane keeps the landing sequence
+at its end (read back equal) with airspeeds no lower than the minimum.
 """
 
 from __future__ import annotations
@@ -35,18 +37,21 @@ from gcs_utm.clock import ScaledClock
 from gcs_utm.model import FlightPlan, OperationId, SysId, Waypoint4D
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess, wait_tcp_listening
 from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, rows
-from tests.autopilot.pilot import PilotLink, offset_deg
+from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 from tests.mavlink.conftest import Sink
 
 SPEED = 5.0
 AUTO = 10  # ArduPlane's AUTO custom mode
 FILED_MPS = 14.0  # the mission's speed item: a ground speed, which ArduPlane flies past
+CRUISE_ALT_M = 60.0  # above home: a 30 m climb on the first leg from the take-off's 30 m
+LAND_SEQ = 7  # NAV_LAND's seq in the mission with the speed item
 
 
 def _mission(lat0: float, lon0: float, filed_mps: float | None = None) -> list[object]:
     """Home, NAV_TAKEOFF (15 deg, 30 m), [DO_CHANGE_SPEED ground speed ``filed_mps``,]
-    1600 m north and then 800 m west at 30 m, DO_LAND_START, the approach at 30 m and
-    NAV_LAND at home (altitudes above home, as ground stations send them)."""
+    1600 m north climbing to 60 m and then 800 m west at 60 m (two turns: 90 deg at the
+    first waypoint, 150 deg at the second), DO_LAND_START, the approach descending to 30 m
+    and NAV_LAND at home (altitudes above home, as ground stations send them)."""
     rel = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 
     def item(seq: int, cmd: int, east: float, north: float, alt: float, p1: float = 0.0) -> object:
@@ -73,16 +78,16 @@ def _mission(lat0: float, lon0: float, filed_mps: float | None = None) -> list[o
         item(0, mav.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0),
         takeoff,
         *speed,
-        item(2 + k, mav.MAV_CMD_NAV_WAYPOINT, 0.0, 1600.0, 30.0),
-        item(3 + k, mav.MAV_CMD_NAV_WAYPOINT, -800.0, 1600.0, 30.0),
+        item(2 + k, mav.MAV_CMD_NAV_WAYPOINT, 0.0, 1600.0, CRUISE_ALT_M),
+        item(3 + k, mav.MAV_CMD_NAV_WAYPOINT, -800.0, 1600.0, CRUISE_ALT_M),
         item(4 + k, mav.MAV_CMD_DO_LAND_START, -800.0, 0.0, 0.0),
         item(5 + k, mav.MAV_CMD_NAV_WAYPOINT, -400.0, -400.0, 30.0),
         item(6 + k, mav.MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0),
     ]
 
 
-@pytest.mark.timeout(240)
-def test_arduplane_takeoff_raises_no_conformance_threat(
+@pytest.mark.timeout(300)
+def test_arduplane_mission_raises_no_conformance_threat(
     ardupilot: Callable[..., SitlProcess], tmp_path: Path
 ) -> None:
     lat0, lon0, ground, _heading = ARDUPILOT_DEFAULT_HOME  # heading 0: the runway points north
@@ -95,7 +100,9 @@ def test_arduplane_takeoff_raises_no_conformance_threat(
     serve: subprocess.Popen[bytes] | None = None
     try:
         pilot.wait_ready()
-        pilot.set_params({"RTL_AUTOLAND": 2.0})  # else "Arm: DO_LAND_START set and ..."
+        # RTL_AUTOLAND: else "Arm: DO_LAND_START set and ..."; FLIGHT_OPTIONS bit 14
+        # (IMMEDIATE_CLIMB_IN_AUTO): climb first to a higher waypoint, not on a glide slope
+        pilot.set_params({"RTL_AUTOLAND": 2.0, "FLIGHT_OPTIONS": 16384.0})
         pilot.upload(_mission(lat0, lon0, FILED_MPS))
         with log_path.open("wb") as log:
             serve = subprocess.Popen(
@@ -107,12 +114,8 @@ def test_arduplane_takeoff_raises_no_conformance_threat(
         _wait_operations(db, 1, 40.0, serve)
         pilot.set_mode(AUTO)
         pilot._arm(60.0)
-        end = time.monotonic() + 150.0 / SPEED  # simulated: take-off and 1600 m (about 75 s)
-        # MISSION_CURRENT past the first waypoint: take-off, climb-out and first leg flown
-        while not any(seq >= 4 for _, seq, _ in pilot.mission_current):
-            assert time.monotonic() < end, f"mission not flown: {pilot.statustexts[-6:]}"
-            pilot.request_streams()
-            pilot.poll(0.5)
+        # simulated about 300 s (5.2 km at 22-24 m/s, take-off and landing); twice for load
+        _fly_to_touchdown(pilot, ground, time.monotonic() + 2.0 * 300.0 / SPEED)
         assert serve.poll() is None, "gcs-utm serve exited"
         commands = [int(it.command) for it in _download(pilot)]
     finally:
@@ -121,12 +124,28 @@ def test_arduplane_takeoff_raises_no_conformance_threat(
             serve.terminate()
             serve.wait(timeout=30)
     tail = log_path.read_text(errors="replace")[-4000:]
-    kinds = [str(r[0]) for r in rows(db, "SELECT kind FROM threats")]
-    conformance = {"UAS_OUT_OV", "UAS_IN_CV"} & set(kinds)
-    assert not conformance, f"non-conformance on a normal take-off: {kinds}\n{tail}"
+    threats = rows(db, "SELECT kind, detected_at_s, doc FROM threats")
+    conformance = [t for t in threats if t[0] in ("UAS_OUT_OV", "UAS_IN_CV")]
+    assert not conformance, f"non-conformance on a normal mission: {conformance}\n{tail}"
     recs = rows(db, "SELECT state FROM recommendations")
     assert recs == [], f"recommendations for a plane on its mission: {recs}\n{tail}"
     assert commands[-3:] == [189, 16, 21], f"landing sequence gone: {commands}"
+
+
+def _fly_to_touchdown(pilot: PilotLink, ground_amsl_m: float, end: float) -> None:
+    """Until the plane has flown to its NAV_LAND and stands on the ground (within 1.5 m of
+    its home's altitude, its last four positions within 1 m of each other)."""
+    while True:
+        assert time.monotonic() < end, f"no touchdown: {pilot.statustexts[-8:]}"
+        pilot.request_streams()
+        pilot.poll(0.5)
+        landing = any(seq >= LAND_SEQ for _, seq, _ in pilot.mission_current)
+        last = pilot.samples[-4:]
+        if not landing or len(last) < 4 or last[-1].alt_amsl_m > ground_amsl_m + 1.5:
+            continue
+        east, north = local_m(last[0].lat_deg, last[0].lon_deg, last[-1].lat_deg, last[-1].lon_deg)
+        if abs(east) + abs(north) < 1.0:
+            return
 
 
 def _download(pilot: PilotLink) -> list[object]:

@@ -268,16 +268,14 @@ async def take_off(s: Stack, alt_m: float) -> None:
     assert res.ok, res
     end = time.monotonic() + 40.0
     while True:
-        res = await hub._command_long(  # (arming is no UTM command)
-            st, MAV_CMD_COMPONENT_ARM_DISARM, (1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), None
+        res = await hub.command_long(  # (arming is no UTM command)
+            st.key, MAV_CMD_COMPONENT_ARM_DISARM, (1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         )
         if res.ok:
             break
         assert time.monotonic() < end, f"arming refused: {res}"
         await asyncio.sleep(1.0)
-    res = await hub._command_long(
-        st, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, alt_m), None
-    )
+    res = await hub.command_long(st.key, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, alt_m))
     assert res.ok, res
     ground = ARDUPILOT_DEFAULT_HOME[2]
     await until(

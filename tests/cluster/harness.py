@@ -27,7 +27,7 @@ from gcs_utm.model import (
     RecommendationId,
 )
 from gcs_utm.scenario import load_scenario
-from gcs_utm.store import StoreWriter, open_store
+from gcs_utm.store import StoreConfig, StoreWriter, open_store
 from tests.store.test_store import UC1
 
 
@@ -198,11 +198,12 @@ async def member(
     command_ok: bool = True,
     services: Callable[[Persistence], tuple[UsmPort, AirspacePort]] | None = None,
     emergency: EmergencyPort | None = None,
+    store_config: StoreConfig | None = None,
 ) -> Member:
     """A member; ``services``: makes a real USM and airspace on the member's store instead
     of the fakes (the fakes are still returned, unused); ``emergency``: a real EM service
-    instead of the fake (likewise)."""
-    writer = StoreWriter(location)
+    instead of the fake (likewise); ``store_config``: its writer's settings."""
+    writer = StoreWriter(location, store_config)
     store = Persistence(writer)
     usm_port, airspace_port = services(store) if services is not None else (None, None)
     usm = FakeUsm(store, command_ok=command_ok)

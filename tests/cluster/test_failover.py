@@ -7,6 +7,8 @@ lease: C takes both regions, and B, woken, files nothing and exits with code 3."
 
 from __future__ import annotations
 
+import asyncio
+import json
 import os
 import shutil
 import signal
@@ -15,6 +17,7 @@ import subprocess
 import time
 from pathlib import Path
 
+import aiomqtt
 import pytest
 
 from gcs_utm.cluster import lease
@@ -41,6 +44,43 @@ def _holders(url: str) -> dict[str, str]:
 
 def _one(url: str, sql: str) -> object:
     return raw_execute(url, sql)[0][0]
+
+
+def _operator_command(
+    mqtt_port: int, uas: str, command: str, request_id: str, settle_s: float = 1.0
+) -> list[dict[str, object]]:
+    """An operator's command over MQTT (as ``gcs-utm pilot`` sends it, operator ``admin``):
+    every answer on the status topic for ``request_id``, collected until ``settle_s`` after
+    the first (at most 15 s)."""
+
+    async def exchange() -> list[dict[str, object]]:
+        answers: list[dict[str, object]] = []
+        async with aiomqtt.Client("127.0.0.1", mqtt_port, identifier="test-station") as client:
+            await client.subscribe("gcs_utm/operators/admin/status", qos=1)
+            body = {
+                "schema_version": 1,
+                "type": "operator_command",
+                "uas": uas,
+                "command": command,
+                "id": request_id,
+                "t_s": time.time(),
+            }
+            await client.publish("gcs_utm/operators/admin/commands", json.dumps(body), qos=1)
+            loop = asyncio.get_running_loop()
+            end = loop.time() + 15.0
+            messages = aiter(client.messages)
+            while loop.time() < end:
+                try:
+                    msg = await asyncio.wait_for(anext(messages), end - loop.time())
+                except TimeoutError:
+                    break
+                doc = json.loads(bytes(msg.payload))  # type: ignore[arg-type]
+                if doc.get("type") == "command_status" and doc.get("id") == request_id:
+                    answers.append(doc)
+                    end = min(end, loop.time() + settle_s)
+        return answers
+
+    return asyncio.run(exchange())
 
 
 @pytest.mark.slow
@@ -76,6 +116,12 @@ def test_kill_stall_and_database_restart_leave_one_decider_and_tracked_vehicles(
             )
             if not region:  # C: a standby with no region of its own
                 cfg.write_text(cfg.read_text().replace('region = "c0r0"\n', ""))
+            # the operators' MQTT interface on every instance (one client id each)
+            cfg.write_text(
+                cfg.read_text().replace(
+                    "[mqtt]\n", f'[mqtt]\nenabled = true\nclient_id = "gcs-utm-{name}"\n'
+                )
+            )
             inst[name] = _start([*serve, "--config", str(cfg)], log)
             procs.append(inst[name])
             if name == "B":
@@ -100,6 +146,17 @@ def test_kill_stall_and_database_restart_leave_one_decider_and_tracked_vehicles(
         assert "sys1 filed from sysid 1" in filed["A"] and "sys2 filed" not in filed["A"]
         assert "sys2 filed from sysid 2" in filed["B"] and "sys1 filed" not in filed["B"]
         assert "filed from sysid" not in filed["C"]
+        # the standby (no region) watches both vehicles as the operations their owners
+        # filed: ordinary vehicle tracks, not intruders sysid:<n>@<address>
+        _wait(
+            lambda: all(
+                f"watching {op} of another instance (heard)" in logs[2].read_text()
+                for op in ("sys1", "sys2")
+            ),
+            10.0,
+            "C watches both vehicles",
+            logs,
+        )
         rows_before = {
             t: int(str(_one(pg_url, f"SELECT COUNT(*) FROM {t}")))
             for t in ("operations", "flight_plans", "threats", "recommendations")
@@ -118,6 +175,14 @@ def test_kill_stall_and_database_restart_leave_one_decider_and_tracked_vehicles(
         _wait(lambda: track_t("sys1") > t_kill + 3.0, 15.0, "sys1 still tracked", logs)
         for name in names[1:]:
             assert inst[name].poll() is None, logs[names.index(name)].read_text()[-3000:]
+        # the new owner commands A's vehicle through the router; it alone answers (every
+        # instance hears the MQTT command), and the vehicle acknowledges and reports HOLD
+        answers = _operator_command(mqtt_port, "sys1", "hold", "after-takeover")
+        assert [a["outcome"] for a in answers] == ["confirmed"], answers
+        assert answers[0]["mode"] == "hold", answers
+        other = next(n for n in ("B", "C") if n != new_owner)
+        assert "hold sys1: confirmed" in logs[names.index(new_owner)].read_text()
+        assert "hold sys1: refused" in logs[names.index(other)].read_text()
         # then B stalls past its lease: C, the standby left, takes whatever B holds
         epoch_b = int(
             str(_one(pg_url, "SELECT holder FROM region_leases WHERE holder LIKE 'B#%'")).split(
@@ -141,6 +206,9 @@ def test_kill_stall_and_database_restart_leave_one_decider_and_tracked_vehicles(
         _wait(lambda: all(track_t(t) > t_stall[t] + 3.0 for t in t_stall), 15.0, "C tracks", logs)
         assert _holders(pg_url) == {"c0r0": "C", "c1r0": "C"}
         assert inst["C"].poll() is None, logs[2].read_text()[-3000:]
+        # an intruder track a vehicle got before its operation was filed is not fed since
+        intruders = raw_execute(pg_url, "SELECT id, t_s FROM tracks_latest WHERE id LIKE 'sysid:%'")
+        assert all(float(str(t)) < t_kill for _, t in intruders), intruders
         lost = raw_execute(pg_url, "SELECT id FROM threats WHERE kind = 'COMMUNICATION_FAILURE'")
         assert lost == [], lost
         assert raw_execute(pg_url, "SELECT id FROM geofences WHERE active = 1") == []

@@ -121,6 +121,15 @@ def test_kill_9_of_an_owner_hands_its_region_and_prompt_to_the_survivor(
         failover_s = time.monotonic() - killed
         assert failover_s <= LEASE_S + RENEW_S + 2.0, failover_s
         _wait(lambda: _versions(pg_url) == [1, 2, 3], 10.0, "B re-proposes the prompt")
+
+        def gained_by_b() -> bool:  # recorded after the re-proposal, in a later writer batch
+            with open_store(pg_url) as s:
+                return any(
+                    e.action == "region_gained" and e.subject == "c0r0" and e.actor[0] == "B"
+                    for e in s.load_audit()
+                )
+
+        _wait(gained_by_b, 10.0, "B records the region it gained")
         with open_store(pg_url) as s:
             latest = s.load_recommendations()
             assert [(r.id, r.version, r.state) for r in latest] == [

@@ -114,7 +114,7 @@ async def test_h_then_y_holds_the_selected_uas_and_the_audit_records_it() -> Non
             # resume: m, m (the same key twice) puts it back on its mission
             await pilot.press("m", "m")
             await _until("the resume outcome", lambda: len(app.commands.results) == 2)
-            assert app.commands.results[1].outcome.value == "confirmed"
+            assert app.commands.results[1].outcome.value == "confirmed", app.commands.results[1]
             assert _mode(usm) is FlightMode.MISSION
     hold = rig.audit("operator_hold")
     assert len(hold) == 1 and hold[0].actor == "operator:dashboard"

@@ -30,6 +30,7 @@ from gcs_utm.model import (
     ThreatStatus,
     Track,
     TrackId,
+    VehicleKind,
 )
 from gcs_utm.services.emergency import EmergencyService
 
@@ -99,14 +100,15 @@ async def _nothing(d: Decision) -> None:
 def test_a_loss_sooner_than_the_measured_lead_gets_an_immediate_command() -> None:
     """The same threat, 10 s ahead: with the configured lead (2 + 3 + 2 s) EM proposes
     plans; once A's uploads were measured at 9 s a plan would start after the event, so EM
-    proposes an immediate command instead (and says why)."""
+    proposes an immediate command instead (and says why). No margin beyond the lead here
+    (``immediate_margin_s``: see the test below)."""
     snap, threat = sc.scenario_los_2uas()
     threat = replace(threat, predicted_event_at_s=snap.t_s + 10.0)
-    em = make_em()
+    em = make_em(immediate_margin_s=0.0)
     d = em.on_threat(threat, snap)
     assert d.recommendations and all(r.selected is not None for r in d.recommendations)
     assert not d.escalations
-    em2 = make_em()
+    em2 = make_em(immediate_margin_s=0.0)
     em2.lead.observe("upload", A, 9.0)
     d2 = em2.on_threat(threat, snap)
     assert d2.recommendations and all(r.command is not None for r in d2.recommendations)
@@ -184,16 +186,19 @@ def sc_td() -> TacticalDeconfliction:
     return TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MON)
 
 
-def test_a_conformance_decision_does_not_undo_an_immediate_command() -> None:
+@pytest.mark.parametrize("answered", [True, False], ids=["accepted", "still-proposed"])
+def test_a_conformance_decision_does_not_undo_an_immediate_command(answered: bool) -> None:
     """A UAS told to hold is off its plan on purpose: the conformance threat that follows
-    (UAS_OUT_OV, back to plan) must not send it back into the loss it avoids."""
+    (UAS_OUT_OV, back to plan) must not send it back into the loss it avoids; nor while the
+    command is still proposed (the answer may come in the same second: a plan back accepted
+    right after it undid the command on a late encounter and created a loss)."""
     snap, threat = sc.scenario_los_2uas()
     threat = replace(threat, predicted_event_at_s=snap.t_s + 5.0)
     em = make_em()
     d = em.on_threat(threat, snap)
     cmds = [r for r in d.recommendations if r.command is not None]
     assert cmds, d
-    for r in cmds:
+    for r in cmds if answered else ():
         em.on_answer(r, True, snap)
     held = cmds[0].operation_id
     out = sc.threat(ThreatKind.UAS_OUT_OV, [held], tid="t2", event_in_s=0.0)
@@ -204,3 +209,83 @@ def test_a_conformance_decision_does_not_undo_an_immediate_command() -> None:
     # once the loss case is closed, conformance decides as usual again
     em.on_threat(replace(threat, status=ThreatStatus.CLOSED), snap)
     assert em.on_threat(replace(out, id=ThreatId("t3")), snap).audit[0].action != "deferred"
+
+
+def test_a_fixed_wing_hold_takes_the_room_it_can_reach_not_its_whole_circle_at_once() -> None:
+    """A fixed wing (22 m/s) 230 m behind a multirotor (8 m/s) on the same track, closing at
+    14 m/s: told to circle where it is, it is anywhere within two turn radii (160 m) of
+    where the command reached it, but no farther than its top speed carries it by then. The
+    multirotor flies on and away; the circle never comes within the minima, so holding the
+    fixed wing is clear. Counting the whole 160 m from the command's first instant made
+    every fixed-wing command look 42 m from a loss (ratio 0.65) and nothing clear."""
+    now = sc.T0_S + 89.0
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], speed_mps=8.0, ov_m=15.0)
+    b = sc.make_operation("B", [(-1000, 0, 100), (1000, 0, 100)], speed_mps=22.0, ov_m=25.0)
+    b = replace(b, vehicle_kind=VehicleKind.FIXED_WING, max_climb_rate_mps=5.0)
+    tracks = {
+        TrackId("A"): _track("A", 0.0, 0.0, 8.0, 0.0, now),
+        TrackId("B"): _track("B", -230.0, 0.0, 22.0, 0.0, now),
+    }
+    snap = replace(sc.snapshot([a, b], t_s=now), tracks=tracks)
+    choice = choose_commands(sc_td(), snap, [A, B], now + 2.0, now + 11.8, {A: 5, B: 1})
+    assert choice is not None and choice.clear, choice
+    assert choice.actions == {B: "hold"}
+    assert 1.0 <= choice.ratio < 1.6  # the circle's 160 m still counts once it is reached
+
+
+def _crossing(d_m: float) -> AirspaceSnapshot:
+    """A (priority 2) east and B (priority 1) north at 10 m/s, each ``d_m`` before the
+    crossing, plans timed where the tracks are."""
+    now = sc.T0_S + 89.0
+    t0 = now - (1000.0 - d_m) / 10.0
+    a = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)], priority=2, t0_s=t0)
+    b = sc.make_operation("B", [(0, -1000, 100), (0, 1000, 100)], priority=1, t0_s=t0)
+    tracks = {
+        TrackId("A"): _track("A", -d_m, 0.0, 10.0, 0.0, now),
+        TrackId("B"): _track("B", 0.0, -d_m, 0.0, 10.0, now),
+    }
+    return replace(sc.snapshot([a, b], t_s=now), tracks=tracks)
+
+
+@pytest.mark.parametrize(("event_in_s", "immediate"), [(11.0, True), (13.0, False)])
+def test_a_loss_just_beyond_the_lead_gets_the_immediate_command_when_it_keeps_the_minima(
+    event_in_s: float, immediate: bool
+) -> None:
+    """A plan decided 11 s before the event starts 7 s later (answer 2 + upload 3 + margin
+    2), 4 s before it: a re-route that starts that late was flown inside the minima. Within
+    the lead plus ``immediate_margin_s`` (5 s) EM proposes the immediate command (B, the
+    lower priority, holds) since it keeps the minima; 13 s ahead, and with no margin, the
+    plans stand as before."""
+    snap = _crossing(200.0)
+    threat = sc.threat(
+        ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], t_s=snap.t_s, event_in_s=event_in_s
+    )
+    d = make_em().on_threat(threat, snap)
+    (rec,) = d.recommendations
+    assert rec.operation_id == B
+    if immediate:
+        assert rec.command is not None and rec.command.kind is CommandKind.HOLD
+        assert d.escalations and "within a new plan's lead (7.0 s) plus 5.0 s" in d.escalations[0]
+    else:
+        assert rec.command is None and rec.selected is not None and not d.escalations
+    plans = make_em(immediate_margin_s=0.0).on_threat(threat, snap)
+    assert all(r.selected is not None for r in plans.recommendations) and not plans.escalations
+
+
+@pytest.mark.parametrize(
+    ("north_m", "radius_m"), [(-62.0, 5.0), (-45.0, 6.0)], ids=["inside", "within-its-volume"]
+)
+def test_the_command_keeps_its_uas_out_of_geofences_when_another_keeps_the_minima(
+    north_m: float, radius_m: float
+) -> None:
+    """The crossing above: B (priority 1) would stop 60 m before the crossing, inside a no-fly
+    zone of 5 m there, or 9 m from one (less than its 10 m operational volume: TD keeps its
+    plans that far from fences); A's command keeps the minima too and enters nothing, so it
+    is A's (the combinations that enter the fence say so in the audit)."""
+    snap = _tracked([(0, -1000, 100), (0, 1000, 100)], (0.0, -110.0, 0.0, 10.0), (2, 1))
+    snap = replace(snap, geofences=(sc.cylinder("G1", 0.0, north_m, radius_m),))
+    prio = {A: 2, B: 1}
+    choice = choose_commands(sc_td(), snap, [A, B], snap.t_s + 3.0, snap.t_s + 11.0, prio)
+    assert choice is not None and choice.clear
+    assert list(choice.actions) == [A]
+    assert {"commands": {"B": "hold"}, "ratio": 1.0, "geofences": ["G1"]} in choice.tried

@@ -95,7 +95,7 @@ async def test_a_vehicle_in_a_transfer_is_not_evicted_and_a_forgotten_one_comes_
         e = _enc(3)
         hub._on_chunk(link, _hb(e), ("10.0.0.3", 14550))
         st = hub.state(SysId(3))
-        async with hub._exchange(st):
+        async with hub.transfers.exchange(st):
             clock.advance(20.0)
             hub.evict_idle()
             assert hub.state(SysId(3)) is st  # busy: kept

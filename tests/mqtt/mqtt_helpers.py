@@ -23,9 +23,10 @@ from typing import Any
 
 import aiomqtt
 import pytest
+from fake_usm import AnswerBook
 
 from adapters.mqtt.acl import mosquitto_acl
-from adapters.mqtt.answers import AnswerBook, AnswerOutcome
+from adapters.mqtt.answers import AnswerOutcome
 from adapters.mqtt.codec import (
     CommandAck,
     FlightPlanSubmission,

@@ -1,100 +1,25 @@
-"""Sans-IO tests: AnswerBook rules, schema errors, queue policy."""
+"""Sans-IO tests: schema errors, queue policy."""
 
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import pytest
 from mqtt_helpers import T0
 
-from adapters.mqtt.answers import AnswerBook, AnswerStatus
 from adapters.mqtt.bridge import MqttBridge
 from adapters.mqtt.codec import MqttMessageError, Topics, decode, validate
 from adapters.mqtt.config import MqttConfig
 from gcs_utm.clock import ManualClock
-from gcs_utm.messages import HazardReport, PilotAnswer, PilotDecision
+from gcs_utm.messages import HazardReport
 from gcs_utm.model import (
-    Alternative,
-    Maneuver,
     OperationId,
-    Recommendation,
-    RecommendationId,
-    RecommendationState,
     ThreatId,
     ThreatKind,
 )
 
 T = Topics()
-REC = Recommendation(
-    id=RecommendationId("r"),
-    version=3,
-    threat_id=ThreatId("t"),
-    threat_kind=ThreatKind.INTRUDER,
-    operation_id=OperationId("op"),
-    created_t_s=0.0,
-    deadline_t_s=100.0,
-    alternatives=(
-        Alternative(
-            operation_id=OperationId("op"), maneuver=Maneuver.HOLD, plan=None, cost=0, risk=0
-        ),
-    ),
-)
-
-
-def _ans(
-    version: int,
-    decision: PilotDecision,
-    op: str = "alice",
-    t_s: float = 1.0,
-    idx: int | None = None,
-) -> PilotAnswer:
-    return PilotAnswer(
-        recommendation_id=RecommendationId("r"),
-        version=version,
-        decision=decision,
-        t_s=t_s,
-        operator=op,
-        alternative_index=idx,
-    )
-
-
-def test_answer_book_matches_exact_id_and_version() -> None:
-    book = AnswerBook()
-    book.register(replace(REC, version=2), "alice")
-    book.register(REC, "alice")  # version 3 supersedes 2
-    old = book.answer(_ans(2, PilotDecision.REJECT), 1.0)
-    assert old.status is AnswerStatus.REFUSED and "superseded" in old.reason
-    future = book.answer(_ans(4, PilotDecision.ACCEPT), 1.0)
-    assert future.status is AnswerStatus.REFUSED and "unknown version" in future.reason
-    other = book.answer(_ans(3, PilotDecision.ACCEPT, op="bob"), 1.0)
-    assert other.status is AnswerStatus.REFUSED and "bob" in other.reason
-    bad_idx = book.answer(_ans(3, PilotDecision.ACCEPT, idx=5), 1.0)
-    assert bad_idx.status is AnswerStatus.REFUSED and "out of range" in bad_idx.reason
-    ok = book.answer(_ans(3, PilotDecision.REJECT), 1.0)
-    assert ok.status is AnswerStatus.ACCEPTED and ok.state is RecommendationState.REJECTED
-    assert book.answer(_ans(3, PilotDecision.REJECT), 2.0).status is AnswerStatus.DUPLICATE
-    flip = book.answer(_ans(3, PilotDecision.ACCEPT), 2.0)
-    assert flip.status is AnswerStatus.REFUSED and "already answered: reject" in flip.reason
-    assert book.get(RecommendationId("r")).state is RecommendationState.REJECTED  # type: ignore[union-attr]
-    unknown = book.answer(replace(_ans(1, PilotDecision.ACCEPT), recommendation_id="x"), 1.0)
-    assert unknown.status is AnswerStatus.REFUSED and unknown.state is None
-
-
-def test_answer_book_deadline_is_inclusive_and_uses_the_later_time() -> None:
-    book = AnswerBook()
-    book.register(REC)
-    assert (
-        book.answer(_ans(3, PilotDecision.ACCEPT, t_s=0.0), 100.0).status is AnswerStatus.ACCEPTED
-    )
-    book2 = AnswerBook()
-    book2.register(REC)
-    # a pilot clock running behind cannot extend the deadline
-    late = book2.answer(_ans(3, PilotDecision.ACCEPT, t_s=50.0), 100.5)
-    assert late.status is AnswerStatus.REFUSED and late.state is RecommendationState.EXPIRED
-    again = book2.answer(_ans(3, PilotDecision.ACCEPT, t_s=50.0), 100.6)
-    assert again.status is AnswerStatus.REFUSED and "expired" in again.reason
 
 
 def test_schema_errors_name_the_field() -> None:

@@ -112,6 +112,33 @@ def test_takeoff_is_a_climb_out_along_the_heading_to_the_next_waypoint() -> None
     assert takeoff.alt_amsl_m == pytest.approx(705.0)
 
 
+def test_a_takeoff_with_a_position_is_a_climb_out_towards_it() -> None:
+    """PX4: NAV_TAKEOFF carries the position its runway take-off heads for (250 m north, at
+    30 m; PX4 reads it back without a pitch). Measured on PX4 v1.15.2 SIH: lift-off about
+    18 m out, 30 m reached 95-99 m out, then level to it; the straight line from home to the
+    take-off position put the climbing plane 18-28 m above its plan. The climb-out at 5 m/s
+    (FW_T_CLMB_MAX) at the minimum airspeed (0.7 x 22 m/s): 92 m."""
+    px4 = [
+        _Item(22, _north(250.0), _e7(HOME.lon_deg), HOME.alt_amsl_m + 30.0, frame=0),
+        _Item(16, _north(1000.0), _e7(HOME.lon_deg), HOME.alt_amsl_m + 30.0, frame=0, seq=1),
+    ]  # fmt: skip
+    pts = mission_points(px4, home=HOME, cruise_speed_mps=22.0, skip_first=False)
+    assert pts is not None
+    plane = fw.fixed_wing_points(
+        pts, ground_alt_m=HOME.alt_amsl_m, climb_rate_mps=3.0, descent_rate_mps=3.0,
+        loiter_radius_m=80.0, home_deg=(HOME.lat_deg, HOME.lon_deg),
+    )  # fmt: skip
+    run_m = 30.0 * 0.7 * 22.0 / 5.0
+    roll, climbed, takeoff, leg = plane
+    assert _north_m(roll) == pytest.approx(fw.ROLL_FRACTION * run_m, abs=1.0)
+    assert roll.alt_amsl_m == pytest.approx(HOME.alt_amsl_m)
+    assert _north_m(climbed) == pytest.approx(run_m, abs=1.0)
+    assert climbed.alt_amsl_m == pytest.approx(HOME.alt_amsl_m + 30.0)
+    assert not roll.explicit and not climbed.explicit  # modelled: never compared
+    assert _north_m(takeoff) == pytest.approx(250.0, abs=0.5) and takeoff.explicit
+    assert _north_m(leg) == pytest.approx(1000.0, abs=0.5)
+
+
 def test_loiter_to_alt_is_a_climbing_circle_and_landing_is_flagged() -> None:
     plane = _points()
     circle = [p for p in plane if p.command == 31]
@@ -209,7 +236,7 @@ async def test_a_plane_on_the_ground_is_filed_with_its_climb_out() -> None:
     assert _north_m(first) == pytest.approx(0.0, abs=0.5) and first.t_s == 1000.0
     assert climb.alt_amsl_m == pytest.approx(HOME.alt_amsl_m + 30.0)
     assert _north_m(climb) == pytest.approx(112.0, abs=1.0)
-    # without a pitch in the item: at the climb rate (3 m/s) and the speed
+    # without a pitch in the item: at the maximum climb rate (5 m/s) and the minimum speed
     no_pitch = _mission()
     no_pitch[1] = _Item(22, z=30.0, seq=1)
     pts = mission_points(no_pitch, home=HOME, cruise_speed_mps=15.0, skip_first=True)
@@ -218,7 +245,7 @@ async def test_a_plane_on_the_ground_is_filed_with_its_climb_out() -> None:
         pts, ground_alt_m=HOME.alt_amsl_m, climb_rate_mps=3.0, descent_rate_mps=3.0,
         loiter_radius_m=80.0,
     )  # fmt: skip
-    assert _north_m(out[1]) == pytest.approx(150.0, abs=1.0)
+    assert _north_m(out[1]) == pytest.approx(30.0 * 0.7 * 15.0 / 5.0, abs=1.0)
 
 
 def test_a_plane_retimed_at_a_new_item_turns_round_the_waypoint_it_reached() -> None:

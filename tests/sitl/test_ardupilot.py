@@ -77,6 +77,6 @@ def test_plane_mode_numbers() -> None:
     v = Vehicle(
         sitl.VehicleSpec(instance=0, autopilot="ardupilot", kind="fixed_wing"), sitl.SimTime()
     )
-    assert v._set_mode_numbers(1, 11) == 0 and v.mode == "RTL" and PLANE_MODES["RTL"] == 11
-    assert v._custom_mode()[1] == 11
-    assert v._set_mode_numbers(1, 99) == mav.MAV_RESULT_UNSUPPORTED
+    assert v.commands.set_mode_numbers(1, 11) == 0 and v.mode == "RTL" and PLANE_MODES["RTL"] == 11
+    assert v.telemetry.custom_mode()[1] == 11
+    assert v.commands.set_mode_numbers(1, 99) == mav.MAV_RESULT_UNSUPPORTED

@@ -61,7 +61,7 @@ def test_ardupilot_restart_on_a_do_item_fails_until_set_current() -> None:
     v = make(autopilot="ardupilot", home_lat_deg=HOME[0], home_lon_deg=HOME[1])
     v.accept_mission([wp(0, 0.0, 488.0), wp(1, 0.001, 500.0), wp(2, 0.002, 500.0)], None)
     assert v.arm(force=True) == 0
-    v._enter_mode("MISSION")
+    v.flight.enter_mode("MISSION")
     t = 0.0
     while v.mission_current_seq < 2 and t < 120.0:
         t += 0.5
@@ -88,20 +88,20 @@ def test_ardupilot_restart_on_a_do_item_fails_until_set_current() -> None:
 
 def test_ardupilot_copter_modes_brake_holds_loiter_descends() -> None:
     v = make(autopilot="ardupilot")
-    assert v._custom_mode()[1] == 0  # boots in STABILIZE
+    assert v.telemetry.custom_mode()[1] == 0  # boots in STABILIZE
     assert v.arm(force=True) == 0
-    assert v._request_mode("TAKEOFF") == 0
+    assert v.commands.request_mode("TAKEOFF") == 0
     t = 0.0
     while v.alt_amsl_m < v.ground_alt_m + 9.0 and t < 60.0:
         t += 0.5
         v.advance(t)
-    assert v._set_mode_numbers(1, 17) == 0 and v._custom_mode()[1] == 17  # BRAKE
+    assert v.commands.set_mode_numbers(1, 17) == 0 and v.telemetry.custom_mode()[1] == 17  # BRAKE
     a0 = v.alt_amsl_m
     for _ in range(20):
         t += 0.5
         v.advance(t)
     assert abs(v.alt_amsl_m - a0) < 0.5
-    assert v._set_mode_numbers(1, 5) == 0 and v._custom_mode()[1] == 5  # LOITER
+    assert v.commands.set_mode_numbers(1, 5) == 0 and v.telemetry.custom_mode()[1] == 5  # LOITER
     for _ in range(20):
         t += 0.5
         v.advance(t)
@@ -111,12 +111,12 @@ def test_ardupilot_copter_modes_brake_holds_loiter_descends() -> None:
 def test_land_start_fails_without_a_landing_sequence() -> None:
     v = make(autopilot="ardupilot", kind="fixed_wing")
     v.accept_mission([wp(0, 0.0, 488.0), wp(1, 0.01, 550.0)], None)
-    assert v._cmd_land_start(None, None, [0.0] * 7) == 4  # type: ignore[arg-type]
+    assert v.commands._cmd_land_start(None, None, [0.0] * 7) == 4  # type: ignore[arg-type]
     assert any("Unable to start landing" in s for _, _, s in v.statustexts)
-    assert v._cmd_land(None, None, [0.0] * 7) == 3  # type: ignore[arg-type]
+    assert v.commands._cmd_land(None, None, [0.0] * 7) == 3  # type: ignore[arg-type]
     land_start = mp.RawItem(2, mp.FRAME_MISSION, mp.CMD_LAND_START, 0, 1, 0, 0, 0, 0, 0, 0, 0)
     v.accept_mission([wp(0, 0.0, 488.0), wp(1, 0.01, 550.0), land_start], None)
-    assert v._cmd_land_start(None, None, [0.0] * 7) == 0  # type: ignore[arg-type]
+    assert v.commands._cmd_land_start(None, None, [0.0] * 7) == 0  # type: ignore[arg-type]
     assert v.mode == "MISSION" and v.mission_current_seq == 2
 
 
@@ -156,7 +156,7 @@ def test_arduplane_refuses_to_arm_with_do_land_start_unless_rtl_autoland() -> No
         assert (v.arm() == 4) is refused, (autopilot, kind)
         if refused:
             assert any("RTL_AUTOLAND disabled" in s for _, _, s in v.statustexts)
-            v._params["RTL_AUTOLAND"] = 2.0
+            v.flight.params["RTL_AUTOLAND"] = 2.0
             assert v.arm() == 0
 
 

@@ -44,7 +44,7 @@ def test_multirotor_flies_mission_then_rtl_and_lands() -> None:
     assert v.mission_current_seq == 2
     # the DO_CHANGE_SPEED(4 m/s) item governed the last leg
     assert v.k.airspeed_mps < 4.5
-    assert v._request_mode("RTL") == 0
+    assert v.commands.request_mode("RTL") == 0
     t = run(v, 200.0, t)
     assert v.landed and not v.armed and dist_m(v, HOME[0], HOME[1]) < 1.5
     assert v.position_history and v.position_history[-1][0] > 1_700_000_000.0
@@ -53,11 +53,11 @@ def test_multirotor_flies_mission_then_rtl_and_lands() -> None:
 def test_takeoff_hold_land_and_fixed_wing_loiter() -> None:
     v = make()
     assert v.arm() == 0
-    v._takeoff_alt = HOME[2] + 15.0
-    assert v._request_mode("TAKEOFF") == 0
+    v.flight.takeoff_alt_m = HOME[2] + 15.0
+    assert v.commands.request_mode("TAKEOFF") == 0
     t = run(v, 15.0)
     assert v.mode == "HOLD" and abs(v.alt_amsl_m - 503.0) < 1.0
-    assert v._request_mode("LAND") == 0
+    assert v.commands.request_mode("LAND") == 0
     run(v, 40.0, t)
     assert v.landed and not v.armed
 
@@ -71,7 +71,7 @@ def test_takeoff_hold_land_and_fixed_wing_loiter() -> None:
         fw.advance(t)
         speeds.append(math.hypot(fw.k.vn_mps, fw.k.ve_mps))
     assert min(speeds) >= 11.0
-    n, e = fw._goal_ne
+    n, e = fw.flight.goal_ne
     assert math.hypot(fw.k.north_m - n, fw.k.east_m - e) < 2.5 * fw.lim.loiter_radius_m
 
 
@@ -82,15 +82,15 @@ def test_gnss_jamming_degrades_fix_and_drifts() -> None:
         )
     )
     run(v, 1.0)
-    assert v._gps_fix_type() == 3
+    assert v.faults.gps_fix_type() == 3
     t = run(v, 20.0, 1.0)
-    assert v._gps_fix_type() < 3 and v._health() & 32 == 0
+    assert v.faults.gps_fix_type() < 3 and v.telemetry.health() & 32 == 0
     lat, _, _ = v.reported_position()
     assert abs(lat - v.lat_deg) * 111_000 > 10.0
     assert any("jamming" in s for _, _, s in v.statustexts)
     assert v.arm() != 0  # no arming without a 3D fix
     run(v, 40.0, t)
-    assert v._gps_fix_type() == 3 and any("recovered" in s for _, _, s in v.statustexts)
+    assert v.faults.gps_fix_type() == 3 and any("recovered" in s for _, _, s in v.statustexts)
 
 
 def test_jamming_drift_advances_per_simulated_second_not_per_message() -> None:
@@ -99,7 +99,7 @@ def test_jamming_drift_advances_per_simulated_second_not_per_message() -> None:
     rate_mps = 1.0  # the default
     v = make(faults=(sitl.FaultSpec(kind=sitl.FaultKind.GNSS_JAMMING, at_s=0.0),))
     run(v, 12.0)  # jamming level 1 after 9 s
-    before = v._jam_offset
+    before = v.faults.jam_offset
     sent: list[str] = []
 
     class _Sink:
@@ -107,14 +107,14 @@ def test_jamming_drift_advances_per_simulated_second_not_per_message() -> None:
             sent.append(name)
 
     for _ in range(250):  # many reports, no simulated time
-        v._send_stream(_Sink(), "GPS_RAW_INT")  # type: ignore[arg-type]
-        v._send_stream(_Sink(), "GLOBAL_POSITION_INT")  # type: ignore[arg-type]
-    assert len(sent) == 500 and v._jam_offset == before
+        v.telemetry.send_stream(_Sink(), "GPS_RAW_INT")  # type: ignore[arg-type]
+        v.telemetry.send_stream(_Sink(), "GLOBAL_POSITION_INT")  # type: ignore[arg-type]
+    assert len(sent) == 500 and v.faults.jam_offset == before
     t, t_end = 12.0, 32.0
     while t < t_end:  # 20 simulated seconds in physics steps
         t += 0.05
         v.advance(t)
-    moved_m = math.hypot(v._jam_offset[0] - before[0], v._jam_offset[1] - before[1])
+    moved_m = math.hypot(v.faults.jam_offset[0] - before[0], v.faults.jam_offset[1] - before[1])
     # the path is rate * 20 s; the straight-line displacement a little less (direction wanders)
     assert 0.85 * rate_mps * 20.0 < moved_m <= rate_mps * 20.0 + 1e-6
 
@@ -136,8 +136,8 @@ def test_spoofing_battery_and_motor_failure() -> None:
     t = run(m, 10.0)
     m.inject_fault(sitl.FaultKind.MOTOR_FAILURE)
     assert m.mode == "LAND" and m.motor_failed
-    assert m._request_mode("MISSION") != 0
-    assert m._health() & 32768 == 0
+    assert m.commands.request_mode("MISSION") != 0
+    assert m.telemetry.health() & 32768 == 0
     run(m, 40.0, t)
     assert m.landed
 
@@ -145,10 +145,10 @@ def test_spoofing_battery_and_motor_failure() -> None:
 def test_link_faults_drop_and_count() -> None:
     v = make(faults=(sitl.FaultSpec(kind=sitl.FaultKind.LINK_LOSS, at_s=0.0, duration_s=5.0),))
     v.advance(1.0)
-    assert v._link_loss
+    assert v.faults.link_loss
     v.advance(6.0)
-    assert not v._link_loss
+    assert not v.faults.link_loss
     v.inject_fault(sitl.FaultKind.PACKET_LOSS, value=0.5, duration_s=2.0)
-    assert v._packet_loss == 0.5
+    assert v.faults.packet_loss == 0.5
     v.advance(9.0)
-    assert v._packet_loss == 0.0
+    assert v.faults.packet_loss == 0.0

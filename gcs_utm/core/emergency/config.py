@@ -109,6 +109,15 @@ class EmergencyConfig:
         min=0.0,
         unit="s",
     )
+    immediate_margin_s: float = setting(
+        5.0,
+        "a loss predicted less than a new plan's lead (answer, upload, start_margin_s) plus "
+        "this far ahead gets the immediate command (hold, climb or descend in place) instead "
+        "of new plans whenever that command keeps the minima: a plan that starts just before "
+        "the event leaves no room for the vehicles' tracking error",
+        min=0.0,
+        unit="s",
+    )
     supervision_grace_s: float = setting(
         10.0,
         "a threat still open this long after its accepted plan started (and was uploaded) "
@@ -126,6 +135,15 @@ class EmergencyConfig:
         30.0,
         "a persisting threat whose handling ended in escalation is re-planned this often",
         min=1.0,
+        unit="s",
+    )
+    escalation_window_s: float = setting(
+        120.0,
+        "an escalation that repeats an earlier one (the same UAS, cause and proposed command; "
+        "threat ids and numbers aside) within this long after it is not raised again: it "
+        "updates the earlier one (a warning and an escalation_updated audit entry). 0: every "
+        "escalation is raised",
+        min=0.0,
         unit="s",
     )
     expiry_action: str = setting(

@@ -32,7 +32,7 @@ def fly_on(best: Choice, none_ratio: float) -> Choice:
     if best.clear or best.ratio >= none_ratio:
         return best
     tried = [*best.tried, {"commands": FLY_ON, "ratio": round(none_ratio, 3)}]
-    return replace(best, commands={}, actions={}, ratio=none_ratio, tried=tried)
+    return replace(best, commands={}, actions={}, ratio=none_ratio, tried=tried, geofences=())
 
 
 def flying_on(em: EmergencyManager, case: Case, now: float, why: str, choice: Choice) -> Decision:

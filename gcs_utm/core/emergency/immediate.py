@@ -5,7 +5,9 @@ answer and its acknowledgement. EM proposes a command (through the same pilot pr
 every recommendation, with an escalation that names it) instead of plans when:
 
 - the predicted event is nearer than the time a new plan needs to start (a UAS that appears
-  from nowhere, a conflict detected late): plans would start inside the loss;
+  from nowhere, a conflict detected late): plans would start inside the loss; or nearer than
+  that plus ``emergency.immediate_margin_s`` and the command keeps the minima
+  (:func:`late_reason`): a plan would start just before the event;
 - no combination of plans resolves the conflict;
 - every plan keeps separation while the tracks predict the loss, even re-timed from the
   vehicles' progress (the snapshot EM decides on holds the plans as flown,
@@ -22,13 +24,15 @@ stops, the vertical minimum plus a margin higher or lower, within the altitude b
 above the safety floor). Each UAS of the threat gets none or one of them; every combination
 is flown forward on a 0.5 s grid: a commanded UAS at its track's velocity up to the command
 time, then braking at :data:`BRAKE_MPS2` to a stop (a fixed wing: anywhere within two turn
-radii of where it was commanded) while climbing or descending at its rates; every other UAS
-on its predicted path (the snapshot's prediction row of its track, else its velocity, else
-its plan). The combination is kept that
+radii of where it was commanded, and within its top speed's reach of there) while climbing
+or descending at its rates; every other UAS on its predicted path (the snapshot's
+prediction row of its track, else its velocity, else its plan). The combination is kept that
 keeps TD's minima (effective minima plus tracking tolerances) from the other UAS of the
 threat and from all other traffic with the fewest commanded UAS, then the lowest priorities,
-then the largest separation; when none keeps them, the one with the largest separation. The
-audit lists every combination with its separation ratio.
+then the largest separation; when none keeps them, the one with the largest separation.
+Either way a combination that takes no UAS into a geofence (:mod:`.command_fences`) comes
+before one that does. The audit lists every combination with its separation ratio (and the
+geofences it enters).
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
+from gcs_utm.core.emergency.command_fences import fence_entered
 from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.emergency.fly_on import fly_on, flying_on
 from gcs_utm.core.emergency.supervision import escalate_safe
@@ -88,7 +93,7 @@ class _Move:
     op_id: OperationId
     action: str
     xyz: FloatArray
-    slack_m: float
+    slack_m: FloatArray
     command: Command
 
 
@@ -160,10 +165,15 @@ def _moves(
         tb = np.minimum(tau, t_stop)
         run = speed * tb - 0.5 * BRAKE_MPS2 * tb * tb
         stop_xy = p0[:2] + v / speed * run[:, None]
-        slack = 0.0
+        slack = np.zeros_like(grid)
     else:
         stop_xy = np.repeat(p0[None, :2], grid.shape[0], axis=0)
-        slack = 0.0 if env.can_hover else 2.0 * env.turn_radius_m
+        # A fixed wing circles somewhere within two turn radii of where it was commanded,
+        # and it cannot be farther from there than its top speed carries it: the room grows
+        # from nothing at the command (a constant 2 r from the command on hid the separation
+        # a climb or descent builds up while it is still far away).
+        reach = env.max_speed_mps * tau
+        slack = np.zeros_like(grid) if env.can_hover else np.minimum(reach, 2 * env.turn_radius_m)
     lo, hi = td.alt_limits(op)
     out = []
     for action, target_z, rate in (
@@ -191,8 +201,8 @@ def _moves(
     return out
 
 
-_Flown = tuple[Operation, FloatArray, float]
-"""A UAS, its positions on the grid and the horizontal room its hold takes."""
+_Flown = tuple[Operation, FloatArray, FloatArray | float]
+"""A UAS, its positions on the grid and the horizontal room its hold takes (per grid time)."""
 
 
 def _ratio(td: TacticalDeconfliction, fa: _Flown, fb: _Flown) -> float:
@@ -211,6 +221,8 @@ class Choice:
     ratio: float
     clear: bool
     tried: list[dict[str, object]]
+    geofences: tuple[str, ...] = ()
+    """The geofences the chosen commands take their UAS into (see .command_fences)."""
 
 
 def choose_commands(  # noqa: PLR0917 - one call site
@@ -245,6 +257,12 @@ def choose_commands(  # noqa: PLR0917 - one call site
         options.append(
             [None, *_moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)]
         )
+    fenced = {
+        id(m): fence_entered(td, snapshot, m.op_id, m.xyz, m.slack_m, grid, t_cmd)
+        for opts in options
+        for m in opts
+        if m is not None
+    }
     best: tuple[tuple[float, ...], Choice] | None = None
     tried: list[dict[str, object]] = []
     for combo in itertools.product(*options):
@@ -253,16 +271,31 @@ def choose_commands(  # noqa: PLR0917 - one call site
             continue
         ratio = _combo_ratio(td, cands, others, combo, paths)
         clear = ratio >= 1.0
-        prio = sum(priority_of.get(m.op_id, 0) for m in moves)
-        key = (0.0, len(moves), prio, -ratio) if clear else (1.0, -ratio, len(moves), prio)
+        fences = sorted({fenced[id(m)] for m in moves} - {""})
+        key = _rank(ratio, bool(fences), moves, priority_of)
         actions = {m.op_id: m.action for m in moves}
-        tried.append(
-            {"commands": {str(k): v for k, v in actions.items()}, "ratio": round(ratio, 3)}
-        )
+        record: dict[str, object] = {"commands": {str(k): v for k, v in actions.items()}}
+        record["ratio"] = round(ratio, 3)
+        if fences:
+            record["geofences"] = fences
+        tried.append(record)
         if best is None or key < best[0]:
             cmds = {m.op_id: m.command for m in moves}
-            best = (key, Choice(cmds, actions, ratio, clear, tried))
+            best = (key, Choice(cmds, actions, ratio, clear, tried, tuple(fences)))
     return None if best is None else fly_on(best[1], _combo_ratio(td, cands, others, [], paths))
+
+
+def _rank(
+    ratio: float, fenced: bool, moves: list[_Move], priority_of: dict[OperationId, int]
+) -> tuple[float, ...]:
+    """Order of combinations: those that keep the minima first, then those that take no UAS
+    into a geofence; among the first, the fewest commanded UAS, the lowest priorities, the
+    largest separation; among the others, the largest separation."""
+    prio = float(sum(priority_of.get(m.op_id, 0) for m in moves))
+    fence = 1.0 if fenced else 0.0
+    if ratio >= 1.0:
+        return (0.0, fence, float(len(moves)), prio, -ratio)
+    return (1.0, fence, -ratio, float(len(moves)), prio)
 
 
 def _combo_ratio(
@@ -276,7 +309,9 @@ def _combo_ratio(
     each of them to all other traffic."""
     combo = list(combo) or [None] * len(cands)  # none: every UAS flies on
     xyz = {c.id: (paths[c.id] if m is None else m.xyz) for c, m in zip(cands, combo, strict=True)}
-    slack = {c.id: (0.0 if m is None else m.slack_m) for c, m in zip(cands, combo, strict=True)}
+    slack: dict[OperationId, FloatArray | float] = {
+        c.id: (0.0 if m is None else m.slack_m) for c, m in zip(cands, combo, strict=True)
+    }
     worst = np.inf
     for i, a in enumerate(cands):
         for b in cands[i + 1 :]:
@@ -309,6 +344,35 @@ def too_late(em: EmergencyManager, threat: Threat, now: float) -> str:
     return (
         f"{threat.id}: loss predicted in {event - now:.1f} s, sooner than a new plan can "
         f"start ({lead_s:.1f} s: answer, upload, margin)"
+    )
+
+
+def late_reason(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> str:
+    """Why the loss of ``case`` gets the immediate command now rather than new plans ("" when
+    plans are tried): the event is nearer than a new plan's lead (:func:`too_late`), or
+    nearer than the lead plus ``emergency.immediate_margin_s`` and the immediate command
+    keeps the minima without taking a UAS into a geofence. A plan that starts just before
+    the event leaves no room for the vehicles' tracking error: on generated late encounters
+    plans starting 1-3 s before the event were flown 0.5-1.6 m inside the minima."""
+    t = case.threat
+    now = snapshot.t_s
+    late = too_late(em, t, now)
+    event = t.predicted_event_at_s
+    if late or event is None:
+        return late
+    lead_s = em.plan_start(t, now) - now
+    margin_s = em.config.immediate_margin_s
+    if event - now >= lead_s + margin_s:
+        return ""
+    ops = snapshot.operations
+    ids = list(t.uas_ids)
+    prio = {k: ops[k].priority for k in ids if k in ops}
+    choice = choose_commands(em.td, snapshot, ids, em.lead.command_at(ids, now), event, prio)
+    if choice is None or not choice.clear or choice.geofences:
+        return ""  # the plans (kept off geofences by TD) are tried
+    return (
+        f"{t.id}: loss predicted in {event - now:.1f} s, within a new plan's lead "
+        f"({lead_s:.1f} s) plus {margin_s:.1f} s"
     )
 
 
@@ -386,14 +450,16 @@ def propose(
 
 def held_by(em: EmergencyManager, op_id: OperationId, other: Case) -> str:
     """The loss-of-separation case (other than ``other``) whose immediate command for
-    ``op_id`` is accepted or applied ("" when none): the UAS is off its plan on purpose, and
-    a conformance decision must not send it back into the loss (back to plan)."""
+    ``op_id`` is proposed, accepted or applied ("" when none): the UAS is off its plan on
+    purpose (or about to be: the pilot's answer may come in the same second, and the plan
+    back would undo the command), and a conformance decision must not send it back into the
+    loss (back to plan)."""
     for tid in em.open_threats():
         case = em.case(tid)
         if case is None or case is other or case.threat.kind is not ThreatKind.LOSS_OF_SEPARATION:
             continue
         rec = em.recommendation(RecommendationId(f"{tid}/{op_id}"))
-        if rec is not None and rec.command is not None and rec.state in _LIVE[1:]:
+        if rec is not None and rec.command is not None and rec.state in _LIVE:
             return str(tid)
     return ""
 

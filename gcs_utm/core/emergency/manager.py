@@ -32,7 +32,7 @@ from gcs_utm.core.emergency.decision import (
 )
 from gcs_utm.core.emergency.expiry import expire
 from gcs_utm.core.emergency.geofences import area, link_loss, suspend
-from gcs_utm.core.emergency.immediate import held_by, keep_all, propose, too_late
+from gcs_utm.core.emergency.immediate import held_by, keep_all, late_reason, propose
 from gcs_utm.core.emergency.lead import ResponseTimes
 from gcs_utm.core.emergency.selection import (
     STAY_DETAIL,
@@ -441,7 +441,7 @@ class EmergencyManager:
         case.operations = dict(snapshot.operations)
         now = snapshot.t_s
         t = case.threat
-        late = too_late(self, t, now)  # with plans of the case in force: only if they change
+        late = late_reason(self, case, snapshot)  # with plans in force: only if they change
         if late and not self._in_force(case):
             return propose(self, case, snapshot, late, t.uas_ids)
         options, tiered, compatible = self._joint(case, snapshot, buffered=True)

@@ -39,6 +39,7 @@ from gcs_utm.core.monitoring.checks import (
 )
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.fences import LocalFence, localise
+from gcs_utm.core.monitoring.fixed_wing_band import band_distance, band_parameters
 from gcs_utm.core.monitoring.geometry import FloatArray, Windows, window_extents
 from gcs_utm.core.monitoring.separation import detect_los, detect_pairs_between, window_steps
 from gcs_utm.core.monitoring.strategic import plan_local
@@ -66,6 +67,7 @@ BoolArray = npt.NDArray[np.bool_]
 # flight geometry m, operational volume m, plan start s, plan end s, slowest and fastest
 # progress along the plan (along_track.py); per operation
 _Limits = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+_Band = tuple[FloatArray, FloatArray, FloatArray]
 
 
 @dataclass(slots=True)
@@ -133,7 +135,9 @@ class Monitor:
         self._fence_cache: dict[GeofenceId, tuple[Geofence, LocalFence]] = {}
         self._plan_cache: dict[OperationId, tuple[FlightPlan, FloatArray]] = {}
         # Operations (frozen objects) of the last conformance table, the table, the anchors.
-        self._conf_cache: tuple[list[Operation], PlanTable, FloatArray, _Limits] | None = None
+        self._conf_cache: tuple[list[Operation], PlanTable, FloatArray, _Limits, _Band] | None = (
+            None
+        )
 
     # ---- public -------------------------------------------------------------------------
     def active(self) -> list[Threat]:
@@ -350,12 +354,14 @@ class Monitor:
         fresh_ids = [cols.operation_ids[i] for i in rows.tolist()]
         ev.fresh_parts.append(fresh_ids)
         ops = [snapshot.operations[o] for o in fresh_ids]
-        table, anchors, (fg, ovol, start, end, slow, fast) = self._conformance_table(ops)
+        table, anchors, (fg, ovol, start, end, slow, fast), band = self._conformance_table(ops)
         pos = cols.pos[rows]  # m
         ts = cols.t_s[rows]  # s
         # a fixed wing flying its own cruise is re-timed along its track (along_track.py)
         window = plan_time_window(ts, start, slow, fast, cfg.conformance_time_tolerance_s)
         dist = plan_distance(table, pos, ts, cfg.conformance_time_tolerance_s, window)  # m
+        # ...and flies its turns on its radius and its climbs first (fixed_wing_band.py)
+        dist = np.minimum(dist, band_distance(table, pos, window, band))
         gated = np.zeros(len(ops), bool)
         if cfg.gate_takeoff_landing:
             # Near the first or last waypoint or home (NaN when none), horizontally within
@@ -382,16 +388,19 @@ class Monitor:
                 message=f"{d:.1f} m from plan",
             )
 
-    def _conformance_table(self, ops: list[Operation]) -> tuple[PlanTable, FloatArray, _Limits]:
-        """Packed local plans, the take-off/landing anchors (N, 3, 3) and the limits of these
-        operations, rebuilt only when an operation object changed (cached)."""
+    def _conformance_table(
+        self, ops: list[Operation]
+    ) -> tuple[PlanTable, FloatArray, _Limits, _Band]:
+        """Packed local plans, the take-off/landing anchors (N, 3, 3), the limits and the
+        fixed-wing band parameters of these operations, rebuilt only when an operation object
+        changed (cached)."""
         prev = self._conf_cache
         if (
             prev is not None
             and len(prev[0]) == len(ops)
             and all(a is b for a, b in zip(prev[0], ops, strict=True))
         ):
-            return prev[1], prev[2], prev[3]
+            return prev[1], prev[2], prev[3], prev[4]
         plans = [self._plan(o) for o in ops]
         anchors = np.full((len(ops), 3, 3), np.nan)
         for k, (o, p) in enumerate(zip(ops, plans, strict=True)):
@@ -408,8 +417,9 @@ class Monitor:
             np.array([o.plan.end_t_s for o in ops]),  # s
             *progress_ratios(ops),
         )
-        self._conf_cache = (ops, table, anchors, limits)
-        return table, anchors, limits
+        band = band_parameters(ops)
+        self._conf_cache = (ops, table, anchors, limits, band)
+        return table, anchors, limits, band
 
     # ---- life cycle ---------------------------------------------------------------------
     def _fresh(self, key: Key, ev: _Evaluation) -> bool:
