@@ -233,6 +233,7 @@ def choose_commands(  # noqa: PLR0917 - one call site
         o
         for k, o in ops.items()
         if k not in {c.id for c in cands}
+        and k not in snapshot.grounded  # a vehicle on the ground is not traffic
         and (track_xyz(td, o, snapshot) is not None or o.plan.start_t_s <= now <= o.plan.end_t_s)
     ]
     paths = {o.id: _at(predicted_path(td, o, snapshot, until), grid) for o in cands + others}
