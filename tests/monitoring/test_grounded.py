@@ -68,9 +68,7 @@ def _crossing(t_s: float) -> AirspaceSnapshot:
         points=np.array(rows),
         sigma_m=np.ones((2, STEPS)),
     )
-    return AirspaceSnapshot(
-        t_s=t_s, operations=ops, tracks=tracks, geofences=(), prediction=pred
-    )
+    return AirspaceSnapshot(t_s=t_s, operations=ops, tracks=tracks, geofences=(), prediction=pred)
 
 
 def _los(threats: list) -> list:  # type: ignore[type-arg]
