@@ -577,6 +577,7 @@ class Maneuver(Enum):
     HOLD = "hold"
     LAND = "land"
     VERTICAL_AVOIDANCE = "vertical_avoidance"
+    MOVE_END = "move_end"  # a new end point away from traffic (core/emergency/endpoint.py)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -44,8 +44,11 @@ def test_a_finished_fixed_wing_loitering_beside_a_geofence_is_left_alone(
     # The loiter circle is clear of the fence: no conflict, no reroute of a finished plan.
     geo = [t["uas"] for t in report["threats"] if t["kind"] == "GEOFENCE_CONFLICT"]
     assert geo == [], geo
+    # (a new end point away from UAS1 hovering beside its circle is a separation decision,
+    # docs/emergency.md "Moving an end point away from traffic")
     uas3 = next(o for o in report["operations"] if o["id"] == "UAS3")
-    assert [p["reason"] for p in uas3["plans"]] == ["filed"]
+    reasons = [p["reason"] for p in uas3["plans"]]
+    assert reasons[0] == "filed" and not [r for r in reasons if "GEOFENCE" in r], reasons
 
 
 def test_no_predicted_loss_is_flown(run: tuple[EvalSummary, Path]) -> None:

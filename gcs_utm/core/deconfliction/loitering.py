@@ -188,11 +188,12 @@ def traffic(
 ) -> list[Operation]:
     """The operations other than ``exclude`` that are traffic at the snapshot: airborne ones
     (whatever their plan and state: :func:`after_plan` up to ``until_t_s``), loitering fixed
-    wings with their circle, and active ones whose plan has not ended."""
+    wings with their circle, and active ones whose plan has not ended; never one on the
+    ground (``snapshot.grounded``)."""
     out = []
     for op in snapshot.operations.values():
-        if op.id in exclude:
-            continue
+        if op.id in exclude or op.id in snapshot.grounded:
+            continue  # (a vehicle on the ground is not traffic, whatever its plan says)
         if op.id in snapshot.airborne:
             plan = after_plan(op, snapshot, frame, until_t_s)
             out.append(op if plan is op.plan else replace(op, plan=plan))

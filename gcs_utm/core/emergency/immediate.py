@@ -47,6 +47,7 @@ import numpy as np
 from gcs_utm.core.deconfliction.geometry import LocalPlan
 from gcs_utm.core.emergency.command_fences import fence_entered
 from gcs_utm.core.emergency.decision import Case, Decision
+from gcs_utm.core.emergency.endpoint import move_end
 from gcs_utm.core.emergency.fly_on import fly_on, flying_on
 from gcs_utm.core.emergency.supervision import escalate_safe
 from gcs_utm.core.monitoring.loss import separation_ratio
@@ -246,6 +247,7 @@ def choose_commands(  # noqa: PLR0917 - one call site
         o
         for k, o in ops.items()
         if k not in {c.id for c in cands}
+        and k not in snapshot.grounded  # a vehicle on the ground is not traffic
         and (track_xyz(td, o, snapshot) is not None or o.plan.start_t_s <= now <= o.plan.end_t_s)
     ]
     paths = {o.id: _at(predicted_path(td, o, snapshot, until), grid) for o in cands + others}
@@ -387,6 +389,9 @@ def keep_all(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> De
     case) and, once the event is within the lead plus :data:`IMMINENT_S`, propose the
     immediate command for the UAS whose track is off its plan (all of the threat's when
     none is); until then the case is decided again at that time."""
+    moved = move_end(em, case, snapshot)  # two UAS waiting after their plans: not a command
+    if moved is not None:
+        return moved
     t = case.threat
     now = snapshot.t_s
     off = [k for k in t.uas_ids if k in off_plan(em.td, snapshot)]
@@ -422,6 +427,9 @@ def propose(
     ops = snapshot.operations
     if not choose:
         return escalate_safe(em, case, list(candidates), now, why)
+    moved = None if too_late(em, t, now) else move_end(em, case, snapshot)
+    if moved is not None:  # two UAS waiting after their plans: a new end point, in time
+        return moved
     choice = choose_commands(
         em.td,
         snapshot,

@@ -39,6 +39,7 @@ _ACTIONS: dict[Maneuver, str] = {
     Maneuver.HOLD: "Hold at the current position",
     Maneuver.LAND: "Land now",
     Maneuver.VERTICAL_AVOIDANCE: "Climb or descend away from the intruder, up to {m}",
+    Maneuver.MOVE_END: "Move the end point {m} away from traffic and wait there",
 }
 
 _COMMANDS: dict[CommandKind, str] = {

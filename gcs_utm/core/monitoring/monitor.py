@@ -16,7 +16,11 @@ Hysteresis: a condition opens after ``open_cycles`` consecutive fresh cycles; an
 closes only after ``close_cycles`` consecutive fresh cycles in which it is clear by a margin.
 Stale or missing data (stale track, row absent from the prediction, no prediction) changes
 nothing: silence is not evidence. An operation that is LANDED/ENDED or gone from the snapshot
-closes its threats (the plan is over). UPDATED is emitted when the kind, the predicted event
+closes its threats (the plan is over). A vehicle on the ground by its own messages
+(``AirspaceSnapshot.grounded``: disarmed, or armed and landed) is not traffic: its track is
+no evidence of any condition (its filed plan, whose start time may have passed, is not
+predicted as if it flew) and its threats close at once; once it takes off it is checked
+like any other. UPDATED is emitted when the kind, the predicted event
 time (by more than one period) or the closest distance (by more than the separation margin)
 changes; ``active()`` always holds the latest figures.
 """
@@ -188,8 +192,10 @@ class Monitor:
         ops = snapshot.operations
         cols = track_columns(snapshot.tracks, self.frame)
         op_ids = cols.operation_ids
-        # Rows of cooperative tracks whose operation is in the snapshot (evidence about it).
-        known = np.fromiter((o in ops for o in op_ids), bool, len(op_ids))
+        # Rows of cooperative tracks whose operation is in the snapshot (evidence about it),
+        # less the vehicles on the ground: not traffic, whatever their filed plan says.
+        ground = snapshot.grounded
+        known = np.fromiter((o in ops and o not in ground for o in op_ids), bool, len(op_ids))
         usable = known & cols.cooperative
         fresh = np.flatnonzero(usable & ~cols.stale)
         self._conformance(snapshot, cols, fresh, ev)
@@ -480,6 +486,7 @@ class Monitor:
             ended = any(
                 (o := snapshot.operations.get(OperationId(u))) is None
                 or o.state in (OperationState.LANDED, OperationState.ENDED)
+                or o.id in snapshot.grounded  # on the ground: not traffic, nothing flown
                 for u in self._op_ids(key)
             ) or (key[0] == "INTR" and key[2] not in snapshot.tracks)  # the intruder is gone
             if not ended and (key in ev.marginal or not self._fresh(key, ev)):
