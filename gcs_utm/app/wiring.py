@@ -283,16 +283,11 @@ def build_runtime(
     hub = MavlinkHub(settings.mavlink, clock, usm)
     usm.attach_vehicles(hub if policy is None else FencedVehicles(hub, policy.may_act))
 
-    def rid_identity(rec: RidAircraft, text: str) -> None:
-        usm.log_event("remote_id", text)
-        store.record(identity_audit(rec))
-
-    rid_ingest = RidIngest(  # vehicles' OPEN_DRONE_ID_* reports: docs/remote-id.md
-        consistency_m=settings.remote_id.consistency_m,
-        position_of=telemetry_positions(hub),
-        on_identity=rid_identity,
-    )
-    rid_ingest.register(hub.remote_id)
+    rid_ingest = _remote_id_ingest(settings, hub, usm, store)
+    # What gcs-utm sends to the vehicles unasked (traffic, the operator's Remote ID part): in a
+    # cluster only to the vehicles this instance owns, within its lease (behind a router every
+    # instance hears every vehicle).
+    to_vehicles = hub if policy is None else OwnedTraffic(hub, policy, airspace.by_sys_id)
 
     return Runtime(
         settings=settings,
@@ -310,7 +305,7 @@ def build_runtime(
         remote_id=RemoteIdOperator(
             settings.remote_id,
             clock,
-            hub,
+            to_vehicles,
             vehicles=hub.remote_id,
             known=hub.vehicles,
             operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
@@ -321,7 +316,7 @@ def build_runtime(
         remote_id_tracks=rid_tracks,
         traffic_out=TrafficOut(
             settings.traffic_out,
-            hub if policy is None else OwnedTraffic(hub, policy, airspace.by_sys_id),
+            to_vehicles,
             tracks=tracking.tracks_now,
             operations=lambda: airspace.operations.values(),  # noqa: PLW0108 - a property
         ),
@@ -331,6 +326,25 @@ def build_runtime(
             clock, airspace, tracking, (usm, em), plans=plan_history, fences=geofence_history
         ),
     )
+
+
+def _remote_id_ingest(
+    settings: Settings, hub: MavlinkHub, usm: Usm, store: Persistence
+) -> RidIngest:
+    """The vehicles' OPEN_DRONE_ID_* reports (docs/remote-id.md), each identity logged and
+    audited."""
+
+    def rid_identity(rec: RidAircraft, text: str) -> None:
+        usm.log_event("remote_id", text)
+        store.record(identity_audit(rec))
+
+    rid_ingest = RidIngest(
+        consistency_m=settings.remote_id.consistency_m,
+        position_of=telemetry_positions(hub),
+        on_identity=rid_identity,
+    )
+    rid_ingest.register(hub.remote_id)
+    return rid_ingest
 
 
 def _attach_emergency(usm: Usm, emergency: EmergencyService) -> None:
