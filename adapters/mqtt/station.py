@@ -141,8 +141,12 @@ class PilotStation:
     ) -> None:
         if self._task is not None:
             self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
+            try:
                 await self._task
+            except asyncio.CancelledError:
+                current = asyncio.current_task()
+                if current is not None and current.cancelling():
+                    raise  # the closer itself is cancelled: not the station's own end
             self._task = None
 
     @property
@@ -252,6 +256,12 @@ class PilotStation:
                 await self._serve_once()
             except (aiomqtt.MqttError, TimeoutError, OSError) as exc:
                 self._client = None
+                task = asyncio.current_task()
+                if task is not None and task.cancelling():
+                    # The station is closing: the cancel arrived while connecting and came
+                    # out as this error (asyncio.timeout and the MQTT client can turn it into
+                    # one); retrying would swallow the cancel and the close would never end.
+                    raise asyncio.CancelledError from exc
                 self.last_error = str(exc) or type(exc).__name__
                 failures += 1
                 cfg = self._config
