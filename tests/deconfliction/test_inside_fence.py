@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
@@ -21,6 +22,7 @@ from gcs_utm.model import (
     ThreatKind,
     Track,
     TrackId,
+    VehicleKind,
 )
 
 MON = MonitoringConfig()
@@ -81,3 +83,41 @@ def test_inside_a_fence_that_holds_the_destination_a_way_out_is_offered() -> Non
     hold = plan_to_local(got[Maneuver.HOLD].plan, sc.FRAME)  # type: ignore[arg-type]
     assert np.allclose(hold.xyz()[-1], hold.xyz()[-2])
     assert hold.t[-1] - hold.t[-2] >= 60.0
+
+
+def test_a_fixed_wing_is_offered_home_ending_above_it_not_a_vertical_descent() -> None:
+    """A fixed wing cannot descend vertically onto home: its return-home plan ends above
+    home at its altitude, where it circles (the autopilot's RTL loiter) and lands on its own
+    landing sequence. Before, the plan ended with a vertical descent, which the envelope
+    check refused ("speed ... below the envelope's minimum"), so a fixed wing was never
+    offered home."""
+    fence = sc.cylinder("F", 0.0, 0.0, 200.0)
+    op = replace(
+        sc.make_operation(
+            "A",
+            [(-1200, 0, 100), (0, 0, 100)],
+            speed_mps=20.0,
+            landing_sites=[(-700, 600, 0.0)],
+            home_enz=(-1200, 0, 0.0),
+        ),
+        vehicle_kind=VehicleKind.FIXED_WING,
+        operational_volume_m=25.0,
+    )
+    t = sc.T0_S + 55.0
+    snap = AirspaceSnapshot(
+        t_s=t,
+        operations={op.id: op},
+        tracks={TrackId("A"): _track_at("A", -120, 0, 100, t)},
+        geofences=(fence,),
+    )
+    threat = sc.threat(ThreatKind.GEOFENCE_INTRUSION, ["A"], t_s=t, geofence_id=GeofenceId("F"))
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(min_height_above_home_m=0.0), MON)
+    got = {a.maneuver: a for a in td.resolve_single(threat, OperationId("A"), snap)}
+    assert Maneuver.RETURN_HOME in got, td.dropped
+    home = got[Maneuver.RETURN_HOME]
+    assert "circle above it" in home.detail
+    lp = plan_to_local(home.plan, sc.FRAME)  # type: ignore[arg-type]
+    assert np.hypot(lp.e[-1] + 1200.0, lp.n[-1]) < 1.0  # over home
+    assert lp.z[-1] == pytest.approx(100.0, abs=1.0)  # at its altitude, not on the ground
+    site = got[Maneuver.LANDING_SITE]
+    assert site.detail.startswith("circle above site 0"), site.detail

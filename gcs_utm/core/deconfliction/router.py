@@ -183,15 +183,18 @@ class Router:
         return self._join(self._fly(path, self.now), 1), 0
 
     def land_at(self, site: FloatArray) -> tuple[LocalPlan, int] | None:
-        """Cruise at the current altitude to above ``site``, then descend onto it. From
-        inside an obstacle, leave it first (:meth:`exit_xyz`); the plan is then verified
-        from the exit point on (the leg out is unavoidable)."""
+        """Cruise at the current altitude to above ``site``, then descend onto it. A vehicle
+        that cannot hover cannot descend vertically: its plan ends above the site, where it
+        circles (the autopilot's RTL loiter) until it lands on its own landing sequence.
+        From inside an obstacle, leave it first (:meth:`exit_xyz`); the plan is then
+        verified from the exit point on (the leg out is unavoidable)."""
         head, start = ([self.cur], self.exit_xyz()) if self.inside() else ([], self.cur)
         above = np.array([site[0], site[1], self.cur[2]])
         path = self._path3d(start, above)
         if path is None:
             return None
-        return self._fly([*head, *path, site], self.now), len(head)
+        end = [site] if self.op.performance().can_hover else []
+        return self._fly([*head, *path, *end], self.now), len(head)
 
     def hold_outside(self, hold_s: float) -> tuple[LocalPlan, int]:
         """Leave the obstacle by the closest border point (:meth:`exit_xyz`) and hold there

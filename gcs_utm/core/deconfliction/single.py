@@ -180,7 +180,8 @@ def _abandon(
                 f"home not reachable with {left:.0f} s of endurance left",
             )
         else:
-            add(Maneuver.RETURN_HOME, route, "return home and land")
+            how = "land" if op.performance().can_hover else "circle above it"
+            add(Maneuver.RETURN_HOME, route, f"return home and {how}")
     if Maneuver.LANDING_SITE in want and op.landing_sites:
         best = _landing(td, op, router, t0)
         if best is None:
@@ -224,5 +225,6 @@ def _landing(
             continue
         if dur < best_t:
             best_t = dur
-            best = (route, f"land at site {k} in {dur:.0f} s")
+            how = "land at" if op.performance().can_hover else "circle above"
+            best = (route, f"{how} site {k} in {dur:.0f} s")
     return best
