@@ -183,7 +183,7 @@ async def serve(
     pending = Path(settings.store.journal) if is_postgres(location) else None
     store = Persistence(StoreWriter(location, _writer_config(settings, cluster), journal=pending))
     policy = OwnershipPolicy() if cluster else None
-    rt = build_runtime(settings, clock, frame, store, policy=policy)
+    rt = build_runtime(settings, clock, frame, store, policy=policy, run_report=False)
     store.writer.on_event = lambda text: rt.usm.log_event("store", text)
     recorder = record_links(
         rt.hub,
