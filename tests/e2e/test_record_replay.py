@@ -23,7 +23,7 @@ import pytest
 from adapters.adsb.config import AdsbConfig
 from adapters.mavlink.config import MavlinkConfig
 from gcs_utm.app import OperatorMode, RunOptions, Runtime, run_scenario, serve
-from gcs_utm.cli.replay import scenario_pipeline
+from gcs_utm.cli.replay import scenario_config
 from gcs_utm.cli.replay_inputs import discover, replay_inputs
 from gcs_utm.geo import haversine_m
 from gcs_utm.services.record_config import RecordConfig
@@ -96,7 +96,9 @@ async def test_recorded_run_replays_to_the_same_tracks(tmp_path: Path) -> None:
 
     inputs = discover([rec_dir])
     assert len(inputs.feeds) == 1 and inputs.feeds[0].pieces == tuple(captures)
-    report = await replay_inputs(inputs, pipeline=scenario_pipeline(inputs, scenario))
+    report = await asyncio.to_thread(
+        replay_inputs, inputs, config=scenario_config(inputs, scenario)
+    )
 
     assert set(report["tracks"]) == set(live) == {"UAS1", f"icao:{ICAO}"}
     (feed,) = report["counters"]["adsb_feeds"].values()
