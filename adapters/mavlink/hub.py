@@ -197,7 +197,7 @@ class MavlinkHub:
         self._tasks: list[asyncio.Task[None]] = []
         self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE relayed by a vehicle -> ADS-B measurement
         self.remote_id = RidVehicles()  # OPEN_DRONE_ID_* and ODID texts (docs/remote-id.md)
-        self._handlers = message_handlers(self.adsb_relay, self.remote_id)  # as tlog replay
+        self._handlers = message_handlers(self.adsb_relay, self.remote_id)
 
     # --- lifecycle ------------------------------------------------------------------------
     async def __aenter__(self) -> MavlinkHub:
