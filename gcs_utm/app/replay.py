@@ -190,6 +190,7 @@ async def _play(
         asyncio.create_task(rt.tracking.run(), name="tracking"),
         asyncio.create_task(rt.monitoring.run(), name="monitoring"),
     ]
+    await asyncio.sleep(0)  # both running (tracking schedules its ingests once it runs)
     try:
         for n, (t_s, item) in enumerate(events, 1):
             wait_s = t_s - clock.now_s()
