@@ -5,9 +5,9 @@ replay DIR`` (with the scenario, so the vehicle is associated with its operation
 the same tracks: the same track ids and last update times (within 1 s), the aircraft's last
 position within 1 cm (the replay decodes the recorded bytes at their recorded receipt times,
 so its measurements are the live ones; measured: 2e-5 m, the microsecond rounding of the
-times), the vehicle's within 5 m, one second of its flight at 5 m/s (the live service times
-telemetry by the vehicle's clock, the replay by record time, i.e. receipt: they differ by the
-receive delay; measured: 7-9 mm on an idle machine, 1.5 m with the whole suite running)."""
+times), the vehicle's within 5 m, one second of its flight at 5 m/s (the replay's hub times
+telemetry as the live hub did: by the vehicle's clock mapped on the recorded receipt
+times)."""
 
 from __future__ import annotations
 
