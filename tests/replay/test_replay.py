@@ -4,12 +4,14 @@ input, pacing and the CLI."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import json
 from pathlib import Path
 
 import pytest
 from replay_helpers import ALT0, CONVERGING, LAT0, LON0, MEET_S, T0_S, write_tlog
 
+from adapters.mavlink import MavlinkConfig
 from gcs_utm.cli import main
 from gcs_utm.cli.replay import ReplayConfig, ReplayError, parse_speed, replay_file
 from gcs_utm.geo import LocalFrame
@@ -21,6 +23,7 @@ from gcs_utm.model import (
     VehicleKind,
     Waypoint4D,
 )
+from gcs_utm.settings import Settings
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "tlog"
 ARDUSUB = DATA / "ardusub_log_tools_small.tlog"
@@ -123,6 +126,19 @@ def test_two_operations_converging_raise_loss_of_separation(tmp_path: Path) -> N
     assert th["first_t_s"] < T0_S + MEET_S - 10.0
     assert th["min_closest_approach_m"] < 10.0
     assert r["counters"]["rejected_measurements"]["unassociated"] == 0  # type: ignore[index]
+
+
+def test_the_replay_checks_signatures_as_a_live_link_does(tmp_path: Path) -> None:
+    """Replayed records go through the live MAVLink hub, its checks included: with a signing
+    key for system id 1 ([mavlink] signing_keys), the recording's unsigned frames of sysid 1
+    are dropped as a live link drops them; sysid 2 (no key) is tracked."""
+    path = tmp_path / "enc.tlog"
+    n = write_tlog(path)
+    keyed = MavlinkConfig(signing_keys={"1": "00" * 32})
+    config = ReplayConfig(settings=dataclasses.replace(Settings(), mavlink=keyed))
+    r = _run(path, config=config)
+    assert set(r["tracks"]) == {"sysid:2"}  # type: ignore[arg-type]
+    assert [(v["sys_id"], v["positions"]) for v in r["vehicles"]] == [(2, n)]  # type: ignore[attr-defined]
 
 
 def test_corrupt_records_are_skipped_and_counted(tmp_path: Path) -> None:
