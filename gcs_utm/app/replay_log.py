@@ -168,7 +168,7 @@ class ReplayLog:
 
 
 def replay_report(
-    rt: ReplayRuntime | None,
+    rt: ReplayRuntime,
     *,
     path: Path,
     records: int,
@@ -186,13 +186,13 @@ def replay_report(
     def rel(t: float | None) -> float | None:
         return None if t is None else round(t - t0, 3)
 
-    log = rt.log if rt is not None else ReplayLog()
-    frame = rt.frame if rt is not None and rt.framed else None
+    log = rt.log
+    frame = rt.frame if rt.framed else None
     return {
         "file": str(path),
         "inputs": list(inputs) or [{"path": str(path), "kind": "tlog"}],
         "records": records,
-        "vehicles": [] if rt is None else _vehicles(rt.hub.states(), log),
+        "vehicles": _vehicles(rt.hub.states(), log),
         "duration": {
             "first_t_s": first_t_s,
             "last_t_s": last_t_s,
@@ -255,43 +255,39 @@ def replay_report(
             for h in log.hazards
         ],
         "remote_id": _remote_id_report(rt),
-        "counters": _counters(rt, log, counters, adsb_feeds),
+        "counters": _counters(rt, counters, adsb_feeds),
         "wall_s": round(wall_s, 3),
     }
 
 
 def _counters(
-    rt: ReplayRuntime | None,
-    log: ReplayLog,
-    counters: TlogCounters,
-    adsb_feeds: dict[str, dict[str, int]] | None,
+    rt: ReplayRuntime, counters: TlogCounters, adsb_feeds: dict[str, dict[str, int]] | None
 ) -> dict[str, Any]:
-    hc = rt.hub.counters if rt is not None else None
-    tc = rt.tracking.tracker.counters if rt is not None else {}
+    hc = rt.hub.counters
+    tc = rt.tracking.tracker.counters
     reasons = ("out_of_order", "duplicate", "invalid", "gate", "unassociated")
-    relay = rt.hub.adsb_relay.counters if rt is not None else None
     return {
         "corrupt_records": counters.corrupt_chunks + counters.truncated_tail,
         "tlog": counters.as_dict(),
-        "adsb_relay": dataclasses.asdict(relay) if relay is not None else {},
+        "adsb_relay": dataclasses.asdict(rt.hub.adsb_relay.counters),
         "adsb_feeds": adsb_feeds or {},
-        "adsb_capture_measurements": log.capture_measurements,
+        "adsb_capture_measurements": rt.log.capture_measurements,
         "bad_frames": {
-            "bad_crc": hc.bad_crc if hc else 0,
-            "garbage": hc.garbage if hc else 0,
-            "truncated": hc.truncated if hc else 0,
-            "bad_signature": hc.bad_signature if hc else 0,
+            "bad_crc": hc.bad_crc,
+            "garbage": hc.garbage,
+            "truncated": hc.truncated,
+            "bad_signature": hc.bad_signature,
         },
-        "frames": hc.frames if hc else 0,
+        "frames": hc.frames,
         # valid frames of messages outside the adapter's common dialect (ArduPilot- or
         # PX4-specific): the tlog reader checked their CRC; telemetry ignores them
-        "frames_not_in_common_dialect": hc.unknown_msg if hc else 0,
-        "gcs_messages": hc.gcs_heartbeats if hc else 0,
-        "handler_errors": hc.handler_errors if hc else 0,
-        "measurements": log.measurements,
+        "frames_not_in_common_dialect": hc.unknown_msg,
+        "gcs_messages": hc.gcs_heartbeats,
+        "handler_errors": hc.handler_errors,
+        "measurements": rt.log.measurements,
         "accepted_measurements": tc.get("accepted", 0),
         "rejected_measurements": {r: tc.get(r, 0) for r in reasons},
-        "monitoring_cycles": rt.monitoring.cycles if rt is not None else 0,
+        "monitoring_cycles": rt.monitoring.cycles,
     }
 
 
@@ -337,10 +333,8 @@ def _vehicles(states: list[VehicleState], log: ReplayLog) -> list[dict[str, Any]
     return out
 
 
-def _remote_id_report(rt: ReplayRuntime | None) -> dict[str, Any]:
+def _remote_id_report(rt: ReplayRuntime) -> dict[str, Any]:
     """The Remote ID heard: each source's identity on its track, and the counters."""
-    if rt is None:
-        return {"declared_sys_ids": [], "identities": [], "counters": {}}
     return {
         "declared_sys_ids": sorted(rt.hub.remote_id.declared),
         "identities": [

@@ -211,10 +211,9 @@ def feed_counts(feed: Feed, decoder: CaptureDecoder) -> dict[str, int]:
 
 @dataclass(slots=True)
 class _Seen:
-    """What went by: records (tlog), events, bytes, the first and last record times."""
+    """What went by: records (tlog), bytes, the first and last record times."""
 
     records: int = 0
-    events: int = 0
     done_bytes: int = 0
     first_t_s: float | None = None
     last_t_s: float | None = None
@@ -229,7 +228,6 @@ def _events(streams: list[Iterator[_Event]], seen: _Seen) -> Iterator[ReplayEven
         if seen.first_t_s is None:
             seen.first_t_s = t_s
         seen.last_t_s = t_s
-        seen.events += 1
         if isinstance(item, bytes):
             seen.records += 1
             seen.done_bytes += 8 + len(item)
