@@ -44,7 +44,7 @@ from adapters.adsb.capture import (
 from adapters.adsb.config import AdsbConfig
 from adapters.tlog import TlogCounters, TlogReader
 from gcs_utm.app.replay import ReplayConfig, ReplayEvent, replay_blocking
-from gcs_utm.app.replay_log import replay_report
+from gcs_utm.app.replay_report import replay_report
 from gcs_utm.model import Measurement
 
 _PROGRESS_EVERY = 256  # events between progress-bar updates (rendering is not free)

@@ -180,8 +180,10 @@ def test_speed_factor_paces_on_record_time(tmp_path: Path) -> None:
     write_tlog(path, duration_s=8.0)
     fast = _run(path)
     paced = _run(path, speed=10.0)  # ~7.8 s of records -> ~0.78 s
-    assert fast["wall_s"] < 0.5
-    assert 0.7 <= paced["wall_s"] < 2.0  # type: ignore[operator]
+    # paced on record time / 10 (not 1x: 7.8 s; a loaded machine adds CPU time to both),
+    # while "max" waits for nothing
+    assert 0.7 <= paced["wall_s"] < 4.0  # type: ignore[operator]
+    assert fast["wall_s"] < paced["wall_s"]  # type: ignore[operator]
     assert paced["tracks"].keys() == fast["tracks"].keys()  # type: ignore[attr-defined]
 
 
