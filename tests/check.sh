@@ -14,6 +14,7 @@ echo "== ruff check"; "$BIN/ruff" check gcs_utm adapters sitl tests setup.py
 echo "== ruff format --check"; "$BIN/ruff" format --check gcs_utm adapters sitl tests setup.py
 echo "== mypy --strict"; "$BIN/mypy" --strict -p gcs_utm -p adapters -p sitl
 echo "== lint-imports"; "$BIN/lint-imports"
+echo "== vulture"; "$BIN/vulture"  # paths and whitelist: pyproject.toml [tool.vulture]
 echo "== pytest"
 # pytest in GCS_UTM_TEST_JOBS parallel worker processes (pytest-xdist; 2 by default, 1 runs
 # everything in this process): most of the suite's time is spent waiting on servers and

@@ -52,6 +52,7 @@ from adapters.mavlink.endpoint import parse_endpoint
 from adapters.mavlink.handlers import message_handlers
 from adapters.mavlink.hub_report import HubCounters, LinkState
 from adapters.mavlink.mission import MissionItem
+from adapters.mavlink.modes import MAV_AUTOPILOT_INVALID
 from adapters.mavlink.senders import Senders, idle_keys, over_cap_keys
 from adapters.mavlink.signing import SignatureCheck
 from adapters.mavlink.transfer import (
@@ -486,7 +487,7 @@ class MavlinkHub:
             return
         st = self._states.get((link.name, addr, sys_id, comp_id))
         if st is None:
-            if mid == wire.HEARTBEAT and m.autopilot == 8:
+            if mid == wire.HEARTBEAT and m.autopilot == MAV_AUTOPILOT_INVALID:
                 self.counters.gcs_heartbeats += 1
                 return  # another GCS or a non-autopilot component: not a vehicle
             st = self._new_state(link, addr, sys_id, comp_id, t)
@@ -512,7 +513,7 @@ class MavlinkHub:
     ) -> None:
         """A vehicle's HEARTBEAT: discovery, and ArduPilot's streams asked for when it is new
         or its link came back."""
-        if m.autopilot == 8:
+        if m.autopilot == MAV_AUTOPILOT_INVALID:
             self.counters.gcs_heartbeats += 1
             return  # a component without an autopilot sharing the vehicle's ids
         new = handler(st, m, t, self.sink)
