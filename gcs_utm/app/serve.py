@@ -100,6 +100,7 @@ async def join_cluster(
         exchange=exchange,
         tracks=rt.tracks,
         emergency=rt.emergency,
+        heard=rt.usm.statuses_by_sys_id,  # the vehicles heard, by system id
     )
     rt.store.writer.set_fence(node.fence)  # region-owned rows carry the lease generation
     rt.usm.vehicle_ops.owns = node.files  # behind a router: only our regions' vehicles
