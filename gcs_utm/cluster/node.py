@@ -27,6 +27,9 @@ drive what this instance's airspace holds.
   for an operation this instance owns is adopted (proposed again as a new version allocated
   in this life, :mod:`gcs_utm.cluster.versions`), like a pending one at takeover, and a
   command decided for it is sent to its vehicle here;
+- MQTT input (answers, flight plans, operator commands reach every instance): carried out
+  and answered by the holder of the region concerned, one refusal from one instance when
+  nobody holds it (:mod:`gcs_utm.cluster.inbound`);
 - fencing: the writes of this instance's regions' rows carry the lease generation it gained
   them with (:mod:`gcs_utm.cluster.fence`); a refused write is audited and stops the
   instance, like a lost lease.
@@ -47,6 +50,7 @@ from gcs_utm.cluster.config import ClusterConfig
 from gcs_utm.cluster.decisions import DecisionRelay, EmergencyPort, UsmPort
 from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
 from gcs_utm.cluster.fence import LeaseFence, Refusal
+from gcs_utm.cluster.inbound import InboundArbiter
 from gcs_utm.cluster.lease import Lease
 from gcs_utm.cluster.member import ClusterMember
 from gcs_utm.cluster.policy import OwnershipPolicy
@@ -159,6 +163,16 @@ class ClusterNode:
         )
         self.policy.filer = self.decisions.file
         self.policy.may_act = self.may_act
+        # MQTT answers, plans and commands: one instance acts, one answers (the gateway's)
+        self.inbound = InboundArbiter(
+            self.member,
+            self.policy,
+            frame,
+            may_act=self.may_act,
+            loaded=lambda region_id: region_id in self.resumed,
+            record=record,
+            clock=clock,
+        )
 
     # ---- self-fencing on the local clock (gcs_utm.cluster.member, .selffence) ---------------
     def may_act(self) -> bool:
