@@ -256,8 +256,8 @@ async def test_one_instance_refuses_what_no_instance_holds(pg_url: str, mqtt_por
         s.begin_life()
         s.save_recommendation(uas2_rec)
     a = await _instance(pg_url, mqtt_port, config("A", "c0r0", standby=False))
-    # B holds nothing (a standby that has not taken c1r0 yet): nobody holds c1r0
-    b = await _instance(pg_url, mqtt_port, config("B", "", standby=True))
+    # B has not claimed its region c1r0 yet (no lease round): nobody holds c1r0
+    b = await _instance(pg_url, mqtt_port, config("B", "c1r0", standby=False))
     try:
         assert await a.m.step() == ["gained c0r0"]
         async with _station(mqtt_port) as station:
@@ -310,5 +310,18 @@ async def test_one_instance_refuses_what_no_instance_holds(pg_url: str, mqtt_por
             )
             assert [d["answer"]["outcome"] for d in answers] == ["refused"], answers
             assert "its new holder proposes it again" in answers[0]["reason"]
+            # B takes c1r0; the station sends its first command again (no answer reached
+            # it, say): B carries it out now (no vehicle link here), and alone answers
+            assert await b.m.step() == ["gained c1r0"]
+            answers = await _send(
+                station,
+                "commands",
+                _command("UAS2", "c1"),
+                lambda d: d.get("type") == "command_status" and d.get("id") == "c1",
+                decided=_handled(
+                    lambda: len(b.usm.operator_commands.results), lambda: a.m.node.inbound.ignored
+                ),
+            )
+            assert [d["reason"] for d in answers] == ["no vehicle link for UAS2"], answers
     finally:
         await _stop(a, b)
