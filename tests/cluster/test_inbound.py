@@ -126,11 +126,11 @@ async def _send(
 ) -> list[Doc]:
     """Publish ``body`` on the station's ``kind`` topic; every answer ``wanted`` picks, until
     ``decided()`` (every instance has handled the message) and 0.5 s after the last answer
-    (at most 5 s)."""
+    (at most 10 s)."""
     await client.publish(f"gcs_utm/operators/admin/{kind}", json.dumps(body), qos=1)
     answers: list[Doc] = []
     loop = asyncio.get_running_loop()
-    end = loop.time() + 5.0
+    end = loop.time() + 10.0
     quiet_until = end
     messages = aiter(client.messages)
     while loop.time() < min(end, quiet_until):
