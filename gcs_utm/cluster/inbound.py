@@ -174,7 +174,8 @@ class InboundArbiter:
         store answers (this instance, if the store says so and it holds the region), else
         the arbiter refuses."""
         if not self._member.owned or not self._may_act():
-            return self._ignore(kind, subject, "this instance holds no region: not the arbiter")
+            why = "this instance holds no region (or its lease deadline passed): not the arbiter"
+            return self._ignore(kind, subject, why)
         try:
             found = await self._member.read(lambda s: (leases_.owners(s), lookup(s)))
         except StoreError as exc:  # nobody may know better: the station sends it again
