@@ -1,10 +1,10 @@
 """MQTT input in a cluster: one instance acts on each message, and one answers it.
 
 Every instance's MQTT gateway subscribes to the same broker topics (docs/mqtt.md), so a
-pilot's answer to a recommendation, a flight plan and an operator command reach every
-instance at once. Behind a MAVLink router any of them could act on it; only one may, and the
-pilot's station, which waits for one acknowledgement (:mod:`adapters.mqtt.station`), must
-hear one answer:
+pilot's answer to a recommendation, a flight plan, a flight status (start, stop) and an
+operator command reach every instance at once. Behind a MAVLink router any of them could
+act on it; only one may, and the pilot's station, which waits for one acknowledgement
+(:mod:`adapters.mqtt.station`), must hear one answer:
 
 - **the holder acts and answers**: the instance holding the region of the operation the
   message concerns (its departure's; a flight plan's first waypoint's), within its lease
@@ -41,7 +41,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
-from adapters.mqtt.codec import FlightPlanSubmission, OperatorCommandRequest
+from adapters.mqtt.codec import FlightPlanSubmission, FlightStatusReport, OperatorCommandRequest
 from gcs_utm.clock import Clock
 from gcs_utm.cluster import lease as leases_
 from gcs_utm.cluster.member import ClusterMember
@@ -130,6 +130,25 @@ class InboundArbiter:
             unheld=lambda r: (
                 f"operation {s.operation_id} departs in region {r}, held by no instance now (a "
                 "takeover under way, or no instance serves it): submit it again in a few seconds"
+            ),
+        )
+
+    async def flight_status(self, s: FlightStatusReport) -> Route:
+        """A pilot starts or stops an operation: its owner changes its state (and files it)."""
+        op_id = s.operation_id
+        if self._policy.owns(op_id):
+            region_id = self._region_of_operation(op_id)
+            if region_id is not None and self._holds(region_id):
+                return HERE
+        region_map, frame = self._member.map, self._frame
+        return await self._elsewhere(
+            "flight_status",
+            op_id,
+            lambda store: _region_of(_operation(store, op_id), frame, region_map),
+            unknown=f"unknown operation {op_id!r}: no instance has it",
+            unheld=lambda region_id: (
+                f"operation {op_id} belongs to region {region_id}, held by no instance now (a "
+                "takeover under way, or no instance serves it): send it again in a few seconds"
             ),
         )
 

@@ -19,8 +19,8 @@ Invariants:
 - every publish only enqueues (the bridge never blocks the USM);
 - a cluster member (``arbiter`` set, :mod:`gcs_utm.cluster.inbound`): every instance hears
   the same messages, and only the holder of the region concerned carries out an answer, a
-  flight plan or an operator command; the others publish nothing, except one refusal when no
-  instance holds that region.
+  flight plan, a flight status or an operator command; the others publish nothing, except
+  one refusal when no instance holds that region.
 """
 
 from __future__ import annotations
@@ -93,6 +93,8 @@ class InboundArbiter(Protocol):
         ...
 
     async def flight_plan(self, s: FlightPlanSubmission) -> Route: ...
+
+    async def flight_status(self, s: FlightStatusReport) -> Route: ...
 
     async def operator_command(self, c: OperatorCommandRequest, gate_reason: str) -> str:
         """A command refused as another instance's: the refusal to publish ("": none)."""
@@ -272,6 +274,13 @@ class MqttGateway:
         self.usm.log_event("operation", f"{op.id} filed over MQTT by {s.operator}")
 
     async def on_flight_status(self, s: FlightStatusReport) -> None:
+        """Start or stop an operation (in a cluster: by its owner only, as a plan is)."""
+        if self.arbiter is not None:
+            route = await self.arbiter.flight_status(s)
+            if route.refusal:
+                raise ValueError(route.refusal)
+            if not route.here:
+                return
         op = self._own_operation(s.operation_id, s.operator)
         if s.plan_version is not None and s.plan_version != op.plan.version:
             raise ValueError(

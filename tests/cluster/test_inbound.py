@@ -239,6 +239,18 @@ async def test_the_holder_alone_acts_on_an_answer_or_a_plan_and_answers(
             assert OperationId("PLAN-B") in b.airspace.operations
             assert b.m.node.policy.owns(OperationId("PLAN-B"))
             assert OperationId("PLAN-B") not in a.airspace.operations
+            # the pilot starts UAS2's flight: B (its owner) starts it, A says nothing
+            uas2 = OperationId("UAS2")
+            body = {"schema_version": 1, "type": "flight_status", "operation_id": "UAS2"}
+            a_ignored = _handled(lambda: a.m.node.inbound.ignored)
+            answers = await _send(
+                station,
+                "flight_status",
+                {**body, "status": "start", "t_s": time.time()},
+                _about("UAS2"),
+                decided=lambda: b.airspace.operations[uas2].state.value == "active" and a_ignored(),
+            )
+            assert answers == [] and uas2 not in a.airspace.operations
     finally:
         await _stop(a, b)
 
