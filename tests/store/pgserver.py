@@ -188,7 +188,10 @@ def start(*, durable: bool = False) -> tuple[PgServer | None, str]:
 
 def main() -> int:
     """Start a durable private server with one database, print its URL and keep it until
-    Ctrl-C (a PostgreSQL for ``gcs-utm bench cluster --url``)."""
+    Ctrl-C or SIGTERM (a PostgreSQL for ``gcs-utm bench cluster --url``)."""
+    # also when started in the background, where SIGINT comes ignored
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     server, why = start(durable=True)
     if server is None:
         print(f"no PostgreSQL: {why}", file=sys.stderr)
