@@ -31,3 +31,14 @@ def test_the_cluster_has_no_sql() -> None:
 def test_the_check_finds_sql() -> None:
     # the check itself reads the store, which does have statements
     assert any("INSERT INTO region_leases" in line for line in sql_in(ROOT / "gcs_utm" / "store"))
+
+
+def test_the_store_has_no_not_implemented_hooks() -> None:
+    """A backend is a whole class of its own over StoreBase (issue 36): no base method that
+    only raises for a subclass to fill in."""
+    hooks = [
+        f"{f.relative_to(ROOT)}"
+        for f in sorted((ROOT / "gcs_utm" / "store").rglob("*.py"))
+        if "raise NotImplementedError" in f.read_text(encoding="utf-8")
+    ]
+    assert hooks == []
