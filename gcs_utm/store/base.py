@@ -571,6 +571,13 @@ class StoreBase:
         sql += " ORDER BY created_t_s, id, version"
         return [self._load(Recommendation, d) for (d,) in self._rows(sql, params)]
 
+    def operation_of_recommendation(self, rec_id: str) -> str | None:
+        """The operation a recommendation id is for (None: no version of it is stored)."""
+        rows = self._rows(
+            "SELECT operation_id FROM recommendations WHERE id = ? LIMIT 1", (rec_id,)
+        )
+        return str(rows[0][0]) if rows else None
+
     def versions_touched_by(self, epoch: int) -> list[tuple[str, int, str, int]]:
         """(id, version, state, epoch) of every version of each recommendation id that life
         ``epoch`` wrote a version of, in id and version order (a cluster member follows what
