@@ -114,10 +114,11 @@ def test_takeoff_is_a_climb_out_along_the_heading_to_the_next_waypoint() -> None
 
 def test_a_takeoff_at_the_launch_position_is_a_climb_out_along_the_heading() -> None:
     """QGroundControl gives a plane's NAV_TAKEOFF the launch position; ArduPlane climbs out
-    along its heading all the same. Filed as a vertical climb at home, the rolling ArduPlane
-    of the nuisance soak opened UAS_IN_CV (29.9 m from its plan) 1 s into its take-off."""
+    along its heading all the same. Filed as a vertical climb at home (the item 1.8 m from
+    the reported home), the rolling ArduPlane of the nuisance soak opened UAS_OUT_OV 3 s into
+    its take-off, and the auto-accepted HOLD was sent to a plane climbing out."""
     items = _mission()
-    items[1] = _Item(22, _e7(HOME.lat_deg), _e7(HOME.lon_deg), 30.0, param1=15.0, seq=1)
+    items[1] = _Item(22, _north(1.8), _e7(HOME.lon_deg), 30.0, param1=15.0, seq=1)
     pts = mission_points(items, home=HOME, cruise_speed_mps=15.0, skip_first=True)
     assert pts is not None
     plane = fw.fixed_wing_points(
