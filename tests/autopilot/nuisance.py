@@ -87,6 +87,7 @@ class Events:
     cut_window: tuple[set[str], set[str]] | None = None  # threat ids before the cut, after
     reboot_window: tuple[set[str], set[str]] | None = None
     serve_killed: int = 0
+    flight_errors: list[str] = field(default_factory=list)
     t0: float = field(default_factory=time.monotonic)
 
     def say(self, text: str) -> None:
@@ -177,7 +178,10 @@ def run_soak(cfg: SoakConfig, workdir: Path) -> dict[str, Any]:
     workdir.mkdir(parents=True, exist_ok=True)
     ev = Events()
     serve = Serve(workdir, cfg)
-    flyers = [Flyer(v, workdir, cfg.speed, cfg.rest_s, ev.say) for v in VEHICLES]
+    flyers = [
+        Flyer(v, workdir, cfg.speed, cfg.rest_s, ev.say, land_before_stop=cfg.land_at_end)
+        for v in VEHICLES
+    ]
     copter = next(f for f in flyers if f.v.airframe == "copter")
     cut: TcpCut | None = None
     threads: list[threading.Thread] = []
@@ -207,6 +211,7 @@ def run_soak(cfg: SoakConfig, workdir: Path) -> dict[str, Any]:
             for t in threads:
                 t.join(max(0.0, end - time.monotonic()))
         ev.say("soak over")
+        ev.flight_errors = [f.error for f in flyers if f.error]  # before the shutdown
     finally:
         for f in flyers:
             f.stop.set()
@@ -228,7 +233,8 @@ def _schedule(cfg: SoakConfig, ev: Events, serve: Serve, flyers: list[Flyer], cu
     pending = {"cut", "reboot", "kill"} - (set() if cfg.reboot else {"reboot"})
     if not cfg.kill_serve:
         pending.discard("kill")
-    while sim() < cfg.length_s or pending - {"reboot"}:
+    # past T only for an injection not done yet (the link drop waits for a flying copter)
+    while sim() < cfg.length_s or (pending - {"reboot"} and sim() < 1.5 * cfg.length_s):
         if not serve.alive():
             raise RuntimeError("gcs-utm serve exited")
         if "cut" in pending and sim() >= 0.25 * cfg.length_s and copter.airborne:
@@ -298,7 +304,7 @@ def judge(
         problems.append("the reboot was not injected")
     if cfg.kill_serve and not ev.serve_killed:
         problems.append("serve was not killed")
-    problems += [f.error for f in flyers if f.error]
+    problems += ev.flight_errors
     if cfg.land_at_end:
         problems += [f"{f.v.name} did not land by the end" for f in flyers if f.airborne]
     audit = rows(

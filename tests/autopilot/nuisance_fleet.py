@@ -227,6 +227,7 @@ class Flyer:
     rebooted_at: list[float] = field(default_factory=list)  # wall monotonic s
     stop: threading.Event = field(default_factory=threading.Event)
     go: threading.Event = field(default_factory=threading.Event)  # the first take-off
+    land_before_stop: bool = True  # when stopped in flight, fly on to the landing
     error: str = ""
     armed: bool = False
     all_procs: list[SitlProcess] = field(default_factory=list)
@@ -338,6 +339,8 @@ class Flyer:
         end = time.monotonic() + 3.0 * 600.0 / self.speed
         self.armed = True
         while self.armed:
+            if self.stop.is_set() and not self.land_before_stop:
+                return  # the soak is over and does not wait for the landing
             if time.monotonic() > end:
                 raise TimeoutError(f"no landing in {3 * 600} simulated s")
             self._poll(0.5)
