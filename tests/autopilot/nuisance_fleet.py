@@ -331,6 +331,8 @@ class Flyer:
         if self.takeoffs:  # again: the pilot uploads the mission for the next flight
             self._upload()
             self._fresh_battery()
+        if self.stop.is_set():
+            return
         self._start()
         self.takeoffs += 1
         self.airborne = True
