@@ -104,6 +104,7 @@ _VEHICLE_HAZARDS = frozenset(
         ThreatKind.LACK_OF_BATTERY,
         ThreatKind.TECHNICAL_FAILURE,
         ThreatKind.COMMUNICATION_FAILURE,
+        ThreatKind.REMOTE_ID_MISMATCH,  # its broadcast or its filing: the pilot's checks
     }
 )
 """A vehicle's own hazards: on the ground they are its pre-flight findings, not threats."""
