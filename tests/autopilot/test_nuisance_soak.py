@@ -11,6 +11,7 @@ Every threat in the store must be the link drop's COMMUNICATION_FAILURE, closed 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -22,6 +23,11 @@ SHORT = SoakConfig(minutes=3.0, speed=3.0, land_at_end=False, reboot=False)
 
 
 @pytest.mark.timeout(420)
+@pytest.mark.skipif(
+    not os.environ.get("GCS_UTM_NUISANCE"),
+    reason="set GCS_UTM_NUISANCE=1: while it is a known failure (the xfail below) its ~2 "
+    "minutes of four autopilots are left out of the suite's real-autopilot step",
+)
 @pytest.mark.xfail(
     strict=True,
     raises=AssertionError,
