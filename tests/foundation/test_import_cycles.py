@@ -15,7 +15,6 @@ PACKAGES = ("gcs_utm", "adapters", "sitl")
 STILL_CYCLIC = (
     "gcs_utm.core.tracking",
     "gcs_utm.core.deconfliction",
-    "gcs_utm.core.emergency",
     "gcs_utm.bench",
 )
 """Packages whose cycles are still being split into parts (issue 36); a cycle anywhere else
