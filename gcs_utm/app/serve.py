@@ -24,6 +24,7 @@ from gcs_utm.cluster.regions import RegionError
 from gcs_utm.config import ConfigError
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import Geofence, Operation
+from gcs_utm.services.mqtt_gateway import MqttGateway
 from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreConfig, StoreError, StoreWriter, describe, is_postgres, open_store
@@ -62,10 +63,13 @@ async def join_cluster(
     stop: asyncio.Event,
     failed: list[str],
     policy: OwnershipPolicy,
+    *,
+    gateway: MqttGateway | None = None,
 ) -> ClusterNode:
     """This runtime as a cluster member: checks the region map (a differing one is refused);
     the member task and the region exchange (on the [mqtt] broker) start with the service
-    tasks."""
+    tasks. ``gateway``: the MQTT interface, whose answers, plans and commands one instance
+    carries out and answers (gcs_utm.cluster.inbound)."""
     settings = rt.settings.cluster
     instance = settings.instance or f"{socket.gethostname()}-{os.getpid()}"
 
@@ -100,11 +104,14 @@ async def join_cluster(
         exchange=exchange,
         tracks=rt.tracks,
         emergency=rt.emergency,
+        heard=rt.usm.statuses_by_sys_id,  # the vehicles heard, by system id
     )
     rt.store.writer.set_fence(node.fence)  # region-owned rows carry the lease generation
     rt.usm.vehicle_ops.owns = node.files  # behind a router: only our regions' vehicles
     # an operator's command: carried out by the owner of the UAS's region only
     rt.usm.operator_commands.gate = CommandGate(node.member, policy, rt.frame, node.may_act)
+    if gateway is not None:
+        gateway.arbiter = node.inbound
     try:
         await node.member.start()
     except RegionError as exc:
@@ -183,7 +190,7 @@ async def serve(
     pending = Path(settings.store.journal) if is_postgres(location) else None
     store = Persistence(StoreWriter(location, _writer_config(settings, cluster), journal=pending))
     policy = OwnershipPolicy() if cluster else None
-    rt = build_runtime(settings, clock, frame, store, policy=policy)
+    rt = build_runtime(settings, clock, frame, store, policy=policy, run_report=False)
     store.writer.on_event = lambda text: rt.usm.log_event("store", text)
     recorder = record_links(
         rt.hub,
@@ -205,7 +212,11 @@ async def serve(
     stop = stop or asyncio.Event()
     failed: list[str] = []
     try:
-        node = await join_cluster(rt, location, stop, failed, policy) if policy else None
+        node = (
+            await join_cluster(rt, location, stop, failed, policy, gateway=frontends.gateway)
+            if policy
+            else None
+        )
     except StoreError:
         await rt.hub.close()
         store.close()

@@ -40,7 +40,6 @@ from typing import Protocol, Self, TypeVar
 
 from gcs_utm.envelope import FIXED_WING_MIN_SPEED_FACTOR
 
-NAV_LOITER_UNLIM = 17
 NAV_LOITER_TURNS = 18
 NAV_LOITER_TIME = 19
 NAV_TAKEOFF = 22

@@ -147,6 +147,7 @@ class EmergencyManager:
     def forget_operations(self, op_ids: Collection[OperationId]) -> None:
         """Operations the airspace forgot (services/retention.py): their recommendations leave
         memory, except one an open case still refers to (the store keeps the record)."""
+        self.lead.forget(op_ids)
         kept = {rid for case in self._cases.values() for rid in case.rec_ids}
         for rid in [r for r, x in self._recs.items() if x.operation_id in op_ids]:
             if rid not in kept:
