@@ -215,10 +215,6 @@ class EmergencyManager:
         """The upload (or command) of an accepted recommendation was verified or failed."""
         return on_outcome(self.ctx, rec_id, version, applied, reason, snapshot)
 
-    def decide_again(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
-        """A fresh decision for an open case on the current snapshot (new versions)."""
-        return self._handle(case, snapshot)
-
     def on_answer(
         self, rec: Recommendation, accepted: bool, snapshot: AirspaceSnapshot
     ) -> Decision:
