@@ -265,10 +265,8 @@ def _uas_region(store: StoreBase, uas: str, frame: LocalFrame, region_map: Regio
 def _recommendation_region(
     store: StoreBase, rec_id: str, frame: LocalFrame, region_map: RegionMap
 ) -> str | None:
-    rows = store._rows("SELECT operation_id FROM recommendations WHERE id = ? LIMIT 1", (rec_id,))
-    if not rows:
-        return None
-    return _uas_region(store, str(rows[0][0]), frame, region_map)
+    op_id = store.operation_of_recommendation(rec_id)
+    return None if op_id is None else _uas_region(store, op_id, frame, region_map)
 
 
 __all__ = ["InboundArbiter"]

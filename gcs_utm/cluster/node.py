@@ -25,7 +25,7 @@ drive what this instance's airspace holds.
 - decisions: who decides is :mod:`gcs_utm.cluster.policy`; what crosses instances goes
   through the store (:mod:`gcs_utm.cluster.decisions`): a recommendation another life filed
   for an operation this instance owns is adopted (proposed again as a new version allocated
-  in this life, :mod:`gcs_utm.cluster.versions`), like a pending one at takeover, and a
+  in this life, :mod:`gcs_utm.store.versions`), like a pending one at takeover, and a
   command decided for it is sent to its vehicle here;
 - MQTT input (answers, flight plans, operator commands reach every instance): carried out
   and answered by the holder of the region concerned, one refusal from one instance when
@@ -45,7 +45,6 @@ from pathlib import Path
 from typing import Protocol
 
 from gcs_utm.clock import Clock
-from gcs_utm.cluster import versions
 from gcs_utm.cluster.config import ClusterConfig
 from gcs_utm.cluster.decisions import DecisionRelay, EmergencyPort, UsmPort
 from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
@@ -70,7 +69,7 @@ from gcs_utm.model import (
     Track,
     TrackId,
 )
-from gcs_utm.store import StoreBase, StoreError, is_postgres
+from gcs_utm.store import StoreBase, StoreError, is_postgres, versions
 
 _log = logging.getLogger(__name__)
 
@@ -150,7 +149,7 @@ class ClusterNode:
             self.member.holder,
             self._region_of,
             self._refused,
-            lock_sql=" FOR SHARE" if is_postgres(location) else "",
+            share_lock=is_postgres(location),
         )
         self.decisions = DecisionRelay(
             member=self.member,
