@@ -16,12 +16,6 @@ from pathlib import Path
 from tests.foundation.test_import_cycles import ROOT, _modules
 
 MAX_PROJECT_BASES = 2
-HOOKS_ALLOWED = {
-    # branch storesql turns the store's base class into parts (issue 36): remove this entry
-    # when it has landed
-    "gcs_utm/store/base.py",
-}
-"""Files whose ``NotImplementedError`` hooks another branch is removing."""
 
 ClassKey = tuple[str, str]  # (module, class name)
 
@@ -159,7 +153,6 @@ def test_no_not_implemented_hooks() -> None:
     found = [
         f"{classes.paths[m]}:{line}"
         for m, mod in classes.modules.items()
-        if str(classes.paths[m]) not in HOOKS_ALLOWED
         for line in _hooks(mod.tree)
     ]
     assert not found, f"raise NotImplementedError hooks: {found}"
