@@ -165,6 +165,7 @@ class Runtime:
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
     retention: Retention | None = None  # forgets what ended long ago (services/retention.py)
+    filing: FilingCheck | None = None  # the strategic check of filed plans (services/strategic.py)
     recorder: LinkRecorder | None = None  # --record: closed after the links
     # a blocking close step (the store's) runs on a thread, bounded; inline on a fast-time
     # loop, which does not wait for threads (gcs_utm.app.stopping.run_steps)
@@ -357,8 +358,14 @@ def build_runtime(
         plan_history=plan_history,
         geofence_history=geofence_history,
         retention=_retention(
-            clock, airspace, tracking, (usm, em), plans=plan_history, fences=geofence_history
+            clock,
+            airspace,
+            tracking,
+            (usm, em, filing),
+            plans=plan_history,
+            fences=geofence_history,
         ),
+        filing=filing,
     )
 
 
@@ -411,14 +418,14 @@ def _retention(
     clock: Clock,
     airspace: Airspace,
     tracking: TrackingService,
-    keepers: tuple[Usm, EmergencyManager],
+    keepers: tuple[Usm, EmergencyManager, FilingCheck],
     *,
     plans: dict[OperationId, list[FlightPlan]],
     fences: dict[str, Geofence],
 ) -> Retention:
     """What ended an hour ago leaves memory (services/retention.py): the operations' tracks,
-    their USM and EM recommendations, their histories, and the geofences that ended as long
-    ago."""
+    their USM and EM recommendations, what their filing found, their histories, and the
+    geofences that ended as long ago."""
 
     def forgotten(op_ids: list[OperationId]) -> None:
         tracking.set_operations(airspace.operations.values())  # drops their tracks

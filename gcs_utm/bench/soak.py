@@ -229,6 +229,7 @@ _PARTS = (
     "remote_id_ingest",
     "remote_id_tracks",
     "traffic_out",
+    "filing",
 )
 
 

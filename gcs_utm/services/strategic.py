@@ -159,6 +159,16 @@ class FilingCheck:
             self._plan[o.id] = o.plan
             self._fences(o)
 
+    def forget_operations(self, op_ids: Collection[OperationId]) -> None:
+        """Operations the airspace forgot (services/retention.py): what their filing found
+        leaves memory too (a day of traffic kept one list of conflicts per operation)."""
+        for op_id in op_ids:
+            self.conflicts.pop(op_id, None)
+            self.fence_findings.pop(op_id, None)
+            self._state.pop(op_id, None)
+            if self._plan.pop(op_id, None) is not None:
+                self._filed.remove(op_id)
+
     def in_fences(self, op: Operation) -> list[FenceFinding]:
         """The active geofences ``op``'s plan runs into (none without ``geofences``). A
         plan of Tactical Deconfliction is not judged again: TD verified it against every

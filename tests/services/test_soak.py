@@ -17,6 +17,9 @@ PER_OPERATION = (
     "emergency.em._cases",
     "emergency.em._recs",
     "plan_history",
+    "filing.conflicts",
+    "filing.fence_findings",
+    "filing._state",
 )
 
 

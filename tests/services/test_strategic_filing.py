@@ -93,6 +93,27 @@ def test_the_service_checks_a_plan_when_it_is_filed() -> None:
     assert len(texts) == 1 and texts[0].startswith("B plan v1 conflicts with A")
 
 
+def test_what_the_filing_found_leaves_with_the_forgotten_operation() -> None:
+    """A day of traffic kept one list of conflicts (and of fence findings) per operation
+    ever filed (``gcs-utm bench soak``): the retention that forgets an ended operation now
+    forgets what its filing found too; the others' stay."""
+    rt = build_runtime(Settings(), ManualClock(0.0), FRAME, _NoStore())
+    assert rt.filing is not None and rt.retention is not None
+    rt.airspace.add_operation(_line("A", 0.0))
+    rt.airspace.add_operation(_line("B", 0.0, reverse=True))
+    assert [c.b for c in rt.filing.conflicts["B"]] == ["A"]
+    for op_id in ("A", "B"):
+        rt.airspace.set_state(op_id, OperationState.ACTIVE)
+    rt.airspace.set_state("A", OperationState.ENDED)
+    rt.airspace.set_state("B", OperationState.ENDED)
+    rt.airspace.add_operation(_line("C", 5000.0))
+    rt.retention.sweep(0.0)
+    assert sorted(rt.retention.sweep(rt.retention.keep_s)) == ["A", "B"]
+    assert set(rt.filing.conflicts) == {"C"}
+    assert set(rt.filing.fence_findings) == {"C"}
+    assert len(rt.filing) == 1
+
+
 def test_a_failing_check_never_refuses_a_filing(monkeypatch: pytest.MonkeyPatch) -> None:
     airspace = Airspace()
     check = FilingCheck(FRAME, MonitoringConfig(), operations=lambda: airspace.operations)
