@@ -14,7 +14,6 @@ ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("gcs_utm", "adapters", "sitl")
 STILL_CYCLIC = (
     "gcs_utm.core.tracking",
-    "gcs_utm.core.deconfliction",
     "gcs_utm.core.emergency",
     "gcs_utm.bench",
 )
