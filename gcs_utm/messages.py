@@ -92,11 +92,6 @@ class LinkHealth:
     clock_jumps: int = 0  # re-anchors of the vehicle clock mapping (docs/vehicle-time.md)
     system_time_rejected: int = 0  # SYSTEM_TIME that disagreed with arrival times
 
-    @property
-    def loss_ratio(self) -> float:
-        total = self.received + self.lost
-        return self.lost / total if total else 0.0
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class HazardReport:

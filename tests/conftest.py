@@ -20,9 +20,15 @@ settings.load_profile("ci" if os.environ.get("CI") else "local")
 
 # With pytest-xdist (tests/check.sh), the scheduler below hands out whole modules, longest
 # first. The real PX4 / ArduPilot tests form one group that one worker runs one after the other
-# (their timing margins were set with the machine's cores to themselves; the whole suite runs
-# them in a step of their own, see tests/check.sh).
+# (most of their timing margins assume no CPU-bound test beside them; the whole suite runs them
+# in lanes of their own, see tests/check.sh).
 _REAL_AUTOPILOT_DIR = "tests/autopilot/"
+# The tests that start a real PX4 carry the ``px4`` mark: tests/check.sh runs them in a lane of
+# their own, one after the other, beside the lane of the other real-autopilot tests (PX4 SIH in
+# lockstep takes most of a core, ArduPilot SITL a fraction of one; docs/testing.md). A test
+# that requests the ``px4`` fixture gets the mark here; one that starts PX4 another way (e.g.
+# ``request.getfixturevalue``) carries it itself.
+PX4_FIXTURE = "px4"
 
 
 def _timeout_s(item: pytest.Item) -> float:
@@ -43,11 +49,14 @@ def group_of(nodeid: str) -> str:
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Longest first, so that parallel workers do not end on one long test: the real-autopilot
+    """Marks the tests that start a real PX4 (``px4``, before ``-m`` selects on it). Orders
+    longest first, so that parallel workers do not end on one long test: the real-autopilot
     modules, then the others, each by its longest test's timeout (the authors' bound on its
     duration), each module's tests kept together and in order."""
     by_module: dict[str, list[pytest.Item]] = {}
     for item in items:
+        if PX4_FIXTURE in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.px4)
         by_module.setdefault(item.nodeid.split("::", 1)[0], []).append(item)
     ordered = sorted(
         by_module.values(),

@@ -32,10 +32,6 @@ class AdsbFlags(IntFlag):
     SOURCE_UAT = 32768
 
 
-ALTITUDE_TYPE_PRESSURE_QNH = 0
-ALTITUDE_TYPE_GEOMETRIC = 1
-
-
 def adsb_vehicle_to_measurement(
     *,
     icao_address: int,

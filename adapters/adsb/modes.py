@@ -144,9 +144,6 @@ class ModeSDecoder:
         """ICAO address -> callsign ('' if none yet) of every aircraft with a valid frame."""
         return {icao: a.callsign for icao, a in self._state.aircraft.items()}
 
-    def positions_by_aircraft(self) -> dict[Icao24, int]:
-        return {icao: a.positions for icao, a in self._state.aircraft.items()}
-
     def state_size(self) -> int:
         """Addresses with state kept: this decoder's or its pair decoder's, the larger."""
         pairs = 0 if self._pairs is None else self._pairs.size()

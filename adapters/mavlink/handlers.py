@@ -1,10 +1,10 @@
 """The one table of per-message telemetry handlers: MAVLink message id -> what a vehicle's
 :class:`~adapters.mavlink.vehicle.VehicleState` does with it.
 
-The live hub (:class:`adapters.mavlink.hub.MavlinkHub`) and the tlog replay
-(:class:`gcs_utm.cli.replay_pipeline.ReplayPipeline`) both dispatch through
-:func:`message_handlers`, so a replayed recording goes through exactly the handling of a live
-link (HOME_POSITION included: the vehicle's home, against which relative altitudes are read).
+The hub (:class:`adapters.mavlink.hub.MavlinkHub`) dispatches through
+:func:`message_handlers`, for live links and for replayed recordings alike (``gcs-utm replay``
+feeds them to a replay link of the hub: :mod:`gcs_utm.app.replay`), HOME_POSITION included:
+the vehicle's home, against which relative altitudes are read.
 Messages outside the table are not telemetry (mission and command protocol messages go to the
 hub's transfer mailboxes) or not used.
 """

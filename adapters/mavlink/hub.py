@@ -52,6 +52,7 @@ from adapters.mavlink.endpoint import parse_endpoint
 from adapters.mavlink.handlers import message_handlers
 from adapters.mavlink.hub_report import HubCounters, LinkState
 from adapters.mavlink.mission import MissionItem
+from adapters.mavlink.modes import MAV_AUTOPILOT_INVALID
 from adapters.mavlink.senders import Senders, idle_keys, over_cap_keys
 from adapters.mavlink.signing import SignatureCheck
 from adapters.mavlink.transfer import (
@@ -197,7 +198,7 @@ class MavlinkHub:
         self._tasks: list[asyncio.Task[None]] = []
         self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE relayed by a vehicle -> ADS-B measurement
         self.remote_id = RidVehicles()  # OPEN_DRONE_ID_* and ODID texts (docs/remote-id.md)
-        self._handlers = message_handlers(self.adsb_relay, self.remote_id)  # as tlog replay
+        self._handlers = message_handlers(self.adsb_relay, self.remote_id)
 
     # --- lifecycle ------------------------------------------------------------------------
     async def __aenter__(self) -> MavlinkHub:
@@ -300,6 +301,14 @@ class MavlinkHub:
         """The open links' names, in the order they were opened."""
         return tuple(self._links)
 
+    def add_replay_link(self, name: str) -> Callable[[bytes, Address | None], None]:
+        """A receive-only datagram link that its caller feeds (``gcs-utm replay``: each call
+        one recorded packet, at the clock's time); frames sent on it go nowhere."""
+        transport = Transport(parse_endpoint("udpin:127.0.0.1:0"))  # never opened
+        self._links[name] = _Link(name=name, transport=transport, datagram=True)
+        self._links[name].encoder = wire.Encoder(self.config.gcs_sys_id, self.config.gcs_comp_id)
+        return self.receiver(name)
+
     def receiver(self, link: str) -> Callable[[bytes, Address | None], None]:
         """What ``link``'s transport calls with each received chunk and its source address;
         calling it is receiving those bytes on that link (benchmarks, tests)."""
@@ -317,6 +326,10 @@ class MavlinkHub:
         self._links.clear()
 
     # --- queries --------------------------------------------------------------------------
+    def states(self) -> list[VehicleState]:
+        """Every sender heard (vehicles, and components that are none), as first heard."""
+        return list(self._states.values())
+
     def vehicles(self) -> list[VehicleInfo]:
         return [s.info for s in self._states.values() if s.info is not None]
 
@@ -474,7 +487,8 @@ class MavlinkHub:
             return
         st = self._states.get((link.name, addr, sys_id, comp_id))
         if st is None:
-            if mid == wire.HEARTBEAT and m.autopilot == 8:
+            if mid == wire.HEARTBEAT and m.autopilot == MAV_AUTOPILOT_INVALID:
+                self.counters.gcs_heartbeats += 1
                 return  # another GCS or a non-autopilot component: not a vehicle
             st = self._new_state(link, addr, sys_id, comp_id, t)
             if st is None:
@@ -499,7 +513,8 @@ class MavlinkHub:
     ) -> None:
         """A vehicle's HEARTBEAT: discovery, and ArduPilot's streams asked for when it is new
         or its link came back."""
-        if m.autopilot == 8:
+        if m.autopilot == MAV_AUTOPILOT_INVALID:
+            self.counters.gcs_heartbeats += 1
             return  # a component without an autopilot sharing the vehicle's ids
         new = handler(st, m, t, self.sink)
         if new:

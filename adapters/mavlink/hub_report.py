@@ -17,6 +17,7 @@ class HubCounters:
     truncated: int = 0
     bad_signature: int = 0
     not_for_us: int = 0
+    gcs_heartbeats: int = 0  # HEARTBEATs without an autopilot (ground stations): no vehicle
     address_changes: int = 0
     sysid_collisions: int = 0
     handler_errors: int = 0

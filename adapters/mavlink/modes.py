@@ -100,10 +100,6 @@ def kind_from(mav_type: int) -> VehicleKind | None:
     return None
 
 
-def px4_custom_mode(main: int, sub: int = 0) -> int:
-    return (main << 16) | (sub << 24)
-
-
 def mode_from(autopilot: Autopilot, kind: VehicleKind | None, custom_mode: int) -> FlightMode:
     if autopilot is Autopilot.PX4:
         main = (custom_mode >> 16) & 0xFF

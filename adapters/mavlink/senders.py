@@ -113,13 +113,6 @@ class Senders:
         self.on_forget: list[Callable[[VehicleState], None]] = []
         self._keyed = frozenset(int(s) for s in config.signing_keys)
 
-    def bound_to(self, sys_id: int) -> tuple[str, Address | None] | None:
-        """(link, address) that ``sys_id`` is bound to, or None."""
-        owner = self.by_sysid.get(sys_id)
-        if owner is None:
-            return None
-        return owner.key.link, self.addr.get(id(owner))
-
     def new_state(
         self, link: str, addr: Address | None, sys_id: int, comp_id: int, t_s: float
     ) -> VehicleState | None:

@@ -19,6 +19,8 @@ def mosquitto_acl(
     surveillance: Sequence[str] = ("adsb",),
 ) -> str:
     """ACL file text for mosquitto 2 (``acl_file``). Users not named here are operators."""
+    if not valid_operator(prefix):
+        raise ValueError(f"topic prefix {prefix!r} is not a valid topic level")
     for name in (utm_user, *authorities, *surveillance):
         if not valid_operator(name):
             raise ValueError(f"user name {name!r} is not a valid topic level")

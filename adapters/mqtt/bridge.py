@@ -104,9 +104,10 @@ class MqttHandler(Protocol):
         """A stakeholder alert (with ``area``) or a GNSS jamming/spoofing/integrity report."""
         ...
 
-    async def on_pilot_answer(self, a: PilotAnswer) -> AnswerOutcome:
+    async def on_pilot_answer(self, a: PilotAnswer) -> AnswerOutcome | None:
         """An answer (``a.operator`` is the topic's operator). Return what became of it; the
-        bridge publishes the outcome on the operator's status topic."""
+        bridge publishes the outcome on the operator's status topic. None: another service
+        instance answers it (nothing is published here)."""
         ...
 
     async def on_flight_plan(self, s: FlightPlanSubmission) -> None:
@@ -616,6 +617,11 @@ class MqttBridge:
             await h.on_hazard(msg)
         elif isinstance(msg, PilotAnswer):
             outcome = await h.on_pilot_answer(msg)
+            if outcome is None:
+                _log.debug(
+                    "mqtt: answer %s v%d: answered elsewhere", msg.recommendation_id, msg.version
+                )
+                return
             _log.info(
                 "mqtt: answer %s v%d %s from %s: %s %s",
                 msg.recommendation_id,

@@ -33,8 +33,6 @@ from typing import TypeVar
 
 MESSAGE_SIZE = 25
 PACK_MAX_MESSAGES = 9  # F3411-22a: at most 9 messages in a pack (a BLE 5 / Wi-Fi frame)
-AUTH_PAGE0_DATA_BYTES = 17
-AUTH_PAGE_DATA_BYTES = 23
 ODID_EPOCH_UTC_S = datetime(2019, 1, 1, tzinfo=UTC).timestamp()  # F3411 timestamps count from it
 
 _E = TypeVar("_E", bound=IntEnum)

@@ -5,7 +5,7 @@ Times in the report are seconds after the scenario's t0 (``*_at_s``, waypoint ti
 are WGS84 degrees and metres AMSL. ``to_json`` gives the JSON layout field by field (the field
 names are the JSON keys), so a changed field is a type error in every reader, not a missing key.
 Loss of separation is judged as Monitoring judges it, on the effective minima of each pair
-(operational volumes included: :func:`gcs_utm.core.monitoring.loss.is_loss`), on the tracks
+(operational volumes included: :mod:`gcs_utm.core.monitoring.loss`), on the tracks
 the UTM had (``separation``) and on the simulated vehicles' true positions (``truth``).
 """
 

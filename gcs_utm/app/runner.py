@@ -309,51 +309,47 @@ async def run_scenario(
     scenario, settings = _load(scenario_path, settings, start_utc + lead_s)
     if options.record_dir is not None:  # refused before anything starts (RecordError)
         check_folder(options.record_dir, settings.record)
-    store = _open_store(options, scenario, settings)
-    rt = build_runtime(settings, clock, scenario.frame, store)
-    recorder = record_links(
-        rt.hub,
-        options.record_dir,
-        settings.record,
-        surveillance=rt.surveillance,
-        on_failure=lambda text: rt.usm.log_event("recording", text),
-    )
-    _file_scenario(rt, scenario)
-
-    end_t_s = scenario.t0_s + (options.duration_s or scenario.duration_s)
-    link = options.link or (
-        "udpin:127.0.0.1:0" if not options.external else settings.mavlink.links[0]
-    )
-    await rt.hub.add_link(link)
-    fleet = _fleet(rt, scenario, options, link=link, lead_s=lead_s, sim_clock=sim_clock)
-    frontends = attach_frontends(
-        rt,
-        FrontendOptions(
-            operator=options.operator,
-            headless=options.headless,
-            quiet=options.quiet,
-            mqtt=options.mqtt,
-            reject_first=options.reject_first,
-        ),
-    )
-    wall0 = time.perf_counter()
-    flown: list[FlyOutcome] = []
-    try:
-        async with contextlib.AsyncExitStack() as stack:
-            if fleet is not None:
-                await stack.enter_async_context(fleet)
-            if on_runtime is not None:
-                await on_runtime(rt)
-            quit_requested = await _serve(
-                rt, frontends, scenario, options, end_t_s=end_t_s, flown=flown
-            )
-    finally:
-        await rt.usm.drain()
-        await rt.usm.close()
-        await rt.hub.close()
-        if recorder is not None:
-            recorder.close()
-        wall_s = time.perf_counter() - wall0
+    rt = build_runtime(settings, clock, scenario.frame, _open_store(options, scenario, settings))
+    rt.close_in_threads = not options.fast_time  # a fast-time loop does not wait for threads
+    async with rt:  # whatever fails from here on, what was started is torn down
+        rt.recorder = record_links(
+            rt.hub,
+            options.record_dir,
+            settings.record,
+            surveillance=rt.surveillance,
+            on_failure=lambda text: rt.usm.log_event("recording", text),
+        )
+        _file_scenario(rt, scenario)
+        end_t_s = scenario.t0_s + (options.duration_s or scenario.duration_s)
+        link = options.link or (
+            "udpin:127.0.0.1:0" if not options.external else settings.mavlink.links[0]
+        )
+        await rt.hub.add_link(link)
+        fleet = _fleet(rt, scenario, options, link=link, lead_s=lead_s, sim_clock=sim_clock)
+        frontends = attach_frontends(
+            rt,
+            FrontendOptions(
+                operator=options.operator,
+                headless=options.headless,
+                quiet=options.quiet,
+                mqtt=options.mqtt,
+                reject_first=options.reject_first,
+            ),
+        )
+        wall0 = time.perf_counter()
+        flown: list[FlyOutcome] = []
+        try:
+            async with contextlib.AsyncExitStack() as stack:
+                if fleet is not None:
+                    await stack.enter_async_context(fleet)
+                if on_runtime is not None:
+                    await on_runtime(rt)
+                quit_requested = await _serve(
+                    rt, frontends, scenario, options, end_t_s=end_t_s, flown=flown
+                )
+        finally:
+            await rt.close()
+            wall_s = time.perf_counter() - wall0
     report = build_report(
         rt,
         scenario,
@@ -362,7 +358,6 @@ async def run_scenario(
         vehicles=fleet.vehicles if fleet is not None else (),
         operator_quit=quit_requested,
     )
-    store.close()
     _write_outputs(report, scenario, options, flown)
     return report
 

@@ -24,14 +24,16 @@ from gcs_utm.cluster.regions import RegionError
 from gcs_utm.config import ConfigError
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import Geofence, Operation
+from gcs_utm.services.mqtt_gateway import MqttGateway
 from gcs_utm.services.recorder import check_folder, record_links
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreConfig, StoreError, StoreWriter, describe, is_postgres, open_store
 
 from .restart import start_review
-from .stopping import Stopping, run_steps
+from .stopping import Stopping
 from .wiring import (
     FrontendOptions,
+    Frontends,
     Persistence,
     Runtime,
     attach_frontends,
@@ -40,9 +42,6 @@ from .wiring import (
 )
 
 _log = logging.getLogger(__name__)
-
-# how long a plain stop waits for the USM's uploads in progress before cancelling them
-DRAIN_BUDGET_S = 10.0
 
 
 def check_cluster(settings: Settings, location: str | Path) -> None:
@@ -62,10 +61,13 @@ async def join_cluster(
     stop: asyncio.Event,
     failed: list[str],
     policy: OwnershipPolicy,
+    *,
+    gateway: MqttGateway | None = None,
 ) -> ClusterNode:
     """This runtime as a cluster member: checks the region map (a differing one is refused);
     the member task and the region exchange (on the [mqtt] broker) start with the service
-    tasks."""
+    tasks. ``gateway``: the MQTT interface, whose answers, plans and commands one instance
+    carries out and answers (gcs_utm.cluster.inbound)."""
     settings = rt.settings.cluster
     instance = settings.instance or f"{socket.gethostname()}-{os.getpid()}"
 
@@ -100,11 +102,14 @@ async def join_cluster(
         exchange=exchange,
         tracks=rt.tracks,
         emergency=rt.emergency,
+        heard=rt.usm.statuses_by_sys_id,  # the vehicles heard, by system id
     )
     rt.store.writer.set_fence(node.fence)  # region-owned rows carry the lease generation
     rt.usm.vehicle_ops.owns = node.files  # behind a router: only our regions' vehicles
     # an operator's command: carried out by the owner of the UAS's region only
     rt.usm.operator_commands.gate = CommandGate(node.member, policy, rt.frame, node.may_act)
+    if gateway is not None:
+        gateway.arbiter = node.inbound
     try:
         await node.member.start()
     except RegionError as exc:
@@ -139,15 +144,13 @@ def _stored_airspace(
     return location, operations, geofences
 
 
-async def _open_links(rt: Runtime, store: Persistence) -> None:
+async def _open_links(rt: Runtime) -> None:
     """Open the ``[mavlink]`` links; one that cannot be (taken since the start's
-    check_resources) is one ConfigError line, after closing what is open."""
+    check_resources) is one ConfigError line (the runtime's teardown closes what is open)."""
     for i, link in enumerate(rt.settings.mavlink.links):
         try:
             await rt.hub.add_link(link)
         except OSError as exc:
-            await rt.hub.close()
-            store.close()
             raise ConfigError(
                 "serve", f"mavlink.links[{i}]", f"{link!r} cannot be opened: {exc}"
             ) from exc
@@ -183,35 +186,54 @@ async def serve(
     pending = Path(settings.store.journal) if is_postgres(location) else None
     store = Persistence(StoreWriter(location, _writer_config(settings, cluster), journal=pending))
     policy = OwnershipPolicy() if cluster else None
-    rt = build_runtime(settings, clock, frame, store, policy=policy)
-    store.writer.on_event = lambda text: rt.usm.log_event("store", text)
-    recorder = record_links(
-        rt.hub,
-        record_dir,
-        settings.record,
-        surveillance=rt.surveillance,
-        on_failure=lambda text: rt.usm.log_event("recording", text),
-    )
-    rt.airspace.load(operations, geofences)
-    rt.tracking.set_operations(operations)
-    _log.info(
-        "resumed %d operations and %d geofences from %s",
-        len(operations),
-        len(geofences),
-        describe(location),
-    )
-    await _open_links(rt, store)
-    frontends = attach_frontends(rt, FrontendOptions(operator=operator, headless=headless))
-    stop = stop or asyncio.Event()
-    failed: list[str] = []
-    try:
-        node = await join_cluster(rt, location, stop, failed, policy) if policy else None
-    except StoreError:
-        await rt.hub.close()
-        store.close()
-        raise
-    if on_runtime is not None:
-        await on_runtime(rt)
+    rt = build_runtime(settings, clock, frame, store, policy=policy, run_report=False)
+    async with rt:  # whatever fails from here on, what was started is torn down
+        store.writer.on_event = lambda text: rt.usm.log_event("store", text)
+        rt.recorder = record_links(
+            rt.hub,
+            record_dir,
+            settings.record,
+            surveillance=rt.surveillance,
+            on_failure=lambda text: rt.usm.log_event("recording", text),
+        )
+        rt.airspace.load(operations, geofences)
+        rt.tracking.set_operations(operations)
+        _log.info(
+            "resumed %d operations and %d geofences from %s",
+            len(operations),
+            len(geofences),
+            describe(location),
+        )
+        await _open_links(rt)
+        frontends = attach_frontends(rt, FrontendOptions(operator=operator, headless=headless))
+        stop = stop or asyncio.Event()
+        failed: list[str] = []
+        node = (
+            await join_cluster(rt, location, stop, failed, policy, gateway=frontends.gateway)
+            if policy
+            else None
+        )
+        if on_runtime is not None:
+            await on_runtime(rt)
+        await _serve_until_stop(
+            rt, frontends, node, location, stop=stop, failed=failed, cluster=cluster
+        )
+    print("gcs-utm serve: stopped", *failed, file=sys.stderr)
+    return 3 if failed else 0
+
+
+async def _serve_until_stop(
+    rt: Runtime,
+    frontends: Frontends,
+    node: ClusterNode | None,
+    location: str | Path,
+    *,
+    stop: asyncio.Event,
+    failed: list[str],
+    cluster: bool,
+) -> None:
+    """The service tasks until ``stop`` (SIGINT, SIGTERM, the dashboard's end, a lost
+    region: ``failed``), then the runtime's bounded stop."""
     loop = asyncio.get_running_loop()
     stopping: Stopping | None = None
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -229,49 +251,10 @@ async def serve(
             await stop.wait()
             stopping = Stopping(fenced=bool(failed))
             if await stopping.cancel(tasks):  # some task ignores its cancellation
-                await _close(stopping, rt, store, recorder)
+                await rt.close(stopping)
                 stopping.exit_now(3 if failed else 1, " ".join(["gcs-utm serve: stopped", *failed]))
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.remove_signal_handler(sig)
-        await _close(stopping or Stopping(fenced=bool(failed)), rt, store, recorder)
-    print("gcs-utm serve: stopped", *failed, file=sys.stderr)
-    return 3 if failed else 0
-
-
-async def _close(
-    stopping: Stopping, rt: Runtime, store: Persistence, recorder: object | None
-) -> None:
-    await run_steps(stopping, closing_steps(rt, store, recorder, stopping))
-
-
-def closing_steps(
-    rt: Runtime, store: Persistence, recorder: object | None, stopping: Stopping
-) -> list[tuple[str, Callable[[], object]]]:
-    """The steps of a stop, in order (each bounded by gcs_utm.app.stopping).
-
-    A plain stop first lets the USM's work in progress (uploads, hazard forwarding) finish,
-    within :data:`DRAIN_BUDGET_S`, as ``run`` does: an upload cut in the middle would leave
-    a vehicle and the store disagreeing about its mission. A fenced member does not: its
-    region may be another instance's by now, so it sends nothing more."""
-    steps: list[tuple[str, Callable[[], object]]] = []
-    if not stopping.fenced:
-
-        async def drain() -> None:
-            await _drain(rt)
-
-        steps.append(("usm.drain (work in progress)", drain))
-    steps += [("usm.close", rt.usm.close), ("links (hub.close)", rt.hub.close)]
-    close = getattr(recorder, "close", None)
-    if close is not None:
-        steps.append(("recorder.close", close))
-    steps.append(("store.close", store.close))
-    return steps
-
-
-async def _drain(rt: Runtime) -> None:
-    try:
-        await asyncio.wait_for(rt.usm.drain(), DRAIN_BUDGET_S)
-    except TimeoutError:
-        _log.warning("stop: USM work still running after %.0f s; cancelling it", DRAIN_BUDGET_S)
+        await rt.close(stopping or Stopping(fenced=bool(failed)))

@@ -1,5 +1,9 @@
-"""A bounded stop of ``serve``: every step of the shutdown has a time limit, and a step that
-overruns it is logged by name and left behind, so an instance that must stop does stop.
+"""A bounded stop of the runtime (``serve``, ``run``, ``demo`` and ``eval`` alike, see
+:meth:`gcs_utm.app.wiring.Runtime.close`): every step of the shutdown has a time limit, and a
+step that overruns it is logged by name and left behind, so an instance that must stop does
+stop. The steps, in order (:func:`closing_steps`): let the USM's work in progress finish
+(within :data:`DRAIN_BUDGET_S`; a fenced member skips it), close the USM, the links, the
+recorder, the store.
 
 A fenced cluster member (its region may be another instance's by now) has a short budget:
 its links close and it exits with code 3 within :data:`FENCED_BUDGET_S`; a plain stop
@@ -18,6 +22,7 @@ import os
 import sys
 import time
 from collections.abc import Awaitable, Callable, Sequence
+from typing import Protocol
 
 _log = logging.getLogger(__name__)
 
@@ -25,6 +30,32 @@ FENCED_BUDGET_S = 3.0
 STOP_BUDGET_S = 40.0
 # the share of the budget the service tasks get to end after their cancellation
 TASKS_SHARE = 0.4
+# how long a plain stop waits for the USM's uploads in progress before cancelling them
+DRAIN_BUDGET_S = 10.0
+
+
+class _Usm(Protocol):
+    async def drain(self) -> None: ...
+
+    async def close(self) -> None: ...
+
+
+class _Hub(Protocol):
+    async def close(self) -> None: ...
+
+
+class _Closeable(Protocol):
+    def close(self) -> None: ...
+
+
+class Parts(Protocol):
+    """What a stop closes of a runtime (:class:`gcs_utm.app.wiring.Runtime`)."""
+
+    @property
+    def usm(self) -> _Usm: ...
+
+    @property
+    def hub(self) -> _Hub: ...
 
 
 class Stopping:
@@ -70,14 +101,61 @@ class Stopping:
         os._exit(code)
 
 
-async def run_steps(stopping: Stopping, steps: Sequence[tuple[str, Callable[[], object]]]) -> None:
+async def run_steps(
+    stopping: Stopping,
+    steps: Sequence[tuple[str, Callable[[], object]]],
+    *,
+    threads: bool = True,
+) -> None:
     """Each ``(name, fn)``: a coroutine function awaited, or a blocking function run on a
-    thread, within the time left."""
+    thread, within the time left. ``threads`` False runs a blocking one inline: a fast-time
+    loop (:class:`gcs_utm.clock.FastTimeLoop`) does not wait for threads, so their time limit
+    would run out at once."""
     for what, fn in steps:
         if asyncio.iscoroutinefunction(fn):
             await stopping.step(what, fn())
-        else:
+        elif threads:
             await stopping.step(what, asyncio.to_thread(fn))
+        else:
+            fn()
 
 
-__all__ = ["FENCED_BUDGET_S", "STOP_BUDGET_S", "Stopping", "run_steps"]
+def closing_steps(
+    rt: Parts, store: _Closeable, recorder: _Closeable | None, stopping: Stopping
+) -> list[tuple[str, Callable[[], object]]]:
+    """The steps of a stop, in order (each bounded by :func:`run_steps`).
+
+    A plain stop first lets the USM's work in progress (uploads, hazard forwarding) finish,
+    within :data:`DRAIN_BUDGET_S`: an upload cut in the middle would leave a vehicle and the
+    store disagreeing about its mission. A fenced member does not: its region may be another
+    instance's by now, so it sends nothing more."""
+    steps: list[tuple[str, Callable[[], object]]] = []
+    if not stopping.fenced:
+
+        async def drain() -> None:
+            await _drain(rt.usm)
+
+        steps.append(("usm.drain (work in progress)", drain))
+    steps += [("usm.close", rt.usm.close), ("links (hub.close)", rt.hub.close)]
+    if recorder is not None:
+        steps.append(("recorder.close", recorder.close))
+    steps.append(("store.close", store.close))
+    return steps
+
+
+async def _drain(usm: _Usm) -> None:
+    try:
+        await asyncio.wait_for(usm.drain(), DRAIN_BUDGET_S)
+    except TimeoutError:
+        _log.warning("stop: USM work still running after %.0f s; cancelling it", DRAIN_BUDGET_S)
+
+
+__all__ = [
+    "DRAIN_BUDGET_S",
+    "FENCED_BUDGET_S",
+    "STOP_BUDGET_S",
+    "Parts",
+    "Stopping",
+    "closing_steps",
+    "run_steps",
+]

@@ -58,6 +58,7 @@ from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.emergency import EmergencyService
 from gcs_utm.services.monitoring import MonitoringService
 from gcs_utm.services.operator import AutoOperator
+from gcs_utm.services.recorder import LinkRecorder
 from gcs_utm.services.retention import Retention
 from gcs_utm.services.strategic import FilingCheck
 from gcs_utm.services.surveillance import SurveillanceService
@@ -66,6 +67,8 @@ from gcs_utm.services.usm import Usm
 from gcs_utm.settings import Settings
 from gcs_utm.store import StoreWriter
 from gcs_utm.store.ids import life_prefix
+
+from .stopping import Stopping, closing_steps, run_steps
 
 if TYPE_CHECKING:
     from gcs_utm.cluster.policy import OwnershipPolicy
@@ -135,7 +138,12 @@ class Persistence:
 
 @dataclass
 class Runtime:
-    """Every built part, so the CLI, the report and tests can look inside."""
+    """Every built part, so the CLI, the report and tests can look inside; and the owner of
+    their lifetime, the same for ``serve``, ``run``, ``demo`` and ``eval``: the start (links
+    opened, frontends attached, a cluster joined) runs inside ``async with rt:``, so a failure
+    anywhere in it still tears down what was started, and leaving the block (or
+    :meth:`close`) tears down once, in the order of
+    :func:`gcs_utm.app.stopping.closing_steps`."""
 
     settings: Settings
     clock: Clock
@@ -157,9 +165,31 @@ class Runtime:
     geofence_history: dict[str, Geofence] = field(default_factory=dict)
     samples: dict[TrackId, list[TrackSample]] = field(default_factory=dict)
     retention: Retention | None = None  # forgets what ended long ago (services/retention.py)
+    recorder: LinkRecorder | None = None  # --record: closed after the links
+    # a blocking close step (the store's) runs on a thread, bounded; inline on a fast-time
+    # loop, which does not wait for threads (gcs_utm.app.stopping.run_steps)
+    close_in_threads: bool = True
+    _closed: bool = field(default=False, init=False, repr=False)
 
     def tracks(self) -> dict[TrackId, Track]:
         return self.remote_id_tracks.attach(self.tracking.tracks_now())
+
+    async def __aenter__(self) -> Runtime:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def close(self, stopping: Stopping | None = None) -> None:
+        """Tear down once (a second call does nothing): drain the USM (unless ``stopping``
+        is a fenced member's), close it, the links, the recorder and the store, each step
+        within ``stopping``'s budget (default: a plain stop's, from now)."""
+        if self._closed:
+            return
+        self._closed = True
+        stopping = stopping or Stopping(fenced=False)
+        steps = closing_steps(self, self.store, self.recorder, stopping)
+        await run_steps(stopping, steps, threads=self.close_in_threads)
 
 
 def build_runtime(
@@ -169,11 +199,14 @@ def build_runtime(
     store: Persistence,
     *,
     policy: OwnershipPolicy | None = None,
+    run_report: bool = True,
 ) -> Runtime:
     """Build and connect the parts (no task started, no socket opened, nothing process-wide
     changed: see :func:`gcs_utm.app.configure_interpreter` for that). ``policy``: a cluster
     member's ownership rule (``serve --cluster``): only the threats it decides reach its USM
-    and EM, and its recommendations for other instances' operations go to the store only."""
+    and EM, and its recommendations for other instances' operations go to the store only.
+    ``run_report``: keep what a run report reads (the USM's threat log); ``serve`` builds
+    no report, so a day of threats stays in the store only."""
     plan_history: dict[OperationId, list[FlightPlan]] = {}
     geofence_history: dict[str, Geofence] = {}
     tracker = Tracker(frame, settings.tracking)
@@ -205,6 +238,7 @@ def build_runtime(
         record=store.record,
         id_prefix=id_prefix,
         ground_elevation_amsl_m=frame.ground_elevation_amsl_m,
+        keep_threat_log=run_report,
     )
 
     filing = FilingCheck(

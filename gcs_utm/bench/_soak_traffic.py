@@ -23,8 +23,6 @@ from gcs_utm.model import (
 if TYPE_CHECKING:
     from gcs_utm.app.wiring import Runtime
 
-    from .soak import Traffic
-
 BOX_M = 8_000.0  # side of the square the legs cross
 SPEED_MPS = 12.0
 LEAD_S = 30.0  # filed this long before it starts
@@ -114,8 +112,12 @@ async def _fly(rt: Runtime, op_id: OperationId) -> None:
     rt.usm.log_event("operation", f"{op_id} ended by soak")
 
 
-async def play_traffic(rt: Runtime, traffic: Traffic) -> None:
-    """File an operation every ``traffic.every_s``, each flown by a task of its own."""
+async def play_traffic(
+    rt: Runtime, *, every_s: float, flight_s: float, conflict_every: int
+) -> None:
+    """File an operation every ``every_s`` (each flying ``flight_s``, every
+    ``conflict_every``-th head-on into the one before it; 0: none), each flown by a task of
+    its own."""
     rng = random.Random(7)
     flights: set[asyncio.Task[None]] = set()
     last_leg: tuple[float, ...] | None = None
@@ -123,10 +125,10 @@ async def play_traffic(rt: Runtime, traffic: Traffic) -> None:
     while True:
         n += 1
         op_id = OperationId(f"soak-{n}")
-        head_on = last_leg if traffic.conflict_every and n % traffic.conflict_every == 0 else None
-        leg = _leg(rng, traffic.flight_s, head_on)
+        head_on = last_leg if conflict_every and n % conflict_every == 0 else None
+        leg = _leg(rng, flight_s, head_on)
         last_leg = leg
-        plan = _plan(rt, op_id, rt.clock.now_s() + LEAD_S, traffic.flight_s, leg)
+        plan = _plan(rt, op_id, rt.clock.now_s() + LEAD_S, flight_s, leg)
         rt.airspace.add_operation(
             Operation(
                 id=op_id,
@@ -144,4 +146,4 @@ async def play_traffic(rt: Runtime, traffic: Traffic) -> None:
         task = asyncio.create_task(_fly(rt, op_id), name=f"soak-{op_id}")
         flights.add(task)
         task.add_done_callback(flights.discard)
-        await rt.clock.sleep(traffic.every_s)
+        await rt.clock.sleep(every_s)

@@ -20,8 +20,8 @@ throughput on SQLite and PostgreSQL, and broker throughput of region traffic mes
   subscriber: region traffic messages (``--tracks-per-msg`` tracks in the existing traffic
   encoding) through the broker per second, QoS 0.
 
-PostgreSQL: ``--url`` (an existing server), else a private server started for the run with
-its default durability (fsync on).
+PostgreSQL: ``--url``, a database the run may fill (a deployment's own server, or from a
+checkout the private one ``python -m tests.store.pgserver`` starts, fsync on).
 """
 
 from __future__ import annotations
@@ -87,7 +87,9 @@ w.close()
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--url", default="", help="postgresql:// URL (default: a private server)")
+    p.add_argument(
+        "--url", default="", help="postgresql:// URL of a database the run may fill (required)"
+    )
     p.add_argument("--runs", type=int, default=3, help="failovers timed")
     p.add_argument("--lease-s", type=float, default=3.0, help="[cluster] lease_s")
     p.add_argument("--renew-s", type=float, default=1.0, help="[cluster] renew_s")
@@ -259,12 +261,12 @@ async def _failover_once(url: str, args: argparse.Namespace, epoch: int) -> floa
 
 
 def _failover_record(url: str, args: argparse.Namespace) -> dict[str, object]:
-    from gcs_utm.store import open_store
+    from gcs_utm.store import leases, open_store
 
     times: list[float] = []
     for run in range(args.runs):
-        with open_store(url) as s, s.transaction() as c:
-            c.execute("DELETE FROM region_leases")  # each run starts with no owner
+        with open_store(url) as s:
+            leases.clear(s)  # each run starts with no owner
         times.append(asyncio.run(_failover_once(url, args, 1000 + 2 * run)))
     return summary(
         "cluster.failover",
@@ -422,28 +424,20 @@ def _exchange_record(port: int, args: argparse.Namespace) -> dict[str, object]:
 
 
 def run(args: argparse.Namespace) -> list[dict[str, object]]:
-    from gcs_utm.cluster import localpg
-
-    server = None
     url = args.url
     if not url:
-        server, why = localpg.start(durable=True)
-        if server is None:
-            raise SystemExit(f"gcs-utm bench cluster: no PostgreSQL: {why}; pass --url")
-        url = server.create_database("bench")
-    records: list[dict[str, object]] = []
-    try:
-        records.append(_failover_record(url, args))
-        with tempfile.TemporaryDirectory() as d:
-            records += _store_records(Path(d) / "bench.sqlite3", "sqlite", args)
-        records += _store_records(url, "postgresql", args)
-        if args.writers > 1:
-            records.append(_shared_store_record(url, args))
-        with _mosquitto() as port:
-            if port is not None:
-                records.append(_broker_record(port, args))
-                records.append(_exchange_record(port, args))
-    finally:
-        if server is not None:
-            server.stop()
+        raise SystemExit(
+            "gcs-utm bench cluster: pass --url postgresql://... (a database it may fill); "
+            "from a checkout, python -m tests.store.pgserver starts a private one"
+        )
+    records = [_failover_record(url, args)]
+    with tempfile.TemporaryDirectory() as d:
+        records += _store_records(Path(d) / "bench.sqlite3", "sqlite", args)
+    records += _store_records(url, "postgresql", args)
+    if args.writers > 1:
+        records.append(_shared_store_record(url, args))
+    with _mosquitto() as port:
+        if port is not None:
+            records.append(_broker_record(port, args))
+            records.append(_exchange_record(port, args))
     return records

@@ -138,7 +138,7 @@ async def _soak(traffic: Traffic, db_path: Path) -> list[dict[str, Any]]:
     clock = LoopClock(asyncio.get_running_loop(), FAST_TIME_EPOCH_UTC_S)
     frame = LocalFrame(origin_lat_deg=47.0, origin_lon_deg=8.0, ground_elevation_amsl_m=400.0)
     store = Persistence(StoreWriter(db_path, settings.store))
-    rt = build_runtime(settings, clock, frame, store)
+    rt = build_runtime(settings, clock, frame, store, run_report=False)  # as serve
     frontends = attach_frontends(
         rt, FrontendOptions(operator=OperatorMode.AUTO_ACCEPT, headless=True, quiet=True)
     )
@@ -150,7 +150,17 @@ async def _soak(traffic: Traffic, db_path: Path) -> list[dict[str, Any]]:
     try:
         async with asyncio.TaskGroup() as tg:
             tasks = start_service_tasks(tg, rt, frontends)
-            tasks.append(tg.create_task(play_traffic(rt, traffic), name="soak-traffic"))
+            tasks.append(
+                tg.create_task(
+                    play_traffic(
+                        rt,
+                        every_s=traffic.every_s,
+                        flight_s=traffic.flight_s,
+                        conflict_every=traffic.conflict_every,
+                    ),
+                    name="soak-traffic",
+                )
+            )
             total_s = traffic.hours * HOUR_S
             for k in range(1, math.ceil(total_s / traffic.sample_s - 1e-9) + 1):
                 end_s = t0_s + min(k * traffic.sample_s, total_s)

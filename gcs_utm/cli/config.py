@@ -1,52 +1,24 @@
 """``gcs-utm config default`` prints every setting with its default and doc;
 ``gcs-utm config check FILE`` validates a configuration file against the settings classes.
+``gcs-utm config mqtt-acl`` prints the broker's ACL (:mod:`adapters.mqtt.acl`).
 
-Sections come from ``gcs_utm.settings.SECTIONS`` (composed by the lead) when that module
-exists, else from the known per-area settings classes that can be imported.
+Sections come from ``gcs_utm.settings.SECTIONS``.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 from typing import Any
 
 from gcs_utm.config import ConfigError, build, load_toml, render_toml
 from gcs_utm.preflight import check_resources, check_settings
-from gcs_utm.settings import Settings
-
-# Section -> (module, class), as agreed in docs/HELPERS.md; used only without gcs_utm.settings.
-_KNOWN: dict[str, tuple[str, str]] = {
-    "tracking": ("gcs_utm.core.tracking.config", "TrackingConfig"),
-    "monitoring": ("gcs_utm.core.monitoring.config", "MonitoringConfig"),
-    "deconfliction": ("gcs_utm.core.deconfliction.config", "DeconflictionConfig"),
-    "emergency": ("gcs_utm.core.emergency.config", "EmergencyConfig"),
-    "mavlink": ("adapters.mavlink.config", "MavlinkConfig"),
-    "adsb": ("adapters.adsb.config", "AdsbConfig"),
-    "mqtt": ("adapters.mqtt.config", "MqttConfig"),
-    "store": ("gcs_utm.store.config", "StoreConfig"),
-    "dashboard": ("gcs_utm.dashboard.config", "DashboardConfig"),
-    "cluster": ("gcs_utm.cluster.config", "ClusterConfig"),
-}
+from gcs_utm.settings import SECTIONS, Settings
 
 
 def sections() -> dict[str, type[Any]]:
     """The configuration sections: name -> settings dataclass."""
-    try:
-        settings = importlib.import_module("gcs_utm.settings")
-    except ModuleNotFoundError as exc:
-        if exc.name != "gcs_utm.settings":
-            raise
-    else:
-        return dict(settings.SECTIONS)
-    out: dict[str, type[Any]] = {}
-    for name, (module, cls) in _KNOWN.items():
-        try:
-            out[name] = getattr(importlib.import_module(module), cls)
-        except (ModuleNotFoundError, AttributeError):
-            continue  # that area has not landed yet
-    return out
+    return dict(SECTIONS)
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -57,10 +29,30 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     c = cmds.add_parser("check", help="validate a configuration TOML file")
     c.add_argument("file", help="configuration file (TOML)")
     c.set_defaults(func=_check)
+    a = cmds.add_parser(
+        "mqtt-acl", help="print the mosquitto ACL that confines each operator to its topics"
+    )
+    a.add_argument("--prefix", default="gcs_utm", help="[mqtt] topic_prefix (default gcs_utm)")
+    a.add_argument(
+        "--utm-user", default="gcs_utm", help="broker user name of gcs-utm (default gcs_utm)"
+    )
+    a.set_defaults(func=_mqtt_acl)
 
 
 def _default(args: argparse.Namespace) -> int:
     sys.stdout.write(render_toml(sections()))
+    return 0
+
+
+def _mqtt_acl(args: argparse.Namespace) -> int:
+    from adapters.mqtt.acl import mosquitto_acl
+
+    try:
+        text = mosquitto_acl(args.prefix, utm_user=args.utm_user)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    sys.stdout.write(text)
     return 0
 
 

@@ -1,10 +1,11 @@
 """``gcs-utm replay INPUT... [--speed N|max] [--report OUT.json]``: recorded ``.tlog`` files,
 ADS-B receiver captures (``.sbs``, ``.bin``, ``.avr``) and folders written by ``--record``
-run through the same pipeline as live links and feeds (MAVLink telemetry decoder / ADS-B
-decoders -> Tracking -> Monitoring), with a progress bar on stderr and a JSON report.
+run through the service's own parts, as live links and feeds do (MAVLink hub / ADS-B
+decoders -> Tracking -> Monitoring), on record time, with a progress bar on stderr and a JSON
+report.
 
-The pipeline: :mod:`gcs_utm.cli.replay_pipeline`; reading and merging the inputs:
-:mod:`gcs_utm.cli.replay_inputs`. Bad input, one line on stderr: a missing path, a file of
+The replay configuration of the service: :mod:`gcs_utm.app.replay`; reading and merging the
+inputs: :mod:`gcs_utm.cli.replay_inputs`. Bad input, one line on stderr: a missing path, a file of
 unknown kind or a folder without recordings is exit 2; inputs without a single valid record
 (or a capture that cannot be timed) exit 1.
 """
@@ -17,23 +18,24 @@ import json
 import math
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from adapters.adsb.config import AdsbConfig
-from gcs_utm.cli.replay_inputs import Inputs, discover, first_t_s, replay_inputs
-from gcs_utm.cli.replay_pipeline import ReplayError, ReplayPipeline
+from gcs_utm.app.replay import ReplayConfig
+from gcs_utm.cli.replay_inputs import Inputs, ReplayError, discover, first_t_s, replay_inputs
 from gcs_utm.scenario import ScenarioError
 
 __all__ = [
+    "ReplayConfig",
     "ReplayError",
-    "ReplayPipeline",
     "parse_speed",
     "register",
     "replay_file",
     "replay_paths",
-    "scenario_pipeline",
+    "scenario_config",
 ]
 
 
@@ -41,18 +43,19 @@ async def replay_paths(
     paths: Sequence[Path],
     *,
     speed: float | None = None,
-    pipeline: ReplayPipeline | None = None,
+    config: ReplayConfig | None = None,
     on_progress: Callable[[int], None] | None = None,
     adsb: AdsbConfig | None = None,
     adsb_start_t_s: float | None = None,
 ) -> dict[str, Any]:
     """Replay ``paths`` (tlogs, captures, recorded folders) merged by time and return the
-    report; ``adsb`` configures the capture decoders (receiver position). Raises
-    :class:`ReplayError`."""
-    return await replay_inputs(
+    report; ``adsb`` configures the capture decoders (receiver position). The replay runs on
+    an event loop of its own, in a worker thread. Raises :class:`ReplayError`."""
+    return await asyncio.to_thread(
+        replay_inputs,
         discover(paths),
         speed=speed,
-        pipeline=pipeline,
+        config=config,
         on_progress=on_progress,
         adsb=adsb,
         adsb_start_t_s=adsb_start_t_s,
@@ -63,38 +66,42 @@ async def replay_file(
     path: Path,
     *,
     speed: float | None = None,
-    pipeline: ReplayPipeline | None = None,
+    config: ReplayConfig | None = None,
     on_progress: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
     """Replay the one file ``path`` (a tlog or an ADS-B capture); see :func:`replay_paths`.
     ``on_progress(bytes_done)`` is called every few hundred records."""
     if not path.is_file():
         raise ReplayError(path, _not_a_file(path))
-    return await replay_paths([path], speed=speed, pipeline=pipeline, on_progress=on_progress)
+    return await replay_paths([path], speed=speed, config=config, on_progress=on_progress)
 
 
-def scenario_pipeline(
-    inputs: Inputs, scenario_path: Path, base: ReplayPipeline | None = None
-) -> ReplayPipeline:
-    """A pipeline with the operations and geofences of ``scenario_path``, its t0 set to the
-    first record time of ``inputs``; ``base`` gives the settings (mavlink, tracking,
-    monitoring)."""
+def scenario_config(
+    inputs: Inputs,
+    scenario_path: Path,
+    base: ReplayConfig | None = None,
+    *,
+    t0_s: float | None = None,
+) -> ReplayConfig:
+    """The replay configuration with the operations, geofences and frame of
+    ``scenario_path``, its t0 at ``t0_s`` (default: the first record time of ``inputs``);
+    ``base`` gives the settings."""
     from gcs_utm.scenario import load_any
 
-    t0 = first_t_s(inputs)
+    t0 = first_t_s(inputs) if t0_s is None else t0_s
     if t0 is None:
         raise ReplayError(inputs.files[0], "no valid tlog record: not a .tlog file?")
     scenario = load_any(scenario_path, t0_s=t0)
-    b = base or ReplayPipeline()
-    return ReplayPipeline(
+    b = base or ReplayConfig()
+    settings = b.settings
+    if scenario.safety_distance_m is not None:  # as `run` does with such a scenario
+        settings = replace(settings, monitoring=scenario.monitoring_for(settings.monitoring))
+    return ReplayConfig(
+        settings=settings,
         link=f"tlog:{inputs.files[0].name}",
-        mavlink=b.mavlink,
-        tracking=b.tracking,
-        monitoring=b.monitoring,
-        remote_id=b.remote_id_config,
         frame=scenario.frame,
-        operations=scenario.operations,
-        geofences=scenario.geofences,
+        operations=tuple(scenario.operations),
+        geofences=tuple(scenario.geofences),
     )
 
 
@@ -142,7 +149,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "monitoring and write a JSON report",
         description="Replay .tlog files, ADS-B receiver captures (.sbs SBS-1, .bin Beast, "
         ".avr AVR) and folders recorded with --record into the telemetry -> tracking -> "
-        "monitoring pipeline, merged by time, using record times as capture times. "
+        "monitoring parts of the service, merged by time, each at its record time. "
         "Corrupt records are skipped and counted.",
     )
     p.add_argument(
@@ -172,6 +179,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="scenario file whose operations/geofences apply (its t0 = the first record time)",
     )
     p.add_argument(
+        "--scenario-t0",
+        type=parse_utc,
+        default=None,
+        metavar="UTC",
+        help="the scenario's t0 (POSIX seconds or ISO 8601; default: the first record time): "
+        "the t0 of the run that recorded the inputs",
+    )
+    p.add_argument(
         "--config",
         type=Path,
         default=None,
@@ -190,8 +205,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.set_defaults(func=_run)
 
 
-def _prepare(args: argparse.Namespace) -> tuple[Inputs, ReplayPipeline | None, Any] | int:
-    """Inputs, pipeline and ADS-B settings of the command line, or an exit code."""
+def _prepare(args: argparse.Namespace) -> tuple[Inputs, ReplayConfig, Any] | int:
+    """Inputs, replay configuration and ADS-B settings of the command line, or an exit
+    code."""
     from gcs_utm.config import ConfigError
     from gcs_utm.settings import load_settings
 
@@ -207,22 +223,16 @@ def _prepare(args: argparse.Namespace) -> tuple[Inputs, ReplayPipeline | None, A
         return 2
     try:
         settings = load_settings(args.config)
-        pipeline = ReplayPipeline(
-            link=f"tlog:{inputs.files[0].name}",
-            mavlink=settings.mavlink,
-            tracking=settings.tracking,
-            monitoring=settings.monitoring,
-            remote_id=settings.remote_id,
-        )
+        config = ReplayConfig(settings=settings, link=f"tlog:{inputs.files[0].name}")
         if args.scenario is not None:
-            pipeline = scenario_pipeline(inputs, args.scenario, pipeline)
+            config = scenario_config(inputs, args.scenario, config, t0_s=args.scenario_t0)
     except ConfigError as exc:
         print(f"gcs-utm replay: {exc}", file=sys.stderr)
         return 2
     except (ReplayError, ScenarioError, OSError) as exc:
         print(f"gcs-utm replay: {exc}", file=sys.stderr)
         return 1
-    return inputs, pipeline, settings.adsb
+    return inputs, config, settings.adsb
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -239,7 +249,7 @@ def _run(args: argparse.Namespace) -> int:
     prepared = _prepare(args)
     if isinstance(prepared, int):
         return prepared
-    inputs, pipeline, adsb = prepared
+    inputs, config, adsb = prepared
     first: Path = args.inputs[0]
     out: Path = args.report or Path(f"{first.stem or first.resolve().name}.replay.json")
     total = inputs.total_bytes()
@@ -255,15 +265,13 @@ def _run(args: argparse.Namespace) -> int:
     with progress:
         task = progress.add_task(first.name, total=total)
         try:
-            report = asyncio.run(
-                replay_inputs(
-                    inputs,
-                    speed=args.speed,
-                    pipeline=pipeline,
-                    on_progress=lambda done: progress.update(task, completed=done),
-                    adsb=adsb,
-                    adsb_start_t_s=args.adsb_start,
-                )
+            report = replay_inputs(
+                inputs,
+                speed=args.speed,
+                config=config,
+                on_progress=lambda done: progress.update(task, completed=done),
+                adsb=adsb,
+                adsb_start_t_s=args.adsb_start,
             )
         except ReplayError as exc:
             progress.stop()

@@ -1,5 +1,5 @@
 """What ``gcs-utm replay`` reads and in what order: tlogs, ADS-B receiver captures and recorded
-folders, merged by time into one :class:`~gcs_utm.cli.replay_pipeline.ReplayPipeline`.
+folders, merged by time into one replay of the service (:mod:`gcs_utm.app.replay`).
 
 Inputs (:func:`discover`), any number of them:
 
@@ -14,7 +14,8 @@ Inputs (:func:`discover`), any number of them:
 
 Every tlog record and every decoded ADS-B measurement is an event at its record (receipt)
 time; the events of all inputs are merged by time (ties: in input order) and handed to the
-pipeline, paced at real speed, a factor, or as fast as possible. Captures without a sidecar
+replay at their record times, paced at real speed, a factor, or as fast as possible (fast
+time). Captures without a sidecar
 whose content has only receiver-relative times (Beast, AVR ``@`` MLAT counters) start at
 ``adsb_start_t_s``: by default the first record of the tlogs replayed with them, else the
 capture file's modification time.
@@ -22,12 +23,11 @@ capture file's modification time.
 
 from __future__ import annotations
 
-import asyncio
 import heapq
 import re
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -43,12 +43,21 @@ from adapters.adsb.capture import (
 )
 from adapters.adsb.config import AdsbConfig
 from adapters.tlog import TlogCounters, TlogReader
-from gcs_utm.cli.replay_pipeline import ReplayError, ReplayPipeline
+from gcs_utm.app.replay import ReplayConfig, ReplayEvent, replay_blocking
+from gcs_utm.app.replay_report import replay_report
 from gcs_utm.model import Measurement
 
 _PROGRESS_EVERY = 256  # events between progress-bar updates (rendering is not free)
-_YIELD_EVERY = 500  # events between yields to the loop when replaying as fast as possible
 _PIECE = re.compile(r"^(?P<feed>.+)-\d{8}T\d{6}Z(?:-\d+)?$")  # the recorder's file names
+
+
+class ReplayError(ValueError):
+    """A replay that cannot produce a report (missing file, no valid record)."""
+
+    def __init__(self, path: Path, message: str) -> None:
+        super().__init__(f"{path}: {message}")
+        self.path = path
+        self.message = message
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,10 +80,6 @@ class Inputs:
 
     def total_bytes(self) -> int:
         return sum(p.stat().st_size for p in self.files)
-
-
-def _not_a_file(path: Path) -> str:
-    return "is a directory, not a .tlog file" if path.is_dir() else "no such file"
 
 
 def _first_time(piece: Path) -> float:
@@ -205,71 +210,71 @@ def feed_counts(feed: Feed, decoder: CaptureDecoder) -> dict[str, int]:
 
 
 @dataclass(slots=True)
-class _Pacer:
-    speed: float | None
+class _Seen:
+    """What went by: records (tlog), bytes, the first and last record times."""
+
+    records: int = 0
+    done_bytes: int = 0
     first_t_s: float | None = None
-    start_wall_s: float = 0.0
-    n: int = 0
+    last_t_s: float | None = None
+    decoders: list[CaptureDecoder] = field(default_factory=list)
 
-    async def wait(self, t_s: float) -> None:
-        if self.first_t_s is None:
-            self.first_t_s = t_s
-            self.start_wall_s = time.monotonic()
-        self.n += 1
-        if self.speed is not None:
-            delay = self.start_wall_s + (t_s - self.first_t_s) / self.speed - time.monotonic()
-            if delay > 0.0:
-                await asyncio.sleep(delay)
-        elif self.n % _YIELD_EVERY == 0:
-            await asyncio.sleep(0)
+    def total_bytes(self) -> int:
+        return self.done_bytes + sum(d.counters.bytes for d in self.decoders)
 
 
-async def replay_inputs(
+def _events(streams: list[Iterator[_Event]], seen: _Seen) -> Iterator[ReplayEvent]:
+    for t_s, _, item in heapq.merge(*streams, key=lambda e: (e[0], e[1])):
+        if seen.first_t_s is None:
+            seen.first_t_s = t_s
+        seen.last_t_s = t_s
+        if isinstance(item, bytes):
+            seen.records += 1
+            seen.done_bytes += 8 + len(item)
+        yield t_s, item
+
+
+def replay_inputs(
     inputs: Inputs,
     *,
     speed: float | None = None,
-    pipeline: ReplayPipeline | None = None,
+    config: ReplayConfig | None = None,
     on_progress: Callable[[int], None] | None = None,
     adsb: AdsbConfig | None = None,
     adsb_start_t_s: float | None = None,
 ) -> dict[str, Any]:
-    """Replay every input, merged by time, and return the report (see the module doc).
-    Raises :class:`ReplayError` when nothing in them is valid or a capture cannot be read."""
+    """Replay every input, merged by time, and return the report (see the module doc); runs
+    an event loop of its own. Raises :class:`ReplayError` when nothing in them is valid or a
+    capture cannot be read."""
     first = inputs.files[0]
-    pipe = pipeline or ReplayPipeline(link=f"tlog:{first.name}")
-    config = adsb or AdsbConfig()
+    conf = config or ReplayConfig(link=f"tlog:{first.name}")
+    adsb_config = adsb or AdsbConfig()
     start = adsb_start_t_s
     if start is None and inputs.feeds:
         tlog_t0 = [t for t in map(first_record_t_s, inputs.tlogs) if t is not None]
         start = min(tlog_t0) if tlog_t0 else inputs.feeds[0].pieces[0].stat().st_mtime
     tlog_counters = TlogCounters()
-    decoders = [_decoder(f, config) for f in inputs.feeds]
+    seen = _Seen(decoders=[_decoder(f, adsb_config) for f in inputs.feeds])
     streams: list[Iterator[_Event]] = [
         _tlog_events(p, i, tlog_counters) for i, p in enumerate(inputs.tlogs)
     ]
     streams += [
         _feed_events(f, len(inputs.tlogs) + i, d, start or 0.0)
-        for i, (f, d) in enumerate(zip(inputs.feeds, decoders, strict=True))
+        for i, (f, d) in enumerate(zip(inputs.feeds, seen.decoders, strict=True))
     ]
-    pacer = _Pacer(speed)
-    done = 0
+
+    def progress(n: int) -> None:
+        if on_progress is not None and n % _PROGRESS_EVERY == 0:
+            on_progress(seen.total_bytes())
+
     wall0 = time.monotonic()
     try:
-        for t_s, _, item in heapq.merge(*streams, key=lambda e: (e[0], e[1])):
-            await pacer.wait(t_s)
-            if isinstance(item, bytes):
-                pipe.feed_packet(t_s, item)
-                done += 8 + len(item)
-            else:
-                pipe.feed_measurement(t_s, item)
-            if on_progress is not None and pacer.n % _PROGRESS_EVERY == 0:
-                on_progress(done + sum(d.counters.bytes for d in decoders))
+        rt = replay_blocking(conf, _events(streams, seen), speed=speed, on_event=progress)
     except CaptureError as exc:
         raise ReplayError(exc.path, exc.message) from exc
     except OSError as exc:
         raise ReplayError(Path(exc.filename or first), f"cannot read: {exc.strerror}") from exc
-    pipe.finish()
-    if pacer.n == 0:
+    if rt is None:
         raise ReplayError(first, _nothing_valid(inputs, tlog_counters))
     described = [{"path": str(p), "kind": "tlog"} for p in inputs.tlogs]
     described += [
@@ -277,12 +282,17 @@ async def replay_inputs(
         for f in inputs.feeds
         for p in f.pieces
     ]
-    return pipe.report(
+    return replay_report(
+        rt,
         path=first,
+        records=seen.records,
+        span=(seen.first_t_s, seen.last_t_s),
         counters=tlog_counters,
         wall_s=time.monotonic() - wall0,
         inputs=described,
-        adsb_feeds={f.name: feed_counts(f, d) for f, d in zip(inputs.feeds, decoders, strict=True)},
+        adsb_feeds={
+            f.name: feed_counts(f, d) for f, d in zip(inputs.feeds, seen.decoders, strict=True)
+        },
     )
 
 

@@ -8,7 +8,7 @@ audit can follow, and the decider hears the outcome from the same rows; the exch
 QoS 0, latest-wins traffic, right for tracks and wrong for commands.
 
 - **decider** (:meth:`DecisionRelay.file`): a recommendation for another instance's operation
-  is filed in the store as a new version allocated there (:func:`gcs_utm.cluster.versions.
+  is filed in the store as a new version allocated there (:func:`gcs_utm.store.versions.
   allocate`: unique across lives, so a re-decision never collides with the owner's version);
   its EM's number is mapped to the filed one. A later state of that version is an ordinary
   write of the mapped version.
@@ -37,7 +37,6 @@ from collections.abc import Callable
 from typing import Protocol
 
 from gcs_utm.clock import Clock
-from gcs_utm.cluster import versions
 from gcs_utm.cluster.fence import LeaseFence
 from gcs_utm.cluster.member import ClusterMember
 from gcs_utm.cluster.policy import OwnershipPolicy
@@ -48,7 +47,7 @@ from gcs_utm.model import (
     RecommendationId,
     RecommendationState,
 )
-from gcs_utm.store import StoreError
+from gcs_utm.store import StoreError, versions
 
 _log = logging.getLogger(__name__)
 

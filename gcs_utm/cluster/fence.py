@@ -26,6 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from gcs_utm.store import Connection, FencedError
+from gcs_utm.store.leases import holder_of
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -57,12 +58,12 @@ class LeaseFence:
         region_of: Callable[[str], str | None],
         on_refused: Callable[[Refusal], None],
         *,
-        lock_sql: str = "",
+        share_lock: bool = False,
     ) -> None:
         self.holder = holder
         self._region_of = region_of
         self._on_refused = on_refused
-        self._lock_sql = lock_sql
+        self._share_lock = share_lock  # PostgreSQL: share-lock the lease row read
         self.generations: dict[str, int] = {}
         self.refused = 0
 
@@ -84,18 +85,15 @@ class LeaseFence:
             self._check(c, op_id, held_region, held)
 
     def _check(self, c: Connection, op_id: str, region_id: str, held: int) -> None:
-        row = c.execute(
-            "SELECT holder, generation FROM region_leases WHERE region_id = ?" + self._lock_sql,
-            (region_id,),
-        ).fetchone()
-        if row is not None and str(row[0]) == self.holder and int(row[1]) == held:
+        row = holder_of(c, region_id, share_lock=self._share_lock)
+        if row == (self.holder, held):
             return
         refusal = Refusal(
             operation_id=op_id,
             region_id=region_id,
             generation=held,
-            current_generation=0 if row is None else int(row[1]),
-            current_holder="" if row is None else str(row[0]),
+            current_generation=0 if row is None else row[1],
+            current_holder="" if row is None else row[0],
         )
         self.refused += 1
         self._on_refused(refusal)

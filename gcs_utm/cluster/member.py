@@ -17,7 +17,7 @@ monitoring cycle can cost a lease):
    configured owner the head start at cluster start).
 Every connection of the member runs under a statement timeout of ``lease_s`` (a renewal or a
 read that takes longer is worthless: the lease has run out by then) and TCP keepalive; the
-read connection is checked (``SELECT 1``) every round, so a standby that holds nothing and
+read connection is checked (a round trip) every round, so a standby that holds nothing and
 never reads finds a connection broken by a PostgreSQL restart before a takeover needs it. A
 region whose takeover cannot be loaded is handed back (:meth:`ClusterMember.drop`): released
 on the next round, and taken again by a later one.
@@ -120,12 +120,13 @@ class ClusterMember:
         return self._read_db
 
     def _ping(self) -> None:
-        """On the read thread: ``SELECT 1`` on the read connection; a broken one is closed
-        here, so the next read opens a new one instead of failing on the old."""
+        """On the read thread: a round trip on the read connection (:meth:`StoreBase.ping`);
+        a broken one is closed here, so the next read opens a new one instead of failing on
+        the old."""
         try:
             if self._closed:
                 return
-            self._reader()._rows("SELECT 1")
+            self._reader().ping()
         except StoreError as exc:
             _log.warning("cluster: read connection broken, reconnecting: %s", exc)
             if self._read_db is not None:

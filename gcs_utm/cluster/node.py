@@ -17,15 +17,19 @@ drive what this instance's airspace holds.
   with its system id (unique across the cluster: behind a MAVLink router this instance hears
   the vehicle too, and both feed one track) and its tracks are fed to the tracker as its
   measurements; a vehicle this instance hears is filed as an operation here only when its
-  mission departs in a region it holds (:meth:`ClusterNode.files`), else its operation,
-  once its owner filed it, is loaded as foreign (:meth:`ClusterNode.watch_heard`), so even a
-  standby holding nothing tracks it as that operation, not as an intruder; foreign plans and
-  the active geofences are refreshed from the store every ``renew_s``;
+  mission departs in a region it holds (:meth:`ClusterNode.files`), else the operation its
+  owner filed for its system id (whatever that operation is called) is loaded as foreign
+  (:meth:`ClusterNode.watch_heard`), so even a standby holding nothing tracks it as that
+  operation, not as an intruder; foreign plans and the active geofences are refreshed from
+  the store every ``renew_s``;
 - decisions: who decides is :mod:`gcs_utm.cluster.policy`; what crosses instances goes
   through the store (:mod:`gcs_utm.cluster.decisions`): a recommendation another life filed
   for an operation this instance owns is adopted (proposed again as a new version allocated
-  in this life, :mod:`gcs_utm.cluster.versions`), like a pending one at takeover, and a
+  in this life, :mod:`gcs_utm.store.versions`), like a pending one at takeover, and a
   command decided for it is sent to its vehicle here;
+- MQTT input (answers, flight plans, operator commands reach every instance): carried out
+  and answered by the holder of the region concerned, one refusal from one instance when
+  nobody holds it (:mod:`gcs_utm.cluster.inbound`);
 - fencing: the writes of this instance's regions' rows carry the lease generation it gained
   them with (:mod:`gcs_utm.cluster.fence`); a refused write is audited and stops the
   instance, like a lost lease.
@@ -41,11 +45,11 @@ from pathlib import Path
 from typing import Protocol
 
 from gcs_utm.clock import Clock
-from gcs_utm.cluster import versions
 from gcs_utm.cluster.config import ClusterConfig
 from gcs_utm.cluster.decisions import DecisionRelay, EmergencyPort, UsmPort
 from gcs_utm.cluster.exchange import RegionExchange, RemoteTrack
 from gcs_utm.cluster.fence import LeaseFence, Refusal
+from gcs_utm.cluster.inbound import InboundArbiter
 from gcs_utm.cluster.lease import Lease
 from gcs_utm.cluster.member import ClusterMember
 from gcs_utm.cluster.policy import OwnershipPolicy
@@ -59,11 +63,13 @@ from gcs_utm.model import (
     MeasurementSource,
     Operation,
     OperationId,
+    OperationState,
     Recommendation,
+    SysId,
     Track,
     TrackId,
 )
-from gcs_utm.store import StoreBase, StoreError, is_postgres
+from gcs_utm.store import StoreBase, StoreError, is_postgres, versions
 
 _log = logging.getLogger(__name__)
 
@@ -106,6 +112,7 @@ class ClusterNode:
         exchange: RegionExchange | None = None,
         tracks: Callable[[], Mapping[TrackId, Track]] | None = None,
         emergency: EmergencyPort | None = None,
+        heard: Callable[[], Iterable[SysId]] | None = None,
     ) -> None:
         self.member = ClusterMember(
             location,
@@ -128,9 +135,9 @@ class ClusterNode:
         self.exchange = exchange
         self._tracks = tracks
         self._loading: set[OperationId] = set()
-        # operations of vehicles heard here (behind a router) whose region another instance
-        # holds, not yet in the airspace: loaded as foreign once their owner filed them
-        self._heard: set[OperationId] = set()
+        # the MAVLink system ids of the vehicles heard here (behind a router: every vehicle);
+        # one flying no operation of the airspace is looked for in the store (watch_heard)
+        self._heard = heard
         self.foreign_measurements = 0
         self._regions_of_ops: dict[OperationId, str] = {}
         self._failed = False
@@ -142,7 +149,7 @@ class ClusterNode:
             self.member.holder,
             self._region_of,
             self._refused,
-            lock_sql=" FOR SHARE" if is_postgres(location) else "",
+            share_lock=is_postgres(location),
         )
         self.decisions = DecisionRelay(
             member=self.member,
@@ -155,6 +162,16 @@ class ClusterNode:
         )
         self.policy.filer = self.decisions.file
         self.policy.may_act = self.may_act
+        # MQTT answers, plans and commands: one instance acts, one answers (the gateway's)
+        self.inbound = InboundArbiter(
+            self.member,
+            self.policy,
+            frame,
+            may_act=self.may_act,
+            loaded=lambda region_id: region_id in self.resumed,
+            record=record,
+            clock=clock,
+        )
 
     # ---- self-fencing on the local clock (gcs_utm.cluster.member, .selffence) ---------------
     def may_act(self) -> bool:
@@ -247,7 +264,6 @@ class ClusterNode:
             self._regions_of_ops[op.id] = region_id  # the fence's map, filled ahead of writes
         if self.exchange is not None:
             self.exchange.watch(self.member.owned)
-        self._heard.difference_update(op.id for op in state.operations)
         known = set(self._airspace.operations)
         self._airspace.load(state.operations, state.geofences)
         self._tracking.set_operations(self._airspace.operations.values())
@@ -367,32 +383,39 @@ class ClusterNode:
             return False
         first = plan.waypoints[0]
         east_m, north_m = self._frame.point_to_local(first.lat_deg, first.lon_deg)
-        if self.member.owns(self.member.map.region_of(east_m, north_m)):
-            return True
-        self._heard.add(op_id)  # another instance's vehicle: watched once filed there
-        return False
+        # another instance's vehicle: watched once filed there (watch_heard)
+        return self.member.owns(self.member.map.region_of(east_m, north_m))
 
     async def watch_heard(self) -> None:
-        """The vehicles heard here whose operation another instance filed become foreign
-        operations (with their system id), so their telemetry feeds a vehicle track of
-        that operation rather than an intruder ``sysid:<n>@<address>``; one not filed yet is
-        looked for again on the next call."""
-        wanted = self._heard - set(self._airspace.operations)
-        self._heard = wanted
+        """The vehicles heard here (their system ids, as the hub names them) that fly no
+        operation of this airspace: the operation another instance filed for that system id
+        becomes a foreign operation here, whatever it is called (``sys<n>`` from the
+        vehicle's mission, an id filed over MQTT or from a scenario with its ``sys_id``), so
+        the vehicle's telemetry feeds a vehicle track of that operation rather than an
+        intruder ``sysid:<n>@<address>``; one not filed yet is looked for again on the next
+        call."""
+        if self._heard is None:
+            return
+        here = self._airspace.operations
+        flown = {op.sys_id for op in here.values() if op.sys_id is not None}
+        wanted = {SysId(s) for s in self._heard()} - flown
         if not wanted:
             return
-        found = await self.member.read(
-            lambda s: [op for op in s.load_operations() if op.id in wanted]
-        )
+        found = await self.member.read(lambda s: _flown_by(s, wanted))
         assert isinstance(found, list)
-        ops = [op for op in found if op.id not in self._airspace.operations]
+        ops = [op for op in found if op.id not in here and not self._held(op)]
         if not ops:
             return
         self.policy.foreign.update(op.id for op in ops)
-        self._heard -= {op.id for op in ops}
         self._install_foreign(ops)
         for op in ops:
             self._usm.log_event("cluster", f"watching {op.id} of another instance (heard)")
+
+    def _held(self, op: Operation) -> bool:
+        """An operation of a region this instance holds: its own (loaded with the region)."""
+        return bool(op.plan.waypoints) and self.member.owns(
+            departure_region(op, self._frame, self.member.map)
+        )
 
     async def refresh(self) -> None:
         """Foreign operations' plans and the active geofences as filed in the store (their
@@ -457,6 +480,19 @@ def _operation(store: StoreBase, op_id: OperationId) -> Operation | None:
         if op.id == op_id:
             return op
     return None
+
+
+def _flown_by(store: StoreBase, sys_ids: set[SysId]) -> list[Operation]:
+    """The operation each of ``sys_ids`` flies as filed in the store (not ended; the most
+    recently planned when a vehicle has flown several)."""
+    latest: dict[SysId, Operation] = {}
+    for op in store.load_operations():
+        if op.sys_id is None or op.sys_id not in sys_ids or op.state is OperationState.ENDED:
+            continue
+        seen = latest.get(op.sys_id)
+        if seen is None or op.plan.created_t_s >= seen.plan.created_t_s:
+            latest[op.sys_id] = op
+    return list(latest.values())
 
 
 def _refresh_view(

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from gcs_utm.cluster.regions import RegionMap
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import Geofence, Operation, OperationId, Recommendation, RecommendationState
-from gcs_utm.store import StoreBase
+from gcs_utm.store import StoreBase, versions
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -66,13 +66,9 @@ def load_region(
 
 
 def _highest(store: StoreBase, op_ids: set[OperationId], epoch: int) -> tuple[tuple[str, int], ...]:
-    rows = store._rows(
-        "SELECT id, operation_id, MAX(version) FROM recommendations WHERE id IN "
-        "(SELECT id FROM recommendations WHERE epoch = ?) GROUP BY id, operation_id "
-        "ORDER BY id",
-        (epoch,),
+    return tuple(
+        (i, v) for i, op, v in versions.highest_of_life(store, epoch) if OperationId(op) in op_ids
     )
-    return tuple((str(i), int(v)) for i, op, v in rows if OperationId(str(op)) in op_ids)
 
 
 __all__ = ["RegionState", "departure_region", "load_region"]

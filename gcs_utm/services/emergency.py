@@ -36,11 +36,8 @@ from dataclasses import dataclass, replace
 
 from gcs_utm.clock import Clock
 from gcs_utm.core.emergency import Decision, EmergencyManager
-from gcs_utm.core.emergency.adoption import adopt_case
-from gcs_utm.core.emergency.closing import close_threat
 from gcs_utm.core.emergency.coalesce import EscalationCoalescer
 from gcs_utm.core.emergency.ground import not_decided, on_ground
-from gcs_utm.core.emergency.recheck import plan_problem
 from gcs_utm.model import (
     AirspaceSnapshot,
     Geofence,
@@ -148,7 +145,7 @@ class EmergencyService:
     def plan_problem(self, rec: Recommendation) -> str:
         """Why the accepted plan of ``rec`` must not be uploaded now (core.emergency.recheck,
         on a fresh snapshot): the USM asks right before the upload."""
-        return plan_problem(self.em, rec, self._snapshot(self._clock.now_s()))
+        return self.em.plan_problem(rec, self._snapshot(self._clock.now_s()))
 
     async def run(self) -> None:
         getter: asyncio.Future[_Item] | None = None
@@ -218,7 +215,7 @@ class EmergencyService:
                 lambda: self.em.on_answer(asked, item.accepted, self._snapshot(now)), item.rec_id
             )
         elif item.status is ThreatStatus.CLOSED:  # its geofences go with it
-            await self._decide(lambda: close_threat(self.em, item), item.id)
+            await self._decide(lambda: self.em.close_threat(item), item.id)
         elif (held := self.adoptions.pop(item.id, None)) is not None:
             await self._decide(lambda: self._adopt(item, held, now), item.id)
         else:
@@ -229,8 +226,7 @@ class EmergencyService:
         """A restart detected the condition of an earlier life's threat again: its case is
         taken over (nothing in force: decided as a new threat)."""
         inherited, recs, fences = held
-        d = adopt_case(
-            self.em,
+        d = self.em.adopt_case(
             threat,
             inherited=inherited,
             recommendations=recs,

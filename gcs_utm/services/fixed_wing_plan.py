@@ -14,7 +14,9 @@ hovers at a loiter. A fixed wing cannot:
   30 m reached 111 m out, where 30 / tan(15 deg) = 112 m; a straight line from the start
   put the rolling plane 10.3 m below it, outside its flight geometry).
 - **NAV_TAKEOFF with a position** (PX4: its runway take-off heads for it) is the same
-  climb-out from the vehicle's home towards that position, then level to it. PX4 v1.15.2
+  climb-out from the vehicle's home towards that position, then level to it; a position
+  within :data:`HERE_M` of where it starts (QGroundControl gives a plane's take-off the
+  launch position) is "here". PX4 v1.15.2
   SIH keeps no pitch in the item (read back without it): lift-off about 18 m out, 30 m
   reached 95-99 m out (the model: 32 and 92 m at 22 m/s filed), 5 m above it after, then
   level; a straight line from home to a take-off position 250 m out put it 18-28 m above
@@ -40,7 +42,6 @@ from typing import Protocol, Self, TypeVar
 
 from gcs_utm.envelope import FIXED_WING_MIN_SPEED_FACTOR
 
-NAV_LOITER_UNLIM = 17
 NAV_LOITER_TURNS = 18
 NAV_LOITER_TIME = 19
 NAV_TAKEOFF = 22
@@ -51,6 +52,9 @@ TAKEOFF_CLIMB_RATE_MPS = 5.0
 TECS_CLMB_MAX and PX4 FW_T_CLMB_MAX default to 5 m/s."""
 ROLL_FRACTION = 0.35
 """The part of the take-off run on the ground (ArduPlane 4.6 SITL: 40 of 111 m)."""
+HERE_M = 10.0
+"""A take-off position this close to where the vehicle starts gives no heading: "here" (the
+launch position a ground station wrote, GNSS noise, a home rounded to 1e-4 deg)."""
 _STEP_RAD = math.pi / 4.0  # circle points every 45 degrees
 _MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
 _M_PER_DEG_LAT = 110_540.0
@@ -114,8 +118,9 @@ def fixed_wing_points(
     is before it (PX4)."""
     out: list[P] = []
     for i, p in enumerate(points):
-        if p.command == NAV_TAKEOFF and not p.explicit:
-            out.extend(_climb_out(p, out[-1] if out else None, points[i + 1 :], ground_alt_m))
+        if p.command == NAV_TAKEOFF and _here(p, out[-1] if out else None, home_deg):
+            here = _from_start(p, out[-1] if out else None, home_deg)
+            out.extend(_climb_out(here, out[-1] if out else None, points[i + 1 :], ground_alt_m))
         elif p.command == NAV_TAKEOFF:
             out.extend(_climb_out_to(p, out[-1] if out else None, home_deg, ground_alt_m))
         elif p.command in LOITER_COMMANDS and out:
@@ -124,6 +129,33 @@ def fixed_wing_points(
         else:
             out.append(p)
     return out
+
+
+def _here(p: Point, before: Point | None, home_deg: tuple[float, float] | None) -> bool:
+    """Whether a take-off is "here": no position of its own, or the position the vehicle
+    starts from (QGroundControl gives a plane's NAV_TAKEOFF the launch position; ArduPlane
+    climbs out along its heading whatever the item's position, and a runway take-off towards
+    a point within :data:`HERE_M` of where it stands has no heading either)."""
+    if not p.explicit:
+        return True
+    start = (before.lat_deg, before.lon_deg) if before is not None else home_deg
+    if start is None:
+        return False
+    k = math.cos(math.radians(p.lat_deg))
+    east_m = (p.lon_deg - start[1]) * _M_PER_DEG_LON * k
+    north_m = (p.lat_deg - start[0]) * _M_PER_DEG_LAT
+    return math.hypot(east_m, north_m) < HERE_M
+
+
+def _from_start(p: P, before: Point | None, home_deg: tuple[float, float] | None) -> P:
+    """A take-off that is "here" with a position of its own, moved to where the vehicle
+    starts (a modelled point); one without a position as it is."""
+    if not p.explicit:
+        return p
+    start = (before.lat_deg, before.lon_deg) if before is not None else home_deg
+    if start is None:  # not reached: _here needs a start for a take-off with a position
+        return p
+    return p.moved(start[0], start[1], p.alt_amsl_m).synthetic()
 
 
 def _climb_out_to(

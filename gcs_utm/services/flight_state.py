@@ -48,7 +48,7 @@ class Phase(Enum):
 @dataclass(slots=True)
 class FlightState:
     """One vehicle (one system id on one link). ``home`` is its HOME_POSITION once it has had a
-    3D fix; ``home_at_arming`` the home it had when it armed (the floor of its flight)."""
+    3D fix."""
 
     phase: Phase = Phase.PREFLIGHT
     armed: bool = False
@@ -56,7 +56,6 @@ class FlightState:
     had_fix: bool = False  # a 3D fix since the last boot
     reboots: int = 0
     home: Position | None = None
-    home_at_arming: Position | None = None
     armed_at: Position | None = None  # where it was when it armed
 
     on_ground: bool = False  # disarmed, or armed and landed by its own landed state
@@ -77,7 +76,7 @@ class FlightState:
         if s.reboots != self.reboots:
             self.reboots = s.reboots
             self.phase, self.armed, self.fix, self.had_fix = Phase.PREFLIGHT, False, False, False
-            self.home = self.home_at_arming = self.armed_at = None
+            self.home = self.armed_at = None
             out.append("rebooted")
         if s.gnss_fix_type is None:  # no GPS_RAW_INT (another source): once it has positions
             self.fix = s.position is not None
@@ -90,7 +89,7 @@ class FlightState:
             self.home = s.home
             out.append("home")
         if s.armed and not self.armed:
-            self.home_at_arming, self.armed_at = self.home, s.position
+            self.armed_at = s.position
             out.append("armed")
         elif self.armed and not s.armed:
             out.append("disarmed")

@@ -36,7 +36,6 @@ class MonitoringService:
         self._on_threats = on_threats
         self.period_s = period_s
         self.cycles = 0
-        self.overruns = 0
 
     def run_once(self, t_s: float) -> list[Threat]:
         """One cycle at ``t_s``: snapshot, detect, return the opened/updated/closed threats."""
@@ -52,6 +51,5 @@ class MonitoringService:
                 await self._on_threats(threats)
             took = self._clock.now_s() - t0
             if took > self.period_s:
-                self.overruns += 1
                 _log.warning("monitoring cycle took %.3f s (period %.3f s)", took, self.period_s)
             await self._clock.sleep(max(0.0, self.period_s - took))

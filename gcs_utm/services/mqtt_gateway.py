@@ -16,7 +16,11 @@ Invariants:
   answer always reaches the USM with ``source == "mqtt"``;
 - an inbound message the USM cannot take raises ``ValueError``: the bridge reports it on the
   errors topics and logs it, nothing crashes;
-- every publish only enqueues (the bridge never blocks the USM).
+- every publish only enqueues (the bridge never blocks the USM);
+- a cluster member (``arbiter`` set, :mod:`gcs_utm.cluster.inbound`): every instance hears
+  the same messages, and only the holder of the region concerned carries out an answer, a
+  flight plan, a flight status or an operator command; the others publish nothing, except
+  one refusal when no instance holds that region.
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ import asyncio
 import dataclasses
 import logging
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Protocol
 
 from adapters.mqtt import answers as mqtt_answers
 from adapters.mqtt.bridge import MqttBridge
@@ -66,6 +72,35 @@ EXPIRY_SLACK_S = 0.01
 after the earliest end, when that geofence is strictly expired."""
 
 
+@dataclass(frozen=True, slots=True)
+class Route:
+    """Who handles one inbound message in a cluster: this instance (``here``); else
+    ``refusal`` is this instance's answer ("": another instance answers, nothing is
+    published here)."""
+
+    here: bool
+    refusal: str = ""
+
+
+HERE = Route(here=True)
+
+
+class InboundArbiter(Protocol):
+    """A cluster member's rule for MQTT input (:mod:`gcs_utm.cluster.inbound`)."""
+
+    async def pilot_answer(self, a: PilotAnswer, operation_id: OperationId | None) -> Route:
+        """``operation_id``: the recommendation's operation as this USM knows it."""
+        ...
+
+    async def flight_plan(self, s: FlightPlanSubmission) -> Route: ...
+
+    async def flight_status(self, s: FlightStatusReport) -> Route: ...
+
+    async def operator_command(self, c: OperatorCommandRequest, gate_reason: str) -> str:
+        """A command refused as another instance's: the refusal to publish ("": none)."""
+        ...
+
+
 class MqttGateway:
     """``gw = MqttGateway(usm, config, tracks=...)``; ``gw.attach()`` wires it into the USM;
     ``await gw.run()`` (in a task group) runs the bridge and the traffic publisher."""
@@ -87,6 +122,8 @@ class MqttGateway:
         self._alerted: set[ThreatId] = set()
         self._next_expiry_s: float | None = None  # earliest end of the published set
         self._republish = asyncio.Event()  # the published set changed: re-arm the expiry
+        # a cluster member's rule for answers, plans and commands; None: all are ours
+        self.arbiter: InboundArbiter | None = None
 
     def attach(self) -> None:
         """Register as operator port, threat sink and geofence listener of the USM."""
@@ -149,9 +186,18 @@ class MqttGateway:
             raise ValueError(f"unknown operation {h.operation_id!r}")
         self.usm.on_hazard(h)
 
-    async def on_pilot_answer(self, a: PilotAnswer) -> mqtt_answers.AnswerOutcome:
+    async def on_pilot_answer(self, a: PilotAnswer) -> mqtt_answers.AnswerOutcome | None:
+        """The USM's outcome; in a cluster, None (nothing published) when another instance
+        answers, or the arbiter's refusal."""
         if a.source != "mqtt":
             a = dataclasses.replace(a, source="mqtt")
+        if self.arbiter is not None:
+            known = self.usm.recommendations.get(a.recommendation_id)
+            route = await self.arbiter.pilot_answer(
+                a, None if known is None else known.rec.operation_id
+            )
+            if not route.here:
+                return None if not route.refusal else self._refused_answer(a, route.refusal)
         outcome = await self.usm.answer(a)
         record = self.usm.recommendations.get(a.recommendation_id)
         return mqtt_answers.AnswerOutcome(
@@ -163,16 +209,31 @@ class MqttGateway:
             state=None if record is None else record.rec.state,
         )
 
+    @staticmethod
+    def _refused_answer(a: PilotAnswer, reason: str) -> mqtt_answers.AnswerOutcome:
+        return mqtt_answers.AnswerOutcome(
+            status=mqtt_answers.AnswerStatus.REFUSED,
+            recommendation_id=a.recommendation_id,
+            version=a.version,
+            decision=a.decision,
+            reason=reason,
+        )
+
     async def on_operator_command(self, c: OperatorCommandRequest) -> CommandAck | None:
         """An operator's hold / land / rtl / resume: the USM's one entry point for them
         (refused unless the operator flies the UAS, or is ``admin``). None (nothing
         published) when another cluster instance commands the UAS: it heard the same message
-        and answers (gcs_utm.cluster.commands)."""
+        and answers (gcs_utm.cluster.commands); when no instance holds the UAS's region, the
+        arbiter alone answers (gcs_utm.cluster.inbound)."""
         result = await self.usm.operator_command(
             c.uas, c.command, operator=c.operator, source="mqtt", request_id=c.request_id
         )
         if result.elsewhere:
-            return None
+            arbiter = self.arbiter
+            reason = "" if arbiter is None else await arbiter.operator_command(c, result.reason)
+            if not reason:
+                return None
+            result = dataclasses.replace(result, reason=reason)
         return CommandAck(
             request_id=c.request_id,
             uas=result.uas,
@@ -183,6 +244,15 @@ class MqttGateway:
         )
 
     async def on_flight_plan(self, s: FlightPlanSubmission) -> None:
+        """File the plan as an operation; raise ValueError to refuse it. In a cluster, only
+        the holder of its departure's region files it; another instance returns (nothing
+        published) or, as the arbiter of a region nobody holds, refuses it."""
+        if self.arbiter is not None:
+            route = await self.arbiter.flight_plan(s)
+            if route.refusal:
+                raise ValueError(route.refusal)
+            if not route.here:
+                return
         airspace = self.usm.airspace
         if s.operation_id in airspace.operations:
             raise ValueError(f"operation {s.operation_id!r} already exists")
@@ -204,6 +274,13 @@ class MqttGateway:
         self.usm.log_event("operation", f"{op.id} filed over MQTT by {s.operator}")
 
     async def on_flight_status(self, s: FlightStatusReport) -> None:
+        """Start or stop an operation (in a cluster: by its owner only, as a plan is)."""
+        if self.arbiter is not None:
+            route = await self.arbiter.flight_status(s)
+            if route.refusal:
+                raise ValueError(route.refusal)
+            if not route.here:
+                return
         op = self._own_operation(s.operation_id, s.operator)
         if s.plan_version is not None and s.plan_version != op.plan.version:
             raise ValueError(

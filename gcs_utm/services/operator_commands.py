@@ -16,7 +16,8 @@ One entry point, :meth:`OperatorCommands.command`, that every channel uses:
   show the commanded mode within ``confirm_s`` clock seconds (``confirmed``), else the
   outcome says it was only ``acknowledged`` and which mode the vehicle reports;
 - a request id seen again from the same operator (a station re-sending until it hears back)
-  is not sent twice: the first outcome is returned again.
+  is not sent twice: the first outcome is returned again (not a refusal as another cluster
+  instance's: after a takeover the UAS may be this instance's when the id comes again).
 
 Mapping (adapters/mavlink/commands.py): hold = PX4 AUTO.LOITER, ArduCopter BRAKE, ArduPlane
 LOITER; land = PX4 NAV_LAND, ArduCopter LAND, ArduPlane DO_LAND_START else a landing mission
@@ -231,7 +232,7 @@ class OperatorCommands:
             result = await self._command(uas, command, operator, source, request_id)
         finally:
             self._running.discard(key)
-        if request_id:
+        if request_id and not result.elsewhere:  # another instance's may become ours
             self._done[key] = result
             while len(self._done) > _REMEMBERED_IDS:
                 self._done.popitem(last=False)

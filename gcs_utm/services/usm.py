@@ -104,6 +104,7 @@ _VEHICLE_HAZARDS = frozenset(
         ThreatKind.LACK_OF_BATTERY,
         ThreatKind.TECHNICAL_FAILURE,
         ThreatKind.COMMUNICATION_FAILURE,
+        ThreatKind.REMOTE_ID_MISMATCH,  # its broadcast or its filing: the pilot's checks
     }
 )
 """A vehicle's own hazards: on the ground they are its pre-flight findings, not threats."""
@@ -129,9 +130,11 @@ class Usm:
         position_lane: bool = True,
         id_prefix: str = "",
         ground_elevation_amsl_m: float | None = None,
+        keep_threat_log: bool = True,
     ) -> None:
         """``ground_elevation_amsl_m``: the airspace's ground, to warn about vehicles whose
-        home is far from it (None: no warning)."""
+        home is far from it (None: no warning). ``keep_threat_log``: keep :attr:`threat_log`
+        for a run report (``serve`` builds none: its threats are in the store only)."""
         self.airspace = airspace
         # prefixes hazard threat ids (the store life's ``E<epoch>-``): unique across restarts
         self.id_prefix = id_prefix
@@ -160,7 +163,9 @@ class Usm:
         # per vehicle: (system id, where it was first heard), see LinkHealth.vehicle
         self.health: dict[tuple[SysId, str], LinkHealth] = {}
         self.threats: dict[ThreatId, Threat] = {}
-        self.threat_log: deque[Threat] = deque(maxlen=self.config.threat_log_size)
+        self.threat_log: deque[Threat] = deque(
+            maxlen=self.config.threat_log_size if keep_threat_log else 0
+        )
         self._telemetry: dict[str, TelemetryStats] = {}
         self._sources: dict[tuple[object, ...], SourceStats] = {}
         self.events: deque[UsmEvent] = deque(maxlen=self.config.event_log_size)
@@ -294,6 +299,16 @@ class Usm:
         self, listener: Callable[[Sequence[Geofence]], Awaitable[None]]
     ) -> None:
         self._geofence_listeners.append(listener)
+
+    def _log_threat(self, t: Threat) -> None:
+        """Keep an opening or closing for the run report, if one is kept (see __init__):
+        without the prediction the threat was computed on (every track's trajectory, tens of
+        kB), which would make a full log hold hundreds of MB."""
+        if self.threat_log.maxlen == 0:
+            return
+        if len(self.threat_log) == self.threat_log.maxlen:
+            self.counters["threat_log_dropped"] += 1
+        self.threat_log.append(replace(t, snapshot=None))
 
     def log_event(self, kind: str, text: str) -> None:
         t_s = self.clock.now_s()
@@ -591,12 +606,7 @@ class Usm:
             else:
                 self.threats[t.id] = t
             if first or t.status is ThreatStatus.CLOSED:
-                if len(self.threat_log) == self.threat_log.maxlen:
-                    self.counters["threat_log_dropped"] += 1
-                # The log is for the run report: without the prediction the threat was
-                # computed on (every track's trajectory, tens of kB), which would make a
-                # full log hold hundreds of MB.
-                self.threat_log.append(replace(t, snapshot=None))
+                self._log_threat(t)
                 self._record(t)
                 uas = ",".join(t.uas_ids) or "-"
                 self.log_event(

@@ -134,9 +134,6 @@ class StoreBase:
     _conn: Any
     # how a top-level transaction begins (SQLite: take the write lock at once)
     _begin_sql = "BEGIN"
-    # what a SELECT appends to keep the rows it read from changing until the transaction
-    # ends (PostgreSQL: a share lock; SQLite's single writer needs none)
-    lock_share_sql = ""
     # A cluster member's lease fence (gcs_utm.cluster.fence): called with the connection and
     # the operation id inside the transaction of every write of a row its region owns (the
     # operation, its plans, its recommendations); raises FencedError to refuse the write.
@@ -147,19 +144,16 @@ class StoreBase:
         self._epoch: int | None = None
 
     # ---- lifecycle ----------------------------------------------------------------------
-    @property
-    def schema_version(self) -> int:
-        raise NotImplementedError
-
-    def integrity_check(self) -> str:
-        raise NotImplementedError
-
     # the database's clock in POSIX seconds (leases expire on it, not on an instance's clock)
     _now_sql = ""
 
     def now_unix_s(self) -> float:
         """The database server's wall clock, POSIX seconds: one clock for every instance."""
         return float(self._conn.execute(self._now_sql).fetchone()[0])
+
+    def ping(self) -> None:
+        """One round trip on the connection (raises :class:`StoreError` when it is lost)."""
+        self._conn.execute("SELECT 1").fetchone()
 
     def close(self) -> None:
         self._conn.close()
@@ -576,6 +570,13 @@ class StoreBase:
             sql += " WHERE " + " AND ".join(clauses)
         sql += " ORDER BY created_t_s, id, version"
         return [self._load(Recommendation, d) for (d,) in self._rows(sql, params)]
+
+    def operation_of_recommendation(self, rec_id: str) -> str | None:
+        """The operation a recommendation id is for (None: no version of it is stored)."""
+        rows = self._rows(
+            "SELECT operation_id FROM recommendations WHERE id = ? LIMIT 1", (rec_id,)
+        )
+        return str(rows[0][0]) if rows else None
 
     def versions_touched_by(self, epoch: int) -> list[tuple[str, int, str, int]]:
         """(id, version, state, epoch) of every version of each recommendation id that life

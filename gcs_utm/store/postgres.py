@@ -115,7 +115,6 @@ class PgStore(StoreBase):
 
     _conn: _PgConnection
     _now_sql = "SELECT extract(epoch FROM clock_timestamp())::float8"
-    lock_share_sql = " FOR SHARE"
 
     def lock_key(self, c: Connection, key: str) -> None:
         # the two-number form, in a space of its own: never the migration lock's key

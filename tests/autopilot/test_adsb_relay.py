@@ -27,11 +27,11 @@ from typing import Any
 import pytest
 
 from adapters.mavlink import MavlinkConfig
-from adapters.tlog import iter_messages
 from gcs_utm.app import OperatorMode, Runtime, serve
 from gcs_utm.cli.replay import replay_paths
 from gcs_utm.settings import Settings
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess
+from tests.tlog_messages import tlog_messages
 
 pytestmark = [pytest.mark.slow, pytest.mark.network]
 
@@ -109,7 +109,7 @@ async def test_ardupilot_relays_simulated_traffic_as_intruder_tracks(
     assert relay["measurements"] >= 2 and relay["invalid"] == 0, relay
     # the addresses on the wire, from the recording of the link
     (tlog,) = rec_dir.glob("*.tlog")
-    frames = [m for _, m in iter_messages(tlog) if m.get_type() == "ADSB_VEHICLE"]
+    frames = [m for _, m in tlog_messages(tlog) if m.get_type() == "ADSB_VEHICLE"]
     on_wire = {f"icao:{m.ICAO_address:06x}" for m in frames}
     assert frames and all(m.get_srcSystem() == 1 for m in frames)  # relayed by the autopilot
     assert all(m.callsign.startswith("SIM") for m in frames)  # SIM_ADSB's callsigns

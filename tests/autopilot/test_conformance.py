@@ -108,6 +108,17 @@ CASES = [
 ]
 
 
+def case_params(cases: list[Case]) -> list[Any]:
+    """``cases`` as pytest parameters: those on a real PX4 carry the ``px4`` mark, which the
+    fixture-based marking in tests/conftest.py cannot see (``request.getfixturevalue``)."""
+    return [
+        pytest.param(
+            c, id=c.name, marks=[pytest.mark.px4] if c.real and c.autopilot is Autopilot.PX4 else []
+        )
+        for c in cases
+    ]
+
+
 @dataclass
 class Rig:
     case: Case
@@ -251,7 +262,7 @@ def _check_upload(res: UploadResult) -> None:
     assert res.failure is None and res.current_seq is not None
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+@pytest.mark.parametrize("case", case_params(CASES))
 async def test_mission_and_commands(case: Case, request: pytest.FixtureRequest) -> None:
     if case.real:
         start = request.getfixturevalue("px4" if case.autopilot is Autopilot.PX4 else "ardupilot")

@@ -31,6 +31,7 @@ from tests.autopilot.test_conformance import (
     _config,
     _plan,
     _take_off,
+    case_params,
     until,
 )
 
@@ -39,7 +40,7 @@ pytestmark = [pytest.mark.network, pytest.mark.timeout(240)]
 REAL = [c for c in CASES if c.real and c.kind is VehicleKind.MULTIROTOR]
 
 
-@pytest.mark.parametrize("case", REAL, ids=[c.name for c in REAL])
+@pytest.mark.parametrize("case", case_params(REAL))
 async def test_operator_hold_resume_rtl_and_land_reach_the_autopilot(
     case: Case, request: pytest.FixtureRequest
 ) -> None:

@@ -41,6 +41,9 @@ SOAK_SIM_S = 1800.0
 STALE_AFTER_S = 30.0
 
 
+# Its margins were measured at a load average of about 10 on 2 cores (above): tests/check.sh
+# runs it beside the rest of the suite, not in the PX4 lane.
+@pytest.mark.load_tolerant
 @pytest.mark.timeout(420)
 async def test_serve_30_minutes_against_px4(
     px4: Callable[..., SitlProcess], tmp_path: Path

@@ -25,6 +25,7 @@ from gcs_utm.model import (
     OperationId,
     Recommendation,
     RecommendationId,
+    SysId,
 )
 from gcs_utm.scenario import load_scenario
 from gcs_utm.store import StoreConfig, StoreWriter, open_store
@@ -199,10 +200,12 @@ async def member(
     services: Callable[[Persistence], tuple[UsmPort, AirspacePort]] | None = None,
     emergency: EmergencyPort | None = None,
     store_config: StoreConfig | None = None,
+    heard: Callable[[], Iterable[SysId]] | None = None,
 ) -> Member:
     """A member; ``services``: makes a real USM and airspace on the member's store instead
     of the fakes (the fakes are still returned, unused); ``emergency``: a real EM service
-    instead of the fake (likewise); ``store_config``: its writer's settings."""
+    instead of the fake (likewise); ``store_config``: its writer's settings; ``heard``: the
+    system ids of the vehicles it hears."""
     writer = StoreWriter(location, store_config)
     store = Persistence(writer)
     usm_port, airspace_port = services(store) if services is not None else (None, None)
@@ -223,6 +226,7 @@ async def member(
         record=store.record,
         on_fail=failed.append,
         emergency=emergency or em,
+        heard=heard,
     )
     if fenced:
         writer.set_fence(node.fence).result(10.0)

@@ -83,6 +83,29 @@ def _operator_command(
     return asyncio.run(exchange())
 
 
+def _submit_plan(mqtt_port: int, op_id: str, like: str, url: str) -> None:
+    """A pilot files a plan over MQTT (operator ``admin``), the waypoints of operation
+    ``like`` as stored."""
+    with open_store(url) as s:
+        (plan,) = [op.plan for op in s.load_operations() if op.id == like]
+    body = {
+        "schema_version": 1,
+        "type": "flight_plan",
+        "operation_id": op_id,
+        "t_s": time.time(),
+        "waypoints": [
+            {"lat_deg": w.lat_deg, "lon_deg": w.lon_deg, "alt_amsl_m": w.alt_amsl_m, "t_s": w.t_s}
+            for w in plan.waypoints
+        ],
+    }
+
+    async def send() -> None:
+        async with aiomqtt.Client("127.0.0.1", mqtt_port, identifier="test-planner") as client:
+            await client.publish("gcs_utm/operators/admin/flight_plans", json.dumps(body), qos=1)
+
+    asyncio.run(send())
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_kill_stall_and_database_restart_leave_one_decider_and_tracked_vehicles(
@@ -157,6 +180,19 @@ def test_kill_stall_and_database_restart_leave_one_decider_and_tracked_vehicles(
             "C watches both vehicles",
             logs,
         )
+        # a plan filed over MQTT reaches every instance: filed by the holder of its region only
+        _submit_plan(mqtt_port, "PLAN-B", "sys2", pg_url)
+        elsewhere = "SELECT actor FROM audit WHERE action = 'mqtt_elsewhere' AND subject = 'PLAN-B'"
+        _wait(
+            lambda: (
+                len(raw_execute(pg_url, elsewhere)) == 2
+                and "PLAN-B filed over MQTT" in logs[1].read_text()
+            ),
+            10.0,
+            "B files the plan, A and C pass",
+            logs,
+        )
+        assert all("PLAN-B filed" not in logs[i].read_text() for i in (0, 2))
         rows_before = {
             t: int(str(_one(pg_url, f"SELECT COUNT(*) FROM {t}")))
             for t in ("operations", "flight_plans", "threats", "recommendations")

@@ -14,10 +14,10 @@ import pytest
 
 from gcs_utm.cluster import lease
 from gcs_utm.cluster.fence import LeaseFence, Refusal
-from gcs_utm.cluster.versions import allocate
 from gcs_utm.model import OperationId, RecommendationId
 from gcs_utm.scenario import load_scenario
-from gcs_utm.store import FencedError, open_store
+from gcs_utm.store import FencedError, is_postgres, open_store
+from gcs_utm.store.versions import allocate
 from tests.cluster.harness import config, file_airspace, member
 from tests.store.conftest import raw_execute
 from tests.store.test_store import UC1, _rec
@@ -93,7 +93,7 @@ def test_the_fence_checks_the_generation_on_both_backends(db: str | Path) -> Non
             s.save_operation(op)
         first = lease.acquire(s, "c0r0", "A#1", 1, 0.05)
         assert first is not None and first.generation == 1
-        fence = LeaseFence("A#1", region_of, refused.append, lock_sql=s.lock_share_sql)
+        fence = LeaseFence("A#1", region_of, refused.append, share_lock=is_postgres(db))
         fence.gained("c0r0", 1)
         s.fence = fence
         rec = _rec()
@@ -116,7 +116,7 @@ def test_the_fence_checks_the_generation_on_both_backends(db: str | Path) -> Non
         with pytest.raises(FencedError, match="region c0r0"):
             s.save_recommendation(other)
         # a life holding a live lease files it
-        b_fence = LeaseFence("B#2", region_of, refused.append, lock_sql=s.lock_share_sql)
+        b_fence = LeaseFence("B#2", region_of, refused.append, share_lock=is_postgres(db))
         b_fence.gained("c0r0", 2)
         s.fence = b_fence
         s.save_recommendation(other)

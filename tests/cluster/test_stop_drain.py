@@ -1,6 +1,6 @@
-"""How ``serve`` stops its USM (gcs_utm.app.serve.closing_steps): a plain stop lets an
-upload in progress finish before the links close, as ``run`` does; a fenced member (its
-region may be another instance's) cancels it and sends nothing more."""
+"""How the runtime stops its USM (gcs_utm.app.stopping.closing_steps, for serve and run
+alike): a plain stop lets an upload in progress finish before the links close; a fenced
+member (its region may be another instance's) cancels it and sends nothing more."""
 
 from __future__ import annotations
 
@@ -11,14 +11,12 @@ from typing import Any
 
 import pytest
 
-from gcs_utm.app.serve import closing_steps
-from gcs_utm.app.stopping import Stopping, run_steps
+from gcs_utm.app.stopping import Stopping, closing_steps, run_steps
 from gcs_utm.clock import ManualClock
 from gcs_utm.services.airspace import Airspace
 from gcs_utm.services.usm import Usm
 
-# the module (gcs_utm.app.serve is also the name of its function)
-serve_module = importlib.import_module("gcs_utm.app.serve")
+stopping_module = importlib.import_module("gcs_utm.app.stopping")
 
 
 async def _stop_during_an_upload(*, fenced: bool) -> list[str]:
@@ -52,7 +50,7 @@ async def test_a_fenced_stop_cancels_it() -> None:
 
 
 async def test_the_drain_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(serve_module, "DRAIN_BUDGET_S", 0.05)
+    monkeypatch.setattr(stopping_module, "DRAIN_BUDGET_S", 0.05)
     usm = Usm(Airspace(), ManualClock(0.0))
     never = asyncio.Event()
     usm._spawn(never.wait())

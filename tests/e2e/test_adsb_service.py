@@ -23,7 +23,6 @@ from pymavlink.dialects.v20 import common as mav
 
 from adapters.adsb.config import AdsbConfig
 from adapters.mavlink.config import MavlinkConfig
-from adapters.tlog import iter_messages
 from gcs_utm.app import OperatorMode, RunOptions, Runtime, run_scenario, serve
 from gcs_utm.cli.replay import replay_file
 from gcs_utm.model import ThreatKind
@@ -31,6 +30,7 @@ from gcs_utm.settings import Settings
 from gcs_utm.store import Store
 from tests.adsb.sbs_lines import sbs_position, sbs_velocity
 from tests.adsb.test_relay import adsb_vehicle
+from tests.tlog_messages import tlog_messages
 
 pytestmark = [pytest.mark.slow, pytest.mark.network, pytest.mark.timeout(120)]
 
@@ -299,5 +299,5 @@ async def test_serve_tracks_sbs_and_relayed_aircraft_and_records_the_link(tmp_pa
     assert feed_stats["positions"] >= 1 and feed_stats["up"] == 1
     # serve --record: the relayed frame is in the link's tlog (with our heartbeats, if any)
     (tlog,) = (tmp_path / "rec").glob("*.tlog")
-    types = [m.get_type() for _, m in iter_messages(tlog)]
+    types = [m.get_type() for _, m in tlog_messages(tlog)]
     assert types.count("ADSB_VEHICLE") == 1 and set(types) <= {"ADSB_VEHICLE", "HEARTBEAT"}

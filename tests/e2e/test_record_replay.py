@@ -5,9 +5,9 @@ replay DIR`` (with the scenario, so the vehicle is associated with its operation
 the same tracks: the same track ids and last update times (within 1 s), the aircraft's last
 position within 1 cm (the replay decodes the recorded bytes at their recorded receipt times,
 so its measurements are the live ones; measured: 2e-5 m, the microsecond rounding of the
-times), the vehicle's within 5 m, one second of its flight at 5 m/s (the live service times
-telemetry by the vehicle's clock, the replay by record time, i.e. receipt: they differ by the
-receive delay; measured: 7-9 mm on an idle machine, 1.5 m with the whole suite running)."""
+times), the vehicle's within 5 m, one second of its flight at 5 m/s (the replay's hub times
+telemetry as the live hub did: by the vehicle's clock mapped on the recorded receipt
+times)."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ import pytest
 from adapters.adsb.config import AdsbConfig
 from adapters.mavlink.config import MavlinkConfig
 from gcs_utm.app import OperatorMode, RunOptions, Runtime, run_scenario, serve
-from gcs_utm.cli.replay import scenario_pipeline
+from gcs_utm.cli.replay import scenario_config
 from gcs_utm.cli.replay_inputs import discover, replay_inputs
 from gcs_utm.geo import haversine_m
 from gcs_utm.services.record_config import RecordConfig
@@ -96,7 +96,9 @@ async def test_recorded_run_replays_to_the_same_tracks(tmp_path: Path) -> None:
 
     inputs = discover([rec_dir])
     assert len(inputs.feeds) == 1 and inputs.feeds[0].pieces == tuple(captures)
-    report = await replay_inputs(inputs, pipeline=scenario_pipeline(inputs, scenario))
+    report = await asyncio.to_thread(
+        replay_inputs, inputs, config=scenario_config(inputs, scenario)
+    )
 
     assert set(report["tracks"]) == set(live) == {"UAS1", f"icao:{ICAO}"}
     (feed,) = report["counters"]["adsb_feeds"].values()

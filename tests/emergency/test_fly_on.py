@@ -12,6 +12,7 @@ import pytest
 from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
 from gcs_utm.core.emergency import EmergencyConfig, EmergencyManager
+from gcs_utm.core.emergency.config import Action
 from gcs_utm.core.emergency.decision import Case
 from gcs_utm.core.emergency.fly_on import FLY_ON
 from gcs_utm.core.emergency.immediate import choose_commands, propose
@@ -57,8 +58,8 @@ def test_flying_on_is_a_warning_not_a_command_and_the_case_is_retried() -> None:
     td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MON)
     em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MON)
     threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], t_s=snap.t_s, event_in_s=4.0)
-    case = Case(threat=threat, action="alternative_plans", attempt_t_s=snap.t_s - 30.0)
-    d = propose(em, case, snap, "t1: loss predicted in 4.0 s", [A])
+    case = Case(threat=threat, action=Action.ALTERNATIVE_PLANS, attempt_t_s=snap.t_s - 30.0)
+    d = propose(em.ctx, case, snap, "t1: loss predicted in 4.0 s", [A])
     assert d.recommendations == () and d.escalations == () and d.commands == ()
     assert d.warnings and "flying on" in d.warnings[0]
     assert case.attempt_t_s == snap.t_s  # decided again after retry_after_s

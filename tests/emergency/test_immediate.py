@@ -289,3 +289,20 @@ def test_the_command_keeps_its_uas_out_of_geofences_when_another_keeps_the_minim
     assert choice is not None and choice.clear
     assert list(choice.actions) == [A]
     assert {"commands": {"B": "hold"}, "ratio": 1.0, "geofences": ["G1"]} in choice.tried
+
+
+def test_forgotten_operations_take_their_response_times_with_them() -> None:
+    """A day of traffic must not accumulate in the response-time book (``gcs-utm bench
+    soak`` grew by one deque per operation): operations the airspace forgot leave it, with
+    an accepted version that was never applied; the others' figures stay."""
+    em = make_em()
+    em.lead.observe("upload", A, 4.0)
+    em.lead.observe("answer", B, 3.0)
+    accepted = _rec().transition(RecommendationState.ACCEPTED, 103.0)
+    em.lead.on_state(accepted)
+    em.forget_operations({A})
+    assert em.lead.measured() == {"answer": {"B": 3.0}}
+    assert em.lead.upload_s([A]) == EmergencyConfig().upload_time_s
+    # A's acceptance went too: applying it later measures from creation, not acceptance
+    em.lead.on_state(accepted.transition(RecommendationState.APPLIED, 104.0))
+    assert em.lead.measured()["upload"] == {"A": 4.0}

@@ -8,7 +8,6 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from gcs_utm.core.emergency.recheck import plan_problem
 from gcs_utm.messages import PilotAnswer, PilotDecision
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -46,16 +45,16 @@ def test_a_plan_into_a_uas_that_appeared_since_the_decision_is_not_uploaded() ->
     em = make_em()
     (rec,) = em.on_threat(threat, snap).recommendations
     assert rec.selected is not None and rec.selected.plan is not None
-    assert plan_problem(em, rec, snap) == ""
+    assert em.plan_problem(rec, snap) == ""
     later = replace(_with_c(snap), t_s=snap.t_s + 2.0)
-    problem = plan_problem(em, rec, later)
+    problem = em.plan_problem(rec, later)
     assert problem.startswith("t1/B v1 re-checked before its upload: separation with C")
     assert em.on_answer(rec, True, later).recommendations[0].state is RecommendationState.ACCEPTED
     d = em.on_outcome(rec.id, rec.version, False, f"not uploaded: {problem}", later)
     states = {(r.version, r.state) for r in d.recommendations}
     assert (1, RecommendationState.FAILED) in states
     new = [r for r in d.recommendations if r.version > 1]
-    assert new and all(plan_problem(em, r, later) == "" for r in new), d
+    assert new and all(em.plan_problem(r, later) == "" for r in new), d
 
 
 async def test_the_usm_fails_a_plan_its_check_refuses_and_uploads_nothing() -> None:

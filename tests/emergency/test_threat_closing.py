@@ -6,7 +6,6 @@ from __future__ import annotations
 from dataclasses import replace
 
 from gcs_utm.bench import deconfliction as sc
-from gcs_utm.core.emergency.closing import close_threat
 from gcs_utm.model import RecommendationState, ThreatKind, ThreatStatus
 from tests.emergency.test_em import make_em
 
@@ -28,7 +27,7 @@ def test_closing_a_link_loss_removes_its_fence_and_supersedes_the_reroute() -> N
         updated_at_s=snap.t_s + 20.0,
         message="closed: positions of A flow again",
     )
-    out = close_threat(em, closed)
+    out = em.close_threat(closed)
     assert out.removed_geofences == (fence.id,)
     assert reroutes[0].id in out.superseded
     removed = [a for a in out.audit if a.action == "geofences_removed"]
@@ -37,5 +36,5 @@ def test_closing_a_link_loss_removes_its_fence_and_supersedes_the_reroute() -> N
     # a threat EM made no fence for removes none
     other = sc.threat(ThreatKind.UAS_IN_CV, ["A"])
     em.on_threat(other, snap)
-    out = close_threat(em, replace(other, status=ThreatStatus.CLOSED))
+    out = em.close_threat(replace(other, status=ThreatStatus.CLOSED))
     assert out.removed_geofences == ()

@@ -12,12 +12,23 @@ from hypothesis import strategies as st
 
 from gcs_utm.app.report import separation
 from gcs_utm.core.monitoring.config import MonitoringConfig
-from gcs_utm.core.monitoring.geometry import segment_loss
-from gcs_utm.core.monitoring.loss import is_loss, minima_arrays, separation_ratio
+from gcs_utm.core.monitoring.geometry import segment_separation
+from gcs_utm.core.monitoring.loss import minima_arrays, separation_ratio
 from tests.monitoring.helpers import operation
 
 CYL = MonitoringConfig()
 SPH = MonitoringConfig(separation_mode="sphere")
+
+
+def is_loss(
+    config: MonitoringConfig, dh_m: float, dv_m: float, ov_a_m: float = 0.0, ov_b_m: float = 0.0
+) -> bool:
+    """The definition of gcs_utm.core.monitoring.loss, written out: strict inequalities on
+    the effective minima."""
+    h_min, v_min = config.effective_minima(ov_a_m, ov_b_m)
+    if config.spherical:
+        return bool(np.hypot(dh_m, dv_m) < h_min)
+    return bool(dh_m < h_min and abs(dv_m) < v_min)
 
 
 def test_report_uses_the_effective_minima_not_the_bare_ones() -> None:
@@ -59,5 +70,5 @@ def test_predicate_ratio_and_monitoring_kernel_agree(
     # Monitoring's segment kernel on a pair standing still at that offset.
     a = np.array([[dh, 0.0, dv]])
     b = np.zeros((1, 3))
-    kernel = segment_loss(a, a, b, b, min_h_m=h, min_v_m=v, spherical=config.spherical)
-    assert bool(kernel[0]) == loss
+    kernel = segment_separation(a, a, b, b, min_h_m=h, min_v_m=v, spherical=config.spherical)
+    assert bool(kernel.loss[0]) == loss

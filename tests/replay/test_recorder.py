@@ -14,9 +14,10 @@ os.environ["MAVLINK20"] = "1"
 from pymavlink.dialects.v20 import common as mav
 
 from adapters.mavlink import MavlinkConfig, MavlinkHub
-from adapters.tlog import TlogReader, iter_messages
+from adapters.tlog import TlogReader
 from gcs_utm.clock import ScaledClock
 from gcs_utm.services.recorder import LinkRecorder, sanitise, split_packets
+from tests.tlog_messages import tlog_messages
 
 
 def _frames() -> list[bytes]:
@@ -115,7 +116,7 @@ async def test_record_a_sitl_vehicle_through_the_hub_and_replay_it(tmp_path: Pat
     rec.close()
     assert rec.counters.dropped_chunks == 0 and rec.counters.write_errors == 0
     [path] = rec.files.values()
-    got = [(t, m) for t, m in iter_messages(path)]
+    got = [(t, m) for t, m in tlog_messages(path)]
     live = [m for m in sink.positions if m.sys_id == 1]
     replayed = [m for _, m in got if m.get_type() == "GLOBAL_POSITION_INT"]
     assert len(live) >= 10  # ~2 s x speed 5 x 5 Hz, capped by the real-rate limit

@@ -4,14 +4,16 @@ input, pacing and the CLI."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import json
 from pathlib import Path
 
 import pytest
 from replay_helpers import ALT0, CONVERGING, LAT0, LON0, MEET_S, T0_S, write_tlog
 
+from adapters.mavlink import MavlinkConfig
 from gcs_utm.cli import main
-from gcs_utm.cli.replay import ReplayError, ReplayPipeline, parse_speed, replay_file
+from gcs_utm.cli.replay import ReplayConfig, ReplayError, parse_speed, replay_file
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     FlightPlan,
@@ -21,6 +23,7 @@ from gcs_utm.model import (
     VehicleKind,
     Waypoint4D,
 )
+from gcs_utm.settings import Settings
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "tlog"
 ARDUSUB = DATA / "ardusub_log_tools_small.tlog"
@@ -57,7 +60,9 @@ def test_real_ardusub_tlog_through_the_cli(
     assert sum(r["counters"]["rejected_measurements"].values()) == 0
     # an ROV at the surface drifting: tens of metres, not kilometres
     assert 1.0 < track["distance_m"] < 500.0
-    assert r["counters"]["monitoring_cycles"] == pytest.approx(263, abs=1)
+    # the live monitoring service's cycles: one a second from the first record (0 .. 263 s),
+    # and the last one at the last record
+    assert r["counters"]["monitoring_cycles"] == 265
     assert r["threats"] == []  # no operations: nothing for Monitoring to watch
     assert r["counters"]["handler_errors"] == 0
 
@@ -107,10 +112,10 @@ def test_two_unknown_vehicles_are_intruder_tracks_without_threats(tmp_path: Path
 def test_two_operations_converging_raise_loss_of_separation(tmp_path: Path) -> None:
     path = tmp_path / "enc.tlog"
     write_tlog(path)
-    pipe = ReplayPipeline(
+    config = ReplayConfig(
         frame=LocalFrame(LAT0, LON0, ground_elevation_amsl_m=ALT0), operations=_operations()
     )
-    r = _run(path, pipeline=pipe)
+    r = _run(path, config=config)
     assert set(r["tracks"]) == {"op-1", "op-2"}  # type: ignore[arg-type]
     assert all(t["cooperative"] for t in r["tracks"].values())  # type: ignore[attr-defined]
     los = [t for t in r["threats"] if t["kind"] == "LOSS_OF_SEPARATION"]  # type: ignore[attr-defined]
@@ -121,6 +126,19 @@ def test_two_operations_converging_raise_loss_of_separation(tmp_path: Path) -> N
     assert th["first_t_s"] < T0_S + MEET_S - 10.0
     assert th["min_closest_approach_m"] < 10.0
     assert r["counters"]["rejected_measurements"]["unassociated"] == 0  # type: ignore[index]
+
+
+def test_the_replay_checks_signatures_as_a_live_link_does(tmp_path: Path) -> None:
+    """Replayed records go through the live MAVLink hub, its checks included: with a signing
+    key for system id 1 ([mavlink] signing_keys), the recording's unsigned frames of sysid 1
+    are dropped as a live link drops them; sysid 2 (no key) is tracked."""
+    path = tmp_path / "enc.tlog"
+    n = write_tlog(path)
+    keyed = MavlinkConfig(signing_keys={"1": "00" * 32})
+    config = ReplayConfig(settings=dataclasses.replace(Settings(), mavlink=keyed))
+    r = _run(path, config=config)
+    assert set(r["tracks"]) == {"sysid:2"}  # type: ignore[arg-type]
+    assert [(v["sys_id"], v["positions"]) for v in r["vehicles"]] == [(2, n)]  # type: ignore[attr-defined]
 
 
 def test_corrupt_records_are_skipped_and_counted(tmp_path: Path) -> None:
@@ -162,8 +180,10 @@ def test_speed_factor_paces_on_record_time(tmp_path: Path) -> None:
     write_tlog(path, duration_s=8.0)
     fast = _run(path)
     paced = _run(path, speed=10.0)  # ~7.8 s of records -> ~0.78 s
-    assert fast["wall_s"] < 0.5
-    assert 0.7 <= paced["wall_s"] < 2.0  # type: ignore[operator]
+    # paced on record time / 10 (not 1x: 7.8 s; a loaded machine adds CPU time to both),
+    # while "max" waits for nothing
+    assert 0.7 <= paced["wall_s"] < 4.0  # type: ignore[operator]
+    assert fast["wall_s"] < paced["wall_s"]  # type: ignore[operator]
     assert paced["tracks"].keys() == fast["tracks"].keys()  # type: ignore[attr-defined]
 
 

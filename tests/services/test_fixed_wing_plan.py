@@ -112,6 +112,22 @@ def test_takeoff_is_a_climb_out_along_the_heading_to_the_next_waypoint() -> None
     assert takeoff.alt_amsl_m == pytest.approx(705.0)
 
 
+def test_a_takeoff_at_the_launch_position_is_a_climb_out_along_the_heading() -> None:
+    """QGroundControl gives a plane's NAV_TAKEOFF the launch position; ArduPlane climbs out
+    along its heading all the same. Filed as a vertical climb at home (the item 1.8 m from
+    the reported home), the rolling ArduPlane of the nuisance soak opened UAS_OUT_OV 3 s into
+    its take-off, and the auto-accepted HOLD was sent to a plane climbing out."""
+    items = _mission()
+    items[1] = _Item(22, _north(1.8), _e7(HOME.lon_deg), 30.0, param1=15.0, seq=1)
+    pts = mission_points(items, home=HOME, cruise_speed_mps=15.0, skip_first=True)
+    assert pts is not None
+    plane = fw.fixed_wing_points(
+        pts, ground_alt_m=HOME.alt_amsl_m, climb_rate_mps=3.0, descent_rate_mps=3.0,
+        loiter_radius_m=80.0, home_deg=(HOME.lat_deg, HOME.lon_deg),
+    )  # fmt: skip
+    assert plane[:2] == _points()[:2]  # the same ground roll and climb-out as "here"
+
+
 def test_a_takeoff_with_a_position_is_a_climb_out_towards_it() -> None:
     """PX4: NAV_TAKEOFF carries the position its runway take-off heads for (250 m north, at
     30 m; PX4 reads it back without a pitch). Measured on PX4 v1.15.2 SIH: lift-off about

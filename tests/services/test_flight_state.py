@@ -124,6 +124,34 @@ async def test_hazards_of_a_vehicle_on_the_ground_are_preflight_not_threats() ->
     assert len(seen) == 2
 
 
+async def test_remote_id_of_a_vehicle_on_the_ground_is_a_preflight_finding() -> None:
+    """A PX4 on the ground broadcasts Remote ID from boot, while its mission download is
+    still being retried under load: "declares Remote ID but no operation is filed" was a
+    REMOTE_ID_MISMATCH threat on the operator's screen before any take-off (the nuisance
+    soak, issue 31). On the ground it is the pilot's pre-flight check; in the air a threat."""
+    usm, _port, _clock = _usm()
+    usm.on_vehicle(_Info(key=_Key(1)))
+    seen: list[object] = []
+
+    async def sink(threats: list[object]) -> None:
+        seen.extend(threats)
+
+    usm.attach_threat_sink(sink)  # type: ignore[arg-type]
+    usm.on_status(_s())
+    unfiled = HazardReport(
+        kind=ThreatKind.REMOTE_ID_MISMATCH, t_s=1000.0, sys_id=SysId(1),
+        message="sysid 1 declares Remote ID (OPEN_DRONE_ID_LOCATION) but no operation is filed",
+        source="remote-id",
+    )  # fmt: skip
+    usm.on_hazard(unfiled)
+    await usm.drain()
+    assert seen == [] and usm.counters["hazards_on_ground"] == 1
+    usm.on_status(_s(armed=True, landed=False))
+    usm.on_hazard(replace(unfiled, t_s=1001.0))
+    await usm.drain()
+    assert [t.kind for t in seen] == [ThreatKind.REMOTE_ID_MISMATCH]  # type: ignore[attr-defined]
+
+
 async def test_the_airspace_snapshot_says_who_is_airborne_and_the_operation_ends_on_landing() -> (
     None
 ):

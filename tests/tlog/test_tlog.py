@@ -1,22 +1,19 @@
-"""tlog reading, corruption handling, recording and replay on the real ArduSub recording."""
+"""tlog reading, corruption handling and recording on the real ArduSub recording (its replay:
+tests/replay/test_replay.py)."""
 
 from __future__ import annotations
 
 import itertools
-import time
 from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
 
 from adapters.tlog import (
-    TlogCounters,
     TlogReader,
     TlogRecord,
     TlogWriter,
     TlogWriterClosedError,
-    iter_messages,
-    replay,
     scan_records,
 )
 
@@ -50,24 +47,6 @@ def test_real_tlog_records_and_its_corrupt_chunks_are_counted(tlog_path, records
     # the pure scanner agrees with the chunked reader
     again, c2 = scan_records(tlog_path.read_bytes())
     assert again == records and c2 == c
-
-
-@pytest.mark.data
-def test_iter_messages_gives_the_vehicle_positions(tlog_path):
-    counters = TlogCounters()
-    positions = [
-        (t, m)
-        for t, m in iter_messages(tlog_path, counters=counters)
-        if m.get_type() == "GLOBAL_POSITION_INT"
-    ]
-    assert counters.records == 35_912
-    assert len(positions) == 792
-    assert {m.get_srcSystem() for _, m in positions} == {1}
-    for _, m in positions:
-        # the BlueROV2 near the surface off Washington state
-        assert abs(m.lat * 1e-7 - 48.3861) < 0.001
-        assert abs(m.lon * 1e-7 - -124.6306) < 0.001
-    assert positions[0][0] < positions[-1][0]
 
 
 def _corrupt(data: bytes, offsets: list[int]) -> bytes:
@@ -139,35 +118,3 @@ def test_writer_flushes_by_record_time(tmp_path, records):
     w.write(t0 + 1.5, records[1].packet)  # older than the interval: flushed
     assert path.stat().st_size == 16 + len(records[0].packet) + len(records[1].packet)
     w.close()
-
-
-@pytest.mark.data
-async def test_replay_as_fast_as_possible_delivers_every_record_in_order(tlog_path, records):
-    got: list[tuple[float, bytes]] = []
-    stats = await replay(tlog_path, lambda t, p: got.append((t, p)), speed=None)
-    assert got == [(r.t_s, r.packet) for r in records]
-    assert stats.records == len(records)
-    assert stats.duration_s == pytest.approx(263.43, abs=0.01)
-    assert stats.counters.corrupt_chunks == 4
-
-
-@pytest.mark.data
-async def test_replay_paces_by_record_time(tmp_path, records):
-    # 2 s of recording at speed 10 must take ~0.2 s
-    t0 = records[0].t_s
-    path = tmp_path / "two_seconds.tlog"
-    with TlogWriter(path) as w:
-        for r in records:
-            if r.t_s - t0 > 2.0:
-                break
-            w.write(r.t_s, r.packet)
-    arrivals: list[tuple[float, float]] = []
-    start = time.monotonic()
-    stats = await replay(
-        path, lambda t, _p: arrivals.append((t, time.monotonic() - start)), speed=10.0
-    )
-    assert 0.17 <= stats.wall_s < 1.0
-    for t, wall in arrivals:
-        assert wall >= (t - t0) / 10.0 - 0.005  # never early
-    with pytest.raises(ValueError):
-        await replay(path, lambda t, p: None, speed=0.0)

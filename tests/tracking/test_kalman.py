@@ -242,3 +242,47 @@ def test_positions_predicted_by_the_caller_give_the_same_step_bit_for_bit(
     kalman.step(moved_x, moved_p, dt, q, z, r, zv, rv, positions_predicted=True)
     assert np.array_equal(plain_x, moved_x)
     assert np.array_equal(plain_p, moved_p)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    pp=st.floats(0.01, 1e4),
+    vv=st.floats(0.01, 1e3),
+    corr=st.floats(-0.99, 0.99),
+    q_var=st.floats(0.0, 100.0),
+    tau_s=st.floats(0.0, 120.0),
+)
+def test_the_one_propagation_equals_filterpy_predict(
+    pp: float, vv: float, corr: float, q_var: float, tau_s: float
+) -> None:
+    """kalman.propagated_pp (step's predict, the snapshot's variances, the prediction's
+    radius) is filterpy's predicted position variance after ``tau_s`` without updates."""
+    pv = corr * np.sqrt(pp * vv)
+    kf = KalmanFilter(dim_x=2, dim_z=1)
+    kf.P = np.array([[pp, pv], [pv, vv]])
+    f = np.array([[1.0, tau_s], [0.0, 1.0]])
+    kf.predict(F=f, Q=Q_discrete_white_noise(dim=2, dt=tau_s, var=q_var))
+    got = kalman.propagated_pp(
+        np.array([pp]), np.array([pv]), np.array([vv]), q_var, np.array([tau_s])
+    )
+    np.testing.assert_allclose(got[0], kf.P[0, 0], rtol=1e-9, atol=1e-9 * max(1.0, pp))
+
+
+def test_prediction_radius_is_the_propagated_variance_of_every_axis() -> None:
+    """The prediction's radius (prediction.extrapolate) is the root of the summed position
+    variances the snapshot propagates per axis (kalman.predicted_position_var)."""
+    from gcs_utm.core.tracking.prediction import extrapolate
+
+    rng = np.random.default_rng(3)
+    n, k = 5, 7
+    x = rng.normal(size=(n, 3, 2))
+    p = np.zeros((n, 3, 3))
+    p[:, :, kalman.PP] = rng.uniform(1.0, 50.0, (n, 3))
+    p[:, :, kalman.VV] = rng.uniform(0.1, 5.0, (n, 3))
+    p[:, :, kalman.PV] = 0.5 * np.sqrt(p[:, :, kalman.PP] * p[:, :, kalman.VV])
+    q = np.array([0.5, 0.5, 0.2])
+    ahead0 = rng.uniform(0.0, 2.0, n)
+    steps = np.arange(k) * 1.0
+    _, radius = extrapolate(x, p, q, ahead0, steps)
+    per_axis = kalman.predicted_position_var(p, np.add.outer(ahead0, steps), q)
+    np.testing.assert_allclose(radius**2, per_axis.sum(axis=2), rtol=1e-12)

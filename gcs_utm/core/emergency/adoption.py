@@ -14,25 +14,17 @@ new threat. Pure, like the manager.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
-from gcs_utm.core.emergency.decision import (
-    MODE_COMMAND,
-    MODE_MULTI,
-    SINGLE_MANEUVERS,
-    Case,
-    Decision,
-)
+from gcs_utm.core.emergency.config import Action
+from gcs_utm.core.emergency.context import EmContext
+from gcs_utm.core.emergency.decision import SINGLE_MANEUVERS, Case, Decision, Mode
 from gcs_utm.model import Geofence, Recommendation, RecommendationState, Threat
-
-if TYPE_CHECKING:
-    from gcs_utm.core.emergency.manager import EmergencyManager
 
 _IN_FORCE = (RecommendationState.ACCEPTED, RecommendationState.APPLIED)
 
 
 def adopt_case(
-    em: EmergencyManager,
+    em: EmContext,
     threat: Threat,
     *,
     inherited: Threat,
@@ -49,17 +41,17 @@ def adopt_case(
         return None
     action = em.config.action_for(threat.kind)
     case = Case(threat=threat, action=action, attempt_t_s=now, geofences=list(geofences))
-    single = ",".join(sorted(m.value for m in SINGLE_MANEUVERS.get(action, ())))
     for rec in in_force:
         em.record(rec)
         case.rec_ids.add(rec.id)
         if rec.command is not None:
-            case.modes[rec.operation_id] = MODE_COMMAND
+            case.modes[rec.operation_id] = Mode.COMMAND
+        elif action is Action.ALTERNATIVE_PLANS:
+            case.modes[rec.operation_id] = Mode.MULTI
         else:
-            case.modes[rec.operation_id] = (
-                MODE_MULTI if action == "alternative_plans" else (f"single:{single}")
-            )
-    em.adopt(case)
+            case.modes[rec.operation_id] = Mode.SINGLE
+            case.maneuvers[rec.operation_id] = SINGLE_MANEUVERS.get(action, frozenset())
+    em.cases[case.threat.id] = case  # a previous life's case, as it is
     detail: dict[str, object] = {
         "reason": f"the condition of {inherited.id} (an earlier life's) detected again",
         "from": inherited.id,

@@ -9,22 +9,39 @@ loss that had ended gave a neighbour three escape plans in one run). Pure, like 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
+from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Decision
-from gcs_utm.model import Threat, ThreatStatus
-
-if TYPE_CHECKING:
-    from gcs_utm.core.emergency.manager import EmergencyManager
+from gcs_utm.model import Recommendation, RecommendationState, Threat, ThreatStatus
 
 
-def close_threat(em: EmergencyManager, threat: Threat) -> Decision:
+def supersede_pending(em: EmContext, threat: Threat) -> Decision:
+    """The case of ``threat`` (CLOSED) ends: its pending proposals are superseded (accepted
+    ones stand), audited."""
+    case = em.cases.pop(threat.id, None)
+    if case is None:
+        return Decision()
+    t = threat.updated_at_s if threat.updated_at_s is not None else threat.detected_at_s
+    recs: list[Recommendation] = []
+    for rid in sorted(case.rec_ids):
+        cur = em.recs[rid]
+        if cur.state is RecommendationState.PROPOSED:
+            new = cur.transition(RecommendationState.SUPERSEDED, t, "threat closed")
+            em.recs[rid] = new
+            recs.append(new)
+    return Decision(
+        recommendations=tuple(recs),
+        superseded=tuple(r.id for r in recs),
+        audit=(em.audit(t, "threat_closed", threat.id, {"superseded": [r.id for r in recs]}),),
+    )
+
+
+def close_threat(em: EmContext, threat: Threat) -> Decision:
     """EM's decision on a CLOSED ``threat`` (pending proposals superseded, audited) plus the
     removal of the geofences its case created, audited with the threat's message."""
     assert threat.status is ThreatStatus.CLOSED
     case = em.case(threat.id)
     fences = () if case is None else tuple(g.id for g in case.geofences)
-    d = em.on_threat_closed(threat)
+    d = supersede_pending(em, threat)
     if not fences:
         return d
     t_s = threat.updated_at_s if threat.updated_at_s is not None else threat.detected_at_s

@@ -1,7 +1,7 @@
 """Settings of Emergency Management (section ``[emergency]``).
 
 ``policy`` maps a :class:`gcs_utm.model.ThreatKind` name to an action (one of
-:data:`ACTIONS`); the table and what each action does are in ``docs/emergency.md``. ``alpha``
+:class:`Action`); the table and what each action does are in ``docs/emergency.md``. ``alpha``
 weighs cost and ``beta`` riskiness in the joint selection ``min sum(alpha*c + beta*r)`` (paper
 eq. 1); safety is favoured by default (beta > alpha).
 """
@@ -9,24 +9,39 @@ eq. 1); safety is favoured by default (beta > alpha).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 
 from gcs_utm.config import setting
 from gcs_utm.model import ThreatKind
 
-ACTIONS = (
-    "alternative_plans",  # multi-UAS charged cords + joint selection
-    "reroute",  # single-UAS A*: reroute, escape, direct to goal, back to plan, next wp, ...
-    "back_to_plan",  # back to the closest plan point or straight to the next waypoint
-    "warn",  # operator warning only
-    "suspend_and_geofence",  # hold/land the UAS, dynamic geofence around it, reroute others
-    "land_or_home",  # nearest reachable landing site or home; land now if none
-    "alert_and_geofence",  # operator alert, temporary geofence around the predicted position
-    "geofence_from_area",  # the alert's area becomes a geofence, affected UAS rerouted
-    "vertical_avoidance",  # climb or descend away from an intruder
-)
 
-EXPIRY_ACTIONS = ("repropose", "replan")
-"""What EM does with a recommendation nobody answered in time (``expiry_action``)."""
+class Action(StrEnum):
+    """What EM does about a threat kind (``[emergency] policy``). The values are the names
+    in the TOML, the audit and the docs."""
+
+    ALTERNATIVE_PLANS = "alternative_plans"  # multi-UAS charged cords + joint selection
+    REROUTE = "reroute"  # single-UAS A*: reroute, escape, direct to goal, back to plan, ...
+    BACK_TO_PLAN = "back_to_plan"  # back to the closest plan point or the next waypoint
+    WARN = "warn"  # operator warning only
+    SUSPEND_AND_GEOFENCE = "suspend_and_geofence"  # hold/land it, geofence around it
+    LAND_OR_HOME = "land_or_home"  # nearest reachable landing site or home; land now if none
+    ALERT_AND_GEOFENCE = "alert_and_geofence"  # alert, geofence around the predicted position
+    GEOFENCE_FROM_AREA = "geofence_from_area"  # the alert's area becomes a geofence
+    VERTICAL_AVOIDANCE = "vertical_avoidance"  # climb or descend away from an intruder
+
+
+ACTIONS = tuple(a.value for a in Action)
+"""The action names a policy may use."""
+
+
+class ExpiryAction(StrEnum):
+    """What EM does with a recommendation nobody answered in time (``expiry_action``)."""
+
+    REPROPOSE = "repropose"  # the safe command proposed again, as a new version
+    REPLAN = "replan"  # a new plan without the expired manoeuvre
+
+
+EXPIRY_ACTIONS = tuple(a.value for a in ExpiryAction)
 
 DEFAULT_POLICY: dict[str, str] = {
     ThreatKind.LOSS_OF_SEPARATION.value: "alternative_plans",
@@ -213,5 +228,5 @@ class EmergencyConfig:
                 f"{self.suspend_command!r}"
             )
 
-    def action_for(self, kind: ThreatKind) -> str:
-        return self.policy.get(kind.value, DEFAULT_POLICY[kind.value])
+    def action_for(self, kind: ThreatKind) -> Action:
+        return Action(self.policy.get(kind.value, DEFAULT_POLICY[kind.value]))

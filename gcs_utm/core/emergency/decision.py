@@ -4,7 +4,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import Enum
 
+from gcs_utm.core.emergency.config import Action
 from gcs_utm.model import (
     AuditEntry,
     Command,
@@ -32,16 +34,30 @@ REROUTE_MANEUVERS = frozenset(
         Maneuver.LANDING_SITE,
     }
 )
-SINGLE_MANEUVERS: dict[str, frozenset[Maneuver]] = {
-    "reroute": REROUTE_MANEUVERS,
-    "back_to_plan": frozenset({Maneuver.BACK_TO_PLAN, Maneuver.NEXT_WAYPOINT}),
-    "land_or_home": frozenset({Maneuver.LANDING_SITE, Maneuver.RETURN_HOME}),
+SINGLE_MANEUVERS: dict[Action, frozenset[Maneuver]] = {
+    Action.REROUTE: REROUTE_MANEUVERS,
+    Action.BACK_TO_PLAN: frozenset({Maneuver.BACK_TO_PLAN, Maneuver.NEXT_WAYPOINT}),
+    Action.LAND_OR_HOME: frozenset({Maneuver.LANDING_SITE, Maneuver.RETURN_HOME}),
 }
-ONE_SHOT = frozenset({"warn", "suspend_and_geofence", "alert_and_geofence", "geofence_from_area"})
+"""The actions decided one UAS at a time from TD's single-UAS alternatives, and which."""
+ONE_SHOT = frozenset(
+    {
+        Action.WARN,
+        Action.SUSPEND_AND_GEOFENCE,
+        Action.ALERT_AND_GEOFENCE,
+        Action.GEOFENCE_FROM_AREA,
+    }
+)
 """Actions done once per threat: repeating them would only duplicate warnings/geofences."""
-MODE_MULTI = "multi"
-MODE_INTRUDER = "intruder"
-MODE_COMMAND = "command"
+
+
+class Mode(Enum):
+    """How a UAS of a case was last decided, so what a re-plan after a refusal does again."""
+
+    MULTI = "multi"  # jointly with the other UAS of the case (charged cords)
+    INTRUDER = "intruder"  # avoidance of the case's intruder
+    COMMAND = "command"  # a command (immediate, safe, suspend): refused, it escalates
+    SINGLE = "single"  # alone, from TD's manoeuvres in Case.maneuvers
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -78,9 +94,11 @@ class Case:
     open."""
 
     threat: Threat
-    action: str
+    action: Action
     attempt_t_s: float
-    modes: dict[OperationId, str] = field(default_factory=dict)
+    modes: dict[OperationId, Mode] = field(default_factory=dict)
+    maneuvers: dict[OperationId, frozenset[Maneuver]] = field(default_factory=dict)
+    """The manoeuvres offered to a UAS decided alone (:attr:`Mode.SINGLE`)."""
     excluded: dict[OperationId, set[Maneuver]] = field(default_factory=dict)
     replans: dict[OperationId, int] = field(default_factory=dict)
     geofences: list[Geofence] = field(default_factory=list)

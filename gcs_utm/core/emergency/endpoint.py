@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan, local_to_plan
+from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.tracking.loiter import loiter_radius_m
 from gcs_utm.model import (
@@ -45,7 +46,6 @@ from gcs_utm.model import (
 
 if TYPE_CHECKING:
     from gcs_utm.core.deconfliction import TacticalDeconfliction
-    from gcs_utm.core.emergency.manager import EmergencyManager
 
 BEARINGS = 16
 """Directions a new end point is searched in."""
@@ -157,7 +157,7 @@ def _turn_path(
 
 
 def _transit(
-    em: EmergencyManager, op: Operation, snapshot: AirspaceSnapshot, new_end: FloatArray
+    em: EmContext, op: Operation, snapshot: AirspaceSnapshot, new_end: FloatArray
 ) -> tuple[FlightPlan, FlightPlan] | None:
     """(the plan to upload, the plan to verify: the same followed by one loiter circle for a
     fixed wing): from where the UAS is now to ``new_end`` at its cruise speed (its climb or
@@ -215,7 +215,7 @@ def _transit(
 
 
 def _best_end(
-    em: EmergencyManager, op: Operation, snapshot: AirspaceSnapshot
+    em: EmContext, op: Operation, snapshot: AirspaceSnapshot
 ) -> tuple[float, Alternative] | None:
     """The nearest verified end point for ``op`` (see the module docstring)."""
     td = em.td
@@ -249,7 +249,7 @@ def _best_end(
     return None
 
 
-def move_end(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Decision | None:
+def move_end(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> Decision | None:
     """The recommendation moving one end point of a loss predicted between two UAS after
     their plans (see the module docstring), or None when that is not the case or no end point
     is found."""

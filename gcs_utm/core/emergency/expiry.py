@@ -16,19 +16,16 @@ The audit entry ``expired`` (actor EM) says what follows: ``expiry_action`` and 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
+from gcs_utm.core.emergency.config import ExpiryAction
+from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Decision
 from gcs_utm.core.emergency.immediate import propose
 from gcs_utm.core.emergency.supervision import describe, escalate_safe
 from gcs_utm.model import AirspaceSnapshot, Recommendation, RecommendationState, ThreatKind
 
-if TYPE_CHECKING:
-    from gcs_utm.core.emergency.manager import EmergencyManager
-
 
 def expire(
-    em: EmergencyManager, rec: Recommendation, snapshot: AirspaceSnapshot
+    em: EmContext, rec: Recommendation, snapshot: AirspaceSnapshot
 ) -> tuple[Decision, Recommendation | None]:
     """Mark ``rec`` EXPIRED (when it is still EM's pending version) with its escalation and
     audit; with ``repropose`` also propose the safe command again. Returns the decision and
@@ -44,7 +41,7 @@ def expire(
     msg = f"{rec.id} v{rec.version} ({rec.operation_id}) expired without an answer"
     again = Decision()
     nxt = "re-plan without the expired manoeuvre"
-    if action == "repropose":
+    if action == ExpiryAction.REPROPOSE:
         again = _repropose(em, new, snapshot, msg)
         mine = [r for r in again.recommendations if r.id == rec.id]
         nxt = (
@@ -64,7 +61,7 @@ def expire(
 
 
 def _repropose(
-    em: EmergencyManager, rec: Recommendation, snapshot: AirspaceSnapshot, why: str
+    em: EmContext, rec: Recommendation, snapshot: AirspaceSnapshot, why: str
 ) -> Decision:
     """The safe command for the UAS of ``rec``, proposed as a new version."""
     case = em.case(rec.threat_id)

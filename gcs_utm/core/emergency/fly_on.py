@@ -13,17 +13,29 @@ one. Pure."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, replace
 
+from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case, Decision
-
-if TYPE_CHECKING:
-    from gcs_utm.core.emergency.immediate import Choice
-    from gcs_utm.core.emergency.manager import EmergencyManager
+from gcs_utm.model import Command, OperationId
 
 FLY_ON = "fly on"
 """The audit's name for the combination without a command."""
+
+
+@dataclass(frozen=True, slots=True)
+class Choice:
+    """The immediate commands chosen for the UAS of a threat (none: they fly on), with the
+    separation ratio they keep and every combination tried, for the audit."""
+
+    commands: dict[OperationId, Command]
+    actions: dict[OperationId, str]
+    """The audit's name of each UAS's command (``immediate.Immediate`` values)."""
+    ratio: float
+    clear: bool
+    tried: list[dict[str, object]]
+    geofences: tuple[str, ...] = ()
+    """The geofences the chosen commands take their UAS into (see .command_fences)."""
 
 
 def fly_on(best: Choice, none_ratio: float) -> Choice:
@@ -35,7 +47,7 @@ def fly_on(best: Choice, none_ratio: float) -> Choice:
     return replace(best, commands={}, actions={}, ratio=none_ratio, tried=tried, geofences=())
 
 
-def flying_on(em: EmergencyManager, case: Case, now: float, why: str, choice: Choice) -> Decision:
+def flying_on(em: EmContext, case: Case, now: float, why: str, choice: Choice) -> Decision:
     """Warn that no command is proposed because flying on separates best, with the numbers
     in the audit; the case is decided again after ``retry_after_s``."""
     text = (

@@ -1,14 +1,16 @@
 """Emergency actions that create geofences (paper use cases 2 and 3): suspend a jammed or
 spoofed UAS with a dynamic geofence around it, a temporary geofence around a lost UAS's
 predicted position, an alert's area as a geofence; every other operation the new fence
-blocks is rerouted. Pure, like :class:`EmergencyManager` whose state they update."""
+blocks is rerouted (:func:`~.single.single`). Pure; they update EM's state through the
+:class:`~.context.EmContext` they are given."""
 
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
-from gcs_utm.core.emergency.decision import ACTOR, MODE_COMMAND, REROUTE_MANEUVERS, Case, Decision
+from gcs_utm.core.emergency.context import EmContext
+from gcs_utm.core.emergency.decision import ACTOR, REROUTE_MANEUVERS, Case, Decision, Mode
+from gcs_utm.core.emergency.single import single
 from gcs_utm.core.monitoring.strategic import plan_vs_geofences
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -23,12 +25,9 @@ from gcs_utm.model import (
     ThreatKind,
 )
 
-if TYPE_CHECKING:
-    from gcs_utm.core.emergency.manager import EmergencyManager
-
 
 def _cylinder(  # noqa: PLR0917 - private helper, one call per geofence kind
-    em: EmergencyManager,
+    em: EmContext,
     gid: str,
     east_m: float,
     north_m: float,
@@ -58,7 +57,7 @@ def _cylinder(  # noqa: PLR0917 - private helper, one call per geofence kind
 
 
 def _reroute_affected(
-    em: EmergencyManager,
+    em: EmContext,
     case: Case,
     fence: Geofence,
     snapshot: AirspaceSnapshot,
@@ -78,11 +77,11 @@ def _reroute_affected(
             geofence_id=fence.id,
             area=fence,
         )
-        d = d.merge(em.single(case, op.id, snapshot, REROUTE_MANEUVERS, threat=sub))
+        d = d.merge(single(em, case, op.id, snapshot, REROUTE_MANEUVERS, threat=sub))
     return d
 
 
-def suspend(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+def suspend(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> Decision:
     now = snapshot.t_s
     cfg = em.config
     t = case.threat
@@ -112,7 +111,7 @@ def suspend(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Dec
             exempt=(op_id,),
         )
         case.geofences.append(fence)
-        case.modes[op_id] = MODE_COMMAND
+        case.modes[op_id] = Mode.COMMAND
         cmd = Command(kind=kind, operation_id=op_id)
         d = d.merge(
             em.issue(
@@ -148,7 +147,7 @@ def suspend(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Dec
     return d
 
 
-def link_loss(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+def link_loss(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> Decision:
     now = snapshot.t_s
     cfg = em.config
     t = case.threat
@@ -192,7 +191,7 @@ def link_loss(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> D
     return d
 
 
-def area(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+def area(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> Decision:
     now = snapshot.t_s
     t = case.threat
     if t.area is None:

@@ -40,15 +40,17 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from enum import Enum
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
 from gcs_utm.core.emergency.command_fences import fence_entered
+from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.emergency.endpoint import move_end
-from gcs_utm.core.emergency.fly_on import fly_on, flying_on
+from gcs_utm.core.emergency.fly_on import Choice, fly_on, flying_on
 from gcs_utm.core.emergency.supervision import escalate_safe
 from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.model import (
@@ -67,7 +69,6 @@ from gcs_utm.model import (
 
 if TYPE_CHECKING:
     from gcs_utm.core.deconfliction import TacticalDeconfliction
-    from gcs_utm.core.emergency.manager import EmergencyManager
 
 BRAKE_MPS2 = 2.5
 """Deceleration assumed for a multirotor that brakes (PX4 MPC_ACC_HOR 3 m/s^2, less a
@@ -81,7 +82,15 @@ MAX_UAS = 3
 """At most this many UAS of one threat get a command (4 options each)."""
 VERTICAL_MARGIN_M = 5.0
 """A climb or descent in place goes this much beyond the pair's vertical minimum."""
-HOLD, CLIMB, DESCEND = "hold", "climb", "descend"
+
+
+class Immediate(Enum):
+    """An immediate command for one UAS; the values are the audit's names."""
+
+    HOLD = "hold"
+    CLIMB = "climb"  # a GOTO the vertical minimum plus a margin above where it stops
+    DESCEND = "descend"  # likewise below
+
 
 _LIVE = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED, RecommendationState.APPLIED)
 
@@ -92,7 +101,7 @@ class _Move:
     takes (a fixed wing circles)."""
 
     op_id: OperationId
-    action: str
+    action: Immediate
     xyz: FloatArray
     slack_m: FloatArray
     command: Command
@@ -178,12 +187,12 @@ def _moves(
     lo, hi = td.alt_limits(op)
     out = []
     for action, target_z, rate in (
-        (HOLD, float(p0[2]), 1.0),
-        (CLIMB, min(float(p0[2]) + rise_m, hi), env.climb_rate_mps),
-        (DESCEND, max(float(p0[2]) - rise_m, lo), env.descent_rate_mps),
+        (Immediate.HOLD, float(p0[2]), 1.0),
+        (Immediate.CLIMB, min(float(p0[2]) + rise_m, hi), env.climb_rate_mps),
+        (Immediate.DESCEND, max(float(p0[2]) - rise_m, lo), env.descent_rate_mps),
     ):
-        if (action == CLIMB and target_z < p0[2] + 1.0) or (
-            action == DESCEND and target_z > p0[2] - 1.0
+        if (action is Immediate.CLIMB and target_z < p0[2] + 1.0) or (
+            action is Immediate.DESCEND and target_z > p0[2] - 1.0
         ):
             continue  # no room in the altitude band (or already outside it that way)
         dz = np.clip(target_z - p0[2], -rate * tau, rate * tau)
@@ -192,7 +201,7 @@ def _moves(
         xyz[after, :2] = stop_xy[after]
         xyz[after, 2] = p0[2] + dz[after]
         stop = stop_xy[-1]
-        if action == HOLD:
+        if action is Immediate.HOLD:
             command = Command(kind=CommandKind.HOLD, operation_id=op.id)
         else:
             lat, lon = td.frame.point_to_wgs84(float(stop[0]), float(stop[1]))
@@ -213,17 +222,6 @@ def _ratio(td: TacticalDeconfliction, fa: _Flown, fb: _Flown) -> float:
     dh = np.maximum(np.hypot(xa[:, 0] - xb[:, 0], xa[:, 1] - xb[:, 1]) - sa - sb, 0.0)
     r = separation_ratio(dh, xa[:, 2] - xb[:, 2], h_min, v_min, spherical=td.monitoring.spherical)
     return float(r.min())
-
-
-@dataclass(frozen=True, slots=True)
-class Choice:
-    commands: dict[OperationId, Command]
-    actions: dict[OperationId, str]
-    ratio: float
-    clear: bool
-    tried: list[dict[str, object]]
-    geofences: tuple[str, ...] = ()
-    """The geofences the chosen commands take their UAS into (see .command_fences)."""
 
 
 def choose_commands(  # noqa: PLR0917 - one call site
@@ -275,7 +273,7 @@ def choose_commands(  # noqa: PLR0917 - one call site
         clear = ratio >= 1.0
         fences = sorted({fenced[id(m)] for m in moves} - {""})
         key = _rank(ratio, bool(fences), moves, priority_of)
-        actions = {m.op_id: m.action for m in moves}
+        actions = {m.op_id: m.action.value for m in moves}
         record: dict[str, object] = {"commands": {str(k): v for k, v in actions.items()}}
         record["ratio"] = round(ratio, 3)
         if fences:
@@ -336,7 +334,7 @@ def off_plan(td: TacticalDeconfliction, snapshot: AirspaceSnapshot) -> list[Oper
     return out
 
 
-def too_late(em: EmergencyManager, threat: Threat, now: float) -> str:
+def too_late(em: EmContext, threat: Threat, now: float) -> str:
     """Why a new plan decided ``now`` would start inside the predicted loss ("" when it
     would not, or the threat predicts no event time)."""
     event = threat.predicted_event_at_s
@@ -349,7 +347,7 @@ def too_late(em: EmergencyManager, threat: Threat, now: float) -> str:
     )
 
 
-def late_reason(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> str:
+def late_reason(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> str:
     """Why the loss of ``case`` gets the immediate command now rather than new plans ("" when
     plans are tried): the event is nearer than a new plan's lead (:func:`too_late`), or
     nearer than the lead plus ``emergency.immediate_margin_s`` and the immediate command
@@ -384,7 +382,7 @@ the lead: further ahead the plans or the tracks often change (a UAS catches up, 
 ends), and a UAS held early is where no plan says for the rest of its flight."""
 
 
-def keep_all(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+def keep_all(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> Decision:
     """Every plan of the case is kept while the tracks predict the loss: warn (once per
     case) and, once the event is within the lead plus :data:`IMMINENT_S`, propose the
     immediate command for the UAS whose track is off its plan (all of the threat's when
@@ -410,7 +408,7 @@ def keep_all(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> De
 
 
 def propose(
-    em: EmergencyManager,
+    em: EmContext,
     case: Case,
     snapshot: AirspaceSnapshot,
     why: str,
@@ -456,7 +454,7 @@ def propose(
     return audit.merge(escalate_safe(em, case, list(choice.commands), now, text, choice.commands))
 
 
-def held_by(em: EmergencyManager, op_id: OperationId, other: Case) -> str:
+def held_by(em: EmContext, op_id: OperationId, other: Case) -> str:
     """The loss-of-separation case (other than ``other``) whose immediate command for
     ``op_id`` is proposed, accepted or applied ("" when none): the UAS is off its plan on
     purpose (or about to be: the pilot's answer may come in the same second, and the plan
@@ -472,7 +470,7 @@ def held_by(em: EmergencyManager, op_id: OperationId, other: Case) -> str:
     return ""
 
 
-def _standing(em: EmergencyManager, case: Case, choice: Choice) -> bool:
+def _standing(em: EmContext, case: Case, choice: Choice) -> bool:
     """Every chosen command is already proposed or in force for its UAS in this case."""
     live = {}
     for rid in case.rec_ids:

@@ -18,7 +18,7 @@ time the link is slow).
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass, field
 
 from gcs_utm.core.emergency.config import EmergencyConfig
@@ -43,7 +43,10 @@ class ResponseTimes:
     """An automatic operator's delay (``--auto-accept``): the answer default instead of
     ``expected_answer_s``."""
     _seen: dict[tuple[str, OperationId], deque[float]] = field(default_factory=dict)
-    _accepted: dict[tuple[RecommendationId, int], float] = field(default_factory=dict)
+    _accepted: dict[tuple[RecommendationId, int], tuple[OperationId, float]] = field(
+        default_factory=dict
+    )
+    """When each accepted version was accepted (and its operation), until applied or failed."""
 
     def observe(self, figure: str, op_id: OperationId, seconds: float) -> None:
         """Record one measured ``figure`` (answer, upload or command) for ``op_id``."""
@@ -64,14 +67,22 @@ class ResponseTimes:
         if rec.state in (RecommendationState.ACCEPTED, RecommendationState.REJECTED):
             self.observe(ANSWER, rec.operation_id, max(0.0, t - rec.created_t_s))
             if rec.state is RecommendationState.ACCEPTED:
-                self._accepted[key] = t
+                self._accepted[key] = (rec.operation_id, t)
         elif rec.state is RecommendationState.APPLIED:
-            since = self._accepted.pop(key, rec.created_t_s)
+            since = self._accepted.pop(key, (rec.operation_id, rec.created_t_s))[1]
             plan = rec.selected is not None and rec.selected.plan is not None
             figure = COMMAND if rec.command is not None and not plan else UPLOAD
             self.observe(figure, rec.operation_id, max(0.0, t - since))
         elif rec.state is RecommendationState.FAILED:
             self._accepted.pop(key, None)
+
+    def forget(self, op_ids: Collection[OperationId]) -> None:
+        """Operations the airspace forgot (services/retention.py) take their measurements with
+        them: a day of traffic must not accumulate here (``gcs-utm bench soak``)."""
+        for key in [k for k in self._seen if k[1] in op_ids]:
+            del self._seen[key]
+        for acc in [k for k, (op_id, _) in self._accepted.items() if op_id in op_ids]:
+            del self._accepted[acc]
 
     def measured(self) -> dict[str, dict[str, float]]:
         """What has been measured so far, for the audit: figure -> operation -> seconds."""

@@ -10,6 +10,14 @@ Guarantees:
 - a rejection or an expiry re-plans without the refused maneuver (a new version of the id) up
   to ``max_replans`` times, then escalates; no feasible alternative: EM escalates (no drop);
 - every decision is audited (:class:`AuditEntry`: alternatives, cost, risk, weights, reason).
+
+Composition: the manager is an orchestrator. It holds the state and an
+:class:`~.context.EmContext` over it, and dispatches each case by its :class:`~.config.Action`
+to a part that receives that context and never imports the manager: the multi-UAS joint
+selection (here), :mod:`.single` (one UAS, intruders), :mod:`.geofences` (suspend, link loss,
+alert areas), :mod:`.immediate` and :mod:`.endpoint` (commands, end points), and for what
+follows a decision :mod:`.supervision`, :mod:`.expiry`, :mod:`.adoption`, :mod:`.closing`,
+:mod:`.recheck`.
 """
 
 from __future__ import annotations
@@ -18,22 +26,18 @@ from collections.abc import Callable, Collection, Sequence
 from dataclasses import replace
 
 from gcs_utm.core.deconfliction import TacticalDeconfliction
+from gcs_utm.core.emergency.adoption import adopt_case
 from gcs_utm.core.emergency.clearance import with_clearance
-from gcs_utm.core.emergency.config import EmergencyConfig
-from gcs_utm.core.emergency.decision import (
-    ACTOR,
-    MODE_COMMAND,
-    MODE_INTRUDER,
-    MODE_MULTI,
-    ONE_SHOT,
-    SINGLE_MANEUVERS,
-    Case,
-    Decision,
-)
+from gcs_utm.core.emergency.closing import close_threat, supersede_pending
+from gcs_utm.core.emergency.config import Action, EmergencyConfig, ExpiryAction
+from gcs_utm.core.emergency.context import EmContext
+from gcs_utm.core.emergency.decision import ONE_SHOT, SINGLE_MANEUVERS, Case, Decision, Mode
 from gcs_utm.core.emergency.expiry import expire
 from gcs_utm.core.emergency.geofences import area, link_loss, suspend
-from gcs_utm.core.emergency.immediate import held_by, keep_all, late_reason, propose
+from gcs_utm.core.emergency.immediate import keep_all, late_reason, propose
 from gcs_utm.core.emergency.lead import ResponseTimes
+from gcs_utm.core.emergency.options import detail, intended
+from gcs_utm.core.emergency.recheck import plan_problem
 from gcs_utm.core.emergency.selection import (
     STAY_DETAIL,
     Selection,
@@ -41,24 +45,14 @@ from gcs_utm.core.emergency.selection import (
     is_stay,
     select_by_priority,
     stay,
-    weighted,
 )
-from gcs_utm.core.emergency.supervision import (
-    deviation_start,
-    escalate_safe,
-    on_outcome,
-    safe_command,
-    settled_at,
-    supervise_case,
-)
+from gcs_utm.core.emergency.single import intruder, single
+from gcs_utm.core.emergency.supervision import on_outcome, settled_at, supervise_case
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AirspaceSnapshot,
     Alternative,
-    AuditEntry,
-    Command,
-    CommandKind,
     Geofence,
     Maneuver,
     OperationId,
@@ -79,16 +73,23 @@ KEPT_REASON = (
 """Why a multi-UAS decision that moves nobody moves nobody (``all_kept`` in its audit)."""
 
 
-def _alt_record(alt: Alternative, alpha: float, beta: float) -> dict[str, object]:
-    return {
-        "operation_id": alt.operation_id,
-        "maneuver": alt.maneuver.value,
-        "cost": round(alt.cost, 6),
-        "risk": round(alt.risk, 6),
-        "score": round(weighted(alt, alpha, beta), 6),
-        "detail": alt.detail,
-        "waypoints": 0 if alt.plan is None else len(alt.plan.waypoints),
-    }
+def _warn(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+    """The ``warn`` action: an operator warning, audited."""
+    t = case.threat
+    msg = f"{t.kind.value}: {', '.join(t.uas_ids)} {t.message}".strip()
+    return Decision(
+        warnings=(msg,), audit=(em.audit(snapshot.t_s, "warn", t.id, {"message": msg}),)
+    )
+
+
+_WHOLE_CASE: dict[Action, Callable[[EmContext, Case, AirspaceSnapshot], Decision]] = {
+    Action.WARN: _warn,
+    Action.SUSPEND_AND_GEOFENCE: suspend,
+    Action.ALERT_AND_GEOFENCE: link_loss,
+    Action.GEOFENCE_FROM_AREA: area,
+}
+"""The actions decided for the whole case at once by a part (the multi-UAS one is the
+manager's own; the others are decided per UAS: :func:`.single.single`, intruders)."""
 
 
 class EmergencyManager:
@@ -114,6 +115,28 @@ class EmergencyManager:
         # versions of an id numbered elsewhere (another instance of a cluster): the next
         # version of the id is above them
         self._floors: dict[RecommendationId, int] = {}
+        self.ctx = EmContext(
+            frame=frame,
+            config=config,
+            td=td,
+            monitoring=monitoring,
+            lead=self.lead,
+            cases=self._cases,
+            recs=self._recs,
+            floors=self._floors,
+            decide=self._handle,
+        )
+        """What the parts are handed (see .context)."""
+        # the parts' bookkeeping, offered as the manager's own
+        self.recommendation = self.ctx.recommendation
+        self.record = self.ctx.record
+        self.case = self.ctx.case
+        self.open_threats = self.ctx.open_threats
+        self.audit = self.ctx.audit
+        self.issue = self.ctx.issue
+        self.plan_start = self.ctx.plan_start
+        self.manoeuvre_start = self.ctx.manoeuvre_start
+        self.earliest_receipt = self.ctx.earliest_receipt
 
     # ---- queries ----------------------------------------------------------------------------
     def pending(self) -> list[Recommendation]:
@@ -121,26 +144,10 @@ class EmergencyManager:
         recs = [r for r in self._recs.values() if r.state is RecommendationState.PROPOSED]
         return sorted(recs, key=lambda r: r.deadline_t_s)
 
-    def recommendation(self, rec_id: RecommendationId) -> Recommendation | None:
-        return self._recs.get(rec_id)
-
-    def open_threats(self) -> list[ThreatId]:
-        return list(self._cases)
-
-    def case(self, threat_id: ThreatId) -> Case | None:
-        return self._cases.get(threat_id)
-
-    def adopt(self, case: Case) -> None:  # a previous life's case, as it is (see .adoption)
-        self._cases[case.threat.id] = case
-
-    def record(self, rec: Recommendation) -> Recommendation:
-        """Store ``rec`` as the current version of its id; returns it."""
-        self._recs[rec.id] = rec
-        return rec
-
     def forget_operations(self, op_ids: Collection[OperationId]) -> None:
         """Operations the airspace forgot (services/retention.py): their recommendations leave
         memory, except one an open case still refers to (the store keeps the record)."""
+        self.lead.forget(op_ids)
         kept = {rid for case in self._cases.values() for rid in case.rec_ids}
         for rid in [r for r, x in self._recs.items() if x.operation_id in op_ids]:
             if rid not in kept:
@@ -171,10 +178,10 @@ class EmergencyManager:
         one-shot actions (warning, geofence creation) are done; a case that ended in
         escalation is retried every retry_after_s with its refused maneuvers still excluded
         (no churn every monitoring cycle)."""
-        if case.action in ONE_SHOT or self._pending(case):
+        if case.action in ONE_SHOT or self.ctx.pending_in(case):
             return Decision()
-        if self._in_force(case):
-            return supervise_case(self, case, snapshot)
+        if self.ctx.in_force(case):
+            return supervise_case(self.ctx, case, snapshot)
         if snapshot.t_s - case.attempt_t_s < self.config.retry_after_s:
             return Decision()
         case.attempt_t_s = snapshot.t_s
@@ -184,7 +191,9 @@ class EmergencyManager:
     def supervising(self) -> bool:
         """Is any open case waiting on an accepted plan or on a retry after an escalation
         (so :meth:`supervise` has work)?"""
-        return any(c.action not in ONE_SHOT and not self._pending(c) for c in self._cases.values())
+        return any(
+            c.action not in ONE_SHOT and not self.ctx.pending_in(c) for c in self._cases.values()
+        )
 
     def supervise(self, snapshot: AirspaceSnapshot) -> Decision:
         """Periodic supervision of every open case (Monitoring reports a persisting threat
@@ -204,11 +213,7 @@ class EmergencyManager:
         snapshot: AirspaceSnapshot,
     ) -> Decision:
         """The upload (or command) of an accepted recommendation was verified or failed."""
-        return on_outcome(self, rec_id, version, applied, reason, snapshot)
-
-    def decide_again(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
-        """A fresh decision for an open case on the current snapshot (new versions)."""
-        return self._handle(case, snapshot)
+        return on_outcome(self.ctx, rec_id, version, applied, reason, snapshot)
 
     def on_answer(
         self, rec: Recommendation, accepted: bool, snapshot: AirspaceSnapshot
@@ -244,190 +249,67 @@ class EmergencyManager:
     def on_expired(self, rec: Recommendation, snapshot: AirspaceSnapshot) -> Decision:
         """No answer in time: see :mod:`.expiry` (the safe command proposed again, or a
         re-plan as after a rejection: ``expiry_action``)."""
-        d, new = expire(self, rec, snapshot)
-        if new is None or self.config.expiry_action != "replan":
+        d, new = expire(self.ctx, rec, snapshot)
+        if new is None or self.config.expiry_action != ExpiryAction.REPLAN:
             return d
         return d.merge(self._replan(new, snapshot, "expired"))
 
     def on_threat_closed(self, threat: Threat) -> Decision:
-        case = self._cases.pop(threat.id, None)
-        if case is None:
-            return Decision()
-        t = threat.updated_at_s if threat.updated_at_s is not None else threat.detected_at_s
-        recs: list[Recommendation] = []
-        for rid in sorted(case.rec_ids):
-            cur = self._recs[rid]
-            if cur.state is RecommendationState.PROPOSED:
-                new = cur.transition(RecommendationState.SUPERSEDED, t, "threat closed")
-                self._recs[rid] = new
-                recs.append(new)
-        return Decision(
-            recommendations=tuple(recs),
-            superseded=tuple(r.id for r in recs),
-            audit=(
-                self.audit(t, "threat_closed", threat.id, {"superseded": [r.id for r in recs]}),
-            ),
+        """The case of a CLOSED ``threat`` ends: its pending proposals are superseded."""
+        return supersede_pending(self.ctx, threat)
+
+    def close_threat(self, threat: Threat) -> Decision:
+        """As :meth:`on_threat_closed`, and the geofences its case created go (.closing)."""
+        return close_threat(self.ctx, threat)
+
+    def adopt_case(
+        self,
+        threat: Threat,
+        *,
+        inherited: Threat,
+        recommendations: Sequence[Recommendation],
+        geofences: Sequence[Geofence],
+        now: float,
+    ) -> Decision | None:
+        """An earlier life's case of ``inherited`` taken over by ``threat`` (.adoption)."""
+        return adopt_case(
+            self.ctx,
+            threat,
+            inherited=inherited,
+            recommendations=recommendations,
+            geofences=geofences,
+            now=now,
         )
 
-    # ---- internals --------------------------------------------------------------------------
-    def _intended(self, snapshot: AirspaceSnapshot, case: Case) -> AirspaceSnapshot:
-        """``snapshot`` with every plan another case has recommended and that is not in the
-        airspace yet (proposed or accepted) in place of the UAS's plan: overlapping threats
-        decided one after the other build on each other's plans (three pairwise threats
-        among three UAS, each decided on the filed plans, gave two of them plans that met)."""
-        live = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED)
-        latest: dict[OperationId, Recommendation] = {}
-        for r in self._recs.values():
-            if r.threat_id == case.threat.id or r.state not in live:
-                continue
-            if r.selected is None or r.selected.plan is None:
-                continue
-            prev = latest.get(r.operation_id)
-            if prev is None or r.created_t_s >= prev.created_t_s:
-                latest[r.operation_id] = r
-        ops = snapshot.operations
-        # An accepted plan the airspace already holds (or a newer one: uploads stamp the plan
-        # they install with their time) is not replaced; the outcome may not be reported.
-        changed = {
-            k: replace(ops[k], plan=replace(r.selected.plan, operation_id=k))
-            for k, r in latest.items()
-            if k in ops
-            and r.selected is not None
-            and r.selected.plan is not None
-            and ops[k].plan.created_t_s < r.created_t_s
-        }
-        if not changed:
-            return snapshot
-        return replace(snapshot, operations={**ops, **changed})
-
-    def _pending(self, case: Case) -> bool:
-        return any(self._recs[r].state is RecommendationState.PROPOSED for r in case.rec_ids)
-
-    def _in_force(self, case: Case) -> bool:
-        force = (RecommendationState.ACCEPTED, RecommendationState.APPLIED)
-        return any(self._recs[r].state in force for r in case.rec_ids)
-
-    def plan_start(self, threat: Threat, now: float) -> float:
-        """When a plan decided now can start: the expected answer (none in autonomous mode;
-        measured per vehicle, else the automatic operator's delay or ``expected_answer_s``,
-        never past the deadline), the upload and a margin (see .lead). The vehicle has the
-        plan before then, and its first waypoint lies ahead of it."""
-        return self.lead.plan_start(threat.uas_ids, now, self._deadline(threat, now))
+    def plan_problem(self, rec: Recommendation, snapshot: AirspaceSnapshot) -> str:
+        """Why the accepted plan of ``rec`` must not be uploaded now ("" when it may;
+        .recheck)."""
+        return plan_problem(self.ctx, rec, snapshot)
 
     def supervision_due(self, rec: Recommendation) -> float | None:
         """When an accepted ``rec`` is settled (see :mod:`.supervision`); None when its case
         is closed."""
         case = self._cases.get(rec.threat_id)
-        return None if case is None else settled_at(self, case, rec)
+        return None if case is None else settled_at(self.ctx, case, rec)
 
-    def manoeuvre_start(self, rec: Recommendation) -> float:
-        """When the plan of ``rec`` leaves the UAS's path (its lead-in ends)."""
-        return self.lead.plan_start((rec.operation_id,), rec.created_t_s, rec.deadline_t_s)
-
-    def earliest_receipt(self, now: float, op_ids: Sequence[OperationId] = ()) -> float:
-        """The earliest the vehicle can have a plan decided now: an immediate answer (or the
-        automatic operator's delay) plus the upload. A new plan carries timed points of the
-        current path from then to its start (TD's lead-in)."""
-        return self.lead.earliest_receipt(op_ids, now)
-
-    def audit(self, t_s: float, action: str, subject: str, detail: dict[str, object]) -> AuditEntry:
-        return AuditEntry(t_s=t_s, actor=ACTOR, action=action, subject=str(subject), detail=detail)
-
-    def _deadline(self, threat: Threat, now: float) -> float:
-        event = threat.predicted_event_at_s
-        if event is None:
-            event = now + self.config.default_event_horizon_s
-        cfg = self.config
-        latest = now + max(cfg.min_response_s, cfg.answer_window_s)
-        return min(latest, max(now + cfg.min_response_s, event - cfg.deadline_margin_s))
-
-    def issue(
-        self,
-        case: Case,
-        op_id: OperationId,
-        now: float,
-        *,
-        selected: Alternative | None = None,
-        command: Command | None = None,
-        alternatives: Sequence[Alternative] = (),
-        reason: str,
-        geofence: Geofence | None = None,
-    ) -> Decision:
-        """A new recommendation (or a new version replacing a pending one)."""
-        rid = RecommendationId(f"{case.threat.id}/{op_id}")
-        prev = self._recs.get(rid)
-        superseded: list[RecommendationId] = []
-        recs: list[Recommendation] = []
-        if prev is not None and prev.state is RecommendationState.PROPOSED:
-            old = prev.transition(RecommendationState.SUPERSEDED, now, "replaced by a new version")
-            recs.append(old)
-            superseded.append(rid)
-        op = case.operations.get(op_id)
-        if selected is not None and selected.plan is not None and op is not None:
-            t_dev = deviation_start(self.frame, selected.plan, op.plan, op.flight_geometry_m)
-            if t_dev is not None:
-                case.deviates_at[rid] = t_dev
-        rec = Recommendation(
-            id=rid,
-            version=max(0 if prev is None else prev.version, self._floors.get(rid, 0)) + 1,
-            threat_id=case.threat.id,
-            threat_kind=case.threat.kind,
-            operation_id=op_id,
-            created_t_s=now,
-            deadline_t_s=self._deadline(case.threat, now),
-            selected=selected,
-            command=command,
-            alternatives=tuple(alternatives),
-            reason=reason,
-            new_geofence=geofence,
-            state_t_s=now,
-        )
-        commands: tuple[Command, ...] = ()
-        if self.config.autonomous:
-            rec = rec.transition(RecommendationState.ACCEPTED, now, "autonomous mode")
-            if command is not None:
-                commands = (command,)
-        self._recs[rid] = rec
-        case.rec_ids.add(rid)
-        recs.append(rec)
-        return Decision(
-            recommendations=tuple(recs), superseded=tuple(superseded), commands=commands
-        )
-
+    # ---- internals --------------------------------------------------------------------------
     def _handle(self, case: Case, snapshot: AirspaceSnapshot) -> Decision:
-        t = case.threat
+        """The case's action (``[emergency] policy``), done by its part: for the whole case
+        at once, or one decision per UAS of the threat."""
         a = case.action
-        if a == "alternative_plans":
+        if a is Action.ALTERNATIVE_PLANS:
             return self._multi(case, snapshot)
-        if a == "warn":
-            msg = f"{t.kind.value}: {', '.join(t.uas_ids)} {t.message}".strip()
-            return Decision(
-                warnings=(msg,), audit=(self.audit(snapshot.t_s, "warn", t.id, {"message": msg}),)
-            )
-        geofencing = {
-            "suspend_and_geofence": suspend,
-            "alert_and_geofence": link_loss,
-            "geofence_from_area": area,
-        }
-        if a in geofencing:
-            return geofencing[a](self, case, snapshot)
-        # one decision per UAS of the threat
-        if a in SINGLE_MANEUVERS:
-            maneuvers = SINGLE_MANEUVERS[a]
-
-            def per_uas(op_id: OperationId) -> Decision:
-                return self.single(case, op_id, snapshot, maneuvers)
-
-        elif a == "vertical_avoidance":
-
-            def per_uas(op_id: OperationId) -> Decision:
-                return self._intruder(case, op_id, snapshot)
-
-        else:
+        whole = _WHOLE_CASE.get(a)
+        if whole is not None:
+            return whole(self.ctx, case, snapshot)
+        if a is not Action.VERTICAL_AVOIDANCE and a not in SINGLE_MANEUVERS:
             raise AssertionError(f"unhandled action {a!r}")  # EmergencyConfig validates actions
         d = Decision()
-        for op_id in t.uas_ids:
-            d = d.merge(per_uas(op_id))
+        for op_id in case.threat.uas_ids:
+            if a is Action.VERTICAL_AVOIDANCE:
+                d = d.merge(intruder(self.ctx, case, op_id, snapshot))
+            else:
+                d = d.merge(single(self.ctx, case, op_id, snapshot, SINGLE_MANEUVERS[a]))
         return d
 
     # -- multi-UAS
@@ -437,34 +319,34 @@ class EmergencyManager:
         move. An immediate command is proposed (.immediate) when the event is nearer than a
         new plan's start, when no combination resolves the conflict, or when every plan
         (re-timed from the vehicles' progress by the snapshot provider) is kept."""
-        snapshot = self._intended(snapshot, case)
+        snapshot = intended(self.ctx, snapshot, case)
         case.operations = dict(snapshot.operations)
         now = snapshot.t_s
         t = case.threat
-        late = late_reason(self, case, snapshot)  # with plans in force: only if they change
-        if late and not self._in_force(case):
-            return propose(self, case, snapshot, late, t.uas_ids)
+        late = late_reason(self.ctx, case, snapshot)  # with plans in force: only if they change
+        if late and not self.ctx.in_force(case):
+            return propose(self.ctx, case, snapshot, late, t.uas_ids)
         options, tiered, compatible = self._joint(case, snapshot, buffered=True)
         if tiered is None:
             # No combination keeps the vehicles' tracking tolerances free: the best one that
             # keeps the bare minima beats no decision at all.
             options, tiered, compatible = self._joint(case, snapshot, buffered=False)
         sel = None if tiered is None else tiered.selection
-        detail = self._detail(options, sel, "loss of separation: charged cords + joint selection")
+        info = detail(self.ctx, options, sel, "loss of separation: charged cords + joint selection")
         if tiered is None:
             msg = f"{t.id}: no conflict-free combination of alternatives for {', '.join(t.uas_ids)}"
-            audit = Decision(audit=(self.audit(now, "escalation", t.id, detail),))
-            return audit.merge(propose(self, case, snapshot, msg, t.uas_ids))
-        detail["moved_up_to_priority"] = tiered.moved_up_to_priority
+            audit = Decision(audit=(self.audit(now, "escalation", t.id, info),))
+            return audit.merge(propose(self.ctx, case, snapshot, msg, t.uas_ids))
+        info["moved_up_to_priority"] = tiered.moved_up_to_priority
         kept = all(a.maneuver is Maneuver.KEEP_PLAN for a in tiered.selection.chosen.values())
         if kept:
-            detail["all_kept"] = KEPT_REASON
-        d = Decision(audit=(self.audit(now, "decision", t.id, detail),))
+            info["all_kept"] = KEPT_REASON
+        d = Decision(audit=(self.audit(now, "decision", t.id, info),))
         if late and not kept:
-            return d.merge(propose(self, case, snapshot, late, t.uas_ids))
+            return d.merge(propose(self.ctx, case, snapshot, late, t.uas_ids))
         d = d.merge(self._issue_joint(case, tiered.selection, options, compatible, now))
-        if kept and not self._in_force(case):
-            d = d.merge(keep_all(self, case, snapshot))  # never keep all: see .immediate
+        if kept and not self.ctx.in_force(case):
+            d = d.merge(keep_all(self.ctx, case, snapshot))  # never keep all: see .immediate
         return d
 
     def _joint(
@@ -536,7 +418,7 @@ class EmergencyManager:
         t = case.threat
         d = Decision()
         for op_id, alt in sel.chosen.items():
-            case.modes[op_id] = MODE_MULTI
+            case.modes[op_id] = Mode.MULTI
             rid = RecommendationId(f"{t.id}/{op_id}")
             prev = self._recs.get(rid)
             if is_stay(alt):
@@ -573,163 +455,11 @@ class EmergencyManager:
             )
         return d
 
-    def _detail(
-        self,
-        options: dict[OperationId, list[Alternative]],
-        sel: Selection | None,
-        reason: str,
-    ) -> dict[str, object]:
-        cfg = self.config
-        return {
-            "reason": reason,
-            "alpha": cfg.alpha,
-            "beta": cfg.beta,
-            "alternatives": [
-                _alt_record(x, cfg.alpha, cfg.beta) for alts in options.values() for x in alts
-            ],
-            "selected": None
-            if sel is None
-            else {k: v.maneuver.value for k, v in sel.chosen.items()},
-            "total": None if sel is None else round(sel.total, 6),
-            "explored": None if sel is None else sel.explored,
-            "truncated": None if sel is None else sel.truncated,
-            "dropped": [
-                {"operation_id": x.operation_id, "maneuver": x.maneuver.value, "reason": x.reason}
-                for x in self.td.dropped
-            ],
-        }
-
-    # -- single UAS
-    def single(
-        self,
-        case: Case,
-        op_id: OperationId,
-        snapshot: AirspaceSnapshot,
-        maneuvers: frozenset[Maneuver],
-        threat: Threat | None = None,
-    ) -> Decision:
-        now = snapshot.t_s
-        t = threat or case.threat
-        held = held_by(self, op_id, case) if case.action == "back_to_plan" else None
-        if held:  # off its plan on purpose: not sent back into the loss it avoids
-            why: dict[str, object] = {"reason": f"{op_id} follows {held}'s immediate command"}
-            return Decision(audit=(self.audit(now, "deferred", case.threat.id, why),))
-        snapshot = self._intended(snapshot, case)
-        case.operations = dict(snapshot.operations)
-        case.modes[op_id] = f"single:{','.join(sorted(m.value for m in maneuvers))}"
-        allowed = maneuvers - case.excluded.get(op_id, set())
-        alts = self.td.resolve_single(
-            t,
-            op_id,
-            snapshot,
-            maneuvers=allowed,
-            extra_geofences=tuple(case.geofences),
-            start_t_s=self.plan_start(t, now),
-            lead_in_from_t_s=self.earliest_receipt(now, (op_id,)),
-        )
-        cfg = self.config
-        if case.action == "land_or_home":
-            # Energy first: with the battery or the vehicle failing, the option that is on the
-            # ground soonest wins; the weighted score only breaks ties.
-            alts.sort(
-                key=lambda x: (
-                    x.plan.end_t_s if x.plan is not None else now,
-                    weighted(x, cfg.alpha, cfg.beta),
-                )
-            )
-        else:
-            alts.sort(key=lambda x: weighted(x, cfg.alpha, cfg.beta))
-        options = {op_id: alts}
-        best = alts[0] if alts else None
-        sel = (
-            None
-            if best is None
-            else Selection(
-                chosen={op_id: best},
-                total=weighted(best, cfg.alpha, cfg.beta),
-                explored=len(alts),
-                truncated=False,
-            )
-        )
-        detail = self._detail(options, sel, f"{t.kind.value}: {case.action}")
-        if best is None:
-            audit = (self.audit(now, "escalation", case.threat.id, detail),)
-            if case.action == "land_or_home":
-                # Low battery or failure and no reachable site: land where it is, and say so.
-                cmd = Command(kind=CommandKind.LAND, operation_id=op_id)
-                case.modes[op_id] = MODE_COMMAND
-                msg = f"{case.threat.id}: no reachable landing site or home for {op_id}: land now"
-                d = self.issue(case, op_id, now, command=cmd, reason=msg)
-                return d.merge(Decision(escalations=(msg,), audit=audit))
-            msg = f"{case.threat.id}: no feasible alternative for {op_id} ({t.kind.value})"
-            return Decision(audit=audit).merge(escalate_safe(self, case, [op_id], now, msg))
-        d = Decision(audit=(self.audit(now, "decision", case.threat.id, detail),))
-        return d.merge(
-            self.issue(
-                case,
-                op_id,
-                now,
-                selected=best,
-                alternatives=alts[1:],
-                reason=f"{t.kind.value}: {best.maneuver.value}",
-            )
-        )
-
-    def _intruder(self, case: Case, op_id: OperationId, snapshot: AirspaceSnapshot) -> Decision:
-        snapshot = self._intended(snapshot, case)
-        case.operations = dict(snapshot.operations)
-        now = snapshot.t_s
-        cfg = self.config
-        case.modes[op_id] = MODE_INTRUDER
-        banned = case.excluded.get(op_id, set())
-        alts = [
-            x
-            for x in self.td.resolve_intruder(
-                case.threat,
-                op_id,
-                snapshot,
-                self.plan_start(case.threat, now),
-                self.earliest_receipt(now, (op_id,)),
-            )
-            if x.maneuver not in banned
-        ]
-        alts.sort(key=lambda x: weighted(x, cfg.alpha, cfg.beta))
-        sel = (
-            None
-            if not alts
-            else Selection(
-                chosen={op_id: alts[0]},
-                total=weighted(alts[0], cfg.alpha, cfg.beta),
-                explored=len(alts),
-                truncated=False,
-            )
-        )
-        detail = self._detail({op_id: alts}, sel, "intruder: avoidance")
-        if not alts:
-            # Nothing flyable keeps the minima: propose the safe command (hold) and escalate.
-            cmd = Command(kind=safe_command(case.threat.kind), operation_id=op_id)
-            case.modes[op_id] = MODE_COMMAND
-            msg = (
-                f"{case.threat.id}: no avoidance for {op_id} from intruder "
-                f"{case.threat.intruder_id}: {cmd.kind.value} proposed"
-            )
-            audit = (self.audit(now, "escalation", case.threat.id, detail),)
-            d = self.issue(case, op_id, now, command=cmd, reason=msg)
-            return d.merge(Decision(escalations=(msg,), audit=audit))
-        d = Decision(audit=(self.audit(now, "decision", case.threat.id, detail),))
-        return d.merge(
-            self.issue(
-                case,
-                op_id,
-                now,
-                selected=alts[0],
-                alternatives=alts[1:],
-                reason=f"intruder {case.threat.intruder_id}: {alts[0].maneuver.value}",
-            )
-        )
-
     # -- re-planning after a refusal
     def _replan(self, rec: Recommendation, snapshot: AirspaceSnapshot, why: str) -> Decision:
+        """A new decision for the UAS of a refused (or expired) ``rec``, made as the last one
+        was (:class:`~.decision.Mode`) without the refused manoeuvre; a refused command, or
+        more than ``max_replans``, escalates."""
         now = snapshot.t_s
         case = self._cases.get(rec.threat_id)
         op_id = rec.operation_id
@@ -739,22 +469,22 @@ class EmergencyManager:
         case.replans[op_id] = n
         if rec.selected is not None:
             case.excluded.setdefault(op_id, set()).add(rec.selected.maneuver)
-        mode = case.modes.get(op_id, "")
-        if mode == MODE_COMMAND:  # the pilot refused (or let expire) the command itself
+        mode = case.modes.get(op_id)
+        if mode is Mode.COMMAND:  # the pilot refused (or let expire) the command itself
             msg = f"{rec.threat_id}: {op_id} {why} a command; operator action needed"
             audit = self.audit(now, "escalation", rec.threat_id, {"reason": msg})
             return Decision(escalations=(msg,), audit=(audit,))
         if n > self.config.max_replans:  # escalate with a command to confirm
             msg = f"{rec.threat_id}: {op_id} {why} {n - 1} re-plans"
-            return propose(self, case, snapshot, msg, [op_id], choose=mode == MODE_MULTI)
-        if mode == MODE_MULTI:
+            return propose(self.ctx, case, snapshot, msg, [op_id], choose=mode is Mode.MULTI)
+        if mode is Mode.MULTI:
             return self._multi(case, snapshot)
-        if mode == MODE_INTRUDER:
-            return self._intruder(case, op_id, snapshot)
-        maneuvers = frozenset(Maneuver(v) for v in mode.removeprefix("single:").split(",") if v)
+        if mode is Mode.INTRUDER:
+            return intruder(self.ctx, case, op_id, snapshot)
+        maneuvers = case.maneuvers.get(op_id, frozenset())
         threat = case.threat
         if op_id not in threat.uas_ids and case.geofences:
             threat = replace(
                 threat, kind=ThreatKind.GEOFENCE_CONFLICT, uas_ids=(op_id,), area=case.geofences[-1]
             )
-        return self.single(case, op_id, snapshot, maneuvers, threat=threat)
+        return single(self.ctx, case, op_id, snapshot, maneuvers, threat=threat)

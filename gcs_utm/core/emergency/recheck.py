@@ -14,14 +14,14 @@ the pair's **bare** effective minima (a decision that found nothing better than 
 minima is not refused for the tracking tolerance it could not keep), against every other
 UAS in the snapshot: its plan re-timed from its vehicle's progress (the snapshot EM decides
 on), or the plan another recommendation has proposed, accepted or applied for it since.
-Pure, like the manager.
+Pure.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
+from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.model import (
     AirspaceSnapshot,
     FlightPlan,
@@ -31,13 +31,10 @@ from gcs_utm.model import (
     RecommendationState,
 )
 
-if TYPE_CHECKING:
-    from gcs_utm.core.emergency.manager import EmergencyManager
-
 _LIVE = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED, RecommendationState.APPLIED)
 
 
-def _intended(em: EmergencyManager, rec: Recommendation) -> dict[OperationId, FlightPlan]:
+def _intended(em: EmContext, rec: Recommendation) -> dict[OperationId, FlightPlan]:
     """The newest plan each other UAS has been recommended (proposed, accepted or applied)."""
     latest: dict[OperationId, tuple[float, FlightPlan]] = {}
     cases = [c for c in map(em.case, em.open_threats()) if c is not None]
@@ -53,9 +50,7 @@ def _intended(em: EmergencyManager, rec: Recommendation) -> dict[OperationId, Fl
     return {k: plan for k, (_, plan) in latest.items()}
 
 
-def _others(
-    em: EmergencyManager, rec: Recommendation, snapshot: AirspaceSnapshot
-) -> list[Operation]:
+def _others(em: EmContext, rec: Recommendation, snapshot: AirspaceSnapshot) -> list[Operation]:
     intended = _intended(em, rec)
     out = []
     for k, op in snapshot.operations.items():
@@ -67,7 +62,7 @@ def _others(
     return out
 
 
-def plan_problem(em: EmergencyManager, rec: Recommendation, snapshot: AirspaceSnapshot) -> str:
+def plan_problem(em: EmContext, rec: Recommendation, snapshot: AirspaceSnapshot) -> str:
     """Why the accepted plan of ``rec`` must not be uploaded now ("" when it may; also for a
     command, or a UAS the snapshot does not hold): the losses of separation Monitoring finds
     on it against the other UAS as they are (see the module docstring)."""

@@ -27,27 +27,21 @@ an upload that failed, each lead to a new decision (paper §4.4: nothing is drop
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gcs_utm.core.deconfliction.geometry import plan_to_local
-from gcs_utm.core.emergency.decision import MODE_COMMAND, ONE_SHOT, Case, Decision
-from gcs_utm.geo import LocalFrame
+from gcs_utm.core.emergency.context import EmContext
+from gcs_utm.core.emergency.decision import ONE_SHOT, Case, Decision, Mode
 from gcs_utm.model import (
     AirspaceSnapshot,
     Command,
     CommandKind,
-    FlightPlan,
     OperationId,
     Recommendation,
     RecommendationId,
     RecommendationState,
     ThreatKind,
 )
-
-if TYPE_CHECKING:
-    from gcs_utm.core.emergency.manager import EmergencyManager
 
 _LAND_KINDS = frozenset(
     {ThreatKind.LACK_OF_BATTERY, ThreatKind.TECHNICAL_FAILURE, ThreatKind.GNSS_DEGRADATION}
@@ -69,19 +63,7 @@ def safe_command(kind: ThreatKind) -> CommandKind:
     return CommandKind.HOLD
 
 
-def deviation_start(
-    frame: LocalFrame, new: FlightPlan, old: FlightPlan, threshold_m: float
-) -> float | None:
-    """The first time (1 s steps) ``new`` is more than ``threshold_m`` (3D) from where
-    ``old`` has the UAS at the same time; None when it never is."""
-    times = np.arange(new.start_t_s, new.end_t_s + 1.0, 1.0)
-    a, _ = plan_to_local(new, frame).sample(times)
-    b, _ = plan_to_local(old, frame).sample(times)
-    far = np.flatnonzero(np.linalg.norm(a - b, axis=1) > threshold_m)
-    return float(times[far[0]]) if far.size else None
-
-
-def settled_at(em: EmergencyManager, case: Case, rec: Recommendation) -> float:
+def settled_at(em: EmContext, case: Case, rec: Recommendation) -> float:
     """When an accepted or applied recommendation should show its effect on the threat."""
     cfg = em.config
     t = rec.state_t_s if rec.state_t_s is not None else rec.created_t_s
@@ -92,7 +74,7 @@ def settled_at(em: EmergencyManager, case: Case, rec: Recommendation) -> float:
     return t + cfg.supervision_grace_s
 
 
-def supervise_case(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot) -> Decision:
+def supervise_case(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> Decision:
     """A new decision when the case's accepted plans are settled and the threat persists."""
     now = snapshot.t_s
     recs = [em.recommendation(r) for r in sorted(case.rec_ids)]
@@ -107,7 +89,7 @@ def supervise_case(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot)
     why = f"{case.threat.id} ({case.threat.kind.value}) still predicted after {versions}"
     if case.supervised > em.config.max_replans:
         return escalate_safe(em, case, [r.operation_id for r in live], now, why)
-    d = em.decide_again(case, snapshot)
+    d = em.decide(case, snapshot)
     audit = em.audit(now, "supervision", case.threat.id, {"reason": why})
     if d.escalations and not d.recommendations:
         return d.merge(escalate_safe(em, case, [r.operation_id for r in live], now, why))
@@ -115,7 +97,7 @@ def supervise_case(em: EmergencyManager, case: Case, snapshot: AirspaceSnapshot)
 
 
 def _not_due(
-    em: EmergencyManager,
+    em: EmContext,
     case: Case,
     recs: list[Recommendation | None],
     live: list[Recommendation],
@@ -132,9 +114,7 @@ def _not_due(
     return bool(case.supervised) and now - case.attempt_t_s < em.config.retry_after_s
 
 
-def _final_noted(
-    em: EmergencyManager, case: Case, live: list[Recommendation], now: float
-) -> Decision:
+def _final_noted(em: EmContext, case: Case, live: list[Recommendation], now: float) -> Decision:
     """Audit once that the final safe command stays in force and is not proposed again."""
     if case.final_in_force:
         return Decision()
@@ -153,7 +133,7 @@ def _final_command_in_force(case: Case, live: list[Recommendation]) -> bool:
 
 
 def escalate_safe(  # noqa: PLR0917 - the decision's context, then what to propose
-    em: EmergencyManager,
+    em: EmContext,
     case: Case,
     op_ids: list[OperationId],
     now: float,
@@ -174,7 +154,7 @@ def escalate_safe(  # noqa: PLR0917 - the decision's context, then what to propo
         audit=(em.audit(now, "escalation", case.threat.id, {"reason": msg}),),
     )
     for op_id, cmd in cmds.items():
-        case.modes[op_id] = MODE_COMMAND
+        case.modes[op_id] = Mode.COMMAND
         d = d.merge(em.issue(case, op_id, now, command=cmd, reason=msg))
     return d
 
@@ -187,7 +167,7 @@ def describe(cmd: Command) -> str:
 
 
 def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answer
-    em: EmergencyManager,
+    em: EmContext,
     rec_id: RecommendationId,
     version: int,
     applied: bool,
@@ -213,15 +193,15 @@ def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answ
     n = case.failures.get(op_id, 0) + 1
     case.failures[op_id] = n
     why = f"{rec_id} v{version} for {op_id} failed ({reason})"
-    if new.command is not None and case.modes.get(op_id) == MODE_COMMAND:
+    if new.command is not None and case.modes.get(op_id) == Mode.COMMAND:
         # The safe command itself failed (e.g. the link is down): proposing it again would
         # only fail again, in a loop; the escalation leaves the decision to the operator.
         msg = f"{why}; the safe command failed too: operator action needed"
         audit = em.audit(now, "escalation", case.threat.id, {"reason": msg})
         return d.merge(Decision(escalations=(msg,), audit=(audit,)))
-    if n > 1 or case.modes.get(op_id) == MODE_COMMAND:
+    if n > 1 or case.modes.get(op_id) == Mode.COMMAND:
         return d.merge(escalate_safe(em, case, [op_id], now, why))
-    again = em.decide_again(case, snapshot)
+    again = em.decide(case, snapshot)
     mine = [r for r in again.recommendations if r.operation_id == op_id]
     if not any(r.state in (RecommendationState.PROPOSED, *_IN_FORCE) for r in mine):
         again = again.merge(escalate_safe(em, case, [op_id], now, why))

@@ -165,37 +165,6 @@ def _relative(
     return (d0[..., 0], d0[..., 1], d0[..., 2]), (v[..., 0], v[..., 1], v[..., 2])
 
 
-def segment_loss(
-    a0: FloatArray,
-    a1: FloatArray,
-    b0: FloatArray,
-    b1: FloatArray,
-    *,
-    min_h_m: FloatArray | float,
-    min_v_m: FloatArray | float,
-    spherical: bool = False,
-) -> BoolArray:
-    """Only the loss flag of :func:`segment_separation` (the cheaper screening pass)."""
-    d0, v = _relative(a0, a1, b0, b1)
-    return relative_loss(d0, v, min_h_m=min_h_m, min_v_m=min_v_m, spherical=spherical)
-
-
-def relative_loss(
-    d0: tuple[FloatArray, FloatArray, FloatArray],
-    v: tuple[FloatArray, FloatArray, FloatArray],
-    *,
-    min_h_m: FloatArray | float,
-    min_v_m: FloatArray | float,
-    spherical: bool = False,
-) -> BoolArray:
-    """:func:`segment_loss` from the relative position ``d0`` and motion ``v`` per axis."""
-    lo, hi = _loss_interval(
-        d0, v, np.asarray(min_h_m, np.float64), np.asarray(min_v_m, np.float64), spherical
-    )
-    out: BoolArray = lo < hi
-    return out
-
-
 def segment_separation(
     a0: FloatArray,
     a1: FloatArray,

@@ -57,18 +57,3 @@ def separation_ratio(
         return out
     out = np.maximum(dh / h_min_m, dv / v_min_m)
     return out
-
-
-def is_loss(
-    config: MonitoringConfig,
-    dh_m: float,
-    dv_m: float,
-    ov_a_m: float = 0.0,
-    ov_b_m: float = 0.0,
-) -> bool:
-    """Is a pair ``dh_m`` apart horizontally and ``dv_m`` vertically in loss of separation,
-    with the effective minima of its operational volumes?"""
-    h_min, v_min = config.effective_minima(ov_a_m, ov_b_m)
-    if config.spherical:
-        return bool(np.hypot(dh_m, dv_m) < h_min)
-    return bool(dh_m < h_min and abs(dv_m) < v_min)

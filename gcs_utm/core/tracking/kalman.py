@@ -36,18 +36,25 @@ PP, PV, VV = 0, 1, 2
 POS, VEL = 0, 1
 
 
+def propagated_pp(
+    pp: FloatArray, pv: FloatArray, vv: FloatArray, q: FloatArray | float, tau_s: FloatArray
+) -> FloatArray:
+    """The one propagation of the position variance: ``pp`` [m^2] after ``tau_s`` without
+    updates, ``pp + 2 tau pv + tau^2 vv + q tau^4 / 4`` (the predict of :func:`step`, the
+    snapshot's variances and the prediction's radius; the C kernel writes the same
+    expression, in the same order)."""
+    tau2 = tau_s * tau_s
+    out: FloatArray = pp + 2.0 * tau_s * pv + tau2 * vv + q * (tau2 * tau2 / 4.0)
+    return out
+
+
 def predicted_position_var(p: FloatArray, tau_s: FloatArray, q: FloatArray) -> FloatArray:
     """Position variance per axis after ``tau_s`` without updates.
 
-    ``p``: (N, 3, 3); ``tau_s``: (N, K); returns (N, K, 3) [m^2]. The prediction of
-    :func:`step` (a zero-noise velocity would give exactly ``a + 2 tau b + tau^2 c``)."""
-    tau = tau_s[:, :, None]
-    a = p[:, None, :, PP]
-    b = p[:, None, :, PV]
-    c = p[:, None, :, VV]
-    tau2 = tau * tau
-    out: FloatArray = a + 2.0 * tau * b + tau2 * c + q * (tau2 * tau2 / 4.0)
-    return out
+    ``p``: (N, 3, 3); ``tau_s``: (N, K); returns (N, K, 3) [m^2]."""
+    return propagated_pp(
+        p[:, None, :, PP], p[:, None, :, PV], p[:, None, :, VV], q, tau_s[:, :, None]
+    )
 
 
 def step(  # noqa: PLR0917 (the arrays of one filter step, as the other functions)
@@ -88,7 +95,7 @@ def step(  # noqa: PLR0917 (the arrays of one filter step, as the other function
     qq[...] = q
     # predict
     dt2 = dt * dt
-    a = a + 2.0 * dt * b + dt2 * c + qq * (dt2 * dt2 / 4.0)
+    a = propagated_pp(a, b, c, qq, dt)
     b = b + dt * c + qq * (dt2 * dt / 2.0)
     c = c + qq * dt2
     if not positions_predicted:

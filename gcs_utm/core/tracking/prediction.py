@@ -27,8 +27,7 @@ def extrapolate(
     pp = p[:, :, kalman.PP].sum(axis=1)[:, None]
     pv = p[:, :, kalman.PV].sum(axis=1)[:, None]
     vv = p[:, :, kalman.VV].sum(axis=1)[:, None]
-    tau2 = tau * tau
-    var = pp + 2.0 * pv * tau + vv * tau2 + (float(q.sum()) / 4.0) * (tau2 * tau2)
+    var = kalman.propagated_pp(pp, pv, vv, float(q.sum()), tau)
     return axes, np.sqrt(var)
 
 

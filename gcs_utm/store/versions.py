@@ -1,4 +1,5 @@
-"""Recommendation version numbers that are unique across the instances of a cluster.
+"""Recommendation version numbers that are unique across the instances of a cluster, and
+the other reads a cluster member makes of the recommendations of several lives.
 
 Two lives write versions of one recommendation id: the decider (its EM numbers them 1, 2, 3
 ... in its memory) and the operation's owner (it proposes the decider's version to its pilot
@@ -14,7 +15,8 @@ lock on PostgreSQL, SQLite's single writer), and a number taken anyway (a row wr
 plain upsert of another life) is skipped by ``ON CONFLICT DO NOTHING`` and a new attempt.
 The number the store gave is returned; the decider keeps a map from its EM's numbers to the
 filed ones (:class:`gcs_utm.cluster.decisions.DecisionRelay`).
-Later state changes of a filed version are ordinary upserts by the same life.
+Later state changes of a filed version are ordinary upserts by the same life
+(:meth:`StoreBase.save_recommendation`).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import dataclasses
 from collections.abc import Callable
 
 from gcs_utm.model import Recommendation, RecommendationState
-from gcs_utm.store import Connection, StoreBase, StoreError
+from gcs_utm.store.base import Connection, StoreBase, StoreError
 from gcs_utm.store.codec import dumps
 
 # how often allocate reads the highest version again after losing a race for a number
@@ -89,4 +91,16 @@ def open_with_lives(store: StoreBase) -> list[tuple[Recommendation, int]]:
     return [(store._load(Recommendation, d), int(e)) for d, e in rows]
 
 
-__all__ = ["FenceCheck", "allocate", "open_with_lives"]
+def highest_of_life(store: StoreBase, epoch: int) -> list[tuple[str, str, int]]:
+    """(id, operation id, highest version) of every recommendation that life ``epoch`` wrote
+    a version of, by id (the versions a gaining life's EM may hold)."""
+    rows = store._rows(
+        "SELECT id, operation_id, MAX(version) FROM recommendations WHERE id IN "
+        "(SELECT id FROM recommendations WHERE epoch = ?) GROUP BY id, operation_id "
+        "ORDER BY id",
+        (epoch,),
+    )
+    return [(str(i), str(op), int(v)) for i, op, v in rows]
+
+
+__all__ = ["FenceCheck", "allocate", "highest_of_life", "open_with_lives"]
