@@ -320,10 +320,10 @@ def test_scenarios_sharing_one_prepared_problem_equal_scenarios_on_their_own() -
         problem = cd.prepare(lps, grid, minima, spherical=spherical, margin_fraction=0.15)
         frozen = [a.copy() for a in (problem.samples.base, problem.sep0, problem.target)]
         scenarios = [
-            ([axis] * 5, [0] * 5, [True] * 5) for axis in (cd.AXIS_VERTICAL, cd.AXIS_LATERAL)
+            ([axis] * 5, [0] * 5, [True] * 5) for axis in (cd.Axis.VERTICAL, cd.Axis.LATERAL)
         ]
         for k in range(2):
-            for axis in (cd.AXIS_VERTICAL, cd.AXIS_LATERAL):
+            for axis in (cd.Axis.VERTICAL, cd.Axis.LATERAL):
                 for sign in (1, -1):
                     scenarios.append(
                         (
@@ -336,10 +336,10 @@ def test_scenarios_sharing_one_prepared_problem_equal_scenarios_on_their_own() -
             cords = [
                 cd.Cord(
                     plan=lp,
-                    axis=axes[i] if mobile[i] else cd.AXIS_NONE,
+                    axis=axes[i] if mobile[i] else cd.Axis.NONE,
                     sign=signs[i],
                     mobility=1.0 / (1 + i % 3) if mobile[i] else 0.0,
-                    slope_m_per_step=3.6 if axes[i] == cd.AXIS_VERTICAL else 11.5,
+                    slope_m_per_step=3.6 if axes[i] == cd.Axis.VERTICAL else 11.5,
                     max_offset_m=120.0,
                     min_alt_amsl_m=0.0,
                     max_alt_amsl_m=500.0,
@@ -453,7 +453,7 @@ def _oracle_deformed(
     lp: LocalPlan,
     grid: FloatArray,
     d: FloatArray,
-    axis: str,
+    axis: object,
     sign: int,
 ) -> LocalPlan:
     """TD's deformation on (N, 3) rows: horizontal speed up to the cruise speed (or the
@@ -469,7 +469,7 @@ def _oracle_deformed(
     times = np.union1d(kinks[inside], lp.t)
     base, _ = lp.sample(times)
     disp = np.interp(times, grid, d)
-    if axis == cd.AXIS_VERTICAL:
+    if axis is cd.Axis.VERTICAL:
         xyz = base.copy()
         xyz[:, 2] += sign * disp
     else:
@@ -508,6 +508,7 @@ def test_deformation_and_normals_equal_the_row_wise_code(
     replaced, for any plan (hovers and vertical legs included) and any slope-limited
     displacement profile, laterally and vertically; so do the cords' left normals."""
     from gcs_utm.core.deconfliction import cords as cd
+    from gcs_utm.core.deconfliction.context import deform
     from gcs_utm.core.deconfliction.deform import concave_hull
 
     pos = lp.xyz()
@@ -522,8 +523,8 @@ def test_deformation_and_normals_equal_the_row_wise_code(
             st.floats(min_value=0.0, max_value=80.0)
         )
     d = np.minimum(cd.envelope(demand, 3.6), 3.6 * np.arange(60))
-    axis = cd.AXIS_VERTICAL if vertical else cd.AXIS_LATERAL
-    got = td.deform(op, lp, grid, d, axis, sign)
+    axis = cd.Axis.VERTICAL if vertical else cd.Axis.LATERAL
+    got = deform(op, lp, grid, d, axis, sign, td.config)
     # the deformation flies the profile's unimodal hull (tested on its own in test_td)
     want = _oracle_deformed(op, td.config, lp, grid, concave_hull(d), axis, sign)
     for c in ("e", "n", "z", "t"):

@@ -108,7 +108,7 @@ def test_joint_repulsion_moves_the_higher_priority_uas_less() -> None:
     cords = [
         cd.Cord(
             plan=p,
-            axis=cd.AXIS_VERTICAL,
+            axis=cd.Axis.VERTICAL,
             sign=0,
             mobility=1.0 / o.priority,
             slope_m_per_step=3.6,
@@ -410,10 +410,10 @@ def test_candidates_that_monitoring_flags_are_dropped_not_offered() -> None:
     dz_m=st.floats(min_value=-10.0, max_value=10.0),
     prio_a=st.integers(min_value=1, max_value=5),
     prio_b=st.integers(min_value=1, max_value=5),
-    axis=st.sampled_from([cd.AXIS_VERTICAL, cd.AXIS_LATERAL]),
+    axis=st.sampled_from([cd.Axis.VERTICAL, cd.Axis.LATERAL]),
 )
 def test_cords_separate_any_crossing_and_move_in_inverse_priority(
-    angle_deg: float, dz_m: float, prio_a: int, prio_b: int, axis: str
+    angle_deg: float, dz_m: float, prio_a: int, prio_b: int, axis: cd.Axis
 ) -> None:
     a = np.deg2rad(angle_deg)
     pa = sc.make_operation("A", [(-1000, 0, 100), (1000, 0, 100)])
@@ -426,7 +426,7 @@ def test_cords_separate_any_crossing_and_move_in_inverse_priority(
     )
     lps = [plan_to_local(o.plan, sc.FRAME) for o in (pa, pb)]
     grid = sc.T0_S + np.arange(0, 201, 2.0)
-    slope = 3.6 if axis == cd.AXIS_VERTICAL else cd.lateral_slope(10.0, 2.0, 30.0)
+    slope = 3.6 if axis is cd.Axis.VERTICAL else cd.lateral_slope(10.0, 2.0, 30.0)
     cords = [
         cd.Cord(
             plan=p,
@@ -452,7 +452,7 @@ def test_cords_separate_any_crossing_and_move_in_inverse_priority(
     dv = np.abs(pos[0][:, 2] - pos[1][:, 2])
     assert (np.maximum(dh / 50.0, dv / 20.0) >= 1.0).all()
     moved = res.displacement_m.max(axis=1)
-    if axis == cd.AXIS_LATERAL and angle_deg < 45.0:
+    if axis is cd.Axis.LATERAL and angle_deg < 45.0:
         # Shallow crossings resolved sideways need long, geometry-driven sidesteps; the
         # mobility split is not a guarantee there (vertical is the cheap option and wins).
         return
@@ -687,8 +687,7 @@ def test_new_plans_keep_both_vehicles_tracking_tolerances_free() -> None:
         assert x.plan is not None
         assert plan_vs_plans(x.plan, a, [b], sc.FRAME, buffered) == [], x.detail
     # switched off (EM's second search), the bare minima are what counts
-    td.tracking_buffers = False
-    assert td.pair_minima(a, b) == MON.effective_minima(10.0, 10.0)
+    assert td.pair_minima(a, b, buffered=False) == MON.effective_minima(10.0, 10.0)
 
 
 def test_a_lateral_deformation_goes_out_along_and_back_without_dips() -> None:
@@ -696,6 +695,7 @@ def test_a_lateral_deformation_goes_out_along_and_back_without_dips() -> None:
     # demand moves along the cord) made plans that zigzag every few seconds: a multirotor
     # slowed at each corner and fell 20-50 m behind its plan, into the loss it was to avoid.
     from gcs_utm.core.deconfliction import cords as cd
+    from gcs_utm.core.deconfliction.context import deform
     from gcs_utm.core.deconfliction.deform import concave_hull
 
     a = sc.make_operation("A", [(0, 0, 100), (2000, 0, 100)])
@@ -709,7 +709,7 @@ def test_a_lateral_deformation_goes_out_along_and_back_without_dips() -> None:
     hull = concave_hull(d)
     assert np.all(hull >= d) and float(hull.max()) == float(d.max())
     assert float(np.abs(np.diff(hull)).max()) <= float(np.abs(np.diff(d)).max()) + 1e-9
-    new = td.deform(a, lp, grid, d, cd.AXIS_LATERAL, 1)
+    new = deform(a, lp, grid, d, cd.Axis.LATERAL, 1, td.config)
     # the plan flies east along n = 0, so its lateral offset is n (left is north): it
     # rises, then falls (one turn back, not one per dip)
     step = np.diff(new.n)

@@ -24,8 +24,7 @@ def test_pair_minima_add_both_vertical_tolerances_in_cylinder_mode() -> None:
     assert env.vertical_tracking_tolerance_m() == 2.0  # multirotor default
     assert implied(True, 20.0, 3.0).vertical_tracking_tolerance_m() == 5.0  # fixed wing
     assert td.pair_minima(a, b) == (h + 10.0, v + 4.0)
-    td.tracking_buffers = False  # EM's second search: the bare minima
-    assert td.pair_minima(a, b) == (h, v)
+    assert td.pair_minima(a, b, buffered=False) == (h, v)  # EM's second search: bare minima
 
 
 def test_vertical_alternatives_keep_both_vertical_tolerances_free() -> None:

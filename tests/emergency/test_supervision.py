@@ -192,10 +192,14 @@ class _FakeTD(TacticalDeconfliction):
         snapshot: AirspaceSnapshot,
         start_t_s: float | None = None,
         lead_in_from_t_s: float | None = None,
+        *,
+        buffered: bool = True,
     ) -> dict[OperationId, list[Alternative]]:
         return {k: list(v) for k, v in self.options.items()}
 
-    def compatible(self, a: Alternative, b: Alternative, snapshot: AirspaceSnapshot) -> bool:
+    def compatible(
+        self, a: Alternative, b: Alternative, snapshot: AirspaceSnapshot, *, buffered: bool = True
+    ) -> bool:
         return frozenset({a.detail, b.detail}) in self.ok
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from gcs_utm.bench import deconfliction as sc
+from gcs_utm.core.deconfliction.context import floor_amsl
 from gcs_utm.messages import FlightMode, HazardReport, VehicleStatus
 from gcs_utm.model import (
     Autopilot,
@@ -210,7 +211,7 @@ async def test_home_refiled_past_the_tolerance_and_at_arming_sets_the_floor() ->
     op = usm.airspace.by_sys_id(SysId(1))
     assert op is not None and op.home == _up(1.9) and op.plan.version == 3
     td = sc.build_manager().td
-    assert td.floor_amsl(op) == pytest.approx(HOME.alt_amsl_m + 1.9 + 10.0)
+    assert floor_amsl(op, td.frame, td.config) == pytest.approx(HOME.alt_amsl_m + 1.9 + 10.0)
 
 
 async def test_an_operation_filed_elsewhere_takes_the_vehicles_home_at_arming() -> None:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 import numpy.typing as npt
@@ -35,9 +36,14 @@ from gcs_utm.model import FloatArray
 
 IntArray = npt.NDArray[np.intp]
 
-AXIS_VERTICAL = "vertical"
-AXIS_LATERAL = "lateral"
-AXIS_NONE = "none"
+
+class Axis(Enum):
+    """Along what a cord moves: up (sign +1) or down, left (+1, its track's left normal) or
+    right, or not at all (a rigid cord)."""
+
+    VERTICAL = "vertical"
+    LATERAL = "lateral"
+    NONE = "none"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -46,7 +52,7 @@ class Cord:
     first repulsion. ``mobility`` 0 makes the cord rigid."""
 
     plan: LocalPlan
-    axis: str
+    axis: Axis
     sign: int
     mobility: float
     slope_m_per_step: float
@@ -193,11 +199,13 @@ def envelope(demand: FloatArray, slope: float) -> FloatArray:
     return np.asarray(np.maximum(fwd, bwd[::-1]), dtype=np.float64)
 
 
-def apply(base: FloatArray, normals: FloatArray, axis: str, sign: int, d: FloatArray) -> FloatArray:
+def apply(
+    base: FloatArray, normals: FloatArray, axis: Axis, sign: int, d: FloatArray
+) -> FloatArray:
     out = base.copy()
-    if axis == AXIS_VERTICAL:
+    if axis is Axis.VERTICAL:
         out[:, 2] += sign * d
-    elif axis == AXIS_LATERAL:
+    elif axis is Axis.LATERAL:
         out[:, :2] += (sign * d)[:, None] * normals
     return out
 
@@ -239,12 +247,12 @@ def resolve(  # noqa: C901, PLR0912, PLR0915 - the charged-cords iteration of th
     # normal, or nothing; a cord's position is then base + sign * d * direction.
     dirs = np.zeros((u, k, 3))
     for i, c in enumerate(cords):
-        if c.axis == AXIS_VERTICAL:
+        if c.axis is Axis.VERTICAL:
             dirs[i, :, 2] = 1.0
-        elif c.axis == AXIS_LATERAL:
+        elif c.axis is Axis.LATERAL:
             dirs[i, :, :2] = normals[i]
     # A pair of rigid cords is not this scenario's business (another threat covers it).
-    movable = np.array([c.mobility > 0.0 and c.axis != AXIS_NONE for c in cords])
+    movable = np.array([c.mobility > 0.0 and c.axis is not Axis.NONE for c in cords])
     both = problem.pairs & (movable[:, None] | movable[None, :])[:, :, None]
     scale = 1.0 + margin_fraction
     target = problem.target
@@ -265,11 +273,11 @@ def resolve(  # noqa: C901, PLR0912, PLR0915 - the charged-cords iteration of th
             mi, mj = cords[i].mobility, cords[j].mobility
             _choose_signs(cords, signs, pos, normals, i, j, ks)
             for c, o, m in ((i, j, mi), (j, i, mj)):
-                if m <= 0.0 or cords[c].axis == AXIS_NONE:
+                if m <= 0.0 or cords[c].axis is Axis.NONE:
                     continue
                 share = m / (mi + mj) if (cords[o].mobility > 0 and _opposed(cords, c, o)) else 1.0
                 rel = pos[c, ks] - pos[o, ks]
-                if cords[c].axis == AXIS_VERTICAL:
+                if cords[c].axis is Axis.VERTICAL:
                     along = rel[:, 2]
                     need = v_min[c, o, 0] * scale
                 else:
@@ -283,10 +291,10 @@ def resolve(  # noqa: C901, PLR0912, PLR0915 - the charged-cords iteration of th
         before = d.copy()
         before_signs = list(signs)
         for i, c in enumerate(cords):
-            if c.axis == AXIS_NONE or c.mobility <= 0.0:
+            if c.axis is Axis.NONE or c.mobility <= 0.0:
                 continue
             cap = caps[i]
-            if c.axis == AXIS_VERTICAL:
+            if c.axis is Axis.VERTICAL:
                 room = (
                     c.max_alt_amsl_m - base[i, :, 2]
                     if (signs[i] or 1) > 0
@@ -309,7 +317,7 @@ def _own_sign(  # noqa: PLR0917 - private helper
     right, as the rules of the air say (both right also resolves head-on and converging
     traffic: each passes behind the other)."""
     rel = pos[c, ks] - pos[o, ks]
-    if cords[c].axis == AXIS_VERTICAL:
+    if cords[c].axis is Axis.VERTICAL:
         mean = float(np.mean(rel[:, 2]))
         return (1 if mean > 0 else -1) if abs(mean) > 1e-3 else (1 if c < o else -1)
     along = np.einsum("kj,kj->k", rel[:, :2], normals[c, ks])
@@ -332,11 +340,13 @@ def _choose_signs(  # noqa: PLR0917 - private helper
     """Fix the free signs of a violating pair, once. Two mobile vertical cords split: one up,
     one down. Lateral cords each take their own side (:func:`_own_sign`)."""
     free = [
-        c for c in (i, j) if signs[c] == 0 and cords[c].axis != AXIS_NONE and cords[c].mobility > 0
+        c
+        for c in (i, j)
+        if signs[c] == 0 and cords[c].axis is not Axis.NONE and cords[c].mobility > 0
     ]
     if not free:
         return
-    mobile = all(cords[c].axis == AXIS_VERTICAL and cords[c].mobility > 0 for c in (i, j))
+    mobile = all(cords[c].axis is Axis.VERTICAL and cords[c].mobility > 0 for c in (i, j))
     if mobile:
         if len(free) == 2:
             signs[i] = _own_sign(cords, pos, normals, i, j, ks)
@@ -353,7 +363,7 @@ def _choose_signs(  # noqa: PLR0917 - private helper
 def _opposed(cords: Sequence[Cord], c: int, o: int) -> bool:
     """Two mobile cords share a deficit only when moving one helps the other, i.e. both use
     the same axis (an up-mover and a left-mover cannot split a vertical deficit)."""
-    return cords[c].axis == cords[o].axis
+    return cords[c].axis is cords[o].axis
 
 
 def lateral_slope(speed_mps: float, dt_s: float, angle_deg: float) -> float:

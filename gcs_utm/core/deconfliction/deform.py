@@ -23,7 +23,7 @@ def deformed(
     lp: LocalPlan,
     grid: FloatArray,
     d: FloatArray,
-    axis: str,
+    axis: cd.Axis,
     sign: int,
     *,
     cruise_speed_mps: float,
@@ -37,7 +37,7 @@ def deformed(
     be, bn, bz = lp.coords(times)
     disp = sign * np.interp(times, grid, d)
     xe, xn, xz = be, bn, bz
-    if axis == cd.AXIS_VERTICAL:
+    if axis is cd.Axis.VERTICAL:
         xz = bz + disp
     else:
         nx, ny = cd.left_normals_en(be, bn)

@@ -7,11 +7,12 @@ and safety floor). Every candidate is then checked against the intruder's predic
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from gcs_utm.core.deconfliction import cords as cd
+from gcs_utm.core.deconfliction.context import Context, Dropped, Queued, deform
 from gcs_utm.core.deconfliction.geometry import LocalPlan, plan_to_local
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
@@ -25,14 +26,11 @@ from gcs_utm.model import (
 )
 
 _CANDIDATES = (
-    (cd.AXIS_VERTICAL, 1, Maneuver.GO_UP),
-    (cd.AXIS_VERTICAL, -1, Maneuver.GO_DOWN),
-    (cd.AXIS_LATERAL, 1, Maneuver.GO_LEFT),
-    (cd.AXIS_LATERAL, -1, Maneuver.GO_RIGHT),
+    (cd.Axis.VERTICAL, 1, Maneuver.GO_UP),
+    (cd.Axis.VERTICAL, -1, Maneuver.GO_DOWN),
+    (cd.Axis.LATERAL, 1, Maneuver.GO_LEFT),
+    (cd.Axis.LATERAL, -1, Maneuver.GO_RIGHT),
 )
-
-if TYPE_CHECKING:
-    from gcs_utm.core.deconfliction.td import TacticalDeconfliction
 
 
 def intruder_plan(threat: Threat, snapshot: AirspaceSnapshot, horizon_s: float) -> LocalPlan | None:
@@ -57,40 +55,67 @@ def intruder_plan(threat: Threat, snapshot: AirspaceSnapshot, horizon_s: float) 
     )
 
 
-def resolve_intruder(
-    td: TacticalDeconfliction,
-    threat: Threat,
-    operation_id: OperationId,
-    snapshot: AirspaceSnapshot,
-    start_t_s: float | None = None,
-) -> list[Alternative]:
-    """Go up, go down, go left and go right candidates for ``operation_id``, verified and
-    scored by ``td`` and kept only when they hold the intruder minima against its predicted
-    path (:func:`loses_minima`); the new plan starts at ``start_t_s`` (see
-    :meth:`TacticalDeconfliction.start_time`)."""
-    td.dropped = []
-    td.reset_queue()
+@dataclass(slots=True)
+class Avoidance:
+    """The candidates of one intruder avoidance (``queue``), the list their alternatives go
+    to once verified (``out``), and what :meth:`kept` checks those against."""
+
+    queue: list[Queued] = field(default_factory=list)
+    out: list[Alternative] = field(default_factory=list)
+    intruder: LocalPlan | None = None
+    minima_m: tuple[float, float] = (0.0, 0.0)
+
+    def kept(
+        self, frame: LocalFrame, from_t_s: float, now_t_s: float
+    ) -> tuple[list[Alternative], list[Dropped]]:
+        """The verified alternatives that hold the intruder minima against its predicted
+        path from ``from_t_s`` (:func:`loses_minima`), and the others, dropped."""
+        kept: list[Alternative] = []
+        dropped: list[Dropped] = []
+        if self.intruder is None:
+            return kept, dropped
+        for alt in self.out:
+            lost = loses_minima(alt, self.intruder, frame, from_t_s, self.minima_m)
+            if lost is None:
+                kept.append(alt)
+            else:
+                dropped.append(
+                    Dropped(
+                        operation_id=alt.operation_id,
+                        maneuver=alt.maneuver,
+                        reason=f"intruder minima lost at t={lost - now_t_s:+.1f} s",
+                    )
+                )
+        return kept, dropped
+
+
+def intruder_candidates(
+    ctx: Context, threat: Threat, operation_id: OperationId, snapshot: AirspaceSnapshot
+) -> Avoidance:
+    """Go up, go down, go left and go right candidates for ``operation_id``; once TD has
+    verified and scored them, :meth:`Avoidance.kept` keeps those that hold the intruder
+    minima. New plans start at the context's start time."""
     op = snapshot.operations.get(operation_id)
-    intruder = intruder_plan(threat, snapshot, td.config.horizon_s)
+    intruder = intruder_plan(threat, snapshot, ctx.config.horizon_s)
     if op is None or intruder is None:
-        return []
-    t0 = td.start_time(snapshot, start_t_s)
-    cfg = td.config
-    lp = td.local_plan(op.plan).after(t0)
+        return Avoidance()
+    t0 = ctx.start_t_s
+    cfg = ctx.config
+    lp = ctx.local_plan(op.plan).after(t0)
     end = min(t0 + cfg.horizon_s, float(lp.t[-1]))
     steps = max(2, math.ceil((end - t0) / cfg.cord_dt_s) + 1)
     grid: FloatArray = t0 + np.arange(steps, dtype=np.float64) * cfg.cord_dt_s
-    mon = td.monitoring
+    mon = ctx.monitoring
     h_min = max(mon.intruder_horizontal_m, op.operational_volume_m)
     v_min = max(mon.intruder_vertical_m, op.operational_volume_m)
     minima = np.array([[[h_min, v_min]] * 2] * 2)
-    lo, hi = td.alt_limits(op)
-    outsiders = td.others(snapshot, {op.id})
-    fences = td.local_fences(snapshot.geofences)
-    out: list[Alternative] = []
+    lo, hi = ctx.alt_limits(op)
+    outsiders = ctx.others(snapshot, {op.id})
+    fences = ctx.local_fences(snapshot.geofences)
+    got = Avoidance(intruder=intruder, minima_m=(h_min, v_min))
     rigid = cd.Cord(
         plan=intruder,
-        axis=cd.AXIS_NONE,
+        axis=cd.Axis.NONE,
         sign=0,
         mobility=0.0,
         slope_m_per_step=0.0,
@@ -99,7 +124,7 @@ def resolve_intruder(
         max_alt_amsl_m=hi,
     )
     for axis, sign, man in _CANDIDATES:
-        vertical = axis == cd.AXIS_VERTICAL
+        vertical = axis is cd.Axis.VERTICAL
         mine = cd.Cord(
             plan=lp,
             axis=axis,
@@ -121,39 +146,26 @@ def resolve_intruder(
             max_iterations=cfg.max_iterations,
         )
         if res is None:
-            td.drop(op.id, man, "no convergence within the envelope")
+            reason = "no convergence within the envelope"
+            got.queue.append(Dropped(operation_id=op.id, maneuver=man, reason=reason))
             continue
         dk = res.displacement_m[0]
-        td.finish(
-            op,
-            man,
-            td.deform(op, lp, grid, dk, axis, sign),
-            lp,
-            geofences=snapshot.geofences,
-            fences=fences,
-            outsiders=outsiders,
-            lowest_priority=op.priority,
-            detail=f"avoidance of intruder {threat.intruder_id}: "
-            f"{man.value} {float(dk.max()):.0f} m",
-            dest=out,
-        )
-    td.flush(snapshot.t_s)
-    from gcs_utm.core.deconfliction.td import Dropped  # td imports this module
-
-    kept: list[Alternative] = []
-    for alt in out:
-        lost = loses_minima(alt, intruder, td.frame, t0, (h_min, v_min))
-        if lost is None:
-            kept.append(alt)
-        else:
-            td.dropped.append(
-                Dropped(
-                    operation_id=op.id,
-                    maneuver=alt.maneuver,
-                    reason=f"intruder minima lost at t={lost - snapshot.t_s:+.1f} s",
-                )
+        got.queue.append(
+            ctx.candidate(
+                op,
+                man,
+                deform(op, lp, grid, dk, axis, sign, cfg),
+                lp,
+                geofences=snapshot.geofences,
+                fences=fences,
+                outsiders=outsiders,
+                lowest_priority=op.priority,
+                detail=f"avoidance of intruder {threat.intruder_id}: "
+                f"{man.value} {float(dk.max()):.0f} m",
+                dest=got.out,
             )
-    return kept
+        )
+    return got
 
 
 def _vertical_slope(op: Operation, sign: int, dt_s: float) -> float:

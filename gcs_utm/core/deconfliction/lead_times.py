@@ -1,4 +1,4 @@
-"""When a new plan's lead-in points lie (see ``TacticalDeconfliction.lead_in``).
+"""When a new plan's lead-in points lie (see ``context.Context.lead_in``).
 
 A new plan starts at ``start_t_s`` (the decision, the expected answer, the upload and a
 margin) and carries timed points of the UAS's path as flown from ``from_t_s``, the earliest

@@ -10,17 +10,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
+from gcs_utm.core.deconfliction.context import Candidate, Context, Problem
 from gcs_utm.core.deconfliction.geometry import LocalPlan
 from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.model import FloatArray, Maneuver, Operation
-
-if TYPE_CHECKING:
-    from gcs_utm.core.deconfliction.td import Problem, TacticalDeconfliction
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -99,12 +96,12 @@ def clear_of(
 
 
 def timing_candidates(
-    td: TacticalDeconfliction, op: Operation, pb: Problem, rigid: Sequence[Operation]
-) -> None:
+    ctx: Context, op: Operation, pb: Problem, rigid: Sequence[Operation]
+) -> list[Candidate]:
     """The smallest delay (hold at the start point, then the same plan later: only for a
     vehicle that can hover) and the mildest slow-down that separate ``op`` from every
-    other plan, if any, queued for its alternatives."""
-    cfg = td.config
+    other plan, if any, as candidates for its alternatives."""
+    cfg = ctx.config
     lp = pb.local[op.id]
     t0 = float(lp.t[0])
     others = list(rigid) + list(pb.outsiders)
@@ -113,24 +110,27 @@ def timing_candidates(
     grid_t = np.arange(t0, t0 + max(span / slowest, span + cfg.max_delay_s) + 1.0, 1.0)
     screens = []
     for o in others:
-        q, ok = td.local_plan(o.plan).sample(grid_t)
-        h, v = td.pair_minima(op, o)
+        q, ok = ctx.local_plan(o.plan).sample(grid_t)
+        h, v = ctx.pair_minima(op, o)
         screens.append(Screen(q[:, 0].copy(), q[:, 1].copy(), q[:, 2].copy(), ok, h, v))
     margin = cfg.separation_margin_fraction
-    spherical = td.monitoring.spherical
+    spherical = ctx.monitoring.spherical
+    out: list[Candidate] = []
 
     def queue(man: Maneuver, cand: LocalPlan, detail: str) -> None:
-        td.finish(
-            op,
-            man,
-            cand,
-            lp,
-            geofences=pb.geofences,
-            fences=pb.fences,
-            outsiders=others,
-            lowest_priority=pb.lowest,
-            detail=detail,
-            dest=pb.out[op.id],
+        out.append(
+            ctx.candidate(
+                op,
+                man,
+                cand,
+                lp,
+                geofences=pb.geofences,
+                fences=pb.fences,
+                outsiders=others,
+                lowest_priority=pb.lowest,
+                detail=detail,
+                dest=pb.out[op.id],
+            )
         )
 
     steps = int(cfg.max_delay_s // cfg.delay_step_s)
@@ -151,3 +151,4 @@ def timing_candidates(
         if clear_of(cand, grid_t, screens, margin, spherical):
             queue(Maneuver.SPEED_CHANGE, cand, f"fly the plan at {factor:.0%} of its speed")
             break
+    return out

@@ -1,5 +1,5 @@
 """The tracking tolerances TD keeps free between two new plans (see
-:meth:`.td.TacticalDeconfliction.pair_minima`): each vehicle flies a new plan with a
+:func:`.context.pair_minima`): each vehicle flies a new plan with a
 horizontal lag at its corners and a vertical error (altitude hold, a climb reached late),
 so the pair's minima are widened by both vehicles' tolerances, horizontally and vertically
 alike. Pure."""

@@ -361,57 +361,49 @@ class EmergencyManager:
         now = snapshot.t_s
         cfg = self.config
         t = case.threat
-        self.td.tracking_buffers = buffered
-        try:
-            options = self.td.resolve_loss_of_separation(
-                t,
-                snapshot,
-                start_t_s=self.plan_start(t, now),
-                lead_in_from_t_s=self.earliest_receipt(now, t.uas_ids),
-            )
-            for op_id, alts in options.items():
-                banned = case.excluded.get(op_id, set())
-                options[op_id] = [x for x in alts if x.maneuver not in banned]
-            ops = snapshot.operations
-            stays = {
-                k: stay(k, ops[k].plan)
-                for k, alts in options.items()
-                if k in ops and not any(x.maneuver is Maneuver.KEEP_PLAN for x in alts)
-            }
-            memo: dict[tuple[int, int], bool] = {}
-            pair = set(t.uas_ids)
+        options = self.td.resolve_loss_of_separation(
+            t,
+            snapshot,
+            start_t_s=self.plan_start(t, now),
+            lead_in_from_t_s=self.earliest_receipt(now, t.uas_ids),
+            buffered=buffered,
+        )
+        for op_id, alts in options.items():
+            banned = case.excluded.get(op_id, set())
+            options[op_id] = [x for x in alts if x.maneuver not in banned]
+        ops = snapshot.operations
+        stays = {
+            k: stay(k, ops[k].plan)
+            for k, alts in options.items()
+            if k in ops and not any(x.maneuver is Maneuver.KEEP_PLAN for x in alts)
+        }
+        memo: dict[tuple[int, int], bool] = {}
+        pair = set(t.uas_ids)
 
-            def compatible(x: Alternative, y: Alternative) -> bool:
-                if (
-                    x.maneuver is Maneuver.KEEP_PLAN
-                    and y.maneuver is Maneuver.KEEP_PLAN
-                    and not {x.operation_id, y.operation_id} <= pair
-                ):
-                    # Two unchanged plans outside this threat's pair: their conflict, if
-                    # any, is another threat's, and this decision neither causes nor can
-                    # fix it (requiring it made every combination fail, and nothing moved).
-                    return True
-                key = (id(x), id(y)) if id(x) < id(y) else (id(y), id(x))
-                if key not in memo:
-                    was = self.td.tracking_buffers
-                    self.td.tracking_buffers = buffered  # also when called after the search
-                    try:
-                        memo[key] = self.td.compatible(x, y, snapshot)
-                    finally:
-                        self.td.tracking_buffers = was
-                return memo[key]
+        def compatible(x: Alternative, y: Alternative) -> bool:
+            if (
+                x.maneuver is Maneuver.KEEP_PLAN
+                and y.maneuver is Maneuver.KEEP_PLAN
+                and not {x.operation_id, y.operation_id} <= pair
+            ):
+                # Two unchanged plans outside this threat's pair: their conflict, if
+                # any, is another threat's, and this decision neither causes nor can
+                # fix it (requiring it made every combination fail, and nothing moved).
+                return True
+            key = (id(x), id(y)) if id(x) < id(y) else (id(y), id(x))
+            if key not in memo:
+                memo[key] = self.td.compatible(x, y, snapshot, buffered=buffered)
+            return memo[key]
 
-            tiered = select_by_priority(
-                options,
-                {k: ops[k].priority for k in options if k in ops},
-                stays,
-                alpha=cfg.alpha,
-                beta=cfg.beta,
-                compatible=compatible,
-                max_nodes=cfg.max_combinations,
-            )
-        finally:
-            self.td.tracking_buffers = True
+        tiered = select_by_priority(
+            options,
+            {k: ops[k].priority for k in options if k in ops},
+            stays,
+            alpha=cfg.alpha,
+            beta=cfg.beta,
+            compatible=compatible,
+            max_nodes=cfg.max_combinations,
+        )
         return options, tiered, compatible
 
     def _issue_joint(

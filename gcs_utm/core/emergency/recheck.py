@@ -71,13 +71,8 @@ def plan_problem(em: EmContext, rec: Recommendation, snapshot: AirspaceSnapshot)
     if plan is None or op is None:
         return ""
     plan = replace(plan, operation_id=op.id)
-    td = em.td
-    was = td.tracking_buffers
-    td.tracking_buffers = False
-    try:
-        flags = [f for f in td.verify(plan, op, _others(em, rec, snapshot), ()) if f]
-    finally:
-        td.tracking_buffers = was
+    others = _others(em, rec, snapshot)
+    flags = [f for f in em.td.verify(plan, op, others, (), buffered=False) if f]
     if not flags:
         return ""
     return f"{rec.id} v{rec.version} re-checked before its upload: " + "; ".join(flags[:3])
