@@ -186,7 +186,7 @@ async def serve(
     pending = Path(settings.store.journal) if is_postgres(location) else None
     store = Persistence(StoreWriter(location, _writer_config(settings, cluster), journal=pending))
     policy = OwnershipPolicy() if cluster else None
-    rt = build_runtime(settings, clock, frame, store, policy=policy, run_report=False)
+    rt = build_runtime(settings, clock, frame, store, policy=policy)
     async with rt:  # whatever fails from here on, what was started is torn down
         store.writer.on_event = lambda text: rt.usm.log_event("store", text)
         rt.recorder = record_links(

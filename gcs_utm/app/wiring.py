@@ -200,14 +200,11 @@ def build_runtime(
     store: Persistence,
     *,
     policy: OwnershipPolicy | None = None,
-    run_report: bool = True,
 ) -> Runtime:
     """Build and connect the parts (no task started, no socket opened, nothing process-wide
     changed: see :func:`gcs_utm.app.configure_interpreter` for that). ``policy``: a cluster
     member's ownership rule (``serve --cluster``): only the threats it decides reach its USM
-    and EM, and its recommendations for other instances' operations go to the store only.
-    ``run_report``: keep what a run report reads (the USM's threat log); ``serve`` builds
-    no report, so a day of threats stays in the store only."""
+    and EM, and its recommendations for other instances' operations go to the store only."""
     plan_history: dict[OperationId, list[FlightPlan]] = {}
     geofence_history: dict[str, Geofence] = {}
     tracker = Tracker(frame, settings.tracking)
@@ -239,7 +236,6 @@ def build_runtime(
         record=store.record,
         id_prefix=id_prefix,
         ground_elevation_amsl_m=frame.ground_elevation_amsl_m,
-        keep_threat_log=run_report,
     )
 
     filing = FilingCheck(

@@ -138,7 +138,7 @@ async def _soak(traffic: Traffic, db_path: Path) -> list[dict[str, Any]]:
     clock = LoopClock(asyncio.get_running_loop(), FAST_TIME_EPOCH_UTC_S)
     frame = LocalFrame(origin_lat_deg=47.0, origin_lon_deg=8.0, ground_elevation_amsl_m=400.0)
     store = Persistence(StoreWriter(db_path, settings.store))
-    rt = build_runtime(settings, clock, frame, store, run_report=False)  # as serve
+    rt = build_runtime(settings, clock, frame, store)
     frontends = attach_frontends(
         rt, FrontendOptions(operator=OperatorMode.AUTO_ACCEPT, headless=True, quiet=True)
     )

@@ -130,11 +130,9 @@ class Usm:
         position_lane: bool = True,
         id_prefix: str = "",
         ground_elevation_amsl_m: float | None = None,
-        keep_threat_log: bool = True,
     ) -> None:
         """``ground_elevation_amsl_m``: the airspace's ground, to warn about vehicles whose
-        home is far from it (None: no warning). ``keep_threat_log``: keep :attr:`threat_log`
-        for a run report (``serve`` builds none: its threats are in the store only)."""
+        home is far from it (None: no warning)."""
         self.airspace = airspace
         # prefixes hazard threat ids (the store life's ``E<epoch>-``): unique across restarts
         self.id_prefix = id_prefix
@@ -163,9 +161,7 @@ class Usm:
         # per vehicle: (system id, where it was first heard), see LinkHealth.vehicle
         self.health: dict[tuple[SysId, str], LinkHealth] = {}
         self.threats: dict[ThreatId, Threat] = {}
-        self.threat_log: deque[Threat] = deque(
-            maxlen=self.config.threat_log_size if keep_threat_log else 0
-        )
+        self.threat_log: deque[Threat] = deque(maxlen=self.config.threat_log_size)
         self._telemetry: dict[str, TelemetryStats] = {}
         self._sources: dict[tuple[object, ...], SourceStats] = {}
         self.events: deque[UsmEvent] = deque(maxlen=self.config.event_log_size)
@@ -301,11 +297,9 @@ class Usm:
         self._geofence_listeners.append(listener)
 
     def _log_threat(self, t: Threat) -> None:
-        """Keep an opening or closing for the run report, if one is kept (see __init__):
-        without the prediction the threat was computed on (every track's trajectory, tens of
-        kB), which would make a full log hold hundreds of MB."""
-        if self.threat_log.maxlen == 0:
-            return
+        """Keep an opening or closing for the run report (and what tests look at): without
+        the prediction the threat was computed on (every track's trajectory, tens of kB),
+        which would make a full log hold hundreds of MB."""
         if len(self.threat_log) == self.threat_log.maxlen:
             self.counters["threat_log_dropped"] += 1
         self.threat_log.append(replace(t, snapshot=None))

@@ -113,6 +113,14 @@ async def _exit_code(pilot: _Pilot, *, within_s: float) -> int:
         ) from None
 
 
+def _ctrl_c_as_at_a_prompt() -> None:
+    """In the pilot's process before it starts: SIGINT as a pilot at a shell prompt has it.
+    A non-interactive shell starts its background jobs with SIGINT ignored, and children
+    inherit that (CI runs the suite's steps as such jobs, tests/check.sh): Python then
+    leaves SIGINT ignored, so Ctrl-C never reached the pilot and the test hung."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @contextlib.asynccontextmanager
 async def _pilot(broker: Broker, tmp_path: Path) -> AsyncIterator[_Pilot]:
     cfg = tmp_path / "pilot.toml"
@@ -135,6 +143,7 @@ async def _pilot(broker: Broker, tmp_path: Path) -> AsyncIterator[_Pilot]:
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.STDOUT,
         env={**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONFAULTHANDLER": "1"},
+        preexec_fn=_ctrl_c_as_at_a_prompt,
     )
     try:
         yield _Pilot(proc)

@@ -26,7 +26,6 @@ from gcs_utm.model import (
     Recommendation,
     RecommendationId,
     SysId,
-    Threat,
     ThreatId,
     ThreatKind,
     VehicleKind,
@@ -109,31 +108,6 @@ async def test_restart_resumes_operations_and_geofences(tmp_path: Path) -> None:
     rt = await _serve_once(db, None)
     assert rt.airspace.operation(OP).plan == op.plan
     assert [g.id for g in rt.airspace.geofences()] == ["fire"]
-
-
-async def test_serve_keeps_its_threats_in_the_store_not_in_memory(tmp_path: Path) -> None:
-    """``serve`` builds no run report, so it keeps no in-memory threat log: over a day of
-    traffic that log was most of what grew (``gcs-utm bench soak``); the store has them."""
-    db = tmp_path / "utm.sqlite"
-    threat = Threat(
-        id=ThreatId("T1"),
-        kind=ThreatKind.LOSS_OF_SEPARATION,
-        uas_ids=(OP, OperationId("other")),
-        detected_at_s=0.0,
-        predicted_event_at_s=40.0,
-    )
-
-    async def raise_threat(rt: Runtime) -> None:
-        await rt.usm.on_threats([threat])
-
-    rt = await _serve_once(db, raise_threat)
-    assert not rt.usm.threat_log
-    assert rt.usm.counters["threat_log_dropped"] == 0
-    store = Store(db)
-    try:
-        assert [t.id for t in store.load_threats()] == ["T1"]
-    finally:
-        store.close()
 
 
 async def test_serve_dashboard_answers_under_the_configured_operator(
