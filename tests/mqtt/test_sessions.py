@@ -97,6 +97,11 @@ async def test_an_answer_sent_during_a_broker_restart_is_resent_until_acknowledg
         PilotStation(alice, "alice", clock, resend_s=60.0) as station,
     ):
         await bridge.wait_connected(5.0)
+        # a recommendation is not retained: one published before the station subscribed
+        # reaches nobody (on a loaded machine the station can be the later one)
+        async with asyncio.timeout(10.0):
+            while not station.connected:
+                await asyncio.sleep(0.02)
         bridge.publish_recommendation(rec, "alice")
         shown = await asyncio.wait_for(station.recommendations.get(), 5.0)
         connects = station.connects
