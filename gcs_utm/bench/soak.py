@@ -21,7 +21,6 @@ import gc
 import math
 import os
 import resource
-import sqlite3
 import sys
 import tempfile
 import time
@@ -293,17 +292,9 @@ def _store_size(db_path: Path) -> dict[str, Any]:
         for s in ("", "-wal")
         if Path(str(db_path) + s).exists()
     )
-    rows: dict[str, int] = {}
-    con = sqlite3.connect(f"file:{db_path}?mode=ro", uri=True)
-    try:
-        names = [
-            r[0]
-            for r in con.execute("SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")
-        ]
-        for name in names:
-            rows[name] = int(con.execute(f'SELECT COUNT(*) FROM "{name}"').fetchone()[0])
-    finally:
-        con.close()
+    from gcs_utm.store.sqlite import table_row_counts
+
+    rows = table_row_counts(db_path)
     return {"bytes": size_b, "rows": sum(rows.values()), "rows_by_table": rows}
 
 

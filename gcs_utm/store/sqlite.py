@@ -97,4 +97,17 @@ class Store(StoreBase):
         return str(self._conn.execute("PRAGMA integrity_check").fetchone()[0])
 
 
-__all__ = ["Store", "StoreError", "decode", "encode", "track_doc"]
+def table_row_counts(db_path: Path) -> dict[str, int]:
+    """Rows per table of a SQLite store file, read-only (``gcs-utm bench soak``'s census)."""
+    con = sqlite3.connect(f"file:{db_path}?mode=ro", uri=True)
+    try:
+        names = [
+            r[0]
+            for r in con.execute("SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")
+        ]
+        return {n: int(con.execute(f'SELECT COUNT(*) FROM "{n}"').fetchone()[0]) for n in names}
+    finally:
+        con.close()
+
+
+__all__ = ["Store", "StoreError", "decode", "encode", "table_row_counts", "track_doc"]

@@ -28,6 +28,19 @@ def test_the_cluster_has_no_sql() -> None:
     assert sql_in(ROOT / "gcs_utm" / "cluster") == []
 
 
+def test_no_sql_outside_the_store() -> None:
+    """Nor does any other product package (``gcs-utm bench soak`` counts the store's rows
+    through gcs_utm.store.sqlite.table_row_counts). Only statements here: other packages
+    have attributes called ``_rows`` of their own."""
+    found = [
+        line
+        for package in ("gcs_utm", "adapters", "sitl")
+        for line in sql_in(ROOT / package)
+        if not line.startswith("gcs_utm/store/") and _SQL.search(line.split(": ", 1)[1])
+    ]
+    assert found == []
+
+
 def test_the_check_finds_sql() -> None:
     # the check itself reads the store, which does have statements
     assert any("INSERT INTO region_leases" in line for line in sql_in(ROOT / "gcs_utm" / "store"))
