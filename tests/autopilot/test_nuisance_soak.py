@@ -23,6 +23,7 @@ SHORT = SoakConfig(minutes=3.0, speed=3.0, land_at_end=False, reboot=False)
 
 
 @pytest.mark.timeout(420)
+@pytest.mark.px4  # it starts PX4 itself (not through the fixture): the PX4 lane, tests/check.sh
 @pytest.mark.skipif(
     not os.environ.get("GCS_UTM_NUISANCE"),
     reason="set GCS_UTM_NUISANCE=1: while it is a known failure (the xfail below) its ~2 "
