@@ -50,9 +50,15 @@ MAV_FRAME_MISSION = 2
 MAV_CMD_NAV_WAYPOINT = 16
 MAV_CMD_NAV_LAND = 21
 MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_NAV_LOITER_TO_ALT = 31
+MAV_CMD_NAV_VTOL_LAND = 85
 MAV_CMD_DO_LAND_START = 189
 MAV_CMD_DO_CHANGE_SPEED = 178
 NAV_COMMAND_MAX = 95  # MAV_CMD ids up to MAV_CMD_NAV_LAST (95) are navigation commands
+LAND_COMMANDS = frozenset({MAV_CMD_NAV_LAND, MAV_CMD_NAV_VTOL_LAND})
+APPROACH_COMMANDS = frozenset({MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TO_ALT})
+"""What may precede a landing as its approach: PX4 rejects a fixed wing's NAV_LAND after
+anything else with a position ("Only ORBIT_TO_ALT or WAYPOINT allowed")."""
 # Frame families: the same meaning under another number (the _INT variants of MAVLink 1).
 _FRAME_FAMILY = {0: 0, 5: 0, 3: 3, 6: 3, 10: 10, 11: 10, 2: 2}
 SPEED_TYPE_AIRSPEED = 0.0
@@ -190,25 +196,46 @@ def plan_to_mission_items(
     return out
 
 
-def landing_sequence(items: list[MissionItem] | None) -> list[MissionItem]:
-    """The landing sequence of a vehicle's mission: the items from its first DO_LAND_START
-    to the end (empty without one). A pilot's landing (approach and NAV_LAND, what ArduPlane's
-    RTL_AUTOLAND and DO_LAND_START jump to, PX4's mission landing) that no UTM plan removes."""
-    for i, it in enumerate(items or ()):
+def landing_sequence(
+    items: list[MissionItem] | None, autopilot: Autopilot | None = None
+) -> list[MissionItem]:
+    """The landing sequence of a vehicle's mission, a pilot's landing that no UTM plan
+    removes (docs/autopilots.md, "Landing sequences"): the items from its first DO_LAND_START
+    to the end (what ArduPlane's RTL_AUTOLAND and DO_LAND_START and PX4's mission landing
+    jump to); without one, from its first NAV_LAND / NAV_VTOL_LAND (PX4's land start then)
+    to the end, with the approach before it: the navigation item before the landing when it
+    is a NAV_WAYPOINT or NAV_LOITER_TO_ALT with a position (PX4's fixed-wing approach
+    entrance, the start of ArduPlane's glide). Empty without a landing. ArduPilot's seq 0 is
+    its home, never an approach."""
+    seq = list(items or ())
+    for i, it in enumerate(seq):
         if it.command == MAV_CMD_DO_LAND_START:
-            return list(items[i:]) if items else []
-    return []
+            return seq[i:]
+    first = 1 if autopilot is Autopilot.ARDUPILOT else 0
+    land = next((i for i in range(first, len(seq)) if seq[i].command in LAND_COMMANDS), None)
+    if land is None:
+        return []
+    j = land - 1
+    while j >= first and not is_nav(seq[j].command):
+        j -= 1
+    if j >= first and seq[j].command in APPROACH_COMMANDS and (seq[j].x, seq[j].y) != (0, 0):
+        return seq[j:]
+    return seq[land:]
 
 
-def with_landing(items: list[MissionItem], landing: list[MissionItem]) -> list[MissionItem]:
-    """``items`` followed by ``landing`` (renumbered, not current) unless ``items`` already
-    has a landing sequence of its own: a plan uploaded to a vehicle whose mission ended in a
-    landing sequence keeps it at its end."""
+def with_landing(
+    items: list[MissionItem], landing: list[MissionItem], *, current: int | None = None
+) -> list[MissionItem]:
+    """``items`` followed by ``landing`` (renumbered) unless ``items`` already has a landing
+    sequence of its own: a plan uploaded to a vehicle whose mission ended in a landing
+    sequence keeps it at its end. ``current``: the index in ``landing`` of the item to start
+    at (the plan starts inside the landing), else the item flagged in ``items``."""
     if not landing or landing_sequence(items):
         return items
     n = len(items)
-    tail = [replace(it, seq=n + k, current=0) for k, it in enumerate(landing)]
-    return [*items, *tail]
+    head = items if current is None else [replace(it, current=0) for it in items]
+    tail = [replace(it, seq=n + k, current=int(k == current)) for k, it in enumerate(landing)]
+    return [*head, *tail]
 
 
 def current_seq(items: list[MissionItem]) -> int:

@@ -14,8 +14,10 @@ One upload (:meth:`Uploads.upload_items`) is, for each try:
    item after it (a DO item as current fails to restart), and the skipped speed item is then
    sent as a DO_CHANGE_SPEED command;
 A plan (:meth:`Uploads.upload_plan`) sent to a vehicle whose mission (as last read from it:
-download or readback) has a landing sequence (DO_LAND_START to the end) ends with that
-sequence: no UTM plan removes a pilot's landing.
+download or readback) has a landing sequence (DO_LAND_START to the end, else the approach
+and NAV_LAND / NAV_VTOL_LAND) keeps that sequence as the autopilot flies it: the plan's
+waypoints that model the landing are replaced by the sequence itself, never sent as
+waypoints (:mod:`adapters.mavlink.landing`): no UTM plan removes a pilot's landing.
 4. with ``set_mission_mode``, DO_SET_MODE to the autopilot's mission mode (PX4 AUTO.MISSION,
    ArduPilot AUTO) until HEARTBEAT shows it -- only on an armed vehicle: on the ground the
    mode is the pilot's (it would override the mode the pilot takes off in).
@@ -31,6 +33,7 @@ import logging
 import time
 from dataclasses import dataclass
 
+from adapters.mavlink.landing import plan_mission
 from adapters.mavlink.mission import (
     MAV_CMD_DO_CHANGE_SPEED,
     MissionItem,
@@ -39,7 +42,6 @@ from adapters.mavlink.mission import (
     plan_to_mission_items,
     same_item,
     start_item,
-    with_landing,
 )
 from adapters.mavlink.transfer import (
     MODE_CONFIRM_S,
@@ -100,19 +102,32 @@ class Uploads:
             st = self.transfers.link.state(sys_id)
         except MavlinkError as exc:
             return _failed(0, 0, t0, (str(exc), UploadFailure.NO_VEHICLE), _Try())
-        items = plan_to_mission_items(
+        ap = autopilot or st.autopilot
+
+        def build(part: FlightPlan, start: int) -> list[MissionItem]:
+            return plan_to_mission_items(
+                part,
+                ap,
+                home,
+                start_index=start,
+                max_speed_mps=self.transfers.config.max_speed_mps,
+                climb_rate_mps=climb_rate_mps,
+                descent_rate_mps=descent_rate_mps,
+                kind=st.kind,
+                min_speed_mps=min_speed_mps,
+            )
+
+        # the pilot's landing sequence (last mission read from the vehicle) is flown as it is:
+        # the plan's waypoints that model it are replaced by it (adapters/mavlink/landing.py)
+        where = home or st.home
+        items = plan_mission(
             plan,
-            autopilot or st.autopilot,
-            home,
+            landing_sequence(st.mission, ap),
+            build,
             start_index=start_index,
-            max_speed_mps=self.transfers.config.max_speed_mps,
-            climb_rate_mps=climb_rate_mps,
-            descent_rate_mps=descent_rate_mps,
             kind=st.kind,
-            min_speed_mps=min_speed_mps,
+            home_alt_m=None if where is None else where.alt_amsl_m,
         )
-        # the pilot's landing sequence (last mission read from the vehicle) stays at the end
-        items = with_landing(items, landing_sequence(st.mission))
         return await self.upload_items(
             st.key, items, deadline_t_s=deadline_t_s, set_mission_mode=set_mission_mode, _t0=t0
         )
