@@ -7,7 +7,7 @@ rejoins it) ends with them. Sent as NAV_WAYPOINTs they are not a landing: a PX4 
 a waypoint at its landing point circled it 0-4 m above the ground. So :func:`cut_landing`
 takes the plan's last waypoints that lie on the landing (within :data:`CORRIDOR_M`
 horizontally of the track through the sequence's positions, and no higher than its highest
-position plus :data:`ABOVE_M`: a plan that climbs over the landing, a go-around, is not one)
+position plus :data:`ABOVE_M`: a plan that passes above the landing is not it)
 off the plan; the upload sends the rest, then the sequence itself (DO_LAND_START, approach,
 NAV_LAND / NAV_VTOL_LAND with their own frames and positions). A plan that starts on the
 landing (the vehicle was already on its approach) starts at the landing item it joins: the
@@ -41,7 +41,7 @@ holds the items' own positions (1e-7 deg) and back_to_plan points on the segment
 them; a flat-earth projection differs from the planner's by far less over a landing's km."""
 ABOVE_M = 5.0
 """A plan waypoint more than this above the landing's highest position is not its landing
-(a go_up over it): it is flown, then the whole sequence."""
+(a plan that crosses it at cruise height): it is flown, then the whole sequence."""
 _M_PER_DEG_LAT = 110_540.0
 _M_PER_DEG_LON = 111_320.0
 _RELATIVE = 3  # frame family of MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT)
