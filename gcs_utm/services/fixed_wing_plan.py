@@ -29,7 +29,10 @@ hovers at a loiter. A fixed wing cannot:
   counter-clockwise, as both autopilots take it), entered at the point nearest the
   previous one.
 - a **landing sequence** (DO_LAND_START, its approach waypoints, NAV_LAND) is already a
-  descent along the track: its points are kept as they are.
+  descent along the track: its points are kept as they are (PX4 v1.15 SIH glides from the
+  approach waypoint straight to the landing point, within 3 m of that line, and touches down
+  on it, rolling about 50 m past the landing point); PX4 leaves a NAV_LOITER_TO_ALT before
+  NAV_LAND on the circle's tangent through the landing point (:mod:`.fixed_wing_landing`).
 Every point made from an item keeps the item's mission seq (the plan from the current item
 on includes the whole of a circle being flown).
 """
@@ -41,9 +44,11 @@ from collections.abc import Sequence
 from typing import Protocol, Self, TypeVar
 
 from gcs_utm.envelope import FIXED_WING_MIN_SPEED_FACTOR
+from gcs_utm.services.fixed_wing_landing import tangent_exit
 
 NAV_LOITER_TURNS = 18
 NAV_LOITER_TIME = 19
+NAV_LAND = 21
 NAV_TAKEOFF = 22
 NAV_LOITER_TO_ALT = 31
 LOITER_COMMANDS = frozenset({NAV_LOITER_TURNS, NAV_LOITER_TIME, NAV_LOITER_TO_ALT})
@@ -111,11 +116,13 @@ def fixed_wing_points(
     descent_rate_mps: float,
     loiter_radius_m: float,
     home_deg: tuple[float, float] | None = None,
+    tangent_landing: bool = False,
 ) -> list[P]:
     """``points`` (mission order, AMSL) as a fixed wing flies them (module docstring).
     ``ground_alt_m``: where a take-off starts (the vehicle's home; None: the point before);
     ``home_deg`` (lat, lon): where a take-off with a position of its own starts when no point
-    is before it (PX4)."""
+    is before it (PX4); ``tangent_landing`` (PX4): a NAV_LAND after a NAV_LOITER_TO_ALT is
+    approached on the circle's tangent through it (:mod:`.fixed_wing_landing`)."""
     out: list[P] = []
     for i, p in enumerate(points):
         if p.command == NAV_TAKEOFF and _here(p, out[-1] if out else None, home_deg):
@@ -126,9 +133,27 @@ def fixed_wing_points(
         elif p.command in LOITER_COMMANDS and out:
             rate = climb_rate_mps if p.alt_amsl_m >= out[-1].alt_amsl_m else descent_rate_mps
             out.extend(_circle(p, out[-1], rate, loiter_radius_m))
+        elif tangent_landing and p.command == NAV_LAND and i and out:
+            out.extend(_landing_exit(points[i - 1], out[-1], p, loiter_radius_m))
+            out.append(p)
         else:
             out.append(p)
     return out
+
+
+def _landing_exit(loiter: Point, last: P, land: Point, default_radius_m: float) -> list[P]:
+    """The rest of a NAV_LOITER_TO_ALT's circle to its tangent through the landing point
+    (points of the loiter, at its altitude), when ``loiter`` is the landing's approach."""
+    if loiter.command != NAV_LOITER_TO_ALT or not land.explicit:
+        return []
+    radius = loiter.radius_m if loiter.radius_m != 0.0 else default_radius_m
+    exits = tangent_exit(
+        (loiter.lat_deg, loiter.lon_deg),
+        radius,
+        (last.lat_deg, last.lon_deg),
+        (land.lat_deg, land.lon_deg),
+    )
+    return [last.moved(lat, lon, last.alt_amsl_m) for lat, lon in exits]
 
 
 def _here(p: Point, before: Point | None, home_deg: tuple[float, float] | None) -> bool:

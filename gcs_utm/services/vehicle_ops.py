@@ -584,6 +584,7 @@ class VehicleOps:
                 descent_rate_mps=env.descent_rate_mps,
                 loiter_radius_m=env.turn_radius_m,
                 home_deg=(v.home.lat_deg, v.home.lon_deg) if v.home is not None else None,
+                tangent_landing=v.autopilot is Autopilot.PX4,
             )
         if points is None and not v.waiting_logged:
             v.waiting_logged = True
