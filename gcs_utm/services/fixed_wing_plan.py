@@ -31,8 +31,9 @@ hovers at a loiter. A fixed wing cannot:
 - a **landing sequence** (DO_LAND_START, its approach waypoints, NAV_LAND) is already a
   descent along the track: its points are kept as they are (PX4 v1.15 SIH glides from the
   approach waypoint straight to the landing point, within 3 m of that line, and touches down
-  on it, rolling about 50 m past the landing point); PX4 leaves a NAV_LOITER_TO_ALT before
-  NAV_LAND on the circle's tangent through the landing point (:mod:`.fixed_wing_landing`).
+  about 45 m past the landing point, stopping about 55 m past it); PX4 leaves a
+  NAV_LOITER_TO_ALT before NAV_LAND at the circle's point towards the landing point
+  (:mod:`.fixed_wing_landing`).
 Every point made from an item keeps the item's mission seq (the plan from the current item
 on includes the whole of a circle being flown).
 """
@@ -44,7 +45,7 @@ from collections.abc import Sequence
 from typing import Protocol, Self, TypeVar
 
 from gcs_utm.envelope import FIXED_WING_MIN_SPEED_FACTOR
-from gcs_utm.services.fixed_wing_landing import tangent_exit
+from gcs_utm.services.fixed_wing_landing import landing_exit
 
 NAV_LOITER_TURNS = 18
 NAV_LOITER_TIME = 19
@@ -116,13 +117,13 @@ def fixed_wing_points(
     descent_rate_mps: float,
     loiter_radius_m: float,
     home_deg: tuple[float, float] | None = None,
-    tangent_landing: bool = False,
+    loiter_landing: bool = False,
 ) -> list[P]:
     """``points`` (mission order, AMSL) as a fixed wing flies them (module docstring).
     ``ground_alt_m``: where a take-off starts (the vehicle's home; None: the point before);
     ``home_deg`` (lat, lon): where a take-off with a position of its own starts when no point
-    is before it (PX4); ``tangent_landing`` (PX4): a NAV_LAND after a NAV_LOITER_TO_ALT is
-    approached on the circle's tangent through it (:mod:`.fixed_wing_landing`)."""
+    is before it (PX4); ``loiter_landing`` (PX4): a NAV_LAND after a NAV_LOITER_TO_ALT is
+    approached from the circle's point towards it (:mod:`.fixed_wing_landing`)."""
     out: list[P] = []
     for i, p in enumerate(points):
         if p.command == NAV_TAKEOFF and _here(p, out[-1] if out else None, home_deg):
@@ -133,7 +134,8 @@ def fixed_wing_points(
         elif p.command in LOITER_COMMANDS and out:
             rate = climb_rate_mps if p.alt_amsl_m >= out[-1].alt_amsl_m else descent_rate_mps
             out.extend(_circle(p, out[-1], rate, loiter_radius_m))
-        elif tangent_landing and p.command == NAV_LAND and i and out:
+        elif loiter_landing and p.command == NAV_LAND and i and out:
+            out = _descended_before(out, points[i - 1])
             out.extend(_landing_exit(points[i - 1], out[-1], p, loiter_radius_m))
             out.append(p)
         else:
@@ -141,19 +143,39 @@ def fixed_wing_points(
     return out
 
 
-def _landing_exit(loiter: Point, last: P, land: Point, default_radius_m: float) -> list[P]:
-    """The rest of a NAV_LOITER_TO_ALT's circle to its tangent through the landing point
-    (points of the loiter, at its altitude), when ``loiter`` is the landing's approach."""
+def _descended_before(out: list[P], loiter: Point) -> list[P]:
+    """A landing's NAV_LOITER_TO_ALT modelled as at most a turn is reached at its altitude:
+    PX4 descends (climbs) on the way to it and makes NAV_LAND current where it meets the
+    circle (measured on PX4 v1.15.2 SIH, 40 -> 30 m: at the loiter's altitude 10 m before
+    the circle, NAV_LAND current there); the circle is then its entry point, at the loiter's
+    altitude, and the landing's path goes round from there (:func:`_landing_exit`)."""
+    if loiter.command != NAV_LOITER_TO_ALT:
+        return out
+    start = len(out)
+    while start > 0 and out[start - 1].seq == loiter.seq:
+        start -= 1
+    circle = out[start:]
+    if not circle or len(circle) > 1 + round(2.0 * math.pi / _STEP_RAD):
+        return out  # more than a turn: it orbits down (up) first
+    entry = circle[0]
+    return [*out[:start], entry.moved(entry.lat_deg, entry.lon_deg, loiter.alt_amsl_m)]
+
+
+def _landing_exit(loiter: Point, last: Point, land: P, default_radius_m: float) -> list[P]:
+    """The rest of a NAV_LOITER_TO_ALT's circle to its point towards the landing point, at
+    the loiter's altitude, when ``loiter`` is the landing's approach: modelled points of the
+    landing item (PX4 makes NAV_LAND current once the loiter's altitude is reached, and flies
+    them as part of it: a plan from NAV_LAND on starts with them)."""
     if loiter.command != NAV_LOITER_TO_ALT or not land.explicit:
         return []
     radius = loiter.radius_m if loiter.radius_m != 0.0 else default_radius_m
-    exits = tangent_exit(
+    exits = landing_exit(
         (loiter.lat_deg, loiter.lon_deg),
         radius,
         (last.lat_deg, last.lon_deg),
         (land.lat_deg, land.lon_deg),
     )
-    return [last.moved(lat, lon, last.alt_amsl_m) for lat, lon in exits]
+    return [land.moved(lat, lon, last.alt_amsl_m).synthetic() for lat, lon in exits]
 
 
 def _here(p: Point, before: Point | None, home_deg: tuple[float, float] | None) -> bool:

@@ -231,6 +231,8 @@ def plan_from_points(
     done = list(points[:start])
     if position is not None and done and _dist_m(position, done[-1]) <= turn_from_m:
         rest = [done[-1], *rest]
+    elif position is not None:
+        rest = _from_nearest_modelled(rest, position)
     wps: list[Waypoint4D] = []
     if position is not None:
         first = rest[0]
@@ -253,6 +255,17 @@ def plan_from_points(
     return FlightPlan(
         operation_id=op_id, version=version, waypoints=tuple(wps), created_t_s=t_s, reason=reason
     )
+
+
+def _from_nearest_modelled(rest: list[NavPoint], position: Position) -> list[NavPoint]:
+    """``rest`` from the modelled point of its first item nearest ``position`` on: a vehicle
+    part-way along an item's modelled path (a PX4 plane round its landing loiter's circle
+    when NAV_LAND becomes current) is not sent back to that path's start."""
+    run = next((k for k, p in enumerate(rest) if p.explicit or p.seq != rest[0].seq), len(rest))
+    if run < 2:
+        return rest
+    nearest = min(range(run), key=lambda k: _dist_m(position, rest[k]))
+    return rest[nearest:]
 
 
 def mission_is_plan(points: Sequence[NavPoint], plan: FlightPlan) -> bool:
@@ -584,7 +597,7 @@ class VehicleOps:
                 descent_rate_mps=env.descent_rate_mps,
                 loiter_radius_m=env.turn_radius_m,
                 home_deg=(v.home.lat_deg, v.home.lon_deg) if v.home is not None else None,
-                tangent_landing=v.autopilot is Autopilot.PX4,
+                loiter_landing=v.autopilot is Autopilot.PX4,
             )
         if points is None and not v.waiting_logged:
             v.waiting_logged = True

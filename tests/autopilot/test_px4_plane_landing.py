@@ -44,8 +44,8 @@ TOUCHDOWN_M = 150.0  # from the landing point: PX4 flares before it and rolls ou
 
 
 def _mission() -> list[object]:
-    """NAV_TAKEOFF 250 m north at 30 m, 700 m north at 40 m, the approach and NAV_LAND (AMSL,
-    as PX4's ground stations send a global frame)."""
+    """NAV_TAKEOFF 250 m north at 30 m, 700 m north at 40 m, the approach waypoint and
+    NAV_LAND (AMSL, as PX4's ground stations send a global frame)."""
     legs = [
         (mav.MAV_CMD_NAV_TAKEOFF, (0.0, 250.0, 30.0), 15.0),
         (mav.MAV_CMD_NAV_WAYPOINT, (0.0, 700.0, 40.0), 0.0),
@@ -143,9 +143,10 @@ def test_px4_plane_landing_raises_no_conformance_threat(
     px4: Callable[..., SitlProcess], tmp_path: Path
 ) -> None:
     """The same mission flown to touchdown beside ``gcs-utm serve --headless
-    --auto-accept``, which files it: the approach, the descent along the landing line and
-    the touchdown raise no UAS_OUT_OV / UAS_IN_CV and no recommendation, and the plane lands
-    on its own landing."""
+    --auto-accept``, which files it: the approach, the glide along the landing line (PX4
+    v1.15.2 SIH: from the approach waypoint straight to the landing point, within 3 m above
+    that line) and the touchdown (about 45 m past the landing point) raise no UAS_OUT_OV /
+    UAS_IN_CV and no recommendation, and the plane lands on its own landing."""
     crossing = Crossing(origin=(LAT0, LON0), ground_amsl_m=GROUND_M)
     db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
     cfg = _config(tmp_path / "serve.toml", crossing, ["udpin:127.0.0.1:14550"])

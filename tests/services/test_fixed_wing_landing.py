@@ -1,7 +1,7 @@
 """PX4's fixed-wing landing pattern filed as PX4 flies it (issue 31.4): from a
-NAV_LOITER_TO_ALT it leaves the circle on the tangent through the landing point, then glides
-straight to it; a straight line from the circle's last modelled point to the landing point
-lay up to a diameter off that path."""
+NAV_LOITER_TO_ALT it goes on round the circle to its point towards the landing point, then
+glides along the line from the loiter's centre to it; a straight line from the circle's last
+modelled point to the landing point lay up to 50 m off that path (UAS_OUT_OV on real PX4)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,10 @@ import math
 
 import pytest
 
+from gcs_utm.model import OperationId, Position
 from gcs_utm.services import fixed_wing_plan as fw
-from gcs_utm.services.fixed_wing_landing import tangent_exit
-from gcs_utm.services.vehicle_ops import NavPoint
+from gcs_utm.services.fixed_wing_landing import landing_exit
+from gcs_utm.services.vehicle_ops import NavPoint, plan_from_points
 
 LAT0, LON0 = 45.4671160, -73.7578370
 K = math.cos(math.radians(LAT0))
@@ -35,41 +36,52 @@ def _distance_to_line_m(
 
 
 @pytest.mark.parametrize("radius_m", [80.0, -80.0])
-def test_the_exit_is_the_tangent_through_the_landing_point(radius_m: float) -> None:
+def test_the_exit_is_the_circles_point_towards_the_landing_point(radius_m: float) -> None:
     """From the circle's north point, clockwise (positive radius) round the east side,
-    anticlockwise round the west side, to the point whose tangent passes through the landing
-    point 600 m south: the line from there to it touches the circle (its distance from the
-    centre is the radius) and the points stay on the circle."""
+    anticlockwise round the west side, to its south point: the landing point is 600 m south;
+    every point on the circle, 15 degrees apart."""
     centre, land = (LAT0, LON0), _deg(0.0, -600.0)
-    pts = tangent_exit(centre, radius_m, _deg(0.0, 80.0), land)
+    pts = landing_exit(centre, radius_m, _deg(0.0, 80.0), land)
     assert all(math.hypot(*_en(p)) == pytest.approx(80.0, abs=0.01) for p in pts)
-    exit_e, exit_n = _en(pts[-1])
-    assert exit_n == pytest.approx(-80.0 * 80.0 / 600.0, abs=0.01)  # r^2/d towards the land
-    assert math.copysign(1.0, exit_e) == math.copysign(1.0, radius_m)  # east when clockwise
-    assert _distance_to_line_m(centre, pts[-1], land) == pytest.approx(80.0, abs=0.01)
-    assert len(pts) == 3  # 45 and 90 degrees round, then the tangent point at 97.7
-    assert tangent_exit(centre, radius_m, _deg(0.0, 80.0), _deg(0.0, -50.0)) == []
+    assert _en(pts[-1]) == pytest.approx((0.0, -80.0), abs=0.01)
+    assert len(pts) == 12  # every 15 degrees round, the exit at 180 last
+    assert math.copysign(1.0, _en(pts[0])[0]) == math.copysign(1.0, radius_m)  # east: clockwise
+    assert landing_exit(centre, radius_m, _deg(0.0, 80.0), _deg(0.0, -50.0)) == []
+    assert landing_exit(centre, radius_m, _deg(0.0, -80.0), land) == [pts[-1]]  # already there
 
 
-def test_a_px4_landing_pattern_is_filed_on_its_tangent() -> None:
-    """NAV_LOITER_TO_ALT 600 m north of NAV_LAND, descending from 60 to 30 m: the circle,
-    then round it to the tangent exit, then NAV_LAND; without ``tangent_landing`` (ArduPlane
-    leaves its loiter towards the next waypoint) the circle goes straight to NAV_LAND."""
-    wp = NavPoint(1, *_deg(0.0, 1200.0), 60.0, 15.0, True)
+def test_a_px4_landing_pattern_is_filed_along_its_landing_line() -> None:
+    """NAV_LOITER_TO_ALT 600 m north of NAV_LAND, descending from 40 to 30 m (less than a
+    turn): reached at 30 m (PX4 descends on the way and makes NAV_LAND current where it meets
+    the circle), then round it to its south point as part of NAV_LAND, then the landing point:
+    the last leg on the line from the loiter's centre to it. A plan from NAV_LAND on starts
+    at the modelled point nearest the plane, wherever NAV_LAND became current. Without
+    ``loiter_landing`` (ArduPlane leaves its loiter towards the next waypoint) the circle
+    goes straight to NAV_LAND; a descent of more than a turn keeps its circle."""
+    wp = NavPoint(1, *_deg(0.0, 1200.0), 40.0, 15.0, True)
     loiter = NavPoint(2, *_deg(0.0, 600.0), 30.0, 15.0, True, fw.NAV_LOITER_TO_ALT, 80.0)
     land = NavPoint(3, *_deg(0.0, 0.0), 0.0, 15.0, True, fw.NAV_LAND)
     args = {"ground_alt_m": 0.0, "climb_rate_mps": 3.0, "descent_rate_mps": 3.0,
             "loiter_radius_m": 80.0}  # fmt: skip
-    px4 = fw.fixed_wing_points([wp, loiter, land], tangent_landing=True, **args)  # type: ignore[arg-type]
+    px4 = fw.fixed_wing_points([wp, loiter, land], loiter_landing=True, **args)  # type: ignore[arg-type]
     plain = fw.fixed_wing_points([wp, loiter, land], **args)  # type: ignore[arg-type]
     assert px4[-1] == land and plain[-1] == land
-    exits = px4[len(plain) - 1 : -1]
-    assert exits and all(p.seq == 2 for p in exits)  # points of the loiter, at its altitude
-    assert all(p.alt_amsl_m == pytest.approx(30.0) for p in exits)
-    centre = (loiter.lat_deg, loiter.lon_deg)
-    tangent = (exits[-1].lat_deg, exits[-1].lon_deg)
-    assert _distance_to_line_m(centre, tangent, (land.lat_deg, land.lon_deg)) == pytest.approx(
-        80.0, abs=0.05
+    entry, exits = px4[1], px4[2:-1]
+    assert (entry.seq, entry.alt_amsl_m) == (2, pytest.approx(30.0))
+    assert _en((entry.lat_deg, entry.lon_deg)) == pytest.approx(
+        _en((plain[1].lat_deg, plain[1].lon_deg))
     )
+    assert exits and all(p.seq == 3 and not p.explicit for p in exits)
+    assert all(p.alt_amsl_m == pytest.approx(30.0) for p in exits)
+    assert _en((exits[-1].lat_deg, exits[-1].lon_deg)) == pytest.approx((0.0, 520.0), abs=0.05)
+    centre = (loiter.lat_deg, loiter.lon_deg)
     last_circle = (plain[-2].lat_deg, plain[-2].lon_deg)
-    assert _distance_to_line_m(centre, last_circle, (land.lat_deg, land.lon_deg)) < 79.0
+    assert _distance_to_line_m(centre, last_circle, (land.lat_deg, land.lon_deg)) > 1.0
+    half = exits[len(exits) // 2]
+    at = Position(lat_deg=half.lat_deg, lon_deg=half.lon_deg, alt_amsl_m=30.0)
+    plan = plan_from_points(px4, OperationId("p"), t_s=0.0, current_seq=3, position=at)
+    assert plan is not None  # here (the nearest point), the rest of the circle, landing
+    assert len(plan.waypoints) == len(exits) - len(exits) // 2 + 1
+    deep = NavPoint(2, *_deg(0.0, 600.0), -150.0, 15.0, True, fw.NAV_LOITER_TO_ALT, 80.0)
+    orbits = fw.fixed_wing_points([wp, deep, land], loiter_landing=True, **args)  # type: ignore[arg-type]
+    assert len([p for p in orbits if p.seq == 2]) > 9  # more than a turn, orbited down
