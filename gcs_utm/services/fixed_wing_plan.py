@@ -21,17 +21,16 @@ hovers at a loiter. A fixed wing cannot:
   reached 95-99 m out (the model: 32 and 92 m at 22 m/s filed), 5 m above it after, then
   level; a straight line from home to a take-off position 250 m out put it 18-28 m above
   its plan.
-- **NAV_LOITER_TO_ALT** (31) is a circle around its position (radius: the item's, else the
-  vehicle's default loiter radius) flown until the altitude is reached at the climb
-  (descent) rate; **NAV_LOITER_TURNS** (18) that many turns at the item's altitude;
-  **NAV_LOITER_TIME** (19) a circle for that long. Circles are points every 45 degrees
-  (a chord is at most 8 % of the radius inside the arc), clockwise (a negative radius:
-  counter-clockwise, as both autopilots take it), entered at the point nearest the
-  previous one.
+- **NAV_LOITER_TO_ALT** (31) is a circle around its position flown until the altitude is
+  reached at the climb (descent) rate; **NAV_LOITER_TURNS** (18) that many turns at the
+  item's altitude; **NAV_LOITER_TIME** (19) a circle for that long: entered on the plane's
+  turn, left on the tangent to the next waypoint, then back on the line from the centre
+  (:mod:`.fixed_wing_loiter`).
 - a **landing sequence** (DO_LAND_START, its approach waypoints, NAV_LAND) is already a
   descent along the track: its points are kept as they are.
 Every point made from an item keeps the item's mission seq (the plan from the current item
-on includes the whole of a circle being flown).
+on includes the whole of a circle being flown; the point back on the track after a loiter
+has the next item's).
 """
 
 from __future__ import annotations
@@ -41,6 +40,7 @@ from collections.abc import Sequence
 from typing import Protocol, Self, TypeVar
 
 from gcs_utm.envelope import FIXED_WING_MIN_SPEED_FACTOR
+from gcs_utm.services.fixed_wing_loiter import loiter_points
 
 NAV_LOITER_TURNS = 18
 NAV_LOITER_TIME = 19
@@ -55,8 +55,6 @@ ROLL_FRACTION = 0.35
 HERE_M = 10.0
 """A take-off position this close to where the vehicle starts gives no heading: "here" (the
 launch position a ground station wrote, GNSS noise, a home rounded to 1e-4 deg)."""
-_STEP_RAD = math.pi / 4.0  # circle points every 45 degrees
-_MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
 _M_PER_DEG_LAT = 110_540.0
 _M_PER_DEG_LON = 111_320.0
 
@@ -82,6 +80,8 @@ class Point(Protocol):
     def radius_m(self) -> float: ...
     @property
     def amount(self) -> float: ...
+    @property
+    def exit_xtrack(self) -> bool: ...
     def moved(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> Self: ...
     def synthetic(self) -> Self: ...
 
@@ -125,7 +125,7 @@ def fixed_wing_points(
             out.extend(_climb_out_to(p, out[-1] if out else None, home_deg, ground_alt_m))
         elif p.command in LOITER_COMMANDS and out:
             rate = climb_rate_mps if p.alt_amsl_m >= out[-1].alt_amsl_m else descent_rate_mps
-            out.extend(_circle(p, out[-1], rate, loiter_radius_m))
+            out.extend(loiter_points(p, out[-1], points[i + 1 :], rate, loiter_radius_m))
         else:
             out.append(p)
     return out
@@ -204,31 +204,3 @@ def _climb_out(
     lat_r, lon_r = _offset(p, ux * roll_m, uy * roll_m)
     lat, lon = _offset(p, ux * run_m, uy * run_m)
     return [p.moved(lat_r, lon_r, base).synthetic(), p.moved(lat, lon, p.alt_amsl_m)]
-
-
-def _circle(p: P, before: Point, rate: float, default_radius_m: float) -> list[P]:
-    """A loiter item as points on its circle (module docstring)."""
-    radius = p.radius_m if p.radius_m != 0.0 else default_radius_m
-    r = abs(radius)
-    if r < 1.0:
-        return [p]
-    sense = -1.0 if radius > 0.0 else 1.0  # clockwise: the angle (from east) decreases
-    speed = max(p.speed_mps, 0.1)
-    turn_s = 2.0 * math.pi * r / speed
-    if p.command == NAV_LOITER_TO_ALT:
-        turns = abs(p.alt_amsl_m - before.alt_amsl_m) / max(rate, 0.1) / turn_s
-    elif p.command == NAV_LOITER_TIME:
-        turns = max(p.amount, 0.0) / turn_s
-    else:
-        turns = max(p.amount, 0.0)
-    steps = max(1, math.ceil(min(turns, _MAX_TURNS) * 2.0 * math.pi / _STEP_RAD))
-    east, north = _east_north(p, before)
-    start = math.atan2(north, east) if math.hypot(east, north) > 0.0 else 0.0
-    z0 = before.alt_amsl_m if p.command == NAV_LOITER_TO_ALT else p.alt_amsl_m
-    out: list[P] = []
-    for k in range(steps + 1):
-        a = start + sense * k * _STEP_RAD
-        lat, lon = _offset(p, r * math.cos(a), r * math.sin(a))
-        alt = z0 + (p.alt_amsl_m - z0) * k / steps
-        out.append(p.moved(lat, lon, alt))
-    return out

@@ -124,6 +124,7 @@ class NavPoint:
     # a loiter's turns (NAV_LOITER_TURNS) or seconds (NAV_LOITER_TIME); a take-off's pitch (deg)
     amount: float = 0.0
     landing: bool = False  # in the landing sequence (after a DO_LAND_START)
+    exit_xtrack: bool = False  # a loiter's param4 1: the next leg from where it leaves
 
     def moved(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> NavPoint:
         return dataclasses.replace(self, lat_deg=lat_deg, lon_deg=lon_deg, alt_amsl_m=alt_amsl_m)
@@ -178,7 +179,10 @@ def mission_points(
             continue  # a malformed item is skipped, not fatal
         seq = int(getattr(it, "seq", i))
         radius, amount = mission_order.item_params(it, command)
-        out.append(NavPoint(seq, lat, lon, alt, speed, explicit, command, radius, amount, landing))
+        xtrack = command in fw.LOITER_COMMANDS and float(getattr(it, "param4", 0.0)) >= 1.0
+        out.append(
+            NavPoint(seq, lat, lon, alt, speed, explicit, command, radius, amount, landing, xtrack)
+        )
     return out
 
 

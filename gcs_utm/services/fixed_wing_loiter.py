@@ -1,0 +1,147 @@
+"""A fixed wing's loiter item as the points it flies (docs/autopilots.md, "Fixed wings"). Pure.
+
+Used by :mod:`.fixed_wing_plan` for NAV_LOITER_TURNS, NAV_LOITER_TIME and NAV_LOITER_TO_ALT.
+As ArduPlane flies them (ArduPlane ``commands_logic.cpp``, ``navigation.cpp``; PX4's
+fixed-wing loiters alike):
+
+- **Radius**: the item's, else the vehicle's default loiter radius (ArduPlane WP_LOITER_RAD,
+  PX4 NAV_LOITER_RAD). A radius of 1 m or less is no radius: ArduPlane's ``update_loiter``
+  takes WP_LOITER_RAD for it, and ArduPilot reads a NAV_LOITER_TIME back with param3 = +1 or
+  -1, the direction only (the soak's ArduPlane was filed circling a 1 m circle). The sign
+  gives the direction: clockwise unless negative.
+- **Entry on the turn**: the L1 controller captures the circle tangentially in its turn
+  direction, not at the point nearest the previous one: the plane arriving from the east
+  on a clockwise circle joins it at its southern side, heading west (measured on ArduPlane
+  4.6 SITL).
+- **The goal** (the turns, the time, the altitude at the climb or descent rate) is counted
+  from there; then the plane **goes on round the circle until it heads for the next
+  waypoint** (``verify_loiter_heading``) and leaves on the tangent towards it.
+- **Exit track**: with the item's param4 0 (the default) the next leg is tracked from the
+  loiter's centre (ArduPlane ``loiter_xtrack``, PX4 ``loiter_exit_xtrack``): the plane
+  converges on the line from the centre to the next waypoint, within about two turn radii
+  of the exit (measured: 155 m after leaving an 80 m circle at 22 m/s, NAVL1_PERIOD 15); a
+  point on that line there models it. With param4 1 it flies straight from where it left.
+Circle points are every 22.5 degrees (a chord is at most 2 % of the radius inside the arc).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, TypeVar
+
+if TYPE_CHECKING:
+    from gcs_utm.services.fixed_wing_plan import Point
+
+P = TypeVar("P", bound="Point")
+
+NAV_LOITER_TURNS = 18
+NAV_LOITER_TIME = 19
+NAV_TAKEOFF = 22
+NAV_LOITER_TO_ALT = 31
+LOITERS = frozenset({NAV_LOITER_TURNS, NAV_LOITER_TIME, NAV_LOITER_TO_ALT})
+NO_RADIUS_M = 1.0
+"""A loiter radius this small or smaller is the vehicle's default (ArduPlane update_loiter)."""
+JOIN_RADII = 2.0
+"""After a loiter the plane is on the line from the centre to the next waypoint this many
+radii further along it than where it left the circle."""
+STEP_RAD = math.pi / 8.0
+MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
+_M_PER_DEG_LAT = 110_540.0
+_M_PER_DEG_LON = 111_320.0
+
+
+def _en(centre: Point, q: Point) -> tuple[float, float]:
+    """q relative to centre, metres east and north (flat earth: a loiter is small)."""
+    k = math.cos(math.radians(centre.lat_deg))
+    return (
+        (q.lon_deg - centre.lon_deg) * _M_PER_DEG_LON * k,
+        (q.lat_deg - centre.lat_deg) * _M_PER_DEG_LAT,
+    )
+
+
+def _at(centre: P, east_m: float, north_m: float, alt_amsl_m: float, like: P) -> P:
+    k = math.cos(math.radians(centre.lat_deg))
+    lat = centre.lat_deg + north_m / _M_PER_DEG_LAT
+    lon = centre.lon_deg + east_m / (_M_PER_DEG_LON * k)
+    return like.moved(lat, lon, alt_amsl_m)
+
+
+def radius_m(p: Point, default_radius_m: float) -> float:
+    """The signed radius flown (> 0 clockwise): the item's, else the default with its sign."""
+    if abs(p.radius_m) <= NO_RADIUS_M:
+        return -default_radius_m if p.radius_m < 0.0 else default_radius_m
+    return p.radius_m
+
+
+def _tangent_angle(east_m: float, north_m: float, r: float, sense: float, leaving: bool) -> float:
+    """The angle (from east) of the circle's point where a plane turning ``sense`` (-1
+    clockwise) joins it coming from (``leaving``: leaves it heading for) the point
+    ``east_m, north_m`` off the centre; the nearest point when that is inside the circle."""
+    phi = math.atan2(north_m, east_m)
+    d = math.hypot(east_m, north_m)
+    if d <= r:
+        return phi
+    half = math.acos(r / d)
+    return phi - sense * half if leaving else phi + sense * half
+
+
+def loiter_points(
+    p: P,
+    before: Point,
+    after: Sequence[P],
+    rate_mps: float,
+    default_radius_m: float,
+) -> list[P]:
+    """The loiter item ``p`` flown after ``before``, ``after`` the points that follow it: its
+    circle from the entry to the exit, then (exit track from the centre) the point where the
+    plane is back on the line to the next waypoint (module docstring)."""
+    radius = radius_m(p, default_radius_m)
+    r = abs(radius)
+    if r < NO_RADIUS_M:
+        return [p]
+    sense = -1.0 if radius > 0.0 else 1.0  # clockwise: the angle (from east) decreases
+    turn_s = 2.0 * math.pi * r / max(p.speed_mps, 0.1)
+    if p.command == NAV_LOITER_TO_ALT:
+        turns = abs(p.alt_amsl_m - before.alt_amsl_m) / max(rate_mps, 0.1) / turn_s
+    elif p.command == NAV_LOITER_TIME:
+        turns = max(p.amount, 0.0) / turn_s
+    else:
+        turns = max(p.amount, 0.0)
+    goal_rad = min(turns, MAX_TURNS) * 2.0 * math.pi
+    start = _tangent_angle(*_en(p, before), r, sense, leaving=False)
+    nxt = next((q for q in after if q.explicit), None)
+    sweep = goal_rad
+    if nxt is not None and math.hypot(*_en(p, nxt)) > r:
+        exit_a = _tangent_angle(*_en(p, nxt), r, sense, leaving=True)
+        sweep += ((exit_a - (start + sense * goal_rad)) * sense) % (2.0 * math.pi)
+    z0 = before.alt_amsl_m if p.command == NAV_LOITER_TO_ALT else p.alt_amsl_m
+    steps = max(1, math.ceil(sweep / STEP_RAD - 1e-9))
+    out: list[P] = []
+    for k in range(steps + 1):
+        swept = min(k * STEP_RAD, sweep)
+        a = start + sense * swept
+        frac = min(swept / goal_rad, 1.0) if goal_rad > 0.0 else 1.0
+        alt = z0 + (p.alt_amsl_m - z0) * frac
+        out.append(_at(p, r * math.cos(a), r * math.sin(a), alt, p))
+    if nxt is not None and nxt is after[0] and nxt.command not in LOITERS | {NAV_TAKEOFF}:
+        out.extend(_join(p, out[-1], nxt, r))
+    return out
+
+
+def _join(p: P, left: P, nxt: P, r: float) -> list[P]:
+    """The point on the line from the loiter's centre to ``nxt`` where the plane that left
+    the circle at ``left`` is back on it (none with param4 1, or a leg too short)."""
+    if p.exit_xtrack:
+        return []
+    ne, nn = _en(p, nxt)
+    length = math.hypot(ne, nn)
+    if length <= 0.0:
+        return []
+    ue, un = ne / length, nn / length
+    le, ln = _en(p, left)
+    s = le * ue + ln * un + JOIN_RADII * r
+    if s >= length - r:
+        return []
+    alt = p.alt_amsl_m + (nxt.alt_amsl_m - p.alt_amsl_m) * s / length
+    return [_at(p, ue * s, un * s, alt, nxt).synthetic()]

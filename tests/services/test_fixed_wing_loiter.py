@@ -1,0 +1,138 @@
+"""A fixed wing's loiter filed as ArduPlane flies it (issue 31): on WP_LOITER_RAD when the
+item carries no radius (ArduPilot reads NAV_LOITER_TIME back with param3 = +1, the direction
+only: the soak's ArduPlane was filed circling a 1 m circle), entered on its turn, left on
+the tangent to the next waypoint, then back on the line from the centre."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import pytest
+
+from gcs_utm.model import OperationId, Position
+from gcs_utm.services import fixed_wing_plan as fw
+from gcs_utm.services.vehicle_ops import NavPoint, mission_points, plan_from_points
+
+HOME = Position(lat_deg=45.4671, lon_deg=-73.7963, alt_amsl_m=32.4)
+M_LAT = 110_540.0
+M_LON = 111_320.0 * math.cos(math.radians(HOME.lat_deg))
+CENTRE = (-800.0, 1600.0)  # east, north of home: the soak's loiter
+
+
+@dataclass
+class _Item:
+    command: int
+    x: int = 0
+    y: int = 0
+    z: float = 0.0
+    frame: int = 3
+    param1: float = 0.0
+    param2: float = 0.0
+    param3: float = 0.0
+    param4: float = 0.0
+    seq: int = 0
+
+
+def _at(east: float, north: float) -> tuple[int, int]:
+    return round((HOME.lat_deg + north / M_LAT) * 1e7), round((HOME.lon_deg + east / M_LON) * 1e7)
+
+
+def _en(p: NavPoint) -> tuple[float, float]:
+    return (p.lon_deg - HOME.lon_deg) * M_LON, (p.lat_deg - HOME.lat_deg) * M_LAT
+
+
+def _soak_mission(param3: float = 1.0, param4: float = 0.0) -> list[NavPoint]:
+    """The nuisance soak's ArduPlane mission as read back (NAV_LOITER_TIME param3 = 1)."""
+    rows = [
+        (16, 0.0, 0.0, 0.0, 0.0),
+        (22, 0.0, 0.0, 30.0, 15.0),
+        (16, 0.0, 1600.0, 60.0, 0.0),
+        (19, *CENTRE, 60.0, 20.0),
+        (189, -800.0, 0.0, 0.0, 0.0),
+        (16, -400.0, -400.0, 30.0, 0.0),
+        (21, 0.0, 0.0, 0.0, 0.0),
+    ]
+    items = []
+    for seq, (cmd, east, north, alt, p1) in enumerate(rows):
+        lat, lon = _at(east, north)
+        p3 = param3 if cmd == 19 else 0.0
+        p4 = param4 if cmd == 19 else 0.0
+        items.append(_Item(cmd, lat, lon, alt, param1=p1, param3=p3, param4=p4, seq=seq))
+    pts = mission_points(items, home=HOME, cruise_speed_mps=22.0, skip_first=True)
+    assert pts is not None
+    return fw.fixed_wing_points(
+        pts, ground_alt_m=HOME.alt_amsl_m, climb_rate_mps=5.0, descent_rate_mps=3.0,
+        loiter_radius_m=80.0, home_deg=(HOME.lat_deg, HOME.lon_deg),
+    )  # fmt: skip
+
+
+def _polar(p: NavPoint) -> tuple[float, float]:
+    e, n = _en(p)
+    return math.hypot(e - CENTRE[0], n - CENTRE[1]), math.atan2(n - CENTRE[1], e - CENTRE[0])
+
+
+def test_a_loiter_without_a_radius_is_flown_on_the_default_radius() -> None:
+    circle = [p for p in _soak_mission() if p.command == 19]
+    assert all(_polar(p)[0] == pytest.approx(80.0, abs=0.5) for p in circle)
+    # a 20 s loiter at 22 m/s on 80 m (a turn takes 22.8 s): 0.87 turns, then round on to
+    # the tangent towards the approach waypoint
+    swept = sum(
+        (_polar(a)[1] - _polar(b)[1]) % (2.0 * math.pi)  # clockwise: the angle decreases
+        for a, b in itertools.pairwise(circle)
+    )
+    assert 0.87 * 2.0 * math.pi <= swept <= 1.87 * 2.0 * math.pi
+
+
+def test_the_plane_joins_on_its_turn_and_leaves_on_the_tangent() -> None:
+    plane = _soak_mission()
+    circle = [p for p in plane if p.command == 19]
+    # arriving from the east on a clockwise circle: the southern side, heading west
+    _, entry = _polar(circle[0])
+    tangent_deg = math.degrees(math.acos(80.0 / 800.0))  # from 800 m east of the centre
+    assert math.degrees(entry) == pytest.approx(-tangent_deg, abs=0.5)
+    e0, n0 = _en(circle[0])
+    e1, n1 = _en(circle[1])
+    assert e1 < e0 and abs(n1 - n0) < abs(e1 - e0)
+    # leaves heading for the approach waypoint (-400, -400): the tangent from it
+    ex, nx = _en(circle[-1])
+    heading = (-400.0 - ex, -400.0 - nx)
+    radial = (ex - CENTRE[0], ny := nx - CENTRE[1])
+    assert abs(heading[0] * radial[0] + heading[1] * ny) / math.hypot(*heading) < 2.0
+    # then back on the line from the centre to it, two radii further on: a synthetic point
+    # of the approach's item
+    join = plane[plane.index(circle[-1]) + 1]
+    assert join.seq == 5 and not join.explicit
+    je, jn = _en(join)
+    u = (400.0 / math.hypot(400.0, 2000.0), -2000.0 / math.hypot(400.0, 2000.0))
+    off_line = (je - CENTRE[0]) * u[1] - (jn - CENTRE[1]) * u[0]
+    assert abs(off_line) < 0.5
+    assert math.hypot(je - ex, jn - nx) == pytest.approx(160.0, abs=25.0)
+
+
+def test_with_param4_1_it_flies_straight_from_where_it_left() -> None:
+    plane = _soak_mission(param4=1.0)
+    last = max(k for k, p in enumerate(plane) if p.command == 19)
+    assert plane[last + 1].command == 16 and plane[last + 1].explicit
+
+
+def test_a_counter_clockwise_loiter_and_an_item_radius() -> None:
+    circle = [p for p in _soak_mission(param3=-1.0) if p.command == 19]
+    _, entry = _polar(circle[0])
+    tangent_deg = math.degrees(math.acos(80.0 / 800.0))
+    assert math.degrees(entry) == pytest.approx(tangent_deg, abs=0.5)  # the northern side
+    assert all(_polar(p)[0] == pytest.approx(80.0, abs=0.5) for p in circle)
+    circle = [p for p in _soak_mission(param3=150.0) if p.command == 19]
+    assert all(_polar(p)[0] == pytest.approx(150.0, abs=0.5) for p in circle)
+
+
+def test_the_plan_re_timed_after_the_loiter_goes_through_the_join() -> None:
+    plane = _soak_mission()
+    exit_point = [p for p in plane if p.command == 19][-1]
+    here = Position(lat_deg=exit_point.lat_deg, lon_deg=exit_point.lon_deg, alt_amsl_m=92.4)
+    plan = plan_from_points(plane, OperationId("p"), t_s=0.0, current_seq=5, position=here)
+    assert plan is not None
+    second = plan.waypoints[1]
+    e, n = (second.lon_deg - HOME.lon_deg) * M_LON, (second.lat_deg - HOME.lat_deg) * M_LAT
+    assert n < CENTRE[1] - 100.0 and abs(e - CENTRE[0]) < 60.0  # on the line, not (-400, -400)
