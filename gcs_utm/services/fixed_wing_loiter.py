@@ -13,8 +13,10 @@ fixed-wing loiters alike):
   direction, not at the point nearest the previous one: the plane arriving from the east
   on a clockwise circle joins it at its southern side, heading west (measured on ArduPlane
   4.6 SITL).
-- **The goal** (the turns, the time, the altitude at the climb or descent rate) is counted
-  from there; then the plane **goes on round the circle until it heads for the next
+- **The goal** (the turns, the time, the altitude) is counted from there. A loiter to an
+  altitude changes it on the way (ArduPlane's glide slope to the loiter point, or its climb
+  first) as far as the climb or descent rate allows at its speed, and the rest on the
+  circle. Then the plane **goes on round the circle until it heads for the next
   waypoint** (``verify_loiter_heading``) and leaves on the tangent towards it.
 - **Exit track**: with the item's param4 0 (the default) the next leg is tracked from the
   loiter's centre (ArduPlane ``loiter_xtrack``, PX4 ``loiter_exit_xtrack``): the plane
@@ -101,21 +103,14 @@ def loiter_points(
     if r < NO_RADIUS_M:
         return [p]
     sense = -1.0 if radius > 0.0 else 1.0  # clockwise: the angle (from east) decreases
-    turn_s = 2.0 * math.pi * r / max(p.speed_mps, 0.1)
-    if p.command == NAV_LOITER_TO_ALT:
-        turns = abs(p.alt_amsl_m - before.alt_amsl_m) / max(rate_mps, 0.1) / turn_s
-    elif p.command == NAV_LOITER_TIME:
-        turns = max(p.amount, 0.0) / turn_s
-    else:
-        turns = max(p.amount, 0.0)
-    goal_rad = min(turns, MAX_TURNS) * 2.0 * math.pi
     start = _tangent_angle(*_en(p, before), r, sense, leaving=False)
+    z0, turns = _goal(p, before, (r * math.cos(start), r * math.sin(start)), r, rate_mps)
+    goal_rad = min(turns, MAX_TURNS) * 2.0 * math.pi
     nxt = next((q for q in after if q.explicit), None)
     sweep = goal_rad
     if nxt is not None and math.hypot(*_en(p, nxt)) > r:
         exit_a = _tangent_angle(*_en(p, nxt), r, sense, leaving=True)
         sweep += ((exit_a - (start + sense * goal_rad)) * sense) % (2.0 * math.pi)
-    z0 = before.alt_amsl_m if p.command == NAV_LOITER_TO_ALT else p.alt_amsl_m
     steps = max(1, math.ceil(sweep / STEP_RAD - 1e-9))
     out: list[P] = []
     for k in range(steps + 1):
@@ -127,6 +122,25 @@ def loiter_points(
     if nxt is not None and nxt is after[0] and nxt.command not in LOITERS | {NAV_TAKEOFF}:
         out.extend(_join(p, out[-1], nxt, r))
     return out
+
+
+def _goal(
+    p: Point, before: Point, entry_m: tuple[float, float], r: float, rate_mps: float
+) -> tuple[float, float]:
+    """The altitude at the circle's entry (``entry_m`` east, north of the centre) and the
+    turns of the goal on a circle of radius ``r`` (module docstring)."""
+    turn_s = 2.0 * math.pi * r / max(p.speed_mps, 0.1)
+    if p.command == NAV_LOITER_TIME:
+        return p.alt_amsl_m, max(p.amount, 0.0) / turn_s
+    if p.command != NAV_LOITER_TO_ALT:
+        return p.alt_amsl_m, max(p.amount, 0.0)
+    # on the way as far as the rate allows at its speed, the rest on the circle
+    be, bn = _en(p, before)
+    leg_m = math.hypot(be - entry_m[0], bn - entry_m[1])
+    dz = p.alt_amsl_m - before.alt_amsl_m
+    reach_m = leg_m * max(rate_mps, 0.1) / max(p.speed_mps, 0.1)
+    z0 = before.alt_amsl_m + math.copysign(min(abs(dz), reach_m), dz)
+    return z0, abs(p.alt_amsl_m - z0) / max(rate_mps, 0.1) / turn_s
 
 
 def _join(p: P, left: P, nxt: P, r: float) -> list[P]:

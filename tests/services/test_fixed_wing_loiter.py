@@ -43,13 +43,15 @@ def _en(p: NavPoint) -> tuple[float, float]:
     return (p.lon_deg - HOME.lon_deg) * M_LON, (p.lat_deg - HOME.lat_deg) * M_LAT
 
 
-def _soak_mission(param3: float = 1.0, param4: float = 0.0) -> list[NavPoint]:
+def _soak_mission(
+    param3: float = 1.0, param4: float = 0.0, loiter: tuple[int, float] = (19, 60.0)
+) -> list[NavPoint]:
     """The nuisance soak's ArduPlane mission as read back (NAV_LOITER_TIME param3 = 1)."""
     rows = [
         (16, 0.0, 0.0, 0.0, 0.0),
         (22, 0.0, 0.0, 30.0, 15.0),
         (16, 0.0, 1600.0, 60.0, 0.0),
-        (19, *CENTRE, 60.0, 20.0),
+        (loiter[0], *CENTRE, loiter[1], 20.0 if loiter[0] == 19 else 0.0),
         (189, -800.0, 0.0, 0.0, 0.0),
         (16, -400.0, -400.0, 30.0, 0.0),
         (21, 0.0, 0.0, 0.0, 0.0),
@@ -58,7 +60,7 @@ def _soak_mission(param3: float = 1.0, param4: float = 0.0) -> list[NavPoint]:
     for seq, (cmd, east, north, alt, p1) in enumerate(rows):
         lat, lon = _at(east, north)
         p3 = param3 if cmd == 19 else 0.0
-        p4 = param4 if cmd == 19 else 0.0
+        p4 = param4 if cmd in (19, 31) else 0.0
         items.append(_Item(cmd, lat, lon, alt, param1=p1, param3=p3, param4=p4, seq=seq))
     pts = mission_points(items, home=HOME, cruise_speed_mps=22.0, skip_first=True)
     assert pts is not None
@@ -136,3 +138,15 @@ def test_the_plan_re_timed_after_the_loiter_goes_through_the_join() -> None:
     second = plan.waypoints[1]
     e, n = (second.lon_deg - HOME.lon_deg) * M_LON, (second.lat_deg - HOME.lat_deg) * M_LAT
     assert n < CENTRE[1] - 100.0 and abs(e - CENTRE[0]) < 60.0  # on the line, not (-400, -400)
+
+
+def test_a_loiter_to_alt_changes_altitude_on_the_way_as_far_as_it_can() -> None:
+    """ArduPlane descends on its glide slope to the loiter point (climbs first with
+    FLIGHT_OPTIONS bit 14): 20 m down over the 796 m to the circle (3 m/s at 22 m/s allows
+    108 m), so the circle is flown at 40 m; 240 m up is more than the way allows."""
+    down = [p for p in _soak_mission(loiter=(31, 40.0)) if p.command == 31]
+    assert all(p.alt_amsl_m == pytest.approx(HOME.alt_amsl_m + 40.0) for p in down)
+    up = [p for p in _soak_mission(loiter=(31, 300.0)) if p.command == 31]
+    rise = up[0].alt_amsl_m - (HOME.alt_amsl_m + 60.0)  # 796 m at 5 m/s over 22 m/s: 181 m
+    assert 175.0 < rise < 185.0
+    assert up[-1].alt_amsl_m == pytest.approx(HOME.alt_amsl_m + 300.0)
