@@ -9,10 +9,12 @@ fixed-wing loiters alike):
   takes WP_LOITER_RAD for it, and ArduPilot reads a NAV_LOITER_TIME back with param3 = +1 or
   -1, the direction only (the soak's ArduPlane was filed circling a 1 m circle). The sign
   gives the direction: clockwise unless negative.
-- **Entry on the turn**: the L1 controller captures the circle tangentially in its turn
-  direction, not at the point nearest the previous one: the plane arriving from the east
-  on a clockwise circle joins it at its southern side, heading west (measured on ArduPlane
-  4.6 SITL).
+- **Entry on the turn**: the plane flies at the centre until about two radii from it
+  (:data:`CAPTURE_RADII`), then the L1 controller turns it onto the circle, which it joins
+  on the tangent in its turn direction, not at the point nearest the previous one: arriving
+  from the east on a clockwise circle it joins the southern side, heading west (measured on
+  ArduPlane 4.6 SITL: on the line to the centre until 150 m from it, on an 80 m circle
+  60-90 degrees round).
 - **The goal** (the turns, the time, the altitude) is counted from there. A loiter to an
   altitude changes it on the way (ArduPlane's glide slope to the loiter point, or its climb
   first) as far as the climb or descent rate allows at its speed, and the rest on the
@@ -47,6 +49,10 @@ NO_RADIUS_M = 1.0
 JOIN_RADII = 2.0
 """After a loiter the plane is on the line from the centre to the next waypoint this many
 radii further along it than where it left the circle."""
+CAPTURE_RADII = 2.0
+"""Heading for a loiter, the plane flies at its centre until this many radii from it, then
+turns onto the circle: ArduPlane's L1 switches from capture to circle when the radial error
+exceeds ``v Kv / Kx``, its L1 distance (79 m at 22 m/s, NAVL1_PERIOD 15), about a radius."""
 STEP_RAD = math.pi / 8.0
 MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
 _M_PER_DEG_LAT = 110_540.0
@@ -103,7 +109,8 @@ def loiter_points(
     if r < NO_RADIUS_M:
         return [p]
     sense = -1.0 if radius > 0.0 else 1.0  # clockwise: the angle (from east) decreases
-    start = _tangent_angle(*_en(p, before), r, sense, leaving=False)
+    capture = _capture(p, before, r)
+    start = _tangent_angle(*_en(p, capture or before), r, sense, leaving=False)
     z0, turns = _goal(p, before, (r * math.cos(start), r * math.sin(start)), r, rate_mps)
     goal_rad = min(turns, MAX_TURNS) * 2.0 * math.pi
     nxt = next((q for q in after if q.explicit), None)
@@ -112,7 +119,7 @@ def loiter_points(
         exit_a = _tangent_angle(*_en(p, nxt), r, sense, leaving=True)
         sweep += ((exit_a - (start + sense * goal_rad)) * sense) % (2.0 * math.pi)
     steps = max(1, math.ceil(sweep / STEP_RAD - 1e-9))
-    out: list[P] = []
+    out: list[P] = [] if capture is None else [capture]
     for k in range(steps + 1):
         swept = min(k * STEP_RAD, sweep)
         a = start + sense * swept
@@ -122,6 +129,21 @@ def loiter_points(
     if nxt is not None and nxt is after[0] and nxt.command not in LOITERS | {NAV_TAKEOFF}:
         out.extend(_join(p, out[-1], nxt, r))
     return out
+
+
+def _capture(p: P, before: Point, r: float) -> P | None:
+    """Where the plane heading for the loiter's centre turns onto the circle:
+    :data:`CAPTURE_RADII` radii from the centre on the line from ``before`` (None when
+    ``before`` is nearer). A modelled point of the loiter's item, at the altitude there."""
+    be, bn = _en(p, before)
+    d = math.hypot(be, bn)
+    if d <= CAPTURE_RADII * r:
+        return None
+    k = CAPTURE_RADII * r / d
+    alt = before.alt_amsl_m
+    if p.command == NAV_LOITER_TO_ALT:  # it descends (climbs) on the way: not above either
+        alt = p.alt_amsl_m + (before.alt_amsl_m - p.alt_amsl_m) * k
+    return _at(p, be * k, bn * k, alt, p).synthetic()
 
 
 def _goal(

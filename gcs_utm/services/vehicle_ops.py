@@ -233,7 +233,12 @@ def plan_from_points(
     if not rest:
         return None
     done = list(points[:start])
-    if position is not None and done and _dist_m(position, done[-1]) <= turn_from_m:
+    if (
+        position is not None
+        and done
+        and done[-1].command not in fw.LOITER_COMMANDS  # a circle is left, not turned round
+        and _dist_m(position, done[-1]) <= turn_from_m
+    ):
         rest = [done[-1], *rest]
     wps: list[Waypoint4D] = []
     if position is not None:

@@ -76,7 +76,7 @@ def _polar(p: NavPoint) -> tuple[float, float]:
 
 
 def test_a_loiter_without_a_radius_is_flown_on_the_default_radius() -> None:
-    circle = [p for p in _soak_mission() if p.command == 19]
+    circle = [p for p in _soak_mission() if p.command == 19 and p.explicit]
     assert all(_polar(p)[0] == pytest.approx(80.0, abs=0.5) for p in circle)
     # a 20 s loiter at 22 m/s on 80 m (a turn takes 22.8 s): 0.87 turns, then round on to
     # the tangent towards the approach waypoint
@@ -89,10 +89,14 @@ def test_a_loiter_without_a_radius_is_flown_on_the_default_radius() -> None:
 
 def test_the_plane_joins_on_its_turn_and_leaves_on_the_tangent() -> None:
     plane = _soak_mission()
-    circle = [p for p in plane if p.command == 19]
+    circle = [p for p in plane if p.command == 19 and p.explicit]
     # arriving from the east on a clockwise circle: the southern side, heading west
     _, entry = _polar(circle[0])
-    tangent_deg = math.degrees(math.acos(80.0 / 800.0))  # from 800 m east of the centre
+    capture = next(p for p in plane if p.command == 19)
+    assert not capture.explicit  # on the line to the centre, two radii from it
+    assert _polar(capture)[0] == pytest.approx(160.0, abs=0.5)
+    assert math.degrees(_polar(capture)[1]) == pytest.approx(0.0, abs=1.0)
+    tangent_deg = math.degrees(math.acos(80.0 / 160.0))  # joined from there on its turn
     assert math.degrees(entry) == pytest.approx(-tangent_deg, abs=0.5)
     e0, n0 = _en(circle[0])
     e1, n1 = _en(circle[1])
@@ -120,33 +124,43 @@ def test_with_param4_1_it_flies_straight_from_where_it_left() -> None:
 
 
 def test_a_counter_clockwise_loiter_and_an_item_radius() -> None:
-    circle = [p for p in _soak_mission(param3=-1.0) if p.command == 19]
+    circle = [p for p in _soak_mission(param3=-1.0) if p.command == 19 and p.explicit]
     _, entry = _polar(circle[0])
-    tangent_deg = math.degrees(math.acos(80.0 / 800.0))
+    tangent_deg = math.degrees(math.acos(80.0 / 160.0))
     assert math.degrees(entry) == pytest.approx(tangent_deg, abs=0.5)  # the northern side
     assert all(_polar(p)[0] == pytest.approx(80.0, abs=0.5) for p in circle)
-    circle = [p for p in _soak_mission(param3=150.0) if p.command == 19]
+    circle = [p for p in _soak_mission(param3=150.0) if p.command == 19 and p.explicit]
     assert all(_polar(p)[0] == pytest.approx(150.0, abs=0.5) for p in circle)
 
 
 def test_the_plan_re_timed_after_the_loiter_goes_through_the_join() -> None:
+    """Re-timed when the approach becomes current (the plane 12 m past its exit, heading for
+    the approach): from the plane to the join, not back to the modelled exit point (a
+    waypoint reached early is turned round; a circle is left)."""
     plane = _soak_mission()
-    exit_point = [p for p in plane if p.command == 19][-1]
-    here = Position(lat_deg=exit_point.lat_deg, lon_deg=exit_point.lon_deg, alt_amsl_m=92.4)
-    plan = plan_from_points(plane, OperationId("p"), t_s=0.0, current_seq=5, position=here)
+    exit_point = [p for p in plane if p.command == 19][-1]  # where the plane left
+    ex, nx = _en(exit_point)
+    k = 12.0 / math.hypot(-400.0 - ex, -400.0 - nx)
+    lat = HOME.lat_deg + (nx + k * (-400.0 - nx)) / M_LAT
+    lon = HOME.lon_deg + (ex + k * (-400.0 - ex)) / M_LON
+    here = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=92.4)
+    plan = plan_from_points(
+        plane, OperationId("p"), t_s=0.0, current_seq=5, position=here, turn_from_m=50.0
+    )
     assert plan is not None
     second = plan.waypoints[1]
     e, n = (second.lon_deg - HOME.lon_deg) * M_LON, (second.lat_deg - HOME.lat_deg) * M_LAT
-    assert n < CENTRE[1] - 100.0 and abs(e - CENTRE[0]) < 60.0  # on the line, not (-400, -400)
+    # the join on the line from the centre, not the exit point behind it nor (-400, -400)
+    assert n < CENTRE[1] - 100.0 and abs(e - CENTRE[0]) < 60.0
 
 
 def test_a_loiter_to_alt_changes_altitude_on_the_way_as_far_as_it_can() -> None:
     """ArduPlane descends on its glide slope to the loiter point (climbs first with
-    FLIGHT_OPTIONS bit 14): 20 m down over the 796 m to the circle (3 m/s at 22 m/s allows
-    108 m), so the circle is flown at 40 m; 240 m up is more than the way allows."""
-    down = [p for p in _soak_mission(loiter=(31, 40.0)) if p.command == 31]
+    FLIGHT_OPTIONS bit 14): 20 m down over the 763 m to the circle (3 m/s at 22 m/s allows
+    104 m), so the circle is flown at 40 m; 240 m up is more than the way allows."""
+    down = [p for p in _soak_mission(loiter=(31, 40.0)) if p.command == 31 and p.explicit]
     assert all(p.alt_amsl_m == pytest.approx(HOME.alt_amsl_m + 40.0) for p in down)
-    up = [p for p in _soak_mission(loiter=(31, 300.0)) if p.command == 31]
-    rise = up[0].alt_amsl_m - (HOME.alt_amsl_m + 60.0)  # 796 m at 5 m/s over 22 m/s: 181 m
-    assert 175.0 < rise < 185.0
+    up = [p for p in _soak_mission(loiter=(31, 300.0)) if p.command == 31 and p.explicit]
+    rise = up[0].alt_amsl_m - (HOME.alt_amsl_m + 60.0)  # 763 m at 5 m/s over 22 m/s: 173 m
+    assert 170.0 < rise < 177.0
     assert up[-1].alt_amsl_m == pytest.approx(HOME.alt_amsl_m + 300.0)
