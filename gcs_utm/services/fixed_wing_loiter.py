@@ -22,9 +22,10 @@ fixed-wing loiters alike):
   waypoint** (``verify_loiter_heading``) and leaves on the tangent towards it.
 - **Exit track**: with the item's param4 0 (the default) the next leg is tracked from the
   loiter's centre (ArduPlane ``loiter_xtrack``, PX4 ``loiter_exit_xtrack``): the plane
-  converges on the line from the centre to the next waypoint, within about two turn radii
-  of the exit (measured: 155 m after leaving an 80 m circle at 22 m/s, NAVL1_PERIOD 15); a
-  point on that line there models it. With param4 1 it flies straight from where it left.
+  runs on along its tangent for about half a radius, then converges on the line from the
+  centre to the next waypoint, within about two radii of the exit (measured: 155-210 m
+  after leaving an 80 m circle at 22 m/s, NAVL1_PERIOD 15); a point on the tangent and a
+  point on that line model it. With param4 1 it flies straight from where it left.
 Circle points are every 22.5 degrees (a chord is at most 2 % of the radius inside the arc).
 """
 
@@ -49,10 +50,15 @@ NO_RADIUS_M = 1.0
 JOIN_RADII = 2.0
 """After a loiter the plane is on the line from the centre to the next waypoint this many
 radii further along it than where it left the circle."""
-CAPTURE_RADII = 2.0
+CAPTURE_RADII = 1.8
 """Heading for a loiter, the plane flies at its centre until this many radii from it, then
 turns onto the circle: ArduPlane's L1 switches from capture to circle when the radial error
-exceeds ``v Kv / Kx``, its L1 distance (79 m at 22 m/s, NAVL1_PERIOD 15), about a radius."""
+nears ``v Kv / Kx``, its L1 distance (79 m at 22 m/s, NAVL1_PERIOD 15), about a radius
+(measured: it left the line 143-150 m from the centre of an 80 m circle and joined it on
+the tangent from there)."""
+EXIT_RUN_RADII = 0.5
+"""Leaving a loiter, the plane flies on along its tangent this many radii before it turns
+onto the line from the centre (measured: 35-40 m on an 80 m circle)."""
 STEP_RAD = math.pi / 8.0
 MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
 _M_PER_DEG_LAT = 110_540.0
@@ -180,4 +186,10 @@ def _join(p: P, left: P, nxt: P, r: float) -> list[P]:
     if s >= length - r:
         return []
     alt = p.alt_amsl_m + (nxt.alt_amsl_m - p.alt_amsl_m) * s / length
-    return [_at(p, ue * s, un * s, alt, nxt).synthetic()]
+    # on along the tangent (towards the next waypoint) first
+    te, tn = ne - le, nn - ln
+    run = EXIT_RUN_RADII * r / max(math.hypot(te, tn), 1e-9)
+    return [
+        _at(p, le + te * run, ln + tn * run, left.alt_amsl_m, nxt).synthetic(),
+        _at(p, ue * s, un * s, alt, nxt).synthetic(),
+    ]

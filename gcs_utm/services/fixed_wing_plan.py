@@ -111,16 +111,25 @@ def fixed_wing_points(
     descent_rate_mps: float,
     loiter_radius_m: float,
     home_deg: tuple[float, float] | None = None,
+    takeoff_heading_deg: float | None = None,
+    heads_for_takeoff_position: bool = True,
 ) -> list[P]:
     """``points`` (mission order, AMSL) as a fixed wing flies them (module docstring).
     ``ground_alt_m``: where a take-off starts (the vehicle's home; None: the point before);
     ``home_deg`` (lat, lon): where a take-off with a position of its own starts when no point
-    is before it (PX4)."""
+    is before it (PX4); ``takeoff_heading_deg``: the vehicle's heading when it armed (a
+    take-off without a position climbs out along it; None: towards the next waypoint);
+    ``heads_for_takeoff_position`` False: the autopilot ignores a take-off's position
+    (ArduPlane's ``do_takeoff``)."""
     out: list[P] = []
     for i, p in enumerate(points):
-        if p.command == NAV_TAKEOFF and _here(p, out[-1] if out else None, home_deg):
-            here = _from_start(p, out[-1] if out else None, home_deg)
-            out.extend(_climb_out(here, out[-1] if out else None, points[i + 1 :], ground_alt_m))
+        before = out[-1] if out else None
+        if p.command == NAV_TAKEOFF and (
+            not heads_for_takeoff_position or _here(p, before, home_deg)
+        ):
+            here = _from_start(p, before, home_deg)
+            after = points[i + 1 :]
+            out.extend(_climb_out(here, before, after, ground_alt_m, takeoff_heading_deg))
         elif p.command == NAV_TAKEOFF:
             out.extend(_climb_out_to(p, out[-1] if out else None, home_deg, ground_alt_m))
         elif p.command in LOITER_COMMANDS and out:
@@ -148,8 +157,9 @@ def _here(p: Point, before: Point | None, home_deg: tuple[float, float] | None) 
 
 
 def _from_start(p: P, before: Point | None, home_deg: tuple[float, float] | None) -> P:
-    """A take-off that is "here" with a position of its own, moved to where the vehicle
-    starts (a modelled point); one without a position as it is."""
+    """A take-off that is "here" with a position of its own (or whose position the autopilot
+    ignores), moved to where the vehicle starts (a modelled point); one without a position
+    as it is."""
     if not p.explicit:
         return p
     start = (before.lat_deg, before.lon_deg) if before is not None else home_deg
@@ -179,19 +189,30 @@ def _climb_out_to(
 
 
 def _climb_out(
-    p: P, before: Point | None, after: Sequence[Point], ground_alt_m: float | None
+    p: P,
+    before: Point | None,
+    after: Sequence[Point],
+    ground_alt_m: float | None,
+    heading_deg: float | None = None,
 ) -> list[P]:
-    """The ground roll's end and the end of the take-off climb: along the heading to the next
-    waypoint with a position of its own; where it is (a vertical climb) without one."""
+    """The ground roll's end and the end of the take-off climb: along ``heading_deg`` (the
+    vehicle's, when it armed), else along the heading to the next waypoint with a position of
+    its own; where it is (a vertical climb) without either."""
     nxt = next((q for q in after if q.explicit), None)
     base = before.alt_amsl_m if before is not None else ground_alt_m
-    if nxt is None or base is None:
+    if base is None or p.alt_amsl_m - base <= 0.0:
         return [p]
     height_m = p.alt_amsl_m - base
-    east, north = _east_north(p, nxt)
-    to_next_m = math.hypot(east, north)
-    if height_m <= 0.0 or to_next_m < 1.0:
+    if heading_deg is not None:
+        east, north = math.sin(math.radians(heading_deg)), math.cos(math.radians(heading_deg))
+        to_next_m = math.inf
+    elif nxt is None:
         return [p]
+    else:
+        east, north = _east_north(p, nxt)
+        to_next_m = math.hypot(east, north)
+        if to_next_m < 1.0:
+            return [p]
     if 1.0 <= p.amount < 89.0:  # the take-off's minimum pitch, degrees
         run_m = height_m / math.tan(math.radians(p.amount))
     else:
@@ -200,7 +221,8 @@ def _climb_out(
         run_m /= TAKEOFF_CLIMB_RATE_MPS
     run_m = min(to_next_m, run_m)
     roll_m = ROLL_FRACTION * run_m
-    ux, uy = east / to_next_m, north / to_next_m
+    unit = math.hypot(east, north)
+    ux, uy = east / unit, north / unit
     lat_r, lon_r = _offset(p, ux * roll_m, uy * roll_m)
     lat, lon = _offset(p, ux * run_m, uy * run_m)
     return [p.moved(lat_r, lon_r, base).synthetic(), p.moved(lat, lon, p.alt_amsl_m)]

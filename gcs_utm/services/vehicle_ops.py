@@ -317,6 +317,7 @@ class _Vehicle:
     home_from_status: bool = False
     seq: int | None = None
     position: Position | None = None
+    takeoff_heading_deg: float | None = None  # its heading when it armed (a fixed wing's run)
     armed: bool = False
     flying: bool = False  # armed in a mission mode
     downloading: bool = False
@@ -406,6 +407,8 @@ class VehicleOps:
             return
         if s.position is not None:
             v.position = s.position
+        if not v.armed:  # until it arms: the heading of its take-off run
+            v.takeoff_heading_deg = s.heading_deg
         v.total = s.mission_total
         v.mission_id = s.mission_id
         if "rebooted" in changes:
@@ -593,6 +596,8 @@ class VehicleOps:
                 descent_rate_mps=env.descent_rate_mps,
                 loiter_radius_m=env.turn_radius_m,
                 home_deg=(v.home.lat_deg, v.home.lon_deg) if v.home is not None else None,
+                takeoff_heading_deg=v.takeoff_heading_deg,
+                heads_for_takeoff_position=v.autopilot is not Autopilot.ARDUPILOT,
             )
         if points is None and not v.waiting_logged:
             v.waiting_logged = True

@@ -93,10 +93,10 @@ def test_the_plane_joins_on_its_turn_and_leaves_on_the_tangent() -> None:
     # arriving from the east on a clockwise circle: the southern side, heading west
     _, entry = _polar(circle[0])
     capture = next(p for p in plane if p.command == 19)
-    assert not capture.explicit  # on the line to the centre, two radii from it
-    assert _polar(capture)[0] == pytest.approx(160.0, abs=0.5)
+    assert not capture.explicit  # on the line to the centre, 1.8 radii from it
+    assert _polar(capture)[0] == pytest.approx(144.0, abs=0.5)
     assert math.degrees(_polar(capture)[1]) == pytest.approx(0.0, abs=1.0)
-    tangent_deg = math.degrees(math.acos(80.0 / 160.0))  # joined from there on its turn
+    tangent_deg = math.degrees(math.acos(80.0 / 144.0))  # joined from there on its turn
     assert math.degrees(entry) == pytest.approx(-tangent_deg, abs=0.5)
     e0, n0 = _en(circle[0])
     e1, n1 = _en(circle[1])
@@ -106,10 +106,13 @@ def test_the_plane_joins_on_its_turn_and_leaves_on_the_tangent() -> None:
     heading = (-400.0 - ex, -400.0 - nx)
     radial = (ex - CENTRE[0], ny := nx - CENTRE[1])
     assert abs(heading[0] * radial[0] + heading[1] * ny) / math.hypot(*heading) < 2.0
-    # then back on the line from the centre to it, two radii further on: a synthetic point
-    # of the approach's item
-    join = plane[plane.index(circle[-1]) + 1]
-    assert join.seq == 5 and not join.explicit
+    # on along the tangent for half a radius, then back on the line from the centre to it,
+    # two radii further on: synthetic points of the approach's item
+    run, join = plane[plane.index(circle[-1]) + 1 : plane.index(circle[-1]) + 3]
+    assert run.seq == join.seq == 5 and not run.explicit and not join.explicit
+    re_, rn = _en(run)
+    assert math.hypot(re_ - ex, rn - nx) == pytest.approx(40.0, abs=0.5)
+    assert abs((re_ - ex) * radial[0] + (rn - nx) * ny) < 1.0  # square to the radius
     je, jn = _en(join)
     u = (400.0 / math.hypot(400.0, 2000.0), -2000.0 / math.hypot(400.0, 2000.0))
     off_line = (je - CENTRE[0]) * u[1] - (jn - CENTRE[1]) * u[0]
@@ -126,7 +129,7 @@ def test_with_param4_1_it_flies_straight_from_where_it_left() -> None:
 def test_a_counter_clockwise_loiter_and_an_item_radius() -> None:
     circle = [p for p in _soak_mission(param3=-1.0) if p.command == 19 and p.explicit]
     _, entry = _polar(circle[0])
-    tangent_deg = math.degrees(math.acos(80.0 / 160.0))
+    tangent_deg = math.degrees(math.acos(80.0 / 144.0))
     assert math.degrees(entry) == pytest.approx(tangent_deg, abs=0.5)  # the northern side
     assert all(_polar(p)[0] == pytest.approx(80.0, abs=0.5) for p in circle)
     circle = [p for p in _soak_mission(param3=150.0) if p.command == 19 and p.explicit]
@@ -148,10 +151,14 @@ def test_the_plan_re_timed_after_the_loiter_goes_through_the_join() -> None:
         plane, OperationId("p"), t_s=0.0, current_seq=5, position=here, turn_from_m=50.0
     )
     assert plan is not None
-    second = plan.waypoints[1]
-    e, n = (second.lon_deg - HOME.lon_deg) * M_LON, (second.lat_deg - HOME.lat_deg) * M_LAT
-    # the join on the line from the centre, not the exit point behind it nor (-400, -400)
-    assert n < CENTRE[1] - 100.0 and abs(e - CENTRE[0]) < 60.0
+    (_, here_n), run, join = [
+        ((w.lon_deg - HOME.lon_deg) * M_LON, (w.lat_deg - HOME.lat_deg) * M_LAT)
+        for w in plan.waypoints[:3]
+    ]
+    # on along the tangent (ahead of the plane, not back to the exit point), then the join
+    # on the line from the centre, not (-400, -400)
+    assert run[1] < here_n - 10.0
+    assert join[1] < CENTRE[1] - 100.0 and abs(join[0] - CENTRE[0]) < 60.0
 
 
 def test_a_loiter_to_alt_changes_altitude_on_the_way_as_far_as_it_can() -> None:
