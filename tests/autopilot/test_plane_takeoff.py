@@ -41,6 +41,9 @@ from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 from tests.mavlink.conftest import Sink
 
 SPEED = 5.0
+LOITER_SPEED = 3.0
+"""The loiter test's speed factor: Monitoring judges the track's position extrapolated to
+serve's clock; on a circle, the further ahead the straighter (off the circle) it is."""
 AUTO = 10  # ArduPlane's AUTO custom mode
 FILED_MPS = 14.0  # the mission's speed item: a ground speed, which ArduPlane flies past
 CRUISE_ALT_M = 60.0  # above home: a 30 m climb on the first leg from the take-off's 30 m
@@ -134,7 +137,8 @@ def test_arduplane_loiter_and_landing_raise_no_conformance_threat(
     back as 1) and opened UAS_IN_CV / UAS_OUT_OV at the loiter; now nothing is raised."""
     lat0, lon0, _ground, _heading = ARDUPILOT_DEFAULT_HOME
     # simulated about 200 s (3.9 km at 22-24 m/s, a turn, take-off and landing)
-    commands = _fly_with_serve(ardupilot, tmp_path, _loiter_mission(lat0, lon0), 6, 200.0)
+    mission = _loiter_mission(lat0, lon0)
+    commands = _fly_with_serve(ardupilot, tmp_path, mission, 6, 200.0, speed=LOITER_SPEED)
     assert commands[-3:] == [189, 16, 21], f"landing sequence gone: {commands}"
 
 
@@ -144,12 +148,13 @@ def _fly_with_serve(
     mission: list[object],
     land_seq: int,
     flight_s: float,
+    speed: float = SPEED,
 ) -> list[int]:
     """Fly ``mission`` on an ArduPlane beside ``serve --auto-accept`` to touchdown (within
     twice ``flight_s`` simulated), assert that no conformance threat and no recommendation
     was raised, and return the mission's commands as the plane has it at the end."""
     lat0, lon0, ground, _heading = ARDUPILOT_DEFAULT_HOME  # heading 0: the runway points north
-    ardupilot(instance=0, vehicle="plane", speed=SPEED)
+    ardupilot(instance=0, vehicle="plane", speed=speed)
     wait_tcp_listening(5760)
     pilot = PilotLink(0, autopilot="ardupilot")
     db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
@@ -166,13 +171,13 @@ def _fly_with_serve(
             serve = subprocess.Popen(
                 [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless",
                  "--auto-accept", "--config", str(cfg), "--db", str(db),
-                 "--speed", str(SPEED)],
+                 "--speed", str(speed)],
                 stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             )  # fmt: skip
-        _wait_operations(db, 1, 40.0, serve)
+        _wait_operations(db, 1, 60.0, serve)
         pilot.set_mode(AUTO)
         pilot._arm(60.0)
-        _fly_to_touchdown(pilot, ground, time.monotonic() + 2.0 * flight_s / SPEED, land_seq)
+        _fly_to_touchdown(pilot, ground, time.monotonic() + 2.0 * flight_s / speed, land_seq)
         assert serve.poll() is None, "gcs-utm serve exited"
         commands = [int(it.command) for it in _download(pilot)]
     finally:
