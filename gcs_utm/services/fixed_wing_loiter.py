@@ -9,12 +9,12 @@ fixed-wing loiters alike):
   takes WP_LOITER_RAD for it, and ArduPilot reads a NAV_LOITER_TIME back with param3 = +1 or
   -1, the direction only (the soak's ArduPlane was filed circling a 1 m circle). The sign
   gives the direction: clockwise unless negative.
-- **Entry on the turn**: the plane flies at the centre until about two radii from it
+- **Entry on the turn**: the plane flies at the centre until about 1.4 radii from it
   (:data:`CAPTURE_RADII`), then the L1 controller turns it onto the circle, which it joins
   on the tangent in its turn direction, not at the point nearest the previous one: arriving
   from the east on a clockwise circle it joins the southern side, heading west (measured on
-  ArduPlane 4.6 SITL: on the line to the centre until 150 m from it, on an 80 m circle
-  60-90 degrees round).
+  ArduPlane 4.6 SITL: on the line to the centre until 115-150 m from it, on an 80 m circle
+  55-90 degrees round).
 - **The goal** (the turns, the time, the altitude) is counted from there. A loiter to an
   altitude changes it on the way (ArduPlane's glide slope to the loiter point, or its climb
   first) as far as the climb or descent rate allows at its speed, and the rest on the
@@ -50,12 +50,13 @@ NO_RADIUS_M = 1.0
 JOIN_RADII = 2.0
 """After a loiter the plane is on the line from the centre to the next waypoint this many
 radii further along it than where it left the circle."""
-CAPTURE_RADII = 1.8
+CAPTURE_RADII = 1.4
 """Heading for a loiter, the plane flies at its centre until this many radii from it, then
 turns onto the circle: ArduPlane's L1 switches from capture to circle when the radial error
 nears ``v Kv / Kx``, its L1 distance (79 m at 22 m/s, NAVL1_PERIOD 15), about a radius
-(measured: it left the line 143-150 m from the centre of an 80 m circle and joined it on
-the tangent from there)."""
+(measured: it left the line 115-150 m from the centre of an 80 m circle and joined it on the
+tangent from there). The latest of those: a plane turning earlier cuts the corner on the
+inside, which the fixed-wing band takes as on its plan; one turning later would overshoot."""
 EXIT_RUN_RADII = 0.5
 """Leaving a loiter, the plane flies on along its tangent this many radii before it turns
 onto the line from the centre (measured: 35-40 m on an 80 m circle)."""

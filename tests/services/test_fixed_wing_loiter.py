@@ -93,10 +93,10 @@ def test_the_plane_joins_on_its_turn_and_leaves_on_the_tangent() -> None:
     # arriving from the east on a clockwise circle: the southern side, heading west
     _, entry = _polar(circle[0])
     capture = next(p for p in plane if p.command == 19)
-    assert not capture.explicit  # on the line to the centre, 1.8 radii from it
-    assert _polar(capture)[0] == pytest.approx(144.0, abs=0.5)
+    assert not capture.explicit  # on the line to the centre, 1.4 radii from it
+    assert _polar(capture)[0] == pytest.approx(112.0, abs=0.5)
     assert math.degrees(_polar(capture)[1]) == pytest.approx(0.0, abs=1.0)
-    tangent_deg = math.degrees(math.acos(80.0 / 144.0))  # joined from there on its turn
+    tangent_deg = math.degrees(math.acos(80.0 / 112.0))  # joined from there on its turn
     assert math.degrees(entry) == pytest.approx(-tangent_deg, abs=0.5)
     e0, n0 = _en(circle[0])
     e1, n1 = _en(circle[1])
@@ -129,7 +129,7 @@ def test_with_param4_1_it_flies_straight_from_where_it_left() -> None:
 def test_a_counter_clockwise_loiter_and_an_item_radius() -> None:
     circle = [p for p in _soak_mission(param3=-1.0) if p.command == 19 and p.explicit]
     _, entry = _polar(circle[0])
-    tangent_deg = math.degrees(math.acos(80.0 / 144.0))
+    tangent_deg = math.degrees(math.acos(80.0 / 112.0))
     assert math.degrees(entry) == pytest.approx(tangent_deg, abs=0.5)  # the northern side
     assert all(_polar(p)[0] == pytest.approx(80.0, abs=0.5) for p in circle)
     circle = [p for p in _soak_mission(param3=150.0) if p.command == 19 and p.explicit]
@@ -163,11 +163,11 @@ def test_the_plan_re_timed_after_the_loiter_goes_through_the_join() -> None:
 
 def test_a_loiter_to_alt_changes_altitude_on_the_way_as_far_as_it_can() -> None:
     """ArduPlane descends on its glide slope to the loiter point (climbs first with
-    FLIGHT_OPTIONS bit 14): 20 m down over the 763 m to the circle (3 m/s at 22 m/s allows
-    104 m), so the circle is flown at 40 m; 240 m up is more than the way allows."""
+    FLIGHT_OPTIONS bit 14): 20 m down over the 745 m to the circle (3 m/s at 22 m/s allows
+    102 m), so the circle is flown at 40 m; 240 m up is more than the way allows."""
     down = [p for p in _soak_mission(loiter=(31, 40.0)) if p.command == 31 and p.explicit]
     assert all(p.alt_amsl_m == pytest.approx(HOME.alt_amsl_m + 40.0) for p in down)
     up = [p for p in _soak_mission(loiter=(31, 300.0)) if p.command == 31 and p.explicit]
-    rise = up[0].alt_amsl_m - (HOME.alt_amsl_m + 60.0)  # 763 m at 5 m/s over 22 m/s: 173 m
-    assert 170.0 < rise < 177.0
+    rise = up[0].alt_amsl_m - (HOME.alt_amsl_m + 60.0)  # 745 m at 5 m/s over 22 m/s: 169 m
+    assert 165.0 < rise < 172.0
     assert up[-1].alt_amsl_m == pytest.approx(HOME.alt_amsl_m + 300.0)
