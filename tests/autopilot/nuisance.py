@@ -27,7 +27,9 @@ link drop was detected. Run it (the autopilots bind fixed ports: a private names
     bash tests/netns.sh .venv/bin/python -m tests.autopilot.nuisance --minutes 30 --speed 1 \
         --json out.json
 
-It prints the JSON report and exits 1 when the verdict fails. ``test_nuisance_soak.py``
+``--vehicles arduplane`` (names of nuisance_fleet.VEHICLES, comma-separated) flies a subset:
+the link drop needs the ArduCopter and the reboot the PX4 quad, so a subset without them
+skips them. It prints the JSON report and exits 1 when the verdict fails. ``test_nuisance_soak.py``
 runs a short one in the suite.
 """
 
