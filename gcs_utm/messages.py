@@ -72,6 +72,7 @@ class VehicleStatus:
     mission_id: int | None = None  # MISSION_CURRENT's opaque mission id, when it sends one
     position: Position | None = None  # the last reported position (GLOBAL_POSITION_INT)
     reboots: int = 0  # reboots seen (time_boot_ms going back): each starts a new pre-flight
+    heading_deg: float | None = None  # GLOBAL_POSITION_INT hdg (yaw, true north), if sent
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -24,7 +24,8 @@ PX4 refuses an item without a position (DO_*) in a global frame (MAV_MISSION_UNS
 reports them in frame 0, stores a NaN param as 0, and keeps of a NAV_WAYPOINT only what its
 packed command holds: ArduCopter the hold time in whole seconds (param1), ArduPlane the
 acceptance and pass-by radii in whole metres up to 255 (param2/param3); of a NAV_LAND it
-keeps the sign of param4 (-1 or 1). An upload is refused with MAV_MISSION_NO_SPACE while the
+keeps the sign of param4 (-1 or 1), of a NAV_LOITER_TIME the sign of param3 (its direction,
+not its radius). An upload is refused with MAV_MISSION_NO_SPACE while the
 host's mission storage is not ready (``MissionHost.storage_ready``: ArduPilot for about 1.5
 simulated seconds after boot).
 
@@ -200,6 +201,8 @@ def ardupilot_stored(item: RawItem, *, fixed_wing: bool) -> RawItem:
         it = replace(it, frame=FRAME_GLOBAL if it.frame == FRAME_GLOBAL_INT else FRAME_GLOBAL_REL)
     if it.command == CMD_LAND:  # only the sign of param4 is kept (deep-stall direction)
         it = replace(it, param4=-1.0 if it.param4 < 0.0 else 1.0)
+    if it.command == CMD_LOITER_TIME:  # the radius is not stored: its sign, the direction
+        it = replace(it, param3=-1.0 if it.param3 < 0.0 else 1.0)
     if it.command == CMD_WAYPOINT:
         if fixed_wing:
             acc = float(min(255, max(0, int(it.param2))))

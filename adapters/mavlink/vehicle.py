@@ -45,6 +45,7 @@ from gcs_utm.ratelog import RateLimitedLog
 _log = logging.getLogger(__name__)
 
 _NAN = float("nan")
+_NO_HEADING = 36000  # GLOBAL_POSITION_INT hdg: 0..35999 cdeg, UINT16_MAX when unknown
 # A reported altitude outside this range (m AMSL) is no altitude: the same plausibility bounds
 # as scenario and configuration input (gcs_utm.validation).
 _MIN_ALT_AMSL_M = -500.0
@@ -86,6 +87,9 @@ class VehicleState:
     mission: list[MissionItem] | None = None
     """The vehicle's mission as last downloaded or read back after an upload (uploads keep
     its landing sequence)."""
+
+    _heading_cdeg: int = _NO_HEADING
+    """GLOBAL_POSITION_INT hdg: the vehicle's heading (a fixed wing's take-off run)."""
 
     def __init__(
         self,
@@ -337,6 +341,7 @@ class VehicleState:
             mission_id=self.mission_id,
             position=self.last_position,
             reboots=self.reboots,
+            heading_deg=None if self._heading_cdeg >= _NO_HEADING else self._heading_cdeg / 100.0,
         )
 
     def hazard(self, kind: ThreatKind, t_s: float, message: str) -> HazardReport:
@@ -377,10 +382,11 @@ class VehicleState:
         """GLOBAL_POSITION_INT -- the fast decoder's named tuple (any tuple of its fields in
         wire order) or a pymavlink message: a position report for tracking."""
         if isinstance(m, tuple):
-            boot_ms, lat_e7, lon_e7, alt_mm, _, vx, vy, vz, _ = m
+            boot_ms, lat_e7, lon_e7, alt_mm, _, vx, vy, vz, hdg = m
         else:
             boot_ms, lat_e7, lon_e7, alt_mm = m.time_boot_ms, m.lat, m.lon, m.alt
-            vx, vy, vz = m.vx, m.vy, m.vz
+            vx, vy, vz, hdg = m.vx, m.vy, m.vz, m.hdg
+        self._heading_cdeg = hdg
         if lat_e7 == 0 and lon_e7 == 0:
             return  # no estimate yet
         self.boot_time(boot_ms, t_s)

@@ -21,13 +21,11 @@ hovers at a loiter. A fixed wing cannot:
   reached 95-99 m out (the model: 32 and 92 m at 22 m/s filed), 5 m above it after, then
   level; a straight line from home to a take-off position 250 m out put it 18-28 m above
   its plan.
-- **NAV_LOITER_TO_ALT** (31) is a circle around its position (radius: the item's, else the
-  vehicle's default loiter radius) flown until the altitude is reached at the climb
-  (descent) rate; **NAV_LOITER_TURNS** (18) that many turns at the item's altitude;
-  **NAV_LOITER_TIME** (19) a circle for that long. Circles are points every 45 degrees
-  (a chord is at most 8 % of the radius inside the arc), clockwise (a negative radius:
-  counter-clockwise, as both autopilots take it), entered at the point nearest the
-  previous one.
+- **NAV_LOITER_TO_ALT** (31) is a circle around its position flown until the altitude is
+  reached at the climb (descent) rate; **NAV_LOITER_TURNS** (18) that many turns at the
+  item's altitude; **NAV_LOITER_TIME** (19) a circle for that long: entered on the plane's
+  turn, left on the tangent to the next waypoint, then back on the line from the centre
+  (:mod:`.fixed_wing_loiter`).
 - a **landing sequence** (DO_LAND_START, its approach waypoints, NAV_LAND) is already a
   descent along the track: its points are kept as they are (PX4 v1.15 SIH glides from the
   approach waypoint straight to the landing point, within 3 m of that line, and touches down
@@ -35,7 +33,8 @@ hovers at a loiter. A fixed wing cannot:
   NAV_LOITER_TO_ALT before NAV_LAND at the circle's point towards the landing point
   (:mod:`.fixed_wing_landing`).
 Every point made from an item keeps the item's mission seq (the plan from the current item
-on includes the whole of a circle being flown).
+on includes the whole of a circle being flown; the point back on the track after a loiter
+has the next item's).
 """
 
 from __future__ import annotations
@@ -46,6 +45,7 @@ from typing import Protocol, Self, TypeVar
 
 from gcs_utm.envelope import FIXED_WING_MIN_SPEED_FACTOR
 from gcs_utm.services.fixed_wing_landing import landing_exit
+from gcs_utm.services.fixed_wing_loiter import STEP_RAD, loiter_points
 
 NAV_LOITER_TURNS = 18
 NAV_LOITER_TIME = 19
@@ -61,8 +61,6 @@ ROLL_FRACTION = 0.35
 HERE_M = 10.0
 """A take-off position this close to where the vehicle starts gives no heading: "here" (the
 launch position a ground station wrote, GNSS noise, a home rounded to 1e-4 deg)."""
-_STEP_RAD = math.pi / 4.0  # circle points every 45 degrees
-_MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
 _M_PER_DEG_LAT = 110_540.0
 _M_PER_DEG_LON = 111_320.0
 
@@ -88,6 +86,8 @@ class Point(Protocol):
     def radius_m(self) -> float: ...
     @property
     def amount(self) -> float: ...
+    @property
+    def exit_xtrack(self) -> bool: ...
     def moved(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> Self: ...
     def synthetic(self) -> Self: ...
 
@@ -118,22 +118,36 @@ def fixed_wing_points(
     loiter_radius_m: float,
     home_deg: tuple[float, float] | None = None,
     loiter_landing: bool = False,
+    takeoff_heading_deg: float | None = None,
+    heads_for_takeoff_position: bool = True,
 ) -> list[P]:
     """``points`` (mission order, AMSL) as a fixed wing flies them (module docstring).
     ``ground_alt_m``: where a take-off starts (the vehicle's home; None: the point before);
     ``home_deg`` (lat, lon): where a take-off with a position of its own starts when no point
     is before it (PX4); ``loiter_landing`` (PX4): a NAV_LAND after a NAV_LOITER_TO_ALT is
-    approached from the circle's point towards it (:mod:`.fixed_wing_landing`)."""
+    approached from the circle's point towards it (:mod:`.fixed_wing_landing`);
+    ``takeoff_heading_deg``: the vehicle's heading when it armed (a take-off without a
+    position climbs out along it; None: towards the next waypoint);
+    ``heads_for_takeoff_position`` False: the autopilot ignores a take-off's position
+    (ArduPlane's ``do_takeoff``)."""
     out: list[P] = []
     for i, p in enumerate(points):
-        if p.command == NAV_TAKEOFF and _here(p, out[-1] if out else None, home_deg):
-            here = _from_start(p, out[-1] if out else None, home_deg)
-            out.extend(_climb_out(here, out[-1] if out else None, points[i + 1 :], ground_alt_m))
+        before = out[-1] if out else None
+        if p.command == NAV_TAKEOFF and (
+            not heads_for_takeoff_position or _here(p, before, home_deg)
+        ):
+            here = _from_start(p, before, home_deg)
+            after = points[i + 1 :]
+            out.extend(_climb_out(here, before, after, ground_alt_m, takeoff_heading_deg))
         elif p.command == NAV_TAKEOFF:
             out.extend(_climb_out_to(p, out[-1] if out else None, home_deg, ground_alt_m))
         elif p.command in LOITER_COMMANDS and out:
             rate = climb_rate_mps if p.alt_amsl_m >= out[-1].alt_amsl_m else descent_rate_mps
-            out.extend(_circle(p, out[-1], rate, loiter_radius_m))
+            # PX4 leaves a landing's loiter towards the landing point (:func:`_landing_exit`),
+            # not on the tangent to the next item
+            to_land = loiter_landing and points[i + 1 : i + 2] and points[i + 1].command == NAV_LAND
+            after = [] if to_land else points[i + 1 :]
+            out.extend(loiter_points(p, out[-1], after, rate, loiter_radius_m))
         elif loiter_landing and p.command == NAV_LAND and i and out:
             out = _descended_before(out, points[i - 1])
             out.extend(_landing_exit(points[i - 1], out[-1], p, loiter_radius_m))
@@ -155,7 +169,7 @@ def _descended_before(out: list[P], loiter: Point) -> list[P]:
     while start > 0 and out[start - 1].seq == loiter.seq:
         start -= 1
     circle = out[start:]
-    if not circle or len(circle) > 1 + round(2.0 * math.pi / _STEP_RAD):
+    if not circle or len(circle) > 2 + round(2.0 * math.pi / STEP_RAD):
         return out  # more than a turn: it orbits down (up) first
     entry = circle[0]
     return [*out[:start], entry.moved(entry.lat_deg, entry.lon_deg, loiter.alt_amsl_m)]
@@ -195,8 +209,9 @@ def _here(p: Point, before: Point | None, home_deg: tuple[float, float] | None) 
 
 
 def _from_start(p: P, before: Point | None, home_deg: tuple[float, float] | None) -> P:
-    """A take-off that is "here" with a position of its own, moved to where the vehicle
-    starts (a modelled point); one without a position as it is."""
+    """A take-off that is "here" with a position of its own (or whose position the autopilot
+    ignores), moved to where the vehicle starts (a modelled point); one without a position
+    as it is."""
     if not p.explicit:
         return p
     start = (before.lat_deg, before.lon_deg) if before is not None else home_deg
@@ -226,19 +241,30 @@ def _climb_out_to(
 
 
 def _climb_out(
-    p: P, before: Point | None, after: Sequence[Point], ground_alt_m: float | None
+    p: P,
+    before: Point | None,
+    after: Sequence[Point],
+    ground_alt_m: float | None,
+    heading_deg: float | None = None,
 ) -> list[P]:
-    """The ground roll's end and the end of the take-off climb: along the heading to the next
-    waypoint with a position of its own; where it is (a vertical climb) without one."""
+    """The ground roll's end and the end of the take-off climb: along ``heading_deg`` (the
+    vehicle's, when it armed), else along the heading to the next waypoint with a position of
+    its own; where it is (a vertical climb) without either."""
     nxt = next((q for q in after if q.explicit), None)
     base = before.alt_amsl_m if before is not None else ground_alt_m
-    if nxt is None or base is None:
+    if base is None or p.alt_amsl_m - base <= 0.0:
         return [p]
     height_m = p.alt_amsl_m - base
-    east, north = _east_north(p, nxt)
-    to_next_m = math.hypot(east, north)
-    if height_m <= 0.0 or to_next_m < 1.0:
+    if heading_deg is not None:
+        east, north = math.sin(math.radians(heading_deg)), math.cos(math.radians(heading_deg))
+        to_next_m = math.inf
+    elif nxt is None:
         return [p]
+    else:
+        east, north = _east_north(p, nxt)
+        to_next_m = math.hypot(east, north)
+        if to_next_m < 1.0:
+            return [p]
     if 1.0 <= p.amount < 89.0:  # the take-off's minimum pitch, degrees
         run_m = height_m / math.tan(math.radians(p.amount))
     else:
@@ -247,35 +273,8 @@ def _climb_out(
         run_m /= TAKEOFF_CLIMB_RATE_MPS
     run_m = min(to_next_m, run_m)
     roll_m = ROLL_FRACTION * run_m
-    ux, uy = east / to_next_m, north / to_next_m
+    unit = math.hypot(east, north)
+    ux, uy = east / unit, north / unit
     lat_r, lon_r = _offset(p, ux * roll_m, uy * roll_m)
     lat, lon = _offset(p, ux * run_m, uy * run_m)
     return [p.moved(lat_r, lon_r, base).synthetic(), p.moved(lat, lon, p.alt_amsl_m)]
-
-
-def _circle(p: P, before: Point, rate: float, default_radius_m: float) -> list[P]:
-    """A loiter item as points on its circle (module docstring)."""
-    radius = p.radius_m if p.radius_m != 0.0 else default_radius_m
-    r = abs(radius)
-    if r < 1.0:
-        return [p]
-    sense = -1.0 if radius > 0.0 else 1.0  # clockwise: the angle (from east) decreases
-    speed = max(p.speed_mps, 0.1)
-    turn_s = 2.0 * math.pi * r / speed
-    if p.command == NAV_LOITER_TO_ALT:
-        turns = abs(p.alt_amsl_m - before.alt_amsl_m) / max(rate, 0.1) / turn_s
-    elif p.command == NAV_LOITER_TIME:
-        turns = max(p.amount, 0.0) / turn_s
-    else:
-        turns = max(p.amount, 0.0)
-    steps = max(1, math.ceil(min(turns, _MAX_TURNS) * 2.0 * math.pi / _STEP_RAD))
-    east, north = _east_north(p, before)
-    start = math.atan2(north, east) if math.hypot(east, north) > 0.0 else 0.0
-    z0 = before.alt_amsl_m if p.command == NAV_LOITER_TO_ALT else p.alt_amsl_m
-    out: list[P] = []
-    for k in range(steps + 1):
-        a = start + sense * k * _STEP_RAD
-        lat, lon = _offset(p, r * math.cos(a), r * math.sin(a))
-        alt = z0 + (p.alt_amsl_m - z0) * k / steps
-        out.append(p.moved(lat, lon, alt))
-    return out

@@ -124,6 +124,7 @@ class NavPoint:
     # a loiter's turns (NAV_LOITER_TURNS) or seconds (NAV_LOITER_TIME); a take-off's pitch (deg)
     amount: float = 0.0
     landing: bool = False  # in the landing sequence (after a DO_LAND_START)
+    exit_xtrack: bool = False  # a loiter's param4 1: the next leg from where it leaves
 
     def moved(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> NavPoint:
         return dataclasses.replace(self, lat_deg=lat_deg, lon_deg=lon_deg, alt_amsl_m=alt_amsl_m)
@@ -178,7 +179,10 @@ def mission_points(
             continue  # a malformed item is skipped, not fatal
         seq = int(getattr(it, "seq", i))
         radius, amount = mission_order.item_params(it, command)
-        out.append(NavPoint(seq, lat, lon, alt, speed, explicit, command, radius, amount, landing))
+        xtrack = command in fw.LOITER_COMMANDS and float(getattr(it, "param4", 0.0)) >= 1.0
+        out.append(
+            NavPoint(seq, lat, lon, alt, speed, explicit, command, radius, amount, landing, xtrack)
+        )
     return out
 
 
@@ -229,7 +233,12 @@ def plan_from_points(
     if not rest:
         return None
     done = list(points[:start])
-    if position is not None and done and _dist_m(position, done[-1]) <= turn_from_m:
+    if (
+        position is not None
+        and done
+        and done[-1].command not in fw.LOITER_COMMANDS  # a circle is left, not turned round
+        and _dist_m(position, done[-1]) <= turn_from_m
+    ):
         rest = [done[-1], *rest]
     elif position is not None:
         rest = _from_nearest_modelled(rest, position)
@@ -321,6 +330,7 @@ class _Vehicle:
     home_from_status: bool = False
     seq: int | None = None
     position: Position | None = None
+    takeoff_heading_deg: float | None = None  # its heading when it armed (a fixed wing's run)
     armed: bool = False
     flying: bool = False  # armed in a mission mode
     downloading: bool = False
@@ -410,6 +420,8 @@ class VehicleOps:
             return
         if s.position is not None:
             v.position = s.position
+        if not v.armed:  # until it arms: the heading of its take-off run
+            v.takeoff_heading_deg = s.heading_deg
         v.total = s.mission_total
         v.mission_id = s.mission_id
         if "rebooted" in changes:
@@ -598,6 +610,8 @@ class VehicleOps:
                 loiter_radius_m=env.turn_radius_m,
                 home_deg=(v.home.lat_deg, v.home.lon_deg) if v.home is not None else None,
                 loiter_landing=v.autopilot is Autopilot.PX4,
+                takeoff_heading_deg=v.takeoff_heading_deg,
+                heads_for_takeoff_position=v.autopilot is not Autopilot.ARDUPILOT,
             )
         if points is None and not v.waiting_logged:
             v.waiting_logged = True

@@ -27,7 +27,9 @@ link drop was detected. Run it (the autopilots bind fixed ports: a private names
     bash tests/netns.sh .venv/bin/python -m tests.autopilot.nuisance --minutes 30 --speed 1 \
         --json out.json
 
-It prints the JSON report and exits 1 when the verdict fails. ``test_nuisance_soak.py``
+``--vehicles arduplane`` (names of nuisance_fleet.VEHICLES, comma-separated) flies a subset:
+the link drop needs the ArduCopter and the reboot the PX4 quad, so a subset without them
+skips them. It prints the JSON report and exits 1 when the verdict fails. ``test_nuisance_soak.py``
 runs a short one in the suite.
 """
 
@@ -48,7 +50,7 @@ from typing import Any
 
 from tests.autopilot.autopilots import REPO, unavailable_reason
 from tests.autopilot.closed_loop import rows
-from tests.autopilot.nuisance_fleet import ORIGIN, VEHICLES, Flyer, TcpCut
+from tests.autopilot.nuisance_fleet import ORIGIN, VEHICLES, Flyer, TcpCut, VehicleDef
 
 CUT_PORT = 15782  # TcpCut's listening port, gcs-utm's link to the ArduCopter
 
@@ -65,6 +67,12 @@ class SoakConfig:
     land_at_end: bool = True
     reboot: bool = True
     kill_serve: bool = True
+    vehicles: tuple[str, ...] = ()  # names (nuisance_fleet.VEHICLES) to fly; () for all
+
+    def fleet(self) -> tuple[VehicleDef, ...]:
+        """The vehicles flown: a subset skips the injections whose vehicle is not in it (the
+        link drop needs the ArduCopter, the reboot the PX4 quad)."""
+        return tuple(v for v in VEHICLES if not self.vehicles or v.name in self.vehicles)
 
     @property
     def length_s(self) -> float:
@@ -98,7 +106,7 @@ class Events:
 
 def _write_config(path: Path, cfg: SoakConfig) -> Path:
     links = ["udpin:127.0.0.1:14550"]
-    for v in VEHICLES:
+    for v in cfg.fleet():
         if v.autopilot == "ardupilot":
             port = CUT_PORT if v.airframe == "copter" else v.serial1_port
             links.append(f"tcp:127.0.0.1:{port}")
@@ -180,16 +188,17 @@ def run_soak(cfg: SoakConfig, workdir: Path) -> dict[str, Any]:
     serve = Serve(workdir, cfg)
     flyers = [
         Flyer(v, workdir, cfg.speed, cfg.rest_s, ev.say, land_before_stop=cfg.land_at_end)
-        for v in VEHICLES
+        for v in cfg.fleet()
     ]
-    copter = next(f for f in flyers if f.v.airframe == "copter")
+    copter = next((f for f in flyers if f.v.airframe == "copter"), None)
     cut: TcpCut | None = None
     threads: list[threading.Thread] = []
     try:
         for f in flyers:
             f.boot()  # one after the other: four booting at once starve each other
             ev.say(f"{f.v.name} ready")
-        cut = TcpCut(CUT_PORT, copter.v.serial1_port)
+        if copter is not None:
+            cut = TcpCut(CUT_PORT, copter.v.serial1_port)
         serve.start()
         for f in flyers:
             t = threading.Thread(target=f.run, name=f.v.name, daemon=True)
@@ -222,22 +231,29 @@ def run_soak(cfg: SoakConfig, workdir: Path) -> dict[str, Any]:
             f.shutdown()
         if cut is not None:
             cut.close()
-    return judge(serve, ev, flyers, cfg, copter.v.sys_id)
+    return judge(serve, ev, flyers, cfg, copter.v.sys_id if copter is not None else None)
 
 
-def _schedule(cfg: SoakConfig, ev: Events, serve: Serve, flyers: list[Flyer], cut: TcpCut) -> None:
+def _schedule(
+    cfg: SoakConfig, ev: Events, serve: Serve, flyers: list[Flyer], cut: TcpCut | None
+) -> None:
     """The injections, at their fractions of the simulated length (see the module)."""
     sim = lambda: (time.monotonic() - ev.t0) * cfg.speed  # noqa: E731
-    copter = next(f for f in flyers if f.v.airframe == "copter")
-    quad = next(f for f in flyers if f.v.airframe == "quad")
+    copter = next((f for f in flyers if f.v.airframe == "copter"), None)
+    quad = next((f for f in flyers if f.v.airframe == "quad"), None)
     pending = {"cut", "reboot", "kill"} - (set() if cfg.reboot else {"reboot"})
     if not cfg.kill_serve:
         pending.discard("kill")
+    if copter is None or cut is None:
+        pending.discard("cut")
+    if quad is None:
+        pending.discard("reboot")
     # past T only for an injection not done yet (the link drop waits for a flying copter)
     while sim() < cfg.length_s or (pending - {"reboot"} and sim() < 1.5 * cfg.length_s):
         if not serve.alive():
             raise RuntimeError("gcs-utm serve exited")
-        if "cut" in pending and sim() >= 0.25 * cfg.length_s and copter.airborne:
+        if "cut" in pending and sim() >= 0.25 * cfg.length_s and copter and copter.airborne:
+            assert cut is not None
             pending.discard("cut")
             before = serve.threat_ids()
             ev.say(f"link drop: {copter.v.name} cut for {cfg.drop_s:.0f} simulated s")
@@ -247,7 +263,7 @@ def _schedule(cfg: SoakConfig, ev: Events, serve: Serve, flyers: list[Flyer], cu
             ev.say(f"link drop: {copter.v.name} restored ({cut.dropped_bytes} bytes dropped)")
             time.sleep(cfg.stale_s / cfg.speed)
             ev.cut_window = (before, serve.threat_ids())
-        if "reboot" in pending and sim() >= 0.4 * cfg.length_s:
+        if "reboot" in pending and sim() >= 0.4 * cfg.length_s and quad is not None:
             pending.discard("reboot")
             quad.reboot_after_landing = True
             ev.say(f"reboot: {quad.v.name} at its next landing")
@@ -263,7 +279,7 @@ def _schedule(cfg: SoakConfig, ev: Events, serve: Serve, flyers: list[Flyer], cu
 
 
 def judge(
-    serve: Serve, ev: Events, flyers: list[Flyer], cfg: SoakConfig, cut_sys_id: int
+    serve: Serve, ev: Events, flyers: list[Flyer], cfg: SoakConfig, cut_sys_id: int | None
 ) -> dict[str, Any]:
     """Every threat in the store, classified (module docstring), and the verdict."""
     op_sys = {}
@@ -292,15 +308,17 @@ def judge(
     false = [t for t in threats if not t["expected"]]
     still_open = [t for t in threats if t["status"] != "closed"]
     drop_seen = any(t["expected"] for t in threats)
-    quad = next(f for f in flyers if f.v.airframe == "quad")
+    quad = next((f for f in flyers if f.v.airframe == "quad"), None)
     problems = [f"{len(false)} false threat(s)"] if false else []
     if still_open:
         problems.append(f"{len(still_open)} threat(s) open at the end")
-    if ev.cut_window is None:
+    if cut_sys_id is None:
+        pass  # no ArduCopter in the fleet: no link drop
+    elif ev.cut_window is None:
         problems.append("the link drop was not injected")
     elif not drop_seen:
         problems.append("the link drop raised no COMMUNICATION_FAILURE")
-    if cfg.reboot and not quad.rebooted_at:
+    if cfg.reboot and quad is not None and not quad.rebooted_at:
         problems.append("the reboot was not injected")
     if cfg.kill_serve and not ev.serve_killed:
         problems.append("serve was not killed")
@@ -328,7 +346,7 @@ def judge(
         "flights": {f.v.name: {"takeoffs": f.takeoffs, "landings": f.flights} for f in flyers},
         "injections": {
             "link_drop": ev.cut_window is not None,
-            "reboot": bool(quad.rebooted_at),
+            "reboot": bool(quad is not None and quad.rebooted_at),
             "serve_kill9": ev.serve_killed,
         },
         "events": ev.log,
@@ -345,7 +363,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--speed", type=float, default=2.0, help="speed factor of every autopilot")
     ap.add_argument("--workdir", type=Path, default=None, help="store, logs (default: a temp dir)")
     ap.add_argument("--json", type=Path, default=None, help="also write the report here")
+    names = [v.name for v in VEHICLES]
+    ap.add_argument(
+        "--vehicles", default="", help=f"comma-separated subset of {','.join(names)} (default all)"
+    )
     args = ap.parse_args(argv)
+    chosen = tuple(n for n in args.vehicles.split(",") if n)
+    unknown = sorted(set(chosen) - set(names))
+    if unknown:
+        ap.error(f"--vehicles: unknown {', '.join(unknown)}; choose from {', '.join(names)}")
     # SIGTERM (and SIGINT, ignored in a background job) stop the soak through its cleanup
     signal.signal(signal.SIGTERM, _interrupt)
     if args.minutes <= 0 or args.speed <= 0:
@@ -354,7 +380,8 @@ def main(argv: list[str] | None = None) -> int:
         args.workdir
         or Path(os.environ.get("GCS_UTM_SITL_ROOT", "/var/tmp")) / f"gcs-utm-nuisance-{os.getpid()}"
     )
-    report = run_soak(SoakConfig(minutes=args.minutes, speed=args.speed), workdir)
+    cfg = SoakConfig(minutes=args.minutes, speed=args.speed, vehicles=chosen)
+    report = run_soak(cfg, workdir)
     report["workdir"] = str(workdir)
     text = json.dumps(report, indent=2)
     print(text)

@@ -41,6 +41,9 @@ from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 from tests.mavlink.conftest import Sink
 
 SPEED = 5.0
+LOITER_SPEED = 3.0
+"""The loiter test's speed factor: Monitoring judges the track's position extrapolated to
+serve's clock; on a circle, the further ahead the straighter (off the circle) it is."""
 AUTO = 10  # ArduPlane's AUTO custom mode
 FILED_MPS = 14.0  # the mission's speed item: a ground speed, which ArduPlane flies past
 CRUISE_ALT_M = 60.0  # above home: a 30 m climb on the first leg from the take-off's 30 m
@@ -90,8 +93,68 @@ def _mission(lat0: float, lon0: float, filed_mps: float | None = None) -> list[o
 def test_arduplane_mission_raises_no_conformance_threat(
     ardupilot: Callable[..., SitlProcess], tmp_path: Path
 ) -> None:
+    lat0, lon0, _ground, _heading = ARDUPILOT_DEFAULT_HOME
+    # simulated about 300 s (5.2 km at 22-24 m/s, take-off and landing); twice for load
+    mission = _mission(lat0, lon0, FILED_MPS)
+    commands = _fly_with_serve(ardupilot, tmp_path, mission, LAND_SEQ, 300.0)
+    assert commands[-3:] == [189, 16, 21], f"landing sequence gone: {commands}"
+
+
+def _loiter_mission(lat0: float, lon0: float) -> list[object]:
+    """Home, NAV_TAKEOFF (15 deg, 30 m), 900 m north climbing to 60 m, a 20 s NAV_LOITER_TIME
+    500 m west at 60 m without a radius (ArduPlane flies WP_LOITER_RAD, 80 m, clockwise, and
+    reads param3 back as 1), DO_LAND_START, the approach to 30 m and NAV_LAND at home."""
+    rel = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+
+    def item(seq: int, cmd: int, east: float, north: float, alt: float, p1: float = 0.0) -> object:
+        lat, lon = offset_deg(lat0, lon0, east, north)
+        return mav.MAVLink_mission_item_int_message(
+            1, 1, seq, rel, cmd, 0, 1, p1, 0.0, 0.0, 0.0, round(lat * 1e7), round(lon * 1e7),
+            alt, 0,
+        )  # fmt: skip
+
+    takeoff = mav.MAVLink_mission_item_int_message(
+        1, 1, 1, rel, mav.MAV_CMD_NAV_TAKEOFF, 0, 1, 15.0, 0, 0, 0, 0, 0, 30.0, 0
+    )
+    return [
+        item(0, mav.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0),
+        takeoff,
+        item(2, mav.MAV_CMD_NAV_WAYPOINT, 0.0, 900.0, CRUISE_ALT_M),
+        item(3, mav.MAV_CMD_NAV_LOITER_TIME, -500.0, 900.0, CRUISE_ALT_M, 20.0),
+        item(4, mav.MAV_CMD_DO_LAND_START, -500.0, 0.0, 0.0),
+        item(5, mav.MAV_CMD_NAV_WAYPOINT, -400.0, -400.0, 30.0),
+        item(6, mav.MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0),
+    ]
+
+
+@pytest.mark.timeout(300)
+def test_arduplane_loiter_and_landing_raise_no_conformance_threat(
+    ardupilot: Callable[..., SitlProcess], tmp_path: Path
+) -> None:
+    """The soak's loiter and landing (issue 31): ArduPlane joins its 80 m circle on its turn,
+    circles 81-96 m from the centre for 20 s and on until it heads for the approach, then
+    converges on the line from the centre and lands. It was filed on a 1 m circle (param3 read
+    back as 1) and opened UAS_IN_CV / UAS_OUT_OV at the loiter; now nothing is raised."""
+    lat0, lon0, _ground, _heading = ARDUPILOT_DEFAULT_HOME
+    # simulated about 200 s (3.9 km at 22-24 m/s, a turn, take-off and landing)
+    mission = _loiter_mission(lat0, lon0)
+    commands = _fly_with_serve(ardupilot, tmp_path, mission, 6, 200.0, speed=LOITER_SPEED)
+    assert commands[-3:] == [189, 16, 21], f"landing sequence gone: {commands}"
+
+
+def _fly_with_serve(
+    ardupilot: Callable[..., SitlProcess],
+    tmp_path: Path,
+    mission: list[object],
+    land_seq: int,
+    flight_s: float,
+    speed: float = SPEED,
+) -> list[int]:
+    """Fly ``mission`` on an ArduPlane beside ``serve --auto-accept`` to touchdown (within
+    twice ``flight_s`` simulated), assert that no conformance threat and no recommendation
+    was raised, and return the mission's commands as the plane has it at the end."""
     lat0, lon0, ground, _heading = ARDUPILOT_DEFAULT_HOME  # heading 0: the runway points north
-    ardupilot(instance=0, vehicle="plane", speed=SPEED)
+    ardupilot(instance=0, vehicle="plane", speed=speed)
     wait_tcp_listening(5760)
     pilot = PilotLink(0, autopilot="ardupilot")
     db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
@@ -103,19 +166,18 @@ def test_arduplane_mission_raises_no_conformance_threat(
         # RTL_AUTOLAND: else "Arm: DO_LAND_START set and ..."; FLIGHT_OPTIONS bit 14
         # (IMMEDIATE_CLIMB_IN_AUTO): climb first to a higher waypoint, not on a glide slope
         pilot.set_params({"RTL_AUTOLAND": 2.0, "FLIGHT_OPTIONS": 16384.0})
-        pilot.upload(_mission(lat0, lon0, FILED_MPS))
+        pilot.upload(mission)
         with log_path.open("wb") as log:
             serve = subprocess.Popen(
                 [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless",
                  "--auto-accept", "--config", str(cfg), "--db", str(db),
-                 "--speed", str(SPEED)],
+                 "--speed", str(speed)],
                 stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             )  # fmt: skip
-        _wait_operations(db, 1, 40.0, serve)
+        _wait_operations(db, 1, 60.0, serve)
         pilot.set_mode(AUTO)
         pilot._arm(60.0)
-        # simulated about 300 s (5.2 km at 22-24 m/s, take-off and landing); twice for load
-        _fly_to_touchdown(pilot, ground, time.monotonic() + 2.0 * 300.0 / SPEED)
+        _fly_to_touchdown(pilot, ground, time.monotonic() + 2.0 * flight_s / speed, land_seq)
         assert serve.poll() is None, "gcs-utm serve exited"
         commands = [int(it.command) for it in _download(pilot)]
     finally:
@@ -129,17 +191,19 @@ def test_arduplane_mission_raises_no_conformance_threat(
     assert not conformance, f"non-conformance on a normal mission: {conformance}\n{tail}"
     recs = rows(db, "SELECT state FROM recommendations")
     assert recs == [], f"recommendations for a plane on its mission: {recs}\n{tail}"
-    assert commands[-3:] == [189, 16, 21], f"landing sequence gone: {commands}"
+    return commands
 
 
-def _fly_to_touchdown(pilot: PilotLink, ground_amsl_m: float, end: float) -> None:
+def _fly_to_touchdown(
+    pilot: PilotLink, ground_amsl_m: float, end: float, land_seq: int = LAND_SEQ
+) -> None:
     """Until the plane has flown to its NAV_LAND and stands on the ground (within 1.5 m of
     its home's altitude, its last four positions within 1 m of each other)."""
     while True:
         assert time.monotonic() < end, f"no touchdown: {pilot.statustexts[-8:]}"
         pilot.request_streams()
         pilot.poll(0.5)
-        landing = any(seq >= LAND_SEQ for _, seq, _ in pilot.mission_current)
+        landing = any(seq >= land_seq for _, seq, _ in pilot.mission_current)
         last = pilot.samples[-4:]
         if not landing or len(last) < 4 or last[-1].alt_amsl_m > ground_amsl_m + 1.5:
             continue

@@ -423,3 +423,14 @@ async def test_home_position_and_mission_changes_reach_the_status(env: Any) -> N
     await _settle()
     assert env.sink.statuses[-1].mission_id is None
     v.close()
+
+
+def test_the_heading_of_global_position_int_is_in_the_status() -> None:
+    """A fixed wing's take-off run is along the heading it armed with (GLOBAL_POSITION_INT
+    hdg, cdeg; UINT16_MAX when the vehicle does not know it)."""
+    st, ev = _clock_state()
+    assert st.status(1000.0).heading_deg is None
+    st.on_global_position((30_000, 473977000, 85456000, 488000, 0, 0, 0, 0, 4500), 1000.0, ev)
+    assert st.status(1000.0).heading_deg == 45.0
+    st.on_global_position((30_100, 473977000, 85456000, 488000, 0, 0, 0, 0, 65535), 1000.1, ev)
+    assert st.status(1000.1).heading_deg is None

@@ -56,8 +56,9 @@ def test_a_px4_landing_pattern_is_filed_along_its_landing_line() -> None:
     the circle), then round it to its south point as part of NAV_LAND, then the landing point:
     the last leg on the line from the loiter's centre to it. A plan from NAV_LAND on starts
     at the modelled point nearest the plane, wherever NAV_LAND became current. Without
-    ``loiter_landing`` (ArduPlane leaves its loiter towards the next waypoint) the circle
-    goes straight to NAV_LAND; a descent of more than a turn keeps its circle."""
+    ``loiter_landing`` (ArduPlane leaves its loiter on the tangent towards the next
+    waypoint) there is no way round to the landing line; a descent of more than a turn
+    keeps its circle."""
     wp = NavPoint(1, *_deg(0.0, 1200.0), 40.0, 15.0, True)
     loiter = NavPoint(2, *_deg(0.0, 600.0), 30.0, 15.0, True, fw.NAV_LOITER_TO_ALT, 80.0)
     land = NavPoint(3, *_deg(0.0, 0.0), 0.0, 15.0, True, fw.NAV_LAND)
@@ -74,14 +75,13 @@ def test_a_px4_landing_pattern_is_filed_along_its_landing_line() -> None:
     assert exits and all(p.seq == 3 and not p.explicit for p in exits)
     assert all(p.alt_amsl_m == pytest.approx(30.0) for p in exits)
     assert _en((exits[-1].lat_deg, exits[-1].lon_deg)) == pytest.approx((0.0, 520.0), abs=0.05)
-    centre = (loiter.lat_deg, loiter.lon_deg)
-    last_circle = (plain[-2].lat_deg, plain[-2].lon_deg)
-    assert _distance_to_line_m(centre, last_circle, (land.lat_deg, land.lon_deg)) > 1.0
+    # ArduPlane leaves on the tangent towards NAV_LAND: not round to the landing line
+    assert all(math.dist(_en((p.lat_deg, p.lon_deg)), (0.0, 520.0)) > 1.0 for p in plain)
     half = exits[len(exits) // 2]
     at = Position(lat_deg=half.lat_deg, lon_deg=half.lon_deg, alt_amsl_m=30.0)
     plan = plan_from_points(px4, OperationId("p"), t_s=0.0, current_seq=3, position=at)
     assert plan is not None  # here (the nearest point), the rest of the circle, landing
     assert len(plan.waypoints) == len(exits) - len(exits) // 2 + 1
-    deep = NavPoint(2, *_deg(0.0, 600.0), -150.0, 15.0, True, fw.NAV_LOITER_TO_ALT, 80.0)
+    deep = NavPoint(2, *_deg(0.0, 600.0), -300.0, 15.0, True, fw.NAV_LOITER_TO_ALT, 80.0)
     orbits = fw.fixed_wing_points([wp, deep, land], loiter_landing=True, **args)  # type: ignore[arg-type]
     assert len([p for p in orbits if p.seq == 2]) > 9  # more than a turn, orbited down

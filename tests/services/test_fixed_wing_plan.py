@@ -168,11 +168,12 @@ def test_loiter_to_alt_is_a_climbing_circle_and_landing_is_flagged() -> None:
         for p in circle
     ]
     assert all(r == pytest.approx(80.0, abs=0.5) for r in radii)
-    # 30 m at 3 m/s = 10 s, one turn (2 pi 80 m at 15 m/s) takes 33.5 s: a third of a turn
-    assert 2 <= len(circle) <= 5
+    # 30 m at 3 m/s: 16 m of it on the 80 m to the circle (3 m/s at 15 m/s), 14 m on it
+    # (4.7 s of a 33.5 s turn: 50 deg), then on round until it heads for the next waypoint
     alts = [p.alt_amsl_m for p in circle]
-    assert alts[0] == pytest.approx(705.0) and alts[-1] == pytest.approx(735.0)
+    assert alts[0] == pytest.approx(721.0) and alts[-1] == pytest.approx(735.0)
     assert alts == sorted(alts)
+    assert alts.index(735.0) == 3  # 50 deg: reached at the 3rd step of 22.5 deg
     landing = [p.seq for p in plane if p.landing]
     assert landing == [6, 7]  # the approach and NAV_LAND (DO_LAND_START has no point)
     plan = plan_from_points(plane, OperationId("p"), t_s=0.0)

@@ -57,6 +57,23 @@ def test_ardupilot_copter_and_plane_stored_forms() -> None:
     assert (got[1].param1, got[1].param2, got[1].param4) == (0.0, 3.0, 0.0)
 
 
+def test_ardupilot_keeps_only_the_direction_of_a_loiter_time_radius() -> None:
+    """ArduPilot reads NAV_LOITER_TIME back with param3 = +1 or -1 (measured on ArduPlane
+    4.6): the radius flown is WP_LOITER_RAD (gcs_utm takes a radius of 1 m as none)."""
+    x, y = round(HOME[0] * 1e7), round(HOME[1] * 1e7)
+    loiters = [
+        mp.RawItem(k + 1, mp.FRAME_GLOBAL_REL, mp.CMD_LOITER_TIME, 0, 1, 20.0, 0.0, r, 0.0, x, y,
+                   60.0)
+        for k, r in enumerate((0.0, 150.0, -150.0))
+    ]  # fmt: skip
+    plane = make(autopilot="ardupilot", kind="fixed_wing")
+    plane.accept_mission([wp(0, 0.0, 488.0), *loiters], None)
+    assert [it.param3 for it in plane.mission_items()[1:]] == [1.0, 1.0, -1.0]
+    px4 = make(kind="fixed_wing")
+    px4.accept_mission(loiters, None)
+    assert [it.param3 for it in px4.mission_items()] == [0.0, 150.0, -150.0]
+
+
 def test_ardupilot_restart_on_a_do_item_fails_until_set_current() -> None:
     v = make(autopilot="ardupilot", home_lat_deg=HOME[0], home_lon_deg=HOME[1])
     v.accept_mission([wp(0, 0.0, 488.0), wp(1, 0.001, 500.0), wp(2, 0.002, 500.0)], None)

@@ -21,6 +21,7 @@ A plan is a polyline; a fixed wing does not fly one (docs/monitoring.md, "Fixed 
   vertically a leg is the band between the straight line and "climb first": from the leg's
   start at the steepest gradient of the envelope (climb rate over minimum speed, descent
   rate over minimum speed for a descent) until the leg's end altitude.
+- **Loiters.** A circle of its plan is the ring it flies round it (loiter_band.py).
 The band is used only for vehicles that cannot hover; a multirotor flies its polyline.
 """
 
@@ -34,6 +35,7 @@ import numpy as np
 
 from gcs_utm.core.monitoring.checks import PlanTable
 from gcs_utm.core.monitoring.geometry import FloatArray
+from gcs_utm.core.monitoring.loiter_band import loiter_distance
 from gcs_utm.model import Operation
 
 _MIN_LEG_M = 0.5  # shorter horizontal legs are climbs on the spot or padding: no band
@@ -72,7 +74,8 @@ def band_distance(
     radius, climb, descent = params
     legs = _leg_distance(table.points, pos, window, climb, descent)
     corners = _corner_distance(table.points, pos, window, radius)
-    out: FloatArray = np.where(radius > 0.0, np.minimum(legs, corners), np.inf)
+    rings = loiter_distance(table.points, pos, window)  # its loiters' circles (loiter_band)
+    out: FloatArray = np.where(radius > 0.0, np.minimum(np.minimum(legs, corners), rings), np.inf)
     return out
 
 

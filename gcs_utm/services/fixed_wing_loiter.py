@@ -1,0 +1,196 @@
+"""A fixed wing's loiter item as the points it flies (docs/autopilots.md, "Fixed wings"). Pure.
+
+Used by :mod:`.fixed_wing_plan` for NAV_LOITER_TURNS, NAV_LOITER_TIME and NAV_LOITER_TO_ALT.
+As ArduPlane flies them (ArduPlane ``commands_logic.cpp``, ``navigation.cpp``; PX4's
+fixed-wing loiters alike):
+
+- **Radius**: the item's, else the vehicle's default loiter radius (ArduPlane WP_LOITER_RAD,
+  PX4 NAV_LOITER_RAD). A radius of 1 m or less is no radius: ArduPlane's ``update_loiter``
+  takes WP_LOITER_RAD for it, and ArduPilot reads a NAV_LOITER_TIME back with param3 = +1 or
+  -1, the direction only (the soak's ArduPlane was filed circling a 1 m circle). The sign
+  gives the direction: clockwise unless negative.
+- **Entry on the turn**: the plane flies at the centre until about 1.4 radii from it
+  (:data:`CAPTURE_RADII`), then the L1 controller turns it onto the circle, which it joins
+  on the tangent in its turn direction, not at the point nearest the previous one: arriving
+  from the east on a clockwise circle it joins the southern side, heading west (measured on
+  ArduPlane 4.6 SITL: on the line to the centre until 115-150 m from it, on an 80 m circle
+  55-90 degrees round).
+- **The goal** (the turns, the time, the altitude) is counted from there. A loiter to an
+  altitude changes it on the way (ArduPlane's glide slope to the loiter point, or its climb
+  first) as far as the climb or descent rate allows at its speed, and the rest on the
+  circle. Then the plane **goes on round the circle until it heads for the next
+  waypoint** (``verify_loiter_heading``) and leaves on the tangent towards it.
+- **Exit track**: with the item's param4 0 (the default) the next leg is tracked from the
+  loiter's centre (ArduPlane ``loiter_xtrack``, PX4 ``loiter_exit_xtrack``): the plane
+  runs on along its tangent for about half a radius, then converges on the line from the
+  centre to the next waypoint, within about two radii of the exit (measured: 155-210 m
+  after leaving an 80 m circle at 22 m/s, NAVL1_PERIOD 15); a point on the tangent and a
+  point on that line model it. With param4 1 it flies straight from where it left.
+Circle points are every 22.5 degrees (a chord is at most 2 % of the radius inside the arc).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, TypeVar
+
+if TYPE_CHECKING:
+    from gcs_utm.services.fixed_wing_plan import Point
+
+P = TypeVar("P", bound="Point")
+
+NAV_LOITER_TURNS = 18
+NAV_LOITER_TIME = 19
+NAV_TAKEOFF = 22
+NAV_LOITER_TO_ALT = 31
+LOITERS = frozenset({NAV_LOITER_TURNS, NAV_LOITER_TIME, NAV_LOITER_TO_ALT})
+NO_RADIUS_M = 1.0
+"""A loiter radius this small or smaller is the vehicle's default (ArduPlane update_loiter)."""
+JOIN_RADII = 2.0
+"""After a loiter the plane is on the line from the centre to the next waypoint this many
+radii further along it than where it left the circle."""
+CAPTURE_RADII = 1.4
+"""Heading for a loiter, the plane flies at its centre until this many radii from it, then
+turns onto the circle: ArduPlane's L1 switches from capture to circle when the radial error
+nears ``v Kv / Kx``, its L1 distance (79 m at 22 m/s, NAVL1_PERIOD 15), about a radius
+(measured: it left the line 115-150 m from the centre of an 80 m circle and joined it on the
+tangent from there). The latest of those: a plane turning earlier cuts the corner on the
+inside, which the fixed-wing band takes as on its plan; one turning later would overshoot."""
+EXIT_RUN_RADII = 0.5
+"""Leaving a loiter, the plane flies on along its tangent this many radii before it turns
+onto the line from the centre (measured: 35-40 m on an 80 m circle)."""
+STEP_RAD = math.pi / 8.0
+MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
+_M_PER_DEG_LAT = 110_540.0
+_M_PER_DEG_LON = 111_320.0
+
+
+def _en(centre: Point, q: Point) -> tuple[float, float]:
+    """q relative to centre, metres east and north (flat earth: a loiter is small)."""
+    k = math.cos(math.radians(centre.lat_deg))
+    return (
+        (q.lon_deg - centre.lon_deg) * _M_PER_DEG_LON * k,
+        (q.lat_deg - centre.lat_deg) * _M_PER_DEG_LAT,
+    )
+
+
+def _at(centre: P, east_m: float, north_m: float, alt_amsl_m: float, like: P) -> P:
+    k = math.cos(math.radians(centre.lat_deg))
+    lat = centre.lat_deg + north_m / _M_PER_DEG_LAT
+    lon = centre.lon_deg + east_m / (_M_PER_DEG_LON * k)
+    return like.moved(lat, lon, alt_amsl_m)
+
+
+def radius_m(p: Point, default_radius_m: float) -> float:
+    """The signed radius flown (> 0 clockwise): the item's, else the default with its sign."""
+    if abs(p.radius_m) <= NO_RADIUS_M:
+        return -default_radius_m if p.radius_m < 0.0 else default_radius_m
+    return p.radius_m
+
+
+def _tangent_angle(east_m: float, north_m: float, r: float, sense: float, leaving: bool) -> float:
+    """The angle (from east) of the circle's point where a plane turning ``sense`` (-1
+    clockwise) joins it coming from (``leaving``: leaves it heading for) the point
+    ``east_m, north_m`` off the centre; the nearest point when that is inside the circle."""
+    phi = math.atan2(north_m, east_m)
+    d = math.hypot(east_m, north_m)
+    if d <= r:
+        return phi
+    half = math.acos(r / d)
+    return phi - sense * half if leaving else phi + sense * half
+
+
+def loiter_points(
+    p: P,
+    before: Point,
+    after: Sequence[P],
+    rate_mps: float,
+    default_radius_m: float,
+) -> list[P]:
+    """The loiter item ``p`` flown after ``before``, ``after`` the points that follow it: its
+    circle from the entry to the exit, then (exit track from the centre) the point where the
+    plane is back on the line to the next waypoint (module docstring)."""
+    radius = radius_m(p, default_radius_m)
+    r = abs(radius)
+    if r < NO_RADIUS_M:
+        return [p]
+    sense = -1.0 if radius > 0.0 else 1.0  # clockwise: the angle (from east) decreases
+    capture = _capture(p, before, r)
+    start = _tangent_angle(*_en(p, capture or before), r, sense, leaving=False)
+    z0, turns = _goal(p, before, (r * math.cos(start), r * math.sin(start)), r, rate_mps)
+    goal_rad = min(turns, MAX_TURNS) * 2.0 * math.pi
+    nxt = next((q for q in after if q.explicit), None)
+    sweep = goal_rad
+    if nxt is not None and math.hypot(*_en(p, nxt)) > r:
+        exit_a = _tangent_angle(*_en(p, nxt), r, sense, leaving=True)
+        sweep += ((exit_a - (start + sense * goal_rad)) * sense) % (2.0 * math.pi)
+    steps = max(1, math.ceil(sweep / STEP_RAD - 1e-9))
+    out: list[P] = [] if capture is None else [capture]
+    for k in range(steps + 1):
+        swept = min(k * STEP_RAD, sweep)
+        a = start + sense * swept
+        frac = min(swept / goal_rad, 1.0) if goal_rad > 0.0 else 1.0
+        alt = z0 + (p.alt_amsl_m - z0) * frac
+        out.append(_at(p, r * math.cos(a), r * math.sin(a), alt, p))
+    if nxt is not None and nxt is after[0] and nxt.command not in LOITERS | {NAV_TAKEOFF}:
+        out.extend(_join(p, out[-1], nxt, r))
+    return out
+
+
+def _capture(p: P, before: Point, r: float) -> P | None:
+    """Where the plane heading for the loiter's centre turns onto the circle:
+    :data:`CAPTURE_RADII` radii from the centre on the line from ``before`` (None when
+    ``before`` is nearer). A modelled point of the loiter's item, at the altitude there."""
+    be, bn = _en(p, before)
+    d = math.hypot(be, bn)
+    if d <= CAPTURE_RADII * r:
+        return None
+    k = CAPTURE_RADII * r / d
+    alt = before.alt_amsl_m
+    if p.command == NAV_LOITER_TO_ALT:  # it descends (climbs) on the way: not above either
+        alt = p.alt_amsl_m + (before.alt_amsl_m - p.alt_amsl_m) * k
+    return _at(p, be * k, bn * k, alt, p).synthetic()
+
+
+def _goal(
+    p: Point, before: Point, entry_m: tuple[float, float], r: float, rate_mps: float
+) -> tuple[float, float]:
+    """The altitude at the circle's entry (``entry_m`` east, north of the centre) and the
+    turns of the goal on a circle of radius ``r`` (module docstring)."""
+    turn_s = 2.0 * math.pi * r / max(p.speed_mps, 0.1)
+    if p.command == NAV_LOITER_TIME:
+        return p.alt_amsl_m, max(p.amount, 0.0) / turn_s
+    if p.command != NAV_LOITER_TO_ALT:
+        return p.alt_amsl_m, max(p.amount, 0.0)
+    # on the way as far as the rate allows at its speed, the rest on the circle
+    be, bn = _en(p, before)
+    leg_m = math.hypot(be - entry_m[0], bn - entry_m[1])
+    dz = p.alt_amsl_m - before.alt_amsl_m
+    reach_m = leg_m * max(rate_mps, 0.1) / max(p.speed_mps, 0.1)
+    z0 = before.alt_amsl_m + math.copysign(min(abs(dz), reach_m), dz)
+    return z0, abs(p.alt_amsl_m - z0) / max(rate_mps, 0.1) / turn_s
+
+
+def _join(p: P, left: P, nxt: P, r: float) -> list[P]:
+    """The point on the line from the loiter's centre to ``nxt`` where the plane that left
+    the circle at ``left`` is back on it (none with param4 1, or a leg too short)."""
+    if p.exit_xtrack:
+        return []
+    ne, nn = _en(p, nxt)
+    length = math.hypot(ne, nn)
+    if length <= 0.0:
+        return []
+    ue, un = ne / length, nn / length
+    le, ln = _en(p, left)
+    s = le * ue + ln * un + JOIN_RADII * r
+    if s >= length - r:
+        return []
+    alt = p.alt_amsl_m + (nxt.alt_amsl_m - p.alt_amsl_m) * s / length
+    # on along the tangent (towards the next waypoint) first
+    te, tn = ne - le, nn - ln
+    run = EXIT_RUN_RADII * r / max(math.hypot(te, tn), 1e-9)
+    return [
+        _at(p, le + te * run, ln + tn * run, left.alt_amsl_m, nxt).synthetic(),
+        _at(p, ue * s, un * s, alt, nxt).synthetic(),
+    ]
