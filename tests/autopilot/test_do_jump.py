@@ -5,6 +5,7 @@ The mission (uploaded after discovery, another ground station's job; here the hu
 flies A and B, jumps back to A twice (DO_JUMP param2 = 2 repeats) and ends at C. PX4 accepts it
 (verified by readback); the operation filed from it passes A and B three times each, then C,
 in time order. The ground service's receive stack of ``test_vehicle_time.py`` on PX4's clock.
+The upload sets PX4's current item with one MISSION_SET_CURRENT (it was ~16 in 0.45 s).
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ from tests.autopilot.test_vehicle_time import (
 )
 
 DO_JUMP = 177
+MISSION_SET_CURRENT = 41
+GCS_SYS_ID = 255  # [mavlink] gcs_sys_id
 SPEED = 8.0
 REL_ALT_M = 25.0
 LAT0, LON0, GROUND_M = PX4_DEFAULT_HOME
@@ -59,6 +62,14 @@ def _mission() -> list[MissionItem]:
     ]  # fmt: skip
 
 
+def _set_current(frame: bytes) -> list[int]:
+    """[1] when ``frame`` is a MAVLink 2 MISSION_SET_CURRENT we sent, else [] (the tap also
+    sees what PX4 sends: its system id is not ours)."""
+    if len(frame) < 10 or frame[0] != 0xFD or frame[5] != GCS_SYS_ID:
+        return []
+    return [1] if int.from_bytes(frame[7:10], "little") == MISSION_SET_CURRENT else []
+
+
 @pytest.mark.timeout(180)
 async def test_px4_mission_with_a_do_jump_loop_is_filed_as_flown(
     px4: Callable[..., SitlProcess],
@@ -69,8 +80,14 @@ async def test_px4_mission_with_a_do_jump_loop_is_filed_as_flown(
         await until(lambda: s.usm.vehicle_ops.counters["downloads"] >= 1, 10.0, "no download")
         await s.usm.drain()
         assert s.op() is None  # no mission yet
+        sent: list[int] = []
+        s.hub.raw_tap = lambda _link, frame, _t: sent.extend(_set_current(frame))
         res = await s.hub.upload_items(SysId(1), _mission(), set_mission_mode=False)
+        s.hub.raw_tap = None
         assert res.ok and res.verified, res  # PX4 took the loop as it is
+        # one MISSION_SET_CURRENT; a second only if PX4's MISSION_CURRENT took longer than
+        # the command timeout (0.5 s)
+        assert 1 <= len(sent) <= 2, sent
         await until(s.op, 30.0, "no operation filed from the mission with a loop")
         op = s.op()
         assert op is not None
