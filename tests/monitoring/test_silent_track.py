@@ -23,6 +23,8 @@ from gcs_utm.model import (
     OperationId,
     Threat,
     ThreatKind,
+    Track,
+    TrackId,
 )
 from tests.tracking.tracking_helpers import FRAME, T0, meas, new_tracker, operation, plan_from_local
 
@@ -143,3 +145,33 @@ def test_silent_track_back_off_its_plan_is_judged_from_the_real_position() -> No
     assert conf.kind is ThreatKind.UAS_OUT_OV and conf.uas_ids == ("A",)
     assert conf.closest_approach_m is not None
     assert np.isclose(conf.closest_approach_m, 40.0, atol=3.0)
+
+
+def test_an_open_conformance_threat_is_not_escalated_from_a_silent_track() -> None:
+    """A UAS_IN_CV threat open on real positions stays UAS_IN_CV while the track is only
+    dead-reckoned (further off, outside the volume); measured there, it is escalated."""
+    (op,) = [o for o in _ops() if o.id == "A"]
+    mon = Monitor(FRAME, MonitoringConfig())
+
+    def cycle(t_s: float, north_m: float, measured_t_s: float) -> list[Threat]:
+        lat, lon = FRAME.point_to_wgs84(50.0, north_m)
+        track = Track(
+            id=TrackId("sysid:1"), t_s=t_s, lat_deg=lat, lon_deg=lon, alt_amsl_m=ALT_M,
+            east_m=50.0, north_m=north_m, vel_enu_mps=(SPEED_MPS, 0.0, 0.0),
+            position_sigma_m=1.0, cooperative=True, operation_id=op.id,
+            measured_t_s=None if measured_t_s == t_s else measured_t_s,
+        )  # fmt: skip
+        snap = AirspaceSnapshot(
+            t_s=t_s, operations={op.id: op}, tracks={track.id: track}, geofences=()
+        )
+        return _conformance(mon.cycle(snap))
+
+    # on the first leg (y = 0) at T0 + 5: 15 m off is inside the volume (20 m), beyond 10 m
+    (opened,) = cycle(T0 + 5, 15.0, T0 + 5)
+    assert opened.kind is ThreatKind.UAS_IN_CV
+    # dead-reckoned 30 m off, 2 s after the last position: no escalation, no update
+    assert cycle(T0 + 7, 30.0, T0 + 5) == []
+    assert [t.kind for t in _conformance(mon.active())] == [ThreatKind.UAS_IN_CV]
+    # measured 30 m off: escalated
+    (escalated,) = cycle(T0 + 8, 30.0, T0 + 8)
+    assert escalated.kind is ThreatKind.UAS_OUT_OV and escalated.id == opened.id
