@@ -480,6 +480,9 @@ class Track:
     stale: bool = False
     updates: int = 0
     next_waypoint: int | None = None
+    # the last accepted measurement's time when ``t_s`` is later (a track propagated to a
+    # snapshot's time: dead-reckoned for ``t_s - measured_t_s``); None: measured at ``t_s``
+    measured_t_s: float | None = None
     # set on the snapshots the views, MQTT and the store get (adapters/remoteid/tracks.py),
     # never by the tracker
     remote_id: RemoteIdentity | None = None

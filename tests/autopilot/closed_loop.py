@@ -12,9 +12,13 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from gcs_utm.geo import haversine_m
+from gcs_utm.model import FlightPlan
+from gcs_utm.store import Store
 from tests.autopilot.pilot import PilotLink, Sample, local_m, mission_items, offset_deg
 
 MIN_H_M, MIN_V_M = 50.0, 15.0  # config/default.toml separation minima
+FLOOR_M = 10.0  # [deconfliction] min_height_above_home_m
 
 
 @dataclass(frozen=True)
@@ -46,6 +50,7 @@ class Outcome:
     closest_h_m: float
     closest_v_m: float
     log: str
+    below_floor: list[str]
 
     @property
     def flown_loss(self) -> bool:
@@ -176,7 +181,45 @@ def fly(
         closest_h_m=dh,
         closest_v_m=dv,
         log=log_path.read_text(errors="replace"),
+        below_floor=below_floor(db),
     )
+
+
+def _from_vehicle(plan: FlightPlan) -> bool:
+    """Whether a stored plan version was filed from the vehicle's mission (vehicle_ops.py)."""
+    return plan.reason.startswith(("from the vehicle's mission", "re-timed"))
+
+
+def below_floor(db: Path) -> list[str]:
+    """Waypoints of the plans the UTM generated (every recommendation's alternatives) lower
+    than FLOOR_M above the operation's home (its home at arming), other than the vehicle's own
+    (its position when planned, any waypoint of a plan filed from its mission: its take-off
+    point on the ground): none may be (issue 31)."""
+    out: list[str] = []
+    with Store(db) as store:
+        ops = {o.id: o for o in store.load_operations()}
+        recs = store.load_recommendations(latest_only=False)
+        own = {
+            # the versions filed from the vehicle's mission (vehicle_ops.py), re-timed ones too
+            o: [w for p in store.load_plans(o) if _from_vehicle(p) for w in p.waypoints]
+            for o in ops
+        }
+    for rec in recs:
+        op = ops.get(rec.operation_id)
+        if op is None or op.home is None:
+            continue
+        floor_m = op.home.alt_amsl_m + FLOOR_M
+        for alt in (*rec.alternatives, *((rec.selected,) if rec.selected else ())):
+            # the first waypoint is where the vehicle was when planned: not generated
+            for w in alt.plan.waypoints[1:] if alt.plan else ():
+                mine = any(
+                    haversine_m(w.lat_deg, w.lon_deg, v.lat_deg, v.lon_deg) < 1.0
+                    and abs(w.alt_amsl_m - v.alt_amsl_m) < 1.0
+                    for v in own[op.id]
+                )
+                if not mine and w.alt_amsl_m < floor_m - 0.01:
+                    out.append(f"{rec.id} {alt.maneuver}: {w} below {floor_m:.2f} m")
+    return out
 
 
 def _follow(pilots: list[PilotLink], crossing: Crossing, timeout_s: float) -> None:

@@ -48,3 +48,5 @@ def test_crossing_arducopter_pair_is_resolved_and_flown(
     assert "applied" in out.recommendation_states, f"{out.recommendation_states}\n{tail}"
     assert out.mission_totals_after != out.mission_totals_before, "no copter flies a new mission"
     assert not out.flown_loss, f"flown {out.closest_h_m:.1f} m / {out.closest_v_m:.1f} m\n{tail}"
+    # no generated waypoint below the floor above the home at arming
+    assert out.below_floor == [], out.below_floor

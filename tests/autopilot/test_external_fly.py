@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from gcs_utm.core.monitoring.loss import separation_ratio
 from tests.autopilot.autopilots import PX4_DEFAULT_HOME, SitlProcess
 from tests.autopilot.fly import FlyOp, closest_pass_m, run_fly, write_scenario
 from tests.autopilot.pilot import local_m, offset_deg
@@ -56,3 +57,17 @@ def test_two_px4_quads_fly_their_plans(px4: Callable[..., SitlProcess], tmp_path
             assert miss < WAYPOINT_TOLERANCE_M, (
                 f"{op.uas}: no track passes waypoint ({e}, {n}, {a} AGL): {miss:.1f} m\n{log}"
             )
+    # The report judges the pair once, on its effective minima (max(50, 10 + 10) m
+    # horizontal, max(15, 10 + 10) m vertical), printed with the verdict and the distances at
+    # the instant of the closest normalised approach, the one that decides it (issue 31).
+    (pair,) = report["separation"]
+    assert (pair["minimum_horizontal_m"], pair["minimum_vertical_m"]) == (50.0, 20.0), pair
+    h_m, v_m = pair["horizontal_at_closest_m"], pair["vertical_at_closest_m"]
+    ratio = float(separation_ratio(h_m, v_m, 50.0, 20.0, spherical=False))
+    assert ratio == pytest.approx(pair["min_ratio"], abs=0.01), pair
+    assert not pair["loss_of_separation"] and pair["min_ratio"] > 1.0, pair
+    line = (
+        f"separation UAS1-UAS2 (minima 50 m horizontal / 20 m vertical): closest at "
+        f"{h_m} m horizontal, {v_m} m vertical: kept"
+    )
+    assert line in log, log

@@ -26,6 +26,7 @@ from gcs_utm.model import (
     Operation,
     OperationId,
     SysId,
+    Threat,
     ThreatKind,
     ThreatStatus,
     TrackId,
@@ -195,6 +196,7 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
         # restarted, the copter is on the ground: its link is back, or it landed/disarmed
         assert any(_cause_gone(str(r)) for r in reasons), reasons
         assert s.load_geofences(active_only=True) == []
+        assert _conformance_kinds(s.load_threats()) == []
 
 
 @pytest.mark.timeout(240)
@@ -274,6 +276,13 @@ async def test_serve_closes_the_link_loss_of_a_restarted_px4(
         assert rows and all(t.status is ThreatStatus.CLOSED for t in rows)
         closed_by = [t.message for t in rows]
         assert all(_cause_gone(m) for m in closed_by), closed_by
+        # the silent, dead-reckoned track raised no conformance alarm around the drop
+        assert _conformance_kinds(s.load_threats()) == []
+
+
+def _conformance_kinds(threats: list[Threat]) -> list[ThreatKind]:
+    """Conformance threats among ``threats`` (a silent track is no conformance evidence)."""
+    return [t.kind for t in threats if t.kind in (ThreatKind.UAS_IN_CV, ThreatKind.UAS_OUT_OV)]
 
 
 def _cause_gone(reason: str) -> bool:

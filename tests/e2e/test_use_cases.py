@@ -173,3 +173,6 @@ def test_a_link_loss_that_ends_closes_and_its_fence_stops_rerouting(tmp_path: Pa
         if r["threat_kind"].startswith("GEOFENCE") and r["created_at_s"] > closed_at
     ]
     assert late == []
+    # the silent track (dead-reckoned for 15 s) raised no conformance alarm
+    conformance = [t for t in report["threats"] if t["kind"] in ("UAS_IN_CV", "UAS_OUT_OV")]
+    assert conformance == [], conformance

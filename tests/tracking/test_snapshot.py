@@ -24,7 +24,7 @@ from gcs_utm.model import Icao24, MeasurementSource, OperationId, Track, TrackId
 FIELDS = [
     "id", "t_s", "lat_deg", "lon_deg", "alt_amsl_m", "east_m", "north_m", "vel_enu_mps",
     "position_sigma_m", "cooperative", "operation_id", "icao24", "stale", "updates",
-    "next_waypoint",
+    "next_waypoint", "measured_t_s",
 ]  # fmt: skip
 
 
@@ -72,6 +72,7 @@ def _reference_tracks(tr: Tracker, t_s: float) -> dict[TrackId, Track]:
             stale=bool(tr._stale[i]),
             updates=int(tr._updates[i]),
             next_waypoint=wp,
+            measured_t_s=None if tr._t[i] == t_s else float(tr._t[i]),
         )
     return out
 
@@ -203,6 +204,7 @@ def _columns(rng: np.random.Generator, n: int) -> dict[str, list[Any]]:
         "stale": (rng.random(n) < 0.5).tolist(),
         "updates": rng.integers(0, 100, n).tolist(),
         "next_waypoint": [i % 7 if i % 4 else None for i in range(n)],
+        "measured_t_s": [float(i) if i % 2 else None for i in range(n)],
     }
 
 

@@ -86,6 +86,14 @@ class MonitoringConfig:
         min=0.0,
         unit="s",
     )
+    conformance_max_track_age_s: float = setting(
+        1.5,
+        "conformance is judged only from a track measured at most this long ago: a silent "
+        "track's dead-reckoned position neither raises, escalates nor closes a conformance "
+        "threat (past [tracking] stale_after_s the link-loss threat is raised instead)",
+        min=0.0,
+        unit="s",
+    )
     open_cycles: int = setting(
         1, "consecutive cycles a condition must hold before a threat opens", min=1, max=100
     )

@@ -197,7 +197,11 @@ class Monitor:
         ground = snapshot.grounded
         known = np.fromiter((o in ops and o not in ground for o in op_ids), bool, len(op_ids))
         usable = known & cols.cooperative
-        fresh = np.flatnonzero(usable & ~cols.stale)
+        # Conformance only from a track measured recently: a silent track's dead-reckoned
+        # position is a prediction, no evidence (past the staleness limit the link-loss
+        # threat is raised instead). Prediction keeps the silent track as traffic.
+        measured = (cols.t_s - cols.measured_t_s) <= self.config.conformance_max_track_age_s
+        fresh = np.flatnonzero(usable & ~cols.stale & measured)
         self._conformance(snapshot, cols, fresh, ev)
         pred = snapshot.prediction
         if pred is None or len(pred.track_ids) == 0:

@@ -572,7 +572,7 @@ class Tracker:
             op_ids = tuple(self._op_ids[:n])
             icao = tuple(self._icao[:n])
             coop, stale = self._coop[:n].copy(), self._stale[:n].copy()
-            updates = self._updates[:n].copy()
+            updates, measured = self._updates[:n].copy(), self._t[:n].copy()
         else:
             n = len(sel)
             rows_t = np.full(n, t_s) if t_s is not None else self._t[sel]
@@ -581,6 +581,7 @@ class Tracker:
             op_ids = tuple(self._op_ids[i] for i in at)
             icao = tuple(self._icao[i] for i in at)
             coop, stale, updates = self._coop[sel], self._stale[sel], self._updates[sel]
+            measured = self._t[sel]
         plan_rows, wp, _, _ = self._plan_state(pos, rows_t, sel)
         next_wp = np.full(n, -1, np.intp)
         next_wp[plan_rows] = wp
@@ -597,6 +598,7 @@ class Tracker:
             operation_ids=op_ids,
             icao24=icao,
             next_waypoint=next_wp,
+            measured_t_s=measured,
         )
 
     def tracks(self) -> dict[TrackId, Track]:

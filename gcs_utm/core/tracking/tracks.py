@@ -25,7 +25,7 @@ from gcs_utm.model import Icao24, OperationId, Track, TrackId, slot_setters
 _TRACK_FIELDS = (
     "id", "t_s", "lat_deg", "lon_deg", "alt_amsl_m", "east_m", "north_m", "vel_enu_mps",
     "position_sigma_m", "cooperative", "operation_id", "icao24", "stale", "updates",
-    "next_waypoint",
+    "next_waypoint", "measured_t_s",
 )  # fmt: skip
 # the tracker has no Remote ID: the field is set to None (adapters/remoteid/tracks.py fills it)
 _SETTERS = slot_setters(Track, (*_TRACK_FIELDS, "remote_id"))
@@ -65,7 +65,8 @@ class TrackColumns:
     Python object per track. Copies, not views of the tracker: a later ingest changes nothing
     here. ``t_s`` (N,) each row's time (the snapshot time when propagated); ``pos`` (N, 3)
     east_m, north_m, alt_amsl_m; ``vel`` (N, 3) east, north, up m/s; ``position_sigma_m``
-    (N,); ``next_waypoint`` (N,) -1 where none."""
+    (N,); ``next_waypoint`` (N,) -1 where none; ``measured_t_s`` (N,) each row's last accepted
+    measurement (its state time: ``t_s - measured_t_s`` is how long it was dead-reckoned)."""
 
     frame: LocalFrame
     ids: tuple[TrackId, ...]
@@ -79,6 +80,7 @@ class TrackColumns:
     operation_ids: tuple[OperationId | None, ...]
     icao24: tuple[Icao24 | None, ...]
     next_waypoint: IntArray
+    measured_t_s: FloatArray
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -93,7 +95,7 @@ class TrackColumns:
             icao: Sequence[Icao24 | None] = self.icao24
             t, pos, vel = self.t_s, self.pos, self.vel
             sigma, coop, stale = self.position_sigma_m, self.cooperative, self.stale
-            updates, wp = self.updates, self.next_waypoint
+            updates, wp, measured = self.updates, self.next_waypoint, self.measured_t_s
         else:
             n = len(rows)
             at = rows.tolist()
@@ -107,6 +109,7 @@ class TrackColumns:
                 self.stale[rows],
             )
             updates, wp = self.updates[rows], self.next_waypoint[rows]
+            measured = self.measured_t_s[rows]
         lat, lon = self.frame.to_wgs84(pos[:, 0], pos[:, 1])
         east, north, alt = pos.T.tolist()
         columns: dict[str, list[Any]] = {
@@ -125,6 +128,9 @@ class TrackColumns:
             "stale": stale.tolist(),
             "updates": updates.tolist(),
             "next_waypoint": [None if w < 0 else w for w in wp.tolist()],
+            "measured_t_s": [
+                None if m == r else m for m, r in zip(measured.tolist(), t.tolist(), strict=True)
+            ],
         }
         return build_tracks(columns, n)
 
@@ -151,6 +157,9 @@ class TrackColumns:
             icao24=tuple(r.icao24 for r in rows),
             next_waypoint=np.fromiter(
                 (-1 if r.next_waypoint is None else r.next_waypoint for r in rows), np.intp, n
+            ),
+            measured_t_s=np.fromiter(
+                (r.t_s if r.measured_t_s is None else r.measured_t_s for r in rows), np.float64, n
             ),
         )
 
