@@ -197,6 +197,8 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
         assert s.load_geofences(active_only=True) == []
 
 
+# One PX4 for about 10 s: runs beside the rest of the suite (load_tolerant, docs/testing.md).
+@pytest.mark.load_tolerant
 @pytest.mark.timeout(240)
 async def test_serve_closes_the_link_loss_of_a_restarted_px4(
     px4: Callable[..., SitlProcess], tmp_path: Path
