@@ -49,6 +49,9 @@ async def _until(cond: Callable[[], bool], timeout_s: float, what: str) -> None:
         await asyncio.sleep(0.05)
 
 
+# A single ArduPilot for about 10 s: runs beside the rest of the suite (load_tolerant,
+# docs/testing.md).
+@pytest.mark.load_tolerant
 @pytest.mark.timeout(240)
 async def test_hub_before_sitl_then_sitl_killed_and_restarted(
     ardupilot: Callable[..., SitlProcess], caplog: pytest.LogCaptureFixture
