@@ -57,6 +57,9 @@ def _intruders(rt: Runtime) -> dict[str, Any]:
     return {str(k): t for k, t in rt.tracks().items() if str(k).startswith("icao:")}
 
 
+# A single ArduPilot for about 5 s: runs beside the rest of the suite (load_tolerant,
+# docs/testing.md).
+@pytest.mark.load_tolerant
 @pytest.mark.timeout(180)
 async def test_ardupilot_relays_simulated_traffic_as_intruder_tracks(
     ardupilot: Callable[..., SitlProcess], tmp_path: Path

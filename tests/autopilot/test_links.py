@@ -50,6 +50,9 @@ async def _until(cond: Callable[[], bool], timeout_s: float, what: str) -> None:
         await asyncio.sleep(0.05)
 
 
+# A single ArduPilot for about 10 s: runs beside the rest of the suite (load_tolerant,
+# docs/testing.md).
+@pytest.mark.load_tolerant
 @pytest.mark.timeout(240)
 async def test_hub_before_sitl_then_sitl_killed_and_restarted(
     ardupilot: Callable[..., SitlProcess], caplog: pytest.LogCaptureFixture
@@ -199,6 +202,8 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
         assert _conformance_kinds(s.load_threats()) == []
 
 
+# One PX4 for about 10 s: runs beside the rest of the suite (load_tolerant, docs/testing.md).
+@pytest.mark.load_tolerant
 @pytest.mark.timeout(240)
 async def test_serve_closes_the_link_loss_of_a_restarted_px4(
     px4: Callable[..., SitlProcess], tmp_path: Path

@@ -25,6 +25,9 @@ SPEED = 2.0
 PARAMS = "ADSB_TYPE 1\nAVD_ENABLE 1\n"
 
 
+# A single ArduPilot for about 5 s: runs beside the rest of the suite (load_tolerant,
+# docs/testing.md).
+@pytest.mark.load_tolerant
 @pytest.mark.timeout(180)
 async def test_ardupilot_reports_the_traffic_gcs_utm_sent_it(
     ardupilot: Callable[..., SitlProcess], tmp_path: Path

@@ -26,6 +26,8 @@ HOME = (47.397742, 8.545594)
 GROUND_M = 32.34  # SIH_LOC_H0 default
 
 
+# One PX4 for about 10 s: runs beside the rest of the suite (load_tolerant, docs/testing.md).
+@pytest.mark.load_tolerant
 @pytest.mark.timeout(240)
 async def test_px4_reports_the_traffic_gcs_utm_sent_it(
     px4: Callable[..., SitlProcess], tmp_path: Path
