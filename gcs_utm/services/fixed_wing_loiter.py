@@ -33,18 +33,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, TypeVar
+from typing import TypeVar
 
-if TYPE_CHECKING:
-    from gcs_utm.services.fixed_wing_plan import Point
+from gcs_utm.services.fixed_wing_point import (
+    LOITER_COMMANDS as LOITERS,
+)
+from gcs_utm.services.fixed_wing_point import (
+    NAV_LOITER_TIME,
+    NAV_LOITER_TO_ALT,
+    NAV_TAKEOFF,
+    Point,
+)
 
-P = TypeVar("P", bound="Point")
+P = TypeVar("P", bound=Point)
 
-NAV_LOITER_TURNS = 18
-NAV_LOITER_TIME = 19
-NAV_TAKEOFF = 22
-NAV_LOITER_TO_ALT = 31
-LOITERS = frozenset({NAV_LOITER_TURNS, NAV_LOITER_TIME, NAV_LOITER_TO_ALT})
 NO_RADIUS_M = 1.0
 """A loiter radius this small or smaller is the vehicle's default (ArduPlane update_loiter)."""
 JOIN_RADII = 2.0

@@ -41,18 +41,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Protocol, Self, TypeVar
+from typing import TypeVar
 
 from gcs_utm.envelope import FIXED_WING_MIN_SPEED_FACTOR
 from gcs_utm.services.fixed_wing_landing import landing_exit
 from gcs_utm.services.fixed_wing_loiter import STEP_RAD, loiter_points
+from gcs_utm.services.fixed_wing_point import (
+    LOITER_COMMANDS,
+    NAV_LAND,
+    NAV_LOITER_TO_ALT,
+    NAV_TAKEOFF,
+    Point,
+)
 
-NAV_LOITER_TURNS = 18
-NAV_LOITER_TIME = 19
-NAV_LAND = 21
-NAV_TAKEOFF = 22
-NAV_LOITER_TO_ALT = 31
-LOITER_COMMANDS = frozenset({NAV_LOITER_TURNS, NAV_LOITER_TIME, NAV_LOITER_TO_ALT})
 TAKEOFF_CLIMB_RATE_MPS = 5.0
 """A take-off without a pitch climbs at the autopilot's maximum climb rate: ArduPlane
 TECS_CLMB_MAX and PX4 FW_T_CLMB_MAX default to 5 m/s."""
@@ -63,33 +64,6 @@ HERE_M = 10.0
 launch position a ground station wrote, GNSS noise, a home rounded to 1e-4 deg)."""
 _M_PER_DEG_LAT = 110_540.0
 _M_PER_DEG_LON = 111_320.0
-
-
-class Point(Protocol):
-    """What this module reads and writes of a mission point (vehicle_ops.NavPoint)."""
-
-    @property
-    def seq(self) -> int: ...
-    @property
-    def lat_deg(self) -> float: ...
-    @property
-    def lon_deg(self) -> float: ...
-    @property
-    def alt_amsl_m(self) -> float: ...
-    @property
-    def speed_mps(self) -> float: ...
-    @property
-    def explicit(self) -> bool: ...
-    @property
-    def command(self) -> int: ...
-    @property
-    def radius_m(self) -> float: ...
-    @property
-    def amount(self) -> float: ...
-    @property
-    def exit_xtrack(self) -> bool: ...
-    def moved(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> Self: ...
-    def synthetic(self) -> Self: ...
 
 
 P = TypeVar("P", bound=Point)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from gcs_utm.services import fixed_wing_plan as fw
+from gcs_utm.services import fixed_wing_point as fwp
 
 _DO_JUMP = 177
 _JUMP_ITEMS_MAX = 500
@@ -40,10 +40,10 @@ def item_params(it: object, command: int) -> tuple[float, float]:
     """(radius, turns, seconds or pitch) of a loiter or take-off item (MAVLink:
     LOITER_TO_ALT radius in param2; LOITER_TURNS and LOITER_TIME turns/seconds in param1,
     radius in param3; NAV_TAKEOFF a fixed wing's minimum pitch in param1)."""
-    if command == fw.NAV_TAKEOFF:
+    if command == fwp.NAV_TAKEOFF:
         return 0.0, float(getattr(it, "param1", 0.0))
-    if command == fw.NAV_LOITER_TO_ALT:
+    if command == fwp.NAV_LOITER_TO_ALT:
         return float(getattr(it, "param2", 0.0)), 0.0
-    if command in (fw.NAV_LOITER_TURNS, fw.NAV_LOITER_TIME):
+    if command in (fwp.NAV_LOITER_TURNS, fwp.NAV_LOITER_TIME):
         return float(getattr(it, "param3", 0.0)), float(getattr(it, "param1", 0.0))
     return 0.0, 0.0

@@ -56,6 +56,7 @@ from gcs_utm.model import (
     default_envelope,
 )
 from gcs_utm.services import fixed_wing_plan as fw
+from gcs_utm.services import fixed_wing_point as fwp
 from gcs_utm.services import mission_order
 from gcs_utm.services.airspace import Airspace, AirspaceError
 from gcs_utm.services.flight_state import FlightState
@@ -71,7 +72,7 @@ _NAV_LAND = 21
 _NAV_TAKEOFF = 22
 _DO_CHANGE_SPEED = 178
 _DO_LAND_START = 189
-_NAV_COMMANDS = frozenset({_NAV_WAYPOINT, _NAV_LAND, _NAV_TAKEOFF}) | fw.LOITER_COMMANDS
+_NAV_COMMANDS = frozenset({_NAV_WAYPOINT, _NAV_LAND, _NAV_TAKEOFF}) | fwp.LOITER_COMMANDS
 _ABSOLUTE_FRAMES = frozenset({0, 5})  # MAV_FRAME_GLOBAL(_INT): metres AMSL
 _RELATIVE_FRAMES = frozenset({3, 6})  # MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT): metres above home
 _MATCH_H_M = 0.5  # a mission point within this of a plan waypoint is that waypoint (float32 z)
@@ -179,7 +180,7 @@ def mission_points(
             continue  # a malformed item is skipped, not fatal
         seq = int(getattr(it, "seq", i))
         radius, amount = mission_order.item_params(it, command)
-        xtrack = command in fw.LOITER_COMMANDS and float(getattr(it, "param4", 0.0)) >= 1.0
+        xtrack = command in fwp.LOITER_COMMANDS and float(getattr(it, "param4", 0.0)) >= 1.0
         out.append(
             NavPoint(seq, lat, lon, alt, speed, explicit, command, radius, amount, landing, xtrack)
         )
@@ -236,7 +237,7 @@ def plan_from_points(
     if (
         position is not None
         and done
-        and done[-1].command not in fw.LOITER_COMMANDS  # a circle is left, not turned round
+        and done[-1].command not in fwp.LOITER_COMMANDS  # a circle is left, not turned round
         and _dist_m(position, done[-1]) <= turn_from_m
     ):
         rest = [done[-1], *rest]

@@ -11,6 +11,7 @@ import pytest
 
 from gcs_utm.model import OperationId, Position
 from gcs_utm.services import fixed_wing_plan as fw
+from gcs_utm.services import fixed_wing_point as fwp
 from gcs_utm.services.fixed_wing_landing import landing_exit
 from gcs_utm.services.vehicle_ops import NavPoint, plan_from_points
 
@@ -60,8 +61,8 @@ def test_a_px4_landing_pattern_is_filed_along_its_landing_line() -> None:
     waypoint) there is no way round to the landing line; a descent of more than a turn
     keeps its circle."""
     wp = NavPoint(1, *_deg(0.0, 1200.0), 40.0, 15.0, True)
-    loiter = NavPoint(2, *_deg(0.0, 600.0), 30.0, 15.0, True, fw.NAV_LOITER_TO_ALT, 80.0)
-    land = NavPoint(3, *_deg(0.0, 0.0), 0.0, 15.0, True, fw.NAV_LAND)
+    loiter = NavPoint(2, *_deg(0.0, 600.0), 30.0, 15.0, True, fwp.NAV_LOITER_TO_ALT, 80.0)
+    land = NavPoint(3, *_deg(0.0, 0.0), 0.0, 15.0, True, fwp.NAV_LAND)
     args = {"ground_alt_m": 0.0, "climb_rate_mps": 3.0, "descent_rate_mps": 3.0,
             "loiter_radius_m": 80.0}  # fmt: skip
     px4 = fw.fixed_wing_points([wp, loiter, land], loiter_landing=True, **args)  # type: ignore[arg-type]
@@ -82,6 +83,6 @@ def test_a_px4_landing_pattern_is_filed_along_its_landing_line() -> None:
     plan = plan_from_points(px4, OperationId("p"), t_s=0.0, current_seq=3, position=at)
     assert plan is not None  # here (the nearest point), the rest of the circle, landing
     assert len(plan.waypoints) == len(exits) - len(exits) // 2 + 1
-    deep = NavPoint(2, *_deg(0.0, 600.0), -300.0, 15.0, True, fw.NAV_LOITER_TO_ALT, 80.0)
+    deep = NavPoint(2, *_deg(0.0, 600.0), -300.0, 15.0, True, fwp.NAV_LOITER_TO_ALT, 80.0)
     orbits = fw.fixed_wing_points([wp, deep, land], loiter_landing=True, **args)  # type: ignore[arg-type]
     assert len([p for p in orbits if p.seq == 2]) > 9  # more than a turn, orbited down
