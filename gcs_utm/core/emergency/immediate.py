@@ -52,6 +52,7 @@ from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.emergency.endpoint import move_end
 from gcs_utm.core.emergency.fly_on import Choice, fly_on, flying_on
 from gcs_utm.core.emergency.supervision import escalate_safe
+from gcs_utm.core.emergency.turn import turn_moves
 from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -90,8 +91,11 @@ class Immediate(Enum):
     HOLD = "hold"
     CLIMB = "climb"  # a GOTO the vertical minimum plus a margin above where it stops
     DESCEND = "descend"  # likewise below
+    TURN_LEFT = "turn left"  # a fixed wing: a GOTO far abeam at its altitude (.turn)
+    TURN_RIGHT = "turn right"
 
 
+_TURNS = (Immediate.TURN_LEFT, Immediate.TURN_RIGHT)
 _LIVE = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED, RecommendationState.APPLIED)
 
 
@@ -231,9 +235,11 @@ def choose_commands(  # noqa: PLR0917 - one call site
     t_cmd: float,
     event_t_s: float | None,
     priority_of: dict[OperationId, int],
+    *,
+    turns: bool = True,
 ) -> Choice | None:
     """The immediate commands for ``candidates`` (see the module docstring); None when no
-    candidate is in the snapshot."""
+    candidate is in the snapshot. Without ``turns`` a fixed wing is not offered a turn."""
     now = snapshot.t_s
     ops = snapshot.operations
     cands = [ops[k] for k in candidates if k in ops][:MAX_UAS]
@@ -254,9 +260,8 @@ def choose_commands(  # noqa: PLR0917 - one call site
         v_mins = [td.pair_minima(c, o)[1] for o in cands + others if o.id != c.id]
         rise = max(v_mins, default=td.monitoring.separation_vertical_m)
         path = predicted_path(td, c, snapshot, until, use_prediction=False)
-        options.append(
-            [None, *_moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)]
-        )
+        moves = _moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)
+        options.append([None, *moves, *(_turns(td, c, path, grid, t_cmd) if turns else [])])
     fenced = {
         id(m): fence_entered(td, snapshot, m.op_id, m.xyz, m.slack_m, grid, t_cmd)
         for opts in options
@@ -285,16 +290,34 @@ def choose_commands(  # noqa: PLR0917 - one call site
     return None if best is None else fly_on(best[1], _combo_ratio(td, cands, others, [], paths))
 
 
+def _turns(
+    td: TacticalDeconfliction, op: Operation, path: LocalPlan, grid: FloatArray, t_cmd: float
+) -> list[_Move]:
+    """A fixed wing's turn left and right (:mod:`.turn`): no room beyond its positions."""
+    return [
+        _Move(
+            op.id,
+            Immediate.TURN_LEFT if left else Immediate.TURN_RIGHT,
+            xyz,
+            np.zeros_like(grid),
+            cmd,
+        )
+        for left, xyz, cmd in turn_moves(td, op, path, grid, t_cmd=t_cmd)
+    ]
+
+
 def _rank(
     ratio: float, fenced: bool, moves: list[_Move], priority_of: dict[OperationId, int]
 ) -> tuple[float, ...]:
     """Order of combinations: those that keep the minima first, then those that take no UAS
     into a geofence; among the first, the fewest commanded UAS, the lowest priorities, the
-    largest separation; among the others, the largest separation."""
+    fewest turns (a turned fixed wing leaves its plan for good), the largest separation;
+    among the others, the largest separation."""
     prio = float(sum(priority_of.get(m.op_id, 0) for m in moves))
     fence = 1.0 if fenced else 0.0
     if ratio >= 1.0:
-        return (0.0, fence, float(len(moves)), prio, -ratio)
+        turned = float(sum(m.action in _TURNS for m in moves))
+        return (0.0, fence, float(len(moves)), prio, turned, -ratio)
     return (1.0, fence, -ratio, float(len(moves)), prio)
 
 
@@ -367,7 +390,9 @@ def late_reason(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> str:
     ops = snapshot.operations
     ids = list(t.uas_ids)
     prio = {k: ops[k].priority for k in ids if k in ops}
-    choice = choose_commands(em.td, snapshot, ids, em.lead.command_at(ids, now), event, prio)
+    at = em.lead.command_at(ids, now)
+    # Without turns: a turned fixed wing leaves its plan for good, and a plan is still in time.
+    choice = choose_commands(em.td, snapshot, ids, at, event, prio, turns=False)
     if choice is None or not choice.clear or choice.geofences:
         return ""  # the plans (kept off geofences by TD) are tried
     return (
