@@ -52,7 +52,7 @@ from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.emergency.endpoint import move_end
 from gcs_utm.core.emergency.fly_on import Choice, fly_on, flying_on
 from gcs_utm.core.emergency.supervision import escalate_safe
-from gcs_utm.core.emergency.turn import turn_moves
+from gcs_utm.core.emergency.turn import turn_moves, turn_words
 from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -471,6 +471,7 @@ def propose(
         return Decision(audit=(em.audit(now, "immediate", t.id, stand),))
     how = "keeps" if choice.clear else "does not keep (the best there is)"
     text = f"{why}; immediate command {how} the minima (ratio {choice.ratio:.2f})"
+    text += turn_words(choice.actions)
     detail: dict[str, object] = {"reason": text, "selected": choice.actions}
     detail["tried"] = choice.tried
     detail["acts_in_s"] = round(em.lead.command_at(candidates, now) - now, 3)
