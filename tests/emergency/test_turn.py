@@ -91,3 +91,24 @@ def test_a_multirotor_is_not_offered_a_turn() -> None:
     tried = _choose(turns=True).tried
     assert not any("'A': 'turn" in str(x["commands"]) for x in tried)
     assert any("'B': 'turn" in str(x["commands"]) for x in tried)
+
+
+def test_a_turn_does_not_win_a_tie_before_any_command_acts() -> None:
+    """The fixed wing B (priority 2) passes 40 m north of the hovering multirotor A (priority
+    8) 1 s from now, before any command acts: every combination keeps the same ratio. The
+    turn of B then loses to a command that keeps both on their plans' tracks (a turn chosen
+    by priority on such a tie sent a fixed wing into another UAS, enc_1_0124)."""
+    a = sc.make_operation("A", [(0, 0, 100), (0, 1, 100)], priority=8, speed_mps=0.01, ov_m=15.0)
+    b = sc.make_operation("B", [(-1000, 40, 100), (1000, 40, 100)], priority=2, ov_m=25.0)
+    b = replace(b, vehicle_kind=VehicleKind.FIXED_WING, max_climb_rate_mps=5.0)
+    tracks = {
+        TrackId("A"): _track("A", 0.0, 0.0, 0.0),
+        TrackId("B"): _track("B", -20.0, 40.0, 20.0),
+    }
+    snap = replace(sc.snapshot([a, b], t_s=NOW), tracks=tracks)
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MonitoringConfig())
+    choice = choose_commands(td, snap, [A, B], NOW + 2.0, NOW + 1.0, {A: 8, B: 2})
+    assert choice is not None and not choice.clear
+    turn = [x for x in choice.tried if x["commands"] == {"B": "turn left"}]
+    assert turn and float(str(turn[0]["ratio"])) == round(choice.ratio, 3)  # a tie
+    assert choice.actions and not any(v.startswith("turn") for v in choice.actions.values())

@@ -313,13 +313,14 @@ def _rank(
     """Order of combinations: those that keep the minima first, then those that take no UAS
     into a geofence; among the first, the fewest commanded UAS, the lowest priorities, the
     fewest turns (a turned fixed wing leaves its plan for good), the largest separation;
-    among the others, the largest separation."""
+    among the others, the largest separation, then the fewest turns (the smallest separation
+    often comes before any command acts, and then every combination ties)."""
     prio = float(sum(priority_of.get(m.op_id, 0) for m in moves))
     fence = 1.0 if fenced else 0.0
+    turned = float(sum(m.action in _TURNS for m in moves))
     if ratio >= 1.0:
-        turned = float(sum(m.action in _TURNS for m in moves))
         return (0.0, fence, float(len(moves)), prio, turned, -ratio)
-    return (1.0, fence, -ratio, float(len(moves)), prio)
+    return (1.0, fence, -ratio, turned, float(len(moves)), prio)
 
 
 def _combo_ratio(
