@@ -24,21 +24,29 @@ A = OperationId("A")
 
 
 def _passing() -> AirspaceSnapshot:
-    """A fixed wing eastbound and a multirotor westbound 40 m to its north (minima 50 m),
-    meeting 6 s after the snapshot: flying on, they pass at 40 m."""
+    """A fixed wing eastbound between two multirotors westbound 40 m to its north and to
+    its south (minima 50 m), meeting 6 s after the snapshot: flying on, they pass at 40 m;
+    a turn either way takes the fixed wing towards one of them."""
     a = sc.make_operation("A", [(-2000, 0, 100), (2000, 0, 100)], speed_mps=20.0, ov_m=25.0)
     a = replace(a, vehicle_kind=VehicleKind.FIXED_WING)
-    b = sc.make_operation("B", [(600, 40, 100), (-600, 40, 100)], speed_mps=6.0, ov_m=15.0)
-    b = replace(
-        b,
-        plan=replace(
-            b.plan,
-            waypoints=tuple(
-                replace(w, t_s=w.t_s + 2000.0 / 20.0 - 600.0 / 6.0) for w in b.plan.waypoints
-            ),
-        ),
-    )
-    return sc.snapshot([a, b], t_s=sc.T0_S + 2000.0 / 20.0 - 6.0)
+    others = []
+    for name, north_m in (("B", 40), ("C", -40)):
+        b = sc.make_operation(
+            name, [(600, north_m, 100), (-600, north_m, 100)], speed_mps=6.0, ov_m=15.0
+        )
+        others.append(
+            replace(
+                b,
+                plan=replace(
+                    b.plan,
+                    waypoints=tuple(
+                        replace(w, t_s=w.t_s + 2000.0 / 20.0 - 600.0 / 6.0)
+                        for w in b.plan.waypoints
+                    ),
+                ),
+            )
+        )
+    return sc.snapshot([a, *others], t_s=sc.T0_S + 2000.0 / 20.0 - 6.0)
 
 
 def test_no_command_when_every_command_separates_less_than_flying_on() -> None:

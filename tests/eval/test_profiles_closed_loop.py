@@ -57,21 +57,11 @@ def test_every_run_completes_and_the_counts_agree(summary: EvalSummary) -> None:
     assert s.encounters_per_minute is not None and s.encounters_per_minute > 0.0
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 30 class 1 (an aircraft after its plan is not traffic: endpoint losses "
-    "flown after the plan ended) and class 2 (late detection, no immediate command)",
-)
 def test_predicted_losses_are_avoided(summary: EvalSummary) -> None:
     t = summary.totals
     assert t.share_avoided is not None and t.share_avoided >= 0.99, markdown(summary)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 30 class 1 (plans sent next to a hovering or loitering aircraft) and class 2 "
-    "(a plan accepted 4 s before a late UAS's loss)",
-)
 def test_no_loss_is_created_by_an_accepted_plan(summary: EvalSummary) -> None:
     assert summary.totals.losses_created_by_accepted_plans == 0, markdown(summary)
 

@@ -19,20 +19,21 @@ A UAS under such a command is off its plan on purpose: a conformance decision (b
 for it waits while the loss case is open (:func:`held_by`).
 
 The commands are *hold* (a multirotor brakes and holds position and altitude; a fixed wing
-circles where it is) and *climb* or *descend in place* (a GOTO to the point where the vehicle
-stops, the vertical minimum plus a margin higher or lower, within the altitude band and
-above the safety floor). Each UAS of the threat gets none or one of them; every combination
-is flown forward on a 0.5 s grid: a commanded UAS at its track's velocity up to the command
-time, then braking at :data:`BRAKE_MPS2` to a stop (a fixed wing: anywhere within two turn
-radii of where it was commanded, and within its top speed's reach of there) while climbing
-or descending at its rates; every other UAS on its predicted path (the snapshot's
-prediction row of its track, else its velocity, else its plan). The combination is kept that
-keeps TD's minima (effective minima plus tracking tolerances) from the other UAS of the
-threat and from all other traffic with the fewest commanded UAS, then the lowest priorities,
-then the largest separation; when none keeps them, the one with the largest separation.
-Either way a combination that takes no UAS into a geofence (:mod:`.command_fences`) comes
-before one that does. The audit lists every combination with its separation ratio (and the
-geofences it enters).
+circles where it is) and *climb* or *descend in place* (a GOTO to the point where the
+vehicle stops, the vertical minimum plus a margin higher or lower, within the altitude band
+and above the safety floor); a fixed wing may also turn left or right (:mod:`.turn`, ranked
+after the others among those that keep the minima). Each UAS of the threat gets none or one
+of them; every combination is flown forward on a 0.5 s grid: a commanded UAS at its track's
+velocity up to the command time, then braking at :data:`BRAKE_MPS2` to a stop (a fixed wing:
+anywhere within two turn radii of where it was commanded, and within its top speed's reach
+of there) while climbing or descending at its rates; every other UAS on its predicted path
+(the snapshot's prediction row of its track, else its velocity, else its plan). The
+combination is kept that keeps TD's minima (effective minima plus tracking tolerances) from
+the other UAS of the threat and from all other traffic with the fewest commanded UAS, then
+the lowest priorities, then the largest separation; when none keeps them, the one with the
+largest separation. Either way a combination that takes no UAS into a geofence
+(:mod:`.command_fences`) comes before one that does. The audit lists every combination with
+its separation ratio (and the geofences it enters).
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.emergency.endpoint import move_end
 from gcs_utm.core.emergency.fly_on import Choice, fly_on, flying_on
 from gcs_utm.core.emergency.supervision import escalate_safe
+from gcs_utm.core.emergency.turn import turn_moves, turn_words
 from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -90,8 +92,11 @@ class Immediate(Enum):
     HOLD = "hold"
     CLIMB = "climb"  # a GOTO the vertical minimum plus a margin above where it stops
     DESCEND = "descend"  # likewise below
+    TURN_LEFT = "turn left"  # a fixed wing: a GOTO far abeam at its altitude (.turn)
+    TURN_RIGHT = "turn right"
 
 
+_TURNS = (Immediate.TURN_LEFT, Immediate.TURN_RIGHT)
 _LIVE = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED, RecommendationState.APPLIED)
 
 
@@ -231,9 +236,11 @@ def choose_commands(  # noqa: PLR0917 - one call site
     t_cmd: float,
     event_t_s: float | None,
     priority_of: dict[OperationId, int],
+    *,
+    turns: bool = True,
 ) -> Choice | None:
     """The immediate commands for ``candidates`` (see the module docstring); None when no
-    candidate is in the snapshot."""
+    candidate is in the snapshot. Without ``turns`` a fixed wing is not offered a turn."""
     now = snapshot.t_s
     ops = snapshot.operations
     cands = [ops[k] for k in candidates if k in ops][:MAX_UAS]
@@ -254,9 +261,8 @@ def choose_commands(  # noqa: PLR0917 - one call site
         v_mins = [td.pair_minima(c, o)[1] for o in cands + others if o.id != c.id]
         rise = max(v_mins, default=td.monitoring.separation_vertical_m)
         path = predicted_path(td, c, snapshot, until, use_prediction=False)
-        options.append(
-            [None, *_moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)]
-        )
+        moves = _moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)
+        options.append([None, *moves, *(_turns(td, c, path, grid, t_cmd) if turns else [])])
     fenced = {
         id(m): fence_entered(td, snapshot, m.op_id, m.xyz, m.slack_m, grid, t_cmd)
         for opts in options
@@ -285,17 +291,36 @@ def choose_commands(  # noqa: PLR0917 - one call site
     return None if best is None else fly_on(best[1], _combo_ratio(td, cands, others, [], paths))
 
 
+def _turns(
+    td: TacticalDeconfliction, op: Operation, path: LocalPlan, grid: FloatArray, t_cmd: float
+) -> list[_Move]:
+    """A fixed wing's turn left and right (:mod:`.turn`): no room beyond its positions."""
+    return [
+        _Move(
+            op.id,
+            Immediate.TURN_LEFT if left else Immediate.TURN_RIGHT,
+            xyz,
+            np.zeros_like(grid),
+            cmd,
+        )
+        for left, xyz, cmd in turn_moves(td, op, path, grid, t_cmd=t_cmd)
+    ]
+
+
 def _rank(
     ratio: float, fenced: bool, moves: list[_Move], priority_of: dict[OperationId, int]
 ) -> tuple[float, ...]:
     """Order of combinations: those that keep the minima first, then those that take no UAS
     into a geofence; among the first, the fewest commanded UAS, the lowest priorities, the
-    largest separation; among the others, the largest separation."""
+    fewest turns (a turned fixed wing leaves its plan for good), the largest separation;
+    among the others, the largest separation, then the fewest turns (the smallest separation
+    often comes before any command acts, and then every combination ties)."""
     prio = float(sum(priority_of.get(m.op_id, 0) for m in moves))
     fence = 1.0 if fenced else 0.0
+    turned = float(sum(m.action in _TURNS for m in moves))
     if ratio >= 1.0:
-        return (0.0, fence, float(len(moves)), prio, -ratio)
-    return (1.0, fence, -ratio, float(len(moves)), prio)
+        return (0.0, fence, float(len(moves)), prio, turned, -ratio)
+    return (1.0, fence, -ratio, turned, float(len(moves)), prio)
 
 
 def _combo_ratio(
@@ -367,7 +392,9 @@ def late_reason(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> str:
     ops = snapshot.operations
     ids = list(t.uas_ids)
     prio = {k: ops[k].priority for k in ids if k in ops}
-    choice = choose_commands(em.td, snapshot, ids, em.lead.command_at(ids, now), event, prio)
+    at = em.lead.command_at(ids, now)
+    # Without turns: a turned fixed wing leaves its plan for good, and a plan is still in time.
+    choice = choose_commands(em.td, snapshot, ids, at, event, prio, turns=False)
     if choice is None or not choice.clear or choice.geofences:
         return ""  # the plans (kept off geofences by TD) are tried
     return (
@@ -446,6 +473,7 @@ def propose(
         return Decision(audit=(em.audit(now, "immediate", t.id, stand),))
     how = "keeps" if choice.clear else "does not keep (the best there is)"
     text = f"{why}; immediate command {how} the minima (ratio {choice.ratio:.2f})"
+    text += turn_words(choice.actions)
     detail: dict[str, object] = {"reason": text, "selected": choice.actions}
     detail["tried"] = choice.tried
     detail["acts_in_s"] = round(em.lead.command_at(candidates, now) - now, 3)

@@ -132,6 +132,8 @@ def command_text(cmd: Command, alt_now_amsl_m: float | None = None) -> str:
         to = cmd.target.alt_amsl_m
         if alt_now_amsl_m is None:
             return f"Climb or descend in place to {to:.0f} m AMSL and hover"
+        if abs(to - alt_now_amsl_m) < 1.0:  # a fixed wing's turn (emergency.turn)
+            return f"Turn towards a point far abeam and fly on at {to:.0f} m AMSL"
         verb = "Climb" if to >= alt_now_amsl_m else "Descend"
         return f"{verb} {abs(to - alt_now_amsl_m):.0f} m in place to {to:.0f} m AMSL and hover"
     return _COMMANDS.get(cmd.kind, cmd.kind.value)

@@ -1,0 +1,114 @@
+"""A fixed wing turns away as an immediate command (issue 30, class 2; ``immediate.turn``).
+
+Held, or climbing or descending in place, a fixed wing circles where it is commanded and
+takes two turn radii of room; with 4.6 s of warning neither that nor its climb rate
+separates it from a multirotor ahead. A turn away does (enc_2_0001_late_head_on: a fixed
+wing at 17 m/s and a multirotor at 4.4 m/s detected 142 m apart, flown 29 m apart with the
+multirotor held, 77 m with the fixed wing turned)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+from gcs_utm.bench import deconfliction as sc
+from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
+from gcs_utm.core.emergency.fly_on import Choice
+from gcs_utm.core.emergency.immediate import choose_commands
+from gcs_utm.core.emergency.turn import turn_words
+from gcs_utm.core.emergency.wording import command_text
+from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.model import AirspaceSnapshot, CommandKind, OperationId, Track, TrackId, VehicleKind
+
+A, B = OperationId("A"), OperationId("B")
+NOW = sc.T0_S + 89.0
+
+
+def _track(op: str, e: float, n: float, ve: float) -> Track:
+    la, lo = sc.FRAME.point_to_wgs84(e, n)
+    return Track(
+        id=TrackId(op),
+        t_s=NOW,
+        lat_deg=la,
+        lon_deg=lo,
+        alt_amsl_m=100.0,
+        east_m=e,
+        north_m=n,
+        vel_enu_mps=(ve, 0.0, 0.0),
+        position_sigma_m=1.0,
+        cooperative=True,
+        operation_id=OperationId(op),
+    )
+
+
+def _head_on() -> AirspaceSnapshot:
+    """Multirotor A (priority 3) flies west at 4.4 m/s from the origin; fixed wing B
+    (priority 6) flies east at 17 m/s, 140 m west of it and 25 m north of its track."""
+    a = sc.make_operation(
+        "A", [(1000, 0, 100), (-1000, 0, 100)], priority=3, speed_mps=4.4, ov_m=15.0
+    )
+    b = sc.make_operation(
+        "B", [(-1000, 25, 100), (1000, 25, 100)], priority=6, speed_mps=17.0, ov_m=25.0
+    )
+    b = replace(b, vehicle_kind=VehicleKind.FIXED_WING, max_climb_rate_mps=5.0)
+    tracks = {
+        TrackId("A"): _track("A", 0.0, 0.0, -4.4),
+        TrackId("B"): _track("B", -140.0, 25.0, 17.0),
+    }
+    return replace(sc.snapshot([a, b], t_s=NOW), tracks=tracks)
+
+
+def _choose(*, turns: bool) -> Choice:
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MonitoringConfig())
+    choice = choose_commands(
+        td, _head_on(), [A, B], NOW + 2.0, NOW + 4.6, {A: 3, B: 6}, turns=turns
+    )
+    assert choice is not None
+    return choice
+
+
+def test_a_fixed_wing_turns_away_when_holds_climbs_and_descents_leave_it_inside() -> None:
+    """Every hold, climb and descent (of either UAS, or both) keeps less than half of TD's
+    minima; the fixed wing's turn to the side away from the multirotor (north: left) keeps
+    more than 0.9 of them, and the command is a GOTO at its altitude far to the north."""
+    without = _choose(turns=False)
+    assert without.ratio < 0.5, without.actions
+    choice = _choose(turns=True)
+    assert choice.actions[B] == "turn left" and choice.ratio > 0.9, choice.actions
+    cmd = choice.commands[B]
+    assert cmd.kind is CommandKind.GOTO and cmd.target is not None
+    e, n = sc.FRAME.point_to_local(cmd.target.lat_deg, cmd.target.lon_deg)
+    assert n > 500.0 and abs(e + 140.0 - 17.0 * 2.0) < 1.0  # abeam where the command acts
+    assert math.isclose(cmd.target.alt_amsl_m, 100.0)
+    assert turn_words(choice.actions) == "; B turn left (a goto far abeam at its altitude)"
+    assert command_text(cmd, 100.2).startswith("Turn towards a point far abeam")
+    turned = [x for x in choice.tried if x["commands"] == {"B": "turn right"}]
+    assert turned and float(str(turned[0]["ratio"])) < choice.ratio  # towards A: worse
+
+
+def test_a_multirotor_is_not_offered_a_turn() -> None:
+    """A multirotor brakes or climbs or descends: the turn is for fixed wings only."""
+    tried = _choose(turns=True).tried
+    assert not any("'A': 'turn" in str(x["commands"]) for x in tried)
+    assert any("'B': 'turn" in str(x["commands"]) for x in tried)
+
+
+def test_a_turn_does_not_win_a_tie_before_any_command_acts() -> None:
+    """The fixed wing B (priority 2) passes 40 m north of the hovering multirotor A (priority
+    8) 1 s from now, before any command acts: every combination keeps the same ratio. The
+    turn of B then loses to a command that keeps both on their plans' tracks (a turn chosen
+    by priority on such a tie sent a fixed wing into another UAS, enc_1_0124)."""
+    a = sc.make_operation("A", [(0, 0, 100), (0, 1, 100)], priority=8, speed_mps=0.01, ov_m=15.0)
+    b = sc.make_operation("B", [(-1000, 40, 100), (1000, 40, 100)], priority=2, ov_m=25.0)
+    b = replace(b, vehicle_kind=VehicleKind.FIXED_WING, max_climb_rate_mps=5.0)
+    tracks = {
+        TrackId("A"): _track("A", 0.0, 0.0, 0.0),
+        TrackId("B"): _track("B", -20.0, 40.0, 20.0),
+    }
+    snap = replace(sc.snapshot([a, b], t_s=NOW), tracks=tracks)
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MonitoringConfig())
+    choice = choose_commands(td, snap, [A, B], NOW + 2.0, NOW + 1.0, {A: 8, B: 2})
+    assert choice is not None and not choice.clear
+    turn = [x for x in choice.tried if x["commands"] == {"B": "turn left"}]
+    assert turn and float(str(turn[0]["ratio"])) == round(choice.ratio, 3)  # a tie
+    assert choice.actions and not any(v.startswith("turn") for v in choice.actions.values())
