@@ -110,7 +110,8 @@ class Waypoint4D:
         return Position(lat_deg=self.lat_deg, lon_deg=self.lon_deg, alt_amsl_m=self.alt_amsl_m)
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
+# weakref_slot: caches keyed by the plan object forget it when it is freed (TD's PlanCache)
+@dataclass(frozen=True, slots=True, kw_only=True, weakref_slot=True)
 class FlightPlan:
     """A versioned 4D flight plan (paper Table 3). Times never go backwards."""
 

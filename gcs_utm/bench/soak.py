@@ -241,6 +241,8 @@ def _containers(rt: Any) -> dict[str, int]:
         _sizes_of(part, name, sizes, depth=2)
     for name in ("plan_history", "geofence_history", "samples"):
         sizes[name] = len(getattr(rt, name))
+    # TD's plan cache, deeper than the walk goes: the plans in use (core/deconfliction)
+    sizes["td._plans"] = len(rt.emergency.em.td._plans)
     return {k: v for k, v in sorted(sizes.items()) if v > 0}
 
 

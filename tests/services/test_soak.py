@@ -20,6 +20,7 @@ PER_OPERATION = (
     "filing.conflicts",
     "filing.fence_findings",
     "filing._state",
+    "td._plans",
 )
 
 

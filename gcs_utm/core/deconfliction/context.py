@@ -24,10 +24,9 @@ from gcs_utm.core.deconfliction.geometry import (
     LocalFence,
     LocalPlan,
     fence_to_local,
-    max_speeds,
-    plan_to_local,
 )
 from gcs_utm.core.deconfliction.lead_times import lead_times, needs_lead_in
+from gcs_utm.core.deconfliction.plan_cache import PlanCache
 from gcs_utm.core.deconfliction.tolerance import pair_buffers
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.geo import LocalFrame
@@ -118,38 +117,6 @@ class Problem:
     lowest: int
     out: dict[OperationId, list[Alternative]]
     prepared: cd.Problem
-
-
-class PlanCache:
-    """Local conversions (and top speeds) of the plans TD sees, keyed by object identity (the
-    plan is kept in the value so its id cannot be reused while cached)."""
-
-    def __init__(self, frame: LocalFrame) -> None:
-        self.frame = frame
-        self._local: dict[int, tuple[FlightPlan, LocalPlan]] = {}
-        self._speeds: dict[int, tuple[FlightPlan, tuple[float, float]]] = {}
-
-    def local(self, plan: FlightPlan) -> LocalPlan:
-        hit = self._local.get(id(plan))
-        if hit is None or hit[0] is not plan:
-            if len(self._local) > 4096:
-                self._local.clear()
-            hit = (plan, plan_to_local(plan, self.frame))
-            self._local[id(plan)] = hit
-        return hit[1]
-
-    def remember(self, plan: FlightPlan, local: LocalPlan) -> None:
-        """``plan``'s local form, known already (a candidate just converted from it)."""
-        self._local[id(plan)] = (plan, local)
-
-    def max_speeds(self, plan: FlightPlan) -> tuple[float, float]:
-        hit = self._speeds.get(id(plan))
-        if hit is None or hit[0] is not plan:
-            if len(self._speeds) > 4096:
-                self._speeds.clear()
-            hit = (plan, max_speeds(self.local(plan)))
-            self._speeds[id(plan)] = hit
-        return hit[1]
 
 
 @dataclass(slots=True)

@@ -36,10 +36,11 @@ from collections.abc import Collection, Sequence
 from gcs_utm.core.deconfliction import context as cx
 from gcs_utm.core.deconfliction import loitering as lt
 from gcs_utm.core.deconfliction.config import DeconflictionConfig
-from gcs_utm.core.deconfliction.context import Context, Dropped, PlanCache
+from gcs_utm.core.deconfliction.context import Context, Dropped
 from gcs_utm.core.deconfliction.geometry import LocalFence, LocalPlan, fence_to_local
 from gcs_utm.core.deconfliction.intruder import intruder_candidates
 from gcs_utm.core.deconfliction.multi import cord_candidates, dedupe
+from gcs_utm.core.deconfliction.plan_cache import PlanCache
 from gcs_utm.core.deconfliction.single import single_candidates
 from gcs_utm.core.deconfliction.verify import Verifier
 from gcs_utm.core.monitoring.config import MonitoringConfig

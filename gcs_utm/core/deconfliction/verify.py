@@ -16,7 +16,6 @@ from gcs_utm.core.deconfliction.config import DeconflictionConfig
 from gcs_utm.core.deconfliction.context import (
     Candidate,
     Dropped,
-    PlanCache,
     Queued,
     floor_amsl,
     pair_minima,
@@ -28,6 +27,7 @@ from gcs_utm.core.deconfliction.geometry import (
     separation_screen,
 )
 from gcs_utm.core.deconfliction.overshoot import overshoot_flags
+from gcs_utm.core.deconfliction.plan_cache import PlanCache
 from gcs_utm.core.deconfliction.safety import envelope_flags, floor_flags, turn_flags
 from gcs_utm.core.deconfliction.scoring import (
     Neighbour,
