@@ -44,7 +44,12 @@ def _project(frame: LocalFrame, plan: FlightPlan, track: Track) -> tuple[int, fl
         a, b = pts[i], pts[i + 1]
         d = [b[k] - a[k] for k in range(3)]
         seg2 = sum(x * x for x in d)
-        u = 0.0 if seg2 == 0.0 else sum((p[k] - a[k]) * d[k] for k in range(3)) / seg2
+        if seg2 == 0.0:
+            # a hold is at every time of its window: the track is at the nearest one
+            dt = wps[i + 1].t_s - wps[i].t_s
+            u = (track.t_s - wps[i].t_s) / dt if dt > 0.0 else 0.0
+        else:
+            u = sum((p[k] - a[k]) * d[k] for k in range(3)) / seg2
         u = min(1.0, max(0.0, u))
         q = [a[k] + u * d[k] for k in range(3)]
         cands.append((math.dist(p, q), i, u))
