@@ -6,6 +6,8 @@ plan), so Tactical Deconfliction and the joint selection must reason on the same
 separation (the paper's use case 1). For every operation with a fresh track close to its plan,
 the plan is cut at the track's projection on it and the rest is shifted by
 ``delay = t_track - t_plan(projection)``. Operations without a usable track keep their plan.
+A hold (two waypoints at one place) is at every time of its window: a UAS holding there is
+at the plan time nearest its own, so a UAS holding as planned keeps its plan's timing.
 
 Pure: time comes from the snapshot; positions go through the airspace frame.
 """
