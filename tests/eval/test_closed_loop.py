@@ -36,8 +36,8 @@ def test_the_classic_set_runs(summary: EvalSummary) -> None:
 
 @pytest.mark.xfail(
     strict=True,
-    reason="issue 30 class 3: enc_7_0010 UAS4, a fixed wing re-planned several times, enters "
-    "the geofence for 5.25 s",
+    reason="issue 30 class 3: enc_7_0010 UAS4, a fixed wing circling under a command and "
+    "predicted along its tangent, is re-planned and enters the geofence for 2.1 s",
 )
 def test_the_classic_set_runs_without_an_intrusion(summary: EvalSummary) -> None:
     assert summary.totals.geofence_intrusions == 0, markdown(summary)

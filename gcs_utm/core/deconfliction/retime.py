@@ -6,6 +6,8 @@ plan), so Tactical Deconfliction and the joint selection must reason on the same
 separation (the paper's use case 1). For every operation with a fresh track close to its plan,
 the plan is cut at the track's projection on it and the rest is shifted by
 ``delay = t_track - t_plan(projection)``. Operations without a usable track keep their plan.
+A hold (two waypoints at one place) is at every time of its window: a UAS holding there is
+at the plan time nearest its own, so a UAS holding as planned keeps its plan's timing.
 
 Pure: time comes from the snapshot; positions go through the airspace frame.
 """
@@ -44,7 +46,12 @@ def _project(frame: LocalFrame, plan: FlightPlan, track: Track) -> tuple[int, fl
         a, b = pts[i], pts[i + 1]
         d = [b[k] - a[k] for k in range(3)]
         seg2 = sum(x * x for x in d)
-        u = 0.0 if seg2 == 0.0 else sum((p[k] - a[k]) * d[k] for k in range(3)) / seg2
+        if seg2 == 0.0:
+            # a hold is at every time of its window: the track is at the nearest one
+            dt = wps[i + 1].t_s - wps[i].t_s
+            u = (track.t_s - wps[i].t_s) / dt if dt > 0.0 else 0.0
+        else:
+            u = sum((p[k] - a[k]) * d[k] for k in range(3)) / seg2
         u = min(1.0, max(0.0, u))
         q = [a[k] + u * d[k] for k in range(3)]
         cands.append((math.dist(p, q), i, u))

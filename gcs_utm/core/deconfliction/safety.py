@@ -110,7 +110,11 @@ def turn_flags(new: LocalPlan, old: LocalPlan, turn_radius_m: float) -> list[str
 
 
 def floor_flags(new: LocalPlan, old: LocalPlan, floor_amsl_m: float, *, lands: bool) -> list[str]:
-    """Generated waypoints of ``new`` below ``floor_amsl_m`` (empty: none)."""
+    """Generated waypoints of ``new`` below ``floor_amsl_m`` (empty: none). The floor is
+    never above the plan's first point: a UAS already at the floor (sent down to it, within
+    its tracking error) may fly on at that height, else nothing could be planned for it."""
+    if len(new):
+        floor_amsl_m = min(floor_amsl_m, float(new.z[0]))
     low = np.flatnonzero(new.z < floor_amsl_m - 1e-6)
     if lands:
         low = low[low != len(new) - 1]

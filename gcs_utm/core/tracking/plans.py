@@ -135,6 +135,12 @@ class PlanTable:
         self.seg_len2: FloatArray = (d * d).sum(axis=2)
         # A zero-length segment divides 0 by 1: its closest point is its start (u = 0).
         self._seg_len2_safe: FloatArray = np.where(self.seg_len2 > 0.0, self.seg_len2, 1.0)
+        # A hold (zero length, positive duration: the UAS waits there) is at every time of
+        # its window at once, so a track on it is at the plan time nearest its own time.
+        dt = self.seg_tb - self.seg_ta
+        self._seg_hold = self.seg_valid & (self.seg_len2 == 0.0) & (dt > 0.0)
+        self._seg_dt_safe: FloatArray = np.where(dt > 0.0, dt, 1.0)
+        self._any_hold = bool(self._seg_hold.any())
 
     def locate(
         self,
@@ -230,6 +236,10 @@ class PlanTable:
             dist2 += o
         dist = np.where(take(self.seg_valid), np.sqrt(dist2), np.inf)
         ta = take(self.seg_ta)
+        if self._any_hold:
+            hold = take(self._seg_hold)
+            on_hold = np.clip((t_s[:, None] - ta) / take(self._seg_dt_safe), 0.0, 1.0)
+            u = np.where(hold, on_hold, u)
         tau = ta + u * (take(self.seg_tb) - ta)
         dmin = dist.min(axis=1)
         cand = dist <= (dmin + ambiguity_m)[:, None]
