@@ -35,6 +35,7 @@ from collections.abc import Collection, Sequence
 
 from gcs_utm.core.deconfliction import context as cx
 from gcs_utm.core.deconfliction import loitering as lt
+from gcs_utm.core.deconfliction.at_rest import at_rest
 from gcs_utm.core.deconfliction.config import DeconflictionConfig
 from gcs_utm.core.deconfliction.context import Context, Dropped
 from gcs_utm.core.deconfliction.geometry import LocalFence, LocalPlan, fence_to_local
@@ -164,6 +165,7 @@ class TacticalDeconfliction:
         not flag its plan against outsiders) so that EM's joint selection can leave the
         higher-priority UAS alone. New plans start at ``start_t_s``: where each UAS will be
         when it gets the plan."""
+        snapshot = at_rest(snapshot, self.frame, start_t_s, lead_in_from_t_s)
         ctx = self._context(snapshot, start_t_s, lead_in_from_t_s, buffered)
         queue, out = cord_candidates(ctx, threat, snapshot)
         self.dropped = self._verifier.flush(queue, snapshot.t_s, buffered=buffered)
@@ -181,6 +183,7 @@ class TacticalDeconfliction:
     ) -> list[Alternative]:
         """Vertical or lateral avoidance of a non-cooperative intruder (:mod:`.intruder`),
         kept only when it holds the intruder minima against the intruder's predicted path."""
+        snapshot = at_rest(snapshot, self.frame, start_t_s, lead_in_from_t_s)
         ctx = self._context(snapshot, start_t_s, lead_in_from_t_s, buffered)
         got = intruder_candidates(ctx, threat, operation_id, snapshot)
         self.dropped = self._verifier.flush(got.queue, snapshot.t_s, buffered=buffered)
@@ -201,6 +204,7 @@ class TacticalDeconfliction:
         buffered: bool = True,
     ) -> list[Alternative]:
         """Single-UAS alternatives (A*), verified (:func:`.single.single_candidates`)."""
+        snapshot = at_rest(snapshot, self.frame, start_t_s, lead_in_from_t_s)
         ctx = self._context(snapshot, start_t_s, lead_in_from_t_s, buffered)
         queue, out = single_candidates(
             ctx,
