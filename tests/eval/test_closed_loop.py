@@ -34,11 +34,6 @@ def test_the_classic_set_runs(summary: EvalSummary) -> None:
     assert s.predicted_losses >= N, table  # the set does bring UAS into conflict
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 30 class 3: enc_7_0010 UAS4, a fixed wing circling under a command and "
-    "predicted along its tangent, is re-planned and enters the geofence for 2.1 s",
-)
 def test_the_classic_set_runs_without_an_intrusion(summary: EvalSummary) -> None:
     assert summary.totals.geofence_intrusions == 0, markdown(summary)
 
