@@ -55,6 +55,10 @@ AFTER_S = 50.0  # flown after the conflict point
 LEAD_IN_S = (60.0, 75.0)  # flown before it
 WARNING_S = 30.0  # no pair of UAS is within its minima (plus a margin) earlier than this
 # before the first pair's conflict time
+FIRST_CLEAR_S = 3.0
+"""Nor within it in the first seconds after the later of two UAS appears: the late
+profile's shortest warning (3-15 s). A loss that begins under a second after a UAS appears
+is one no system can act on; it measures the generator, not the UTM."""
 _TRIES = 20
 
 
@@ -274,21 +278,30 @@ def _at(plan: list[Waypoint], t_s: float) -> tuple[float, float, float]:
 def _apart_until(
     pa: list[Waypoint],
     pb: list[Waypoint],
-    min_h_m: float,
+    minima_m: tuple[float, float],
     until_t_s: float,
 ) -> bool:
-    """Are two filed plans clear of each other (with 10 m / 5 m to spare) while both fly,
-    up to ``until_t_s``? An encounter must develop in flight, with time to resolve it: two
-    UAS must not start in (or seconds from) a loss of separation."""
+    """Are two filed plans clear of each other (with 10 m / 5 m to spare on ``minima_m``, the
+    pair's effective horizontal and vertical minima) while both fly, up to ``until_t_s`` and
+    for at least :data:`FIRST_CLEAR_S` after the later one appears? An encounter must
+    develop in flight, with time to resolve it: two UAS must not start in (or seconds from)
+    a loss of separation."""
     t = max(pa[0][3], pb[0][3])
-    while t <= until_t_s:
+    end = max(until_t_s, t + FIRST_CLEAR_S)
+    while t <= end:
         a, b = _at(pa, t), _at(pb, t)
-        if math.hypot(a[0] - b[0], a[1] - b[1]) < min_h_m + 10.0 and abs(a[2] - b[2]) < (
-            SEPARATION_V_M + 5.0
+        if math.hypot(a[0] - b[0], a[1] - b[1]) < minima_m[0] + 10.0 and abs(a[2] - b[2]) < (
+            minima_m[1] + 5.0
         ):
             return False
         t += 0.5
     return True
+
+
+def _minima_m(a: _Uas, b: _Uas) -> tuple[float, float]:
+    """The pair's effective minima (horizontal, vertical), as Monitoring grows them with the
+    two volumes (as :func:`_loss_start` takes them)."""
+    return _effective_h_m(a, b), max(SEPARATION_V_M, a.volume_m + b.volume_m)
 
 
 def _segment_distance_m(
@@ -347,8 +360,7 @@ def _add_extras(
             extra = _extra(rng, k, centre, t_c, join=join)
             wps = extra.waypoints(min(rng.uniform(*LEAD_IN_S), extra.t_s - 5.0))
             if all(
-                _apart_until(wps, plans[u.id], _effective_h_m(extra, u), t_c - WARNING_S)
-                for u in uas
+                _apart_until(wps, plans[u.id], _minima_m(extra, u), t_c - WARNING_S) for u in uas
             ):
                 break
         else:
@@ -435,8 +447,12 @@ def _build_endpoint(
     uas = _pair(rng, kind, centre, t_c)
     plans = {u.id: u.waypoints(min(rng.uniform(*LEAD_IN_S), u.t_s - 5.0)) for u in uas}
     plans["UAS2"] = _cut(plans["UAS2"], t_c)
-    dt_s = rng.uniform(5.0, 40.0)
-    plans["UAS1"] = [(e, n, a, round(t + dt_s, 3)) for e, n, a, t in plans["UAS1"]]
+    first = plans["UAS1"]
+    for _ in range(_TRIES):  # UAS1 must not appear on top of UAS2 (FIRST_CLEAR_S)
+        dt_s = rng.uniform(5.0, 40.0)
+        plans["UAS1"] = [(e, n, a, round(t + dt_s, 3)) for e, n, a, t in first]
+        if _apart_until(plans["UAS1"], plans["UAS2"], _minima_m(*uas), 0.0):
+            break
     if rng.random() < 0.3:
         plans["UAS1"] = _cut(plans["UAS1"], t_c + dt_s + rng.uniform(0.0, 10.0))
     _add_extras(rng, uas, plans, centre=centre, t_c=t_c, n_uas=n_uas)
