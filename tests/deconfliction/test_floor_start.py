@@ -33,3 +33,10 @@ def test_a_plan_going_lower_than_its_start_and_the_floor_is_refused() -> None:
     assert flags and "waypoint 1 at 680.0 m AMSL" in flags[0]
     flags = floor_flags(_plan(700.0, 690.0, 684.0), FILED, 685.0, lands=False)
     assert flags and "waypoint 2" in flags[0]
+
+
+def test_a_plan_starting_well_below_the_floor_is_still_refused() -> None:
+    """The allowance is the tracking error only: a reroute 5 m under the floor (home 95 m,
+    floor 105 m, flying at 100 m) is refused, as before."""
+    flags = floor_flags(_plan(680.0, 680.0, 680.0), FILED, 685.0, lands=False)
+    assert flags and "below the safety floor 685.0 m" in flags[0]

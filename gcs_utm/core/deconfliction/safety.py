@@ -109,11 +109,17 @@ def turn_flags(new: LocalPlan, old: LocalPlan, turn_radius_m: float) -> list[str
     ]
 
 
+FLOOR_START_TOLERANCE_M = 1.0
+"""How far below the floor a plan may start and still fly on at that height (a UAS at the
+floor within its tracking error)."""
+
+
 def floor_flags(new: LocalPlan, old: LocalPlan, floor_amsl_m: float, *, lands: bool) -> list[str]:
-    """Generated waypoints of ``new`` below ``floor_amsl_m`` (empty: none). The floor is
-    never above the plan's first point: a UAS already at the floor (sent down to it, within
-    its tracking error) may fly on at that height, else nothing could be planned for it."""
-    if len(new):
+    """Generated waypoints of ``new`` below ``floor_amsl_m`` (empty: none). A plan starting
+    at most :data:`FLOOR_START_TOLERANCE_M` below the floor may fly on at its start's height:
+    a UAS sent down to the floor flies it within its tracking error, else nothing could be
+    planned for it; one further below is still refused."""
+    if len(new) and floor_amsl_m - FLOOR_START_TOLERANCE_M <= float(new.z[0]):
         floor_amsl_m = min(floor_amsl_m, float(new.z[0]))
     low = np.flatnonzero(new.z < floor_amsl_m - 1e-6)
     if lands:
