@@ -35,7 +35,7 @@ from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, row
 from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 from tests.mavlink.conftest import Sink
 
-SPEED = 4.0  # as tests/autopilot/test_px4_plane_takeoff.py
+SPEED = 4.0  # as tests/autopilot/test_fly_plane.py
 LAT0, LON0, GROUND_M = PX4_DEFAULT_HOME
 APPROACH = (-300.0, 300.0, 30.0)  # east, north, above ground
 LAND = (0.0, -300.0, 0.0)
@@ -143,10 +143,15 @@ def test_px4_plane_landing_raises_no_conformance_threat(
     px4: Callable[..., SitlProcess], tmp_path: Path
 ) -> None:
     """The same mission flown to touchdown beside ``gcs-utm serve --headless
-    --auto-accept``, which files it: the approach, the glide along the landing line (PX4
+    --auto-accept``, which files it. The runway take-off towards the NAV_TAKEOFF position
+    (lift-off about 18 m out, 30 m reached 95-99 m out) was filed as a straight line from
+    home to that position, 18-28 m below the climbing plane (UAS_IN_CV); it is the climb-out
+    at the maximum climb rate (FW_T_CLMB_MAX) and the minimum airspeed, then level. Then the
+    approach, the glide along the landing line (PX4
     v1.15.2 SIH: from the approach waypoint straight to the landing point, within 3 m above
-    that line) and the touchdown (about 45 m past the landing point) raise no UAS_OUT_OV /
-    UAS_IN_CV and no recommendation, and the plane lands on its own landing."""
+    that line) and the touchdown (about 45 m past the landing point): from take-off to
+    touchdown no UAS_OUT_OV / UAS_IN_CV and no recommendation, and the plane lands on its
+    own landing."""
     crossing = Crossing(origin=(LAT0, LON0), ground_amsl_m=GROUND_M)
     db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
     cfg = _config(tmp_path / "serve.toml", crossing, ["udpin:127.0.0.1:14550"])
