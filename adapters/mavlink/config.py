@@ -88,7 +88,8 @@ class MavlinkConfig:
     )
     reboot_tolerance_ms: int = setting(
         2000,
-        "time_boot_ms going back more than this is a reboot (less: reordering)",
+        "time_boot_ms going back more than this is a reboot (less: reordering), as is an "
+        "uptime this much shorter than the vehicle's silence",
         min=0,
         unit="ms",
     )

@@ -14,7 +14,8 @@ at once (a capture time is never later than its receipt); at the end of each
 ``clock_max_drift`` x the window (a vehicle clock that runs slow, as PX4 SIH's by ~1 %, is
 followed; jitter and delayed reports move nothing), or is re-anchored there, and the jump
 counted, when that sample is more than ``clock_jump_s`` above it (a clock jump, or a drift
-beyond the bound). A reboot (``time_boot_ms`` going back) starts over. SYSTEM_TIME (``unix -
+beyond the bound). A reboot (``time_boot_ms`` going back, or less uptime than the time the
+vehicle went unheard: it booted while its link was down) starts over. SYSTEM_TIME (``unix -
 boot``, once the vehicle has GNSS time) is used only when it agrees with its own arrival (not
 later, at most ``system_time_max_lag_s`` earlier); otherwise it is counted as rejected and the
 arrival-based offset stays. See docs/vehicle-time.md.
@@ -125,7 +126,8 @@ class VehicleState:
         self._rate_mark = (t_s, 0)
         self.rate_hz = 0.0
         # clock (see the module docstring)
-        self.last_boot_ms = -1
+        # the last time_boot_ms, and when it arrived
+        self.last_boot_ms, self._boot_heard_t_s = -1, t_s
         self.offset_s: float | None = None  # our clock - boot time
         self.offset_from_system_time = False
         self.clock_jumps = 0  # re-anchors of the offset (jumps, drift beyond the bound)
@@ -200,12 +202,17 @@ class VehicleState:
         sample = receipt_t_s - boot_ms * 0.001
         off = self.offset_s
         d_ms = boot_ms - self.last_boot_ms
-        if d_ms > 0:
-            self.last_boot_ms = boot_ms
-        elif d_ms < -self.cfg.reboot_tolerance_ms:
+        unheard_ms = (receipt_t_s - self._boot_heard_t_s) * 1000.0
+        self._boot_heard_t_s = receipt_t_s
+        tolerance_ms = self.cfg.reboot_tolerance_ms
+        # a reboot: its clock went back, or it has been up for less time than it was unheard
+        # (it booted while its link was down, and its new clock already passed the old one)
+        if d_ms < -tolerance_ms or (off is not None and unheard_ms > boot_ms + tolerance_ms):
             self._rebooted(boot_ms)
             self._anchor(boot_ms, sample)
             return True
+        if d_ms > 0:
+            self.last_boot_ms = boot_ms
         if off is None:
             self._anchor(boot_ms, sample)
             return False

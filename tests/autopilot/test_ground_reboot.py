@@ -60,7 +60,9 @@ def test_a_rebooted_arducopter_on_the_ground_gets_no_emergency(
         pilot.wait_ready()
         seen = time.monotonic() + 40.0  # serve's link comes back and hears the new boot
         while "sysid 1: rebooted" not in log_path.read_text(errors="replace"):
-            assert time.monotonic() < seen, "the reboot was not seen"
+            assert time.monotonic() < seen, (
+                "the reboot was not seen:\n" + log_path.read_text(errors="replace")[-3000:]
+            )
             pilot.poll(0.5)
         end = time.monotonic() + AFTER_S
         while time.monotonic() < end:

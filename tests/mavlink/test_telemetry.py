@@ -434,3 +434,21 @@ def test_the_heading_of_global_position_int_is_in_the_status() -> None:
     assert st.status(1000.0).heading_deg == 45.0
     st.on_global_position((30_100, 473977000, 85456000, 488000, 0, 0, 0, 0, 65535), 1000.1, ev)
     assert st.status(1000.1).heading_deg is None
+
+
+def test_clock_reboot_while_unheard_is_seen_though_its_clock_passed_the_old_one() -> None:
+    """A power cycle while the link is down: the vehicle is heard again 60 s later, up for
+    40 s, its clock past the 30 s of its last life. It booted while unheard: a reboot."""
+    st, ev = _clock_state()
+    _fly(st, ev, seconds=0.5, rate=1.0)  # up 30.5 s when last heard, at 1000.5
+    _report(st, ev, 40_000, 1060.5)
+    assert st.reboots == 1
+
+
+def test_clock_silence_of_a_running_vehicle_is_no_reboot() -> None:
+    """The link down for 60 s while the vehicle runs on (its clock at 0.8 x ours, a slow
+    simulator): up 30 + 48 s, longer than the silence; no reboot."""
+    st, ev = _clock_state()
+    _fly(st, ev, seconds=0.5, rate=1.0)
+    _report(st, ev, 30_500 + 48_000, 1060.5)
+    assert st.reboots == 0
