@@ -11,6 +11,7 @@ import logging
 import math
 from collections.abc import Callable
 
+from sitl import ground
 from sitl import mission as mp
 from sitl._mav import Inbound, const
 from sitl.core import (
@@ -64,8 +65,10 @@ class CommandHandler:
         telemetry: Telemetry,
         counters: dict[str, int],
         announce: Announcer,
+        reboot: Callable[[], None],
     ) -> None:
         self._time = time
+        self._reboot = reboot
         self._flight = flight
         self._mission = mission
         self._faults = faults
@@ -179,6 +182,12 @@ class CommandHandler:
             ),
             const("MAV_CMD_GET_HOME_POSITION"): self._telemetry.cmd_home,
             const("MAV_CMD_INJECT_FAILURE"): self._cmd_inject_failure,
+            const("MAV_CMD_DO_SET_HOME"): lambda _l, _m, p: ground.set_home(
+                self._flight, self._faults, p, ardupilot=self.is_ardupilot
+            ),
+            const("MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN"): lambda _l, _m, p: ground.reboot(
+                self._flight, self._reboot, p, ardupilot=self.is_ardupilot
+            ),
         }
 
     def _cmd_set_mode(self, _l: Link, _m: Inbound, p: list[float]) -> int:

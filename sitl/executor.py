@@ -55,6 +55,9 @@ class MissionExecutor:
         # leg's first goal, which then starts it at the aircraft (a new current item, a new
         # mission).
         self.leg_from_ne: tuple[float, float] | None = None
+        # DO_JUMP: item index -> jumps made (PX4's do_jump_current_count, ArduPilot's jump
+        # tracking), reset by a new mission and by a reboot
+        self.jumps_done: dict[int, int] = {}
 
     @property
     def first_seq(self) -> int:
@@ -72,6 +75,7 @@ class MissionExecutor:
         else:
             items = [mp.px4_stored(it) for it in items]
         self.items = items
+        self.jumps_done = {}
         first = self.first_seq
         self.stalled = False
         if flagged_current is not None:
@@ -98,8 +102,23 @@ class MissionExecutor:
 
     def clear(self) -> None:
         self.items = []
+        self.jumps_done = {}
         self.seq = 0
         self.state = const("MISSION_STATE_NO_MISSION")
+
+    def reboot(self) -> None:
+        """A reboot keeps the stored mission (PX4's dataman, ArduPilot's storage) and starts
+        it over: first item, no jumps made, not started."""
+        self.jumps_done = {}
+        self.seq = self.first_seq if self.items else 0
+        self.state = (
+            const("MISSION_STATE_NOT_STARTED") if self.items else const("MISSION_STATE_NO_MISSION")
+        )
+        self.reached_at = None
+        self.leg_from_ne = None
+        self.stalled = False
+        self.climb = False
+        self.speed = None
 
     def start(self, *, on_ground: bool) -> None:
         """The vehicle enters mission mode (from the ground: it climbs first)."""
@@ -180,7 +199,8 @@ class MissionExecutor:
         return frm
 
     def run_do_items(self) -> None:
-        """Execute DO items from the current index up to the next navigation item."""
+        """Execute DO items from the current index up to the next navigation item; a
+        DO_JUMP goes to its target while it has repeats left (:meth:`jump_target`)."""
         items = self.items
         guard = 0
         while (
@@ -190,9 +210,47 @@ class MissionExecutor:
         ):
             it = items[self.seq]
             self.speed = self.speed_item(it) or self.speed
-            self.seq += 1
+            target = self.jump_target(self.seq, self.jumps_done)
+            if target is None:
+                self.seq += 1
+            else:
+                self.jumps_done[self.seq] = self.jumps_done.get(self.seq, 0) + 1
+                self.seq = target
             guard += 1
             self._announce.mission_current_changed()
+
+    def jump_target(self, seq: int, jumps_done: dict[int, int]) -> int | None:
+        """Where the DO_JUMP at ``seq`` goes now, None when it is not a DO_JUMP, its repeats
+        are used up or its target is not an item. As PX4 (a jump while
+        do_jump_current_count < repeat count) and ArduPilot (jump_times_run < num_times; a
+        negative count repeats for ever): a repeat count n flies the loop n + 1 times."""
+        it = self.items[seq]
+        if it.command != mp.CMD_DO_JUMP:
+            return None
+        target, repeats = int(it.param1), int(it.param2)
+        if not self.first_seq <= target < len(self.items) or target == seq:
+            return None
+        if 0 <= repeats <= jumps_done.get(seq, 0):
+            return None
+        return target
+
+    def next_nav(self, seq: int) -> int | None:
+        """The navigation item the mission flies after the one at ``seq`` (following the
+        DO_JUMPs with the repeats they have left), None when the mission ends there."""
+        done = dict(self.jumps_done)
+        i = seq + 1
+        for _ in range(2 * len(self.items) + 2):
+            if i >= len(self.items):
+                return None
+            if self.items[i].command in mp.NAV_COMMANDS:
+                return i
+            target = self.jump_target(i, done)
+            if target is None:
+                i += 1
+            else:
+                done[i] = done.get(i, 0) + 1
+                i = target
+        return None
 
     def reached(self, it: mp.RawItem, n: float, e: float, alt: float) -> bool:
         if it.command == mp.CMD_LOITER_UNLIM:

@@ -184,8 +184,9 @@ class Faults:
         return min(1.0, (self._time.t_s - self._jam_since) / 10.0 + 0.1)
 
     def acquiring_gnss(self) -> bool:
-        """No fix yet since boot (``VehicleSpec.gnss_fix_after_s``)."""
-        return self._time.t_s - self._spec.boot_at_s < self._spec.gnss_fix_after_s
+        """No fix yet since the last boot (``VehicleSpec.gnss_fix_after_s``; a reboot
+        acquires GNSS again)."""
+        return self._time.t_s - self._time.boot_at_s < self._spec.gnss_fix_after_s
 
     def gps_fix_type(self) -> int:
         if self.acquiring_gnss():

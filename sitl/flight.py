@@ -69,6 +69,8 @@ class Flight:
         self.frame = LocalTangent(spec.home_lat_deg, spec.home_lon_deg)
         self.home = (spec.home_lat_deg, spec.home_lon_deg, spec.home_alt_amsl_m)
         self.ground_alt_m = spec.home_alt_amsl_m
+        # set by DO_SET_HOME: PX4's manual home, ArduPilot's locked home, kept at arming
+        self.home_manual = False
         self.k = KinState(alt_amsl_m=spec.home_alt_amsl_m)
         self.battery_pct = 100.0
         self.bat_level = 0  # 0 ok, 1 low, 2 critical, 3 emergency
@@ -102,6 +104,28 @@ class Flight:
         self.takeoff_alt_rel_m = spec.takeoff_alt_rel_m
         self.rtl_alt_rel_m = spec.rtl_alt_rel_m
         self.cruise_mps = self.lim.cruise_speed_mps
+
+    def reboot(self) -> None:
+        """The autopilot restarts (:meth:`sitl.vehicle.Vehicle.reboot`): disarmed in its boot
+        mode, no scenario auto-start, parameters kept; its home is taken again where it
+        stands (both set home at the first fix after boot) and is automatic again."""
+        self.armed = False
+        self.mode = POSCTL if self.is_ardupilot and not self.is_fixed_wing else HOLD
+        self.speed_override = None
+        self.rtl_phase = 0
+        self.goal_ne = (self.k.north_m, self.k.east_m)
+        self.goal_alt = self.k.alt_amsl_m if not self.landed else self.ground_alt_m
+        self._auto_started = True
+        self.set_home(
+            self.lat_deg, self.lon_deg, self.ground_alt_m if self.landed else self.k.alt_amsl_m
+        )
+        self.home_manual = False
+        self.mission.reboot()
+
+    def set_home(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> None:
+        """Home, as HOME_POSITION reports it and RTL and relative altitudes use it."""
+        self.home = (lat_deg, lon_deg, alt_amsl_m)
+        self.mission.home = self.home
 
     @property
     def lat_deg(self) -> float:
@@ -354,13 +378,14 @@ class Flight:
             if self.k.alt_amsl_m < self._rtl_alt - 1.0 and not self.is_fixed_wing:
                 return self._goal(self.k.north_m, self.k.east_m, self._rtl_alt, stop=True)
             self.rtl_phase = 2
-        dist = math.hypot(self.k.north_m, self.k.east_m)
+        hn, he = self.frame.to_ne(self.home[0], self.home[1])  # (DO_SET_HOME moves it)
+        dist = math.hypot(self.k.north_m - hn, self.k.east_m - he)
         if self.is_fixed_wing:
-            return self._goal(0.0, 0.0, self._rtl_alt, stop=True)  # loiter over home
+            return self._goal(hn, he, self._rtl_alt, stop=True)  # loiter over home
         if self.rtl_phase == 2 and dist > 1.0:
-            return self._goal(0.0, 0.0, self._rtl_alt, stop=True)
+            return self._goal(hn, he, self._rtl_alt, stop=True)
         self.rtl_phase = 3
-        return self._goal(0.0, 0.0, self.ground_alt_m - 1.0, stop=True)
+        return self._goal(hn, he, self.ground_alt_m - 1.0, stop=True)
 
     def _mission_goal(self) -> Goal:
         items = self.mission.items
@@ -382,7 +407,7 @@ class Flight:
         if special is not None:
             return special
         self.goal_ne, self.goal_alt = (n, e), alt
-        last_nav = not any(x.command in mp.NAV_COMMANDS for x in items[self.mission.seq + 1 :])
+        last_nav = self.mission.next_nav(self.mission.seq) is None
         hold_s = it.param1 if it.command in (mp.CMD_WAYPOINT, mp.CMD_LOITER_TIME) else 0.0
         if self.mission.reached(it, n, e, alt) and self.mission.done_with(hold_s, last_nav):
             return self._goal(n, e, alt, stop=True)  # mission finished: stay on the last point
@@ -434,6 +459,8 @@ class Flight:
                 return R_FAILED
         self.armed = True
         self._armed_at = self._time.t_s
+        if not self.home_manual:  # PX4 and ArduPilot take home where they arm (not a set one)
+            self.set_home(self.lat_deg, self.lon_deg, self.k.alt_amsl_m)
         self._announce.statustext(SEV_INFO, "Armed by external command")
         return R_ACCEPTED
 

@@ -75,11 +75,12 @@ CMD_LAND = const("MAV_CMD_NAV_LAND")
 CMD_TAKEOFF = const("MAV_CMD_NAV_TAKEOFF")
 CMD_CHANGE_SPEED = const("MAV_CMD_DO_CHANGE_SPEED")
 CMD_LAND_START = const("MAV_CMD_DO_LAND_START")
+CMD_DO_JUMP = const("MAV_CMD_DO_JUMP")  # param1 the item to jump to, param2 the repeat count
 NAV_COMMANDS = frozenset(
     {CMD_WAYPOINT, CMD_LOITER_UNLIM, CMD_LOITER_TIME, CMD_RTL, CMD_LAND, CMD_TAKEOFF}
 )
 POSITIONAL = frozenset({CMD_WAYPOINT, CMD_LOITER_UNLIM, CMD_LOITER_TIME, CMD_LAND, CMD_TAKEOFF})
-SUPPORTED_COMMANDS = NAV_COMMANDS | {CMD_CHANGE_SPEED, CMD_LAND_START}
+SUPPORTED_COMMANDS = NAV_COMMANDS | {CMD_CHANGE_SPEED, CMD_LAND_START, CMD_DO_JUMP}
 DO_COMMANDS = SUPPORTED_COMMANDS - NAV_COMMANDS
 _INT_FRAME = {FRAME_GLOBAL: FRAME_GLOBAL_INT, FRAME_GLOBAL_REL: FRAME_GLOBAL_REL_INT}
 
@@ -199,6 +200,9 @@ def ardupilot_stored(item: RawItem, *, fixed_wing: bool) -> RawItem:
         it = replace(it, frame=FRAME_GLOBAL)
     elif it.frame in (FRAME_GLOBAL_INT, FRAME_GLOBAL_REL_INT):
         it = replace(it, frame=FRAME_GLOBAL if it.frame == FRAME_GLOBAL_INT else FRAME_GLOBAL_REL)
+    if it.command == CMD_DO_JUMP:  # the target and the repeat count (int16), nothing else
+        it = replace(it, param1=float(int(it.param1)), param2=float(int(it.param2)), param3=0.0,
+                     param4=0.0)  # fmt: skip
     if it.command == CMD_LAND:  # only the sign of param4 is kept (deep-stall direction)
         it = replace(it, param4=-1.0 if it.param4 < 0.0 else 1.0)
     if it.command == CMD_LOITER_TIME:  # the radius is not stored: its sign, the direction
@@ -272,6 +276,12 @@ class MissionServer:
     @property
     def busy(self) -> bool:
         return self._up is not None
+
+    def reset(self) -> None:
+        """The vehicle rebooted: transfers in progress are gone."""
+        self._up = None
+        self._down = None
+        self._last_done = None
 
     def handle(self, peer: object, msg: Inbound, now_s: float) -> bool:
         """Process one mission-protocol message; False if it is not one."""

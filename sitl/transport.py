@@ -17,7 +17,7 @@ from collections.abc import Callable
 from sitl._mav import Inbound, name_of
 from sitl.core import Timeline
 from sitl.faults import Faults
-from sitl.links import Link, TcpLink, UdpLink
+from sitl.links import Link, StreamState, TcpLink, UdpLink
 from sitl.spec import ARDUPILOT, VehicleSpec
 
 _log = logging.getLogger(__name__)
@@ -50,6 +50,7 @@ class Transport:
         self._udp: UdpLink | None = None
         self._api: UdpLink | None = None
         self._tcp_server: asyncio.Server | None = None
+        self._boot_rates_hz: dict[str, float] = {}  # the streams of a link at boot
 
     @property
     def local_port(self) -> int:
@@ -77,6 +78,7 @@ class Transport:
         if ardupilot:
             # ArduPilot streams nothing but HEARTBEAT until asked (SRx_ params at 0).
             streaming = {"HEARTBEAT": streaming.get("HEARTBEAT", 1.0)}
+        self._boot_rates_hz = streaming
         want_udp = not ardupilot or spec.bind_port is not None
         if want_udp:
             port = spec.bind_port if spec.bind_port is not None else 18570 + spec.instance
@@ -114,6 +116,19 @@ class Transport:
             self._tcp_server.close()
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(self._tcp_server.wait_closed(), 1.0)
+
+    def reboot(self) -> None:
+        """The autopilot restarts: its TCP connections drop (ArduPilot SITL's server goes
+        with the process; the ground station connects again) and every UDP link is back to
+        the streams it has at boot (ArduPilot: HEARTBEAT only until asked again)."""
+        for link in list(self.links):
+            if isinstance(link, TcpLink):
+                if link.transport is not None:
+                    link.transport.close()
+                continue
+            link.streams = {
+                n: StreamState(1.0 / hz if hz > 0 else 0.0) for n, hz in self._boot_rates_hz.items()
+            }
 
     def out(self, link: Link, data: bytes) -> None:
         if not self._time.booted:

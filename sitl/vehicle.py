@@ -44,6 +44,8 @@ from sitl.transport import Transport
 _log = logging.getLogger(__name__)
 
 AP_STORAGE_READY_S = 1.5  # simulated s after boot before ArduPilot takes an upload
+REBOOT_DELAY_S = 0.4  # PX4 px4_reboot_request(400 ms): the COMMAND_ACK goes out first
+REBOOT_DOWN_S = 3.0  # simulated s without a word between the reboot and the new boot
 IGNORED_MESSAGES = frozenset({"SYSTEM_TIME", "COMMAND_ACK", "STATUSTEXT", "PING"})
 
 __all__ = ["PHYSICS_DT_S", "PLANE_MODES", "Vehicle", "mission_items_from_specs", "stream_msg_id"]
@@ -95,8 +97,11 @@ class Vehicle:
             telemetry=self.telemetry,
             counters=self.counters,
             announce=self,
+            reboot=self.reboot,
         )
         self._handlers = self.commands.handlers()
+        self.reboots = 0  # reboots done (MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, :meth:`reboot`)
+        self._reboot_at_s: float | None = None
         self.mission_server = mp.MissionServer(
             self, max_items=spec.max_mission_items, ardupilot=self.is_ardupilot
         )
@@ -206,6 +211,24 @@ class Vehicle:
         """Start a fault now (the "on command" path of fault injection)."""
         self.faults.inject(kind, self.flight, duration_s=duration_s, value=value)
 
+    def reboot(self) -> None:
+        """Reboot REBOOT_DELAY_S from now (simulated): silent for REBOOT_DOWN_S, then a new
+        boot (time_boot_ms from 0, GNSS acquired again, home taken again, disarmed in the
+        boot mode, the stored mission and parameters kept, ArduPilot's TCP connections
+        dropped and its streams off until asked again)."""
+        self._reboot_at_s = self.time.t_s + REBOOT_DELAY_S
+
+    def _restart(self) -> None:
+        self._reboot_at_s = None
+        self.reboots += 1
+        clock = self.time
+        clock.boot_at_s = clock.t_s + REBOOT_DOWN_S
+        clock.booted = False
+        _log.info("sysid %d: rebooting", self.sys_id)
+        self.flight.reboot()
+        self.mission_server.reset()
+        self.transport.reboot()
+
     def arm(self, *, force: bool = False) -> int:
         """Arm as COMPONENT_ARM_DISARM would (the MAV_RESULT)."""
         return self.flight.arm(force=force)
@@ -253,7 +276,7 @@ class Vehicle:
     def storage_ready(self) -> bool:
         """ArduPilot refuses uploads (MAV_MISSION_NO_SPACE) until its mission storage is up,
         about 1.5 simulated s after it starts (measured at speed 1 and 5); PX4 at once."""
-        return not self.is_ardupilot or self.time.t_s - self.spec.boot_at_s >= AP_STORAGE_READY_S
+        return not self.is_ardupilot or self.time.t_s - self.time.boot_at_s >= AP_STORAGE_READY_S
 
     # Receive path and time ------------------------------------------------------------
 
@@ -280,27 +303,22 @@ class Vehicle:
     def advance(self, t_s: float) -> None:
         """Advance the vehicle to `t_s` simulated seconds after fleet start."""
         clock = self.time
-        if t_s < self.spec.boot_at_s:
+        if t_s < clock.boot_at_s:
+            if self.reboots:  # rebooting: the airframe is still there (and falls if flying)
+                self._integrate(t_s)
             clock.t_s = t_s
             return
         if not clock.booted:
             clock.booted = True
-            clock.t_s = max(clock.t_s, self.spec.boot_at_s)
+            clock.t_s = max(clock.t_s, clock.boot_at_s)
             self.statustext(
                 SEV_INFO, "Ready for takeoff!" if not self.is_ardupilot else "ArduPilot Ready"
             )
-        dt_total = t_s - clock.t_s
-        if dt_total > 0:
-            n = max(1, math.ceil(dt_total / PHYSICS_DT_S - 1e-9))
-            n = min(n, 400)  # after a long stall take bigger steps rather than freezing the loop
-            dt = dt_total / n
-            for _ in range(n):
-                clock.t_s += dt
-                self.faults.update(self.flight)
-                self.faults.drift_jam(dt)
-                self.flight.auto_start()
-                self.flight.step(dt)
+        self._integrate(t_s)
         clock.t_s = t_s
+        if self._reboot_at_s is not None and t_s >= self._reboot_at_s:
+            self._restart()
+            return
         self.mission_server.tick(time.monotonic())
         if clock.t_s >= self._next_history_t:
             self._next_history_t = clock.t_s + HISTORY_PERIOD_S
@@ -308,6 +326,23 @@ class Vehicle:
                 (self.sim_now_utc_s(), self.lat_deg, self.lon_deg, self.alt_amsl_m)
             )
         self.telemetry.send_streams()
+
+    def _integrate(self, t_s: float) -> None:
+        """The kinematics and mode logic up to ``t_s``, in fixed steps of at most
+        PHYSICS_DT_S."""
+        clock = self.time
+        dt_total = t_s - clock.t_s
+        if dt_total <= 0:
+            return
+        n = max(1, math.ceil(dt_total / PHYSICS_DT_S - 1e-9))
+        n = min(n, 400)  # after a long stall take bigger steps rather than freezing the loop
+        dt = dt_total / n
+        for _ in range(n):
+            clock.t_s += dt
+            self.faults.update(self.flight)
+            self.faults.drift_jam(dt)
+            self.flight.auto_start()
+            self.flight.step(dt)
 
 
 def stream_msg_id(name: str) -> int:
