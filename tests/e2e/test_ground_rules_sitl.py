@@ -1,0 +1,150 @@
+"""Issue 31 item 2 against the built-in vehicles (``sitl/``), as ``tests/autopilot``'s
+``test_ground_px4.py`` and ``test_ground_reboot.py`` check it against real PX4 and ArduCopter.
+
+A PX4-personality and an ArduCopter-personality ``sitl`` vehicle stand disarmed at the two
+ends of a crossing, each with its crossing leg as mission, beside ``gcs-utm serve --headless
+--auto-accept``. Both acquire GNSS for a few seconds after boot. Nothing is decided for them
+on the ground: no recommendation, no threat, no mission replaced, no mode set. Then the
+ArduCopter reboots on the ground (MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: silent, a new boot whose
+time_boot_ms starts from 0, its TCP connection dropped, GNSS acquired again): serve sees the
+reboot and treats it as a new pre-flight, not an emergency.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import sitl
+from tests.autopilot.closed_loop import Crossing, _config, rows
+from tests.autopilot.pilot import offset_deg
+
+pytestmark = [pytest.mark.network, pytest.mark.timeout(120)]
+
+SPEED = 10.0
+GROUND_M = 675.0
+ORIGIN = (40.6597, -3.5969)
+WATCH_S = 30.0  # simulated seconds watched on the ground, before and after the reboot
+VEHICLE_THREATS = ("GNSS_DEGRADATION", "JAMMING_ATTACK", "LACK_OF_BATTERY", "COMMUNICATION_FAILURE")
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _specs(crossing: Crossing, gcs_port: int) -> list[sitl.VehicleSpec]:
+    out = []
+    for i, (autopilot, start, end) in enumerate(
+        zip(("px4", "ardupilot"), crossing.starts(), crossing.ends(), strict=True)
+    ):
+        alt = GROUND_M + crossing.cruise_agl_m
+        first = offset_deg(start[0], start[1], 0.0, 0.0)
+        out.append(
+            sitl.VehicleSpec(
+                instance=i,
+                autopilot=autopilot,
+                home_lat_deg=start[0],
+                home_lon_deg=start[1],
+                home_alt_amsl_m=GROUND_M,
+                mission=(
+                    sitl.MissionItemSpec(lat_deg=first[0], lon_deg=first[1], alt_amsl_m=alt),
+                    sitl.MissionItemSpec(
+                        lat_deg=end[0], lon_deg=end[1], alt_amsl_m=alt, speed_mps=8.0
+                    ),
+                ),
+                gcs_port=gcs_port,
+                bind_port=0 if autopilot == "px4" else None,
+                tcp_port=0 if autopilot == "ardupilot" else None,
+                gnss_fix_after_s=4.0,
+            )
+        )
+    return out
+
+
+async def _watch(fleet: sitl.Fleet, sim_s: float, modes: list[str]) -> None:
+    end = time.monotonic() + sim_s / SPEED
+    while time.monotonic() < end:
+        modes.extend(v.mode for v in fleet.vehicles)
+        await asyncio.sleep(0.05)
+
+
+async def _until(cond: object, timeout_s: float, what: str, log: Path) -> None:
+    end = time.monotonic() + timeout_s
+    while not cond():  # type: ignore[operator]
+        assert time.monotonic() < end, f"{what}\n" + log.read_text(errors="replace")[-3000:]
+        await asyncio.sleep(0.1)
+
+
+async def test_disarmed_sitl_vehicles_get_no_decision_and_a_reboot_is_a_new_preflight(
+    tmp_path: Path,
+) -> None:
+    crossing = Crossing(origin=ORIGIN, ground_amsl_m=GROUND_M)
+    port = _free_udp_port()
+    sim = sitl.SimTime(SPEED)
+    db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
+    serve: subprocess.Popen[bytes] | None = None
+    modes: list[str] = []
+    async with sitl.Fleet(_specs(crossing, port), sim) as fleet:
+        px4, copter = fleet.vehicle(1), fleet.vehicle(2)
+        missions = [v.mission for v in fleet.vehicles]
+        cfg = _config(
+            tmp_path / "serve.toml",
+            crossing,
+            [f"udpin:127.0.0.1:{port}", f"tcp:127.0.0.1:{copter.tcp_port}"],
+        )
+        try:
+            with log_path.open("wb") as log:
+                serve = subprocess.Popen(
+                    [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless",
+                     "--auto-accept", "--config", str(cfg), "--db", str(db),
+                     "--speed", str(SPEED)],
+                    stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                )  # fmt: skip
+            await _until(
+                lambda: len(rows(db, "SELECT id FROM operations")) >= 2,
+                40.0,
+                "the two missions were not filed",
+                log_path,
+            )
+            await _watch(fleet, WATCH_S, modes)
+            before_reboot = len(modes)
+            assert copter.commands._command_table()[246](None, None, [1.0] + [0.0] * 6) == 0  # type: ignore[arg-type]
+            await _until(
+                lambda: "sysid 2: rebooted" in log_path.read_text(errors="replace"),
+                30.0,
+                "the reboot was not seen",
+                log_path,
+            )
+            assert copter.reboots == 1
+            await _watch(fleet, WATCH_S, modes)
+            assert serve.poll() is None, "gcs-utm serve exited"
+        finally:
+            if serve is not None and serve.poll() is None:
+                serve.terminate()
+                serve.wait(timeout=30)
+        after = [v.mission for v in fleet.vehicles]
+        armed = [v.armed for v in fleet.vehicles]
+    text = log_path.read_text(errors="replace")
+    tail = text[-4000:]
+    recs = rows(db, "SELECT state FROM recommendations")
+    assert recs == [], f"recommendations for vehicles on the ground: {recs}\n{tail}"
+    assert after == missions, f"a mission was replaced\n{tail}"
+    assert not any(armed)
+    assert before_reboot > 0 and "MISSION" not in modes, f"mission mode set on the ground\n{tail}"
+    threats = rows(db, "SELECT kind FROM threats")
+    assert threats == [], f"threats for vehicles on the ground: {threats}\n{tail}"
+    filed = rows(db, "SELECT operation_id FROM flight_plans WHERE version = 1")
+    assert len(filed) == 2, filed
+    for sys_id in (1, 2):  # the home is the one after the fix
+        fix = text.find(f"sysid {sys_id}: fix")
+        home = text.find(f"sysid {sys_id}: home ")
+        assert 0 <= fix < home, f"sysid {sys_id}: home before its fix\n{tail}"
+    assert px4.reboots == 0
