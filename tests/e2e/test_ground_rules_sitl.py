@@ -8,11 +8,15 @@ on the ground: no recommendation, no threat, no mission replaced, no mode set. T
 ArduCopter reboots on the ground (MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: silent, a new boot whose
 time_boot_ms starts from 0, its TCP connection dropped, GNSS acquired again): serve sees the
 reboot and treats it as a new pre-flight, not an emergency.
+
+And issue 31's threat lifecycle with the built-in vehicles in a fast-time scenario run: a
+threat closes when the UAS's fix is back, or when the UAS is on the ground.
 """
 
 from __future__ import annotations
 
 import asyncio
+import math
 import socket
 import subprocess
 import sys
@@ -22,12 +26,15 @@ from pathlib import Path
 import pytest
 
 import sitl
+from gcs_utm.app import OperatorMode, RunOptions, run_scenario_blocking
+from gcs_utm.settings import Settings
 from tests.autopilot.closed_loop import Crossing, _config, rows
 from tests.autopilot.pilot import offset_deg
 
 pytestmark = [pytest.mark.network, pytest.mark.timeout(120)]
 
 SPEED = 10.0
+SCENARIOS = Path(__file__).resolve().parents[2] / "config" / "scenarios"
 GROUND_M = 675.0
 ORIGIN = (40.6597, -3.5969)
 WATCH_S = 30.0  # simulated seconds watched on the ground, before and after the reboot
@@ -148,3 +155,32 @@ async def test_disarmed_sitl_vehicles_get_no_decision_and_a_reboot_is_a_new_pref
         home = text.find(f"sysid {sys_id}: home ")
         assert 0 <= fix < home, f"sysid {sys_id}: home before its fix\n{tail}"
     assert px4.reboots == 0
+
+
+def test_threats_close_when_the_fix_is_back_and_when_the_uas_landed(tmp_path: Path) -> None:
+    """Use case 2 (UAS1 jammed for 120 s, commanded down) with UAS2 jammed for 20 s, fast
+    time, the built-in vehicles: UAS2's GNSS_DEGRADATION closes when its fix is back (its
+    JAMMING_ATTACK does not: nothing UAS2 reports says the jammer is gone), and UAS1's
+    threats close once it is on the ground (disarmed), each with its reason."""
+    text = (SCENARIOS / "use_case_2.toml").read_text()
+    text += (
+        '\n[[events]]\nat_s = 12.0\nkind = "gnss_jamming"\nuas = "UAS2"\nduration_s = 20.0\n'
+        "value = 0.6\n"
+    )
+    path = tmp_path / "use_case_2_two_jammed.toml"
+    path.write_text(text)
+    options = RunOptions(
+        speed=math.inf,
+        headless=True,
+        operator=OperatorMode.AUTO_ACCEPT,
+        out_dir=tmp_path,
+        figures=False,
+        duration_s=150.0,
+    )
+    report = run_scenario_blocking(path, Settings(), options).to_json()
+    closed = {
+        (t["kind"], t["uas"][0]): t["message"] for t in report["threats"] if t["status"] == "closed"
+    }
+    assert "closed: GNSS fix back" in closed[("GNSS_DEGRADATION", "UAS2")], closed
+    assert "closed: UAS1 is on the ground" in closed[("JAMMING_ATTACK", "UAS1")], closed
+    assert "closed: UAS1 is on the ground" in closed[("GNSS_DEGRADATION", "UAS1")], closed
