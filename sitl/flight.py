@@ -250,9 +250,7 @@ class Flight:
             return
         if self.landed:
             if goal.alt_amsl_m <= self.ground_alt_m + 0.3:
-                # PX4 COM_DISARM_LAND, ArduCopter's land detector: after LAND, and RTL's landing
-                down_s = self._time.t_s - self._landed_at
-                if down_s > DISARM_AFTER_LAND_S and self.mode in (LAND, RTL):
+                if self._time.t_s - self._landed_at > DISARM_AFTER_LAND_S and self.mode == LAND:
                     self.armed = False
                     self._announce.statustext(SEV_INFO, "Landing detected, disarmed")
                 return
