@@ -12,6 +12,10 @@ SITL), all through the project's own ``MavlinkHub``:
 4. RTL is acknowledged and shown; LAND is acknowledged and the vehicle descends (ArduPlane:
    DO_LAND_START fails without a landing sequence, the fallback landing mission flies).
 
+Ground and boot rules (issue 31), before step 1 and during step 2: DO_SET_HOME on the ground
+moves home (HOME_POSITION shows it 3 m higher) and DO_SET_HOME "here" takes it back; a reboot
+while armed is refused (PX4 DENIED, ArduPilot FAILED) and the vehicle flies on.
+
 The ``sitl`` cases need nothing; the real ones need ``../shared`` and a private network
 namespace (``bash tests/netns.sh .venv/bin/python -m pytest tests/autopilot/test_conformance.py``)
 and skip, saying why, without them.
@@ -56,6 +60,9 @@ pytestmark = [pytest.mark.network, pytest.mark.timeout(240)]
 
 MAV_CMD_COMPONENT_ARM_DISARM = 400
 MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_DO_SET_HOME = 179
+MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN = 246
+MAV_RESULT_DENIED, MAV_RESULT_FAILED = 2, 4
 SYS = SysId(1)
 _NAN = math.nan
 
@@ -257,6 +264,33 @@ async def _holds_altitude(rig: Rig, sim_s: float, tol_m: float) -> tuple[float, 
     return a0, a1
 
 
+async def _home_moves_on_the_ground(rig: Rig) -> None:
+    """DO_SET_HOME 3 m above the ground is shown in HOME_POSITION; "here" takes it back."""
+    st = rig.hub.state(SYS)
+    lat, lon, ground = rig.case.home
+    await until(lambda: st.home is not None, 90.0, "no HOME_POSITION (no fix)")
+    up = (0.0, 0.0, 0.0, _NAN, lat, lon, ground + 3.0)
+    assert (await rig.hub.command_long(SYS, MAV_CMD_DO_SET_HOME, up)).ok
+    await until(
+        lambda: st.home is not None and abs(st.home.alt_amsl_m - ground - 3.0) < 0.5,
+        10.0,
+        "HOME_POSITION does not show the home DO_SET_HOME set",
+    )
+    assert (await rig.hub.command_long(SYS, MAV_CMD_DO_SET_HOME, (1.0,) + (0.0,) * 6)).ok
+    await until(
+        lambda: st.home is not None and abs(st.home.alt_amsl_m - ground) < 1.5,
+        10.0,
+        "DO_SET_HOME here did not take home back to the vehicle",
+    )
+
+
+async def _no_reboot_in_flight(rig: Rig) -> None:
+    refused = MAV_RESULT_DENIED if rig.case.autopilot is Autopilot.PX4 else MAV_RESULT_FAILED
+    res = await rig.hub.command_long(SYS, MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, (1.0,) + (0.0,) * 6)
+    assert not res.ok and res.result == refused, res
+    assert rig.hub.state(SYS).reboots == 0
+
+
 def _check_upload(res: UploadResult) -> None:
     assert res.ok and res.verified and res.current_set and res.mode_set, res
     assert res.failure is None and res.current_seq is not None
@@ -287,6 +321,7 @@ async def test_mission_and_commands(case: Case, request: pytest.FixtureRequest) 
             # moment after boot: the retry covers it)
             res = await hub.upload_plan(SYS, plan, set_mission_mode=False)
             assert res.ok and res.verified and res.current_set, res
+        await _home_moves_on_the_ground(rig)
         await _take_off(rig, height_m)
 
         # 2. a timed plan with speed items, uploaded in flight
@@ -300,6 +335,7 @@ async def test_mission_and_commands(case: Case, request: pytest.FixtureRequest) 
         await until(
             lambda: (st.mission_seq or 0) > first + 1, 60.0, f"MISSION_CURRENT past {first}"
         )
+        await _no_reboot_in_flight(rig)
 
         # 3. hold keeps the altitude
         r = await hub.send_command(
