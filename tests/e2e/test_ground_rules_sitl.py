@@ -9,8 +9,10 @@ ArduCopter reboots on the ground (MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: silent, a n
 time_boot_ms starts from 0, its TCP connection dropped, GNSS acquired again): serve sees the
 reboot and treats it as a new pre-flight, not an emergency.
 
-And issue 31's threat lifecycle with the built-in vehicles in a fast-time scenario run: a
-threat closes when the UAS's fix is back, or when the UAS is on the ground.
+With the same two vehicles armed and crossing at 15 m above ground, no plan serve generates
+goes below the floor above their homes at arming (issue 31 item 3). And the threat lifecycle
+with the built-in vehicles in a fast-time scenario run: a threat closes when the UAS's fix is
+back, or when the UAS is on the ground.
 """
 
 from __future__ import annotations
@@ -28,8 +30,7 @@ import pytest
 import sitl
 from gcs_utm.app import OperatorMode, RunOptions, run_scenario_blocking
 from gcs_utm.settings import Settings
-from tests.autopilot.closed_loop import Crossing, _config, rows
-from tests.autopilot.pilot import offset_deg
+from tests.autopilot.closed_loop import Crossing, _config, below_floor, rows
 
 pytestmark = [pytest.mark.network, pytest.mark.timeout(120)]
 
@@ -38,7 +39,6 @@ SCENARIOS = Path(__file__).resolve().parents[2] / "config" / "scenarios"
 GROUND_M = 675.0
 ORIGIN = (40.6597, -3.5969)
 WATCH_S = 30.0  # simulated seconds watched on the ground, before and after the reboot
-VEHICLE_THREATS = ("GNSS_DEGRADATION", "JAMMING_ATTACK", "LACK_OF_BATTERY", "COMMUNICATION_FAILURE")
 
 
 def _free_udp_port() -> int:
@@ -48,12 +48,13 @@ def _free_udp_port() -> int:
 
 
 def _specs(crossing: Crossing, gcs_port: int) -> list[sitl.VehicleSpec]:
+    """A PX4 (sysid 1) and an ArduCopter (sysid 2) on the crossing's starts, each with its
+    leg (above its start, then to its end at 8 m/s) as mission."""
     out = []
     for i, (autopilot, start, end) in enumerate(
         zip(("px4", "ardupilot"), crossing.starts(), crossing.ends(), strict=True)
     ):
         alt = GROUND_M + crossing.cruise_agl_m
-        first = offset_deg(start[0], start[1], 0.0, 0.0)
         out.append(
             sitl.VehicleSpec(
                 instance=i,
@@ -62,7 +63,7 @@ def _specs(crossing: Crossing, gcs_port: int) -> list[sitl.VehicleSpec]:
                 home_lon_deg=start[1],
                 home_alt_amsl_m=GROUND_M,
                 mission=(
-                    sitl.MissionItemSpec(lat_deg=first[0], lon_deg=first[1], alt_amsl_m=alt),
+                    sitl.MissionItemSpec(lat_deg=start[0], lon_deg=start[1], alt_amsl_m=alt),
                     sitl.MissionItemSpec(
                         lat_deg=end[0], lon_deg=end[1], alt_amsl_m=alt, speed_mps=8.0
                     ),
@@ -74,6 +75,21 @@ def _specs(crossing: Crossing, gcs_port: int) -> list[sitl.VehicleSpec]:
             )
         )
     return out
+
+
+def _serve(cfg: Path, db: Path, log_path: Path) -> subprocess.Popen[bytes]:
+    with log_path.open("wb") as log:
+        return subprocess.Popen(
+            [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless", "--auto-accept",
+             "--config", str(cfg), "--db", str(db), "--speed", str(SPEED)],
+            stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+        )  # fmt: skip
+
+
+def _stop(serve: subprocess.Popen[bytes] | None) -> None:
+    if serve is not None and serve.poll() is None:
+        serve.terminate()
+        serve.wait(timeout=30)
 
 
 async def _watch(fleet: sitl.Fleet, sim_s: float, modes: list[str]) -> None:
@@ -108,13 +124,7 @@ async def test_disarmed_sitl_vehicles_get_no_decision_and_a_reboot_is_a_new_pref
             [f"udpin:127.0.0.1:{port}", f"tcp:127.0.0.1:{copter.tcp_port}"],
         )
         try:
-            with log_path.open("wb") as log:
-                serve = subprocess.Popen(
-                    [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless",
-                     "--auto-accept", "--config", str(cfg), "--db", str(db),
-                     "--speed", str(SPEED)],
-                    stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                )  # fmt: skip
+            serve = _serve(cfg, db, log_path)
             await _until(
                 lambda: len(rows(db, "SELECT id FROM operations")) >= 2,
                 40.0,
@@ -134,9 +144,7 @@ async def test_disarmed_sitl_vehicles_get_no_decision_and_a_reboot_is_a_new_pref
             await _watch(fleet, WATCH_S, modes)
             assert serve.poll() is None, "gcs-utm serve exited"
         finally:
-            if serve is not None and serve.poll() is None:
-                serve.terminate()
-                serve.wait(timeout=30)
+            _stop(serve)
         after = [v.mission for v in fleet.vehicles]
         armed = [v.armed for v in fleet.vehicles]
     text = log_path.read_text(errors="replace")
@@ -184,3 +192,45 @@ def test_threats_close_when_the_fix_is_back_and_when_the_uas_landed(tmp_path: Pa
     assert "closed: GNSS fix back" in closed[("GNSS_DEGRADATION", "UAS2")], closed
     assert "closed: UAS1 is on the ground" in closed[("JAMMING_ATTACK", "UAS1")], closed
     assert "closed: UAS1 is on the ground" in closed[("GNSS_DEGRADATION", "UAS1")], closed
+
+
+async def test_plans_generated_for_flying_sitl_vehicles_keep_above_the_floor(
+    tmp_path: Path,
+) -> None:
+    """As ``test_px4_closed_loop.py`` / ``test_ardupilot_closed_loop.py`` (closed_loop.
+    below_floor): once filed, the two vehicles are armed and started by their pilots and
+    cross at 15 m above ground; the
+    loss of separation is resolved by serve (auto-accept), and no waypoint of a plan it
+    generates lies below the floor (10 m) above the vehicle's home at arming."""
+    crossing = Crossing(origin=ORIGIN, ground_amsl_m=GROUND_M, cruise_agl_m=15.0)
+    port = _free_udp_port()
+    db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
+    serve: subprocess.Popen[bytes] | None = None
+    async with sitl.Fleet(_specs(crossing, port), sitl.SimTime(SPEED)) as fleet:
+        cfg = _config(
+            tmp_path / "serve.toml",
+            crossing,
+            [f"udpin:127.0.0.1:{port}", f"tcp:127.0.0.1:{fleet.vehicle(2).tcp_port}"],
+        )
+        try:
+            serve = _serve(cfg, db, log_path)
+            await _until(
+                lambda: len(rows(db, "SELECT id FROM operations")) >= 2,
+                40.0,
+                "the two missions were not filed",
+                log_path,
+            )
+            for v in fleet.vehicles:  # the pilots start their missions
+                assert v.arm() == 0 and v.commands.request_mode("MISSION") == 0
+            await _until(
+                lambda: len(rows(db, "SELECT id FROM recommendations")) >= 1,
+                60.0,
+                "no recommendation for the crossing",
+                log_path,
+            )
+            await _watch(fleet, 20.0, [])
+            assert serve.poll() is None, "gcs-utm serve exited"
+        finally:
+            _stop(serve)
+    tail = log_path.read_text(errors="replace")[-4000:]
+    assert below_floor(db) == [], tail
