@@ -219,9 +219,8 @@ class CommandHandler:
         if target == MISSION and not self._mission.items:
             self._announce.statustext(SEV_CRITICAL, "Mode change denied: no valid mission")
             return R_DENIED
-        if target == TAKEOFF and not self._flight.armed:
-            self._announce.statustext(SEV_CRITICAL, "Takeoff denied: disarmed")
-            return R_DENIED
+        # a mode is not refused for being disarmed (PX4's user mode intention, ArduPilot's
+        # set_mode): a vehicle armed in TAKEOFF takes off
         self._flight.enter_mode(target)
         return R_ACCEPTED
 
@@ -242,10 +241,9 @@ class CommandHandler:
             self._flight.takeoff_alt_m = alt
         else:
             self._flight.takeoff_alt_m = self._flight.ground_alt_m + self._flight.takeoff_alt_rel_m
-        if not self._flight.armed:
-            self._announce.statustext(SEV_CRITICAL, "Takeoff denied: disarmed")
-            return R_DENIED
-        return self.request_mode(TAKEOFF)
+        if not self._flight.armed and self.is_ardupilot:
+            return R_FAILED  # ArduCopter's do_user_takeoff: not armed
+        return self.request_mode(TAKEOFF)  # PX4: AUTO.TAKEOFF, armed or not
 
     def _cmd_land(self, _l: Link, _m: Inbound, _p: list[float]) -> int:
         if self.is_ardupilot and self.is_fixed_wing:

@@ -13,8 +13,9 @@ SITL), all through the project's own ``MavlinkHub``:
    DO_LAND_START fails without a landing sequence, the fallback landing mission flies).
 
 Ground and boot rules (issue 31), before step 1 and during step 2: DO_SET_HOME on the ground
-moves home (HOME_POSITION shows it 3 m higher) and DO_SET_HOME "here" takes it back; a reboot
-while armed is refused (PX4 DENIED, ArduPilot FAILED) and the vehicle flies on.
+moves home (HOME_POSITION shows it 3 m higher) and DO_SET_HOME "here" takes it back; NAV_TAKEOFF
+while disarmed is taken by PX4 and refused by ArduCopter (FAILED); a reboot while armed is
+refused (PX4 DENIED, ArduPilot FAILED) and the vehicle flies on.
 
 The ``sitl`` cases need nothing; the real ones need ``../shared`` and a private network
 namespace (``bash tests/netns.sh .venv/bin/python -m pytest tests/autopilot/test_conformance.py``)
@@ -244,10 +245,17 @@ async def _take_off(rig: Rig, height_m: float) -> None:
         assert (await hub.send_mode(SYS, FlightMode.MISSION)).ok  # the pilot's AUTO
         await _arm(rig)
     else:
-        if case.autopilot is Autopilot.ARDUPILOT:
-            assert (await hub.send_mode(SYS, FlightMode.GUIDED)).ok
-        await _arm(rig)
         alt = height_m if case.autopilot is Autopilot.ARDUPILOT else case.home[2] + height_m
+        # disarmed: PX4 takes NAV_TAKEOFF (AUTO.TAKEOFF, it takes off once armed),
+        # ArduCopter answers FAILED (do_user_takeoff needs the motors armed)
+        takeoff = (0.0, 0.0, 0.0, _NAN, _NAN, _NAN, alt)
+        res = await hub.command_long(SYS, MAV_CMD_NAV_TAKEOFF, takeoff)
+        if case.autopilot is Autopilot.ARDUPILOT:
+            assert not res.ok and res.result == MAV_RESULT_FAILED, res
+            assert (await hub.send_mode(SYS, FlightMode.GUIDED)).ok
+        else:
+            assert res.ok, res
+        await _arm(rig)
         res = await hub.command_long(
             SYS, MAV_CMD_NAV_TAKEOFF, (0.0, 0.0, 0.0, _NAN, _NAN, _NAN, alt)
         )

@@ -176,3 +176,17 @@ def test_home_is_taken_again_at_arming_unless_set(autopilot: str) -> None:
     v.flight.set_home(HOME[0] + DLAT, HOME[1], HOME[2] + 3.0)  # an automatic home elsewhere
     assert v.arm() == ACCEPTED
     assert v.home == pytest.approx(HOME)
+
+
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_nav_takeoff_while_disarmed(autopilot: str) -> None:
+    """PX4 takes NAV_TAKEOFF disarmed (AUTO.TAKEOFF: it climbs once armed); ArduCopter
+    answers FAILED (do_user_takeoff needs the motors armed)."""
+    v = make(autopilot)
+    t = run(v, 0.0, 2.0)
+    alt = 15.0 if autopilot == "ardupilot" else HOME[2] + 15.0
+    result = command(v, 22, 0.0, 0.0, 0.0, math.nan, math.nan, math.nan, alt)
+    assert result == (FAILED if autopilot == "ardupilot" else ACCEPTED)
+    assert v.arm() == ACCEPTED
+    run(v, t, t + 12.0)
+    assert (v.alt_amsl_m > HOME[2] + 10.0) is (autopilot == "px4")
