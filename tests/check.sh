@@ -52,7 +52,7 @@ else
         shift 2
         [ "$#" -gt 0 ] || set -- tests/autopilot
         env -u GCS_UTM_NETNS bash tests/netns.sh "$PY" -m pytest -v -p no:cacheprovider \
-            -m "$mark" "$@" 2>&1 | sed -u "s/^/[$name] /"
+            -m "$mark" "$@" 2>&1 3>&- | sed -u "s/^/[$name] /"
     }
     # The PX4 tests that run beside the soak, in the `others` lane before its own tests: each
     # starts a single PX4 at a speed factor of 4-5 and takes about half a core (docs/testing.md).
@@ -85,7 +85,7 @@ else
     # in the foreground: a background job would start the tests with SIGINT ignored
     # (tests/e2e/test_pilot_cli.py)
     failed=0
-    nice -n 19 "${pytest[@]}" "${xdist[@]}" --ignore=tests/autopilot tests || failed=1
+    nice -n 19 "${pytest[@]}" "${xdist[@]}" --ignore=tests/autopilot tests 3>&- || failed=1
     for pid in "${lane_pids[@]}"; do
         wait "$pid" || failed=1  # every lane runs to its end, failed or not
     done
