@@ -21,17 +21,20 @@ echo "== pytest"
 # subprocesses. Each worker gets a private network namespace of its own (tests/netns.sh).
 # --dist loadgroup hands out whole modules, longest first (tests/conftest.py's scheduler;
 # --no-loadscope-reorder keeps that order).
-# Without arguments the whole suite runs in two steps, and the real PX4 / ArduPilot tests
-# (tests/autopilot) in lanes: each lane a pytest of its own in a network namespace of its own,
-# running its tests one after the other, its output lines prefixed with its name.
-# 1. everything but tests/autopilot on the workers, and beside them the lane of the
-#    real-autopilot tests marked load_tolerant (the PX4 serve soak: its margins were measured
-#    on a loaded machine);
-# 2. the other real-autopilot tests with no CPU-bound test beside them (beside a CPU-bound
-#    worker, an ArduCopter pair or PX4's use case 1 missed their deadlines on CI), in two lanes
-#    side by side: the tests that start a PX4 (marked px4, tests/conftest.py) and the others.
-#    PX4 SIH in lockstep takes most of a core at the tests' speed factors, ArduPilot SITL a
-#    fraction of one, and two PX4 tests at once missed deadlines (docs/testing.md).
+# Without arguments the whole suite runs at once, in three parts side by side (docs/testing.md):
+# - everything but tests/autopilot on the workers, at the lowest CPU priority (nice 19): they
+#   take only the CPU the real autopilots leave, so the real-autopilot tests keep the margins
+#   they have on an idle machine (beside a CPU-bound worker of the same priority an ArduCopter
+#   pair and PX4's use case 1 missed their deadlines on CI);
+# - the real PX4 / ArduPilot tests (tests/autopilot) in two lanes, each running its tests one
+#   after the other in pytests of its own (each in a network namespace of its own), its output
+#   lines prefixed with its name. PX4 SIH in lockstep takes most of a core at the tests' speed
+#   factors, ArduPilot SITL a fraction of one, so at most two PX4 tests run at once: one marked
+#   load_tolerant and a single PX4 beside it.
+#   `px4`: the tests marked px4 and load_tolerant (the PX4 serve soak, then short tests); then,
+#   once the `others` lane's PX4 tests have ended, every other PX4 test.
+#   `others`: the PX4 tests of $beside_soak (each a single PX4 taking about half a core, beside
+#   the soak), then every test that starts no PX4.
 jobs="${GCS_UTM_TEST_JOBS:-2}"
 xdist=()
 if [ "$jobs" -gt 1 ]; then
@@ -43,27 +46,50 @@ pytest=(bash tests/netns.sh "$PY" -m pytest -q -p no:cacheprovider)
 if [ "$#" -gt 0 ]; then
     "${pytest[@]}" "${xdist[@]}" "$@"
 else
-    lane() {  # lane NAME MARK-EXPRESSION: the real-autopilot tests it selects, in the background
-        (env -u GCS_UTM_NETNS bash tests/netns.sh "$PY" -m pytest -v -p no:cacheprovider \
-            -m "$2" tests/autopilot 2>&1 | sed -u "s/^/[$1] /") &
-        lane_pids+=("$!")
+    lane() {  # lane NAME MARK-EXPRESSION [PATH...]: the real-autopilot tests it selects (under
+        # PATHs, by default tests/autopilot), one after the other
+        local name=$1 mark=$2
+        shift 2
+        [ "$#" -gt 0 ] || set -- tests/autopilot
+        env -u GCS_UTM_NETNS bash tests/netns.sh "$PY" -m pytest -v -p no:cacheprovider \
+            -m "$mark" "$@" 2>&1 3>&- | sed -u "s/^/[$name] /"
     }
-    lanes_wait() {  # fails when a lane failed, after all of them ended
-        local failed=0 pid
-        for pid in "${lane_pids[@]}"; do
-            wait "$pid" || failed=1
-        done
-        lane_pids=()
-        return "$failed"
-    }
+    # The PX4 tests that run beside the soak, in the `others` lane before its own tests: each
+    # starts a single PX4 at a speed factor of 4-5 and takes about half a core (docs/testing.md).
+    beside_soak=(tests/autopilot/test_px4_plane_landing.py tests/autopilot/test_conformance.py
+        tests/autopilot/test_operator_commands.py)
+    # The `others` lane tells the `px4` lane on this pipe when those have ended: opened read-write
+    # here, so that writing to it never waits for the reader.
+    fifo_dir="$(mktemp -d)"
+    mkfifo "$fifo_dir/lanes"
+    exec 3<>"$fifo_dir/lanes"
+    rm -r "$fifo_dir"
     lane_pids=()
-    lane beside-the-rest "load_tolerant"
-    step1=0
-    "${pytest[@]}" "${xdist[@]}" --ignore=tests/autopilot tests || step1=$?
-    lanes_wait
-    [ "$step1" -eq 0 ]
-    echo "== pytest: real autopilots, a PX4 lane beside the others"
-    lane px4 "px4 and not load_tolerant"
-    lane others "not px4 and not load_tolerant"
-    lanes_wait
+    (
+        failed=0
+        lane px4 "px4 and load_tolerant" || failed=1
+        read -r -u 3 _  # one PX4 beside the soak at most, none beside the tests below
+        lane px4 "px4 and not load_tolerant" "${beside_soak[@]/#/--ignore=}" tests/autopilot \
+            || failed=1
+        exit "$failed"
+    ) &
+    lane_pids+=("$!")
+    (
+        failed=0
+        if [ "${#beside_soak[@]}" -gt 0 ]; then  # (empty: all of them in the `px4` lane)
+            lane others "px4 and not load_tolerant" "${beside_soak[@]}" || failed=1
+        fi
+        echo done >&3
+        lane others "not px4" || failed=1
+        exit "$failed"
+    ) &
+    lane_pids+=("$!")
+    # in the foreground: a background job would start the tests with SIGINT ignored
+    # (tests/e2e/test_pilot_cli.py)
+    failed=0
+    nice -n 19 "${pytest[@]}" "${xdist[@]}" --ignore=tests/autopilot tests 3>&- || failed=1
+    for pid in "${lane_pids[@]}"; do
+        wait "$pid" || failed=1  # every lane runs to its end, failed or not
+    done
+    [ "$failed" -eq 0 ]
 fi

@@ -23,9 +23,10 @@ settings.load_profile("ci" if os.environ.get("CI") else "local")
 # (most of their timing margins assume no CPU-bound test beside them; the whole suite runs them
 # in lanes of their own, see tests/check.sh).
 _REAL_AUTOPILOT_DIR = "tests/autopilot/"
-# The tests that start a real PX4 carry the ``px4`` mark: tests/check.sh runs them in a lane of
-# their own, one after the other, beside the lane of the other real-autopilot tests (PX4 SIH in
-# lockstep takes most of a core, ArduPilot SITL a fraction of one; docs/testing.md). A test
+# The tests that start a real PX4 carry the ``px4`` mark: tests/check.sh runs them one after the
+# other in a lane of their own beside the lane of the other real-autopilot tests, but for a few
+# with a single PX4 that run in that lane beside the PX4 soak (PX4 SIH in lockstep takes most of
+# a core, ArduPilot SITL a fraction of one; docs/testing.md). A test
 # that requests the ``px4`` fixture gets the mark here; one that starts PX4 another way (e.g.
 # ``request.getfixturevalue``) carries it itself.
 PX4_FIXTURE = "px4"
