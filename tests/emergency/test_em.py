@@ -150,6 +150,16 @@ def test_accept_then_threat_closed_keeps_the_accepted_one() -> None:
         assert em.recommendation(rec.id).state is RecommendationState.ACCEPTED  # type: ignore[union-attr]
 
 
+def test_a_closed_threat_is_audited_with_why_it_closed() -> None:
+    snap, threat = sc.scenario_los_2uas()
+    em = make_em()
+    em.on_threat(threat, snap)
+    why = "closed: operation B landed"
+    d = em.on_threat_closed(replace(threat, status=ThreatStatus.CLOSED, message=why))
+    (entry,) = [a for a in d.audit if a.action == "threat_closed"]
+    assert entry.subject == threat.id and entry.detail["reason"] == why
+
+
 def test_expiry_escalates_and_replans_and_closing_supersedes_the_new_version() -> None:
     snap, threat = sc.scenario_los_2uas()
     em = make_em()

@@ -21,6 +21,7 @@ from gcs_utm.core.monitoring import Monitor, MonitoringConfig
 from gcs_utm.model import (
     AirspaceSnapshot,
     OperationId,
+    OperationState,
     PredictedTrajectories,
     ThreatKind,
     ThreatStatus,
@@ -94,4 +95,18 @@ def test_a_loss_threat_closes_at_once_when_a_vehicle_is_on_the_ground() -> None:
     out = mon.cycle(replace(_crossing(6.0), grounded=frozenset({B}), airborne=frozenset({A})))
     (closed,) = _los(out)
     assert closed.id == t1.id and closed.status is ThreatStatus.CLOSED
+    assert closed.message.endswith("closed: B is on the ground"), closed.message  # why
     assert mon.active() == []
+
+
+def test_a_loss_threat_closes_at_once_when_the_other_operation_landed() -> None:
+    mon = Monitor(FRAME, MonitoringConfig(close_cycles=5))
+    (t1,) = _los(mon.cycle(replace(_crossing(5.0), airborne=frozenset({A, B}))))
+    snap = _crossing(6.0)
+    ops = dict(snap.operations)
+    ops[B] = replace(ops[B], state=OperationState.LANDED)
+    # landed and disarmed: the operation's own state says why first
+    out = mon.cycle(replace(snap, operations=ops, grounded=frozenset({B}), airborne=frozenset({A})))
+    (closed,) = _los(out)
+    assert closed.id == t1.id and closed.status is ThreatStatus.CLOSED
+    assert closed.message.endswith("closed: operation B landed"), closed.message

@@ -130,6 +130,7 @@ def test_separation_threat_persists_updates_and_closes_with_hysteresis() -> None
     assert mon.cycle(_snapshot(9, clear, ops2)) == []
     (closed,) = mon.cycle(_snapshot(10, clear, ops2))
     assert closed.status is ThreatStatus.CLOSED and closed.id == t1.id
+    assert closed.message.endswith("closed: clear by the margin for 2 cycles"), closed.message
     assert mon.active() == []
 
 
@@ -245,6 +246,7 @@ def test_intruder_threat_closes_when_tracking_dropped_the_intruder() -> None:
         assert mon.cycle(_snapshot(k, states, ops, intruders=intr, stale=silent)) == []
     (c,) = mon.cycle(_snapshot(4, {"A": states["A"]}, ops))
     assert c.id == t.id and c.status is ThreatStatus.CLOSED
+    assert c.message.endswith("closed: intruder icao:abc123 is no longer tracked"), c.message
 
 
 def test_degenerate_snapshots() -> None:

@@ -16,7 +16,7 @@ from gcs_utm.model import Recommendation, RecommendationState, Threat, ThreatSta
 
 def supersede_pending(em: EmContext, threat: Threat) -> Decision:
     """The case of ``threat`` (CLOSED) ends: its pending proposals are superseded (accepted
-    ones stand), audited."""
+    ones stand), audited with the threat's message (why it closed)."""
     case = em.cases.pop(threat.id, None)
     if case is None:
         return Decision()
@@ -28,10 +28,13 @@ def supersede_pending(em: EmContext, threat: Threat) -> Decision:
             new = cur.transition(RecommendationState.SUPERSEDED, t, "threat closed")
             em.recs[rid] = new
             recs.append(new)
+    # why it closed: the closed threat's message ends "; closed: <reason>" (Monitoring's and
+    # the USM's closings both word it so)
+    detail: dict[str, object] = {"superseded": [r.id for r in recs], "reason": threat.message}
     return Decision(
         recommendations=tuple(recs),
         superseded=tuple(r.id for r in recs),
-        audit=(em.audit(t, "threat_closed", threat.id, {"superseded": [r.id for r in recs]}),),
+        audit=(em.audit(t, "threat_closed", threat.id, detail),),
     )
 
 

@@ -41,6 +41,7 @@ from gcs_utm.core.monitoring.checks import (
     pack_plans,
     plan_distance,
 )
+from gcs_utm.core.monitoring.closing import clear_reason, closed_message, over_reason
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.fences import LocalFence, localise
 from gcs_utm.core.monitoring.fixed_wing_band import band_distance, band_parameters
@@ -56,7 +57,6 @@ from gcs_utm.model import (
     GeofenceId,
     Operation,
     OperationId,
-    OperationState,
     PredictedTrajectories,
     Threat,
     ThreatId,
@@ -487,12 +487,8 @@ class Monitor:
             if key in ev.seen:
                 continue
             st = self._states[key]
-            ended = any(
-                (o := snapshot.operations.get(OperationId(u))) is None
-                or o.state in (OperationState.LANDED, OperationState.ENDED)
-                or o.id in snapshot.grounded  # on the ground: not traffic, nothing flown
-                for u in self._op_ids(key)
-            ) or (key[0] == "INTR" and key[2] not in snapshot.tracks)  # the intruder is gone
+            over = over_reason(self._op_ids(key), key[2] if key[0] == "INTR" else None, snapshot)
+            ended = over is not None
             if not ended and (key in ev.marginal or not self._fresh(key, ev)):
                 st.clear = 0 if key in ev.marginal else st.clear
                 st.present = 0 if key in ev.marginal else st.present
@@ -503,7 +499,8 @@ class Monitor:
                 del self._states[key]
             elif ended or st.clear >= cfg.close_cycles:
                 closed = self._current(st)
-                out.append(replace(closed, status=ThreatStatus.CLOSED, updated_at_s=t))
+                why = closed_message(closed, over or clear_reason(cfg.close_cycles))
+                out.append(replace(closed, status=ThreatStatus.CLOSED, updated_at_s=t, message=why))
                 del self._states[key]
         return out
 
