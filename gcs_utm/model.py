@@ -752,3 +752,6 @@ class AirspaceSnapshot:
     grounded: frozenset[OperationId] = frozenset()
     """Operations whose vehicle is on the ground (disarmed, or armed and landed): nothing is
     decided for them but pre-flight checks."""
+    grounded_tracks: frozenset[TrackId] = frozenset()
+    """Tracks of MAVLink vehicles without an operation that are on the ground by their own
+    messages: not intruders (services/ground_vehicles.py)."""

@@ -27,6 +27,7 @@ from gcs_utm.model import (
     Track,
     TrackId,
 )
+from gcs_utm.services.ground_vehicles import grounded_tracks
 
 _log = logging.getLogger(__name__)
 
@@ -223,4 +224,7 @@ class Airspace:
             prediction=prediction,
             airborne=self._flown(True),
             grounded=self._flown(False),
+            grounded_tracks=grounded_tracks(
+                track_map, {s for s, up in self._airborne.items() if not up}
+            ),
         )

@@ -24,7 +24,15 @@ import pytest
 
 from adapters.mavlink import MavlinkConfig
 from gcs_utm.app import OperatorMode, Runtime, serve
-from gcs_utm.model import Operation, OperationId, SysId, Threat, ThreatKind, ThreatStatus
+from gcs_utm.model import (
+    Operation,
+    OperationId,
+    SysId,
+    Threat,
+    ThreatId,
+    ThreatKind,
+    ThreatStatus,
+)
 from gcs_utm.settings import AirspaceConfig, Settings
 from gcs_utm.store import Store
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess
@@ -219,3 +227,91 @@ async def test_a_loss_of_separation_closes_when_the_other_copter_lands(
     # landed by its own messages: the operation LANDED, or its vehicle on the ground
     why = ("closed: operation AP2 landed", "closed: AP2 is on the ground")
     assert any(w in r for r in reasons for w in why), (reasons, threat.message)
+
+
+# ArduPilot's simulated ADS-B receiver (test_adsb_relay.py) on a second copter that only relays:
+# aircraft within RELAY_RADIUS_M of home at the hovering copter's altitude (SIM_ADSB_ALT is
+# reported as the aircraft's altitude), inside the intruder minima (150 m, 50 m).
+RELAY_RADIUS_M = 300.0
+RELAY_PARAMS = f"""SERIAL5_PROTOCOL 2
+ADSB_TYPE 1
+SIM_ADSB_COUNT 3
+SIM_ADSB_RADIUS {RELAY_RADIUS_M:g}
+SIM_ADSB_ALT {ARDUPILOT_DEFAULT_HOME[2] + HOVER_AGL_M:g}
+"""
+
+
+@pytest.mark.timeout(240)
+async def test_an_intruder_threat_closes_when_the_intruder_is_no_longer_heard(
+    ardupilot: Callable[..., SitlProcess], tmp_path: Path
+) -> None:
+    """A copter hovers; ADS-B aircraft relayed by a second autopilot (disarmed on the ground
+    below it: no intruder) come inside the intruder minima (INTRUDER threats). The relay
+    stops (its process killed): the aircraft are no longer heard, tracking drops them after
+    ``[tracking] intruder_drop_after_s`` and their threats close, the reason in the audit."""
+    db = tmp_path / "utm.sqlite"
+    op = _operation()
+    with Store(db) as store:
+        store.save_operation(op)
+        store.save_plan(op.plan)
+    parm = tmp_path / "relay.parm"
+    parm.write_text(RELAY_PARAMS)
+    stop = asyncio.Event()
+    done: dict[str, Any] = {}
+
+    def intruder_threats(rt: Runtime) -> set[ThreatId]:
+        return {t.id for t in rt.usm.threats.values() if t.kind is ThreatKind.INTRUDER}
+
+    async def scenario(rt: Runtime) -> None:
+        try:
+            ardupilot(instance=0, vehicle="copter", speed=SPEED)
+            await _until(lambda: op.id in rt.tracks(), 90.0, "no track of the operation")
+            pilot = await asyncio.to_thread(PilotLink, 0, "ardupilot", 5762)
+            try:
+                await asyncio.to_thread(pilot.wait_ready)
+                await asyncio.to_thread(pilot.arm_and_start, 60.0, HOVER_AGL_M, auto=False)
+            finally:
+                pilot.close()
+            relay = ardupilot(
+                instance=1,
+                vehicle="copter",
+                speed=SPEED,
+                defaults=(parm,),
+                extra_args=("--serial5=sim:adsb",),
+            )
+            await _until(lambda: bool(intruder_threats(rt)), 90.0, "no INTRUDER threat")
+            relay.stop()  # the aircraft are no longer heard
+            done["open"] = intruder_threats(rt)
+            await _until(lambda: not intruder_threats(rt), 60.0, "an INTRUDER threat stayed open")
+            done["ok"] = True
+        finally:
+            stop.set()
+
+    async def on_runtime(rt: Runtime) -> None:
+        done["task"] = asyncio.create_task(scenario(rt))
+
+    code = await serve(
+        _settings(("tcp:127.0.0.1:5760", "tcp:127.0.0.1:5770")),
+        db_path=db,
+        operator=OperatorMode.NONE,
+        headless=False,
+        stop=stop,
+        on_runtime=on_runtime,
+        speed=SPEED,
+    )
+    await done["task"]
+    assert code == 0 and done.get("ok")
+    with Store(db) as s:
+        reasons = {
+            a.subject: str(a.detail.get("reason", ""))
+            for a in s.load_audit()
+            if a.action == "threat_closed" and a.subject in done["open"]
+        }
+        intruders = {t.intruder_id for t in s.load_threats() if t.kind is ThreatKind.INTRUDER}
+    # the relay itself, disarmed on the ground below the copter, is no intruder
+    assert all(str(i).startswith("icao:") for i in intruders), intruders
+    print(f"intruder threats closed: {reasons}")
+    assert set(reasons) == done["open"], (reasons, done["open"])
+    # each closed once its aircraft was dropped (or, in the seconds before its track went
+    # stale, flew clear of the copter): at least one closed because it was no longer heard
+    assert any("is no longer tracked" in r for r in reasons.values()), reasons

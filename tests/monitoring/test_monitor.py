@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -247,6 +248,30 @@ def test_intruder_threat_closes_when_tracking_dropped_the_intruder() -> None:
     (c,) = mon.cycle(_snapshot(4, {"A": states["A"]}, ops))
     assert c.id == t.id and c.status is ThreatStatus.CLOSED
     assert c.message.endswith("closed: intruder icao:abc123 is no longer tracked"), c.message
+
+
+def test_an_unfiled_vehicle_on_the_ground_is_no_intruder() -> None:
+    """A MAVLink vehicle without an operation is the intruder ``sysid:<n>``; standing on the
+    ground below a UAS (``grounded_tracks``) it raises nothing, and the threat it raised while
+    it flew closes at once when it lands."""
+    ops = [_line_op("A", 0)]
+    states = {"A": ((0, 0, 100), (0, 0, 0)), "sysid:2@h:1": ((20, 0, 90), (0, 0, 0))}
+    intr = frozenset({"sysid:2@h:1"})
+    ground = frozenset({TrackId("sysid:2@h:1")})
+    quiet = Monitor(FRAME, MonitoringConfig(**LOOSE))
+    for k in range(3):
+        snap = replace(_snapshot(k, states, ops, intruders=intr), grounded_tracks=ground)
+        assert [x for x in quiet.cycle(snap) if x.kind is ThreatKind.INTRUDER] == []
+    mon = Monitor(FRAME, MonitoringConfig(**LOOSE))
+    (t,) = [
+        x
+        for x in mon.cycle(_snapshot(0, states, ops, intruders=intr))
+        if x.kind is ThreatKind.INTRUDER
+    ]
+    snap = replace(_snapshot(1, states, ops, intruders=intr), grounded_tracks=ground)
+    (c,) = [x for x in mon.cycle(snap) if x.kind is ThreatKind.INTRUDER]
+    assert c.id == t.id and c.status is ThreatStatus.CLOSED
+    assert c.message.endswith("closed: intruder sysid:2@h:1 is on the ground"), c.message
 
 
 def test_degenerate_snapshots() -> None:

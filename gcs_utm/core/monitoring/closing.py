@@ -16,7 +16,8 @@ def over_reason(
     """Why a threat of ``op_ids`` (and of the non-cooperative track ``intruder_id``) is over
     whatever the figures say, or None while all of them still fly: an operation gone from the
     snapshot, landed or ended, a vehicle on the ground by its own messages (not traffic), or
-    the intruder's track dropped (tracking drops one silent for ``intruder_drop_after_s``)."""
+    the intruder's track dropped (tracking drops one silent for ``intruder_drop_after_s``) or
+    on the ground (an unfiled MAVLink vehicle that landed)."""
     for u in op_ids:
         o = snapshot.operations.get(OperationId(u))
         if o is None:
@@ -27,6 +28,8 @@ def over_reason(
             return f"{u} is on the ground"
     if intruder_id is not None and intruder_id not in snapshot.tracks:
         return f"intruder {intruder_id} is no longer tracked"
+    if intruder_id is not None and intruder_id in snapshot.grounded_tracks:
+        return f"intruder {intruder_id} is on the ground"
     return None
 
 

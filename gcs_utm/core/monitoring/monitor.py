@@ -241,6 +241,10 @@ class Monitor:
         cfg = self.config
         ops = snapshot.operations
         rows_coop, rows_intr, col = self._prediction_rows(pred, cols, usable)
+        if snapshot.grounded_tracks:  # an unfiled vehicle on the ground is no intruder
+            ground = snapshot.grounded_tracks
+            keep = [pred.track_ids[i] not in ground for i in rows_intr.tolist()]
+            rows_intr = rows_intr[np.array(keep, dtype=bool)]
         # The operation of each cooperative prediction row, by position in rows_coop.
         op_of: list[OperationId] = [cols.operation_ids[i] for i in col[rows_coop].tolist()]
         ev.pred_parts.append(op_of)
