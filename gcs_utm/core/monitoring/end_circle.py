@@ -41,10 +41,13 @@ waypoint is on its way to the circle (as :data:`.loiter.CAPTURE_RADII` of the tr
 
 
 def circle_radius_m(op: Operation) -> float:
-    """The radius of the circle flown round the last waypoint after the plan: the turn
-    radius of a vehicle that cannot hover, else 0."""
+    """The radius of the circle checked round the last waypoint after the plan: for a
+    vehicle that cannot hover its turn radius (the loiter radius it is set to) plus its
+    tracking error (the autopilots fly wide of it: ArduPlane 81-96 m from the centre at
+    80 m, docs/monitoring.md "Loiter ring"; the simulated plane about 88 m at 19 m/s), else
+    0."""
     env = op.performance()
-    return 0.0 if env.can_hover else env.turn_radius_m
+    return 0.0 if env.can_hover else env.turn_radius_m + env.tracking_tolerance_m()
 
 
 def end_ring(plan_pts: FloatArray, radius_m: float) -> FloatArray | None:
@@ -103,7 +106,7 @@ def end_circle_hits(
     t_s: float,
 ) -> list[tuple[int, LocalFence, float]]:
     """(index into ``ops``, fence, entry time) for each operation whose plan ends inside the
-    predicted window and whose circle round the end point enters a fence. ``plans`` (each
+    predicted window and whose circle round the end point enters a fence inside it. ``plans`` (each
     (K, 4), local) are the operations' plans, ``predicted`` (N, S, 4) their predicted points
     (one row per operation, same order), ``t_s`` the cycle's time."""
     out: list[tuple[int, LocalFence, float]] = []
@@ -124,6 +127,6 @@ def end_circle_hits(
             continue
         for f in fences:
             t = ring_entry(ring, f)
-            if t is not None:
+            if t is not None and t <= float(row[-1, 3]):  # inside the horizon, as the rest
                 out.append((i, f, t))
     return out
