@@ -60,3 +60,30 @@ def test_a_destination_inside_a_fence_gets_an_end_point_outside_it() -> None:
         assert end_m - circle_m >= RADIUS_M + op.operational_volume_m, (kind, end_m)
         # the closest point outside, not anywhere: on the side the destination is nearest
         assert end_m - circle_m < RADIUS_M + op.operational_volume_m + 40.0, (kind, end_m)
+
+
+def test_a_fixed_wing_whose_end_circle_enters_a_fence_gets_an_end_point_clear_of_it() -> None:
+    """The destination lies outside the fence grown by the volume (100 m from its centre,
+    65 m needed) but the 80 m circle the fixed wing flies round it once its plan has ended
+    comes within 20 m of the centre: every route to it ends inside the fence, so the end
+    point moves until the circle clears it (enc_7_0003_endpoint_vertical)."""
+    fence = sc.cylinder("F", 0.0, 0.0, RADIUS_M)
+    op = sc.make_operation("A", [(1500, 0, 100), (100, 0, 100)], speed_mps=20.0, ov_m=25.0)
+    op = replace(op, vehicle_kind=VehicleKind.FIXED_WING)
+    t = sc.T0_S + 20.0
+    snap = AirspaceSnapshot(t_s=t, operations={op.id: op}, tracks={}, geofences=(fence,))
+    threat = sc.threat(ThreatKind.GEOFENCE_CONFLICT, ["A"], t_s=t, geofence_id=GeofenceId("F"))
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(min_height_above_home_m=0.0), MON)
+    alts = td.resolve_single(threat, OperationId("A"), snap)
+    circle_m = op.performance().turn_radius_m
+    ends = []
+    for a in alts:
+        if a.maneuver is Maneuver.REROUTE and a.plan is not None:
+            lp = plan_to_local(a.plan, sc.FRAME)
+            ends.append(float(np.hypot(lp.e[-1], lp.n[-1])))
+    assert ends, [(a.maneuver, a.detail) for a in alts]
+    end_m = max(ends)
+    # the circle round the new end clears the fence grown by the volume, and no more than
+    # needed (on the side the destination was)
+    assert end_m - circle_m >= RADIUS_M + op.operational_volume_m, end_m
+    assert end_m - circle_m < RADIUS_M + op.operational_volume_m + 40.0, end_m

@@ -66,10 +66,6 @@ def test_no_loss_is_created_by_an_accepted_plan(summary: EvalSummary) -> None:
     assert summary.totals.losses_created_by_accepted_plans == 0, markdown(summary)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 30 class 3 (geofences crossing or touching filed paths and destinations)",
-)
 def test_no_geofence_intrusion(summary: EvalSummary) -> None:
     assert summary.totals.geofence_intrusions == 0, markdown(summary)
 

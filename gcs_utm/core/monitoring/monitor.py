@@ -43,6 +43,7 @@ from gcs_utm.core.monitoring.checks import (
 )
 from gcs_utm.core.monitoring.closing import clear_reason, closed_message, over_reason
 from gcs_utm.core.monitoring.config import MonitoringConfig
+from gcs_utm.core.monitoring.end_circle import end_circle_hits
 from gcs_utm.core.monitoring.fences import LocalFence, localise
 from gcs_utm.core.monitoring.fixed_wing_band import band_distance, band_parameters
 from gcs_utm.core.monitoring.geometry import FloatArray, Windows, window_extents
@@ -296,6 +297,26 @@ class Monitor:
             ev.seen[("GEO", op_id, h.geofence_id)] = _Observation(
                 kind=kind, uas_ids=(op_id,), event_t_s=h.entry_t_s, geofence_id=h.geofence_id
             )
+        # A fixed wing's circle after its plan, while the plan still runs (end_circle.py).
+        t_s, by_id = snapshot.t_s, snapshot.operations
+        rows = [
+            r
+            for r, o in enumerate(op_of)
+            if o in by_id and t_s < by_id[o].plan.end_t_s <= pts[r, -1, 3]
+        ]
+        ops = [by_id[op_of[r]] for r in rows]
+        plans = [self._plan(o) for o in ops]
+        for i, f, t in end_circle_hits(
+            ops=ops, plans=plans, predicted=pts[rows], fences=fences, t_s=t_s
+        ):
+            key = ("GEO", ops[i].id, f.id)
+            if key not in ev.seen and ops[i].id not in exempt.get(f.id, ()):
+                ev.seen[key] = _Observation(
+                    kind=ThreatKind.GEOFENCE_CONFLICT,
+                    uas_ids=(ops[i].id,),
+                    event_t_s=t,
+                    geofence_id=f.id,
+                )
 
     def _intruders(
         self,

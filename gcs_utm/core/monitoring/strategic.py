@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gcs_utm.core.monitoring import end_circle
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.fences import LocalFence, localise
 from gcs_utm.core.monitoring.geometry import FloatArray
@@ -196,14 +197,19 @@ def plan_vs_geofences(
     config: MonitoringConfig,
 ) -> list[PlanGeofenceCrossing]:
     """Active geofences (space and time) that ``plan`` crosses or passes closer to than
-    ``op.operational_volume_m``, with the first such time."""
+    ``op.operational_volume_m``, or that a fixed wing's circle round the plan's last
+    waypoint enters (:mod:`.end_circle`), with the first such time."""
     del config  # the inflation is the operation's own volume; kept for a uniform signature
     pts = plan_local(plan, frame)
+    # A fixed wing's circle after the plan, against the fence as Monitoring checks it.
+    ring = end_circle.end_ring(pts, end_circle.circle_radius_m(op))
     out: list[PlanGeofenceCrossing] = []
     for g in geofences:
         if not g.applies_to(op.id):
             continue
         t = _fence_crossing(pts, localise(g, frame, op.operational_volume_m))
+        if t is None and ring is not None:
+            t = end_circle.ring_entry(ring, localise(g, frame))
         if t is not None:
             out.append(PlanGeofenceCrossing(operation_id=op.id, geofence_id=g.id, entry_t_s=t))
     return out

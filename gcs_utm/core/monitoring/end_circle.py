@@ -1,0 +1,132 @@
+"""The circle a fixed wing flies round its last waypoint once its plan has ended, against
+geofences.
+
+A fixed wing cannot stop: at its plan's end it circles the last waypoint at its turn radius
+(:mod:`gcs_utm.core.tracking.loiter`). Monitoring predicts that circle only once the plan
+has ended (before, the prediction stays at the last waypoint), so a fence beside the end
+point was first predicted a few seconds before the circle reached it: a fence 52 m from the
+end, entered on the 80 m circle 5 s after the end (``enc_7_0003_endpoint_vertical``), with
+no time left for a new plan. Where on the circle the aircraft will be at a given time is
+not known that far ahead (it depends on how it arrives), so the whole circle is checked, not
+one predicted phase: :func:`end_ring` gives it as a closed polyline timed from the end over
+one turn at the last leg's speed, :func:`ring_entry` its first entry into a fence.
+
+Used twice, so that what Monitoring flags TD does not propose again: Monitoring's cycle
+(:func:`end_circle_hits`: operations whose plan ends inside the horizon and whose
+prediction reaches the end point, against the fences as they are) and
+:func:`.strategic.plan_vs_geofences` (a plan's circle against the fences as they are, while
+its path keeps the operational volume from them). Pure.
+
+Units: local frame metres (east, north, alt AMSL), seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from gcs_utm.core.monitoring.fences import LocalFence
+from gcs_utm.core.monitoring.geometry import FloatArray
+from gcs_utm.model import Operation
+
+RING_POINTS = 36
+"""Vertices of the circle's polyline (every 10 degrees: the chord's sagitta is 0.4 % of the
+radius, 0.3 m on 80 m)."""
+
+REACH_RADII = 2.0
+"""A prediction whose point at the plan's end lies within this many radii of the last
+waypoint is on its way to the circle (as :data:`.loiter.CAPTURE_RADII` of the tracker)."""
+
+
+def circle_radius_m(op: Operation) -> float:
+    """The radius of the circle checked round the last waypoint after the plan: for a
+    vehicle that cannot hover its turn radius (the loiter radius it is set to) plus its
+    tracking error (the autopilots fly wide of it: ArduPlane 81-96 m from the centre at
+    80 m, docs/monitoring.md "Loiter ring"; the simulated plane about 88 m at 19 m/s), else
+    0."""
+    env = op.performance()
+    return 0.0 if env.can_hover else env.turn_radius_m + env.tracking_tolerance_m()
+
+
+def end_ring(plan_pts: FloatArray, radius_m: float) -> FloatArray | None:
+    """(RING_POINTS + 1, 4) east, north, alt, t of the closed circle of ``radius_m`` round the
+    last point of ``plan_pts`` (K, 4), at its altitude, clockwise from the direction of the
+    last leg with a horizontal length, timed from the end at that leg's speed (None when the
+    plan never moves horizontally)."""
+    if radius_m <= 0.0 or len(plan_pts) < 2:
+        return None
+    end = plan_pts[-1]
+    # The last leg with a horizontal length (a plan may end with a hold at its last point).
+    moved = np.flatnonzero(np.hypot(*(plan_pts[:-1, :2] - end[:2]).T) > 1e-6)
+    if not len(moved):
+        return None
+    before = plan_pts[int(moved[-1])]
+    d_e, d_n = float(end[0] - before[0]), float(end[1] - before[1])
+    dt_s = float(plan_pts[int(moved[-1]) + 1, 3] - before[3])
+    length_m = math.hypot(d_e, d_n)
+    if dt_s <= 0.0:
+        return None
+    speed = length_m / dt_s  # m/s
+    bearing0 = math.atan2(d_e, d_n)  # the aircraft leaves the centre that way
+    turn = np.linspace(0.0, 2.0 * math.pi, RING_POINTS + 1)
+    bearing = bearing0 + turn  # clockwise: bearing increasing
+    out = np.empty((RING_POINTS + 1, 4))
+    out[:, 0] = end[0] + radius_m * np.sin(bearing)
+    out[:, 1] = end[1] + radius_m * np.cos(bearing)
+    out[:, 2] = end[2]
+    out[:, 3] = end[3] + (radius_m + radius_m * turn) / speed  # out to the circle, then round
+    return out
+
+
+def ring_entry(ring: FloatArray, fence: LocalFence) -> float | None:
+    """The first time the closed ``ring`` (from :func:`end_ring`) is inside ``fence``, or
+    None."""
+    if not fence.active_between(float(ring[0, 3]), float(ring[-1, 3])):
+        return None
+    bx = fence.bbox
+    lo, hi = ring[:, :2].min(axis=0), ring[:, :2].max(axis=0)
+    if lo[0] > bx[2] or lo[1] > bx[3] or hi[0] < bx[0] or hi[1] < bx[1]:
+        return None
+    s = fence.first_entry(ring[:-1], ring[1:])
+    hit = np.flatnonzero(np.isfinite(s))
+    if not len(hit):
+        return None
+    k = int(hit[0])
+    return float(ring[k, 3] + float(s[k]) * (ring[k + 1, 3] - ring[k, 3]))
+
+
+def end_circle_hits(
+    *,
+    ops: Sequence[Operation],
+    plans: Sequence[FloatArray],
+    predicted: FloatArray,
+    fences: Sequence[LocalFence],
+    t_s: float,
+) -> list[tuple[int, LocalFence, float]]:
+    """(index into ``ops``, fence, entry time) for each operation whose plan ends inside the
+    predicted window and whose circle round the end point enters a fence inside it. ``plans`` (each
+    (K, 4), local) are the operations' plans, ``predicted`` (N, S, 4) their predicted points
+    (one row per operation, same order), ``t_s`` the cycle's time."""
+    out: list[tuple[int, LocalFence, float]] = []
+    for i, op in enumerate(ops):
+        radius_m = circle_radius_m(op)
+        pts = plans[i]
+        if radius_m <= 0.0 or len(pts) < 2:
+            continue
+        end_t = float(pts[-1, 3])
+        row = predicted[i]
+        if not (t_s < end_t <= float(row[-1, 3])):
+            continue
+        k = int(np.searchsorted(row[:, 3], end_t, side="right")) - 1
+        if math.hypot(*(row[k, :2] - pts[-1, :2])) > REACH_RADII * radius_m:
+            continue  # the prediction does not reach the end point: sent elsewhere
+        ring = end_ring(pts, radius_m)
+        if ring is None:
+            continue
+        for f in fences:
+            t = ring_entry(ring, f)
+            if t is not None and t <= float(row[-1, 3]):  # inside the horizon, as the rest
+                out.append((i, f, t))
+    return out
