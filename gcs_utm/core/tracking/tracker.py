@@ -334,9 +334,7 @@ class Tracker:
         counters["intruders_created"] += len(new_intruders)
         return stats
 
-    def _apply(
-        self, rw: IntArray, a: FloatArray, n_before: int, with_vel: bool | None
-    ) -> Counts:
+    def _apply(self, rw: IntArray, a: FloatArray, n_before: int, with_vel: bool | None) -> Counts:
         """Rounds of one vectorised predict + update of rows ``rw`` with their records ``a``
         (NCOL, N; lon/lat become east/north here). Returns :data:`Counts`. ``with_vel``: every
         record has a velocity (True), none has (False), or mixed (None)."""
