@@ -30,7 +30,8 @@ Ingest (:meth:`Tracker.ingest`), per batch:
    used, ``gate`` if farther from the prediction than
    ``min(max_jump_m, gate_margin_m + max_speed_mps * dt)``. Rejections never touch the state.
    A stale track that rejected ``gate_reset_count`` measurements in a row restarts from the
-   next valid one (a wrong first fix must not lock a track out forever).
+   next valid one (a wrong first fix must not lock a track out forever); a track silent for
+   more than ``stale_after_s`` restarts from its next one that passes the gate (a link drop).
 
 Position lanes (:class:`~gcs_utm.model.PositionLane`): the MAVLink receive path hands
 telemetry positions over as flat entries instead of Measurements; ``ingest(measurements,
