@@ -177,7 +177,7 @@ def test_the_c_round_equals_the_numpy_round_bit_for_bit(
     rw = rng.permutation(m).astype(np.intp)
     c_tr, np_tr = tracker(), tracker()
     got = c_tr._round_plain(rw, a.copy())
-    assert got == (m, 0, 0, 0, 0)  # the C kernel took the round
+    assert got == (m, 0, 0, 0, 0, 0)  # the C kernel took the round
     with _no_c():
         assert np_tr._round_plain(rw, a.copy()) is None  # without it the NumPy round runs
         want = np_tr._round(rw, a.copy(), None, with_vel)
@@ -211,12 +211,13 @@ def test_the_c_kernel_refuses_arrays_it_was_not_made_for() -> None:
     args = (tr._x, tr._p, tr._t, tr._src_t, tr._updates, tr._gate_fails, tr._stale)
     a = np.zeros((15, 1))
     a[0] = T0 + 1.0
+    q, limits = (1.0, 1.0, 1.0), (1.0, 1.0, 1.0, 5.0)  # max_jump, margin, max_speed, restart
     with pytest.raises(ValueError, match="rw"):
-        c.update_rows(np.zeros(1, dtype=np.int32), a, *args, (1.0, 1.0, 1.0), 1.0, 1.0, 1.0)  # type: ignore[arg-type]
+        c.update_rows(np.zeros(1, dtype=np.int32), a, *args, q, *limits)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="a has"):
-        c.update_rows(np.zeros(1, dtype=np.intp), a[:5], *args, (1.0, 1.0, 1.0), 1.0, 1.0, 1.0)
+        c.update_rows(np.zeros(1, dtype=np.intp), a[:5], *args, q, *limits)
     with pytest.raises(IndexError, match="row 1000"):
-        c.update_rows(np.array([1000], dtype=np.intp), a, *args, (1.0, 1.0, 1.0), 1.0, 1.0, 1.0)
+        c.update_rows(np.array([1000], dtype=np.intp), a, *args, q, *limits)
     assert np.array_equal(tr._x, x0)
     dflt = ((1.0, 1.0, 1.0),) * 3
     with pytest.raises(ValueError, match="whole number"):

@@ -2,8 +2,8 @@
  * the NumPy reference behind one function each).
  *
  * update_rows(): the common round, in which every measurement of a batch updates its own
- * track: the same checks (out of order, duplicate, gate) as Tracker._round and kalman.step's
- * arithmetic per row, the same IEEE double operations in the same order, so the results are
+ * track: the same checks (out of order, duplicate, gate, a gap after which the track
+ * restarts) as Tracker._round and kalman.step's arithmetic per row, the same IEEE double operations in the same order, so the results are
  * equal bit for bit (tests compare the two; build with -ffp-contract=off so that no
  * multiply-add is fused). It changes nothing and returns False as soon as one measurement
  * would not simply update its track, or a division would be by zero (NumPy's inf/nan): the
@@ -105,14 +105,14 @@ static int step_row(double *x, double *p, double dt, const double *q, const doub
 }
 
 /* update_rows(rw, a, x, p, t, src_t, updates, gate_fails, stale, q, max_jump, margin,
- *             max_speed) -> bool */
+ *             max_speed, restart_after) -> bool */
 static PyObject *update_rows(PyObject *self, PyObject *args) {
     PyObject *o_rw, *o_a, *o_x, *o_p, *o_t, *o_src_t, *o_upd, *o_fails, *o_stale;
-    double q[3], max_jump, margin, max_speed;
+    double q[3], max_jump, margin, max_speed, restart_after;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOO(ddd)ddd:update_rows", &o_rw, &o_a, &o_x, &o_p, &o_t,
-                          &o_src_t, &o_upd, &o_fails, &o_stale, &q[0], &q[1], &q[2], &max_jump,
-                          &margin, &max_speed))
+    if (!PyArg_ParseTuple(args, "OOOOOOOOO(ddd)dddd:update_rows", &o_rw, &o_a, &o_x, &o_p,
+                          &o_t, &o_src_t, &o_upd, &o_fails, &o_stale, &q[0], &q[1], &q[2],
+                          &max_jump, &margin, &max_speed, &restart_after))
         return NULL;
     Buf bufs[9] = {{{0}}};
     PyObject *result = NULL;
@@ -154,7 +154,9 @@ static PyObject *update_rows(PyObject *self, PyObject *args) {
             PyErr_Format(PyExc_ValueError, "update_rows: source index %g", src);
             goto done;
         }
-        if (dt < 0.0 || tk == src_t[row * 3 + (Py_ssize_t)src]) goto fallback;
+        /* out of order, duplicate, or back after a gap (the track restarts) */
+        if (dt < 0.0 || dt > restart_after || tk == src_t[row * 3 + (Py_ssize_t)src])
+            goto fallback;
         double *xs = work + k * 15, *ps = xs + 6;
         memcpy(xs, x + row * 6, 6 * sizeof(double));
         memcpy(ps, p + row * 9, 9 * sizeof(double));
@@ -220,6 +222,7 @@ done:
  * north) of true north on the grid. */
 enum { L_IDX = 0, L_RCV, L_T, L_LON, L_LAT, L_ALT, L_VN, L_VE, L_VD, L_EPH, L_EPV, STRIDE };
 enum { NSRC = 3 }; /* source kinds: layout.N_SOURCES */
+enum { C_ARGS_VERSION = 2 }; /* layout.C_ARGS_VERSION: update_rows takes restart_after */
 
 static PyObject *entry_records(PyObject *self, PyObject *args) {
     PyObject *o_values, *o_a, *o_idx, *o_kinds = Py_None, *o_hv = Py_None;
@@ -359,10 +362,12 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC PyInit__kalman_c(void) {
     PyObject *mod = PyModule_Create(&module);
     if (mod == NULL) return NULL;
-    /* The layouts as this build knows them, in the order of layout.C_LAYOUT. */
+    /* The layouts as this build knows them, in the order of layout.C_LAYOUT, then the
+     * version of the functions' arguments (layout.C_ARGS_VERSION). */
     PyObject *layout = Py_BuildValue(
-        "(iiiiiiiiiiiiiiiiiiiiiii)", C_T, C_E, C_N, C_U, C_VE, C_R, C_RV, C_SRC, C_HV, NCOL,
-        L_IDX, L_RCV, L_T, L_LON, L_LAT, L_ALT, L_VN, L_VE, L_VD, L_EPH, L_EPV, STRIDE, NSRC);
+        "(iiiiiiiiiiiiiiiiiiiiiiii)", C_T, C_E, C_N, C_U, C_VE, C_R, C_RV, C_SRC, C_HV, NCOL,
+        L_IDX, L_RCV, L_T, L_LON, L_LAT, L_ALT, L_VN, L_VE, L_VD, L_EPH, L_EPV, STRIDE, NSRC,
+        C_ARGS_VERSION);
     if (layout == NULL || PyModule_AddObject(mod, "LAYOUT", layout) < 0) {
         Py_XDECREF(layout);
         Py_DECREF(mod);

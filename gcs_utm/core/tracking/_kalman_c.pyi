@@ -20,6 +20,7 @@ def update_rows(
     max_jump: float,
     margin: float,
     max_speed: float,
+    restart_after: float,
     /,
 ) -> bool: ...
 def entry_records(

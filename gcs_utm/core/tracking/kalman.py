@@ -57,6 +57,30 @@ def predicted_position_var(p: FloatArray, tau_s: FloatArray, q: FloatArray) -> F
     )
 
 
+def start(  # noqa: PLR0917 (the planes of a track's first measurement)
+    z_m: FloatArray,
+    r_m2: FloatArray,
+    zv_mps: FloatArray,
+    rv_m2ps2: FloatArray,
+    has_vel: npt.NDArray[np.bool_],
+    vel_var_m2ps2: float,
+) -> tuple[FloatArray, FloatArray]:
+    """The state and covariance planes, ``x`` (2, 3, M) and ``p`` (3, 3, M), of tracks that
+    start from a measurement (a new track, or one restarted after a gap or a wrong first
+    fix): the measured position ``z_m`` with its variance ``r_m2``; the measured velocity
+    ``zv_mps`` with ``rv_m2ps2`` where ``has_vel`` (M,), else 0 with ``vel_var_m2ps2``
+    (unknown: the next measurements give it); no position-velocity correlation. Planes
+    (3, M) as :func:`step` takes them."""
+    x = np.empty((2, 3, z_m.shape[1]))
+    x[POS] = z_m
+    x[VEL] = np.where(has_vel, zv_mps, 0.0)
+    p = np.empty((3, 3, z_m.shape[1]))
+    p[PP] = r_m2
+    p[PV] = 0.0
+    p[VV] = np.where(has_vel, rv_m2ps2, vel_var_m2ps2)
+    return x, p
+
+
 def step(  # noqa: PLR0917 (the arrays of one filter step, as the other functions)
     x: FloatArray,
     p: FloatArray,

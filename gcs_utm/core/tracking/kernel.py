@@ -56,8 +56,8 @@ except ImportError:  # pragma: no cover - built by every install with a C compil
 
 if _c is not None and tuple(getattr(_c, "LAYOUT", ())) != C_LAYOUT:  # pragma: no cover
     raise ImportError(
-        "gcs_utm.core.tracking._kalman_c was built from another version of the layouts in "
-        "gcs_utm/core/tracking/layout.py: rebuild it (pip install -e .)"
+        "gcs_utm.core.tracking._kalman_c was built from another version of the layouts or "
+        "arguments in gcs_utm/core/tracking/layout.py: rebuild it (pip install -e .)"
     )
 
 FloatArray = npt.NDArray[np.float64]
@@ -255,16 +255,19 @@ def update_rows(  # noqa: PLR0917 (the tracker's arrays, as the C function takes
     max_jump_m: float,
     gate_margin_m: float,
     max_speed_mps: float,
+    restart_after_s: float,
 ) -> bool:
     """The common round of rows ``rw`` (existing tracks, each once) with records ``a`` (NCOL,
     M, projected) in C, in place on ``state`` = (x, p, t, src_t) and ``counts`` = (updates,
     gate_fails, stale). False (nothing changed) when the C kernel is absent or one
-    measurement would not simply update its track: the NumPy round decides then."""
+    measurement would not simply update its track (among them one more than
+    ``restart_after_s`` after its track's state: it restarts the track): the NumPy round
+    decides then."""
     if _c is None:
         return False
     x, p, t, src_t = state
     updates, gate_fails, stale = counts
     return _c.update_rows(
         rw, a, x, p, t, src_t, updates, gate_fails, stale, q, max_jump_m, gate_margin_m,
-        max_speed_mps,
+        max_speed_mps, restart_after_s,
     )  # fmt: skip

@@ -54,11 +54,15 @@ SOURCE_INDEX = {
 }
 N_SOURCES = 3
 
+# Version of the C functions' arguments (2: update_rows takes restart_after), so that a build
+# of older source is refused at import like a stale layout.
+C_ARGS_VERSION = 2
+
 # What the C kernel must export as LAYOUT, in this order.
 C_LAYOUT = (
     REC_T, REC_EAST, REC_NORTH, REC_ALT, REC_VE, REC_R, REC_RV, REC_SRC, REC_HAS_VEL, NCOL,
     ENT_SRC, ENT_RCV, ENT_T, ENT_LON, ENT_LAT, ENT_ALT, ENT_VN, ENT_VE, ENT_VD, ENT_EPH,
-    ENT_EPV, ENTRY_STRIDE, N_SOURCES,
+    ENT_EPV, ENTRY_STRIDE, N_SOURCES, C_ARGS_VERSION,
 )  # fmt: skip
 
 # Altitudes outside this band are not an aircraft: below the Dead Sea shore (-430 m) with

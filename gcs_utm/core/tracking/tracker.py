@@ -30,7 +30,8 @@ Ingest (:meth:`Tracker.ingest`), per batch:
    used, ``gate`` if farther from the prediction than
    ``min(max_jump_m, gate_margin_m + max_speed_mps * dt)``. Rejections never touch the state.
    A stale track that rejected ``gate_reset_count`` measurements in a row restarts from the
-   next valid one (a wrong first fix must not lock a track out forever).
+   next valid one (a wrong first fix must not lock a track out forever); a track silent for
+   more than ``stale_after_s`` restarts from its next one that passes the gate (a link drop).
 
 Position lanes (:class:`~gcs_utm.model.PositionLane`): the MAVLink receive path hands
 telemetry positions over as flat entries instead of Measurements; ``ingest(measurements,
@@ -87,6 +88,9 @@ from gcs_utm.model import (
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
 
+Counts = tuple[int, int, int, int, int, int]
+"""A round's (accepted, reinitialised, restarted, out_of_order, duplicate, gate)."""
+
 PREDICT_BLOCK_ROWS = 2048
 """Rows predicted together (:meth:`Tracker.predict`): a block's (rows, 61) temporaries are
 1 MB each, so the few a block needs fit in a core's L2 cache (2 MB on the project's machine)."""
@@ -103,7 +107,8 @@ class IngestStats:
     invalid: int = 0
     gate: int = 0
     unassociated: int = 0
-    reinitialised: int = 0
+    reinitialised: int = 0  # restarted after gate_reset_count gate rejections
+    restarted: int = 0  # restarted after a gap longer than stale_after_s
     new_tracks: tuple[TrackId, ...] = ()
     new_intruders: tuple[TrackId, ...] = ()
 
@@ -166,6 +171,7 @@ class Tracker:
                 "gate",
                 "unassociated",
                 "reinitialised",
+                "restarted",
                 "tracks_created",
                 "intruders_created",
                 "intruders_dropped",
@@ -296,8 +302,7 @@ class Tracker:
             parts.append(intake.measurement_records(measurements, c, row_for))
         if lane:
             parts.append(intake.lane_records(lane, lane_sources, c, row_for))
-        accepted = 0
-        reinit = 0
+        accepted = reinit = restarted = 0
         if len(parts) == 2:
             rw = np.concatenate((parts[0][0], parts[1][0]))
             a = np.concatenate((parts[0][1], parts[1][1]), axis=1)
@@ -307,7 +312,7 @@ class Tracker:
             n = len(rw)
             n_vel = int(np.count_nonzero(a[REC_HAS_VEL]))
             with_vel = True if n_vel == n else False if n_vel == 0 else None
-            accepted, reinit, ooo, dup, gated = self._apply(rw, a, n_before, with_vel)
+            accepted, reinit, restarted, ooo, dup, gated = self._apply(rw, a, n_before, with_vel)
             c["gate"] += gated
             c["out_of_order"] = ooo
             c["duplicate"] = dup
@@ -315,6 +320,7 @@ class Tracker:
         stats = IngestStats(
             accepted=accepted,
             reinitialised=reinit,
+            restarted=restarted,
             new_tracks=tuple(new_tracks),
             new_intruders=tuple(new_intruders),
             **c,
@@ -324,17 +330,15 @@ class Tracker:
             counters[key_] += value
         counters["accepted"] += accepted
         counters["reinitialised"] += reinit
+        counters["restarted"] += restarted
         counters["tracks_created"] += len(new_tracks)
         counters["intruders_created"] += len(new_intruders)
         return stats
 
-    def _apply(
-        self, rw: IntArray, a: FloatArray, n_before: int, with_vel: bool | None
-    ) -> tuple[int, int, int, int, int]:
+    def _apply(self, rw: IntArray, a: FloatArray, n_before: int, with_vel: bool | None) -> Counts:
         """Rounds of one vectorised predict + update of rows ``rw`` with their records ``a``
-        (NCOL, N; lon/lat become east/north here). Returns (accepted, reinitialised,
-        out_of_order, duplicate, gate). ``with_vel``: every record has a velocity (True),
-        none has (False), or mixed (None)."""
+        (NCOL, N; lon/lat become east/north here). Returns :data:`Counts`. ``with_vel``: every
+        record has a velocity (True), none has (False), or mixed (None)."""
         n = len(rw)
         self.frame.to_local_in_place(a[REC_LON], a[REC_LAT])
         new_rows = self._n > n_before
@@ -357,7 +361,7 @@ class Tracker:
         rank_grouped = pos - np.maximum.accumulate(np.where(first, pos, 0))
         rank = np.empty(n, dtype=np.intp)
         rank[by_row] = rank_grouped
-        totals = [0, 0, 0, 0, 0]
+        totals = [0, 0, 0, 0, 0, 0]
         for k in range(int(rank.max()) + 1):
             sel = order[rank == k]
             r_k = rw[sel]
@@ -366,8 +370,8 @@ class Tracker:
             init = r_k >= n_before if new_rows and k == 0 else None
             res = self._round(r_k, a[:, sel], init, with_vel)
             totals = [x + y for x, y in zip(totals, res, strict=True)]
-        accepted, reinit, ooo, dup, gate = totals
-        return accepted, reinit, ooo, dup, gate
+        accepted, reinit, restarted, ooo, dup, gate = totals
+        return accepted, reinit, restarted, ooo, dup, gate
 
     def _round(
         self,
@@ -375,7 +379,7 @@ class Tracker:
         a: FloatArray,
         init: npt.NDArray[np.bool_] | None,
         with_vel: bool | None,
-    ) -> tuple[int, int, int, int, int]:
+    ) -> Counts:
         """One round: rows ``rw`` (each at most once) with their records ``a`` (NCOL, M);
         ``init``: rows that start from their measurement (None: none)."""
         cfg = self.config
@@ -392,37 +396,42 @@ class Tracker:
         ooo = dt < 0.0
         dup = t == self._src_t[rw, src]
         gate = miss > allowed
+        # Silent for longer than stale_after_s (a link drop): the state is too old to filter
+        # (its velocity and the position-velocity correlation grown over the gap would pull
+        # the position off the measurement), so the track restarts from it.
+        lapsed = dt > cfg.stale_after_s
         m = len(rw)
-        if init is None and not (ooo | dup | gate).any():
+        if init is None and not (ooo | dup | gate | lapsed).any():
             # The common case: every measurement updates its track.
             self._filter(rw, x, a, dt, with_vel)
             self._accept(rw, t, src)
-            return m, 0, 0, 0, 0
+            return m, 0, 0, 0, 0, 0
         if init is None:
             init = np.zeros(m, dtype=bool)
         ooo &= ~init
         dup &= ~init & ~ooo
         gate &= ~(init | ooo | dup)
         # A stale track that keeps rejecting restarts from this measurement.
-        restart = gate & (dt > cfg.stale_after_s) & (self._gate_fails[rw] >= cfg.gate_reset_count)
+        restart = gate & lapsed & (self._gate_fails[rw] >= cfg.gate_reset_count)
         gate &= ~restart
-        init |= restart
+        # A track back after a gap restarts from its first measurement that passes the gate
+        # (identity, plan association and history kept: same row).
+        resumed = lapsed & ~(init | gate | restart)
+        init |= restart | resumed
         self._gate_fails[rw[gate]] += 1
         upd = ~(init | ooo | dup | gate)
         ok = init | upd
-        if init.any():
-            # New and restarted tracks: state = the measurement, velocity unknown unless
-            # measured.
+        if init.any():  # new and restarted tracks
             ri = rw[init]
             ai = a[:, init]
-            hv = ai[REC_HAS_VEL] != 0.0
-            xi = np.empty((2, 3, len(ri)))
-            xi[kalman.POS] = ai[REC_EAST : REC_ALT + 1]
-            xi[kalman.VEL] = np.where(hv, ai[REC_VE : REC_VU + 1], 0.0)
-            pi = np.empty((3, 3, len(ri)))
-            pi[kalman.PP] = ai[REC_R : REC_R + 3]
-            pi[kalman.PV] = 0.0
-            pi[kalman.VV] = np.where(hv, ai[REC_RV : REC_RV + 3], cfg.initial_vel_sigma_mps**2)
+            xi, pi = kalman.start(
+                ai[REC_EAST : REC_ALT + 1],
+                ai[REC_R : REC_R + 3],
+                ai[REC_VE : REC_VU + 1],
+                ai[REC_RV : REC_RV + 3],
+                ai[REC_HAS_VEL] != 0.0,
+                cfg.initial_vel_sigma_mps**2,
+            )
             self._x.transpose(2, 1, 0)[:, :, ri] = xi
             self._p.transpose(2, 1, 0)[:, :, ri] = pi
             self._src_t[ri] = -np.inf
@@ -433,12 +442,13 @@ class Tracker:
         return (
             int(ok.sum()),
             int(restart.sum()),
+            int(resumed.sum()),
             int(ooo.sum()),
             int(dup.sum()),
             int(gate.sum()),
         )
 
-    def _round_plain(self, rw: IntArray, a: FloatArray) -> tuple[int, int, int, int, int] | None:
+    def _round_plain(self, rw: IntArray, a: FloatArray) -> Counts | None:
         """The round of existing rows ``rw`` (each once) when every measurement updates its
         track, in the C kernel (:func:`.kernel.update_rows`). None: nothing changed (no C
         kernel, or not that case), :meth:`_round` decides."""
@@ -452,11 +462,12 @@ class Tracker:
             cfg.max_jump_m,
             cfg.gate_margin_m,
             cfg.max_speed_mps,
+            cfg.stale_after_s,
         ):
             return None
         ids = self._ids
         self._dirty.update([ids[i] for i in rw.tolist()])
-        return len(rw), 0, 0, 0, 0
+        return len(rw), 0, 0, 0, 0, 0
 
     def _filter(
         self, rw: IntArray, x: FloatArray, a: FloatArray, dt: FloatArray, with_vel: bool | None
