@@ -613,6 +613,7 @@ class VehicleOps:
                 loiter_landing=v.autopilot is Autopilot.PX4,
                 takeoff_heading_deg=v.takeoff_heading_deg,
                 heads_for_takeoff_position=v.autopilot is not Autopilot.ARDUPILOT,
+                turn_after_takeoff=v.autopilot is Autopilot.ARDUPILOT,
             )
         if points is None and not v.waiting_logged:
             v.waiting_logged = True
