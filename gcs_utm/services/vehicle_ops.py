@@ -59,6 +59,7 @@ from gcs_utm.services import fixed_wing_plan as fw
 from gcs_utm.services import fixed_wing_point as fwp
 from gcs_utm.services import mission_order
 from gcs_utm.services.airspace import Airspace, AirspaceError
+from gcs_utm.services.fixed_wing_rejoin import rejoin
 from gcs_utm.services.flight_state import FlightState
 
 _log = logging.getLogger(__name__)
@@ -222,7 +223,8 @@ def plan_from_points(
     flown to. None when there is no point. ``turn_from_m`` (a fixed wing): when the point
     just reached (the one before ``current_seq``) is within that of ``position``, the plan
     goes on through it: the autopilot accepted it early (ArduPlane's WP_RADIUS, 50 m) and
-    turns round it, it does not cut straight from where it is to the next point."""
+    turns round it, it does not cut straight from where it is to the next point; farther,
+    it goes back onto the leg it flies (:mod:`.fixed_wing_rejoin`)."""
     # from the first point at or after the current item (a loop repeats seqs: its first pass)
     start = next(
         (k for k, p in enumerate(points) if current_seq is None or p.seq >= current_seq),
@@ -243,6 +245,8 @@ def plan_from_points(
         rest = [done[-1], *rest]
     elif position is not None:
         rest = _from_nearest_modelled(rest, position)
+        if turn_from_m > 0.0 and done:  # a fixed wing converges on the leg it flies
+            rest = [*rejoin(position.lat_deg, position.lon_deg, done[-1], rest[0]), *rest]
     wps: list[Waypoint4D] = []
     if position is not None:
         first = rest[0]
