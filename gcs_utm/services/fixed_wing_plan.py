@@ -98,6 +98,7 @@ def fixed_wing_points(
     takeoff_heading_deg: float | None = None,
     heads_for_takeoff_position: bool = True,
     turn_after_takeoff: bool = False,
+    loiter_exit_on_goal: bool = False,
 ) -> list[P]:
     """``points`` (mission order, AMSL) as a fixed wing flies them (module docstring).
     ``ground_alt_m``: where a take-off starts (the vehicle's home; None: the point before);
@@ -109,7 +110,8 @@ def fixed_wing_points(
     ``heads_for_takeoff_position`` False: the autopilot ignores a take-off's position
     (ArduPlane's ``do_takeoff``); ``turn_after_takeoff`` (ArduPlane): from the climb's end
     along ``takeoff_heading_deg`` it turns towards the next waypoint as it flies it
-    (:mod:`.fixed_wing_turn`)."""
+    (:mod:`.fixed_wing_turn`); ``loiter_exit_on_goal`` (PX4): a loiter is left as soon as its
+    goal is met (:mod:`.fixed_wing_loiter`)."""
     out: list[P] = []
     for i, p in enumerate(points):
         before = out[-1] if out else None
@@ -131,7 +133,11 @@ def fixed_wing_points(
             # not on the tangent to the next item
             to_land = loiter_landing and points[i + 1 : i + 2] and points[i + 1].command == NAV_LAND
             after = [] if to_land else points[i + 1 :]
-            out.extend(loiter_points(p, out[-1], after, rate, loiter_radius_m))
+            out.extend(
+                loiter_points(
+                    p, out[-1], after, rate, loiter_radius_m, leaves_on_goal=loiter_exit_on_goal
+                )
+            )
         elif loiter_landing and p.command == NAV_LAND and i and out:
             out = _descended_before(out, points[i - 1])
             out.extend(_landing_exit(points[i - 1], out[-1], p, loiter_radius_m))

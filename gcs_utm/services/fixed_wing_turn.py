@@ -49,11 +49,21 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def takeoff_turn(end: Point, course_deg: float, nxt: P, speed_mps: float) -> list[P]:
+def takeoff_turn(
+    end: Point,
+    course_deg: float,
+    nxt: P,
+    speed_mps: float,
+    *,
+    period_s: float = L1_PERIOD_S,
+    roll_in_s: float = ROLL_IN_S,
+    roll_limit_deg: float = ROLL_LIMIT_DEG,
+) -> list[P]:
     """The plane's path from the take-off's end ``end`` (at the take-off altitude, flying
     ``course_deg``) until it heads for ``nxt``: modelled points of ``nxt`` (the item current
     then), at the altitudes of the straight line from ``end`` to ``nxt``; [] when it already
-    heads for it (module docstring)."""
+    heads for it (module docstring). The same pursuit with PX4's guidance period, no roll-in
+    and its roll limit is a PX4 plane's turn out of a loiter (:mod:`.fixed_wing_loiter`)."""
     k = math.cos(math.radians(end.lat_deg))
     goal_e = (nxt.lon_deg - end.lon_deg) * _M_PER_DEG_LON * k
     goal_n = (nxt.lat_deg - end.lat_deg) * _M_PER_DEG_LAT
@@ -62,14 +72,14 @@ def takeoff_turn(end: Point, course_deg: float, nxt: P, speed_mps: float) -> lis
     if total_m < 1.0 or abs(_wrap(psi - math.atan2(goal_e, goal_n))) < DONE_RAD:
         return []
     speed = max(speed_mps, 1.0)
-    l1_m = L1_DAMPING * L1_PERIOD_S * speed / math.pi
-    max_rate = 9.81 * math.tan(math.radians(ROLL_LIMIT_DEG)) / speed**2  # rad per m
+    l1_m = L1_DAMPING * period_s * speed / math.pi
+    max_rate = 9.81 * math.tan(math.radians(roll_limit_deg)) / speed**2  # rad per m
     e = n = 0.0
-    run_m = ROLL_IN_S * speed
+    run_m = roll_in_s * speed
     flown = 0.0
     out: list[P] = []
     last_psi = psi
-    emitted_at = -1.0
+    emitted_at = 0.0  # (not at the start: that point is the caller's)
 
     def emit() -> None:
         nonlocal emitted_at

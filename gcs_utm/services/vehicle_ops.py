@@ -618,6 +618,7 @@ class VehicleOps:
                 takeoff_heading_deg=v.takeoff_heading_deg,
                 heads_for_takeoff_position=v.autopilot is not Autopilot.ARDUPILOT,
                 turn_after_takeoff=v.autopilot is Autopilot.ARDUPILOT,
+                loiter_exit_on_goal=v.autopilot is Autopilot.PX4,
             )
         if points is None and not v.waiting_logged:
             v.waiting_logged = True
