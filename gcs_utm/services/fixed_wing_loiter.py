@@ -44,7 +44,13 @@ from gcs_utm.services.fixed_wing_point import (
     NAV_TAKEOFF,
     Point,
 )
-from gcs_utm.services.fixed_wing_turn import L1_DAMPING, takeoff_turn
+from gcs_utm.services.fixed_wing_turn import (
+    L1_DAMPING,
+    PX4_PERIOD_S,
+    PX4_ROLL_LIMIT_DEG,
+    PX4_TRIM_MPS,
+    takeoff_turn,
+)
 
 P = TypeVar("P", bound=Point)
 
@@ -63,10 +69,6 @@ inside, which the fixed-wing band takes as on its plan; one turning later would 
 EXIT_RUN_RADII = 0.5
 """Leaving a loiter, the plane flies on along its tangent this many radii before it turns
 onto the line from the centre (measured: 35-40 m on an 80 m circle)."""
-PX4_PERIOD_S = 10.0
-"""PX4's NPFG_PERIOD (default): its guidance period."""
-PX4_ROLL_LIMIT_DEG = 50.0
-"""PX4's FW_R_LIM (default)."""
 STEP_RAD = math.pi / 8.0
 MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
 _M_PER_DEG_LAT = 110_540.0
@@ -169,7 +171,7 @@ def _px4_exit(p: P, left: P, at_rad: float, sense: float, nxt: P) -> list[P]:
         return []
     ue, un = ne / length, nn / length
     le, ln = _en(p, left)
-    speed = max(nxt.speed_mps, 1.0)
+    speed = min(max(nxt.speed_mps, 1.0), PX4_TRIM_MPS)
     s = le * ue + ln * un + L1_DAMPING * PX4_PERIOD_S * speed / math.pi
     if s >= length:
         return []

@@ -12,15 +12,30 @@ while the plane landed): 10 m off its landing line when its mission was filed ag
 the position's projection on it, then on along the leg.
 Not after a take-off (ArduPlane pursues the next waypoint from where it is,
 :mod:`.fixed_wing_turn`) nor after a loiter (its exit is modelled, :mod:`.fixed_wing_loiter`).
+
+A PX4 plane leaves a loiter where its time is up, which the plan places from the speed it is
+timed at: filed at 22 m/s, the soak's PX4 SIH plane (14.5 m/s) left its circle about 150 deg
+before the modelled exit, and the plan re-timed then ran from its position straight to the
+modelled exit's point on the centre's line, 35 m beside the plane turning onto that line
+from the circle's tangent (UAS_OUT_OV, an auto-accepted back_to_plan). Re-timed with its
+course, the exit turn is made from where it is (:func:`rejoin_rest`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import TypeVar
 
 from gcs_utm.services.fixed_wing_point import LOITER_COMMANDS, NAV_TAKEOFF, Point
-from gcs_utm.services.fixed_wing_turn import L1_DAMPING, L1_PERIOD_S
+from gcs_utm.services.fixed_wing_turn import (
+    L1_DAMPING,
+    L1_PERIOD_S,
+    PX4_PERIOD_S,
+    PX4_ROLL_LIMIT_DEG,
+    PX4_TRIM_MPS,
+    takeoff_turn,
+)
 
 P = TypeVar("P", bound=Point)
 
@@ -56,3 +71,51 @@ def rejoin(lat_deg: float, lon_deg: float, prev: Point, cur: P) -> list[P]:
     lat = prev.lat_deg + un * s / _M_PER_DEG_LAT
     lon = prev.lon_deg + ue * s / (_M_PER_DEG_LON * k)
     return [cur.moved(lat, lon, alt).synthetic()]
+
+
+def rejoin_rest(
+    lat_deg: float, lon_deg: float, course_deg: float | None, prev: Point, rest: Sequence[P]
+) -> list[P]:
+    """``rest`` (the plan's points from the current item on) for a fixed wing at ``lat_deg,
+    lon_deg`` that flew ``prev`` last: after a loiter with a modelled exit, when its course is
+    known (PX4), that exit made from where it is (:func:`exit_from`); else the point where it
+    is back on its leg (:func:`rejoin`) first."""
+    if not rest:
+        return []
+    if course_deg is not None and prev.command in LOITER_COMMANDS and not rest[0].explicit:
+        return exit_from(lat_deg, lon_deg, course_deg, rest)
+    return [*rejoin(lat_deg, lon_deg, prev, rest[0]), *rest]
+
+
+def exit_from(lat_deg: float, lon_deg: float, course_deg: float, rest: Sequence[P]) -> list[P]:
+    """A PX4 plane out of its loiter at ``lat_deg, lon_deg`` flying ``course_deg``: ``rest``
+    starts with the modelled exit (points of the next item, the last on the line from the
+    loiter's centre to that item's position, which follows); it turns from its course onto
+    that line, pursuing the line's point one guidance distance past its projection
+    (:func:`.fixed_wing_loiter._px4_exit`), then goes on along it. ``rest`` as it is when
+    there is no such line or the plane is past its end."""
+    run = next((k for k, q in enumerate(rest) if q.explicit), len(rest))
+    if run == 0 or run == len(rest):
+        return list(rest)
+    on_line, nxt = rest[run - 1], rest[run]
+    k = math.cos(math.radians(on_line.lat_deg))
+    le = (nxt.lon_deg - on_line.lon_deg) * _M_PER_DEG_LON * k
+    ln = (nxt.lat_deg - on_line.lat_deg) * _M_PER_DEG_LAT
+    length = math.hypot(le, ln)
+    if length < 1.0:
+        return list(rest)
+    ue, un = le / length, ln / length
+    pe = (lon_deg - on_line.lon_deg) * _M_PER_DEG_LON * k
+    pn = (lat_deg - on_line.lat_deg) * _M_PER_DEG_LAT
+    speed = min(max(nxt.speed_mps, 1.0), PX4_TRIM_MPS)
+    s = pe * ue + pn * un + L1_DAMPING * PX4_PERIOD_S * speed / math.pi
+    if s >= length - 1.0:
+        return list(rest[run:])
+    alt = on_line.alt_amsl_m + (nxt.alt_amsl_m - on_line.alt_amsl_m) * max(s, 0.0) / length
+    lat = on_line.lat_deg + un * s / _M_PER_DEG_LAT
+    lon = on_line.lon_deg + ue * s / (_M_PER_DEG_LON * k)
+    target = nxt.moved(lat, lon, alt).synthetic()
+    here = nxt.moved(lat_deg, lon_deg, alt).synthetic()
+    turn = takeoff_turn(here, course_deg, target, speed, period_s=PX4_PERIOD_S, roll_in_s=0.0,
+                        roll_limit_deg=PX4_ROLL_LIMIT_DEG)  # fmt: skip
+    return [*turn, target, *rest[run:]]

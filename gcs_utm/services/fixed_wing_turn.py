@@ -33,6 +33,13 @@ L1_DAMPING = 0.75
 """ArduPlane NAVL1_DAMPING (default)."""
 ROLL_LIMIT_DEG = 45.0
 """ArduPlane ROLL_LIMIT_DEG (default 45; 65 in its SITL defaults): caps the turn."""
+PX4_PERIOD_S = 10.0
+"""PX4's NPFG_PERIOD (default): its guidance period, for the same pursuit out of a loiter."""
+PX4_ROLL_LIMIT_DEG = 50.0
+"""PX4's FW_R_LIM (default)."""
+PX4_TRIM_MPS = 15.0
+"""PX4's FW_AIRSPD_TRIM (default): the airspeed of its turns, whatever speed a plan is timed
+at (the soak's PX4 SIH plane flew 14.5 m/s; its plans are filed at 22 m/s)."""
 ROLL_IN_S = 1.4
 """From the take-off altitude to the turn (the check, the roll-in), fitted to the track."""
 STEP_M = 2.0  # integration step

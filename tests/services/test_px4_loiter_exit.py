@@ -12,9 +12,10 @@ import json
 import math
 from pathlib import Path
 
+from gcs_utm.model import OperationId, Position
 from gcs_utm.services import fixed_wing_loiter as fl
 from gcs_utm.services import fixed_wing_plan as fw
-from gcs_utm.services.vehicle_ops import NavPoint
+from gcs_utm.services.vehicle_ops import NavPoint, plan_from_points
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "flown" / "px4_plane_loiter_exit.json"
 FLOWN = json.loads(DATA.read_text())
@@ -75,3 +76,34 @@ def test_a_px4_loiter_ends_with_its_goal_an_arduplane_one_heading_for_the_waypoi
         return sum(1 for p in pts if p.seq == 3)
 
     assert circle(px4=True) < circle(px4=False)
+
+
+RETIMED = json.loads((DATA.parent / "px4_plane_loiter_exit_retimed.json").read_text())
+
+
+def test_a_plan_retimed_as_px4_leaves_its_circle_turns_from_where_it_is() -> None:
+    """Filed at 22 m/s, the soak's PX4 plane (14.5 m/s) left its circle about 150 deg before
+    the modelled exit; re-timed then, its plan ran from its position straight to the modelled
+    exit's point on the centre's line, 35 m beside it (UAS_OUT_OV, a back_to_plan). With its
+    course the exit turn is made from where it is."""
+    c, on_line, nxt = RETIMED["last_on_circle"], RETIMED["exit_on_line"], RETIMED["next"]
+    points = [
+        NavPoint(3, c["lat_deg"], c["lon_deg"], c["alt_amsl_m"], 22.0, True, 19, amount=20.0),
+        NavPoint(4, on_line["lat_deg"], on_line["lon_deg"], on_line["alt_amsl_m"], 22.0, True,
+                 16).synthetic(),
+        NavPoint(4, nxt["lat_deg"], nxt["lon_deg"], nxt["alt_amsl_m"], 22.0, True, 16),
+    ]  # fmt: skip
+    here = RETIMED["track"][0]
+    position = Position(**{k: here[k] for k in ("lat_deg", "lon_deg", "alt_amsl_m")})
+
+    def plan(course_deg: float | None) -> list[tuple[float, float]]:
+        p = plan_from_points(
+            points, OperationId("sys2"), t_s=0.0, current_seq=4, position=position,
+            turn_from_m=80.0, course_deg=course_deg,
+        )  # fmt: skip
+        assert p is not None
+        return [_en(w.lat_deg, w.lon_deg) for w in p.waypoints]
+
+    track = [_en(q["lat_deg"], q["lon_deg"]) for q in RETIMED["track"]]
+    assert max(_off_m(plan(RETIMED["course_deg"]), *q) for q in track) < 5.0
+    assert max(_off_m(plan(None), *q) for q in track) > 30.0
