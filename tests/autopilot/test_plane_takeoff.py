@@ -135,14 +135,15 @@ def test_arduplane_loiter_and_landing_raise_no_conformance_threat(
     circles 81-96 m from the centre for 20 s and on until it heads for the approach, then
     converges on the line from the centre and lands. It was filed on a 1 m circle (param3 read
     back as 1) and opened UAS_IN_CV / UAS_OUT_OV at the loiter; now nothing is raised. Its
-    runway points north-east, as the soak's plane stands after a landing: it climbs out
-    north-east and turns north to its first waypoint after the take-off (filed as a straight
-    line from the climb's end, that turn ran 45-50 m outside the plan: UAS_IN_CV)."""
+    runway points 30 deg east of north, as the soak's plane stands after a landing: it climbs
+    out along it and turns north to its first waypoint after the take-off (filed as a straight
+    line from the climb's end, the soak's 45 deg turn ran 45-50 m outside the plan:
+    UAS_IN_CV)."""
     lat0, lon0, _ground, _heading = ARDUPILOT_DEFAULT_HOME
     # simulated about 200 s (3.9 km at 22-24 m/s, a turn, take-off and landing)
     mission = _loiter_mission(lat0, lon0)
     commands = _fly_with_serve(
-        ardupilot, tmp_path, mission, 6, 200.0, speed=LOITER_SPEED, heading_deg=45.0
+        ardupilot, tmp_path, mission, 6, 200.0, speed=LOITER_SPEED, heading_deg=30.0
     )
     assert commands[-3:] == [189, 16, 21], f"landing sequence gone: {commands}"
 
