@@ -82,9 +82,31 @@ def rejoin_rest(
     is back on its leg (:func:`rejoin`) first."""
     if not rest:
         return []
-    if course_deg is not None and prev.command in LOITER_COMMANDS and not rest[0].explicit:
-        return exit_from(lat_deg, lon_deg, course_deg, rest)
+    if prev.command in LOITER_COMMANDS and not rest[0].explicit:
+        if course_deg is not None:
+            return exit_from(lat_deg, lon_deg, course_deg, rest)
+        return past_exit(lat_deg, lon_deg, rest)
     return [*rejoin(lat_deg, lon_deg, prev, rest[0]), *rest]
+
+
+def past_exit(lat_deg: float, lon_deg: float, rest: Sequence[P]) -> list[P]:
+    """``rest`` starting with a loiter's modelled exit (points of the next item, the last on
+    the line to that item's position) for a plane already past that exit along the line (a
+    plan filed again by a restarted serve while it flew on: the soak's ArduPlane, 700 m past
+    it, was filed flying back to it, UAS_OUT_OV): the exit left out, back onto the line
+    (:func:`rejoin`); ``rest`` as it is before the exit's end."""
+    run = next((k for k, q in enumerate(rest) if q.explicit), len(rest))
+    if run == 0 or run == len(rest):
+        return list(rest)
+    on_line, nxt = rest[run - 1], rest[run]
+    k = math.cos(math.radians(on_line.lat_deg))
+    le = (nxt.lon_deg - on_line.lon_deg) * _M_PER_DEG_LON * k
+    ln = (nxt.lat_deg - on_line.lat_deg) * _M_PER_DEG_LAT
+    pe = (lon_deg - on_line.lon_deg) * _M_PER_DEG_LON * k
+    pn = (lat_deg - on_line.lat_deg) * _M_PER_DEG_LAT
+    if pe * le + pn * ln <= 0.0:
+        return list(rest)
+    return [*rejoin(lat_deg, lon_deg, on_line, nxt), *rest[run:]]
 
 
 def exit_from(lat_deg: float, lon_deg: float, course_deg: float, rest: Sequence[P]) -> list[P]:

@@ -77,3 +77,39 @@ def test_no_rejoin_on_the_leg_after_a_take_off_or_a_loiter_or_on_the_line() -> N
     assert (
         min(a.alt_amsl_m, land.alt_amsl_m) <= near.alt_amsl_m <= max(a.alt_amsl_m, land.alt_amsl_m)
     )
+
+
+PAST = json.loads((DATA.parent / "arduplane_past_loiter_exit.json").read_text())
+
+
+def test_a_plane_past_its_loiters_exit_is_not_sent_back_to_it() -> None:
+    """Filed again by a restarted serve 700 m past its loiter's modelled exit, the soak's
+    ArduPlane was planned back to that exit (UAS_OUT_OV, an auto-accepted next_waypoint)."""
+    c, (run0, run1), a, land = (
+        PAST["last_on_circle"], PAST["exit_run"], PAST["approach"], PAST["land"]
+    )  # fmt: skip
+    points = [
+        NavPoint(3, c["lat_deg"], c["lon_deg"], c["alt_amsl_m"], 22.0, True, 19, amount=20.0),
+        *(
+            NavPoint(5, q["lat_deg"], q["lon_deg"], q["alt_amsl_m"], 22.0, True, 16).synthetic()
+            for q in (run0, run1)
+        ),
+        NavPoint(5, a["lat_deg"], a["lon_deg"], a["alt_amsl_m"], 22.0, True, 16, landing=True),
+        NavPoint(6, land["lat_deg"], land["lon_deg"], land["alt_amsl_m"], 22.0, True, 21,
+                 landing=True),
+    ]  # fmt: skip
+
+    def plan(turn_from_m: float) -> list[tuple[float, float]]:
+        p = plan_from_points(
+            points, OperationId("sys4"), t_s=0.0, current_seq=5,
+            position=Position(**PAST["filed_from"]), turn_from_m=turn_from_m,
+        )  # fmt: skip
+        assert p is not None
+        return [_en(w.lat_deg, w.lon_deg) for w in p.waypoints]
+
+    track = [_en(q["lat_deg"], q["lon_deg"]) for q in PAST["track"]]
+    fixed_wing, multirotor = plan(80.0), plan(0.0)
+    assert max(_off_m(fixed_wing, *q) for q in track) < 3.0
+    # on from where it is: the plan's next point is ahead (south), not the exit 700 m back
+    assert fixed_wing[1] == _en(a["lat_deg"], a["lon_deg"])
+    assert multirotor[1][1] - multirotor[0][1] > 700.0
