@@ -136,6 +136,8 @@ def loiter_points(
     nxt = next((q for q in after if q.explicit), None)
     sweep = goal_rad
     px4_exit = leaves_on_goal and not p.exit_xtrack
+    if leaves_on_goal and p.command == NAV_LOITER_TIME:
+        sweep = goal_rad = _px4_time_rad(p, capture, start, r)
     if nxt is not None and math.hypot(*_en(p, nxt)) > r and not px4_exit:
         exit_a = _tangent_angle(*_en(p, nxt), r, sense, leaving=True)
         sweep += ((exit_a - (start + sense * goal_rad)) * sense) % (2.0 * math.pi)
@@ -153,6 +155,20 @@ def loiter_points(
             _px4_exit(p, out[-1], exit_a, sense, nxt) if px4_exit else _join(p, out[-1], nxt, r)
         )
     return out
+
+
+def _px4_time_rad(p: P, capture: P | None, start: float, r: float) -> float:
+    """The angle a PX4 plane flies round its NAV_LOITER_TIME circle: the time counts from
+    where it is within the circle's acceptance (the capture, before it joins the circle on
+    its tangent) and it flies its trim airspeed (``PX4_TRIM_MPS``), not the plan's speed.
+    Measured on PX4 v1.15.2 SIH (14.5 m/s, 80 m, 20 s): 155 deg round from its entry, where
+    20 s at the plan's 22 m/s from the join made 315 deg."""
+    speed = min(max(p.speed_mps, 0.1), PX4_TRIM_MPS)
+    lead_s = 0.0
+    if capture is not None:
+        ce, cn = _en(p, capture)
+        lead_s = math.hypot(ce - r * math.cos(start), cn - r * math.sin(start)) / speed
+    return max(p.amount - lead_s, 0.0) * speed / r
 
 
 def _px4_exit(p: P, left: P, at_rad: float, sense: float, nxt: P) -> list[P]:

@@ -7,6 +7,7 @@ ArduPlane exit (on round the circle until it heads for the waypoint, 150 deg fur
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -107,3 +108,22 @@ def test_a_plan_retimed_as_px4_leaves_its_circle_turns_from_where_it_is() -> Non
     track = [_en(q["lat_deg"], q["lon_deg"]) for q in RETIMED["track"]]
     assert max(_off_m(plan(RETIMED["course_deg"]), *q) for q in track) < 5.0
     assert max(_off_m(plan(None), *q) for q in track) > 30.0
+
+
+def test_px4_leaves_where_its_time_counted_from_the_capture_at_trim_airspeed_is_up() -> None:
+    """The soak's mission: from 300 m east of the loiter, 20 s, 80 m clockwise. PX4 counted
+    its 20 s from within the circle's acceptance at its 14.5 m/s and left 155 deg round from
+    its entry (the recorded exit); timed at the plan's 22 m/s from the join it was 315 deg."""
+    before = _pt(2, 16, {**LOITER, "lon_deg": LOITER["lon_deg"] + 300.0 / (111_320.0 * K)})
+    loiter, nxt = _pt(3, 19, LOITER, 20.0), _pt(4, 16, NEXT)
+    before, loiter, nxt = (dataclasses.replace(q, speed_mps=22.0) for q in (before, loiter, nxt))
+    pts = fw.fixed_wing_points(
+        [before, loiter, nxt], ground_alt_m=None, climb_rate_mps=5.0, descent_rate_mps=3.0,
+        loiter_radius_m=80.0, loiter_exit_on_goal=True,
+    )  # fmt: skip
+    last = [p for p in pts if p.seq == 3][-1]
+    e, n = _en(last.lat_deg, last.lon_deg)
+    flown = FLOWN["track"][1]  # where its time was up
+    fe, fn = _en(flown["lat_deg"], flown["lon_deg"])
+    off_deg = math.degrees(math.atan2(n, e) - math.atan2(fn, fe))
+    assert abs((off_deg + 180.0) % 360.0 - 180.0) < 15.0
