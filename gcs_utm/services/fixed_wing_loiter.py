@@ -44,6 +44,13 @@ from gcs_utm.services.fixed_wing_point import (
     NAV_TAKEOFF,
     Point,
 )
+from gcs_utm.services.fixed_wing_turn import (
+    L1_DAMPING,
+    PX4_PERIOD_S,
+    PX4_ROLL_LIMIT_DEG,
+    PX4_TRIM_MPS,
+    takeoff_turn,
+)
 
 P = TypeVar("P", bound=Point)
 
@@ -109,10 +116,14 @@ def loiter_points(
     after: Sequence[P],
     rate_mps: float,
     default_radius_m: float,
+    *,
+    leaves_on_goal: bool = False,
 ) -> list[P]:
     """The loiter item ``p`` flown after ``before``, ``after`` the points that follow it: its
     circle from the entry to the exit, then (exit track from the centre) the point where the
-    plane is back on the line to the next waypoint (module docstring)."""
+    plane is back on the line to the next waypoint (module docstring). ``leaves_on_goal``
+    (PX4): it leaves the circle as soon as the goal is met and turns onto the line from the
+    centre (:func:`_px4_exit`)."""
     radius = radius_m(p, default_radius_m)
     r = abs(radius)
     if r < NO_RADIUS_M:
@@ -124,7 +135,10 @@ def loiter_points(
     goal_rad = min(turns, MAX_TURNS) * 2.0 * math.pi
     nxt = next((q for q in after if q.explicit), None)
     sweep = goal_rad
-    if nxt is not None and math.hypot(*_en(p, nxt)) > r:
+    px4_exit = leaves_on_goal and not p.exit_xtrack
+    if leaves_on_goal and p.command == NAV_LOITER_TIME:
+        sweep = goal_rad = _px4_time_rad(p, capture, start, r)
+    if nxt is not None and math.hypot(*_en(p, nxt)) > r and not px4_exit:
         exit_a = _tangent_angle(*_en(p, nxt), r, sense, leaving=True)
         sweep += ((exit_a - (start + sense * goal_rad)) * sense) % (2.0 * math.pi)
     steps = max(1, math.ceil(sweep / STEP_RAD - 1e-9))
@@ -136,8 +150,54 @@ def loiter_points(
         alt = z0 + (p.alt_amsl_m - z0) * frac
         out.append(_at(p, r * math.cos(a), r * math.sin(a), alt, p))
     if nxt is not None and nxt is after[0] and nxt.command not in LOITERS | {NAV_TAKEOFF}:
-        out.extend(_join(p, out[-1], nxt, r))
+        exit_a = start + sense * sweep
+        out.extend(
+            _px4_exit(p, out[-1], exit_a, sense, nxt) if px4_exit else _join(p, out[-1], nxt, r)
+        )
     return out
+
+
+def _px4_time_rad(p: P, capture: P | None, start: float, r: float) -> float:
+    """The angle a PX4 plane flies round its NAV_LOITER_TIME circle: the time counts from
+    where it is within the circle's acceptance (the capture, before it joins the circle on
+    its tangent) and it flies its trim airspeed (``PX4_TRIM_MPS``), not the plan's speed.
+    Measured on PX4 v1.15.2 SIH (14.5 m/s, 80 m, 20 s): 155 deg round from its entry, where
+    20 s at the plan's 22 m/s from the join made 315 deg."""
+    speed = min(max(p.speed_mps, 0.1), PX4_TRIM_MPS)
+    lead_s = 0.0
+    if capture is not None:
+        ce, cn = _en(p, capture)
+        lead_s = math.hypot(ce - r * math.cos(start), cn - r * math.sin(start)) / speed
+    return max(p.amount - lead_s, 0.0) * speed / r
+
+
+def _px4_exit(p: P, left: P, at_rad: float, sense: float, nxt: P) -> list[P]:
+    """A PX4 plane leaving its loiter at ``left`` (``at_rad`` round the centre, turning
+    ``sense``) once the goal is met (MissionBlock: the loiter item completes when its time is
+    up; without param4 > 0 no tangent exit): it tracks the line from the centre to ``nxt``
+    (the previous setpoint is the loiter's), turning on from the circle's tangent onto it. As
+    the pursuit of the line's point one guidance distance past ``left``'s projection (NPFG
+    period 10 s, PX4's default; roll limit 50 deg, FW_R_LIM): measured on PX4 v1.15.2 SIH
+    (14.5 m/s, 80 m circle, leaving on its north-west side for a waypoint to the south) within
+    5.4 m of the plane, which the ArduPlane exit (on round to the tangent towards the next
+    waypoint, 150 deg further) put 19 m off (UAS_IN_CV)."""
+    ne, nn = _en(p, nxt)
+    length = math.hypot(ne, nn)
+    if length <= 0.0:
+        return []
+    ue, un = ne / length, nn / length
+    le, ln = _en(p, left)
+    speed = min(max(nxt.speed_mps, 1.0), PX4_TRIM_MPS)
+    s = le * ue + ln * un + L1_DAMPING * PX4_PERIOD_S * speed / math.pi
+    if s >= length:
+        return []
+    alt = p.alt_amsl_m + (nxt.alt_amsl_m - p.alt_amsl_m) * s / length
+    target = _at(p, ue * s, un * s, alt, nxt).synthetic()
+    # the course on the circle: its tangent in the turn's sense
+    course = math.degrees(math.atan2(-sense * math.sin(at_rad), sense * math.cos(at_rad)))
+    turn = takeoff_turn(left, course, target, speed, period_s=PX4_PERIOD_S, roll_in_s=0.0,
+                        roll_limit_deg=PX4_ROLL_LIMIT_DEG)  # fmt: skip
+    return [*turn, target]
 
 
 def _capture(p: P, before: Point, r: float) -> P | None:

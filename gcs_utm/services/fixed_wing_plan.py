@@ -13,6 +13,8 @@ hovers at a loiter. A fixed wing cannot:
   after it (measured on ArduPlane 4.6 SITL, param1 15 deg, 30 m: lift-off about 40 m out,
   30 m reached 111 m out, where 30 / tan(15 deg) = 112 m; a straight line from the start
   put the rolling plane 10.3 m below it, outside its flight geometry).
+  From the climb's end along a heading that is not the next waypoint's, ArduPlane turns
+  towards it on its L1 pursuit from where it is (:mod:`.fixed_wing_turn`).
 - **NAV_TAKEOFF with a position** (PX4: its runway take-off heads for it) is the same
   climb-out from the vehicle's home towards that position, then level to it; a position
   within :data:`HERE_M` of where it starts (QGroundControl gives a plane's take-off the
@@ -53,6 +55,7 @@ from gcs_utm.services.fixed_wing_point import (
     NAV_TAKEOFF,
     Point,
 )
+from gcs_utm.services.fixed_wing_turn import takeoff_turn
 
 TAKEOFF_CLIMB_RATE_MPS = 5.0
 """A take-off without a pitch climbs at the autopilot's maximum climb rate: ArduPlane
@@ -94,6 +97,8 @@ def fixed_wing_points(
     loiter_landing: bool = False,
     takeoff_heading_deg: float | None = None,
     heads_for_takeoff_position: bool = True,
+    turn_after_takeoff: bool = False,
+    loiter_exit_on_goal: bool = False,
 ) -> list[P]:
     """``points`` (mission order, AMSL) as a fixed wing flies them (module docstring).
     ``ground_alt_m``: where a take-off starts (the vehicle's home; None: the point before);
@@ -103,7 +108,10 @@ def fixed_wing_points(
     ``takeoff_heading_deg``: the vehicle's heading when it armed (a take-off without a
     position climbs out along it; None: towards the next waypoint);
     ``heads_for_takeoff_position`` False: the autopilot ignores a take-off's position
-    (ArduPlane's ``do_takeoff``)."""
+    (ArduPlane's ``do_takeoff``); ``turn_after_takeoff`` (ArduPlane): from the climb's end
+    along ``takeoff_heading_deg`` it turns towards the next waypoint as it flies it
+    (:mod:`.fixed_wing_turn`); ``loiter_exit_on_goal`` (PX4): a loiter is left as soon as its
+    goal is met (:mod:`.fixed_wing_loiter`)."""
     out: list[P] = []
     for i, p in enumerate(points):
         before = out[-1] if out else None
@@ -112,7 +120,11 @@ def fixed_wing_points(
         ):
             here = _from_start(p, before, home_deg)
             after = points[i + 1 :]
-            out.extend(_climb_out(here, before, after, ground_alt_m, takeoff_heading_deg))
+            climb = _climb_out(here, before, after, ground_alt_m, takeoff_heading_deg)
+            out.extend(climb)
+            nxt = next((q for q in after if q.explicit), None)
+            if turn_after_takeoff and takeoff_heading_deg is not None and len(climb) == 2 and nxt:
+                out.extend(takeoff_turn(climb[-1], takeoff_heading_deg, nxt, nxt.speed_mps))
         elif p.command == NAV_TAKEOFF:
             out.extend(_climb_out_to(p, out[-1] if out else None, home_deg, ground_alt_m))
         elif p.command in LOITER_COMMANDS and out:
@@ -121,7 +133,11 @@ def fixed_wing_points(
             # not on the tangent to the next item
             to_land = loiter_landing and points[i + 1 : i + 2] and points[i + 1].command == NAV_LAND
             after = [] if to_land else points[i + 1 :]
-            out.extend(loiter_points(p, out[-1], after, rate, loiter_radius_m))
+            out.extend(
+                loiter_points(
+                    p, out[-1], after, rate, loiter_radius_m, leaves_on_goal=loiter_exit_on_goal
+                )
+            )
         elif loiter_landing and p.command == NAV_LAND and i and out:
             out = _descended_before(out, points[i - 1])
             out.extend(_landing_exit(points[i - 1], out[-1], p, loiter_radius_m))

@@ -59,6 +59,7 @@ from gcs_utm.services import fixed_wing_plan as fw
 from gcs_utm.services import fixed_wing_point as fwp
 from gcs_utm.services import mission_order
 from gcs_utm.services.airspace import Airspace, AirspaceError
+from gcs_utm.services.fixed_wing_rejoin import rejoin_rest
 from gcs_utm.services.flight_state import FlightState
 
 _log = logging.getLogger(__name__)
@@ -216,13 +217,14 @@ def plan_from_points(
     version: int = 1,
     reason: str = "from the vehicle's mission",
     turn_from_m: float = 0.0,
+    course_deg: float | None = None,
 ) -> FlightPlan | None:
     """The 4D plan of a vehicle flying ``points`` from ``position`` at ``t_s``: the items
     from ``current_seq`` on (MISSION_CURRENT; all when None), each reached at the speed it is
     flown to. None when there is no point. ``turn_from_m`` (a fixed wing): when the point
     just reached (the one before ``current_seq``) is within that of ``position``, the plan
-    goes on through it: the autopilot accepted it early (ArduPlane's WP_RADIUS, 50 m) and
-    turns round it, it does not cut straight from where it is to the next point."""
+    goes on through it (the autopilot accepted it early: ArduPlane's WP_RADIUS, 50 m); farther,
+    it goes back onto its leg (``course_deg``: PX4's loiter exit; :mod:`.fixed_wing_rejoin`)."""
     # from the first point at or after the current item (a loop repeats seqs: its first pass)
     start = next(
         (k for k, p in enumerate(points) if current_seq is None or p.seq >= current_seq),
@@ -243,6 +245,8 @@ def plan_from_points(
         rest = [done[-1], *rest]
     elif position is not None:
         rest = _from_nearest_modelled(rest, position)
+        if turn_from_m > 0.0 and done:  # a fixed wing converges on the leg it flies
+            rest = rejoin_rest(position.lat_deg, position.lon_deg, course_deg, done[-1], rest)
     wps: list[Waypoint4D] = []
     if position is not None:
         first = rest[0]
@@ -332,6 +336,7 @@ class _Vehicle:
     seq: int | None = None
     position: Position | None = None
     takeoff_heading_deg: float | None = None  # its heading when it armed (a fixed wing's run)
+    heading_deg: float | None = None  # its last (GLOBAL_POSITION_INT hdg)
     armed: bool = False
     flying: bool = False  # armed in a mission mode
     downloading: bool = False
@@ -421,6 +426,7 @@ class VehicleOps:
             return
         if s.position is not None:
             v.position = s.position
+        v.heading_deg = s.heading_deg
         if not v.armed:  # until it arms: the heading of its take-off run
             v.takeoff_heading_deg = s.heading_deg
         v.total = s.mission_total
@@ -613,6 +619,8 @@ class VehicleOps:
                 loiter_landing=v.autopilot is Autopilot.PX4,
                 takeoff_heading_deg=v.takeoff_heading_deg,
                 heads_for_takeoff_position=v.autopilot is not Autopilot.ARDUPILOT,
+                turn_after_takeoff=v.autopilot is Autopilot.ARDUPILOT,
+                loiter_exit_on_goal=v.autopilot is Autopilot.PX4,
             )
         if points is None and not v.waiting_logged:
             v.waiting_logged = True
@@ -644,6 +652,7 @@ class VehicleOps:
                 version=version,
                 reason=reason,
                 turn_from_m=_TURN_FROM_M if v.kind is VehicleKind.FIXED_WING else 0.0,
+                course_deg=v.heading_deg if v.autopilot is Autopilot.PX4 else None,
             )
         except ValueError as exc:  # a plan the model refuses (malformed positions)
             self._log_event("vehicle", f"sysid {v.sys_id}: mission not usable: {exc}")

@@ -134,11 +134,17 @@ def test_arduplane_loiter_and_landing_raise_no_conformance_threat(
     """The soak's loiter and landing (issue 31): ArduPlane joins its 80 m circle on its turn,
     circles 81-96 m from the centre for 20 s and on until it heads for the approach, then
     converges on the line from the centre and lands. It was filed on a 1 m circle (param3 read
-    back as 1) and opened UAS_IN_CV / UAS_OUT_OV at the loiter; now nothing is raised."""
+    back as 1) and opened UAS_IN_CV / UAS_OUT_OV at the loiter; now nothing is raised. Its
+    runway points 30 deg east of north, as the soak's plane stands after a landing: it climbs
+    out along it and turns north to its first waypoint after the take-off (filed as a straight
+    line from the climb's end, the soak's 45 deg turn ran 45-50 m outside the plan:
+    UAS_IN_CV)."""
     lat0, lon0, _ground, _heading = ARDUPILOT_DEFAULT_HOME
     # simulated about 200 s (3.9 km at 22-24 m/s, a turn, take-off and landing)
     mission = _loiter_mission(lat0, lon0)
-    commands = _fly_with_serve(ardupilot, tmp_path, mission, 6, 200.0, speed=LOITER_SPEED)
+    commands = _fly_with_serve(
+        ardupilot, tmp_path, mission, 6, 200.0, speed=LOITER_SPEED, heading_deg=30.0
+    )
     assert commands[-3:] == [189, 16, 21], f"landing sequence gone: {commands}"
 
 
@@ -149,12 +155,14 @@ def _fly_with_serve(
     land_seq: int,
     flight_s: float,
     speed: float = SPEED,
+    heading_deg: float = 0.0,
 ) -> list[int]:
     """Fly ``mission`` on an ArduPlane beside ``serve --auto-accept`` to touchdown (within
     twice ``flight_s`` simulated), assert that no conformance threat and no recommendation
-    was raised, and return the mission's commands as the plane has it at the end."""
-    lat0, lon0, ground, _heading = ARDUPILOT_DEFAULT_HOME  # heading 0: the runway points north
-    ardupilot(instance=0, vehicle="plane", speed=speed)
+    was raised, and return the mission's commands as the plane has it at the end. The plane
+    stands at home heading ``heading_deg`` (0: the runway points north)."""
+    lat0, lon0, ground, _heading = ARDUPILOT_DEFAULT_HOME
+    ardupilot(instance=0, vehicle="plane", speed=speed, home=(lat0, lon0, ground, heading_deg))
     wait_tcp_listening(5760)
     pilot = PilotLink(0, autopilot="ardupilot")
     db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
