@@ -1,0 +1,91 @@
+"""The re-check before an upload takes a UAS told to hold where it stops, not on its plan
+(issue 30, a loss created by an accepted plan: enc_3_0219, EM held UAS2 and, in the same
+cycle, gave UAS5 a plan verified against UAS2's plan moving on; UAS5 flew past the held
+UAS2 at 47.5 m / 17 m)."""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from gcs_utm.core.deconfliction.geometry import plan_to_local
+from gcs_utm.core.emergency.recheck import plan_problem
+from gcs_utm.model import (
+    Command,
+    CommandKind,
+    OperationId,
+    Recommendation,
+    RecommendationId,
+    RecommendationState,
+    ThreatId,
+    ThreatKind,
+    TrackId,
+)
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_immediate import _crossing, _track, make_em, sc
+
+
+@dataclass
+class _Case:
+    rec_ids: list[RecommendationId] = field(default_factory=list)
+
+
+class _Em:
+    """The EM context with one more open case: C told to hold."""
+
+    def __init__(self, em: object, hold: Recommendation) -> None:
+        self._em, self._hold = em, hold
+        self.td = em.ctx.td  # type: ignore[attr-defined]
+
+    def open_threats(self) -> list[ThreatId]:
+        return [*self._em.ctx.open_threats(), self._hold.threat_id]  # type: ignore[attr-defined]
+
+    def case(self, tid: ThreatId) -> _Case | None:
+        if tid == self._hold.threat_id:
+            return _Case([self._hold.id])
+        return self._em.ctx.case(tid)  # type: ignore[attr-defined,no-any-return]
+
+    def recommendation(self, rid: RecommendationId) -> Recommendation | None:
+        if rid == self._hold.id:
+            return self._hold
+        return self._em.ctx.recommendation(rid)  # type: ignore[attr-defined,no-any-return]
+
+
+def test_a_plan_past_where_a_held_uas_stops_is_not_uploaded() -> None:
+    snap = _crossing(400.0)
+    threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], t_s=snap.t_s, event_in_s=35.0)
+    em = make_em()
+    (rec,) = em.on_threat(threat, snap).recommendations
+    assert rec.selected is not None and rec.selected.plan is not None
+    # C stands (speed 0) on B's new path, where B passes 30 s from now; C's plan leaves at
+    # once, north at 10 m/s: 300 m away by then
+    lp = plan_to_local(rec.selected.plan, sc.FRAME)
+    e, n, z = (float(c[0]) for c in lp.coords(np.array([snap.t_s + 30.0])))
+    c = sc.make_operation("C", [(e, n, z), (e, n + 1500.0, z)], priority=3, t0_s=snap.t_s)
+    track = replace(_track("C", e, n, 0.0, 0.0, snap.t_s), alt_amsl_m=z)
+    with_c = replace(
+        snap,
+        operations={**snap.operations, c.id: c},
+        tracks={**snap.tracks, TrackId("C"): track},
+    )
+    assert plan_problem(em.ctx, rec, with_c) == ""  # C's plan is long gone by then
+    hold = Recommendation(
+        id=RecommendationId("tC/C"),
+        version=1,
+        threat_id=ThreatId("tC"),
+        threat_kind=ThreatKind.LOSS_OF_SEPARATION,
+        operation_id=OperationId("C"),
+        created_t_s=snap.t_s,
+        deadline_t_s=snap.t_s + 20.0,
+        command=Command(kind=CommandKind.HOLD, operation_id=OperationId("C")),
+        state=RecommendationState.ACCEPTED,
+    )
+    problem = plan_problem(_Em(em, hold), rec, with_c)  # type: ignore[arg-type]
+    assert "separation with C" in problem, problem
+    # a hold that is over (rejected) leaves C on its plan
+    over = replace(hold, state=RecommendationState.REJECTED)
+    assert plan_problem(_Em(em, over), rec, with_c) == ""  # type: ignore[arg-type]
