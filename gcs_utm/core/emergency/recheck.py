@@ -12,11 +12,11 @@ The check is Monitoring's plan-against-plans check (``TacticalDeconfliction.veri
 the plan, as the vehicle will fly it from now on (an airborne UAS hovers after its end), at
 the pair's **bare** effective minima (a decision that found nothing better than the bare
 minima is not refused for the tracking tolerance it could not keep), against every other
-UAS in the snapshot: its plan re-timed from its vehicle's progress (the snapshot EM decides
-on), or the plan another recommendation has proposed, accepted or applied for it since, or,
-when that newest recommendation is a HOLD command, a hold where its track stops
-(:mod:`.held`).
-Pure.
+UAS of TD's traffic (``TacticalDeconfliction.others``: after its plan, a UAS hovers at its
+end or flies the loiter circle it is seen on, as when the plan was made): its plan re-timed
+from its vehicle's progress (the snapshot EM decides on), or the plan another recommendation
+has proposed, accepted or applied for it since, or, when that newest recommendation is a
+HOLD command, a hold where its track stops (:mod:`.held`). Pure.
 """
 
 from __future__ import annotations
@@ -65,9 +65,10 @@ def _others(
 ) -> list[Operation]:
     intended = _intended(em, rec)
     out = []
-    for k, op in snapshot.operations.items():
-        if k == rec.operation_id:
-            continue
+    # TD's traffic: airborne UAS after their plan hover there, or fly the circle they are
+    # seen on (a fixed wing), as when the plan was made
+    for op in em.td.others(snapshot, {rec.operation_id}):
+        k = op.id
         t_rec, plan = intended.get(k, (-math.inf, None))
         if plan is None and op.plan.created_t_s < t_rec:  # told to hold since: where it stops
             held = held_plan(op, snapshot, em.td.frame, until_t_s)
