@@ -89,3 +89,21 @@ def test_a_plan_past_where_a_held_uas_stops_is_not_uploaded() -> None:
     # a hold that is over (rejected) leaves C on its plan
     over = replace(hold, state=RecommendationState.REJECTED)
     assert plan_problem(_Em(em, over), rec, with_c) == ""  # type: ignore[arg-type]
+
+
+def test_the_re_check_takes_the_other_uas_as_tds_traffic() -> None:
+    """A UAS on the ground is not traffic for TD, whatever its plan says; the re-check took
+    every operation's plan as it was (and so a fixed wing seen on its loiter circle at its
+    plan's end, enc_1_0180), refusing plans TD had verified against the traffic."""
+    snap = _crossing(400.0)
+    threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], t_s=snap.t_s, event_in_s=35.0)
+    em = make_em()
+    (rec,) = em.on_threat(threat, snap).recommendations
+    assert rec.selected is not None and rec.selected.plan is not None
+    lp = plan_to_local(rec.selected.plan, sc.FRAME)
+    e, n, z = (float(c[0]) for c in lp.coords(np.array([snap.t_s + 30.0])))
+    g = sc.make_operation("G", [(e - 300.0, n, z), (e + 300.0, n, z)], t0_s=snap.t_s)
+    with_g = replace(snap, operations={**snap.operations, g.id: g})
+    assert "separation with G" in plan_problem(em.ctx, rec, with_g)
+    on_ground = replace(with_g, grounded=frozenset({g.id}))
+    assert plan_problem(em.ctx, rec, on_ground) == ""
