@@ -12,10 +12,13 @@ from pathlib import Path
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import plan_to_local
+from gcs_utm.core.emergency.held import circling_elsewhere, held_plan
 from gcs_utm.core.emergency.recheck import plan_problem
 from gcs_utm.model import (
+    AirspaceSnapshot,
     Command,
     CommandKind,
+    Operation,
     OperationId,
     Recommendation,
     RecommendationId,
@@ -23,6 +26,7 @@ from gcs_utm.model import (
     ThreatId,
     ThreatKind,
     TrackId,
+    VehicleKind,
 )
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -107,3 +111,32 @@ def test_the_re_check_takes_the_other_uas_as_tds_traffic() -> None:
     assert "separation with G" in plan_problem(em.ctx, rec, with_g)
     on_ground = replace(with_g, grounded=frozenset({g.id}))
     assert plan_problem(em.ctx, rec, on_ground) == ""
+
+
+def test_a_fixed_wing_after_its_plan_away_from_its_end_circles_where_it_is() -> None:
+    """A fixed wing held (or sent on) by a command after its plan ended circles where it is;
+    TD's traffic takes it at its last waypoint (enc_2_0107: a plan verified that way ended
+    beside the held aircraft's circle, flown at 2.7 m). Near its end point it is on its end
+    circle (TD's loiter), and a multirotor hovers."""
+    snap = _crossing(400.0)
+    f = sc.make_operation("F", [(-600.0, 0.0, 100.0), (0.0, 0.0, 100.0)], t0_s=snap.t_s - 80.0)
+    f = replace(f, vehicle_kind=VehicleKind.FIXED_WING)
+    assert f.plan.end_t_s < snap.t_s
+
+    def at(e: float, op: Operation) -> AirspaceSnapshot:
+        track = replace(_track("F", e, 0.0, 0.0, 20.0, snap.t_s), operation_id=op.id)
+        return replace(
+            snap,
+            operations={**snap.operations, op.id: op},
+            tracks={**snap.tracks, TrackId("F"): track},
+            airborne=frozenset({op.id}),
+        )
+
+    assert circling_elsewhere(f, at(500.0, f), sc.FRAME)
+    assert not circling_elsewhere(f, at(50.0, f), sc.FRAME)
+    multirotor = replace(f, vehicle_kind=VehicleKind.MULTIROTOR)
+    assert not circling_elsewhere(multirotor, at(500.0, multirotor), sc.FRAME)
+    held = held_plan(f, at(500.0, f), sc.FRAME, snap.t_s + 300.0)
+    assert held is not None
+    here = plan_to_local(held, sc.FRAME).position_at(snap.t_s + 100.0)
+    assert abs(float(here[0]) - 500.0) < 1.0 and abs(float(here[1])) < 1.0

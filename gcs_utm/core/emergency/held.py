@@ -7,7 +7,9 @@ was flown past the held multirotor at 47.5 m / 17 m (``enc_3_0219_endpoint_near_
 UAS5 past UAS2). So :mod:`.recheck` takes a UAS whose newest live recommendation is a HOLD
 command as holding: from its track, braking along its velocity to a stop (its stopping
 distance at its speed, :meth:`~gcs_utm.envelope.PerformanceEnvelope.stopping_distance_m`),
-then at that point up to ``until_t_s``. A fixed wing circles there (the re-check's
+then at that point up to ``until_t_s``. So is a fixed wing in the air whose plan has ended
+away from its end point (:func:`circling_elsewhere`: held, or sent on, by a command; TD's
+traffic takes it at its last waypoint). A fixed wing circles where it stops (the re-check's
 verification keeps plans clear of a fixed wing's circle round a point it stays at,
 :mod:`gcs_utm.core.deconfliction.end_circle`). Pure.
 """
@@ -49,3 +51,20 @@ def held_plan(
     stop_t = now + speed / BRAKE_ACCEL_MPS2
     stop = Waypoint4D(lat_deg=lat, lon_deg=lon, alt_amsl_m=tr.alt_amsl_m, t_s=stop_t)
     return replace(op.plan, waypoints=(here, stop, replace(stop, t_s=max(until_t_s, stop_t + 1.0))))
+
+
+def circling_elsewhere(op: Operation, snapshot: AirspaceSnapshot, frame: LocalFrame) -> bool:
+    """Is ``op`` a fixed wing in the air whose plan has ended, with a fresh track more than
+    two loiter radii from its last waypoint (it circles a commanded point, not its end)?"""
+    env = op.performance()
+    if env.can_hover or op.id not in snapshot.airborne or op.plan.end_t_s > snapshot.t_s:
+        return False
+    tr = next(
+        (t for t in snapshot.tracks.values() if t.operation_id == op.id and not t.stale), None
+    )
+    if tr is None:
+        return False
+    last = op.plan.waypoints[-1]
+    e0, n0 = frame.point_to_local(last.lat_deg, last.lon_deg)
+    e1, n1 = frame.point_to_local(tr.lat_deg, tr.lon_deg)
+    return math.hypot(e1 - e0, n1 - n0) > 2.0 * env.turn_radius_m

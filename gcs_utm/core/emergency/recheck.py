@@ -25,7 +25,7 @@ import math
 from dataclasses import replace
 
 from gcs_utm.core.emergency.context import EmContext
-from gcs_utm.core.emergency.held import held_plan
+from gcs_utm.core.emergency.held import circling_elsewhere, held_plan
 from gcs_utm.model import (
     AirspaceSnapshot,
     CommandKind,
@@ -70,7 +70,9 @@ def _others(
     for op in em.td.others(snapshot, {rec.operation_id}):
         k = op.id
         t_rec, plan = intended.get(k, (-math.inf, None))
-        if plan is None and op.plan.created_t_s < t_rec:  # told to hold since: where it stops
+        held_now = plan is None and op.plan.created_t_s < t_rec  # told to hold since
+        raw = snapshot.operations.get(k, op)
+        if held_now or circling_elsewhere(raw, snapshot, em.td.frame):  # where it stops
             held = held_plan(op, snapshot, em.td.frame, until_t_s)
             out.append(op if held is None else replace(op, plan=held))
             continue
