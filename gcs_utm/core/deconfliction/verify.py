@@ -20,9 +20,12 @@ from gcs_utm.core.deconfliction.context import (
     floor_amsl,
     pair_minima,
 )
+from gcs_utm.core.deconfliction.corner_lag import lagged
+from gcs_utm.core.deconfliction.end_circle import circle_flags, plans_of
 from gcs_utm.core.deconfliction.geometry import (
     LocalFence,
     LocalPlan,
+    local_to_plan,
     local_to_plans,
     separation_screen,
 )
@@ -39,6 +42,7 @@ from gcs_utm.core.deconfliction.scoring import (
 )
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.core.monitoring.strategic import plan_vs_geofences, plan_vs_plans
+from gcs_utm.envelope import MULTIROTOR_HORIZONTAL_ACCEL_MPS2
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -95,9 +99,12 @@ class Verifier:
         geofences: Sequence[Geofence],
         *,
         buffered: bool,
+        flown: bool = True,
     ) -> list[str]:
         """What Monitoring would flag on ``plan`` (empty list = clean), hovering after its end
-        when the UAS is airborne. With nothing to check against, Monitoring is not asked."""
+        when the UAS is airborne. With nothing to check against, Monitoring is not asked.
+        With ``flown`` (a new plan), also as it is flown: a multirotor late by its corners
+        (:mod:`.corner_lag`), a fixed wing's circle after its plan (:mod:`.end_circle`)."""
         flags: list[str] = []
         plan = self.air.extend(op, plan)
         if geofences:
@@ -105,6 +112,16 @@ class Verifier:
                 f"geofence {c.geofence_id} at t={c.entry_t_s:.1f}"
                 for c in plan_vs_geofences(plan, op, geofences, self.frame, self.monitoring)
             ]
+        flags += self._separation(plan, op, others, buffered=buffered)
+        if flown and not flags and others:
+            flags += self._as_flown(plan, op, others, buffered=buffered)
+        return flags
+
+    def _separation(
+        self, plan: FlightPlan, op: Operation, others: Sequence[Operation], *, buffered: bool
+    ) -> list[str]:
+        """Monitoring's plan-against-plans flags of ``plan`` against ``others``."""
+        flags: list[str] = []
         # one Monitoring call per group of others with the same buffered minima
         groups: dict[int, tuple[MonitoringConfig, list[Operation]]] = {}
         for o in others:
@@ -117,6 +134,30 @@ class Verifier:
                 for c in plan_vs_plans(plan, op, group, self.frame, cfg)
             ]
         return flags
+
+    def _as_flown(
+        self, plan: FlightPlan, op: Operation, others: Sequence[Operation], *, buffered: bool
+    ) -> list[str]:
+        """The flags of ``plan`` as it is flown: a multirotor late by its corners, then a fixed
+        wing's circle after its plan (its own or another's)."""
+        lp = self.plans.local(plan)
+        env = op.performance()
+        if env.can_hover:
+            late = lagged(lp, env.horizontal_accel_mps2 or MULTIROTOR_HORIZONTAL_ACCEL_MPS2)
+            if late is not None:
+                late_plan = local_to_plan(
+                    late, plan, self.frame, created_t_s=plan.created_t_s, reason="as flown"
+                )
+                flags = self._separation(late_plan, op, others, buffered=buffered)
+                if flags:
+                    return [f"as flown late at its corners: {f}" for f in flags]
+        return circle_flags(
+            op,
+            lp,
+            plans_of(others, self.plans.local),
+            lambda a, b: pair_minima(self.monitoring, a, b, buffered=buffered),
+            self.monitoring.spherical,
+        )
 
     def compatible(
         self, a: Alternative, b: Alternative, snapshot: AirspaceSnapshot, *, buffered: bool
@@ -140,10 +181,19 @@ class Verifier:
             speeds_a=self.plans.max_speeds(pa),
             speeds_b=self.plans.max_speeds(pb),
         )
-        if broken or clear:
-            return not broken
-        cfg = self._pair_config(op_a, op_b, buffered=buffered)
-        return not plan_vs_plans(pa, op_a, [replace(op_b, plan=pb)], self.frame, cfg)
+        if broken:
+            return False
+        if not clear:
+            cfg = self._pair_config(op_a, op_b, buffered=buffered)
+            if plan_vs_plans(pa, op_a, [replace(op_b, plan=pb)], self.frame, cfg):
+                return False
+        return not circle_flags(
+            op_a,
+            self.plans.local(pa),
+            [(op_b, self.plans.local(pb))],
+            lambda _a, _b: (h, v),
+            self.monitoring.spherical,
+        )
 
     def flush(self, queue: Sequence[Queued], now: float, *, buffered: bool) -> list[Dropped]:
         """Turn the queued candidates into alternatives: all new plans converted to WGS84 at
@@ -236,7 +286,9 @@ class Verifier:
         score counts."""
         op = c.op
         if c.keep:
-            flags = self.verify(op.plan, op, c.outsiders, c.geofences, buffered=buffered)
+            flags = self.verify(
+                op.plan, op, c.outsiders, c.geofences, buffered=buffered, flown=False
+            )
             return flags, op.plan, [True] * len(c.fences)
         assert plan is not None
         self.plans.remember(plan, c.full())  # its local form, without a second conversion
