@@ -15,7 +15,7 @@ from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
 from gcs_utm.core.emergency.fly_on import Choice
 from gcs_utm.core.emergency.immediate import choose_commands
-from gcs_utm.core.emergency.turn import turn_words
+from gcs_utm.core.emergency.supervision import describe
 from gcs_utm.core.emergency.wording import command_text
 from gcs_utm.core.monitoring.config import MonitoringConfig
 from gcs_utm.model import AirspaceSnapshot, CommandKind, OperationId, Track, TrackId, VehicleKind
@@ -80,7 +80,9 @@ def test_a_fixed_wing_turns_away_when_holds_climbs_and_descents_leave_it_inside(
     e, n = sc.FRAME.point_to_local(cmd.target.lat_deg, cmd.target.lon_deg)
     assert n > 500.0 and abs(e + 140.0 - 17.0 * 2.0) < 1.0  # abeam where the command acts
     assert math.isclose(cmd.target.alt_amsl_m, 100.0)
-    assert turn_words(choice.actions) == "; B turn left (a goto far abeam at its altitude)"
+    # the escalation says what the vehicle does, not "in place" (which reads as a hold)
+    words = describe(cmd, choice.actions[B])
+    assert words == "turn left towards a point far abeam, flying on at 100.0 m AMSL", words
     assert command_text(cmd, 100.2).startswith("Turn towards a point far abeam")
     turned = [x for x in choice.tried if x["commands"] == {"B": "turn right"}]
     assert turned and float(str(turned[0]["ratio"])) < choice.ratio  # towards A: worse

@@ -53,7 +53,7 @@ from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.emergency.endpoint import move_end
 from gcs_utm.core.emergency.fly_on import Choice, fly_on, flying_on
 from gcs_utm.core.emergency.supervision import escalate_safe
-from gcs_utm.core.emergency.turn import turn_moves, turn_words
+from gcs_utm.core.emergency.turn import turn_moves
 from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -473,13 +473,13 @@ def propose(
         return Decision(audit=(em.audit(now, "immediate", t.id, stand),))
     how = "keeps" if choice.clear else "does not keep (the best there is)"
     text = f"{why}; immediate command {how} the minima (ratio {choice.ratio:.2f})"
-    text += turn_words(choice.actions)
     detail: dict[str, object] = {"reason": text, "selected": choice.actions}
     detail["tried"] = choice.tried
     detail["acts_in_s"] = round(em.lead.command_at(candidates, now) - now, 3)
     detail["measured_s"] = em.lead.measured()
     audit = Decision(audit=(em.audit(now, "immediate", t.id, detail),))
-    return audit.merge(escalate_safe(em, case, list(choice.commands), now, text, choice.commands))
+    ids = list(choice.commands)
+    return audit.merge(escalate_safe(em, case, ids, now, text, choice.commands, choice.actions))
 
 
 def held_by(em: EmContext, op_id: OperationId, other: Case) -> str:

@@ -21,13 +21,12 @@ straight on. Pure.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
-from gcs_utm.model import Command, CommandKind, FloatArray, Operation, OperationId, Position
+from gcs_utm.model import Command, CommandKind, FloatArray, Operation, Position
 
 if TYPE_CHECKING:
     from gcs_utm.core.deconfliction import TacticalDeconfliction
@@ -75,15 +74,6 @@ def turn_moves(
         target = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=z0)
         out.append((left, xyz, Command(kind=CommandKind.GOTO, operation_id=op.id, target=target)))
     return out
-
-
-def turn_words(actions: Mapping[OperationId, str]) -> str:
-    """The turns among a choice's actions in words, for the escalation (its command reads
-    as a GOTO at the vehicle's altitude): "" without a turn."""
-    turns = [f"{k} {v}" for k, v in actions.items() if v.startswith("turn ")]
-    if not turns:
-        return ""
-    return f"; {', '.join(turns)} (a goto far abeam at its altitude)"
 
 
 def _flown(  # noqa: PLR0917 - the turn's state, positional
