@@ -114,3 +114,44 @@ def test_a_turn_does_not_win_a_tie_before_any_command_acts() -> None:
     turn = [x for x in choice.tried if x["commands"] == {"B": "turn left"}]
     assert turn and float(str(turn[0]["ratio"])) == round(choice.ratio, 3)  # a tie
     assert choice.actions and not any(v.startswith("turn") for v in choice.actions.values())
+
+
+def _crossing_under(fence: bool) -> AirspaceSnapshot:
+    """Fixed wing B eastbound at 21 m/s, 120 m west of multirotor A and 34.6 m below it
+    (minima 50 / 40 m, like seed 2's enc_2_0145_late_crossing); a no-fly zone 100 m south of
+    B's track within the circle a fixed wing descending in place would fly."""
+    a = sc.make_operation(
+        "A", [(0, 0, 134.6), (0, 1000, 134.6)], priority=5, speed_mps=1.0, ov_m=15.0
+    )
+    b = sc.make_operation(
+        "B", [(-1120, 0, 100), (880, 0, 100)], priority=2, speed_mps=21.0, ov_m=25.0
+    )
+    b = replace(b, vehicle_kind=VehicleKind.FIXED_WING, max_climb_rate_mps=5.0)
+    tracks = {
+        TrackId("A"): replace(_track("A", 0.0, 0.0, 0.0), alt_amsl_m=134.6),
+        TrackId("B"): _track("B", -120.0, 0.0, 21.0),
+    }
+    fences = [sc.cylinder("G1", -60.0, -100.0, 30.0)] if fence else []
+    return replace(sc.snapshot([a, b], fences, t_s=NOW), tracks=tracks)
+
+
+def test_a_fixed_wing_descends_flying_on_rather_than_circling() -> None:
+    """With the vertical separation 5.4 m short 4.1 s before the crossing, the multirotor's
+    climb is not enough; the fixed wing's descent in place circles (two turn radii of room
+    over the multirotor, and into the no-fly zone). Descending as it flies on (straight, or
+    turning) keeps more of the minima than any hold, climb or descent in place and enters
+    no geofence: the command is a GOTO far ahead or abeam below B's altitude."""
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MonitoringConfig())
+    snap = _crossing_under(fence=True)
+    args = (td, snap, [A, B], NOW + 3.0, NOW + 4.1, {A: 5, B: 2})
+    in_place = choose_commands(*args, turns=False)
+    choice = choose_commands(*args)
+    assert in_place is not None and choice is not None
+    assert choice.ratio > in_place.ratio + 0.03 and not choice.geofences, choice.tried
+    assert choice.actions[B] in {"descend ahead", "turn left and descend", "turn right and descend"}
+    cmd = choice.commands[B]
+    assert cmd.target is not None and cmd.target.alt_amsl_m < 90.0
+    fenced = [x for x in choice.tried if x["commands"] == {"A": "climb", "B": "descend"}]
+    assert fenced and fenced[0].get("geofences") == ["G1"]  # its circle would enter G1
+    words = describe(cmd, choice.actions[B])
+    assert words.startswith(choice.actions[B].removesuffix(" ahead")) and "AMSL" in words

@@ -94,9 +94,17 @@ class Immediate(Enum):
     DESCEND = "descend"  # likewise below
     TURN_LEFT = "turn left"  # a fixed wing: a GOTO far abeam at its altitude (.turn)
     TURN_RIGHT = "turn right"
+    # A fixed wing that climbs or descends as it turns, or flying straight on (.turn): it
+    # changes altitude at its rates without circling where it was commanded.
+    TURN_LEFT_CLIMB = "turn left and climb"
+    TURN_LEFT_DESCEND = "turn left and descend"
+    TURN_RIGHT_CLIMB = "turn right and climb"
+    TURN_RIGHT_DESCEND = "turn right and descend"
+    CLIMB_AHEAD = "climb ahead"
+    DESCEND_AHEAD = "descend ahead"
 
 
-_TURNS = (Immediate.TURN_LEFT, Immediate.TURN_RIGHT)
+_IN_PLACE = (Immediate.HOLD, Immediate.CLIMB, Immediate.DESCEND)
 _LIVE = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED, RecommendationState.APPLIED)
 
 
@@ -262,7 +270,8 @@ def choose_commands(  # noqa: PLR0917 - one call site
         rise = max(v_mins, default=td.monitoring.separation_vertical_m)
         path = predicted_path(td, c, snapshot, until, use_prediction=False)
         moves = _moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)
-        options.append([None, *moves, *(_turns(td, c, path, grid, t_cmd) if turns else [])])
+        turned = _turns(td, c, path, grid, t_cmd, moves) if turns else []
+        options.append([None, *moves, *turned])
     fenced = {
         id(m): fence_entered(td, snapshot, m.op_id, m.xyz, m.slack_m, grid, t_cmd)
         for opts in options
@@ -291,19 +300,25 @@ def choose_commands(  # noqa: PLR0917 - one call site
     return None if best is None else fly_on(best[1], _combo_ratio(td, cands, others, [], paths))
 
 
-def _turns(
-    td: TacticalDeconfliction, op: Operation, path: LocalPlan, grid: FloatArray, t_cmd: float
+def _turns(  # noqa: PLR0917 - one call site
+    td: TacticalDeconfliction,
+    op: Operation,
+    path: LocalPlan,
+    grid: FloatArray,
+    t_cmd: float,
+    in_place: list[_Move],
 ) -> list[_Move]:
-    """A fixed wing's turn left and right (:mod:`.turn`): no room beyond its positions."""
+    """A fixed wing's turns left and right (:mod:`.turn`), level and climbing or descending
+    to the altitudes its climb and descent in place (``in_place``) go to, and its climb and
+    descent straight ahead: no room beyond its positions."""
+    targets = {
+        m.action.value: m.command.target.alt_amsl_m
+        for m in in_place
+        if m.action in {Immediate.CLIMB, Immediate.DESCEND} and m.command.target is not None
+    }
     return [
-        _Move(
-            op.id,
-            Immediate.TURN_LEFT if left else Immediate.TURN_RIGHT,
-            xyz,
-            np.zeros_like(grid),
-            cmd,
-        )
-        for left, xyz, cmd in turn_moves(td, op, path, grid, t_cmd=t_cmd)
+        _Move(op.id, Immediate(name), xyz, np.zeros_like(grid), cmd)
+        for name, xyz, cmd in turn_moves(td, op, path, grid, t_cmd=t_cmd, targets_z=targets)
     ]
 
 
@@ -317,7 +332,7 @@ def _rank(
     often comes before any command acts, and then every combination ties)."""
     prio = float(sum(priority_of.get(m.op_id, 0) for m in moves))
     fence = 1.0 if fenced else 0.0
-    turned = float(sum(m.action in _TURNS for m in moves))
+    turned = float(sum(m.action not in _IN_PLACE for m in moves))
     if ratio >= 1.0:
         return (0.0, fence, float(len(moves)), prio, turned, -ratio)
     return (1.0, fence, -ratio, turned, float(len(moves)), prio)

@@ -167,13 +167,18 @@ def escalate_safe(  # noqa: PLR0917 - the decision's context, then what to propo
 def describe(cmd: Command, action: str = "") -> str:
     """A command in words: its kind, and a GOTO's target altitude with what the vehicle does
     to get there when the immediate command's ``action`` (.immediate) says it: climb or
-    descend in place (a fixed wing circles there), or turn left or right towards a point far
-    abeam and fly on (.turn). Without it a GOTO is named by its altitude alone."""
+    descend in place (a fixed wing circles there), turn left or right towards a point far
+    abeam and fly on, climbing or descending or not, or climb or descend flying straight on
+    (.turn). Without it a GOTO is named by its altitude alone."""
     if cmd.kind is not CommandKind.GOTO or cmd.target is None:
         return cmd.kind.value
     alt = f"{cmd.target.alt_amsl_m:.1f} m AMSL"
-    if action.startswith("turn "):
+    if action in {"turn left", "turn right"}:
         return f"{action} towards a point far abeam, flying on at {alt}"
+    if action.startswith("turn "):  # and climb, and descend
+        return f"{action} to {alt} towards a point far abeam"
+    if action.endswith(" ahead"):  # a fixed wing's climb or descent flying straight on
+        return f"{action.removesuffix(' ahead')} to {alt} flying straight on"
     if action in {"climb", "descend"}:
         return f"{action} in place to {alt}"
     return f"goto {alt}"
