@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import pytest
+
 from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
 from gcs_utm.core.emergency.fly_on import Choice
@@ -155,3 +157,24 @@ def test_a_fixed_wing_descends_flying_on_rather_than_circling() -> None:
     assert fenced and fenced[0].get("geofences") == ["G1"]  # its circle would enter G1
     words = describe(cmd, choice.actions[B])
     assert words.startswith(choice.actions[B].removesuffix(" ahead")) and "AMSL" in words
+
+
+def test_commands_that_would_act_after_the_pass_are_ranked_by_acting_on_the_answer() -> None:
+    """Expected to act after the answer plus the acknowledgement (here 7 s, after the pass),
+    every command ties with flying on (0.385 of the minima), and the first one tried won:
+    the multirotor held. A vehicle acts on a command before its acknowledgement is back:
+    acting on the answer (2 s) the fixed wing's turn left keeps 0.94, and that decides (seed
+    2's enc_2_0088: a fixed wing's turn proposed 2.8 s ahead, flown at 51.4 m against 50 m,
+    where the first tie flew 45.5 m)."""
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MonitoringConfig())
+    snap = _head_on()
+    args = (td, snap, [A, B], NOW + 7.0, NOW + 4.6, {A: 3, B: 6})
+    tie = choose_commands(*args)
+    assert tie is not None and B not in tie.actions, tie.actions
+    choice = choose_commands(*args, t_early=NOW + 2.0)
+    assert choice is not None and choice.actions.get(B) == "turn left", choice.actions
+    assert choice.ratio == pytest.approx(tie.ratio)  # alike when acting as expected
+    mine = [
+        x for x in choice.tried if x["commands"] == {str(k): v for k, v in choice.actions.items()}
+    ]
+    assert float(str(mine[0]["ratio_if_sooner"])) > 0.9

@@ -246,9 +246,13 @@ def choose_commands(  # noqa: PLR0917 - one call site
     priority_of: dict[OperationId, int],
     *,
     turns: bool = True,
+    t_early: float | None = None,
 ) -> Choice | None:
     """The immediate commands for ``candidates`` (see the module docstring); None when no
-    candidate is in the snapshot. Without ``turns`` a fixed wing is not offered a turn."""
+    candidate is in the snapshot. Without ``turns`` a fixed wing is not offered a turn.
+    ``t_early`` (before ``t_cmd``): the earliest the commands can act (on the answer, before
+    the acknowledgement comes back); combinations that separate alike from ``t_cmd`` are
+    ranked by how they separate from then (:func:`sooner_combo`)."""
     now = snapshot.t_s
     ops = snapshot.operations
     cands = [ops[k] for k in candidates if k in ops][:MAX_UAS]
@@ -264,14 +268,11 @@ def choose_commands(  # noqa: PLR0917 - one call site
         and (track_xyz(td, o, snapshot) is not None or o.plan.start_t_s <= now <= o.plan.end_t_s)
     ]
     paths = {o.id: _at(predicted_path(td, o, snapshot, until), grid) for o in cands + others}
-    options: list[list[_Move | None]] = []
-    for c in cands:
-        v_mins = [td.pair_minima(c, o)[1] for o in cands + others if o.id != c.id]
-        rise = max(v_mins, default=td.monitoring.separation_vertical_m)
-        path = predicted_path(td, c, snapshot, until, use_prediction=False)
-        moves = _moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)
-        turned = _turns(td, c, path, grid, t_cmd, moves) if turns else []
-        options.append([None, *moves, *turned])
+    options = _options(td, snapshot, (cands, others), grid, t_cmd, turns=turns, until=until)
+    early = None
+    if t_early is not None and t_early < t_cmd:
+        opts = _options(td, snapshot, (cands, others), grid, t_early, turns=turns, until=until)
+        early = {(m.op_id, m.action): m for o in opts for m in o if m is not None}
     fenced = {
         id(m): fence_entered(td, snapshot, m.op_id, m.xyz, m.slack_m, grid, t_cmd)
         for opts in options
@@ -279,6 +280,7 @@ def choose_commands(  # noqa: PLR0917 - one call site
         if m is not None
     }
     best: tuple[tuple[float, ...], Choice] | None = None
+    score = 0.0  # the best's separation as ranked (.fly_on)
     tried: list[dict[str, object]] = []
     for combo in itertools.product(*options):
         moves = [m for m in combo if m is not None]
@@ -287,17 +289,57 @@ def choose_commands(  # noqa: PLR0917 - one call site
         ratio = _combo_ratio(td, cands, others, combo, paths)
         clear = ratio >= 1.0
         fences = sorted({fenced[id(m)] for m in moves} - {""})
-        key = _rank(ratio, bool(fences), moves, priority_of)
+        sooner = ratio
+        if early is not None:
+            sooner = _combo_ratio(td, cands, others, sooner_combo(combo, early), paths)
+        key = _rank(ratio, bool(fences), moves, priority_of, sooner)
         actions = {m.op_id: m.action.value for m in moves}
         record: dict[str, object] = {"commands": {str(k): v for k, v in actions.items()}}
         record["ratio"] = round(ratio, 3)
+        if early is not None:
+            record["ratio_if_sooner"] = round(sooner, 3)
         if fences:
             record["geofences"] = fences
         tried.append(record)
         if best is None or key < best[0]:
             cmds = {m.op_id: m.command for m in moves}
             best = (key, Choice(cmds, actions, ratio, clear, tried, tuple(fences)))
-    return None if best is None else fly_on(best[1], _combo_ratio(td, cands, others, [], paths))
+            score = (ratio + sooner) / 2.0
+    if best is None:
+        return None
+    return fly_on(best[1], _combo_ratio(td, cands, others, [], paths), score)
+
+
+def _options(
+    td: TacticalDeconfliction,
+    snapshot: AirspaceSnapshot,
+    traffic: tuple[list[Operation], list[Operation]],
+    grid: FloatArray,
+    t_cmd: float,
+    *,
+    turns: bool,
+    until: float,
+) -> list[list[_Move | None]]:
+    """Each candidate's options commanded at ``t_cmd``: none, then its moves (in place, then
+    a fixed wing's turns and climbs or descents flying on, with ``turns``)."""
+    cands, others = traffic
+    options: list[list[_Move | None]] = []
+    for c in cands:
+        v_mins = [td.pair_minima(c, o)[1] for o in cands + others if o.id != c.id]
+        rise = max(v_mins, default=td.monitoring.separation_vertical_m)
+        path = predicted_path(td, c, snapshot, until, use_prediction=False)
+        moves = _moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)
+        turned = _turns(td, c, path, grid, t_cmd, moves) if turns else []
+        options.append([None, *moves, *turned])
+    return options
+
+
+def sooner_combo(
+    combo: Sequence[_Move | None], early: dict[tuple[OperationId, Immediate], _Move]
+) -> list[_Move | None]:
+    """The same commands acting at the earlier time (a move without its early twin, e.g. a
+    climb the band leaves no room for then, stays as it is)."""
+    return [None if m is None else early.get((m.op_id, m.action), m) for m in combo]
 
 
 def _turns(  # noqa: PLR0917 - one call site
@@ -323,19 +365,25 @@ def _turns(  # noqa: PLR0917 - one call site
 
 
 def _rank(
-    ratio: float, fenced: bool, moves: list[_Move], priority_of: dict[OperationId, int]
+    ratio: float,
+    fenced: bool,
+    moves: list[_Move],
+    priority_of: dict[OperationId, int],
+    sooner: float,
 ) -> tuple[float, ...]:
     """Order of combinations: those that keep the minima first, then those that take no UAS
     into a geofence; among the first, the fewest commanded UAS, the lowest priorities, the
     fewest turns (a turned fixed wing leaves its plan for good), the largest separation;
     among the others, the largest separation, then the fewest turns (the smallest separation
-    often comes before any command acts, and then every combination ties)."""
+    often comes before any command acts, and then every combination ties: it is the mean of
+    the separations with the commands acting when expected and sooner, on the answer, as they
+    may: the vehicle acts on the command before its acknowledgement is back)."""
     prio = float(sum(priority_of.get(m.op_id, 0) for m in moves))
     fence = 1.0 if fenced else 0.0
     turned = float(sum(m.action not in _IN_PLACE for m in moves))
     if ratio >= 1.0:
-        return (0.0, fence, float(len(moves)), prio, turned, -ratio)
-    return (1.0, fence, -ratio, turned, float(len(moves)), prio)
+        return (0.0, fence, float(len(moves)), prio, turned, -ratio, -sooner)
+    return (1.0, fence, -(ratio + sooner) / 2.0, -sooner, turned, float(len(moves)), prio)
 
 
 def _combo_ratio(
@@ -477,6 +525,7 @@ def propose(
         em.lead.command_at(candidates, now),
         t.predicted_event_at_s,
         {k: ops[k].priority for k in candidates if k in ops},
+        t_early=now + em.lead.answer_s(candidates),
     )
     if choice is None:
         return escalate_safe(em, case, list(candidates), now, why)
