@@ -15,12 +15,21 @@ import pytest
 
 from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
+from gcs_utm.core.emergency import EmergencyConfig, EmergencyManager
 from gcs_utm.core.emergency.fly_on import Choice
 from gcs_utm.core.emergency.immediate import choose_commands
 from gcs_utm.core.emergency.supervision import describe
 from gcs_utm.core.emergency.wording import command_text
 from gcs_utm.core.monitoring.config import MonitoringConfig
-from gcs_utm.model import AirspaceSnapshot, CommandKind, OperationId, Track, TrackId, VehicleKind
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    CommandKind,
+    OperationId,
+    ThreatKind,
+    Track,
+    TrackId,
+    VehicleKind,
+)
 
 A, B = OperationId("A"), OperationId("B")
 NOW = sc.T0_S + 89.0
@@ -178,3 +187,25 @@ def test_commands_that_would_act_after_the_pass_are_ranked_by_acting_on_the_answ
         x for x in choice.tried if x["commands"] == {str(k): v for k, v in choice.actions.items()}
     ]
     assert float(str(mine[0]["ratio_if_sooner"])) > 0.9
+
+
+def test_just_beyond_the_lead_a_turn_that_keeps_the_minima_comes_before_plans() -> None:
+    """The head-on above 250 m apart, the loss 9.5 s ahead: a new plan would start 2.5 s
+    before it (lead 7 s). No hold, climb or descent in place keeps the minima, so plans were
+    tried (seed 3's enc_3_0225: a plan that started 0.15 s before the event, flown 47.6 m
+    against 50 m); the fixed wing's turn does keep them and is proposed instead."""
+    snap = _head_on()
+    tracks = dict(snap.tracks)
+    tracks[TrackId("B")] = _track("B", -250.0, 25.0, 17.0)
+    snap = replace(snap, tracks=tracks)
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MonitoringConfig())
+    in_place = choose_commands(td, snap, [A, B], NOW + 3.0, NOW + 9.5, {A: 3, B: 6}, turns=False)
+    assert in_place is not None and not in_place.clear
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MonitoringConfig())
+    threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], t_s=NOW, event_in_s=9.5)
+    d = em.on_threat(threat, snap)
+    (rec,) = d.recommendations
+    assert rec.operation_id == B and rec.command is not None, rec
+    assert rec.command.kind is CommandKind.GOTO
+    assert d.escalations and "within a new plan's lead (7.0 s) plus 5.0 s" in d.escalations[0]
+    assert "keeps the minima" in d.escalations[0] and "turn " in d.escalations[0]
