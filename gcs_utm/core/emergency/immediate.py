@@ -21,20 +21,21 @@ for it waits while the loss case is open (:func:`held_by`).
 The commands are *hold* (a multirotor brakes and holds position and altitude; a fixed wing
 circles where it is) and *climb* or *descend in place* (a GOTO to the point where the
 vehicle stops, the vertical minimum plus a margin higher or lower, within the altitude band
-and above the safety floor); a fixed wing may also turn left or right (:mod:`.turn`, ranked
-after the others among those that keep the minima). Each UAS of the threat gets none or one
-of them; every combination is flown forward on a 0.5 s grid: a commanded UAS at its track's
-velocity up to the command time, then braking at :data:`BRAKE_MPS2` to a stop (a fixed wing:
-anywhere within two turn radii of where it was commanded, and within its top speed's reach
-of there) while climbing or descending at its rates; every other UAS on its predicted path
-(the snapshot's prediction row of its track, else its velocity, else its plan). The
-combination is kept that keeps TD's minima (effective minima plus tracking tolerances) from
-the other UAS of the threat and from all other traffic with the fewest commanded UAS, then
-the lowest priorities, then the largest separation; when none keeps them, the one with the
-largest separation. Either way a combination that takes no UAS into a geofence
+and above the safety floor); a fixed wing may also turn left or right, climbing or
+descending to those altitudes or not, or climb or descend flying straight on (:mod:`.turn`,
+ranked after the others among those that keep the minima). Each UAS of the threat gets none
+or one of them; every combination is flown forward on a 0.5 s grid: a commanded UAS at its
+track's velocity up to the command time, then braking at :data:`BRAKE_MPS2` to a stop (a
+fixed wing: anywhere within two turn radii of where it was commanded, and within its top
+speed's reach of there) while climbing or descending at its rates; every other UAS on its
+predicted path (the snapshot's prediction row of its track, else its velocity, else its
+plan). The combination is kept that keeps TD's minima (effective minima plus tracking
+tolerances) from the other UAS of the threat and from all other traffic with the fewest
+commanded UAS, then the lowest priorities, then the largest separation; when none keeps
+them, the one with the largest separation (the mean of acting when expected and on the
+answer: ``t_early``). Either way a combination that takes no UAS into a geofence
 (:mod:`.command_fences`) comes before one that does. The audit lists every combination with
-its separation ratio (and the geofences it enters).
-"""
+its separation ratio (and the geofences it enters)."""
 
 from __future__ import annotations
 
@@ -439,7 +440,8 @@ def late_reason(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> str:
     """Why the loss of ``case`` gets the immediate command now rather than new plans ("" when
     plans are tried): the event is nearer than a new plan's lead (:func:`too_late`), or
     nearer than the lead plus ``emergency.immediate_margin_s`` and the immediate command
-    keeps the minima without taking a UAS into a geofence. A plan that starts just before
+    keeps the minima without taking a UAS into a geofence (a fixed wing's turn or climb
+    flying on only when nothing in place does). A plan that starts just before
     the event leaves no room for the vehicles' tracking error: on generated late encounters
     plans starting 1-3 s before the event were flown 0.5-1.6 m inside the minima."""
     t = case.threat
