@@ -26,9 +26,10 @@ A = OperationId("A")
 def _passing() -> AirspaceSnapshot:
     """A fixed wing eastbound between two multirotors westbound 40 m to its north and to
     its south (minima 50 m), meeting 6 s after the snapshot: flying on, they pass at 40 m;
-    a turn either way takes the fixed wing towards one of them."""
+    a turn either way takes the fixed wing towards one of them. Its altitude band leaves no
+    room to climb or descend (climbing or descending straight on would add to flying on)."""
     a = sc.make_operation("A", [(-2000, 0, 100), (2000, 0, 100)], speed_mps=20.0, ov_m=25.0)
-    a = replace(a, vehicle_kind=VehicleKind.FIXED_WING)
+    a = replace(a, vehicle_kind=VehicleKind.FIXED_WING, min_alt_amsl_m=99.5, max_alt_amsl_m=100.5)
     others = []
     for name, north_m in (("B", 40), ("C", -40)):
         b = sc.make_operation(

@@ -11,14 +11,25 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import pytest
+
 from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.deconfliction import DeconflictionConfig, TacticalDeconfliction
+from gcs_utm.core.emergency import EmergencyConfig, EmergencyManager
 from gcs_utm.core.emergency.fly_on import Choice
 from gcs_utm.core.emergency.immediate import choose_commands
-from gcs_utm.core.emergency.turn import turn_words
+from gcs_utm.core.emergency.supervision import describe
 from gcs_utm.core.emergency.wording import command_text
 from gcs_utm.core.monitoring.config import MonitoringConfig
-from gcs_utm.model import AirspaceSnapshot, CommandKind, OperationId, Track, TrackId, VehicleKind
+from gcs_utm.model import (
+    AirspaceSnapshot,
+    CommandKind,
+    OperationId,
+    ThreatKind,
+    Track,
+    TrackId,
+    VehicleKind,
+)
 
 A, B = OperationId("A"), OperationId("B")
 NOW = sc.T0_S + 89.0
@@ -80,7 +91,9 @@ def test_a_fixed_wing_turns_away_when_holds_climbs_and_descents_leave_it_inside(
     e, n = sc.FRAME.point_to_local(cmd.target.lat_deg, cmd.target.lon_deg)
     assert n > 500.0 and abs(e + 140.0 - 17.0 * 2.0) < 1.0  # abeam where the command acts
     assert math.isclose(cmd.target.alt_amsl_m, 100.0)
-    assert turn_words(choice.actions) == "; B turn left (a goto far abeam at its altitude)"
+    # the escalation says what the vehicle does, not "in place" (which reads as a hold)
+    words = describe(cmd, choice.actions[B])
+    assert words == "turn left towards a point far abeam, flying on at 100.0 m AMSL", words
     assert command_text(cmd, 100.2).startswith("Turn towards a point far abeam")
     turned = [x for x in choice.tried if x["commands"] == {"B": "turn right"}]
     assert turned and float(str(turned[0]["ratio"])) < choice.ratio  # towards A: worse
@@ -112,3 +125,87 @@ def test_a_turn_does_not_win_a_tie_before_any_command_acts() -> None:
     turn = [x for x in choice.tried if x["commands"] == {"B": "turn left"}]
     assert turn and float(str(turn[0]["ratio"])) == round(choice.ratio, 3)  # a tie
     assert choice.actions and not any(v.startswith("turn") for v in choice.actions.values())
+
+
+def _crossing_under(fence: bool) -> AirspaceSnapshot:
+    """Fixed wing B eastbound at 21 m/s, 120 m west of multirotor A and 34.6 m below it
+    (minima 50 / 40 m, like seed 2's enc_2_0145_late_crossing); a no-fly zone 100 m south of
+    B's track within the circle a fixed wing descending in place would fly."""
+    a = sc.make_operation(
+        "A", [(0, 0, 134.6), (0, 1000, 134.6)], priority=5, speed_mps=1.0, ov_m=15.0
+    )
+    b = sc.make_operation(
+        "B", [(-1120, 0, 100), (880, 0, 100)], priority=2, speed_mps=21.0, ov_m=25.0
+    )
+    b = replace(b, vehicle_kind=VehicleKind.FIXED_WING, max_climb_rate_mps=5.0)
+    tracks = {
+        TrackId("A"): replace(_track("A", 0.0, 0.0, 0.0), alt_amsl_m=134.6),
+        TrackId("B"): _track("B", -120.0, 0.0, 21.0),
+    }
+    fences = [sc.cylinder("G1", -60.0, -100.0, 30.0)] if fence else []
+    return replace(sc.snapshot([a, b], fences, t_s=NOW), tracks=tracks)
+
+
+def test_a_fixed_wing_descends_flying_on_rather_than_circling() -> None:
+    """With the vertical separation 5.4 m short 4.1 s before the crossing, the multirotor's
+    climb is not enough; the fixed wing's descent in place circles (two turn radii of room
+    over the multirotor, and into the no-fly zone). Descending as it flies on (straight, or
+    turning) keeps more of the minima than any hold, climb or descent in place and enters
+    no geofence: the command is a GOTO far ahead or abeam below B's altitude."""
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MonitoringConfig())
+    snap = _crossing_under(fence=True)
+    args = (td, snap, [A, B], NOW + 3.0, NOW + 4.1, {A: 5, B: 2})
+    in_place = choose_commands(*args, turns=False)
+    choice = choose_commands(*args)
+    assert in_place is not None and choice is not None
+    assert choice.ratio > in_place.ratio + 0.03 and not choice.geofences, choice.tried
+    assert choice.actions[B] in {"descend ahead", "turn left and descend", "turn right and descend"}
+    cmd = choice.commands[B]
+    assert cmd.target is not None and cmd.target.alt_amsl_m < 90.0
+    fenced = [x for x in choice.tried if x["commands"] == {"A": "climb", "B": "descend"}]
+    assert fenced and fenced[0].get("geofences") == ["G1"]  # its circle would enter G1
+    words = describe(cmd, choice.actions[B])
+    assert words.startswith(choice.actions[B].removesuffix(" ahead")) and "AMSL" in words
+
+
+def test_commands_that_would_act_after_the_pass_are_ranked_by_acting_on_the_answer() -> None:
+    """Expected to act after the answer plus the acknowledgement (here 7 s, after the pass),
+    every command ties with flying on (0.385 of the minima), and the first one tried won:
+    the multirotor held. A vehicle acts on a command before its acknowledgement is back:
+    acting on the answer (2 s) the fixed wing's turn left keeps 0.94, and that decides (seed
+    2's enc_2_0088: a fixed wing's turn proposed 2.8 s ahead, flown at 51.4 m against 50 m,
+    where the first tie flew 45.5 m)."""
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MonitoringConfig())
+    snap = _head_on()
+    args = (td, snap, [A, B], NOW + 7.0, NOW + 4.6, {A: 3, B: 6})
+    tie = choose_commands(*args)
+    assert tie is not None and B not in tie.actions, tie.actions
+    choice = choose_commands(*args, t_early=NOW + 2.0)
+    assert choice is not None and choice.actions.get(B) == "turn left", choice.actions
+    assert choice.ratio == pytest.approx(tie.ratio)  # alike when acting as expected
+    mine = [
+        x for x in choice.tried if x["commands"] == {str(k): v for k, v in choice.actions.items()}
+    ]
+    assert float(str(mine[0]["ratio_if_sooner"])) > 0.9
+
+
+def test_just_beyond_the_lead_a_turn_that_keeps_the_minima_comes_before_plans() -> None:
+    """The head-on above 250 m apart, the loss 9.5 s ahead: a new plan would start 2.5 s
+    before it (lead 7 s). No hold, climb or descent in place keeps the minima, so plans were
+    tried (seed 3's enc_3_0225: a plan that started 0.15 s before the event, flown 47.6 m
+    against 50 m); the fixed wing's turn does keep them and is proposed instead."""
+    snap = _head_on()
+    tracks = dict(snap.tracks)
+    tracks[TrackId("B")] = _track("B", -250.0, 25.0, 17.0)
+    snap = replace(snap, tracks=tracks)
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(), MonitoringConfig())
+    in_place = choose_commands(td, snap, [A, B], NOW + 3.0, NOW + 9.5, {A: 3, B: 6}, turns=False)
+    assert in_place is not None and not in_place.clear
+    em = EmergencyManager(sc.FRAME, EmergencyConfig(), td, MonitoringConfig())
+    threat = sc.threat(ThreatKind.LOSS_OF_SEPARATION, ["A", "B"], t_s=NOW, event_in_s=9.5)
+    d = em.on_threat(threat, snap)
+    (rec,) = d.recommendations
+    assert rec.operation_id == B and rec.command is not None, rec
+    assert rec.command.kind is CommandKind.GOTO
+    assert d.escalations and "within a new plan's lead (7.0 s) plus 5.0 s" in d.escalations[0]
+    assert "keeps the minima" in d.escalations[0] and "turn " in d.escalations[0]

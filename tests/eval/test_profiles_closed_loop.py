@@ -70,8 +70,5 @@ def test_no_geofence_intrusion(summary: EvalSummary) -> None:
     assert summary.totals.geofence_intrusions == 0, markdown(summary)
 
 
-@pytest.mark.xfail(
-    strict=True, reason="issue 30 class 2 (escalations without a proposed safe command)"
-)
 def test_every_escalation_proposes_a_command(summary: EvalSummary) -> None:
     assert summary.totals.escalations_without_command == 0, markdown(summary)

@@ -25,6 +25,7 @@ from gcs_utm.core.deconfliction.context import (
 )
 from gcs_utm.core.deconfliction.geometry import LocalPlan
 from gcs_utm.core.deconfliction.timing import timing_candidates
+from gcs_utm.core.deconfliction.unheard import unheard
 from gcs_utm.model import (
     AirspaceSnapshot,
     Alternative,
@@ -53,7 +54,8 @@ _ALONE = (
 
 class _Scenarios:
     """The cord scenarios of one problem; every candidate and drop goes to ``queue`` in the
-    order it is made. ``loitering`` are the involved fixed wings on their circle (rigid)."""
+    order it is made. ``loitering`` are the involved fixed wings on their circle and the
+    neighbours whose vehicle is not heard (rigid)."""
 
     def __init__(self, ctx: Context, pb: Problem, loitering: set[OperationId]) -> None:
         self.ctx = ctx
@@ -168,7 +170,9 @@ def cord_candidates(
     if not involved:
         return [], {}
     pb = _problem(ctx, involved, snapshot)
-    sc = _Scenarios(ctx, pb, loitering)
+    # A neighbour whose vehicle is not heard cannot take a plan: rigid, like a loiter (.unheard)
+    rigid = loitering | unheard(snapshot, involved, pb.members[len(involved) :])
+    sc = _Scenarios(ctx, pb, rigid)
     for op in pb.members:
         # Keeping the plan moves nothing: no priority price (the score's cost is then 0).
         lp = pb.local[op.id]

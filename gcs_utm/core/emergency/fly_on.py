@@ -38,10 +38,12 @@ class Choice:
     """The geofences the chosen commands take their UAS into (see .command_fences)."""
 
 
-def fly_on(best: Choice, none_ratio: float) -> Choice:
+def fly_on(best: Choice, none_ratio: float, best_score: float | None = None) -> Choice:
     """``best`` unless it keeps the minima or separates at least as well as no command
-    (``none_ratio``); else the choice without a command (empty ``commands``)."""
-    if best.clear or best.ratio >= none_ratio:
+    (``none_ratio``; ``best_score``, when given, is how well ``best`` separates as it was
+    ranked, else its ratio); else the choice without a command (empty ``commands``)."""
+    score = best.ratio if best_score is None else best_score
+    if best.clear or score >= none_ratio:
         return best
     tried = [*best.tried, {"commands": FLY_ON, "ratio": round(none_ratio, 3)}]
     return replace(best, commands={}, actions={}, ratio=none_ratio, tried=tried, geofences=())

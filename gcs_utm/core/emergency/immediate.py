@@ -21,20 +21,21 @@ for it waits while the loss case is open (:func:`held_by`).
 The commands are *hold* (a multirotor brakes and holds position and altitude; a fixed wing
 circles where it is) and *climb* or *descend in place* (a GOTO to the point where the
 vehicle stops, the vertical minimum plus a margin higher or lower, within the altitude band
-and above the safety floor); a fixed wing may also turn left or right (:mod:`.turn`, ranked
-after the others among those that keep the minima). Each UAS of the threat gets none or one
-of them; every combination is flown forward on a 0.5 s grid: a commanded UAS at its track's
-velocity up to the command time, then braking at :data:`BRAKE_MPS2` to a stop (a fixed wing:
-anywhere within two turn radii of where it was commanded, and within its top speed's reach
-of there) while climbing or descending at its rates; every other UAS on its predicted path
-(the snapshot's prediction row of its track, else its velocity, else its plan). The
-combination is kept that keeps TD's minima (effective minima plus tracking tolerances) from
-the other UAS of the threat and from all other traffic with the fewest commanded UAS, then
-the lowest priorities, then the largest separation; when none keeps them, the one with the
-largest separation. Either way a combination that takes no UAS into a geofence
+and above the safety floor); a fixed wing may also turn left or right, climbing or
+descending to those altitudes or not, or climb or descend flying straight on (:mod:`.turn`,
+ranked after the others among those that keep the minima). Each UAS of the threat gets none
+or one of them; every combination is flown forward on a 0.5 s grid: a commanded UAS at its
+track's velocity up to the command time, then braking at :data:`BRAKE_MPS2` to a stop (a
+fixed wing: anywhere within two turn radii of where it was commanded, and within its top
+speed's reach of there) while climbing or descending at its rates; every other UAS on its
+predicted path (the snapshot's prediction row of its track, else its velocity, else its
+plan). The combination is kept that keeps TD's minima (effective minima plus tracking
+tolerances) from the other UAS of the threat and from all other traffic with the fewest
+commanded UAS, then the lowest priorities, then the largest separation; when none keeps
+them, the one with the largest separation (the mean of acting when expected and on the
+answer: ``t_early``). Either way a combination that takes no UAS into a geofence
 (:mod:`.command_fences`) comes before one that does. The audit lists every combination with
-its separation ratio (and the geofences it enters).
-"""
+its separation ratio (and the geofences it enters)."""
 
 from __future__ import annotations
 
@@ -53,7 +54,7 @@ from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.emergency.endpoint import move_end
 from gcs_utm.core.emergency.fly_on import Choice, fly_on, flying_on
 from gcs_utm.core.emergency.supervision import escalate_safe
-from gcs_utm.core.emergency.turn import turn_moves, turn_words
+from gcs_utm.core.emergency.turn import turn_moves
 from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -94,9 +95,17 @@ class Immediate(Enum):
     DESCEND = "descend"  # likewise below
     TURN_LEFT = "turn left"  # a fixed wing: a GOTO far abeam at its altitude (.turn)
     TURN_RIGHT = "turn right"
+    # A fixed wing that climbs or descends as it turns, or flying straight on (.turn): it
+    # changes altitude at its rates without circling where it was commanded.
+    TURN_LEFT_CLIMB = "turn left and climb"
+    TURN_LEFT_DESCEND = "turn left and descend"
+    TURN_RIGHT_CLIMB = "turn right and climb"
+    TURN_RIGHT_DESCEND = "turn right and descend"
+    CLIMB_AHEAD = "climb ahead"
+    DESCEND_AHEAD = "descend ahead"
 
 
-_TURNS = (Immediate.TURN_LEFT, Immediate.TURN_RIGHT)
+_IN_PLACE = (Immediate.HOLD, Immediate.CLIMB, Immediate.DESCEND)
 _LIVE = (RecommendationState.PROPOSED, RecommendationState.ACCEPTED, RecommendationState.APPLIED)
 
 
@@ -238,9 +247,13 @@ def choose_commands(  # noqa: PLR0917 - one call site
     priority_of: dict[OperationId, int],
     *,
     turns: bool = True,
+    t_early: float | None = None,
 ) -> Choice | None:
     """The immediate commands for ``candidates`` (see the module docstring); None when no
-    candidate is in the snapshot. Without ``turns`` a fixed wing is not offered a turn."""
+    candidate is in the snapshot. Without ``turns`` a fixed wing is not offered a turn.
+    ``t_early`` (before ``t_cmd``): the earliest the commands can act (on the answer, before
+    the acknowledgement comes back); combinations that separate alike from ``t_cmd`` are
+    ranked by how they separate from then (:func:`sooner_combo`)."""
     now = snapshot.t_s
     ops = snapshot.operations
     cands = [ops[k] for k in candidates if k in ops][:MAX_UAS]
@@ -256,13 +269,11 @@ def choose_commands(  # noqa: PLR0917 - one call site
         and (track_xyz(td, o, snapshot) is not None or o.plan.start_t_s <= now <= o.plan.end_t_s)
     ]
     paths = {o.id: _at(predicted_path(td, o, snapshot, until), grid) for o in cands + others}
-    options: list[list[_Move | None]] = []
-    for c in cands:
-        v_mins = [td.pair_minima(c, o)[1] for o in cands + others if o.id != c.id]
-        rise = max(v_mins, default=td.monitoring.separation_vertical_m)
-        path = predicted_path(td, c, snapshot, until, use_prediction=False)
-        moves = _moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)
-        options.append([None, *moves, *(_turns(td, c, path, grid, t_cmd) if turns else [])])
+    options = _options(td, snapshot, (cands, others), grid, t_cmd, turns=turns, until=until)
+    early = None
+    if t_early is not None and t_early < t_cmd:
+        opts = _options(td, snapshot, (cands, others), grid, t_early, turns=turns, until=until)
+        early = {(m.op_id, m.action): m for o in opts for m in o if m is not None}
     fenced = {
         id(m): fence_entered(td, snapshot, m.op_id, m.xyz, m.slack_m, grid, t_cmd)
         for opts in options
@@ -270,6 +281,7 @@ def choose_commands(  # noqa: PLR0917 - one call site
         if m is not None
     }
     best: tuple[tuple[float, ...], Choice] | None = None
+    score = 0.0  # the best's separation as ranked (.fly_on)
     tried: list[dict[str, object]] = []
     for combo in itertools.product(*options):
         moves = [m for m in combo if m is not None]
@@ -278,49 +290,101 @@ def choose_commands(  # noqa: PLR0917 - one call site
         ratio = _combo_ratio(td, cands, others, combo, paths)
         clear = ratio >= 1.0
         fences = sorted({fenced[id(m)] for m in moves} - {""})
-        key = _rank(ratio, bool(fences), moves, priority_of)
+        sooner = ratio
+        if early is not None:
+            sooner = _combo_ratio(td, cands, others, sooner_combo(combo, early), paths)
+        key = _rank(ratio, bool(fences), moves, priority_of, sooner)
         actions = {m.op_id: m.action.value for m in moves}
         record: dict[str, object] = {"commands": {str(k): v for k, v in actions.items()}}
         record["ratio"] = round(ratio, 3)
+        if early is not None:
+            record["ratio_if_sooner"] = round(sooner, 3)
         if fences:
             record["geofences"] = fences
         tried.append(record)
         if best is None or key < best[0]:
             cmds = {m.op_id: m.command for m in moves}
             best = (key, Choice(cmds, actions, ratio, clear, tried, tuple(fences)))
-    return None if best is None else fly_on(best[1], _combo_ratio(td, cands, others, [], paths))
+            score = (ratio + sooner) / 2.0
+    if best is None:
+        return None
+    return fly_on(best[1], _combo_ratio(td, cands, others, [], paths), score)
 
 
-def _turns(
-    td: TacticalDeconfliction, op: Operation, path: LocalPlan, grid: FloatArray, t_cmd: float
+def _options(
+    td: TacticalDeconfliction,
+    snapshot: AirspaceSnapshot,
+    traffic: tuple[list[Operation], list[Operation]],
+    grid: FloatArray,
+    t_cmd: float,
+    *,
+    turns: bool,
+    until: float,
+) -> list[list[_Move | None]]:
+    """Each candidate's options commanded at ``t_cmd``: none, then its moves (in place, then
+    a fixed wing's turns and climbs or descents flying on, with ``turns``)."""
+    cands, others = traffic
+    options: list[list[_Move | None]] = []
+    for c in cands:
+        v_mins = [td.pair_minima(c, o)[1] for o in cands + others if o.id != c.id]
+        rise = max(v_mins, default=td.monitoring.separation_vertical_m)
+        path = predicted_path(td, c, snapshot, until, use_prediction=False)
+        moves = _moves(td, c, path, grid, t_cmd=t_cmd, rise_m=rise + VERTICAL_MARGIN_M)
+        turned = _turns(td, c, path, grid, t_cmd, moves) if turns else []
+        options.append([None, *moves, *turned])
+    return options
+
+
+def sooner_combo(
+    combo: Sequence[_Move | None], early: dict[tuple[OperationId, Immediate], _Move]
+) -> list[_Move | None]:
+    """The same commands acting at the earlier time (a move without its early twin, e.g. a
+    climb the band leaves no room for then, stays as it is)."""
+    return [None if m is None else early.get((m.op_id, m.action), m) for m in combo]
+
+
+def _turns(  # noqa: PLR0917 - one call site
+    td: TacticalDeconfliction,
+    op: Operation,
+    path: LocalPlan,
+    grid: FloatArray,
+    t_cmd: float,
+    in_place: list[_Move],
 ) -> list[_Move]:
-    """A fixed wing's turn left and right (:mod:`.turn`): no room beyond its positions."""
+    """A fixed wing's turns left and right (:mod:`.turn`), level and climbing or descending
+    to the altitudes its climb and descent in place (``in_place``) go to, and its climb and
+    descent straight ahead: no room beyond its positions."""
+    targets = {
+        m.action.value: m.command.target.alt_amsl_m
+        for m in in_place
+        if m.action in {Immediate.CLIMB, Immediate.DESCEND} and m.command.target is not None
+    }
     return [
-        _Move(
-            op.id,
-            Immediate.TURN_LEFT if left else Immediate.TURN_RIGHT,
-            xyz,
-            np.zeros_like(grid),
-            cmd,
-        )
-        for left, xyz, cmd in turn_moves(td, op, path, grid, t_cmd=t_cmd)
+        _Move(op.id, Immediate(name), xyz, np.zeros_like(grid), cmd)
+        for name, xyz, cmd in turn_moves(td, op, path, grid, t_cmd=t_cmd, targets_z=targets)
     ]
 
 
 def _rank(
-    ratio: float, fenced: bool, moves: list[_Move], priority_of: dict[OperationId, int]
+    ratio: float,
+    fenced: bool,
+    moves: list[_Move],
+    priority_of: dict[OperationId, int],
+    sooner: float,
 ) -> tuple[float, ...]:
     """Order of combinations: those that keep the minima first, then those that take no UAS
     into a geofence; among the first, the fewest commanded UAS, the lowest priorities, the
     fewest turns (a turned fixed wing leaves its plan for good), the largest separation;
     among the others, the largest separation, then the fewest turns (the smallest separation
-    often comes before any command acts, and then every combination ties)."""
+    often comes before any command acts, and then every combination ties: it is the mean of
+    the separations with the commands acting when expected and sooner, on the answer, as they
+    may: the vehicle acts on the command before its acknowledgement is back)."""
     prio = float(sum(priority_of.get(m.op_id, 0) for m in moves))
     fence = 1.0 if fenced else 0.0
-    turned = float(sum(m.action in _TURNS for m in moves))
+    turned = float(sum(m.action not in _IN_PLACE for m in moves))
     if ratio >= 1.0:
-        return (0.0, fence, float(len(moves)), prio, turned, -ratio)
-    return (1.0, fence, -ratio, turned, float(len(moves)), prio)
+        return (0.0, fence, float(len(moves)), prio, turned, -ratio, -sooner)
+    return (1.0, fence, -(ratio + sooner) / 2.0, -sooner, turned, float(len(moves)), prio)
 
 
 def _combo_ratio(
@@ -376,7 +440,8 @@ def late_reason(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> str:
     """Why the loss of ``case`` gets the immediate command now rather than new plans ("" when
     plans are tried): the event is nearer than a new plan's lead (:func:`too_late`), or
     nearer than the lead plus ``emergency.immediate_margin_s`` and the immediate command
-    keeps the minima without taking a UAS into a geofence. A plan that starts just before
+    keeps the minima without taking a UAS into a geofence (a fixed wing's turn or climb
+    flying on only when nothing in place does). A plan that starts just before
     the event leaves no room for the vehicles' tracking error: on generated late encounters
     plans starting 1-3 s before the event were flown 0.5-1.6 m inside the minima."""
     t = case.threat
@@ -395,6 +460,11 @@ def late_reason(em: EmContext, case: Case, snapshot: AirspaceSnapshot) -> str:
     at = em.lead.command_at(ids, now)
     # Without turns: a turned fixed wing leaves its plan for good, and a plan is still in time.
     choice = choose_commands(em.td, snapshot, ids, at, event, prio, turns=False)
+    if choice is None or not choice.clear or choice.geofences:
+        # ... unless only a fixed wing's turn or climb flying on keeps them: a plan that
+        # starts just before the event does not (enc_3_0225: 0.15 s before, flown 47.6 m
+        # against 50 m)
+        choice = choose_commands(em.td, snapshot, ids, at, event, prio)
     if choice is None or not choice.clear or choice.geofences:
         return ""  # the plans (kept off geofences by TD) are tried
     return (
@@ -462,6 +532,7 @@ def propose(
         em.lead.command_at(candidates, now),
         t.predicted_event_at_s,
         {k: ops[k].priority for k in candidates if k in ops},
+        t_early=now + em.lead.answer_s(candidates),
     )
     if choice is None:
         return escalate_safe(em, case, list(candidates), now, why)
@@ -473,13 +544,13 @@ def propose(
         return Decision(audit=(em.audit(now, "immediate", t.id, stand),))
     how = "keeps" if choice.clear else "does not keep (the best there is)"
     text = f"{why}; immediate command {how} the minima (ratio {choice.ratio:.2f})"
-    text += turn_words(choice.actions)
     detail: dict[str, object] = {"reason": text, "selected": choice.actions}
     detail["tried"] = choice.tried
     detail["acts_in_s"] = round(em.lead.command_at(candidates, now) - now, 3)
     detail["measured_s"] = em.lead.measured()
     audit = Decision(audit=(em.audit(now, "immediate", t.id, detail),))
-    return audit.merge(escalate_safe(em, case, list(choice.commands), now, text, choice.commands))
+    ids = list(choice.commands)
+    return audit.merge(escalate_safe(em, case, ids, now, text, choice.commands, choice.actions))
 
 
 def held_by(em: EmContext, op_id: OperationId, other: Case) -> str:

@@ -139,14 +139,19 @@ def escalate_safe(  # noqa: PLR0917 - the decision's context, then what to propo
     now: float,
     why: str,
     commands: Mapping[OperationId, Command] | None = None,
+    actions: Mapping[OperationId, str] | None = None,
 ) -> Decision:
     """Escalate with ``why`` and propose a safe command to each UAS in ``op_ids``: the one in
-    ``commands`` (EM's immediate command, see .immediate), else the threat's safe command."""
+    ``commands`` (EM's immediate command, see .immediate, with its ``actions`` named), else
+    the threat's safe command."""
     kind = safe_command(case.threat.kind)
     cmds = {k: Command(kind=kind, operation_id=k) for k in dict.fromkeys(op_ids)}
     cmds.update(commands or {})
+    acts = actions or {}
     what = (
-        kind.value if not commands else ", ".join(f"{describe(c)} for {k}" for k, c in cmds.items())
+        kind.value
+        if not commands
+        else ", ".join(f"{describe(c, acts.get(k, ''))} for {k}" for k, c in cmds.items())
     )
     msg = f"{why}; operator action needed: {what} proposed"
     d = Decision(
@@ -159,11 +164,24 @@ def escalate_safe(  # noqa: PLR0917 - the decision's context, then what to propo
     return d
 
 
-def describe(cmd: Command) -> str:
-    """A command in words: its kind, and a GOTO's target altitude."""
-    if cmd.kind is CommandKind.GOTO and cmd.target is not None:
-        return f"goto {cmd.target.alt_amsl_m:.1f} m AMSL in place"
-    return cmd.kind.value
+def describe(cmd: Command, action: str = "") -> str:
+    """A command in words: its kind, and a GOTO's target altitude with what the vehicle does
+    to get there when the immediate command's ``action`` (.immediate) says it: climb or
+    descend in place (a fixed wing circles there), turn left or right towards a point far
+    abeam and fly on, climbing or descending or not, or climb or descend flying straight on
+    (.turn). Without it a GOTO is named by its altitude alone."""
+    if cmd.kind is not CommandKind.GOTO or cmd.target is None:
+        return cmd.kind.value
+    alt = f"{cmd.target.alt_amsl_m:.1f} m AMSL"
+    if action in {"turn left", "turn right"}:
+        return f"{action} towards a point far abeam, flying on at {alt}"
+    if action.startswith("turn "):  # and climb, and descend
+        return f"{action} to {alt} towards a point far abeam"
+    if action.endswith(" ahead"):  # a fixed wing's climb or descent flying straight on
+        return f"{action.removesuffix(' ahead')} to {alt} flying straight on"
+    if action in {"climb", "descend"}:
+        return f"{action} in place to {alt}"
+    return f"goto {alt}"
 
 
 def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answer

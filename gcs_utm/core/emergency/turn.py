@@ -21,13 +21,12 @@ straight on. Pure.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
-from gcs_utm.model import Command, CommandKind, FloatArray, Operation, OperationId, Position
+from gcs_utm.model import Command, CommandKind, FloatArray, Operation, Position
 
 if TYPE_CHECKING:
     from gcs_utm.core.deconfliction import TacticalDeconfliction
@@ -39,6 +38,12 @@ CAPTURE_RADII = 4.0
 end: the autopilots start circling a reposition point within about three loiter radii."""
 
 
+_SIDES = (("", 0.0), ("left", math.pi / 2.0), ("right", -math.pi / 2.0))
+"""Straight on (first: of two that separate as well, the one nearer its plan), left, right."""
+VERTICAL = ("", "climb", "descend")
+"""How a turning (or straight-flying) fixed wing changes altitude: not, up or down."""
+
+
 def turn_moves(
     td: TacticalDeconfliction,
     op: Operation,
@@ -46,10 +51,14 @@ def turn_moves(
     grid: FloatArray,
     *,
     t_cmd: float,
-) -> list[tuple[bool, FloatArray, Command]]:
-    """A turn left and a turn right for a fixed wing ``op`` flying ``path`` until ``t_cmd``:
-    (left, its positions on ``grid``, the command) each; none for a multirotor, a vehicle
-    without a turn radius, or one not moving."""
+    targets_z: dict[str, float] | None = None,
+) -> list[tuple[str, FloatArray, Command]]:
+    """A turn left and a turn right for a fixed wing ``op`` flying ``path`` until ``t_cmd``,
+    at its altitude and, for each of ``targets_z`` ("climb", "descend": the altitude it goes
+    to), climbing or descending to it at its envelope's rate while it turns, and straight
+    ahead while it climbs or descends: (the action's name, its positions on ``grid``, the
+    command) each; none for a multirotor, a vehicle without a turn radius, or one not
+    moving."""
     env = op.performance()
     r = env.turn_radius_m
     if env.can_hover or r <= 0.0:
@@ -63,27 +72,36 @@ def turn_moves(
         return []
     course = math.atan2(n1 - n0, e1 - e0)  # radians from east, counter-clockwise
     far = max(env.max_speed_mps, speed) * float(grid[-1] - t_cmd) + CAPTURE_RADII * r
+    after = grid >= t_cmd
+    tau = grid[after] - t_cmd
+    rates = {"climb": env.climb_rate_mps, "descend": env.descent_rate_mps}
     out = []
-    for left in (True, False):
-        side = course + (math.pi / 2.0 if left else -math.pi / 2.0)
-        goal = (e0 + far * math.cos(side), n0 + far * math.sin(side))
-        xyz = before.copy()
-        xyz[grid >= t_cmd] = _flown(
-            grid[grid >= t_cmd], t_cmd, (e0, n0, z0), course, speed, r, goal
-        )
-        lat, lon = td.frame.point_to_wgs84(goal[0], goal[1])
-        target = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=z0)
-        out.append((left, xyz, Command(kind=CommandKind.GOTO, operation_id=op.id, target=target)))
+    to = {"": z0, **(targets_z or {})}
+    for vertical in VERTICAL:
+        if vertical not in to:
+            continue  # no room in the altitude band that way
+        to_z = to[vertical]
+        for side_name, side_rad in _SIDES:
+            if not side_name and not vertical:
+                continue  # straight on, level: that is flying on
+            heading = course + side_rad
+            goal = (e0 + far * math.cos(heading), n0 + far * math.sin(heading))
+            xyz = before.copy()
+            xyz[after] = _flown(grid[after], t_cmd, (e0, n0, z0), course, speed, r, goal)
+            rate = rates.get(vertical, 0.0)
+            xyz[after, 2] = z0 + np.clip(to_z - z0, -rate * tau, rate * tau)
+            lat, lon = td.frame.point_to_wgs84(goal[0], goal[1])
+            target = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=to_z)
+            cmd = Command(kind=CommandKind.GOTO, operation_id=op.id, target=target)
+            out.append((_name(side_name, vertical), xyz, cmd))
     return out
 
 
-def turn_words(actions: Mapping[OperationId, str]) -> str:
-    """The turns among a choice's actions in words, for the escalation (its command reads
-    as a GOTO at the vehicle's altitude): "" without a turn."""
-    turns = [f"{k} {v}" for k, v in actions.items() if v.startswith("turn ")]
-    if not turns:
-        return ""
-    return f"; {', '.join(turns)} (a goto far abeam at its altitude)"
+def _name(side: str, vertical: str) -> str:
+    """The audit's name of a turn ("turn left", "turn right and climb", "descend ahead")."""
+    if not side:
+        return f"{vertical} ahead"
+    return f"turn {side}" + (f" and {vertical}" if vertical else "")
 
 
 def _flown(  # noqa: PLR0917 - the turn's state, positional
