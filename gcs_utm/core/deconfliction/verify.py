@@ -21,7 +21,6 @@ from gcs_utm.core.deconfliction.context import (
     pair_minima,
 )
 from gcs_utm.core.deconfliction.corner_lag import lagged
-from gcs_utm.core.deconfliction.end_circle import circle_flags, plans_of
 from gcs_utm.core.deconfliction.geometry import (
     LocalFence,
     LocalPlan,
@@ -104,7 +103,7 @@ class Verifier:
         """What Monitoring would flag on ``plan`` (empty list = clean), hovering after its end
         when the UAS is airborne. With nothing to check against, Monitoring is not asked.
         With ``flown`` (a new plan), also as it is flown: a multirotor late by its corners
-        (:mod:`.corner_lag`), a fixed wing's circle after its plan (:mod:`.end_circle`)."""
+        (:mod:`.corner_lag`)."""
         flags: list[str] = []
         plan = self.air.extend(op, plan)
         if geofences:
@@ -138,8 +137,10 @@ class Verifier:
     def _as_flown(
         self, plan: FlightPlan, op: Operation, others: Sequence[Operation], *, buffered: bool
     ) -> list[str]:
-        """The flags of ``plan`` as it is flown: a multirotor late by its corners, then a fixed
-        wing's circle after its plan (its own or another's)."""
+        """The flags of ``plan`` as it is flown: a multirotor late by its corners. (A check of
+        a fixed wing's circle after its plan against the other plans, as a disk of its loiter
+        radius, was tried and withdrawn: it refused the plans through the circle, held the
+        fixed wing instead, and flew losses and fence conflicts elsewhere, docs/evaluation.md.)"""
         lp = self.plans.local(plan)
         env = op.performance()
         if env.can_hover:
@@ -151,13 +152,7 @@ class Verifier:
                 flags = self._separation(late_plan, op, others, buffered=buffered)
                 if flags:
                     return [f"as flown late at its corners: {f}" for f in flags]
-        return circle_flags(
-            op,
-            lp,
-            plans_of(others, self.plans.local),
-            lambda a, b: pair_minima(self.monitoring, a, b, buffered=buffered),
-            self.monitoring.spherical,
-        )
+        return []
 
     def compatible(
         self, a: Alternative, b: Alternative, snapshot: AirspaceSnapshot, *, buffered: bool
@@ -181,19 +176,10 @@ class Verifier:
             speeds_a=self.plans.max_speeds(pa),
             speeds_b=self.plans.max_speeds(pb),
         )
-        if broken:
-            return False
-        if not clear:
-            cfg = self._pair_config(op_a, op_b, buffered=buffered)
-            if plan_vs_plans(pa, op_a, [replace(op_b, plan=pb)], self.frame, cfg):
-                return False
-        return not circle_flags(
-            op_a,
-            self.plans.local(pa),
-            [(op_b, self.plans.local(pb))],
-            lambda _a, _b: (h, v),
-            self.monitoring.spherical,
-        )
+        if broken or clear:
+            return not broken
+        cfg = self._pair_config(op_a, op_b, buffered=buffered)
+        return not plan_vs_plans(pa, op_a, [replace(op_b, plan=pb)], self.frame, cfg)
 
     def flush(self, queue: Sequence[Queued], now: float, *, buffered: bool) -> list[Dropped]:
         """Turn the queued candidates into alternatives: all new plans converted to WGS84 at

@@ -9,9 +9,8 @@ command as holding: from its track, braking along its velocity to a stop (its st
 distance at its speed, :meth:`~gcs_utm.envelope.PerformanceEnvelope.stopping_distance_m`),
 then at that point up to ``until_t_s``. So is a fixed wing in the air whose plan has ended
 away from its end point (:func:`circling_elsewhere`: held, or sent on, by a command; TD's
-traffic takes it at its last waypoint). A fixed wing circles where it stops (the re-check's
-verification keeps plans clear of a fixed wing's circle round a point it stays at,
-:mod:`gcs_utm.core.deconfliction.end_circle`). Pure.
+traffic takes it at its last waypoint): it is taken at the point where it stops, the centre
+of the circle it flies there. Pure.
 """
 
 from __future__ import annotations
