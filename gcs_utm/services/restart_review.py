@@ -27,6 +27,7 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
+from gcs_utm.core.emergency.adoption import IN_FORCE
 from gcs_utm.messages import HazardReport
 from gcs_utm.model import (
     AuditEntry,
@@ -161,7 +162,7 @@ class RestartReview:
             in_force = [
                 f"{r.id} v{r.version} {r.state.value}"
                 for r in match.recommendations
-                if r.state in (RecommendationState.ACCEPTED, RecommendationState.APPLIED)
+                if r.state in IN_FORCE
             ]
             self._audit(
                 now,
