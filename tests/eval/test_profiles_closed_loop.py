@@ -1,14 +1,10 @@
 """The evaluation that cannot be tuned to, in CI: a seeded mixed-profile set
-(``gcs-utm eval --generate 24 --seed 7 --profile all``: three encounters of each profile)
-flown end to end in fast time with every recommendation accepted, judged on the vehicles'
-true positions from take-off to landing.
-
-24 encounters rather than the issue's 40: 40 take about 90-150 s of wall time here with 2
-processes, 24 about 55-90 s. The judge's invariants are asserted; the issue's targets (at
-least 99 % of predicted losses avoided, no loss created by an accepted plan, no geofence
-intrusion, no escalation without a proposed command) are strict ``xfail`` while they do not
-hold, naming the failure classes of docs/evaluation.md, so each turns into a failure the day
-it passes."""
+(``gcs-utm eval --generate 40 --seed 7 --profile all``: five encounters of each profile, the
+issue's 40) flown end to end in fast time with every recommendation accepted, judged on the
+vehicles' true positions from take-off to landing. The judge's invariants are asserted, and
+the issue's targets: at least 99 % of predicted losses avoided, no loss created by an
+accepted plan, no geofence intrusion, no escalation without a proposed command. 40 take
+about 26 s of wall time with 2 processes on a quiet machine (24 took 16 s)."""
 
 from __future__ import annotations
 
@@ -20,7 +16,7 @@ from gcs_utm.eval.summary import EvalSummary, markdown
 from gcs_utm.settings import Settings
 
 SEED = 7
-N = 3 * len(PROFILES)
+N = 5 * len(PROFILES)
 
 pytestmark = [pytest.mark.slow, pytest.mark.network, pytest.mark.timeout(900)]
 
