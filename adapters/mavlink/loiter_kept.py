@@ -1,0 +1,192 @@
+"""A plan uploaded to an ArduPlane keeps the pilot's loiters as loiter items (pure;
+docs/autopilots.md, "Loiters kept").
+
+The plan filed from a fixed wing's mission models a NAV_LOITER_TURNS / NAV_LOITER_TIME /
+NAV_LOITER_UNLIM as points on its circle, every 22.5 degrees
+(:mod:`gcs_utm.services.fixed_wing_loiter`). A plan derived from it (back_to_plan, a re-plan)
+holds those points; sent as NAV_WAYPOINTs they are no loiter: ArduPlane accepts each
+WP_RADIUS (50 m) before it and turns round it, so it flies a wider, ragged ring than the
+filed circle (and conformance may fire). So :func:`keep_loiters` replaces a run of the
+encoded mission's waypoints that lie on a loiter's circle (at the loiter's altitude, all at
+the same distance from its centre: the item's radius, or the one the plan was modelled with
+when the item has none) by the pilot's loiter item itself, as it was read from the vehicle
+(its command, frame, position, radius, direction and exit flag).
+
+Its goal leaves the circle where the plan does. ArduPlane goes on round after the goal until
+it heads for the next waypoint (``verify_loiter_heading``), so any goal that ends within the
+last turn before the plan's exit from the circle leaves it there. The pilot's item as it is
+when its own goal does: always when the plan holds the whole loiter (the model went on round
+less than a turn after the goal). A plan that starts on the circle (the plane was loitering:
+ArduPlane restarts a loiter's goal when its mission is replaced) may hold less than the goal:
+NAV_LOITER_TURNS then gets the whole turns of the plan's sweep, NAV_LOITER_TIME the time of
+the plan's sweep less half a turn (the middle of that last turn; whole seconds, as ArduPilot
+stores it). NAV_LOITER_UNLIM is kept as it is.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+from adapters.mavlink.mission import MAV_CMD_NAV_WAYPOINT, MissionItem, frame_family
+from gcs_utm.model import FlightPlan, Waypoint4D
+
+MAV_CMD_NAV_LOITER_UNLIM = 17
+MAV_CMD_NAV_LOITER_TURNS = 18
+MAV_CMD_NAV_LOITER_TIME = 19
+KEPT_LOITERS = frozenset(
+    {MAV_CMD_NAV_LOITER_UNLIM, MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_LOITER_TIME}
+)
+ON_CIRCLE_M = 2.0
+"""Plan points this close to one distance from a loiter's centre are on one circle: the
+model puts them on it exactly (up to 1e-7 deg and its flat earth); the plane's own position,
+which a back_to_plan starts from, is 1-16 m off its ring and is not taken for the loiter."""
+ALT_M = 1.0  # a circle point is at the loiter's altitude (the model keeps it exactly)
+NO_RADIUS_M = 1.0
+"""An item radius this small or smaller is the vehicle's default (ArduPlane ``update_loiter``;
+ArduPilot reads a NAV_LOITER_TIME's param3 back as +1 or -1, the direction only)."""
+MAX_RADIUS_M = 1000.0  # a common distance beyond this is not a loiter's circle
+_GLOBAL = 0
+_RELATIVE = 3
+_M_PER_DEG_LAT = 110_540.0
+_M_PER_DEG_LON = 111_320.0
+_TURN_RAD = 2.0 * math.pi
+
+
+def mission_loiters(mission: list[MissionItem] | None) -> list[MissionItem]:
+    """The loiter items (:data:`KEPT_LOITERS`) of a vehicle's mission that have a position."""
+    return [
+        it
+        for it in mission or ()
+        if it.command in KEPT_LOITERS and it.seq > 0 and (it.x, it.y) != (0, 0)
+    ]
+
+
+def keep_loiters(
+    plan: FlightPlan,
+    items: list[MissionItem],
+    loiters: list[MissionItem],
+    home_alt_m: float | None = None,
+) -> list[MissionItem]:
+    """``items`` (``plan`` encoded by :func:`~adapters.mavlink.mission.plan_to_mission_items`)
+    with each run of waypoints on a loiter's circle replaced by that loiter item (module
+    docstring). ``home_alt_m`` resolves a loiter in a relative-altitude frame (None: such a
+    loiter is not looked for)."""
+    out = items
+    for loiter in loiters:
+        alt = _alt_amsl_m(loiter, home_alt_m)
+        if alt is None:
+            continue
+        run = _circle_run(plan.waypoints, loiter, alt)
+        if run is not None:
+            out = _replace_run(out, plan.waypoints, run, loiter)
+    return out
+
+
+def _alt_amsl_m(it: MissionItem, home_alt_m: float | None) -> float | None:
+    family = frame_family(it.frame)
+    if family == _GLOBAL:
+        return it.z
+    if family == _RELATIVE and home_alt_m is not None:
+        return it.z + home_alt_m
+    return None
+
+
+def _en(centre: MissionItem, w: Waypoint4D) -> tuple[float, float]:
+    """``w`` relative to the loiter's centre, metres east and north (flat earth)."""
+    k = math.cos(math.radians(centre.lat_deg))
+    return (
+        (w.lon_deg - centre.lon_deg) * _M_PER_DEG_LON * k,
+        (w.lat_deg - centre.lat_deg) * _M_PER_DEG_LAT,
+    )
+
+
+def _circle_run(
+    wps: tuple[Waypoint4D, ...], loiter: MissionItem, alt_amsl_m: float
+) -> tuple[int, int] | None:
+    """The first and last index of the longest run (at least two) of consecutive plan
+    waypoints on ``loiter``'s circle, else None."""
+    given = abs(loiter.param3) if loiter.param3 and abs(loiter.param3) > NO_RADIUS_M else None
+    best: tuple[int, int] | None = None
+    start: int | None = None
+    radius = 0.0
+    for i, w in enumerate([*wps, None]):
+        d = math.hypot(*_en(loiter, w)) if w is not None else -1.0
+        on = (
+            w is not None
+            and abs(w.alt_amsl_m - alt_amsl_m) <= ALT_M
+            and NO_RADIUS_M < d <= MAX_RADIUS_M
+            and (given is None or abs(d - given) <= ON_CIRCLE_M)
+        )
+        if on and start is not None and abs(d - radius) <= ON_CIRCLE_M:
+            continue
+        if (
+            start is not None
+            and i - 1 > start
+            and (best is None or i - 1 - start > best[1] - best[0])
+        ):
+            best = (start, i - 1)
+        start, radius = (i, d) if on else (None, 0.0)
+    return best
+
+
+def _sweep_rad(wps: tuple[Waypoint4D, ...], loiter: MissionItem, a: int, b: int) -> float:
+    """The angle the plan goes round the centre from waypoint ``a`` to ``b``."""
+    total = 0.0
+    prev = math.atan2(*reversed(_en(loiter, wps[a])))
+    for w in wps[a + 1 : b + 1]:
+        ang = math.atan2(*reversed(_en(loiter, w)))
+        total += abs((ang - prev + math.pi) % _TURN_RAD - math.pi)
+        prev = ang
+    return total
+
+
+def _goal(loiter: MissionItem, sweep_rad: float, duration_s: float) -> MissionItem:
+    """``loiter`` with the goal that leaves its circle where the plan does, when the plan
+    sweeps ``sweep_rad`` round it in ``duration_s`` (module docstring): the item as it is
+    when its own goal does (the plan holds the whole loiter, or a plane that restarts it
+    where it is still leaves there)."""
+    if loiter.command == MAV_CMD_NAV_LOITER_TURNS:
+        turns = float(math.floor(sweep_rad / _TURN_RAD + 1e-9))
+        return loiter if turns == loiter.param1 else replace(loiter, param1=turns)
+    if loiter.command == MAV_CMD_NAV_LOITER_TIME and duration_s > 0.0 and sweep_rad > 0.0:
+        rate_rad_s = sweep_rad / duration_s
+        if sweep_rad - _TURN_RAD < loiter.param1 * rate_rad_s <= sweep_rad:
+            return loiter
+        left_s = max(0.0, sweep_rad - math.pi) / rate_rad_s
+        return replace(loiter, param1=float(round(left_s)))
+    return loiter
+
+
+def _at(items: list[MissionItem], w: Waypoint4D, after: int = 1) -> int | None:
+    """The index of the NAV_WAYPOINT of plan waypoint ``w`` (its position to 1e-7 deg) from
+    ``after`` on (ArduPilot's seq 0 is home, made from the plan's first waypoint when the
+    vehicle's home is not known)."""
+    x, y = round(w.lat_deg * 1e7), round(w.lon_deg * 1e7)
+    return next(
+        (
+            i
+            for i in range(after, len(items))
+            if items[i].command == MAV_CMD_NAV_WAYPOINT and (items[i].x, items[i].y) == (x, y)
+        ),
+        None,
+    )
+
+
+def _replace_run(
+    items: list[MissionItem],
+    wps: tuple[Waypoint4D, ...],
+    run: tuple[int, int],
+    loiter: MissionItem,
+) -> list[MissionItem]:
+    """``items`` with the waypoints of plan waypoints ``run`` (and the speed items between
+    them) replaced by ``loiter`` with its goal left; current where one of them was."""
+    a, b = run
+    first = _at(items, wps[a])
+    last = None if first is None else _at(items, wps[b], first)
+    if first is None or last is None:
+        return items  # (not encoded as waypoints: nothing to replace)
+    kept = _goal(loiter, _sweep_rad(wps, loiter, a, b), wps[b].t_s - wps[a].t_s)
+    current = any(it.current for it in items[first : last + 1])
+    out = [*items[:first], replace(kept, current=int(current)), *items[last + 1 :]]
+    return [replace(it, seq=i) for i, it in enumerate(out)]
