@@ -38,9 +38,12 @@ KEPT_LOITERS = frozenset(
     {MAV_CMD_NAV_LOITER_UNLIM, MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_LOITER_TIME}
 )
 ON_CIRCLE_M = 2.0
-"""Plan points this close to one distance from a loiter's centre are on one circle: the
-model puts them on it exactly (up to 1e-7 deg and its flat earth); the plane's own position,
-which a back_to_plan starts from, is 1-16 m off its ring and is not taken for the loiter."""
+"""Plan points this close (plus :data:`CHORD_FRACTION` of the radius) to one distance from a
+loiter's centre are on one circle: the model puts them on it exactly (up to 1e-7 deg and its
+flat earth)."""
+CHORD_FRACTION = 0.02
+"""A back_to_plan joins the plan at the point nearest the plane, on a chord between two circle
+points: the middle of a 22.5 degree chord is 1.9 % of the radius inside the circle."""
 ALT_M = 1.0  # a circle point is at the loiter's altitude (the model keeps it exactly)
 NO_RADIUS_M = 1.0
 """An item radius this small or smaller is the vehicle's default (ArduPlane ``update_loiter``;
@@ -116,9 +119,9 @@ def _circle_run(
             w is not None
             and abs(w.alt_amsl_m - alt_amsl_m) <= ALT_M
             and NO_RADIUS_M < d <= MAX_RADIUS_M
-            and (given is None or abs(d - given) <= ON_CIRCLE_M)
+            and (given is None or abs(d - given) <= _tolerance_m(given))
         )
-        if on and start is not None and abs(d - radius) <= ON_CIRCLE_M:
+        if on and start is not None and abs(d - radius) <= _tolerance_m(max(d, radius)):
             continue
         if (
             start is not None
@@ -128,6 +131,10 @@ def _circle_run(
             best = (start, i - 1)
         start, radius = (i, d) if on else (None, 0.0)
     return best
+
+
+def _tolerance_m(radius_m: float) -> float:
+    return ON_CIRCLE_M + CHORD_FRACTION * radius_m
 
 
 def _sweep_rad(wps: tuple[Waypoint4D, ...], loiter: MissionItem, a: int, b: int) -> float:

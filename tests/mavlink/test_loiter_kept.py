@@ -192,3 +192,23 @@ async def test_a_px4_plane_and_a_multirotor_are_not_changed() -> None:
     ):
         items = await _uploaded(state, plan)
         assert not any(it.command == MAV_CMD_NAV_LOITER_TIME for it in items)
+
+
+async def test_a_back_to_plan_joining_on_a_chord_starts_at_the_loiter() -> None:
+    """back_to_plan's plan: the plane's position (off the ring), the point of the plan nearest
+    it (on a chord between two circle points, 1.5 m inside the circle), then the plan: the
+    plane's position is flown first, then the loiter item; no circle point is sent."""
+    mission = _mission()
+    plan = _filed(mission)
+    on = [k for k, w in enumerate(plan.waypoints) if _circle_distance(w) < 1.0]
+    a, b = plan.waypoints[on[-8]], plan.waypoints[on[-7]]
+    q = replace(a, lat_deg=(a.lat_deg + b.lat_deg) / 2, lon_deg=(a.lon_deg + b.lon_deg) / 2)
+    assert 1.0 < _circle_distance(q) < 2.0
+    outside = replace(a, lat_deg=a.lat_deg + 12.0 / 110_540.0, t_s=a.t_s - 1.0)
+    wps = (outside, q, *plan.waypoints[on[-7] :])
+    items = await _uploaded(_State(mission), replace(plan, waypoints=wps), start_index=1)
+    commands = [it.command for it in items]
+    assert commands[:4] == [MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_WAYPOINT, 178, 19], commands
+    assert _on_circle(items, mission[3]) == []
+    seq, _ = start_item(items, Autopilot.ARDUPILOT)
+    assert items[seq].command == MAV_CMD_NAV_LOITER_TIME
