@@ -10,7 +10,14 @@ filed circle (and conformance may fire). So :func:`keep_loiters` replaces a run 
 encoded mission's waypoints that lie on a loiter's circle (at the loiter's altitude, all at
 the same distance from its centre: the item's radius, or the one the plan was modelled with
 when the item has none) by the pilot's loiter item itself, as it was read from the vehicle
-(its command, frame, position, radius, direction and exit flag).
+(its command, frame, position, radius, direction and exit flag), after the run's first point
+on the circle, its entry, which is kept as a waypoint (a back_to_plan's point on a chord
+before it too): the plane starts its circle there, and serve's model of the uploaded mission
+(:func:`~gcs_utm.services.fixed_wing_loiter.loiter_points`: a circle entered from a point on
+it starts there) puts the circle's points where the plan's are, so the mission read back is
+recognised as the plan (``mission_is_plan``: the upload's echo, not a pilot's new mission).
+The entry is sent :data:`INWARD_M` inside the circle: from a point outside, the model joins
+the circle on its tangent, already 0.9 degrees round 1 cm out.
 
 Its goal leaves the circle where the plan does. ArduPlane goes on round after the goal until
 it heads for the next waypoint (``verify_loiter_heading``), so any goal that ends within the
@@ -28,7 +35,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from adapters.mavlink.mission import MAV_CMD_NAV_WAYPOINT, MissionItem, frame_family
+from adapters.mavlink.mission import MAV_CMD_NAV_WAYPOINT, MissionItem, frame_family, is_nav
 from gcs_utm.model import FlightPlan, Waypoint4D
 
 MAV_CMD_NAV_LOITER_UNLIM = 17
@@ -48,6 +55,10 @@ ALT_M = 1.0  # a circle point is at the loiter's altitude (the model keeps it ex
 NO_RADIUS_M = 1.0
 """An item radius this small or smaller is the vehicle's default (ArduPlane ``update_loiter``;
 ArduPilot reads a NAV_LOITER_TIME's param3 back as +1 or -1, the direction only)."""
+ENTRY_M = 0.3  # a run point this close to its farthest from the centre is on the circle
+INWARD_M = 0.05
+"""The kept entry waypoint is moved this far towards the centre: inside the circle by more
+than the 1e-7 deg (1.1 cm) of its position, so that serve's model takes it as the entry."""
 MAX_RADIUS_M = 1000.0  # a common distance beyond this is not a loiter's circle
 _GLOBAL = 0
 _RELATIVE = 3
@@ -180,20 +191,44 @@ def _at(items: list[MissionItem], w: Waypoint4D, after: int = 1) -> int | None:
     )
 
 
+def _entry(wps: tuple[Waypoint4D, ...], loiter: MissionItem, a: int, b: int) -> int:
+    """The run's first point on the circle itself: a back_to_plan's point on a chord (inside
+    the circle) before it is flown as a waypoint."""
+    radii = [math.hypot(*_en(loiter, w)) for w in wps[a : b + 1]]
+    return a + next(k for k, d in enumerate(radii) if d >= max(radii) - ENTRY_M)
+
+
+def _inward(it: MissionItem, loiter: MissionItem) -> MissionItem:
+    """``it`` moved :data:`INWARD_M` towards the loiter's centre (module docstring)."""
+    k = math.cos(math.radians(loiter.lat_deg))
+    east = (it.lon_deg - loiter.lon_deg) * _M_PER_DEG_LON * k
+    north = (it.lat_deg - loiter.lat_deg) * _M_PER_DEG_LAT
+    f = max(0.0, 1.0 - INWARD_M / max(math.hypot(east, north), INWARD_M))
+    lat = loiter.lat_deg + north * f / _M_PER_DEG_LAT
+    lon = loiter.lon_deg + east * f / (_M_PER_DEG_LON * k)
+    return replace(it, x=round(lat * 1e7), y=round(lon * 1e7))
+
+
 def _replace_run(
     items: list[MissionItem],
     wps: tuple[Waypoint4D, ...],
     run: tuple[int, int],
     loiter: MissionItem,
 ) -> list[MissionItem]:
-    """``items`` with the waypoints of plan waypoints ``run`` (and the speed items between
-    them) replaced by ``loiter`` with its goal left; current where one of them was."""
-    a, b = run
+    """``items`` with the waypoints of plan waypoints ``run`` after its entry (and the speed
+    items between them) replaced by ``loiter`` with its goal left, after the entry's speed
+    item; current where one of them was (module docstring)."""
+    a, b = _entry(wps, loiter, *run), run[1]
     first = _at(items, wps[a])
-    last = None if first is None else _at(items, wps[b], first)
+    last = None if first is None or a == b else _at(items, wps[b], first + 1)
     if first is None or last is None:
         return items  # (not encoded as waypoints: nothing to replace)
     kept = _goal(loiter, _sweep_rad(wps, loiter, a, b), wps[b].t_s - wps[a].t_s)
-    current = any(it.current for it in items[first : last + 1])
-    out = [*items[:first], replace(kept, current=int(current)), *items[last + 1 :]]
+    speed = first + 1  # the speed items of the leg after the entry are the loiter's
+    while speed <= last and not is_nav(items[speed].command):
+        speed += 1
+    current = any(it.current for it in items[speed : last + 1])
+    entry = _inward(items[first], loiter)
+    out = [*items[:first], entry, *items[first + 1 : speed]]
+    out += [replace(kept, current=int(current)), *items[last + 1 :]]
     return [replace(it, seq=i) for i, it in enumerate(out)]

@@ -6,9 +6,9 @@ NAV_LOITER_TIME 500 m west without a radius: ArduPlane's WP_LOITER_RAD, 80 m, cl
 DO_LAND_START, the approach, NAV_LAND at home). Half way round its circle the hub uploads
 what a back_to_plan is (the plane's position, then the filed plan on from the circle's point
 ahead of it, as serve files the mission: :mod:`gcs_utm.services.fixed_wing_plan`). The
-upload holds the pilot's loiter item (current, its time cut to what the plan has left of
-it), none of the circle's points as waypoints (ArduPlane accepts each WP_RADIUS early), and
-the landing sequence at its end; the plane goes on round its 80 m circle, leaves it and
+upload holds the plane's position, the circle's point after it, the pilot's loiter item (its
+time cut to what the plan has left of it), none of the circle's other points as waypoints
+(ArduPlane accepts each WP_RADIUS early), and the landing sequence at its end; the plane goes on round its 80 m circle, leaves it and
 lands on that landing at home.
 """
 
@@ -141,17 +141,21 @@ async def test_arduplane_upload_on_its_loiter_keeps_the_loiter_and_lands(
         commands = [it.command for it in got]
         assert commands.count(MAV_CMD_NAV_LOITER_TIME) == 1, commands
         kept = commands.index(MAV_CMD_NAV_LOITER_TIME)
-        # it starts at its own position (accepted at once: WP_RADIUS), then the loiter
-        first = got[res.current_seq or 0]
-        assert _from_centre_m(first, at) < 10.0 and kept - (res.current_seq or 0) == 2, commands
+        # it starts at its own position, then the circle's point after it (both accepted at
+        # once: WP_RADIUS), then the loiter
+        first, entry = got[res.current_seq or 0], got[kept - 2]
+        assert _from_centre_m(first, at) < 10.0 and kept - (res.current_seq or 0) == 4, commands
+        assert abs(_from_centre_m(loiter, entry) - RADIUS_M) < 1.0, entry
         assert (got[kept].x, got[kept].y, got[kept].z) == (loiter.x, loiter.y, loiter.z)
         assert got[kept].param1 <= 20.0, got[kept]
         circle = [
             it.seq
             for it in got[1:]
-            if it.command == MAV_CMD_NAV_WAYPOINT and abs(_from_centre_m(loiter, it) - RADIUS_M) < 5
+            if it.command == MAV_CMD_NAV_WAYPOINT
+            and abs(_from_centre_m(loiter, it) - RADIUS_M) < 5
+            and it.seq != kept - 2
         ]
-        assert circle == [], f"the circle's points sent as waypoints: {circle}"
+        assert circle == [], f"the circle's points sent as waypoints: {circle}"  # but its entry
         assert commands[-3:] == [189, 16, MAV_CMD_NAV_LAND], commands
         land_seq = len(got) - 1
         # it goes on round its ring, leaves it and lands on the pilot's landing at home

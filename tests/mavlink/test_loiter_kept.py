@@ -29,7 +29,7 @@ from adapters.mavlink.upload import Uploads
 from gcs_utm.model import Autopilot, FlightPlan, OperationId, Position, VehicleKind
 from gcs_utm.services import fixed_wing_plan as fw
 from gcs_utm.services.fixed_wing_loiter import STEP_RAD
-from gcs_utm.services.vehicle_ops import mission_points, plan_from_points
+from gcs_utm.services.vehicle_ops import mission_is_plan, mission_points, plan_from_points
 
 LAT0, LON0, GROUND_M = 47.397, 8.5456, 488.0
 RADIUS_M = 80.0  # ArduPlane's WP_LOITER_RAD in its SITL defaults
@@ -76,16 +76,38 @@ def _filed(mission: list[MissionItem]) -> FlightPlan:
 
 
 def _on_circle(items: list[MissionItem], loiter: MissionItem) -> list[int]:
-    """The seqs of waypoints within 2 m of the loiter's 80 m circle (seq 0 is home)."""
+    """The seqs of waypoints within 1 m of the loiter's 80 m circle (seq 0 is home)."""
     k = math.cos(math.radians(LAT0))
     out = []
     for it in items:
         east = (it.y - loiter.y) / 1e7 * 111_320.0 * k
         north = (it.x - loiter.x) / 1e7 * 110_540.0
-        on = abs(math.hypot(east, north) - RADIUS_M) < 2.0
+        on = abs(math.hypot(east, north) - RADIUS_M) < 1.0
         if it.seq > 0 and it.command == MAV_CMD_NAV_WAYPOINT and on:
             out.append(it.seq)
     return out
+
+
+def _entry_only(items: list[MissionItem]) -> bool:
+    """Of the circle's points only its entry is sent: the waypoint before the loiter item
+    (its speed item between them), 5 cm inside the circle."""
+    loiter = next(k for k, it in enumerate(items) if it.command in (18, 19))
+    on = _on_circle(items, items[loiter])
+    return on == [loiter - 2] and items[loiter - 1].command == 178
+
+
+def _echo(items: list[MissionItem], plan: FlightPlan) -> bool:
+    """Whether serve (vehicle_ops) takes ``items`` read back from the vehicle, from their
+    current item on, for ``plan``: the upload's echo, not a new mission of the pilot's."""
+    points = mission_points(items, home=HOME, cruise_speed_mps=22.0, skip_first=True)
+    assert points is not None
+    flown = fw.fixed_wing_points(
+        points, ground_alt_m=GROUND_M, climb_rate_mps=5.0, descent_rate_mps=3.0,
+        loiter_radius_m=RADIUS_M, home_deg=(LAT0, LON0), takeoff_heading_deg=0.0,
+        heads_for_takeoff_position=False, turn_after_takeoff=True,
+    )  # fmt: skip
+    current = next(it.seq for it in items if it.current)
+    return mission_is_plan([p for p in flown if p.seq >= current], plan)
 
 
 @dataclass
@@ -134,7 +156,8 @@ async def test_an_arduplane_upload_keeps_the_loiter_item() -> None:
     items = await _uploaded(_State(mission), plan)
     loiters = [it for it in items if it.command == MAV_CMD_NAV_LOITER_TIME]
     assert [replace(it, seq=0) for it in loiters] == [replace(loiter, seq=0)]
-    assert _on_circle(items, loiter) == []
+    assert _entry_only(items)
+    assert _echo(items, plan)
     assert [it.command for it in items[-3:]] == [MAV_CMD_DO_LAND_START, 16, MAV_CMD_NAV_LAND]
     assert [it.seq for it in items] == list(range(len(items)))
 
@@ -157,9 +180,11 @@ async def test_a_plan_from_the_circle_starts_at_the_loiter_and_leaves_where_it_d
         )
         items = await _uploaded(_State(mission), rest)
         seq, _ = start_item(items, Autopilot.ARDUPILOT)
-        assert items[seq].command == MAV_CMD_NAV_LOITER_TIME, steps_left
-        assert items[seq].param1 == round(want_s), (steps_left, items[seq].param1)
-        assert _on_circle(items, mission[3]) == []
+        assert _on_circle(items, mission[3]) == [seq]  # the entry, then the loiter
+        assert items[seq + 2].command == MAV_CMD_NAV_LOITER_TIME, steps_left
+        assert items[seq + 2].param1 == round(want_s), (steps_left, items[seq + 2].param1)
+        assert _entry_only(items)
+        assert _echo(items, rest)  # serve's model of the mission read back is the plan
 
 
 def _circle_distance(w: Any) -> float:
@@ -208,7 +233,10 @@ async def test_a_back_to_plan_joining_on_a_chord_starts_at_the_loiter() -> None:
     wps = (outside, q, *plan.waypoints[on[-7] :])
     items = await _uploaded(_State(mission), replace(plan, waypoints=wps), start_index=1)
     commands = [it.command for it in items]
-    assert commands[:4] == [MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_WAYPOINT, 178, 19], commands
-    assert _on_circle(items, mission[3]) == []
+    # the plane's position, the chord's point, the circle's point after it (its entry), the
+    # loiter
+    assert commands[:8] == [16, 16, 178, 16, 178, 16, 178, MAV_CMD_NAV_LOITER_TIME], commands
+    assert _entry_only(items)
+    assert _echo(items, replace(plan, waypoints=wps))
     seq, _ = start_item(items, Autopilot.ARDUPILOT)
-    assert items[seq].command == MAV_CMD_NAV_LOITER_TIME
+    assert items[seq] == items[3]  # the chord's point, then the entry and the loiter
