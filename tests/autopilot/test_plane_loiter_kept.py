@@ -8,8 +8,10 @@ what a back_to_plan is (the plane's position, then the filed plan on from the ci
 ahead of it, as serve files the mission: :mod:`gcs_utm.services.fixed_wing_plan`). The
 upload holds the plane's position, the circle's point after it, the pilot's loiter item (its
 time cut to what the plan has left of it), none of the circle's other points as waypoints
-(ArduPlane accepts each WP_RADIUS early), and the landing sequence at its end; the plane goes on round its 80 m circle, leaves it and
-lands on that landing at home.
+(ArduPlane accepts each WP_RADIUS early), airspeeds (not ground speeds) no lower than its
+AIRSPEED_MIN, and the landing sequence at its end; the plane goes on round its own ring (as
+the circle's waypoints it cut inside to 39 m, then flew 112-115 m from the centre), leaves it
+and lands on that landing at home (about 45 s at speed 5).
 """
 
 from __future__ import annotations
@@ -157,6 +159,8 @@ async def test_arduplane_upload_on_its_loiter_keeps_the_loiter_and_lands(
         ]
         assert circle == [], f"the circle's points sent as waypoints: {circle}"  # but its entry
         assert commands[-3:] == [189, 16, MAV_CMD_NAV_LAND], commands
+        speeds = [(it.param1, it.param2) for it in got if it.command == 178]
+        assert speeds and all(kind == 0.0 and mps >= 10.0 for kind, mps in speeds), speeds
         land_seq = len(got) - 1
         # it goes on round its ring, leaves it and lands on the pilot's landing at home
         await _until(
