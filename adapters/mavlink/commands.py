@@ -13,7 +13,9 @@ the copter descends to the ground; BRAKE holds position and altitude. ArduPlane 
 DO_LAND_START with MAV_RESULT_FAILED when its mission has no landing sequence, and refuses
 MAV_CMD_NAV_LAND as a command (UNSUPPORTED), so the fallback uploads a two-item mission
 (home, NAV_LAND ahead on the current track at the home's altitude), makes the NAV_LAND current
-and switches to AUTO: the plane glides from where it is to the landing point.
+and switches to AUTO: the plane glides from where it is to the landing point. Not when
+DO_LAND_START went unanswered and the mission (as last read) has a DO_LAND_START sequence:
+ArduPlane may have started it, and the landing mission would replace the pilot's landing.
 """
 
 from __future__ import annotations
@@ -22,7 +24,12 @@ import asyncio
 import logging
 import math
 
-from adapters.mavlink.mission import MAV_CMD_DO_LAND_START, MAV_CMD_NAV_LAND, MissionItem
+from adapters.mavlink.mission import (
+    MAV_CMD_DO_LAND_START,
+    MAV_CMD_NAV_LAND,
+    MissionItem,
+    landing_sequence,
+)
 from adapters.mavlink.transfer import CommandResult, MavlinkError, Transfers
 from adapters.mavlink.upload import Uploads
 from adapters.mavlink.vehicle import VehicleState
@@ -96,6 +103,18 @@ class Commands:
         )
         if res.ok:
             return res
+        if res.result is None and _lands(st):
+            # no answer (it may have started it) and the pilot's landing sequence is on the
+            # vehicle: a landing mission would replace it (no plan removes a pilot's landing)
+            _log.warning(
+                "%s: DO_LAND_START unanswered (%s): landing sequence kept", st.key, res.error
+            )
+            return CommandResult(
+                ok=False,
+                result=None,
+                attempts=res.attempts,
+                error=f"DO_LAND_START: {res.error}; the mission's landing sequence kept",
+            )
         _log.warning("%s: DO_LAND_START failed (%s): landing mission instead", st.key, res.error)
         return await self._plane_land_here(st, res, deadline_t_s)
 
@@ -149,6 +168,12 @@ class Commands:
             _log.warning("%s: home not read (%s)", st.key, exc)
             return default_m
         return items[0].z if items and items[0].x != 0 else default_m
+
+
+def _lands(st: VehicleState) -> bool:
+    """Whether the vehicle's mission (as last read from it) has a DO_LAND_START sequence."""
+    sequence = landing_sequence(st.mission, st.autopilot)
+    return bool(sequence) and sequence[0].command == MAV_CMD_DO_LAND_START
 
 
 def _ahead(lat_deg: float, lon_deg: float, track_deg: float, dist_m: float) -> tuple[float, float]:

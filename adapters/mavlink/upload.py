@@ -34,6 +34,7 @@ import time
 from dataclasses import dataclass
 
 from adapters.mavlink.landing import plan_mission
+from adapters.mavlink.loiter_kept import keep_loiters, mission_loiters
 from adapters.mavlink.mission import (
     MAV_CMD_DO_CHANGE_SPEED,
     MissionItem,
@@ -53,7 +54,7 @@ from adapters.mavlink.transfer import (
 )
 from adapters.mavlink.vehicle import VehicleState
 from gcs_utm.messages import FlightMode, VehicleKey
-from gcs_utm.model import Autopilot, FlightPlan, Position, SysId
+from gcs_utm.model import Autopilot, FlightPlan, Position, SysId, VehicleKind
 
 _log = logging.getLogger(__name__)
 
@@ -103,9 +104,15 @@ class Uploads:
         except MavlinkError as exc:
             return _failed(0, 0, t0, (str(exc), UploadFailure.NO_VEHICLE), _Try())
         ap = autopilot or st.autopilot
+        where = home or st.home
+        home_alt_m = None if where is None else where.alt_amsl_m
+        # an ArduPlane's loiters are sent as loiter items, not as their circle's points
+        # (adapters/mavlink/loiter_kept.py)
+        fw_ap = st.kind is VehicleKind.FIXED_WING and ap is Autopilot.ARDUPILOT
+        loiters = mission_loiters(st.mission) if fw_ap else []
 
         def build(part: FlightPlan, start: int) -> list[MissionItem]:
-            return plan_to_mission_items(
+            items = plan_to_mission_items(
                 part,
                 ap,
                 home,
@@ -116,17 +123,17 @@ class Uploads:
                 kind=st.kind,
                 min_speed_mps=min_speed_mps,
             )
+            return keep_loiters(part, items, loiters, home_alt_m) if loiters else items
 
         # the pilot's landing sequence (last mission read from the vehicle) is flown as it is:
         # the plan's waypoints that model it are replaced by it (adapters/mavlink/landing.py)
-        where = home or st.home
         items = plan_mission(
             plan,
             landing_sequence(st.mission, ap),
             build,
             start_index=start_index,
             kind=st.kind,
-            home_alt_m=None if where is None else where.alt_amsl_m,
+            home_alt_m=home_alt_m,
         )
         return await self.upload_items(
             st.key, items, deadline_t_s=deadline_t_s, set_mission_mode=set_mission_mode, _t0=t0

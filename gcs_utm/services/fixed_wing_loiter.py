@@ -69,6 +69,7 @@ inside, which the fixed-wing band takes as on its plan; one turning later would 
 EXIT_RUN_RADII = 0.5
 """Leaving a loiter, the plane flies on along its tangent this many radii before it turns
 onto the line from the centre (measured: 35-40 m on an 80 m circle)."""
+SAME_M = 0.5  # a point this close to the circle's entry is the entry
 STEP_RAD = math.pi / 8.0
 MAX_TURNS = 20.0  # a circle is modelled up to this many turns (a bound on points)
 _M_PER_DEG_LAT = 110_540.0
@@ -143,7 +144,7 @@ def loiter_points(
         sweep += ((exit_a - (start + sense * goal_rad)) * sense) % (2.0 * math.pi)
     steps = max(1, math.ceil(sweep / STEP_RAD - 1e-9))
     out: list[P] = [] if capture is None else [capture]
-    for k in range(steps + 1):
+    for k in range(int(_is_entry(p, before, start, r, z0)), steps + 1):
         swept = min(k * STEP_RAD, sweep)
         a = start + sense * swept
         frac = min(swept / goal_rad, 1.0) if goal_rad > 0.0 else 1.0
@@ -155,6 +156,16 @@ def loiter_points(
             _px4_exit(p, out[-1], exit_a, sense, nxt) if px4_exit else _join(p, out[-1], nxt, r)
         )
     return out
+
+
+def _is_entry(p: Point, before: Point, start: float, r: float, alt_amsl_m: float) -> bool:
+    """Whether ``before`` is the circle's entry point (``start`` round the centre, within
+    :data:`SAME_M`, at the entry's altitude): a mission whose waypoint before the loiter is
+    on its circle (an upload that keeps a loiter: adapters/mavlink/loiter_kept.py) starts the
+    circle there, once."""
+    be, bn = _en(p, before)
+    off_m = math.hypot(be - r * math.cos(start), bn - r * math.sin(start))
+    return off_m <= SAME_M and abs(before.alt_amsl_m - alt_amsl_m) <= SAME_M
 
 
 def _px4_time_rad(p: P, capture: P | None, start: float, r: float) -> float:
