@@ -206,15 +206,42 @@ _FAULTS = {
 }
 
 
-async def _play_alerts(rt: Runtime, scenario: Scenario, lead_s: float) -> None:
-    """Stakeholder alerts of the scenario (e.g. a wildfire area) reach the USM at their time,
-    as they would from MQTT."""
-    alerts = sorted(
-        (e for e in scenario.events if e.kind is EventKind.ALERT_AREA), key=lambda e: e.at_s
-    )
-    for ev in alerts:
-        await rt.clock.sleep(max(0.0, ev.t_s - rt.clock.now_s()))
-        rt.usm.on_hazard(_alert_hazard(ev))
+_REPORTED = {
+    EventKind.GNSS_JAMMING: ThreatKind.JAMMING_ATTACK,
+    EventKind.SPOOFING: ThreatKind.SPOOFING_ATTACK,
+}
+"""Scenario faults an external vehicle cannot be made to suffer, but its RPA reports (the
+GNSS status of a network identification message, adapters/mqtt/codec.py): with
+``--external`` they reach the USM as that report at their time."""
+
+
+def played_hazards(scenario: Scenario, *, external: bool) -> list[HazardReport]:
+    """The hazards the run itself reports to the USM, in time order: the stakeholder alerts
+    (e.g. a wildfire area), as they would come from MQTT; with ``external`` also the
+    scenario's GNSS jamming and spoofing of a UAS (the built-in vehicles suffer those in
+    their simulated receiver instead; a real autopilot in SITL has no such receiver fault)."""
+    out = [_alert_hazard(e) for e in scenario.events if e.kind is EventKind.ALERT_AREA]
+    if external:
+        out += [
+            HazardReport(
+                kind=_REPORTED[e.kind],
+                t_s=e.t_s,
+                operation_id=e.uas,
+                message=f"RPA reports {e.kind.value.replace('_', ' ')}"
+                + (f": {e.reason}" if e.reason else ""),
+                source="scenario",
+            )
+            for e in scenario.events
+            if e.kind in _REPORTED and e.uas is not None
+        ]
+    return sorted(out, key=lambda h: h.t_s)
+
+
+async def _play_hazards(rt: Runtime, hazards: list[HazardReport]) -> None:
+    """Each of ``hazards`` reaches the USM at its time."""
+    for h in hazards:
+        await rt.clock.sleep(max(0.0, h.t_s - rt.clock.now_s()))
+        rt.usm.on_hazard(h)
 
 
 def _alert_hazard(ev: ScenarioEvent) -> HazardReport:
@@ -398,10 +425,10 @@ async def _serve(
 ) -> bool:
     """The service tasks, the scenario's alerts, track sampling and (``--fly``) the flights,
     until the scenario's end or the operator quits the dashboard; True when they quit."""
-    lead_s = options.lead_s if options.lead_s is not None else DEFAULT_LEAD_S
     async with asyncio.TaskGroup() as tg:
         tasks = start_service_tasks(tg, rt, frontends)
-        tasks.append(tg.create_task(_play_alerts(rt, scenario, lead_s), name="alerts"))
+        hazards = played_hazards(scenario, external=options.external)
+        tasks.append(tg.create_task(_play_hazards(rt, hazards), name="alerts"))
         tasks.append(tg.create_task(_sample_tracks(rt, SAMPLE_PERIOD_S), name="samples"))
         if options.fly:
             # the plan version current at upload: a resolution accepted before the

@@ -1,4 +1,5 @@
-"""Use case 1 with ``gcs-utm run --external --fly`` on real PX4 v1.15.2 SIH vehicles (issue 18).
+"""Use cases 1 and 2 with ``gcs-utm run --external --fly`` on real PX4 v1.15.2 SIH vehicles
+(issues 18 and 30).
 
 ``config/scenarios/use_case_1_px4.toml`` is use case 1 matched to the SIH plane's speed
 (14 m/s instead of 30 m/s; the same line, cut so that the plane reaches the crossing 100 s after its
@@ -13,8 +14,16 @@ GLOBAL_POSITION_INT (recorded by the run, ``--record``):
 - the flown separation (PX4's positions, time-matched) never under 50 m horizontally while
   under 15 m vertically, and no loss of separation in the report.
 
-Use case 2 cannot run on PX4 v1.15.2 SIH: its SIH GNSS simulation takes no failure injection
-(docs/autopilots.md, "Use cases 1 and 2 on PX4").
+``config/scenarios/use_case_2_px4.toml`` is use case 2 at PX4 SIH's origin, shifted by 110 s for
+take-off, flown by two SIH quadrotors. PX4 v1.15.2 SIH's GNSS takes no jamming, so the run
+reports the scenario's jamming to the USM as the RPA would (docs/autopilots.md, "Use cases 1
+and 2 on PX4"). Checked as an outsider, on PX4's own positions from take-off to the run's end:
+- JAMMING_ATTACK on UAS1 at the scenario's time; UAS1 held (or landed) by command, a geofence
+  around it, UAS2 re-planned around it (accepted, uploaded, verified);
+- UAS1 stopped its climb (held); UAS2 never inside that geofence (its filed leg passes 41 m
+  from its centre) and past it at the end;
+- no moment inside the pair's effective minima (50 m horizontally and 30 m vertically at once:
+  the minima are at least the sum of the two 15 m operational volumes).
 """
 
 from __future__ import annotations
@@ -36,6 +45,11 @@ SPEED = 5.0  # PX4_SIM_SPEED_FACTOR; run --speed matches it
 LAT0, LON0, GROUND_M = PX4_DEFAULT_HOME
 SCENARIO = REPO / "config" / "scenarios" / "use_case_1_px4.toml"
 HOMES = {1: ("quad", (240.0, -40.0)), 2: ("plane", (1717.8, -137.4))}  # the scenario's homes
+SCENARIO_2 = REPO / "config" / "scenarios" / "use_case_2_px4.toml"
+HOMES_2 = {1: (190.0, 60.0), 2: (315.4, 57.0)}  # use case 2's homes, two quads
+JAMMED_AT_S = 122.0  # the scenario's jamming of UAS1
+UAS1_TOP_AGL_M = 90.0  # the top of UAS1's filed climb
+MIN_V_2_M = 30.0  # use case 2's pair: max(15 m, 15 m + 15 m operational volumes)
 # the plane waits for its start in a loiter around its first waypoint: within its 30 m
 # operational volume (PX4's default NAV_LOITER_RAD is 80 m), as its operator would set it
 PLANE_PARAMS = {**PX4_SIH_PLANE_PARAMS, "NAV_LOITER_RAD": 25.0}
@@ -63,10 +77,12 @@ def _px4_positions(record_dir: Path) -> dict[int, list[tuple[float, float, float
 
 
 def _closest_pair(
-    a: list[tuple[float, float, float, float]], b: list[tuple[float, float, float, float]]
+    a: list[tuple[float, float, float, float]],
+    b: list[tuple[float, float, float, float]],
+    min_v_m: float = MIN_V_M,
 ) -> tuple[float, float, int, tuple[float, float]]:
     """(horizontal m, vertical m) of the time-matched pair of positions that comes closest to
-    the minima: the smallest horizontal distance among the pairs less than MIN_V_M apart
+    the minima: the smallest horizontal distance among the pairs less than ``min_v_m`` apart
     vertically (or the smallest vertical distance when none is); how many pairs; and the
     closest horizontal pass with its vertical distance (for the record)."""
     times = [q[0] for q in b]
@@ -81,7 +97,7 @@ def _closest_pair(
         pairs += 1
         h, v = math.hypot(e - q[1], n - q[2]), abs(alt - q[3])
         closest = min(closest, (h, v))
-        if v < MIN_V_M and h < best_h:
+        if v < min_v_m and h < best_h:
             best_h, best_v = h, v
         elif best_h == math.inf and v < best_v:
             best_v = v
@@ -164,6 +180,79 @@ def _check_flown(
     h_m, v_m, pairs, (close_h_m, close_v_m) = _closest_pair(px4[1], px4[2])
     print(f"flown (PX4's positions, {pairs} pairs): closest {h_m:.1f} m horizontally "
           f"within {MIN_V_M:.0f} m vertically (vertical {v_m:.1f} m); closest horizontal "
+          f"pass {close_h_m:.1f} m at {close_v_m:.1f} m vertically")  # fmt: skip
+    assert pairs > 1000
+    assert h_m >= MIN_H_M, (h_m, v_m)
+    assert not any(p["loss_of_separation"] for p in report["separation"]), report["separation"]
+
+
+@pytest.mark.timeout(300)
+def test_use_case_2_on_px4_sih_quads(px4: Callable[..., SitlProcess], tmp_path: Path) -> None:
+    for sys_id, home in HOMES_2.items():
+        px4(instance=sys_id - 1, airframe="quad", home=offset_deg(LAT0, LON0, *home), speed=SPEED)
+    for instance in (0, 1):
+        pilot = PilotLink(instance)
+        try:  # closed before the run: parsing PX4's onboard stream costs CPU the run needs
+            pilot.wait_ready(90.0)
+        finally:
+            pilot.close()
+    record = ("--record", str(tmp_path / "rec"))
+    report, log = run_fly(SCENARIO_2, tmp_path / "runs", SPEED, timeout_s=200.0, extra_args=record)
+    px4_positions = _px4_positions(tmp_path / "rec")
+    fence = _check_jamming_response(report, log)
+    _check_flown_2(report, px4_positions, fence)
+
+
+def _check_jamming_response(report: dict[str, Any], log: str) -> dict[str, Any]:
+    """The jamming reported at its time: UAS1 suspended by command, a geofence around it,
+    UAS2 re-planned around the geofence; returns that geofence."""
+    jams = [t for t in report["threats"] if t["kind"] == "JAMMING_ATTACK"]
+    assert jams and jams[0]["uas"] == ["UAS1"], f"{report['threats']}\n{log}"
+    assert JAMMED_AT_S <= jams[0]["detected_at_s"] <= JAMMED_AT_S + 3.0, jams
+    recs = report["recommendations"]
+    print("recommendations:", [(r["uas"], r["threat_kind"], r["maneuver"], r["decision"],
+                                r["verified"], r["history"][0][0]) for r in recs])  # fmt: skip
+    suspend = [r for r in recs if r["uas"] == "UAS1" and r["threat_kind"] == "JAMMING_ATTACK"]
+    assert suspend and suspend[0]["maneuver"] in {"hold", "land"}, recs
+    assert (suspend[0]["decision"], suspend[0]["verified"]) == ("accepted", True), suspend
+    fences = [g for g in report["geofences"] if g["reason"].startswith("JAMMING_ATTACK")]
+    assert len(fences) == 1 and fences[0]["exempt"] == ["UAS1"], report["geofences"]
+    reroute = [r for r in recs if r["uas"] == "UAS2"]
+    assert reroute, recs
+    assert (reroute[0]["decision"], reroute[0]["uploaded"], reroute[0]["verified"]) == (
+        "accepted",
+        True,
+        True,
+    ), reroute
+    return fences[0]
+
+
+def _check_flown_2(
+    report: dict[str, Any],
+    px4: dict[int, list[tuple[float, float, float, float]]],
+    fence: dict[str, Any],
+) -> None:
+    """From PX4's own positions: UAS2 never inside the geofence; the pair never inside its
+    effective minima, from take-off to the run's end."""
+    assert len(px4[1]) > 1000 and len(px4[2]) > 1000, {k: len(v) for k, v in px4.items()}
+    (sep,) = report["separation"]
+    assert (sep["minimum_horizontal_m"], sep["minimum_vertical_m"]) == (MIN_H_M, MIN_V_2_M), sep
+    ce, cn = local_m(LAT0, LON0, fence["center"]["lat_deg"], fence["center"]["lon_deg"])
+    to_fence_m = min(math.hypot(e - ce, n - cn) for _t, e, n, _alt in px4[2])
+    print(f"geofence centre ({ce:.0f}, {cn:.0f}) radius {fence['radius_m']} m: UAS2 came "
+          f"{to_fence_m:.1f} m close")  # fmt: skip
+    assert to_fence_m > fence["radius_m"]
+    # the hold flown: UAS1 stopped its climb to 90 m AGL where the jamming caught it
+    top_m = max(alt for _t, _e, _n, alt in px4[1]) - GROUND_M
+    # the re-plan flown: UAS2 went on around the geofence and is past it (west) at the end
+    end_e, end_n = px4[2][-1][1:3]
+    print(f"UAS1 highest {top_m:.1f} m AGL; UAS2 ends at ({end_e:.0f}, {end_n:.0f})")
+    assert top_m < UAS1_TOP_AGL_M - 5.0
+    assert end_e < ce - fence["radius_m"]
+    airborne = [[q for q in px4[i] if q[3] > GROUND_M + 1.0] for i in (1, 2)]
+    h_m, v_m, pairs, (close_h_m, close_v_m) = _closest_pair(*airborne, min_v_m=MIN_V_2_M)
+    print(f"flown (PX4's positions, {pairs} airborne pairs): closest {h_m:.1f} m horizontally "
+          f"within {MIN_V_2_M:.0f} m vertically (vertical {v_m:.1f} m); closest horizontal "
           f"pass {close_h_m:.1f} m at {close_v_m:.1f} m vertically")  # fmt: skip
     assert pairs > 1000
     assert h_m >= MIN_H_M, (h_m, v_m)

@@ -93,6 +93,12 @@ def test_use_case_2_jamming_suspends_and_neighbour_reroutes(tmp_path: Path) -> N
     )
     # UAS2 never enters the geofence (actual track, not prediction)
     assert not [g for g in report["geofence_intrusions"] if g["uas"] == "UAS2"]
+    # flown, on the vehicles' true positions from take-off to landing: never inside the pair's
+    # effective minima (at least the sum of the two 15 m operational volumes: 30 m vertically)
+    (pair,) = report["truth"]["pairs"]
+    assert (pair["minimum_horizontal_m"], pair["minimum_vertical_m"]) == (50.0, 30.0), pair
+    assert not pair["loss_of_separation"] and pair["loss_duration_s"] == 0.0, pair
+    assert pair["min_ratio"] > 1.0, pair
     assert (tmp_path / "use_case_2_geofence.png").stat().st_size > 0
     fence = next(g["id"] for g in report["geofences"] if g["reason"].startswith("JAMMING"))
     again = export_all(report, tmp_path / "again", stem="uc2")
