@@ -10,41 +10,50 @@ import itertools
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 from gcs_utm.services import fixed_wing_plan as fw
 from gcs_utm.services.vehicle_ops import NavPoint
 
-FLOWN = json.loads(
-    (Path(__file__).resolve().parents[1] / "data" / "flown" / "px4_plane_second_takeoff.json")
-    .read_text()
-)  # fmt: skip
-HOME = FLOWN["home"]
-K = math.cos(math.radians(HOME["lat_deg"]))
+DATA = Path(__file__).resolve().parents[1] / "data" / "flown"
+FLIGHTS = [
+    json.loads((DATA / name).read_text())
+    for name in ("px4_plane_second_takeoff.json", "px4_plane_second_takeoff_2.json")
+]
+FLOWN = FLIGHTS[0]
 
 
-def _en(lat: float, lon: float) -> tuple[float, float]:
-    return (lon - HOME["lon_deg"]) * 111_320.0 * K, (lat - HOME["lat_deg"]) * 110_540.0
+def _en(lat: float, lon: float, home: dict[str, float] | None = None) -> tuple[float, float]:
+    home = home or FLOWN["home"]
+    k = math.cos(math.radians(home["lat_deg"]))
+    return (lon - home["lon_deg"]) * 111_320.0 * k, (lat - home["lat_deg"]) * 110_540.0
 
 
-def _plan(heading_deg: float | None) -> list[tuple[float, float, float]]:
-    tk, nxt = FLOWN["takeoff"], FLOWN["next"]
+def _plan(
+    heading_deg: float | None, flown: dict[str, Any] = FLOWN
+) -> list[tuple[float, float, float]]:
+    tk, nxt, home = flown["takeoff"], flown["next"], flown["home"]
     points = [
         NavPoint(1, tk["lat_deg"], tk["lon_deg"], tk["alt_amsl_m"], 22.0, True, 22),
         NavPoint(2, nxt["lat_deg"], nxt["lon_deg"], nxt["alt_amsl_m"], 22.0, True, 16),
     ]
     pts = fw.fixed_wing_points(
-        points, ground_alt_m=HOME["alt_amsl_m"], climb_rate_mps=5.0, descent_rate_mps=3.0,
-        loiter_radius_m=80.0, home_deg=(HOME["lat_deg"], HOME["lon_deg"]), loiter_landing=True,
+        points, ground_alt_m=home["alt_amsl_m"], climb_rate_mps=5.0, descent_rate_mps=3.0,
+        loiter_radius_m=80.0, home_deg=(home["lat_deg"], home["lon_deg"]), loiter_landing=True,
         takeoff_heading_deg=heading_deg, loiter_exit_on_goal=True,
     )  # fmt: skip
-    return [(0.0, 0.0, HOME["alt_amsl_m"])] + [
-        (*_en(p.lat_deg, p.lon_deg), p.alt_amsl_m) for p in pts
+    return [(0.0, 0.0, home["alt_amsl_m"])] + [
+        (*_en(p.lat_deg, p.lon_deg, home), p.alt_amsl_m) for p in pts
     ]
 
 
-def _off_m(plan: list[tuple[float, float, float]], q: dict[str, float]) -> tuple[float, float]:
+def _off_m(
+    plan: list[tuple[float, float, float]],
+    q: dict[str, float],
+    home: dict[str, float] | None = None,
+) -> tuple[float, float]:
     """Horizontal distance to the plan's path and height above it there."""
-    e, n = _en(q["lat_deg"], q["lon_deg"])
+    e, n = _en(q["lat_deg"], q["lon_deg"], home)
     best = (math.inf, 0.0)
     for (ax, ay, az), (bx, by, bz) in itertools.pairwise(plan):
         dx, dy = bx - ax, by - ay
@@ -56,12 +65,14 @@ def _off_m(plan: list[tuple[float, float, float]], q: dict[str, float]) -> tuple
     return best
 
 
-def test_px4_rolls_on_its_parked_heading_then_turns_for_its_takeoff_waypoint() -> None:
-    turned = [_off_m(_plan(FLOWN["heading_deg"]), q) for q in FLOWN["track"]]
-    assert max(h for h, _ in turned) < 3.0
-    assert max(abs(v) for _, v in turned) < 4.0
-    straight = [_off_m(_plan(None), q) for q in FLOWN["track"]]
-    assert max(h for h, _ in straight) > 25.0
+def test_px4_rolls_on_its_parked_heading_then_turns_back_for_its_takeoff_line() -> None:
+    for flown, within_m in zip(FLIGHTS, (3.0, 12.5), strict=True):
+        home = flown["home"]
+        turned = [_off_m(_plan(flown["heading_deg"], flown), q, home) for q in flown["track"]]
+        assert max(h for h, _ in turned) < within_m
+        assert max(abs(v) for _, v in turned[:5]) < 6.0  # the climb
+        straight = [_off_m(_plan(None, flown), q, home) for q in flown["track"]]
+        assert max(h for h, _ in straight) > 25.0
 
 
 def test_a_parked_heading_towards_the_takeoff_waypoint_is_the_straight_climb_out() -> None:
