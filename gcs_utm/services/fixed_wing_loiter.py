@@ -207,7 +207,7 @@ def _px4_exit(p: P, left: P, at_rad: float, sense: float, nxt: P) -> list[P]:
     # the course on the circle: its tangent in the turn's sense
     course = math.degrees(math.atan2(-sense * math.sin(at_rad), sense * math.cos(at_rad)))
     turn = takeoff_turn(left, course, target, speed, period_s=PX4_PERIOD_S, roll_in_s=0.0,
-                        roll_limit_deg=PX4_ROLL_LIMIT_DEG)  # fmt: skip
+                        roll_limit_deg=PX4_ROLL_LIMIT_DEG, full_bank=True)  # fmt: skip
     return [*turn, target]
 
 

@@ -55,6 +55,7 @@ from gcs_utm.services.fixed_wing_point import (
     NAV_TAKEOFF,
     Point,
 )
+from gcs_utm.services.fixed_wing_runway import runway_from_heading
 from gcs_utm.services.fixed_wing_turn import takeoff_turn
 
 TAKEOFF_CLIMB_RATE_MPS = 5.0
@@ -126,7 +127,8 @@ def fixed_wing_points(
             if turn_after_takeoff and takeoff_heading_deg is not None and len(climb) == 2 and nxt:
                 out.extend(takeoff_turn(climb[-1], takeoff_heading_deg, nxt, nxt.speed_mps))
         elif p.command == NAV_TAKEOFF:
-            out.extend(_climb_out_to(p, out[-1] if out else None, home_deg, ground_alt_m))
+            before = out[-1] if out else None
+            out.extend(_climb_out_to(p, before, home_deg, ground_alt_m, takeoff_heading_deg))
         elif p.command in LOITER_COMMANDS and out:
             rate = climb_rate_mps if p.alt_amsl_m >= out[-1].alt_amsl_m else descent_rate_mps
             # PX4 leaves a landing's loiter towards the landing point (:func:`_landing_exit`),
@@ -215,10 +217,12 @@ def _climb_out_to(
     before: P | None,
     home_deg: tuple[float, float] | None,
     ground_alt_m: float | None,
+    heading_deg: float | None = None,
 ) -> list[P]:
     """A take-off with a position of its own (PX4: the runway take-off heads for it): the
     climb-out from where the vehicle stands (the point before, else home) towards it, then
-    level to it."""
+    level to it; from a parked ``heading_deg`` that is not towards it, the ground roll along
+    that heading and the turn back onto the line (:mod:`.fixed_wing_runway`)."""
     start_deg = (before.lat_deg, before.lon_deg) if before is not None else home_deg
     if start_deg is None:
         return [p]
@@ -226,6 +230,9 @@ def _climb_out_to(
     climb = _climb_out(start, before, [p], ground_alt_m)
     if len(climb) < 2:  # no climb to model
         return [p]
+    turned = None if heading_deg is None else runway_from_heading(start, heading_deg, climb, p)
+    if turned is not None:
+        return turned
     ends = [q.synthetic() for q in climb if math.hypot(*_east_north(q, p)) >= 1.0]
     return [*ends, p]
 

@@ -139,5 +139,5 @@ def exit_from(lat_deg: float, lon_deg: float, course_deg: float, rest: Sequence[
     target = nxt.moved(lat, lon, alt).synthetic()
     here = nxt.moved(lat_deg, lon_deg, alt).synthetic()
     turn = takeoff_turn(here, course_deg, target, speed, period_s=PX4_PERIOD_S, roll_in_s=0.0,
-                        roll_limit_deg=PX4_ROLL_LIMIT_DEG)  # fmt: skip
+                        roll_limit_deg=PX4_ROLL_LIMIT_DEG, full_bank=True)  # fmt: skip
     return [*turn, target, *rest[run:]]

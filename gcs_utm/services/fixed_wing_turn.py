@@ -65,12 +65,14 @@ def takeoff_turn(
     period_s: float = L1_PERIOD_S,
     roll_in_s: float = ROLL_IN_S,
     roll_limit_deg: float = ROLL_LIMIT_DEG,
+    full_bank: bool = False,
 ) -> list[P]:
     """The plane's path from the take-off's end ``end`` (at the take-off altitude, flying
     ``course_deg``) until it heads for ``nxt``: modelled points of ``nxt`` (the item current
     then), at the altitudes of the straight line from ``end`` to ``nxt``; [] when it already
-    heads for it (module docstring). The same pursuit with PX4's guidance period, no roll-in
-    and its roll limit is a PX4 plane's turn out of a loiter (:mod:`.fixed_wing_loiter`)."""
+    heads for it (module docstring). ``full_bank``: the turn is made at the roll limit until
+    the plane heads for ``nxt`` (PX4's turn out of a loiter, :mod:`.fixed_wing_loiter`: its
+    guidance saturates, where L1's pursuit eases off as the bearing error closes)."""
     k = math.cos(math.radians(end.lat_deg))
     goal_e = (nxt.lon_deg - end.lon_deg) * _M_PER_DEG_LON * k
     goal_n = (nxt.lat_deg - end.lat_deg) * _M_PER_DEG_LAT
@@ -108,7 +110,7 @@ def takeoff_turn(
         if flown >= run_m:
             if flown - STEP_M < run_m:
                 emit()  # where the turn starts
-            rate = min(2.0 * math.sin(abs(eta)) / l1_m, max_rate)
+            rate = max_rate if full_bank else min(2.0 * math.sin(abs(eta)) / l1_m, max_rate)
             psi -= math.copysign(rate * STEP_M, eta)
         e += math.sin(psi) * STEP_M
         n += math.cos(psi) * STEP_M

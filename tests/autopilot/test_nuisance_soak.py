@@ -11,7 +11,6 @@ Every threat in the store must be the link drop's COMMUNICATION_FAILURE, closed 
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import pytest
@@ -24,17 +23,6 @@ SHORT = SoakConfig(minutes=3.0, speed=3.0, land_at_end=False, reboot=False)
 
 @pytest.mark.timeout(420)
 @pytest.mark.px4  # it starts PX4 itself (not through the fixture): the PX4 lane, tests/check.sh
-@pytest.mark.skipif(
-    not os.environ.get("GCS_UTM_NUISANCE"),
-    reason="set GCS_UTM_NUISANCE=1: while it is a known failure (the xfail below) its ~2 "
-    "minutes of four autopilots are left out of the suite's real-autopilot step",
-)
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="issue 31, open: the PX4 plane's turn out of its loiter still raised a UAS_IN_CV "
-    "of 10.7-11.4 m on real PX4 (docs/testing.md, 'The nuisance soak')",
-)
 def test_mixed_fleet_raises_no_false_threat(tmp_path: Path) -> None:
     reason = unavailable_reason("px4") or unavailable_reason("ardupilot")
     if reason:

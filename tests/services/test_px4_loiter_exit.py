@@ -12,10 +12,13 @@ import itertools
 import json
 import math
 from pathlib import Path
+from typing import Any
+from unittest import mock
 
 from gcs_utm.model import OperationId, Position
 from gcs_utm.services import fixed_wing_loiter as fl
 from gcs_utm.services import fixed_wing_plan as fw
+from gcs_utm.services import fixed_wing_rejoin as fr
 from gcs_utm.services.vehicle_ops import NavPoint, plan_from_points
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "flown" / "px4_plane_loiter_exit.json"
@@ -127,3 +130,37 @@ def test_px4_leaves_where_its_time_counted_from_the_capture_at_trim_airspeed_is_
     fe, fn = _en(flown["lat_deg"], flown["lon_deg"])
     off_deg = math.degrees(math.atan2(n, e) - math.atan2(fn, fe))
     assert abs((off_deg + 180.0) % 360.0 - 180.0) < 15.0
+
+
+TURN = json.loads((DATA.parent / "px4_plane_loiter_exit_turn.json").read_text())
+
+
+def test_px4_turns_out_of_its_loiter_at_its_roll_limit() -> None:
+    """Re-timed as it left its circle (14.5 m/s, course 31 deg, the centre's line to the
+    south), the soak's PX4 plane turned at its roll limit until it headed for the line (NPFG's
+    command saturates); the L1-style pursuit, which eases off as the bearing error closes,
+    modelled the turn 11-13 m outside it (UAS_IN_CV)."""
+    c, nxt, here = TURN["on_line"], TURN["next"], TURN["here"]
+    rest = [
+        NavPoint(4, c["lat_deg"], c["lon_deg"], c["alt_amsl_m"], 22.0, True, 16).synthetic(),
+        NavPoint(4, nxt["lat_deg"], nxt["lon_deg"], nxt["alt_amsl_m"], 22.0, True, 16),
+    ]
+    k = math.cos(math.radians(c["lat_deg"]))
+
+    def en(q: Position | NavPoint | dict[str, float]) -> tuple[float, float]:
+        lat, lon = (q["lat_deg"], q["lon_deg"]) if isinstance(q, dict) else (q.lat_deg, q.lon_deg)
+        return (lon - c["lon_deg"]) * 111_320.0 * k, (lat - c["lat_deg"]) * 110_540.0
+
+    def worst_m(pursuit: bool) -> float:
+        real = fr.takeoff_turn
+
+        def l1_pursuit(*args: Any, **kwargs: Any) -> Any:
+            return real(*args, **{**kwargs, "full_bank": False})
+
+        with mock.patch.object(fr, "takeoff_turn", l1_pursuit if pursuit else real):
+            pts = fr.exit_from(here["lat_deg"], here["lon_deg"], TURN["course_deg"], rest)
+        poly = [en(here), *(en(p) for p in pts)]
+        return max(_off_m(poly, *en(q)) for q in TURN["track"])
+
+    assert worst_m(pursuit=False) < 8.0
+    assert worst_m(pursuit=True) > 10.0

@@ -1,0 +1,82 @@
+"""PX4's runway take-off from a parked heading (issue 31): it rolls along the heading it
+stands on (RWTO_HDG 0), then turns at its roll limit for the take-off waypoint. The nuisance
+soak's PX4 SIH plane, parked on its landing's heading (154 deg) for a take-off waypoint 600 m
+north, was planned on the straight climb-out from its start towards that waypoint: 33 m off
+its plan (UAS_OUT_OV, an auto-accepted hold). ``tests/data/flown`` holds its positions."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from gcs_utm.services import fixed_wing_plan as fw
+from gcs_utm.services.vehicle_ops import NavPoint
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "flown"
+FLIGHTS = [
+    json.loads((DATA / name).read_text())
+    for name in ("px4_plane_second_takeoff.json", "px4_plane_second_takeoff_2.json")
+]
+FLOWN = FLIGHTS[0]
+
+
+def _en(lat: float, lon: float, home: dict[str, float] | None = None) -> tuple[float, float]:
+    home = home or FLOWN["home"]
+    k = math.cos(math.radians(home["lat_deg"]))
+    return (lon - home["lon_deg"]) * 111_320.0 * k, (lat - home["lat_deg"]) * 110_540.0
+
+
+def _plan(
+    heading_deg: float | None, flown: dict[str, Any] = FLOWN
+) -> list[tuple[float, float, float]]:
+    tk, nxt, home = flown["takeoff"], flown["next"], flown["home"]
+    points = [
+        NavPoint(1, tk["lat_deg"], tk["lon_deg"], tk["alt_amsl_m"], 22.0, True, 22),
+        NavPoint(2, nxt["lat_deg"], nxt["lon_deg"], nxt["alt_amsl_m"], 22.0, True, 16),
+    ]
+    pts = fw.fixed_wing_points(
+        points, ground_alt_m=home["alt_amsl_m"], climb_rate_mps=5.0, descent_rate_mps=3.0,
+        loiter_radius_m=80.0, home_deg=(home["lat_deg"], home["lon_deg"]), loiter_landing=True,
+        takeoff_heading_deg=heading_deg, loiter_exit_on_goal=True,
+    )  # fmt: skip
+    return [(0.0, 0.0, home["alt_amsl_m"])] + [
+        (*_en(p.lat_deg, p.lon_deg, home), p.alt_amsl_m) for p in pts
+    ]
+
+
+def _off_m(
+    plan: list[tuple[float, float, float]],
+    q: dict[str, float],
+    home: dict[str, float] | None = None,
+) -> tuple[float, float]:
+    """Horizontal distance to the plan's path and height above it there."""
+    e, n = _en(q["lat_deg"], q["lon_deg"], home)
+    best = (math.inf, 0.0)
+    for (ax, ay, az), (bx, by, bz) in itertools.pairwise(plan):
+        dx, dy = bx - ax, by - ay
+        length2 = dx * dx + dy * dy
+        u = 0.0 if length2 == 0.0 else max(0.0, min(1.0, ((e - ax) * dx + (n - ay) * dy) / length2))
+        d = math.hypot(e - ax - u * dx, n - ay - u * dy)
+        if d < best[0]:
+            best = (d, q["alt_amsl_m"] - (az + u * (bz - az)))
+    return best
+
+
+def test_px4_rolls_on_its_parked_heading_then_turns_back_for_its_takeoff_line() -> None:
+    for flown, within_m in zip(FLIGHTS, (3.0, 12.5), strict=True):
+        home = flown["home"]
+        turned = [_off_m(_plan(flown["heading_deg"], flown), q, home) for q in flown["track"]]
+        assert max(h for h, _ in turned) < within_m
+        assert max(abs(v) for _, v in turned[:5]) < 6.0  # the climb
+        straight = [_off_m(_plan(None, flown), q, home) for q in flown["track"]]
+        assert max(h for h, _ in straight) > 25.0
+
+
+def test_a_parked_heading_towards_the_takeoff_waypoint_is_the_straight_climb_out() -> None:
+    tk = FLOWN["takeoff"]
+    bearing = math.degrees(math.atan2(*_en(tk["lat_deg"], tk["lon_deg"])))
+    assert _plan(bearing + 5.0) == _plan(None)
+    assert _plan(bearing + 30.0) != _plan(None)
