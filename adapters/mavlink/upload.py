@@ -92,11 +92,14 @@ class Uploads:
         climb_rate_mps: float | None = None,
         descent_rate_mps: float | None = None,
         min_speed_mps: float = 0.0,
+        lands: bool = False,
     ) -> UploadResult:
         """Upload ``plan`` as a mission, verify it, start it at plan waypoint ``start_index``
         (see :meth:`upload_items`); the vertical speeds let a climb on the spot keep the
         plan's time, and a fixed wing's speeds are airspeeds no lower than ``min_speed_mps``
-        (see :func:`plan_to_mission_items`). Never raises for vehicle behaviour: failures are
+        (see :func:`plan_to_mission_items`). ``lands``: the plan ends with a landing at its
+        last waypoint (a NAV_LAND there), unless that part of it is the pilot's landing
+        sequence (then flown as it is). Never raises for vehicle behaviour: failures are
         in the result."""
         t0 = time.monotonic()
         try:
@@ -112,6 +115,7 @@ class Uploads:
         loiters = mission_loiters(st.mission) if fw_ap else []
 
         def build(part: FlightPlan, start: int) -> list[MissionItem]:
+            whole = len(part.waypoints) == len(plan.waypoints)  # (else it ends on the pilot's)
             items = plan_to_mission_items(
                 part,
                 ap,
@@ -122,6 +126,7 @@ class Uploads:
                 descent_rate_mps=descent_rate_mps,
                 kind=st.kind,
                 min_speed_mps=min_speed_mps,
+                lands=lands and whole,
             )
             return keep_loiters(part, items, loiters, home_alt_m) if loiters else items
 
