@@ -234,3 +234,74 @@ async def test_plans_generated_for_flying_sitl_vehicles_keep_above_the_floor(
             _stop(serve)
     tail = log_path.read_text(errors="replace")[-4000:]
     assert below_floor(db) == [], tail
+
+
+_RETURN_HOME_SCENARIO = """
+[scenario]
+name = "return_home_lands"
+description = "A multirotor low on battery, no landing site: it returns home and lands there"
+duration_s = 130.0
+
+[airspace]
+origin_lat_deg = 40.6597
+origin_lon_deg = -3.5969
+ground_elevation_amsl_m = 675.0
+
+[[operations]]
+id = "UAS1"
+sys_id = 1
+priority = 1
+conops = "survey"
+operator = "pilot-uas1"
+icao24 = "346617"
+vehicle = "multirotor"
+autopilot = "{autopilot}"
+cruise_speed_mps = 5.0
+flight_geometry_m = 8.0
+operational_volume_m = 15.0
+max_climb_rate_mps = 2.0
+endurance_s = 1200.0
+home = {{ east_m = 0.0, north_m = 0.0, alt_agl_m = 0.0 }}
+waypoints = [
+    {{ east_m = 60.0, north_m = 0.0, alt_agl_m = 30.0 }},
+    {{ east_m = 900.0, north_m = 0.0, alt_agl_m = 30.0 }},
+]
+
+[[events]]
+at_s = 10.0
+kind = "battery_drop"
+uas = "UAS1"
+value = 20.0
+reason = "battery below the 25 % reserve"
+"""
+
+
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_a_return_home_lands_at_home_and_its_threat_closes_on_the_ground(
+    tmp_path: Path, autopilot: str
+) -> None:
+    """A multirotor below its battery reserve with no landing site is sent home (auto-accept,
+    fast time, the built-in vehicles): its mission ends with a NAV_LAND at home, so it lands
+    there, disarms, and LACK_OF_BATTERY closes because the UAS is on the ground. (With a
+    waypoint at ground level instead, the vehicle hovered over home armed, and the threat
+    stayed open: return_home was proposed again every 30 s until a LAND command ended it.)"""
+    path = tmp_path / "return_home.toml"
+    path.write_text(_RETURN_HOME_SCENARIO.format(autopilot=autopilot))
+    options = RunOptions(
+        speed=math.inf,
+        headless=True,
+        operator=OperatorMode.AUTO_ACCEPT,
+        out_dir=tmp_path,
+        figures=False,
+        duration_s=130.0,
+    )
+    report = run_scenario_blocking(path, Settings(), options).to_json()
+    # return_home flown to the ground: no LAND command needed in the end
+    [rec] = report["recommendations"]
+    assert (rec["maneuver"], rec["state"]) == ("return_home", "applied"), rec["history"]
+    threats = [t for t in report["threats"] if t["kind"] == "LACK_OF_BATTERY"]
+    threat = threats[-1]
+    assert threat["status"] == "closed", threat
+    assert threat["message"].endswith(
+        ("closed: operation UAS1 landed", "closed: UAS1 is on the ground")
+    ), threat
