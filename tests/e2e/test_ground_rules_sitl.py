@@ -305,3 +305,77 @@ def test_a_return_home_lands_at_home_and_its_threat_closes_on_the_ground(
     assert threat["message"].endswith(
         ("closed: operation UAS1 landed", "closed: UAS1 is on the ground")
     ), threat
+
+
+_OTHER_LANDS_SCENARIO = """
+[scenario]
+name = "other_uas_lands"
+description = "Two multirotors fly side by side 30 m apart, 12 m up; the second one lands"
+duration_s = 70.0
+
+[airspace]
+origin_lat_deg = 40.6597
+origin_lon_deg = -3.5969
+ground_elevation_amsl_m = 675.0
+{operations}
+[[events]]
+at_s = 25.0
+kind = "motor_failure"
+uas = "UAS2"
+reason = "UAS2 lands at once"
+"""
+
+_SIDE_BY_SIDE_OPERATION = """
+[[operations]]
+id = "UAS{k}"
+sys_id = {k}
+priority = 1
+conops = "survey"
+operator = "pilot-uas{k}"
+icao24 = "34661{k}"
+vehicle = "multirotor"
+autopilot = "{autopilot}"
+cruise_speed_mps = 5.0
+flight_geometry_m = 8.0
+operational_volume_m = 10.0
+max_climb_rate_mps = 2.0
+home = {{ east_m = 0.0, north_m = {north}, alt_agl_m = 0.0 }}
+waypoints = [
+    {{ east_m = 0.0, north_m = {north}, alt_agl_m = 12.0 }},
+    {{ east_m = 600.0, north_m = {north}, alt_agl_m = 12.0 }},
+]
+"""
+
+
+def test_a_loss_of_separation_closes_when_the_other_sitl_uas_lands(tmp_path: Path) -> None:
+    """As ``test_threats_close.py::test_a_loss_of_separation_closes_when_the_other_copter_
+    lands`` on two ArduCopters: a PX4 and an ArduCopter built-in vehicle fly side by side 30 m
+    apart 12 m above the ground (a loss of separation, open while both fly, and the landing
+    never clears the vertical minimum; no operator answers); the second one lands (a motor failure: it comes down where it is, and disarms). The loss
+    of separation closes because the other UAS is on the ground, with that reason, while the
+    first one flies on."""
+    operations = "".join(
+        _SIDE_BY_SIDE_OPERATION.format(k=k, autopilot=autopilot, north=north)
+        for k, autopilot, north in ((1, "px4", 0.0), (2, "ardupilot", 30.0))
+    )
+    path = tmp_path / "other_uas_lands.toml"
+    path.write_text(_OTHER_LANDS_SCENARIO.format(operations=operations))
+    options = RunOptions(
+        speed=math.inf,
+        headless=True,
+        operator=OperatorMode.NONE,
+        out_dir=tmp_path,
+        figures=False,
+        duration_s=70.0,
+    )
+    report = run_scenario_blocking(path, Settings(), options).to_json()
+    los = [t for t in report["threats"] if t["kind"] == "LOSS_OF_SEPARATION"]
+    assert los, report["threats"]
+    last = los[-1]
+    assert last["status"] == "closed", los
+    assert sorted(last["uas"]) == ["UAS1", "UAS2"], last
+    assert last["message"].endswith(
+        ("closed: operation UAS2 landed", "closed: UAS2 is on the ground")
+    ), last
+    final = {t["id"]: t["status"] for t in los}  # (the report lists each state it went through)
+    assert set(final.values()) == {"closed"}, los
