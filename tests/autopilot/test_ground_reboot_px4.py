@@ -3,11 +3,11 @@ emergency (ArduCopter: test_ground_reboot.py).
 
 A PX4 quad with a mission sits disarmed beside ``gcs-utm serve --headless --auto-accept``. Its
 process is stopped and started again at once on the same working directory (parameters and
-mission kept, as a power cycle). Its positions stop until the new boot's estimator has a position
-(~30 simulated seconds): on the ground that silence is a pre-flight finding. The reboot is
-seen (``sysid 1: rebooted``, at the new boot's first HEARTBEAT: MAV_STATE_UNINIT), the home is taken again from
-the new boot, and no threat is raised from the vehicle, no recommendation made and no mode
-set on it.
+mission kept, as a power cycle). Its positions stop until the new boot's estimator has a
+position (~30 simulated seconds): on the ground that silence is a pre-flight finding. The
+reboot is seen (``sysid 1: rebooted``, at the new boot's first HEARTBEAT: MAV_STATE_UNINIT),
+the home is taken again from the new boot, and no threat is raised from the vehicle, no
+recommendation made and no mode set on it.
 """
 
 from __future__ import annotations

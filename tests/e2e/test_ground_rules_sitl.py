@@ -350,10 +350,10 @@ waypoints = [
 def test_a_loss_of_separation_closes_when_the_other_sitl_uas_lands(tmp_path: Path) -> None:
     """As ``test_threats_close.py::test_a_loss_of_separation_closes_when_the_other_copter_
     lands`` on two ArduCopters: a PX4 and an ArduCopter built-in vehicle fly side by side 30 m
-    apart 12 m above the ground (a loss of separation, open while both fly, and the landing
-    never clears the vertical minimum; no operator answers); the second one lands (a motor failure: it comes down where it is, and disarms). The loss
-    of separation closes because the other UAS is on the ground, with that reason, while the
-    first one flies on."""
+    apart 12 m above the ground (a loss of separation, open while both fly; the landing never
+    clears the vertical minimum; no operator answers); the second one lands (a motor failure:
+    it comes down where it is and disarms). The loss of separation closes because the other
+    UAS is on the ground, with that reason."""
     operations = "".join(
         _SIDE_BY_SIDE_OPERATION.format(k=k, autopilot=autopilot, north=north)
         for k, autopilot, north in ((1, "px4", 0.0), (2, "ardupilot", 30.0))
