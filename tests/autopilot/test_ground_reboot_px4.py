@@ -103,6 +103,9 @@ def test_a_rebooted_px4_on_the_ground_starts_a_new_preflight(
     recs = rows(db, "SELECT state FROM recommendations")
     assert recs == [], f"recommendations for a quad on the ground: {recs}\n{tail}"
     assert modes and AUTO_MISSION not in modes, f"mission mode set on the ground\n{tail}"
+    # seen by its first HEARTBEAT (MAV_STATE_UNINIT), not by its clock: a PX4 heard again
+    # at once may show a clock near the old one at its first position (docs/vehicle-time.md)
+    assert "rebooted (system_status 3 -> 0)" in text, tail
     # the silence was noticed (no positions until the new boot's estimator has a fix, ~30
     # simulated seconds): a pre-flight finding, not a link loss of the airspace
     assert "sys1 on the ground: COMMUNICATION_FAILURE" in text, tail
