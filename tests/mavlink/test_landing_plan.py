@@ -6,6 +6,7 @@ before it stays where the plan has it, above the floor over home."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 
@@ -26,6 +27,7 @@ from gcs_utm.model import (
     FlightPlan,
     Maneuver,
     OperationId,
+    SysId,
     ThreatKind,
     VehicleKind,
     Waypoint4D,
@@ -90,3 +92,38 @@ def test_a_fixed_wings_landing_plan_gets_no_nav_land() -> None:
         plan, Autopilot.PX4, kind=VehicleKind.FIXED_WING, min_speed_mps=12.0, lands=True
     )
     assert all(it.command != MAV_CMD_NAV_LAND for it in items)
+
+
+async def test_a_second_return_home_is_not_sent_back_to_the_first_ones_approach(
+    env: Any,
+) -> None:
+    """Through the hub: a return home uploaded while the vehicle already descends on an
+    earlier one (EM re-plans while the threat is open) ends with its own NAV_LAND; the
+    earlier NAV_LAND and the waypoint above home before it, read back into the vehicle's
+    mission, are not a pilot's landing sequence to rejoin (the vehicle climbed back to that
+    waypoint's height before landing)."""
+    v = await env.vehicle(8)
+    plan = _return_home()
+    cruise_m = plan.waypoints[-2].alt_amsl_m
+    res = await env.hub.upload_plan(SysId(8), plan, lands=True)
+    assert res.ok and res.verified, res
+    assert v.mission[-1].command == MAV_CMD_NAV_LAND
+    # 20 m lower over home, on the way down: the next return home starts there
+    low = cruise_m - 20.0
+    last = plan.waypoints[-1]
+    t = plan.waypoints[-2].t_s + 10.0
+    again = FlightPlan(
+        operation_id=plan.operation_id,
+        version=plan.version + 1,
+        waypoints=(
+            Waypoint4D(lat_deg=last.lat_deg, lon_deg=last.lon_deg, alt_amsl_m=low, t_s=t),
+            Waypoint4D(
+                lat_deg=last.lat_deg, lon_deg=last.lon_deg, alt_amsl_m=last.alt_amsl_m, t_s=t + 20
+            ),
+        ),
+    )
+    res = await env.hub.upload_plan(SysId(8), again, lands=True)
+    assert res.ok and res.verified, res
+    got = [(m.command, round(m.z, 2)) for m in v.mission if is_nav(m.command)]
+    assert got == [(MAV_CMD_NAV_WAYPOINT, round(low, 2)), (MAV_CMD_NAV_LAND, last.alt_amsl_m)]
+    v.close()
