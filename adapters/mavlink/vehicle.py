@@ -258,6 +258,7 @@ class VehicleState:
         not a fix lost nor an accuracy jump. ``why``: what showed it, when not its clock."""
         self.reboots += 1
         self._last_seq = -1
+        self._system_status = -1  # its first HEARTBEAT is not compared with the last life's
         self._system_time_boot_ms = -1
         self.fix_type = self.eph_m = self.epv_m = self.home = self.landed = None
         self._fix_lost = self._eph_bad = False

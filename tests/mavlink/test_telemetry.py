@@ -489,6 +489,19 @@ def test_a_px4_restarted_at_once_is_seen_by_its_boot_state() -> None:
     assert st.reboots == 1
 
 
+def test_a_reboot_seen_by_the_clock_is_not_counted_again_by_the_boot_state() -> None:
+    """An ArduCopter restarted: its SYSTEM_TIME (time_boot_ms back at 2.4 s) may come
+    before its first HEARTBEAT (MAV_STATE_BOOT): one reboot."""
+    st, ev = _clock_state()
+    _frame(st, ev, 1000.0, status=3)
+    _report(st, ev, 60_000, 1000.0)
+    _report(st, ev, 2_400, 1003.0)
+    assert st.reboots == 1
+    _frame(st, ev, 1003.1, status=1)
+    _frame(st, ev, 1004.1, status=3)
+    assert st.reboots == 1
+
+
 @pytest.mark.parametrize("dropped", [0, 1, 7])
 def test_a_stream_with_a_wrap_a_drop_and_state_changes_is_no_reboot(dropped: int) -> None:
     """A running vehicle: its boot state (UNINIT, as PX4 at boot), then STANDBY, ACTIVE,
