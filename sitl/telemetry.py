@@ -46,6 +46,10 @@ from sitl.spec import VehicleSpec
 
 _log = logging.getLogger(__name__)
 
+AP_BOOT_S = 2.0
+"""ArduPilot's HEARTBEATs say MAV_STATE_BOOT this long after a boot (ArduCopter 4.6 SITL)."""
+PX4_INIT_AFTER_FIX_S = 2.0
+"""PX4's HEARTBEATs say MAV_STATE_UNINIT until this long after its first fix (v1.15 SIH)."""
 HOME_PRE_FIX_OFFSET_M = -2.0
 """A PX4's HOME_POSITION altitude before its fix, off its true home (PX4 SIH's wandered
 by up to 2 m while its estimator converged)."""
@@ -114,11 +118,23 @@ class Telemetry:
         )
 
     def _system_status(self) -> int:
+        if not self._flight.armed and self._booting():
+            return const("MAV_STATE_BOOT") if self.is_ardupilot else const("MAV_STATE_UNINIT")
         if self._faults.motor_failed or self._flight.bat_level >= 3:
             return const("MAV_STATE_EMERGENCY")
         if self._flight.bat_level == 2 or self._faults.jam_level() >= 0.8:
             return const("MAV_STATE_CRITICAL")
         return const("MAV_STATE_ACTIVE") if self._flight.armed else const("MAV_STATE_STANDBY")
+
+    def _booting(self) -> bool:
+        """Whether the autopilot is still starting (measured on the real SITL after a
+        restart): ArduPilot 4.6 sends MAV_STATE_BOOT for its first ~2 s; PX4 v1.15 sends
+        MAV_STATE_UNINIT until its arming state leaves INIT, ~2 s after its first position
+        with a fix (36 s after boot for a fix at 33 s). Each boot starts it again."""
+        up_s = self._time.t_s - self._time.boot_at_s
+        if self.is_ardupilot:
+            return up_s < AP_BOOT_S
+        return up_s < self.spec.gnss_fix_after_s + PX4_INIT_AFTER_FIX_S
 
     def health(self) -> int:
         h = SENSORS_PRESENT

@@ -370,6 +370,7 @@ class MavlinkHub:
         climb_rate_mps: float | None = None,
         descent_rate_mps: float | None = None,
         min_speed_mps: float = 0.0,
+        lands: bool = False,
     ) -> UploadResult:
         """Upload ``plan`` as a mission, verified, started (:meth:`Uploads.upload_plan`)."""
         return await self.uploads.upload_plan(
@@ -383,6 +384,7 @@ class MavlinkHub:
             climb_rate_mps=climb_rate_mps,
             descent_rate_mps=descent_rate_mps,
             min_speed_mps=min_speed_mps,
+            lands=lands,
         )
 
     async def upload_items(

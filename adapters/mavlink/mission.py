@@ -19,7 +19,13 @@ Encoding of a 4D :class:`FlightPlan` (MAVLink waypoints carry no time):
 - ArduPilot: seq 0 is home (``home`` or the first waypoint), so items shift by one;
   hold times are whole seconds (ArduCopter keeps ``param1`` as an integer).
 - items without a position (DO_CHANGE_SPEED) are in MAV_FRAME_MISSION (2): PX4 refuses
-  them in a global frame (MAV_MISSION_UNSUPPORTED), ArduPilot takes either.
+  them in a global frame (MAV_MISSION_UNSUPPORTED), ArduPilot takes either;
+- a plan that lands (``lands``: return home, a landing site) flown by a vehicle that hovers
+  ends with a NAV_LAND at its last waypoint, the touchdown point, in place of a waypoint
+  there: a waypoint at ground level is no landing on PX4 or ArduPilot (the vehicle hovers
+  over it, armed). The plan's descent onto it is the landing: the items before it stay
+  where the plan has them (above home at the cruise altitude), and the autopilot descends
+  at its own landing speed, then disarms.
 
 Readback (:func:`stored_form`, :func:`same_item`) compares what each autopilot is documented
 to keep, not the bytes sent:
@@ -113,6 +119,14 @@ def _waypoint(lat: float, lon: float, alt: float) -> MissionItem:
     )
 
 
+def _landing(wp: MissionItem) -> MissionItem:
+    """A NAV_LAND at waypoint ``wp``'s position (abort altitude and precision mode 0: the
+    autopilot's defaults; yaw NaN: keep the heading)."""
+    return replace(
+        wp, command=MAV_CMD_NAV_LAND, param1=0.0, param2=0.0, param3=0.0, param4=math.nan
+    )
+
+
 def plan_to_mission_items(
     plan: FlightPlan,
     autopilot: Autopilot = Autopilot.PX4,
@@ -124,6 +138,7 @@ def plan_to_mission_items(
     descent_rate_mps: float | None = None,
     kind: VehicleKind | None = None,
     min_speed_mps: float = 0.0,
+    lands: bool = False,
 ) -> list[MissionItem]:
     """The MAVLink mission that flies ``plan`` (see the module docstring for the encoding).
 
@@ -131,6 +146,9 @@ def plan_to_mission_items(
     ``climb_rate_mps``/``descent_rate_mps`` are the vehicle's vertical speeds (None: assume
     the plan timed its climbs at them, no wait is added to a climb on the spot). A
     ``kind`` FIXED_WING gets airspeeds, raised to ``min_speed_mps`` (its minimum airspeed).
+    ``lands``: the plan ends on the ground (its last waypoint the touchdown point), flown as
+    a NAV_LAND there by a vehicle that is not a fixed wing (a fixed wing's landing plan ends
+    above the site: it circles there until its own landing sequence is flown).
     """
     fixed_wing = kind is VehicleKind.FIXED_WING
     speed_type = SPEED_TYPE_AIRSPEED if fixed_wing else SPEED_TYPE_GROUND
@@ -184,6 +202,8 @@ def plan_to_mission_items(
         vertical_hold = 0.0
         if k == start_index:
             current = first_of_wp
+    land = lands and not fixed_wing and len(wps) > 1
+    items[last_wp] = _landing(items[last_wp]) if land else items[last_wp]
     if autopilot is Autopilot.ARDUPILOT:
         # ArduCopter stores the hold time as whole seconds: send what it keeps
         items = [

@@ -92,12 +92,15 @@ class Uploads:
         climb_rate_mps: float | None = None,
         descent_rate_mps: float | None = None,
         min_speed_mps: float = 0.0,
+        lands: bool = False,
     ) -> UploadResult:
         """Upload ``plan`` as a mission, verify it, start it at plan waypoint ``start_index``
         (see :meth:`upload_items`); the vertical speeds let a climb on the spot keep the
         plan's time, and a fixed wing's speeds are airspeeds no lower than ``min_speed_mps``
-        (see :func:`plan_to_mission_items`). Never raises for vehicle behaviour: failures are
-        in the result."""
+        (see :func:`plan_to_mission_items`). ``lands``: the plan ends with a landing at its
+        last waypoint (a multirotor's NAV_LAND there, in place of the landing sequence of the
+        vehicle's mission; a fixed wing's plan is followed by that sequence). Never raises
+        for vehicle behaviour: failures are in the result."""
         t0 = time.monotonic()
         try:
             st = self.transfers.link.state(sys_id)
@@ -122,14 +125,21 @@ class Uploads:
                 descent_rate_mps=descent_rate_mps,
                 kind=st.kind,
                 min_speed_mps=min_speed_mps,
+                lands=lands,
             )
             return keep_loiters(part, items, loiters, home_alt_m) if loiters else items
 
         # the pilot's landing sequence (last mission read from the vehicle) is flown as it is:
         # the plan's waypoints that model it are replaced by it (adapters/mavlink/landing.py)
+        landing = landing_sequence(st.mission, ap)
+        if lands and st.kind is not VehicleKind.FIXED_WING:
+            # the plan brings its own NAV_LAND: the one of an earlier return home, left in the
+            # vehicle's mission, is no pilot's sequence to rejoin (its approach is where that
+            # return began its descent: the vehicle climbed back to it)
+            landing = []
         items = plan_mission(
             plan,
-            landing_sequence(st.mission, ap),
+            landing,
             build,
             start_index=start_index,
             kind=st.kind,

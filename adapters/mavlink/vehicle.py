@@ -15,7 +15,10 @@ at once (a capture time is never later than its receipt); at the end of each
 followed; jitter and delayed reports move nothing), or is re-anchored there, and the jump
 counted, when that sample is more than ``clock_jump_s`` above it (a clock jump, or a drift
 beyond the bound). A reboot (``time_boot_ms`` going back, or less uptime than the time the
-vehicle went unheard: it booted while its link was down) starts over. SYSTEM_TIME (``unix -
+vehicle went unheard: it booted while its link was down) starts over; so does a HEARTBEAT
+whose ``system_status`` is back to UNINIT or BOOT after a later state (:func:`boot_again`:
+a PX4 restarted within ~0.5 s, whose first position comes when its new clock is near the
+old one, says so in its first HEARTBEAT). SYSTEM_TIME (``unix -
 boot``, once the vehicle has GNSS time) is used only when it agrees with its own arrival (not
 later, at most ``system_time_max_lag_s`` earlier); otherwise it is counted as rejected and the
 arrival-based offset stays. See docs/vehicle-time.md.
@@ -60,6 +63,20 @@ _GNSS_BAD_RE = re.compile(
 )
 
 
+_MAV_STATE_BOOT = 1
+_MAV_STATE_CALIBRATING = 2
+
+
+def boot_again(before: int, now: int) -> bool:
+    """Whether a HEARTBEAT's ``system_status`` ``now`` after ``before`` (the previous one's,
+    -1 for none) shows a new boot. A boot is the only way back to MAV_STATE_UNINIT (0) or
+    MAV_STATE_BOOT (1) from a later state: PX4 v1.15 sends UNINIT while its arming state is
+    INIT (from boot until its checks first ran), then STANDBY/ACTIVE/CRITICAL/...; ArduPilot
+    4.6 sends BOOT until it is initialised (STANDBY at once on the ground). See
+    docs/vehicle-time.md."""
+    return before >= _MAV_STATE_CALIBRATING and 0 <= now <= _MAV_STATE_BOOT
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class VehicleInfo:
     """A discovered vehicle (from its autopilot HEARTBEAT)."""
@@ -91,6 +108,9 @@ class VehicleState:
 
     _heading_cdeg: int = _NO_HEADING
     """GLOBAL_POSITION_INT hdg: the vehicle's heading (a fixed wing's take-off run)."""
+
+    _system_status: int = -1
+    """The last HEARTBEAT's system_status (MAV_STATE), -1 before the first."""
 
     def __init__(
         self,
@@ -232,21 +252,21 @@ class VehicleState:
         self._window_start_ms = boot_ms
         self._window_end_ms = boot_ms + self._window_ms
 
-    def _rebooted(self, boot_ms: int) -> None:
+    def _rebooted(self, boot_ms: int, why: str = "") -> None:
         """A new life of the vehicle: a new pre-flight. What the last one reported (fix,
         accuracy, home, landed state) is forgotten, so acquiring GNSS again on the ground is
-        not a fix lost nor an accuracy jump."""
+        not a fix lost nor an accuracy jump. ``why``: what showed it, when not its clock."""
         self.reboots += 1
         self._last_seq = -1
+        self._system_status = -1  # its first HEARTBEAT is not compared with the last life's
         self._system_time_boot_ms = -1
         self.fix_type = self.eph_m = self.epv_m = self.home = self.landed = None
         self._fix_lost = self._eph_bad = False
         self._ratelog.warning(
             f"reboot:{self.sys_id}",
-            "%s rebooted (time_boot_ms %d -> %d)",
+            "%s rebooted (%s)",
             self.key,
-            self.last_boot_ms,
-            boot_ms,
+            why or f"time_boot_ms {self.last_boot_ms} -> {boot_ms}",
         )
 
     def _close_window(self, boot_ms: int) -> None:
@@ -382,6 +402,11 @@ class VehicleState:
         self.custom_mode = int(m.custom_mode)
         self.mode = modes.mode_from(self.autopilot, self.kind, self.custom_mode)
         self.armed = bool(m.base_mode & 128)  # MAV_MODE_FLAG_SAFETY_ARMED
+        state = int(m.system_status)
+        if boot_again(self._system_status, state):
+            self._rebooted(-1, f"system_status {self._system_status} -> {state}")
+            self.last_boot_ms, self.offset_s = -1, None  # a new clock: the next report anchors
+        self._system_status = state
         ev.on_status(self.status(t_s))
         return new
 

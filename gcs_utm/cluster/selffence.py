@@ -64,6 +64,7 @@ class FencedVehicles:
         climb_rate_mps: float | None = None,
         descent_rate_mps: float | None = None,
         min_speed_mps: float = 0.0,
+        lands: bool = False,
     ) -> UploadOutcome:
         if not self._may_act():
             self.refused += 1
@@ -77,6 +78,7 @@ class FencedVehicles:
             climb_rate_mps=climb_rate_mps,
             descent_rate_mps=descent_rate_mps,
             min_speed_mps=min_speed_mps,
+            lands=lands,
         )
 
     async def send_command(self, sys_id: SysId, command: Command) -> CommandOutcome:

@@ -32,6 +32,7 @@ from enum import Enum
 from typing import Protocol
 
 from gcs_utm.clock import Clock
+from gcs_utm.core.deconfliction.verify import ABANDON
 from gcs_utm.core.emergency.wording import proposal_text
 from gcs_utm.messages import PilotAnswer, PilotDecision
 from gcs_utm.model import (
@@ -85,6 +86,7 @@ class VehiclePort(Protocol):
         climb_rate_mps: float | None = None,
         descent_rate_mps: float | None = None,
         min_speed_mps: float = 0.0,
+        lands: bool = False,
     ) -> UploadOutcome: ...
 
     async def send_command(self, sys_id: SysId, command: Command) -> CommandOutcome: ...
@@ -483,6 +485,8 @@ class RecommendationLifecycle:
                 climb_rate_mps=op.performance().climb_rate_mps,
                 descent_rate_mps=op.performance().descent_rate_mps,
                 min_speed_mps=op.performance().min_speed_mps,
+                # return home, a landing site: the plan ends on the ground, a landing there
+                lands=rec.selected is not None and rec.selected.maneuver in ABANDON,
             )
             record.uploaded = record.uploaded or result.ok
             if result.ok and result.verified:

@@ -234,3 +234,148 @@ async def test_plans_generated_for_flying_sitl_vehicles_keep_above_the_floor(
             _stop(serve)
     tail = log_path.read_text(errors="replace")[-4000:]
     assert below_floor(db) == [], tail
+
+
+_RETURN_HOME_SCENARIO = """
+[scenario]
+name = "return_home_lands"
+description = "A multirotor low on battery, no landing site: it returns home and lands there"
+duration_s = 130.0
+
+[airspace]
+origin_lat_deg = 40.6597
+origin_lon_deg = -3.5969
+ground_elevation_amsl_m = 675.0
+
+[[operations]]
+id = "UAS1"
+sys_id = 1
+priority = 1
+conops = "survey"
+operator = "pilot-uas1"
+icao24 = "346617"
+vehicle = "multirotor"
+autopilot = "{autopilot}"
+cruise_speed_mps = 5.0
+flight_geometry_m = 8.0
+operational_volume_m = 15.0
+max_climb_rate_mps = 2.0
+endurance_s = 1200.0
+home = {{ east_m = 0.0, north_m = 0.0, alt_agl_m = 0.0 }}
+waypoints = [
+    {{ east_m = 60.0, north_m = 0.0, alt_agl_m = 30.0 }},
+    {{ east_m = 900.0, north_m = 0.0, alt_agl_m = 30.0 }},
+]
+
+[[events]]
+at_s = 10.0
+kind = "battery_drop"
+uas = "UAS1"
+value = 20.0
+reason = "battery below the 25 % reserve"
+"""
+
+
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_a_return_home_lands_at_home_and_its_threat_closes_on_the_ground(
+    tmp_path: Path, autopilot: str
+) -> None:
+    """A multirotor below its battery reserve with no landing site is sent home (auto-accept,
+    fast time, the built-in vehicles): its mission ends with a NAV_LAND at home, so it lands
+    there, disarms, and LACK_OF_BATTERY closes because the UAS is on the ground. (With a
+    waypoint at ground level instead, the vehicle hovered over home armed, and the threat
+    stayed open: return_home was proposed again every 30 s until a LAND command ended it.)"""
+    path = tmp_path / "return_home.toml"
+    path.write_text(_RETURN_HOME_SCENARIO.format(autopilot=autopilot))
+    options = RunOptions(
+        speed=math.inf,
+        headless=True,
+        operator=OperatorMode.AUTO_ACCEPT,
+        out_dir=tmp_path,
+        figures=False,
+        duration_s=130.0,
+    )
+    report = run_scenario_blocking(path, Settings(), options).to_json()
+    # return_home flown to the ground: no LAND command needed in the end
+    [rec] = report["recommendations"]
+    assert (rec["maneuver"], rec["state"]) == ("return_home", "applied"), rec["history"]
+    threats = [t for t in report["threats"] if t["kind"] == "LACK_OF_BATTERY"]
+    threat = threats[-1]
+    assert threat["status"] == "closed", threat
+    assert threat["message"].endswith(
+        ("closed: operation UAS1 landed", "closed: UAS1 is on the ground")
+    ), threat
+
+
+_OTHER_LANDS_SCENARIO = """
+[scenario]
+name = "other_uas_lands"
+description = "Two multirotors fly side by side 30 m apart, 12 m up; the second one lands"
+duration_s = 70.0
+
+[airspace]
+origin_lat_deg = 40.6597
+origin_lon_deg = -3.5969
+ground_elevation_amsl_m = 675.0
+{operations}
+[[events]]
+at_s = 25.0
+kind = "motor_failure"
+uas = "UAS2"
+reason = "UAS2 lands at once"
+"""
+
+_SIDE_BY_SIDE_OPERATION = """
+[[operations]]
+id = "UAS{k}"
+sys_id = {k}
+priority = 1
+conops = "survey"
+operator = "pilot-uas{k}"
+icao24 = "34661{k}"
+vehicle = "multirotor"
+autopilot = "{autopilot}"
+cruise_speed_mps = 5.0
+flight_geometry_m = 8.0
+operational_volume_m = 10.0
+max_climb_rate_mps = 2.0
+home = {{ east_m = 0.0, north_m = {north}, alt_agl_m = 0.0 }}
+waypoints = [
+    {{ east_m = 0.0, north_m = {north}, alt_agl_m = 12.0 }},
+    {{ east_m = 600.0, north_m = {north}, alt_agl_m = 12.0 }},
+]
+"""
+
+
+def test_a_loss_of_separation_closes_when_the_other_sitl_uas_lands(tmp_path: Path) -> None:
+    """As ``test_threats_close.py::test_a_loss_of_separation_closes_when_the_other_copter_
+    lands`` on two ArduCopters: a PX4 and an ArduCopter built-in vehicle fly side by side 30 m
+    apart 12 m above the ground (a loss of separation, open while both fly; the landing never
+    clears the vertical minimum; no operator answers); the second one lands (a motor failure:
+    it comes down where it is and disarms). The loss of separation closes because the other
+    UAS is on the ground, with that reason."""
+    operations = "".join(
+        _SIDE_BY_SIDE_OPERATION.format(k=k, autopilot=autopilot, north=north)
+        for k, autopilot, north in ((1, "px4", 0.0), (2, "ardupilot", 30.0))
+    )
+    path = tmp_path / "other_uas_lands.toml"
+    path.write_text(_OTHER_LANDS_SCENARIO.format(operations=operations))
+    options = RunOptions(
+        speed=math.inf,
+        headless=True,
+        operator=OperatorMode.NONE,
+        out_dir=tmp_path,
+        figures=False,
+        duration_s=70.0,
+    )
+    report = run_scenario_blocking(path, Settings(), options).to_json()
+    los = [t for t in report["threats"] if t["kind"] == "LOSS_OF_SEPARATION"]
+    assert los, report["threats"]
+    last = los[-1]
+    assert last["status"] == "closed", los
+    assert sorted(last["uas"]) == ["UAS1", "UAS2"], last
+    assert last["message"].endswith(
+        ("closed: operation UAS2 landed", "closed: UAS2 is on the ground")
+    ), last
+    final = {t["id"]: t["status"] for t in los}  # (the report lists each state it went through)
+    assert set(final.values()) == {"closed"}, los

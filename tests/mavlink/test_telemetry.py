@@ -452,3 +452,71 @@ def test_clock_silence_of_a_running_vehicle_is_no_reboot() -> None:
     _fly(st, ev, seconds=0.5, rate=1.0)
     _report(st, ev, 30_500 + 48_000, 1060.5)
     assert st.reboots == 0
+
+
+_MAV = mav_common.MAVLink(None, srcSystem=1, srcComponent=1)
+
+
+def _frame(st: VehicleState, ev: _Events, t_s: float, status: int | None = None) -> None:
+    """One datagram of the vehicle's stream: a HEARTBEAT with ``status`` (MAV_STATE), else
+    a position report; sequence numbers as the sender counts them (mod 256)."""
+    st.count_frame(_MAV.seq, t_s)
+    _MAV.seq = (_MAV.seq + 1) % 256
+    if status is not None:
+        st.on_heartbeat(_MAV.heartbeat_encode(2, 12, 1, 0, status, 3), t_s, ev)
+
+
+def test_a_px4_restarted_at_once_is_seen_by_its_boot_state() -> None:
+    """A PX4 stopped 32 s after boot and started again at once (as measured on v1.15 SIH):
+    its first HEARTBEATs, 0.6 s later, say MAV_STATE_UNINIT with the sequence back at 0; its
+    first position comes 33.5 s into the new boot, after 34.1 s unheard. Its clock is past
+    the old one and it was unheard for no longer than it has been up: only the boot state
+    tells the two lives apart. One reboot, and the new clock is anchored afresh."""
+    st, ev = _clock_state()
+    _MAV.seq = 250
+    for k in range(11):  # STANDBY, positions up to 32 s of boot time
+        _frame(st, ev, 1000.0 + k * 0.1, status=3 if k % 5 == 0 else None)
+        _report(st, ev, 31_000 + k * 100, 1000.0 + k * 0.1)
+    assert st.reboots == 0
+    _MAV.seq = 0  # the new process
+    _frame(st, ev, 1001.6, status=0)
+    assert st.reboots == 1
+    _frame(st, ev, 1002.6, status=0)
+    m = _report(st, ev, 33_500, 1001.0 + 34.1)
+    assert st.reboots == 1  # the new clock is not a second reboot
+    assert m.capture_t_s <= m.receipt_t_s
+    _frame(st, ev, 1037.0, status=3)
+    assert st.reboots == 1
+
+
+def test_a_reboot_seen_by_the_clock_is_not_counted_again_by_the_boot_state() -> None:
+    """An ArduCopter restarted: its SYSTEM_TIME (time_boot_ms back at 2.4 s) may come
+    before its first HEARTBEAT (MAV_STATE_BOOT): one reboot."""
+    st, ev = _clock_state()
+    _frame(st, ev, 1000.0, status=3)
+    _report(st, ev, 60_000, 1000.0)
+    _report(st, ev, 2_400, 1003.0)
+    assert st.reboots == 1
+    _frame(st, ev, 1003.1, status=1)
+    _frame(st, ev, 1004.1, status=3)
+    assert st.reboots == 1
+
+
+@pytest.mark.parametrize("dropped", [0, 1, 7])
+def test_a_stream_with_a_wrap_a_drop_and_state_changes_is_no_reboot(dropped: int) -> None:
+    """A running vehicle: its boot state (UNINIT, as PX4 at boot), then STANDBY, ACTIVE,
+    CRITICAL, STANDBY again; the sequence wraps at 255 and ``dropped`` datagrams are lost on
+    the way (one of them across the wrap). No reboot, and the loss is counted."""
+    st, ev = _clock_state()
+    _MAV.seq = 200
+    states = [0, 0, 3, 4, 4, 5, 4, 3, 3, 2, 3]  # (2: CALIBRATING, on the ground)
+    t = 1000.0
+    for k in range(110):
+        status = states[k // 10] if k % 10 == 0 else None
+        if k == 55:  # around seq 255 -> 0
+            _MAV.seq = (_MAV.seq + dropped) % 256
+        _frame(st, ev, t, status=status)
+        _report(st, ev, 30_000 + k * 20, t)
+        t += 0.02
+    assert st.reboots == 0
+    assert st.lost == dropped

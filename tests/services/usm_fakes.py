@@ -58,6 +58,7 @@ class FakeVehicles:
         self.start_indices: list[int] = []
         self.rates: list[tuple[float | None, float | None]] = []
         self.min_speeds: list[float] = []
+        self.lands: list[bool] = []
         self.commands: list[Command] = []
         self.verified = verified
         self.command_ok = command_ok
@@ -73,8 +74,10 @@ class FakeVehicles:
         climb_rate_mps: float | None = None,
         descent_rate_mps: float | None = None,
         min_speed_mps: float = 0.0,
+        lands: bool = False,
     ) -> Result:
         self.uploads.append(plan)
+        self.lands.append(lands)
         self.min_speeds.append(min_speed_mps)
         self.start_indices.append(start_index)
         self.rates.append((climb_rate_mps, descent_rate_mps))
