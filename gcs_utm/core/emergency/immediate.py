@@ -54,6 +54,7 @@ from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.emergency.endpoint import move_end
 from gcs_utm.core.emergency.fly_on import Choice, fly_on, flying_on
 from gcs_utm.core.emergency.supervision import escalate_safe
+from gcs_utm.core.emergency.third_party import better, limiting_outsider
 from gcs_utm.core.emergency.turn import turn_moves
 from gcs_utm.core.monitoring.loss import separation_ratio
 from gcs_utm.model import (
@@ -254,11 +255,39 @@ def choose_commands(  # noqa: PLR0917 - one call site
     ``t_early`` (before ``t_cmd``): the earliest the commands can act (on the answer, before
     the acknowledgement comes back); combinations that separate alike from ``t_cmd`` are
     ranked by how they separate from then (:func:`sooner_combo`)."""
-    now = snapshot.t_s
     ops = snapshot.operations
     cands = [ops[k] for k in candidates if k in ops][:MAX_UAS]
     if not cands:
         return None
+    first = _choose(td, snapshot, cands, t_cmd, event_t_s, priority_of, turns, t_early)
+    if first is None:
+        return None
+    # the best combination loses the minima to a UAS outside the threat: that UAS may be
+    # commanded too (.third_party)
+    outsider = limiting_outsider(first, len(cands), MAX_UAS)
+    if outsider is None or outsider not in ops:
+        return first[0]
+    prio = {**priority_of, outsider: ops[outsider].priority}
+    more = [*cands, ops[outsider]]
+    second = _choose(td, snapshot, more, t_cmd, event_t_s, prio, turns, t_early)
+    return first[0] if second is None else better(first[0], second[0])
+
+
+def _choose(  # noqa: PLR0917 - choose_commands's arguments, resolved
+    td: TacticalDeconfliction,
+    snapshot: AirspaceSnapshot,
+    cands: list[Operation],
+    t_cmd: float,
+    event_t_s: float | None,
+    priority_of: dict[OperationId, int],
+    turns: bool,
+    t_early: float | None,
+) -> tuple[Choice, OperationId | None] | None:
+    """:func:`choose_commands` for the UAS ``cands``, with the UAS outside them that the
+    chosen combination comes closest to when that limits its ratio (None when a pair of
+    ``cands`` does, or it keeps the minima)."""
+    now = snapshot.t_s
+    ops = snapshot.operations
     until = max(now + MIN_HORIZON_S, (event_t_s or now) + AFTER_EVENT_S)
     grid = np.arange(now, until + STEP_S, STEP_S)
     others = [
@@ -282,6 +311,7 @@ def choose_commands(  # noqa: PLR0917 - one call site
     }
     best: tuple[tuple[float, ...], Choice] | None = None
     score = 0.0  # the best's separation as ranked (.fly_on)
+    best_combo: Sequence[_Move | None] = ()
     tried: list[dict[str, object]] = []
     for combo in itertools.product(*options):
         moves = [m for m in combo if m is not None]
@@ -306,9 +336,13 @@ def choose_commands(  # noqa: PLR0917 - one call site
             cmds = {m.op_id: m.command for m in moves}
             best = (key, Choice(cmds, actions, ratio, clear, tried, tuple(fences)))
             score = (ratio + sooner) / 2.0
+            best_combo = combo
     if best is None:
         return None
-    return fly_on(best[1], _combo_ratio(td, cands, others, [], paths), score)
+    choice = fly_on(best[1], _combo_ratio(td, cands, others, [], paths), score)
+    if choice.clear or not choice.commands:
+        return choice, None
+    return choice, worst_other(td, cands, others, best_combo, paths)
 
 
 def _options(
@@ -408,6 +442,24 @@ def _combo_ratio(
         for o in others:
             worst = min(worst, _ratio(td, (a, xyz[a.id], slack[a.id]), (o, paths[o.id], 0.0)))
     return float(worst)
+
+
+def worst_other(
+    td: TacticalDeconfliction,
+    cands: list[Operation],
+    others: list[Operation],
+    combo: Sequence[_Move | None],
+    paths: dict[OperationId, FloatArray],
+) -> OperationId | None:
+    """The UAS of ``others`` whose separation from a commanded UAS of ``combo`` is the
+    combination's smallest (None when a pair of ``cands`` has it)."""
+    worst = _combo_ratio(td, cands, [], combo, paths) if len(cands) > 1 else np.inf
+    found = None
+    for o in others:
+        r = _combo_ratio(td, cands, [o], combo, paths)
+        if r < worst:
+            worst, found = r, o.id
+    return found
 
 
 def off_plan(td: TacticalDeconfliction, snapshot: AirspaceSnapshot) -> list[OperationId]:

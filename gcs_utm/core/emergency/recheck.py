@@ -16,7 +16,9 @@ UAS of TD's traffic (``TacticalDeconfliction.others``: after its plan, a UAS hov
 end or flies the loiter circle it is seen on, as when the plan was made): its plan re-timed
 from its vehicle's progress (the snapshot EM decides on), or the plan another recommendation
 has proposed, accepted or applied for it since, or, when that newest recommendation is a
-HOLD command, a hold where its track stops (:mod:`.held`). Pure.
+HOLD command, a hold where its track stops (:mod:`.held`). A plan is not uploaded either over
+a command another case has decided since (or in the same cycle) for the same UAS
+(:mod:`.overridden`). Pure.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from dataclasses import replace
 
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.held import circling_elsewhere, held_plan
+from gcs_utm.core.emergency.overridden import newer_command
 from gcs_utm.model import (
     AirspaceSnapshot,
     CommandKind,
@@ -89,6 +92,9 @@ def plan_problem(em: EmContext, rec: Recommendation, snapshot: AirspaceSnapshot)
     op = snapshot.operations.get(rec.operation_id)
     if plan is None or op is None:
         return ""
+    newer = newer_command(em, rec)
+    if newer:  # a command decided since (or with it) for the same UAS stands (.overridden)
+        return f"{rec.id} v{rec.version} overtaken by the command of {newer} for {op.id}"
     plan = replace(plan, operation_id=op.id)
     others = _others(em, rec, snapshot, max(plan.end_t_s, snapshot.t_s) + em.td.config.horizon_s)
     flags = [f for f in em.td.verify(plan, op, others, (), buffered=False) if f]
