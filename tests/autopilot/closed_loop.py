@@ -4,16 +4,22 @@ from the autopilots' own positions (see pilot.py)."""
 
 from __future__ import annotations
 
+import asyncio
 import math
 import sqlite3
 import subprocess
 import sys
 import time
+from collections.abc import Awaitable, Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
+from gcs_utm.app import OperatorMode, Runtime, serve
 from gcs_utm.geo import haversine_m
-from gcs_utm.model import FlightPlan
+from gcs_utm.model import FlightPlan, Operation
+from gcs_utm.settings import Settings
 from gcs_utm.store import Store
 from tests.autopilot.pilot import PilotLink, Sample, local_m, mission_items, offset_deg
 
@@ -96,10 +102,97 @@ def rows(db: Path, sql: str) -> list[tuple[object, ...]]:
         con.close()
 
 
-def _wait_operations(db: Path, n: int, timeout_s: float, serve: subprocess.Popen[bytes]) -> None:
+def file_operations(db: Path, *ops: Operation) -> None:
+    """Save ``ops`` and their plans in the store at ``db`` (before serve starts on it)."""
+    with Store(db) as store:
+        for op in ops:
+            store.save_operation(op)
+            store.save_plan(op.plan)
+
+
+@contextmanager
+def serve_process(
+    cfg: Path, db: Path, log_path: Path, speed: float, *, verbose: bool = True
+) -> Iterator[subprocess.Popen[bytes]]:
+    """``gcs-utm [-v] serve --headless --auto-accept`` on ``cfg`` and ``db`` at ``speed``, its
+    output in ``log_path``, for the block. A failure in the block (an assertion, a timeout)
+    comes back with the log's last 4000 characters, and so does serve gone by its end; serve
+    is stopped (SIGTERM, waited for up to 30 s) however the block ends."""
+    with log_path.open("wb") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "gcs_utm", *(["-v"] if verbose else []), "serve",
+             "--headless", "--auto-accept", "--config", str(cfg), "--db", str(db),
+             "--speed", str(speed)],
+            stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+        )  # fmt: skip
+    try:
+        yield proc
+        assert proc.poll() is None, "gcs-utm serve exited"
+    except (AssertionError, TimeoutError) as exc:
+        tail = log_path.read_text(errors="replace")[-4000:]
+        raise AssertionError(f"{exc}\n--- gcs-utm serve log\n{tail}") from exc
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            proc.wait(timeout=30)
+
+
+async def until(cond: Callable[[], object], timeout_s: float, what: str) -> None:
+    """Until ``cond()`` holds (checked every 0.05 s): an AssertionError naming ``what`` after
+    ``timeout_s`` wall seconds."""
+    end = time.monotonic() + timeout_s
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out after {timeout_s} s: {what}")
+        await asyncio.sleep(0.05)
+
+
+T = TypeVar("T")
+
+
+async def serve_while(
+    settings: Settings,
+    db: Path,
+    scenario: Callable[[Runtime], Awaitable[T]],
+    speed: float,
+    record_dir: Path | None = None,
+) -> T:
+    """``gcs-utm serve`` in this process on ``settings`` and ``db`` at ``speed`` (nobody
+    answers: ``OperatorMode.NONE``, nothing commanded), stopped once ``scenario``, started
+    on its runtime, ends. The scenario's failure is raised again; else serve must have exited
+    with 0. Returns what the scenario returned."""
+    stop = asyncio.Event()
+    tasks: list[asyncio.Task[T]] = []
+
+    async def guarded(rt: Runtime) -> T:
+        try:
+            return await scenario(rt)
+        finally:
+            stop.set()
+
+    async def on_runtime(rt: Runtime) -> None:
+        tasks.append(asyncio.create_task(guarded(rt)))
+
+    code = await serve(
+        settings,
+        db_path=db,
+        operator=OperatorMode.NONE,
+        headless=False,
+        stop=stop,
+        on_runtime=on_runtime,
+        speed=speed,
+        record_dir=record_dir,
+    )
+    assert tasks, f"gcs-utm serve exited with {code} before its runtime was up"
+    result = await tasks[0]  # its assertion, if any
+    assert code == 0, f"gcs-utm serve exited with {code}"
+    return result
+
+
+def _wait_operations(db: Path, n: int, timeout_s: float, proc: subprocess.Popen[bytes]) -> None:
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
-        if serve.poll() is not None:
+        if proc.poll() is not None:
             raise AssertionError("gcs-utm serve exited early")
         if len(rows(db, "SELECT id FROM operations")) >= n:
             return
@@ -147,31 +240,17 @@ def fly(
     for p in pilots:  # the mission size the pilot uploaded, as the autopilot reports it
         p.poll(1.0)
     before = [_total(p) for p in pilots]
-    with log_path.open("wb") as log:
-        serve = subprocess.Popen(
-            [sys.executable, "-m", "gcs_utm", "serve", "--headless", "--auto-accept",
-             "--config", str(cfg), "--db", str(db), "--speed", str(speed)],
-            stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-        )  # fmt: skip
-        try:
-            _wait_operations(db, 2, 40.0, serve)
-            # ArduCopters take off one after the other (arming can be refused for a while
-            # after boot) and hover in GUIDED; both missions then start together, so the
-            # crossing does not depend on how long each arming took on a loaded machine
-            for p in pilots:
-                p.arm_and_start(takeoff_agl_m=crossing.cruise_agl_m, auto=False)
-            for p in pilots:
-                if p.autopilot != "px4":
-                    p.set_mode(3)  # AUTO
-            _follow(pilots, crossing, flight_timeout_s)
-            assert serve.poll() is None, "gcs-utm serve exited during the flight"
-        except AssertionError as exc:
-            tail = log_path.read_text(errors="replace")[-4000:]
-            raise AssertionError(f"{exc}\n--- gcs-utm serve log\n{tail}") from exc
-        finally:
-            if serve.poll() is None:
-                serve.terminate()
-                serve.wait(timeout=30)
+    with serve_process(cfg, db, log_path, speed, verbose=False) as proc:
+        _wait_operations(db, 2, 40.0, proc)
+        # ArduCopters take off one after the other (arming can be refused for a while
+        # after boot) and hover in GUIDED; both missions then start together, so the
+        # crossing does not depend on how long each arming took on a loaded machine
+        for p in pilots:
+            p.arm_and_start(takeoff_agl_m=crossing.cruise_agl_m, auto=False)
+        for p in pilots:
+            if p.autopilot != "px4":
+                p.set_mode(3)  # AUTO
+        _follow(pilots, crossing, flight_timeout_s)
     dh, dv = closest(pilots[0].samples, pilots[1].samples, crossing.origin)
     return Outcome(
         threat_kinds=[str(r[0]) for r in rows(db, "SELECT kind FROM threats")],

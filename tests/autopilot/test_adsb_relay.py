@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -27,10 +26,11 @@ from typing import Any
 import pytest
 
 from adapters.mavlink import MavlinkConfig
-from gcs_utm.app import OperatorMode, Runtime, serve
+from gcs_utm.app import Runtime
 from gcs_utm.cli.replay import replay_paths
 from gcs_utm.settings import Settings
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess
+from tests.autopilot.closed_loop import serve_while, until
 from tests.tlog_messages import tlog_messages
 
 pytestmark = [pytest.mark.slow, pytest.mark.network]
@@ -43,14 +43,6 @@ SIM_ADSB_COUNT 3
 SIM_ADSB_RADIUS {RADIUS_M:g}
 SIM_ADSB_ALT 300
 """
-
-
-async def _until(cond: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            raise AssertionError(what)
-        await asyncio.sleep(0.1)
 
 
 def _intruders(rt: Runtime) -> dict[str, Any]:
@@ -73,42 +65,22 @@ async def test_ardupilot_relays_simulated_traffic_as_intruder_tracks(
             links=("tcp:127.0.0.1:5760",), reconnect_min_s=0.2, reconnect_max_s=1.0
         ),
     )
-    stop = asyncio.Event()
-    seen: dict[str, Any] = {}
 
-    async def scenario(rt: Runtime) -> None:
-        try:
-            ardupilot(
-                instance=0,
-                vehicle="copter",
-                speed=SPEED,
-                defaults=(parm,),
-                extra_args=("--serial5=sim:adsb",),
-            )
-            await _until(lambda: len(_intruders(rt)) >= 2, 90.0, "no relayed aircraft tracked")
-            await asyncio.sleep(2.0)
-            seen["intruders"] = _intruders(rt)
-            seen["relay"] = dataclasses.asdict(rt.hub.adsb_relay.counters)
-        finally:
-            stop.set()
+    async def scenario(rt: Runtime) -> tuple[dict[str, Any], dict[str, Any]]:
+        """The intruder tracks and the relay's counters once two aircraft are tracked."""
+        ardupilot(
+            instance=0,
+            vehicle="copter",
+            speed=SPEED,
+            defaults=(parm,),
+            extra_args=("--serial5=sim:adsb",),
+        )
+        await until(lambda: len(_intruders(rt)) >= 2, 90.0, "no relayed aircraft tracked")
+        await asyncio.sleep(2.0)
+        return _intruders(rt), dataclasses.asdict(rt.hub.adsb_relay.counters)
 
-    async def on_runtime(rt: Runtime) -> None:
-        seen["task"] = asyncio.create_task(scenario(rt))
-
-    code = await serve(
-        settings,
-        db_path=tmp_path / "utm.sqlite",
-        operator=OperatorMode.NONE,
-        headless=False,
-        stop=stop,
-        on_runtime=on_runtime,
-        speed=SPEED,
-        record_dir=rec_dir,
-    )
-    await seen["task"]
-    assert code == 0
-    intruders: dict[str, Any] = seen["intruders"]
-    relay = seen["relay"]
+    db = tmp_path / "utm.sqlite"
+    intruders, relay = await serve_while(settings, db, scenario, SPEED, record_dir=rec_dir)
     assert relay["measurements"] >= 2 and relay["invalid"] == 0, relay
     # the addresses on the wire, from the recording of the link
     (tlog,) = rec_dir.glob("*.tlog")

@@ -12,8 +12,6 @@ predict the crossing of the filed missions at all (no LOSS_OF_SEPARATION threat)
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -21,7 +19,14 @@ from pathlib import Path
 import pytest
 
 from tests.autopilot.autopilots import PX4_DEFAULT_HOME, SitlProcess
-from tests.autopilot.closed_loop import Crossing, _config, _total, _wait_operations, rows
+from tests.autopilot.closed_loop import (
+    Crossing,
+    _config,
+    _total,
+    _wait_operations,
+    rows,
+    serve_process,
+)
 from tests.autopilot.pilot import PilotLink, mission_items
 
 SPEED = 4.0
@@ -36,15 +41,10 @@ def test_disarmed_px4_quads_with_crossing_missions_get_no_decision(
     crossing = Crossing(origin=PX4_DEFAULT_HOME[:2], ground_amsl_m=PX4_DEFAULT_HOME[2])
     db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
     cfg = _config(tmp_path / "serve.toml", crossing, ["udpin:127.0.0.1:14550"])
-    with log_path.open("wb") as log:
-        serve = subprocess.Popen(
-            [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless", "--auto-accept",
-             "--config", str(cfg), "--db", str(db), "--speed", str(SPEED)],
-            stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-        )  # fmt: skip
-        pilots: list[PilotLink] = []
-        modes: list[int] = []
-        try:
+    pilots: list[PilotLink] = []
+    modes: list[int] = []
+    try:
+        with serve_process(cfg, db, log_path, SPEED) as serve:
             # serve hears PX4 from its boot: HOME_POSITION before the fix included
             for i, home in enumerate(crossing.starts()):
                 px4(instance=i, airframe="quad", home=home, speed=SPEED)
@@ -67,13 +67,9 @@ def test_disarmed_px4_quads_with_crossing_missions_get_no_decision(
                         for m in p.poll(0.05)
                         if m.get_type() == "HEARTBEAT" and m.autopilot != 8
                     ]
-            assert serve.poll() is None, "gcs-utm serve exited"
-        finally:
-            for p in pilots:
-                p.close()
-            if serve.poll() is None:
-                serve.terminate()
-                serve.wait(timeout=30)
+    finally:
+        for p in pilots:
+            p.close()
     text = log_path.read_text(errors="replace")
     tail = text[-4000:]
     recs = rows(db, "SELECT state FROM recommendations")

@@ -10,8 +10,6 @@ recommendation, and the reboot is seen (``sysid 1: rebooted``).
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -19,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess, wait_tcp_listening
-from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, rows
+from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, rows, serve_process
 from tests.autopilot.pilot import PilotLink, mission_items
 
 SPEED = 5.0
@@ -38,42 +36,30 @@ def test_a_rebooted_arducopter_on_the_ground_gets_no_emergency(
     pilot = PilotLink(0, autopilot="ardupilot")
     db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
     cfg = _config(tmp_path / "serve.toml", crossing, ["tcp:127.0.0.1:5762"])
-    serve: subprocess.Popen[bytes] | None = None
     try:
         pilot.wait_ready()
         start = (lat0, lon0)
         pilot.upload(mission_items(1, start, [(lat0 + 0.001, lon0, 30.0)], autopilot="ardupilot"))
-        with log_path.open("wb") as log:
-            serve = subprocess.Popen(
-                [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless",
-                 "--auto-accept", "--config", str(cfg), "--db", str(db),
-                 "--speed", str(SPEED)],
-                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            )  # fmt: skip
-        _wait_operations(db, 1, 40.0, serve)
-        # power cycle: the same working directory (parameters, mission) and home
-        pilot.close()
-        copter.stop()
-        ardupilot(instance=0, vehicle="copter", speed=SPEED, workdir=workdir)
-        wait_tcp_listening(5760)
-        pilot = PilotLink(0, autopilot="ardupilot")
-        pilot.wait_ready()
-        seen = time.monotonic() + 40.0  # serve's link comes back and hears the new boot
-        while "sysid 1: rebooted" not in log_path.read_text(errors="replace"):
-            assert time.monotonic() < seen, (
-                "the reboot was not seen:\n" + log_path.read_text(errors="replace")[-3000:]
-            )
-            pilot.poll(0.5)
-        end = time.monotonic() + AFTER_S
-        while time.monotonic() < end:
-            pilot.request_streams()
-            pilot.poll(1.0)
-        assert serve.poll() is None, "gcs-utm serve exited"
+        with serve_process(cfg, db, log_path, SPEED) as serve:
+            _wait_operations(db, 1, 40.0, serve)
+            # power cycle: the same working directory (parameters, mission) and home
+            pilot.close()
+            copter.stop()
+            ardupilot(instance=0, vehicle="copter", speed=SPEED, workdir=workdir)
+            wait_tcp_listening(5760)
+            pilot = PilotLink(0, autopilot="ardupilot")
+            pilot.wait_ready()
+            seen = time.monotonic() + 40.0  # serve's link comes back and hears the new boot
+            while "sysid 1: rebooted" not in log_path.read_text(errors="replace"):
+                assert time.monotonic() < seen, "the reboot was not seen"
+                pilot.poll(0.5)
+            end = time.monotonic() + AFTER_S
+            while time.monotonic() < end:
+                pilot.request_streams()
+                pilot.poll(1.0)
+            pilot.close()  # before serve stops: left open, unread, it made the stop ~10 s slower
     finally:
         pilot.close()
-        if serve is not None and serve.poll() is None:
-            serve.terminate()
-            serve.wait(timeout=30)
     text = log_path.read_text(errors="replace")
     tail = text[-4000:]
     vehicle = {"GNSS_DEGRADATION", "JAMMING_ATTACK", "LACK_OF_BATTERY", "COMMUNICATION_FAILURE"}

@@ -14,17 +14,16 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 
-from gcs_utm.app import OperatorMode, Runtime, serve
+from gcs_utm.app import Runtime
 from gcs_utm.geo import haversine_m
 from gcs_utm.model import Operation, SysId
 from gcs_utm.store import Store
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess
+from tests.autopilot.closed_loop import serve_while, until
 from tests.autopilot.pilot import PilotLink, mission_items, offset_deg
-from tests.autopilot.test_links import _until
 from tests.autopilot.test_threats_close import _settings
 
 SPEED = 5.0
@@ -40,73 +39,54 @@ async def test_a_home_moved_on_the_ground_is_filed_again(
 ) -> None:
     db = tmp_path / "utm.sqlite"
     lat, lon = ARDUPILOT_DEFAULT_HOME[:2]
-    stop = asyncio.Event()
-    done: dict[str, Any] = {}
 
     def op(rt: Runtime) -> Operation | None:
         return rt.airspace.by_sys_id(SysId(1))
 
-    async def scenario(rt: Runtime) -> None:
+    async def scenario(rt: Runtime) -> tuple[Operation, Operation, bool]:
+        """The operation as filed, as filed again after DO_SET_HOME, and whether it armed."""
+        ardupilot(instance=0, vehicle="copter", speed=SPEED)
+        heard = rt.usm.health_by_sys_id
+        await until(lambda: SysId(1) in heard(), 60.0, "ArduCopter not heard")
+        pilot = await asyncio.to_thread(PilotLink, 0, "ardupilot", 5762)
         try:
-            ardupilot(instance=0, vehicle="copter", speed=SPEED)
-            heard = rt.usm.health_by_sys_id
-            await _until(lambda: SysId(1) in heard(), 60.0, "ArduCopter not heard")
-            pilot = await asyncio.to_thread(PilotLink, 0, "ardupilot", 5762)
-            try:
-                await asyncio.to_thread(pilot.wait_ready)
-                assert pilot.home is not None
-                wps = [(*offset_deg(lat, lon, 0.0, 100.0), MISSION_AGL_M)]
-                items = mission_items(1, (lat, lon), wps, autopilot="ardupilot")
-                await asyncio.to_thread(pilot.upload, items)
-                await _until(lambda: op(rt) is not None, 40.0, "no operation from the mission")
-                filed = op(rt)
-                assert filed is not None and filed.home is not None
-                done["filed"] = filed
-                new_lat, new_lon = offset_deg(lat, lon, 0.0, MOVE_NORTH_M)
-                new_alt = filed.home.alt_amsl_m + MOVE_UP_M
-                result = await asyncio.to_thread(
-                    pilot.command, DO_SET_HOME, 0, 0, 0, 0, new_lat, new_lon, new_alt
-                )
-                assert result == ACCEPTED, f"DO_SET_HOME refused: {result}"
+            await asyncio.to_thread(pilot.wait_ready)
+            assert pilot.home is not None
+            wps = [(*offset_deg(lat, lon, 0.0, 100.0), MISSION_AGL_M)]
+            items = mission_items(1, (lat, lon), wps, autopilot="ardupilot")
+            await asyncio.to_thread(pilot.upload, items)
+            await until(lambda: op(rt) is not None, 40.0, "no operation from the mission")
+            filed = op(rt)
+            assert filed is not None and filed.home is not None
+            new_lat, new_lon = offset_deg(lat, lon, 0.0, MOVE_NORTH_M)
+            new_alt = filed.home.alt_amsl_m + MOVE_UP_M
+            result = await asyncio.to_thread(
+                pilot.command, DO_SET_HOME, 0, 0, 0, 0, new_lat, new_lon, new_alt
+            )
+            assert result == ACCEPTED, f"DO_SET_HOME refused: {result}"
 
-                def moved() -> bool:
-                    o = op(rt)
-                    return (
-                        o is not None
-                        and o.home is not None
-                        and haversine_m(o.home.lat_deg, o.home.lon_deg, new_lat, new_lon) < 1.0
-                    )
-
-                await _until(moved, 30.0, "the operation kept its old home")
-                done["moved"] = op(rt)
-                done["armed"] = any(
-                    m.base_mode & 128
-                    for m in await asyncio.to_thread(pilot.poll, 1.0)
-                    if m.get_type() == "HEARTBEAT"
+            def moved() -> bool:
+                o = op(rt)
+                return (
+                    o is not None
+                    and o.home is not None
+                    and haversine_m(o.home.lat_deg, o.home.lon_deg, new_lat, new_lon) < 1.0
                 )
-            finally:
-                pilot.close()
-            done["ok"] = True
+
+            await until(moved, 30.0, "the operation kept its old home")
+            refiled = op(rt)
+            assert refiled is not None
+            armed = any(
+                m.base_mode & 128
+                for m in await asyncio.to_thread(pilot.poll, 1.0)
+                if m.get_type() == "HEARTBEAT"
+            )
+            return filed, refiled, armed
         finally:
-            stop.set()
+            pilot.close()
 
-    async def on_runtime(rt: Runtime) -> None:
-        done["task"] = asyncio.create_task(scenario(rt))
-
-    code = await serve(
-        _settings(("tcp:127.0.0.1:5760",)),
-        db_path=db,
-        operator=OperatorMode.NONE,
-        headless=False,
-        stop=stop,
-        on_runtime=on_runtime,
-        speed=SPEED,
-    )
-    await done["task"]
-    assert code == 0 and done.get("ok")
-    filed: Operation = done["filed"]
-    moved: Operation = done["moved"]
-    assert not done["armed"], "the copter armed: the home was not moved on the ground"
+    filed, moved, armed = await serve_while(_settings(("tcp:127.0.0.1:5760",)), db, scenario, SPEED)
+    assert not armed, "the copter armed: the home was not moved on the ground"
     assert moved.home is not None and filed.home is not None
     assert moved.home.alt_amsl_m == pytest.approx(filed.home.alt_amsl_m + MOVE_UP_M, abs=0.5)
     # a new plan version filed with it: the mission's altitudes are above the new home

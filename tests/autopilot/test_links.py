@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 
 from adapters.mavlink import MavlinkConfig, MavlinkHub
-from gcs_utm.app import OperatorMode, Runtime, serve
+from gcs_utm.app import Runtime
 from gcs_utm.clock import RealClock
 from gcs_utm.model import (
     FlightPlan,
@@ -36,18 +36,11 @@ from gcs_utm.model import (
 from gcs_utm.settings import Settings
 from gcs_utm.store import Store
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, PX4_DEFAULT_HOME, SitlProcess
+from tests.autopilot.closed_loop import file_operations, serve_while, until
 from tests.autopilot.pilot import PilotLink, mission_items
 from tests.mavlink.conftest import Sink
 
 SPEED = 5.0
-
-
-async def _until(cond: Callable[[], bool], timeout_s: float, what: str) -> None:
-    end = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > end:
-            raise AssertionError(f"timed out after {timeout_s} s: {what}")
-        await asyncio.sleep(0.05)
 
 
 # A single ArduPilot for about 10 s: runs beside the rest of the suite (load_tolerant,
@@ -72,15 +65,15 @@ async def test_hub_before_sitl_then_sitl_killed_and_restarted(
         assert any("not up" in r.getMessage() for r in caplog.records)
         await asyncio.sleep(1.0)
         p = ardupilot(instance=0, vehicle="copter", speed=SPEED)
-        await _until(lambda: hub.links()[0].up, 30.0, "no connection once SITL listens")
-        await _until(lambda: bool(sink.vehicles), 30.0, "ArduCopter not discovered")
-        await _until(lambda: bool(sink.measurements), 90.0, "no position from ArduCopter")
+        await until(lambda: hub.links()[0].up, 30.0, "no connection once SITL listens")
+        await until(lambda: bool(sink.vehicles), 30.0, "ArduCopter not discovered")
+        await until(lambda: bool(sink.measurements), 90.0, "no position from ArduCopter")
         assert sink.vehicles[0].key.sys_id == 1
 
         # SITL dies: the vehicle is lost, the link is down, nothing floods the log
         os.killpg(p.proc.pid, signal.SIGKILL)
         p.proc.wait(timeout=10.0)
-        await _until(lambda: not hub.links()[0].up, 10.0, "link not seen down")
+        await until(lambda: not hub.links()[0].up, 10.0, "link not seen down")
         lost = [h for h in sink.hazards if h.kind is ThreatKind.COMMUNICATION_FAILURE]
         assert [h.sys_id for h in lost] == [1], lost
         await asyncio.sleep(3.0)  # heartbeats keep being due while it is down
@@ -90,8 +83,8 @@ async def test_hub_before_sitl_then_sitl_killed_and_restarted(
         t_restart = time.time()
         n_before = len(sink.measurements)
         ardupilot(instance=0, vehicle="copter", speed=SPEED, workdir=p.workdir)
-        await _until(lambda: hub.links()[0].connects == 2, 30.0, "no reconnect")
-        await _until(
+        await until(lambda: hub.links()[0].connects == 2, 30.0, "no reconnect")
+        await until(
             lambda: any(m.receipt_t_s > t_restart for m in sink.measurements[n_before:]),
             90.0,
             "no position after the restart",
@@ -117,18 +110,13 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
     link health and track are live again after the restart."""
     db = tmp_path / "utm.sqlite"
     op = _operation()
-    store = Store(db)
-    store.save_operation(op)
-    store.save_plan(op.plan)
-    store.close()
+    file_operations(db, op)
     settings = dataclasses.replace(
         Settings(),
         mavlink=MavlinkConfig(
             links=("tcp:127.0.0.1:5760",), reconnect_min_s=0.2, reconnect_max_s=1.0
         ),
     )
-    stop = asyncio.Event()
-    done: dict[str, Any] = {}
 
     def lost(rt: Runtime) -> bool:
         return any(
@@ -137,57 +125,40 @@ async def test_serve_keeps_an_operation_across_a_sitl_restart(
         )
 
     async def scenario(rt: Runtime) -> None:
-        try:
-            p = ardupilot(instance=0, vehicle="copter", speed=SPEED)
-            await _until(lambda: SysId(1) in rt.usm.health_by_sys_id(), 60.0, "not heard")
-            await _until(lambda: op.id in rt.tracks(), 90.0, "no track of the operation")
-            # a link loss is an emergency in the air only (on the ground it is a pre-flight
-            # finding): the pilot takes off in GUIDED on SERIAL1 and hovers
-            pilot = await asyncio.to_thread(PilotLink, 0, "ardupilot", 5762)
-            try:
-                await asyncio.to_thread(pilot.wait_ready)
-                await asyncio.to_thread(pilot.arm_and_start, 60.0, 20.0, auto=False)
-                await _until(lambda: rt.airspace.airborne(op.id), 30.0, "not airborne")
-                os.killpg(p.proc.pid, signal.SIGKILL)
-                p.proc.wait(timeout=10.0)
-            finally:
-                pilot.close()
-            await _until(lambda: lost(rt), 20.0, "no COMMUNICATION_FAILURE threat")
-            t_restart = rt.clock.now_s()
-            ardupilot(instance=0, vehicle="copter", speed=SPEED, workdir=p.workdir)
-            await _until(
-                lambda: rt.usm.health_by_sys_id()[SysId(1)].last_heard_t_s > t_restart,
-                60.0,
-                "not heard after the restart",
-            )
-            await _until(lambda: rt.tracks()[op.id].t_s > t_restart, 90.0, "track not live again")
-            # positions flow again: the threat closes, and the link-loss geofence goes with it
-            # (issue 31: it stayed open while positions flowed)
-            await _until(lambda: not lost(rt), 30.0, "COMMUNICATION_FAILURE stayed open")
-            await _until(
-                lambda: not [g for g in rt.airspace.geofences() if g.id.startswith("em-")],
-                10.0,
-                "the link-loss geofence stayed",
-            )
-            done["ok"] = True
-        finally:
-            stop.set()
-
-    async def on_runtime(rt: Runtime) -> None:
         assert not rt.hub.links()[0].up  # serve starts without its link
-        done["task"] = asyncio.create_task(scenario(rt))
+        p = ardupilot(instance=0, vehicle="copter", speed=SPEED)
+        await until(lambda: SysId(1) in rt.usm.health_by_sys_id(), 60.0, "not heard")
+        await until(lambda: op.id in rt.tracks(), 90.0, "no track of the operation")
+        # a link loss is an emergency in the air only (on the ground it is a pre-flight
+        # finding): the pilot takes off in GUIDED on SERIAL1 and hovers
+        pilot = await asyncio.to_thread(PilotLink, 0, "ardupilot", 5762)
+        try:
+            await asyncio.to_thread(pilot.wait_ready)
+            await asyncio.to_thread(pilot.arm_and_start, 60.0, 20.0, auto=False)
+            await until(lambda: rt.airspace.airborne(op.id), 30.0, "not airborne")
+            os.killpg(p.proc.pid, signal.SIGKILL)
+            p.proc.wait(timeout=10.0)
+        finally:
+            pilot.close()
+        await until(lambda: lost(rt), 20.0, "no COMMUNICATION_FAILURE threat")
+        t_restart = rt.clock.now_s()
+        ardupilot(instance=0, vehicle="copter", speed=SPEED, workdir=p.workdir)
+        await until(
+            lambda: rt.usm.health_by_sys_id()[SysId(1)].last_heard_t_s > t_restart,
+            60.0,
+            "not heard after the restart",
+        )
+        await until(lambda: rt.tracks()[op.id].t_s > t_restart, 90.0, "track not live again")
+        # positions flow again: the threat closes, and the link-loss geofence goes with it
+        # (issue 31: it stayed open while positions flowed)
+        await until(lambda: not lost(rt), 30.0, "COMMUNICATION_FAILURE stayed open")
+        await until(
+            lambda: not [g for g in rt.airspace.geofences() if g.id.startswith("em-")],
+            10.0,
+            "the link-loss geofence stayed",
+        )
 
-    code = await serve(
-        settings,
-        db_path=db,
-        operator=OperatorMode.NONE,
-        headless=False,
-        stop=stop,
-        on_runtime=on_runtime,
-        speed=SPEED,
-    )
-    await done["task"]  # its assertion, if any
-    assert code == 0 and done.get("ok")
+    await serve_while(settings, db, scenario, SPEED)
     with Store(db) as s:
         lost_rows = [t for t in s.load_threats() if t.kind is ThreatKind.COMMUNICATION_FAILURE]
         assert lost_rows and all(t.status is ThreatStatus.CLOSED for t in lost_rows)
@@ -214,14 +185,10 @@ async def test_serve_closes_the_link_loss_of_a_restarted_px4(
     db = tmp_path / "utm.sqlite"
     lat, lon, ground_m = PX4_DEFAULT_HOME
     op = _operation((lat, lon, ground_m))
-    with Store(db) as store:
-        store.save_operation(op)
-        store.save_plan(op.plan)
+    file_operations(db, op)
     settings = dataclasses.replace(
         Settings(), mavlink=MavlinkConfig(links=("udpin:127.0.0.1:14550",))
     )
-    stop = asyncio.Event()
-    done: dict[str, Any] = {}
 
     def lost(rt: Runtime) -> bool:
         return any(t.kind is ThreatKind.COMMUNICATION_FAILURE for t in rt.usm.threats.values())
@@ -230,52 +197,35 @@ async def test_serve_closes_the_link_loss_of_a_restarted_px4(
         return any(g.id.startswith("em-") for g in rt.airspace.geofences())
 
     async def scenario(rt: Runtime) -> None:
+        p = px4(instance=0, speed=SPEED)
+        await until(lambda: TrackId(op.id) in rt.tracks(), 90.0, "no track of the operation")
+        # in the air (a grounded vehicle's link loss is a pre-flight finding): the pilot
+        # uploads a take-off and a waypoint on the API link and starts the mission
+        pilot = await asyncio.to_thread(PilotLink, 0)
         try:
-            p = px4(instance=0, speed=SPEED)
-            await _until(lambda: TrackId(op.id) in rt.tracks(), 90.0, "no track of the operation")
-            # in the air (a grounded vehicle's link loss is a pre-flight finding): the pilot
-            # uploads a take-off and a waypoint on the API link and starts the mission
-            pilot = await asyncio.to_thread(PilotLink, 0)
-            try:
-                await asyncio.to_thread(pilot.wait_ready)
-                assert pilot.home is not None
-                alt_m = pilot.home[2] + 20.0
-                items = mission_items(1, (lat, lon), [(lat, lon, alt_m), (lat + 0.001, lon, alt_m)])
-                await asyncio.to_thread(pilot.upload, items)
-                await asyncio.to_thread(pilot.arm_and_start)
-                await _until(lambda: rt.airspace.airborne(op.id), 60.0, "not airborne")
-                os.killpg(p.proc.pid, signal.SIGKILL)
-                p.proc.wait(timeout=10.0)
-            finally:
-                pilot.close()
-            await _until(lambda: lost(rt) and fenced(rt), 30.0, "no link loss and fence")
-            t_restart = rt.clock.now_s()
-            px4(instance=0, speed=SPEED)
-            await _until(
-                lambda: rt.usm.health_by_sys_id()[SysId(1)].last_heard_t_s > t_restart,
-                90.0,
-                "not heard after the restart",
-            )
-            await _until(lambda: not lost(rt), 30.0, "COMMUNICATION_FAILURE stayed open")
-            await _until(lambda: not fenced(rt), 10.0, "the link-loss geofence stayed")
-            done["ok"] = True
+            await asyncio.to_thread(pilot.wait_ready)
+            assert pilot.home is not None
+            alt_m = pilot.home[2] + 20.0
+            items = mission_items(1, (lat, lon), [(lat, lon, alt_m), (lat + 0.001, lon, alt_m)])
+            await asyncio.to_thread(pilot.upload, items)
+            await asyncio.to_thread(pilot.arm_and_start)
+            await until(lambda: rt.airspace.airborne(op.id), 60.0, "not airborne")
+            os.killpg(p.proc.pid, signal.SIGKILL)
+            p.proc.wait(timeout=10.0)
         finally:
-            stop.set()
+            pilot.close()
+        await until(lambda: lost(rt) and fenced(rt), 30.0, "no link loss and fence")
+        t_restart = rt.clock.now_s()
+        px4(instance=0, speed=SPEED)
+        await until(
+            lambda: rt.usm.health_by_sys_id()[SysId(1)].last_heard_t_s > t_restart,
+            90.0,
+            "not heard after the restart",
+        )
+        await until(lambda: not lost(rt), 30.0, "COMMUNICATION_FAILURE stayed open")
+        await until(lambda: not fenced(rt), 10.0, "the link-loss geofence stayed")
 
-    async def on_runtime(rt: Runtime) -> None:
-        done["task"] = asyncio.create_task(scenario(rt))
-
-    code = await serve(
-        settings,
-        db_path=db,
-        operator=OperatorMode.NONE,
-        headless=False,
-        stop=stop,
-        on_runtime=on_runtime,
-        speed=SPEED,
-    )
-    await done["task"]
-    assert code == 0 and done.get("ok")
+    await serve_while(settings, db, scenario, SPEED)
     with Store(db) as s:
         rows = [t for t in s.load_threats() if t.kind is ThreatKind.COMMUNICATION_FAILURE]
         assert rows and all(t.status is ThreatStatus.CLOSED for t in rows)

@@ -21,8 +21,6 @@ at its end (read back equal) with airspeeds no lower than the minimum.
 from __future__ import annotations
 
 import asyncio
-import subprocess
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -36,7 +34,7 @@ from adapters.mavlink.mission import MissionItem
 from gcs_utm.clock import ScaledClock
 from gcs_utm.model import FlightPlan, OperationId, SysId, Waypoint4D
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess, wait_tcp_listening
-from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, rows
+from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, rows, serve_process
 from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 from tests.mavlink.conftest import Sink
 
@@ -168,31 +166,21 @@ def _fly_with_serve(
     db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
     crossing = Crossing(origin=(lat0, lon0), ground_amsl_m=ground)
     cfg = _config(tmp_path / "serve.toml", crossing, ["tcp:127.0.0.1:5762"])
-    serve: subprocess.Popen[bytes] | None = None
     try:
         pilot.wait_ready()
         # RTL_AUTOLAND: else "Arm: DO_LAND_START set and ..."; FLIGHT_OPTIONS bit 14
         # (IMMEDIATE_CLIMB_IN_AUTO): climb first to a higher waypoint, not on a glide slope
         pilot.set_params({"RTL_AUTOLAND": 2.0, "FLIGHT_OPTIONS": 16384.0})
         pilot.upload(mission)
-        with log_path.open("wb") as log:
-            serve = subprocess.Popen(
-                [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless",
-                 "--auto-accept", "--config", str(cfg), "--db", str(db),
-                 "--speed", str(speed)],
-                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            )  # fmt: skip
-        _wait_operations(db, 1, 60.0, serve)
-        pilot.set_mode(AUTO)
-        pilot._arm(60.0)
-        _fly_to_touchdown(pilot, ground, time.monotonic() + 2.0 * flight_s / speed, land_seq)
-        assert serve.poll() is None, "gcs-utm serve exited"
-        commands = [int(it.command) for it in _download(pilot)]
+        with serve_process(cfg, db, log_path, speed) as serve:
+            _wait_operations(db, 1, 60.0, serve)
+            pilot.set_mode(AUTO)
+            pilot._arm(60.0)
+            _fly_to_touchdown(pilot, ground, time.monotonic() + 2.0 * flight_s / speed, land_seq)
+            commands = [int(it.command) for it in _download(pilot)]
+            pilot.close()  # before serve stops: left open, unread, it made the stop ~10 s slower
     finally:
         pilot.close()
-        if serve is not None and serve.poll() is None:
-            serve.terminate()
-            serve.wait(timeout=30)
     tail = log_path.read_text(errors="replace")[-4000:]
     threats = rows(db, "SELECT kind, detected_at_s, doc FROM threats")
     conformance = [t for t in threats if t[0] in ("UAS_OUT_OV", "UAS_IN_CV")]

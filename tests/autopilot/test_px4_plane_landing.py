@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import subprocess
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -31,7 +29,7 @@ from adapters.mavlink.mission import MAV_CMD_NAV_LAND
 from gcs_utm.clock import ScaledClock
 from gcs_utm.model import FlightPlan, OperationId, SysId, Waypoint4D
 from tests.autopilot.autopilots import PX4_DEFAULT_HOME, PX4_SIH_PLANE_PARAMS, SitlProcess
-from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, rows
+from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, rows, serve_process
 from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 from tests.mavlink.conftest import Sink
 
@@ -157,32 +155,21 @@ def test_px4_plane_landing_raises_no_conformance_threat(
     cfg = _config(tmp_path / "serve.toml", crossing, ["udpin:127.0.0.1:14550"])
     px4(instance=0, airframe="plane", home=(LAT0, LON0), speed=SPEED)
     pilot = PilotLink(0)
-    serve: subprocess.Popen[bytes] | None = None
     try:
         pilot.wait_ready(90.0)
         pilot.set_params(PX4_SIH_PLANE_PARAMS)
         pilot.upload(_mission())
-        with log_path.open("wb") as log:
-            serve = subprocess.Popen(
-                [sys.executable, "-m", "gcs_utm", "-v", "serve", "--headless",
-                 "--auto-accept", "--config", str(cfg), "--db", str(db),
-                 "--speed", str(SPEED)],
-                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            )  # fmt: skip
-        _wait_operations(db, 1, 60.0, serve)
-        pilot.arm_and_start(90.0)
-        end = time.monotonic() + 420.0 / SPEED  # simulated: the mission to touchdown
-        landed = False
-        while not landed:
-            assert time.monotonic() < end, f"not landed: {pilot.statustexts[-6:]}"
-            for m in pilot.poll(0.5):
-                landed = landed or (m.get_type() == "HEARTBEAT" and not m.base_mode & 128)
-        assert serve.poll() is None, "gcs-utm serve exited"
+        with serve_process(cfg, db, log_path, SPEED) as serve:
+            _wait_operations(db, 1, 60.0, serve)
+            pilot.arm_and_start(90.0)
+            end = time.monotonic() + 420.0 / SPEED  # simulated: the mission to touchdown
+            landed = False
+            while not landed:
+                assert time.monotonic() < end, f"not landed: {pilot.statustexts[-6:]}"
+                for m in pilot.poll(0.5):
+                    landed = landed or (m.get_type() == "HEARTBEAT" and not m.base_mode & 128)
     finally:
         pilot.close()
-        if serve is not None and serve.poll() is None:
-            serve.terminate()
-            serve.wait(timeout=30)
     tail = log_path.read_text(errors="replace")[-4000:]
     threats = rows(db, "SELECT kind, detected_at_s, doc FROM threats")
     conformance = [t[:2] for t in threats if t[0] in ("UAS_OUT_OV", "UAS_IN_CV")]

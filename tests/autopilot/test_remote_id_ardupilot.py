@@ -38,7 +38,7 @@ from pymavlink.dialects.v20 import common as mav
 
 from adapters.mavlink import MavlinkConfig
 from adapters.remoteid.config import RemoteIdConfig
-from gcs_utm.app import OperatorMode, Runtime, serve
+from gcs_utm.app import Runtime
 from gcs_utm.model import (
     FlightPlan,
     Operation,
@@ -52,6 +52,7 @@ from gcs_utm.model import (
 )
 from gcs_utm.settings import Settings
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess
+from tests.autopilot.closed_loop import serve_while, until
 
 pytestmark = [pytest.mark.slow, pytest.mark.network]
 
@@ -125,14 +126,6 @@ class Texts:
         return [text for t, text in self.lines if t >= t0]
 
 
-async def _until(cond: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            raise AssertionError(what)
-        await asyncio.sleep(0.1)
-
-
 async def _arm(rt: Runtime, texts: Texts) -> tuple[bool, list[str]]:
     """One arming attempt: whether it was accepted, and the texts that came with it."""
     t0 = time.monotonic()
@@ -201,7 +194,6 @@ async def test_ardupilot_enforcing_remote_id_arms_with_gcs_utm_operator_location
     )
     lat, lon, ground_m, _ = ARDUPILOT_DEFAULT_HOME
     home = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=ground_m)
-    stop = asyncio.Event()
     seen: dict[str, Any] = {}
     tx = Transmitter()
     texts = Texts()
@@ -211,14 +203,14 @@ async def test_ardupilot_enforcing_remote_id_arms_with_gcs_utm_operator_location
         tx_task: asyncio.Task[None] | None = None
         try:
             ardupilot(instance=0, vehicle="copter", speed=SPEED, defaults=(parm,))
-            await _until(lambda: bool(rt.hub.vehicles()), 60.0, "vehicle not heard")
+            await until(lambda: bool(rt.hub.vehicles()), 60.0, "vehicle not heard")
             tx_task = asyncio.create_task(tx.run(5762))
-            await _until(lambda: 1 in rt.hub.remote_id.declared, 30.0, "RID not declared")
+            await until(lambda: 1 in rt.hub.remote_id.declared, 30.0, "RID not declared")
             seen["declared_by"] = rt.hub.remote_id.declared[1].how
             seen["refusal"] = await _refused_for_remote_id(rt, texts)
             seen["system_before"] = len(tx.got("OPEN_DRONE_ID_SYSTEM"))
             rt.airspace.add_operation(_operation(home))
-            await _until(
+            await until(
                 lambda: any(m.operator_latitude != 0 for m in tx.got("OPEN_DRONE_ID_SYSTEM")),
                 20.0,
                 "the operator location did not reach the transmitter",
@@ -236,7 +228,7 @@ async def test_ardupilot_enforcing_remote_id_arms_with_gcs_utm_operator_location
                 await rt.hub.command_long(
                     SysId(1), MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, TAKEOFF_AGL_M)
                 )
-                await _until(lambda: _height_m(rt, home) > 0.8 * TAKEOFF_AGL_M, 60.0, "no climb")
+                await until(lambda: _height_m(rt, home) > 0.8 * TAKEOFF_AGL_M, 60.0, "no climb")
                 seen["height_m"] = _height_m(rt, home)
                 n_air = len(tx.got("OPEN_DRONE_ID_SYSTEM"))
                 await asyncio.sleep(2.0)
@@ -246,22 +238,8 @@ async def test_ardupilot_enforcing_remote_id_arms_with_gcs_utm_operator_location
         finally:
             if tx_task is not None:
                 tx_task.cancel()
-            stop.set()
 
-    async def on_runtime(rt: Runtime) -> None:
-        seen["task"] = asyncio.create_task(scenario(rt))
-
-    code = await serve(
-        settings,
-        db_path=tmp_path / "utm.sqlite",
-        operator=OperatorMode.NONE,
-        headless=False,
-        stop=stop,
-        on_runtime=on_runtime,
-        speed=SPEED,
-    )
-    await seen["task"]
-    assert code == 0
+    await serve_while(settings, tmp_path / "utm.sqlite", scenario, SPEED)
     # phase 1: refused for the operator location alone
     assert any(ODID_REASON in t for t in seen["refusal"]), seen["refusal"]
     assert seen["system_before"] == 0 or all(

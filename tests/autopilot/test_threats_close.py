@@ -18,12 +18,11 @@ import dataclasses
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 from adapters.mavlink import MavlinkConfig
-from gcs_utm.app import OperatorMode, Runtime, serve
+from gcs_utm.app import Runtime
 from gcs_utm.model import (
     Operation,
     OperationId,
@@ -36,8 +35,9 @@ from gcs_utm.model import (
 from gcs_utm.settings import AirspaceConfig, Settings
 from gcs_utm.store import Store
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess
+from tests.autopilot.closed_loop import file_operations, serve_while, until
 from tests.autopilot.pilot import PilotLink, offset_deg
-from tests.autopilot.test_links import _operation, _until
+from tests.autopilot.test_links import _operation
 
 SPEED = 5.0
 HOVER_AGL_M = 12.0
@@ -63,6 +63,13 @@ def _open(rt: Runtime, kind: ThreatKind, op_id: OperationId) -> bool:
     return any(t.kind is kind and op_id in t.uas_ids for t in rt.usm.threats.values())
 
 
+async def _hover(pilot: PilotLink) -> None:
+    """Once ready, the copter takes off in GUIDED and hovers ``HOVER_AGL_M`` above its home
+    (in the air: on the ground these hazards are pre-flight findings)."""
+    await asyncio.to_thread(pilot.wait_ready)
+    await asyncio.to_thread(pilot.arm_and_start, 60.0, HOVER_AGL_M, auto=False)
+
+
 def _battery_used_mah(pilot: PilotLink) -> float:
     """The charge the copter has drawn so far (BATTERY_STATUS.current_consumed)."""
     m = pilot.wait("BATTERY_STATUS", 10.0, lambda m: m.current_consumed > 0)
@@ -75,60 +82,37 @@ async def test_gnss_and_battery_threats_close_when_the_fix_is_back_and_it_landed
 ) -> None:
     db = tmp_path / "utm.sqlite"
     op = _operation()
-    with Store(db) as store:
-        store.save_operation(op)
-        store.save_plan(op.plan)
+    file_operations(db, op)
     parm = tmp_path / "no-ekf-failsafe.parm"
     parm.write_text(NO_EKF_FAILSAFE)
-    stop = asyncio.Event()
-    done: dict[str, Any] = {}
 
     async def scenario(rt: Runtime) -> None:
+        ardupilot(instance=0, vehicle="copter", speed=SPEED, defaults=(parm,))
+        await until(lambda: op.id in rt.tracks(), 90.0, "no track of the operation")
+        pilot = await asyncio.to_thread(PilotLink, 0, "ardupilot", 5762)
         try:
-            ardupilot(instance=0, vehicle="copter", speed=SPEED, defaults=(parm,))
-            await _until(lambda: op.id in rt.tracks(), 90.0, "no track of the operation")
-            pilot = await asyncio.to_thread(PilotLink, 0, "ardupilot", 5762)
-            try:
-                await asyncio.to_thread(pilot.wait_ready)
-                # in the air: on the ground these hazards are pre-flight findings
-                await asyncio.to_thread(pilot.arm_and_start, 60.0, HOVER_AGL_M, auto=False)
-                await _until(lambda: rt.airspace.airborne(op.id), 30.0, "not airborne")
-                # 1. the fix goes and comes back
-                await asyncio.to_thread(pilot.set_params, {"SIM_GPS_DISABLE": 1.0})
-                gnss = ThreatKind.GNSS_DEGRADATION
-                await _until(lambda: _open(rt, gnss, op.id), 30.0, "no GNSS_DEGRADATION")
-                await asyncio.to_thread(pilot.set_params, {"SIM_GPS_DISABLE": 0.0})
-                await _until(lambda: not _open(rt, gnss, op.id), 30.0, "GNSS threat stayed open")
-                assert rt.airspace.airborne(op.id), "closed by a landing, not by the fix"
-                # 2. the battery runs low; the pilot lands
-                used = await asyncio.to_thread(_battery_used_mah, pilot)
-                capacity = float(max(1, round(used * 1.1)))  # about 9 % left
-                await asyncio.to_thread(pilot.set_params, {"BATT_CAPACITY": capacity})
-                low = ThreatKind.LACK_OF_BATTERY
-                await _until(lambda: _open(rt, low, op.id), 30.0, "no LACK_OF_BATTERY")
-                await asyncio.to_thread(pilot.set_mode, LAND)
-                await _until(lambda: not _open(rt, low, op.id), 60.0, "battery threat stayed open")
-            finally:
-                pilot.close()
-            done["ok"] = True
+            await _hover(pilot)
+            await until(lambda: rt.airspace.airborne(op.id), 30.0, "not airborne")
+            # 1. the fix goes and comes back
+            await asyncio.to_thread(pilot.set_params, {"SIM_GPS_DISABLE": 1.0})
+            gnss = ThreatKind.GNSS_DEGRADATION
+            await until(lambda: _open(rt, gnss, op.id), 30.0, "no GNSS_DEGRADATION")
+            await asyncio.to_thread(pilot.set_params, {"SIM_GPS_DISABLE": 0.0})
+            await until(lambda: not _open(rt, gnss, op.id), 30.0, "GNSS threat stayed open")
+            assert rt.airspace.airborne(op.id), "closed by a landing, not by the fix"
+            # 2. the battery runs low; the pilot lands
+            used = await asyncio.to_thread(_battery_used_mah, pilot)
+            capacity = float(max(1, round(used * 1.1)))  # about 9 % left
+            await asyncio.to_thread(pilot.set_params, {"BATT_CAPACITY": capacity})
+            low = ThreatKind.LACK_OF_BATTERY
+            await until(lambda: _open(rt, low, op.id), 30.0, "no LACK_OF_BATTERY")
+            await asyncio.to_thread(pilot.set_mode, LAND)
+            await until(lambda: not _open(rt, low, op.id), 60.0, "battery threat stayed open")
         finally:
-            stop.set()
-
-    async def on_runtime(rt: Runtime) -> None:
-        done["task"] = asyncio.create_task(scenario(rt))
+            pilot.close()
 
     t0 = time.monotonic()
-    code = await serve(
-        _settings(("tcp:127.0.0.1:5760",)),
-        db_path=db,
-        operator=OperatorMode.NONE,
-        headless=False,
-        stop=stop,
-        on_runtime=on_runtime,
-        speed=SPEED,
-    )
-    await done["task"]
-    assert code == 0 and done.get("ok")
+    await serve_while(_settings(("tcp:127.0.0.1:5760",)), db, scenario, SPEED)
     print(f"threats closed in {time.monotonic() - t0:.1f} s wall")
     with Store(db) as s:
         threats = {t.id: t for t in s.load_threats()}
@@ -165,62 +149,40 @@ async def test_a_loss_of_separation_closes_when_the_other_copter_lands(
     while both fly; it closes once the other one has landed, the reason in the audit."""
     db = tmp_path / "utm.sqlite"
     ops = [_operation(), _second(_operation(), APART_M)]
-    with Store(db) as store:
-        for o in ops:
-            store.save_operation(o)
-            store.save_plan(o.plan)
+    file_operations(db, *ops)
     lat, lon, ground_m, heading = ARDUPILOT_DEFAULT_HOME
     homes = [
         ARDUPILOT_DEFAULT_HOME,
         (lat, offset_deg(lat, lon, APART_M, 0.0)[1], ground_m, heading),
     ]
-    stop = asyncio.Event()
-    done: dict[str, Any] = {}
 
     def los(rt: Runtime) -> list[Threat]:
         return [t for t in rt.usm.threats.values() if t.kind is ThreatKind.LOSS_OF_SEPARATION]
 
-    async def scenario(rt: Runtime) -> None:
+    async def scenario(rt: Runtime) -> ThreatId:
+        for i, home in enumerate(homes):
+            ardupilot(instance=i, vehicle="copter", speed=SPEED, home=home)
+        await until(lambda: all(o.id in rt.tracks() for o in ops), 90.0, "no tracks")
+        pilots = [await asyncio.to_thread(PilotLink, i, "ardupilot", 5762 + 10 * i) for i in (0, 1)]
         try:
-            for i, home in enumerate(homes):
-                ardupilot(instance=i, vehicle="copter", speed=SPEED, home=home)
-            await _until(lambda: all(o.id in rt.tracks() for o in ops), 90.0, "no tracks")
-            pilots = [
-                await asyncio.to_thread(PilotLink, i, "ardupilot", 5762 + 10 * i) for i in (0, 1)
-            ]
-            try:
-                for p in pilots:
-                    await asyncio.to_thread(p.wait_ready)
-                for p in pilots:
-                    await asyncio.to_thread(p.arm_and_start, 60.0, HOVER_AGL_M, auto=False)
-                await _until(lambda: bool(los(rt)), 30.0, "no loss of separation")
-                done["threat"] = los(rt)[0].id
-                await asyncio.to_thread(pilots[1].set_mode, LAND)
-                await _until(lambda: not los(rt), 60.0, "the loss of separation stayed open")
-                assert rt.airspace.airborne(ops[0].id), "the first copter came down too"
-            finally:
-                for p in pilots:
-                    p.close()
-            done["ok"] = True
+            for p in pilots:
+                await asyncio.to_thread(p.wait_ready)
+            for p in pilots:
+                await asyncio.to_thread(p.arm_and_start, 60.0, HOVER_AGL_M, auto=False)
+            await until(lambda: bool(los(rt)), 30.0, "no loss of separation")
+            threat_id = los(rt)[0].id
+            await asyncio.to_thread(pilots[1].set_mode, LAND)
+            await until(lambda: not los(rt), 60.0, "the loss of separation stayed open")
+            assert rt.airspace.airborne(ops[0].id), "the first copter came down too"
         finally:
-            stop.set()
+            for p in pilots:
+                p.close()
+        return threat_id
 
-    async def on_runtime(rt: Runtime) -> None:
-        done["task"] = asyncio.create_task(scenario(rt))
-
-    code = await serve(
-        _settings(("tcp:127.0.0.1:5760", "tcp:127.0.0.1:5770")),
-        db_path=db,
-        operator=OperatorMode.NONE,
-        headless=False,
-        stop=stop,
-        on_runtime=on_runtime,
-        speed=SPEED,
-    )
-    await done["task"]
-    assert code == 0 and done.get("ok")
+    links = ("tcp:127.0.0.1:5760", "tcp:127.0.0.1:5770")
+    threat_id = await serve_while(_settings(links), db, scenario, SPEED)
     with Store(db) as s:
-        threat = next(t for t in s.load_threats() if t.id == done["threat"])
+        threat = next(t for t in s.load_threats() if t.id == threat_id)
         audit = [a for a in s.load_audit() if a.subject == threat.id]
     assert threat.status is ThreatStatus.CLOSED, threat
     reasons = [str(a.detail.get("reason", "")) for a in audit if a.action == "threat_closed"]
@@ -251,67 +213,47 @@ async def test_an_intruder_threat_closes_when_the_intruder_is_no_longer_heard(
     ``[tracking] intruder_drop_after_s`` and their threats close, the reason in the audit."""
     db = tmp_path / "utm.sqlite"
     op = _operation()
-    with Store(db) as store:
-        store.save_operation(op)
-        store.save_plan(op.plan)
+    file_operations(db, op)
     parm = tmp_path / "relay.parm"
     parm.write_text(RELAY_PARAMS)
-    stop = asyncio.Event()
-    done: dict[str, Any] = {}
 
     def intruder_threats(rt: Runtime) -> set[ThreatId]:
         return {t.id for t in rt.usm.threats.values() if t.kind is ThreatKind.INTRUDER}
 
-    async def scenario(rt: Runtime) -> None:
+    async def scenario(rt: Runtime) -> set[ThreatId]:
+        ardupilot(instance=0, vehicle="copter", speed=SPEED)
+        await until(lambda: op.id in rt.tracks(), 90.0, "no track of the operation")
+        pilot = await asyncio.to_thread(PilotLink, 0, "ardupilot", 5762)
         try:
-            ardupilot(instance=0, vehicle="copter", speed=SPEED)
-            await _until(lambda: op.id in rt.tracks(), 90.0, "no track of the operation")
-            pilot = await asyncio.to_thread(PilotLink, 0, "ardupilot", 5762)
-            try:
-                await asyncio.to_thread(pilot.wait_ready)
-                await asyncio.to_thread(pilot.arm_and_start, 60.0, HOVER_AGL_M, auto=False)
-            finally:
-                pilot.close()
-            relay = ardupilot(
-                instance=1,
-                vehicle="copter",
-                speed=SPEED,
-                defaults=(parm,),
-                extra_args=("--serial5=sim:adsb",),
-            )
-            await _until(lambda: bool(intruder_threats(rt)), 90.0, "no INTRUDER threat")
-            relay.stop()  # the aircraft are no longer heard
-            done["open"] = intruder_threats(rt)
-            await _until(lambda: not intruder_threats(rt), 60.0, "an INTRUDER threat stayed open")
-            done["ok"] = True
+            await _hover(pilot)
         finally:
-            stop.set()
+            pilot.close()
+        relay = ardupilot(
+            instance=1,
+            vehicle="copter",
+            speed=SPEED,
+            defaults=(parm,),
+            extra_args=("--serial5=sim:adsb",),
+        )
+        await until(lambda: bool(intruder_threats(rt)), 90.0, "no INTRUDER threat")
+        relay.stop()  # the aircraft are no longer heard
+        opened = intruder_threats(rt)
+        await until(lambda: not intruder_threats(rt), 60.0, "an INTRUDER threat stayed open")
+        return opened
 
-    async def on_runtime(rt: Runtime) -> None:
-        done["task"] = asyncio.create_task(scenario(rt))
-
-    code = await serve(
-        _settings(("tcp:127.0.0.1:5760", "tcp:127.0.0.1:5770")),
-        db_path=db,
-        operator=OperatorMode.NONE,
-        headless=False,
-        stop=stop,
-        on_runtime=on_runtime,
-        speed=SPEED,
-    )
-    await done["task"]
-    assert code == 0 and done.get("ok")
+    links = ("tcp:127.0.0.1:5760", "tcp:127.0.0.1:5770")
+    opened = await serve_while(_settings(links), db, scenario, SPEED)
     with Store(db) as s:
         reasons = {
             a.subject: str(a.detail.get("reason", ""))
             for a in s.load_audit()
-            if a.action == "threat_closed" and a.subject in done["open"]
+            if a.action == "threat_closed" and a.subject in opened
         }
         intruders = {t.intruder_id for t in s.load_threats() if t.kind is ThreatKind.INTRUDER}
     # the relay itself, disarmed on the ground below the copter, is no intruder
     assert all(str(i).startswith("icao:") for i in intruders), intruders
     print(f"intruder threats closed: {reasons}")
-    assert set(reasons) == done["open"], (reasons, done["open"])
+    assert set(reasons) == opened, (reasons, opened)
     # each closed once its aircraft was dropped (or, in the seconds before its track went
     # stale, flew clear of the copter): at least one closed because it was no longer heard
     assert any("is no longer tracked" in r for r in reasons.values()), reasons

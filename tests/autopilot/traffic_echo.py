@@ -8,7 +8,6 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import os
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,9 +18,10 @@ from pymavlink.dialects.v20 import common as mav
 
 from adapters.mavlink import MavlinkConfig
 from adapters.mavlink.traffic_out import TrafficOutConfig
-from gcs_utm.app import OperatorMode, Runtime, serve
+from gcs_utm.app import Runtime
 from gcs_utm.model import Icao24, Measurement, MeasurementSource
 from gcs_utm.settings import Settings
+from tests.autopilot.closed_loop import serve_while, until
 
 ICAO = 0xABC123
 
@@ -47,7 +47,6 @@ class Intruder:
 class Echo:
     """What came back: the vehicle's ADSB_VEHICLE frames and serve's counters and tracks."""
 
-    code: int
     frames: list[Any]
     out: dict[str, Any]
     relay: dict[str, Any]
@@ -68,14 +67,6 @@ class _Relayed:
                 self.frames.append(m)
 
 
-async def _until(cond: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            raise AssertionError(what)
-        await asyncio.sleep(0.1)
-
-
 async def run_echo(
     mavlink: MavlinkConfig,
     start_vehicle: Callable[[], object],
@@ -90,8 +81,6 @@ async def run_echo(
         mavlink=mavlink,
         traffic_out=TrafficOutConfig(enabled=True, radius_m=3000.0),
     )
-    stop = asyncio.Event()
-    seen: dict[str, Any] = {}
     relayed = _Relayed()
 
     async def feed(rt: Runtime) -> None:
@@ -112,18 +101,17 @@ async def run_echo(
             )
             await asyncio.sleep(1.0)
 
-    async def scenario(rt: Runtime) -> None:
+    async def scenario(rt: Runtime) -> Echo:
         rt.hub.raw_tap = relayed.tap
         feeding = asyncio.create_task(feed(rt))
         try:
             start_vehicle()
-            await _until(
+            await until(
                 lambda: any(m.ICAO_address == ICAO for m in relayed.frames),
                 90.0,
                 "the vehicle never reported the traffic it was sent",
             )
-            seen["echo"] = Echo(
-                code=-1,
+            return Echo(
                 frames=list(relayed.frames),
                 out=dataclasses.asdict(rt.traffic_out.counters),
                 relay=dataclasses.asdict(rt.hub.adsb_relay.counters),
@@ -131,30 +119,15 @@ async def run_echo(
             )
         finally:
             feeding.cancel()
-            stop.set()
 
-    async def on_runtime(rt: Runtime) -> None:
-        seen["task"] = asyncio.create_task(scenario(rt))
-
-    code = await serve(
-        settings,
-        db_path=tmp_path / "utm.sqlite",
-        operator=OperatorMode.NONE,
-        headless=False,
-        stop=stop,
-        on_runtime=on_runtime,
-        speed=speed,
-    )
-    await seen["task"]
-    echo: Echo = seen["echo"]
-    echo.code = code
-    return echo
+    # serve_while: serve exited with 0
+    return await serve_while(settings, tmp_path / "utm.sqlite", scenario, speed)
 
 
 def assert_echo_only_of_the_intruder(echo: Echo) -> Any:
-    """Serve ran cleanly, sent traffic, never the vehicle's own track, and fused the echo with
-    the intruder's track; the last echo frame is returned for the caller's position check."""
-    assert echo.code == 0
+    """Serve sent traffic, never the vehicle's own track, and fused the echo with the
+    intruder's track (run_echo: it ran cleanly); the last echo frame is returned for the
+    caller's position check."""
     assert echo.out["sent"] > 0 and echo.out["send_errors"] == 0
     # the vehicle's own track (sysid:1) was never sent to it, so nothing else came back
     assert {m.ICAO_address for m in echo.frames} == {ICAO}
