@@ -173,6 +173,8 @@ async def test_a_loss_of_separation_closes_when_the_other_copter_lands(
             threat_id = los(rt)[0].id
             await asyncio.to_thread(pilots[1].set_mode, LAND)
             await until(lambda: not los(rt), 60.0, "the loss of separation stayed open")
+            # EM audits the closing from its queue: serve must not stop before it has
+            await until(lambda: rt.emergency.em.case(threat_id) is None, 10.0, "EM's case open")
             assert rt.airspace.airborne(ops[0].id), "the first copter came down too"
         finally:
             for p in pilots:
@@ -239,6 +241,10 @@ async def test_an_intruder_threat_closes_when_the_intruder_is_no_longer_heard(
         relay.stop()  # the aircraft are no longer heard
         opened = intruder_threats(rt)
         await until(lambda: not intruder_threats(rt), 60.0, "an INTRUDER threat stayed open")
+        # EM audits each closing from its queue: serve must not stop before it has
+        await until(
+            lambda: all(rt.emergency.em.case(t) is None for t in opened), 10.0, "EM's case open"
+        )
         return opened
 
     links = ("tcp:127.0.0.1:5760", "tcp:127.0.0.1:5770")
