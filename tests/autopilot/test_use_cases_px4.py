@@ -67,10 +67,13 @@ def _px4_positions(record_dir: Path) -> dict[int, list[tuple[float, float, float
     out: dict[int, list[tuple[float, float, float, float]]] = {1: [], 2: []}
     for path in sorted(record_dir.glob("*.tlog")):
         log = mavutil.mavlink_connection(str(path), dialect="common")
-        while (m := log.recv_match(type="GLOBAL_POSITION_INT")) is not None:
-            if m.get_srcSystem() in out and m.lat != 0:
-                e, n = local_m(LAT0, LON0, m.lat / 1e7, m.lon / 1e7)
-                out[m.get_srcSystem()].append((m._timestamp, e, n, m.alt / 1000.0))
+        try:  # closed here: left to the garbage collector, a later test fails on its warning
+            while (m := log.recv_match(type="GLOBAL_POSITION_INT")) is not None:
+                if m.get_srcSystem() in out and m.lat != 0:
+                    e, n = local_m(LAT0, LON0, m.lat / 1e7, m.lon / 1e7)
+                    out[m.get_srcSystem()].append((m._timestamp, e, n, m.alt / 1000.0))
+        finally:
+            log.close()
     for samples in out.values():
         samples.sort()
     return out
