@@ -6,9 +6,11 @@ Pure."""
 
 from __future__ import annotations
 
+from gcs_utm.core.emergency.commanded import commanded_snapshot
 from gcs_utm.core.emergency.config import Action
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case, Decision, Mode
+from gcs_utm.core.emergency.fenced_hold import fence_free_hold
 from gcs_utm.core.emergency.immediate import held_by
 from gcs_utm.core.emergency.options import detail, intended
 from gcs_utm.core.emergency.selection import Selection, weighted
@@ -59,13 +61,14 @@ def single(  # noqa: PLR0917 - the case, its UAS and snapshot, what to offer, th
     case.modes[op_id] = Mode.SINGLE
     case.maneuvers[op_id] = maneuvers
     allowed = maneuvers - case.excluded.get(op_id, set())
+    start_t_s = em.plan_start(t, now)
     alts = em.td.resolve_single(
         t,
         op_id,
-        snapshot,
+        commanded_snapshot(em, snapshot, op_id, start_t_s),  # a fixed wing off its plan
         maneuvers=allowed,
         extra_geofences=tuple(case.geofences),
-        start_t_s=em.plan_start(t, now),
+        start_t_s=start_t_s,
         lead_in_from_t_s=em.earliest_receipt(now, (op_id,)),
     )
     cfg = em.config
@@ -92,7 +95,10 @@ def single(  # noqa: PLR0917 - the case, its UAS and snapshot, what to offer, th
             d = em.issue(case, op_id, now, command=cmd, reason=msg)
             return d.merge(Decision(escalations=(msg,), audit=audit))
         msg = f"{case.threat.id}: no feasible alternative for {op_id} ({t.kind.value})"
-        return Decision(audit=audit).merge(escalate_safe(em, case, [op_id], now, msg))
+        instead = fence_free_hold(em, t, op_id, snapshot)  # a fixed wing's hold into a fence
+        return Decision(audit=audit).merge(
+            escalate_safe(em, case, [op_id], now, msg, *(instead or (None, None)))
+        )
     best = alts[0]
     d = Decision(audit=(em.audit(now, "decision", case.threat.id, audit_detail),))
     return d.merge(
