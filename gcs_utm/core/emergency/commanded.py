@@ -5,7 +5,7 @@ how far it is off it now (:meth:`.deconfliction.context.Context.start_xyz`). A f
 that an immediate command has sent off its plan does not follow it: it circles where it was
 held, or flies towards its go-to point. Its new plan then started up to a plan-leg's flight
 from the aircraft, on the far side of a fence: a fixed wing turned away at 77 s was given a
-geofence reroute at 80 s starting 56 m from the track's extrapolation, turned back on its
+plan back round a fence at 80 s starting 56 m from the track's extrapolation, turned back on its
 radius to reach it and flew 5 s inside the fence (``enc_3_0409_late_near_threshold``); one
 held at 124 s got a "leave the fence" plan starting where its filed plan (7 s ahead)
 crossed the fence it was circling clear of, and flew it in (``enc_3_0235``).
