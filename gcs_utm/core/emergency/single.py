@@ -6,7 +6,6 @@ Pure."""
 
 from __future__ import annotations
 
-from gcs_utm.core.emergency.commanded import commanded_snapshot
 from gcs_utm.core.emergency.config import Action
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case, Decision, Mode
@@ -61,14 +60,13 @@ def single(  # noqa: PLR0917 - the case, its UAS and snapshot, what to offer, th
     case.modes[op_id] = Mode.SINGLE
     case.maneuvers[op_id] = maneuvers
     allowed = maneuvers - case.excluded.get(op_id, set())
-    start_t_s = em.plan_start(t, now)
     alts = em.td.resolve_single(
         t,
         op_id,
-        commanded_snapshot(em, snapshot, op_id, start_t_s),  # a fixed wing off its plan
+        snapshot,
         maneuvers=allowed,
         extra_geofences=tuple(case.geofences),
-        start_t_s=start_t_s,
+        start_t_s=em.plan_start(t, now),
         lead_in_from_t_s=em.earliest_receipt(now, (op_id,)),
     )
     cfg = em.config
