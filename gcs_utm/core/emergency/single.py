@@ -9,6 +9,7 @@ from __future__ import annotations
 from gcs_utm.core.emergency.config import Action
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case, Decision, Mode
+from gcs_utm.core.emergency.fenced_hold import fence_free_hold
 from gcs_utm.core.emergency.immediate import held_by
 from gcs_utm.core.emergency.options import detail, intended
 from gcs_utm.core.emergency.selection import Selection, weighted
@@ -92,7 +93,10 @@ def single(  # noqa: PLR0917 - the case, its UAS and snapshot, what to offer, th
             d = em.issue(case, op_id, now, command=cmd, reason=msg)
             return d.merge(Decision(escalations=(msg,), audit=audit))
         msg = f"{case.threat.id}: no feasible alternative for {op_id} ({t.kind.value})"
-        return Decision(audit=audit).merge(escalate_safe(em, case, [op_id], now, msg))
+        instead = fence_free_hold(em, t, op_id, snapshot)  # a fixed wing's hold into a fence
+        return Decision(audit=audit).merge(
+            escalate_safe(em, case, [op_id], now, msg, *(instead or (None, None)))
+        )
     best = alts[0]
     d = Decision(audit=(em.audit(now, "decision", case.threat.id, audit_detail),))
     return d.merge(
