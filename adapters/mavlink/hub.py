@@ -762,8 +762,12 @@ again."""
 
 
 def _streams_unanswered(st: VehicleState, t_s: float) -> bool:
-    """An ArduPilot that heartbeats but sent no position ``STREAM_RETRY_S`` after its streams
-    were asked for: the request was lost or undone (SITL reloads its parameter defaults, the
-    stream rates among them, while it boots), so it is asked again."""
+    """An ArduPilot that heartbeats but sent no position in the ``STREAM_RETRY_S`` since its
+    streams were last asked for: the request was lost or undone (SITL reloads its parameter
+    defaults, the stream rates among them, while it boots), so it is asked again. Positions
+    from before the request do not count: a vehicle restarted after sending some (its link
+    back, a reboot) was otherwise never asked again and stayed silent but for heartbeats."""
     asked = st.streams_asked_t_s
-    return st.last_position is None and asked is not None and t_s - asked >= STREAM_RETRY_S
+    if asked is None or t_s - asked < STREAM_RETRY_S:
+        return False
+    return st.position_t_s is None or st.position_t_s <= asked  # none after the request

@@ -102,6 +102,9 @@ class VehicleState:
     streams_asked_t_s: float | None = None
     """When the hub last asked this (ArduPilot) vehicle for its streams (hub clock, s)."""
 
+    position_t_s: float | None = None
+    """When its last position report (GLOBAL_POSITION_INT) arrived (hub clock, s)."""
+
     mission: list[MissionItem] | None = None
     """The vehicle's mission as last downloaded or read back after an upload (uploads keep
     its landing sequence)."""
@@ -432,6 +435,7 @@ class VehicleState:
         ):
             return  # PX4 fills alt with INT32_MIN (-2147483.648 m) when it has no altitude
         self._last_fix = (lat, lon, alt)
+        self.position_t_s = t_s
         offset = self.offset_s  # capture_t_s(), inline
         eph = self.eph_m
         epv = self.epv_m

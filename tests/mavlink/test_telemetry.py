@@ -211,6 +211,38 @@ async def test_ardupilot_asked_again_while_it_sends_no_position(
     v.close()
 
 
+async def test_ardupilot_restarted_after_positions_is_asked_again(
+    env: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An ArduPilot that sent positions, then rebooted (its clock back) and, its new
+    request undone while it booted, sends only heartbeats: asked again, as a vehicle that
+    never sent a position is (on CI a restarted ArduCopter stayed silent for good)."""
+    import adapters.mavlink.hub as hub_module
+
+    monkeypatch.setattr(hub_module, "STREAM_RETRY_S", 0.2)
+    v = await env.vehicle(13, autopilot=3)
+    for k in range(3):
+        v.position(boot_ms=60_000 + 100 * k)
+    await _settle()
+
+    def asked() -> int:
+        return sum(m.get_type() == "REQUEST_DATA_STREAM" for m in v.received)
+
+    await asyncio.sleep(0.3)
+    v.heartbeat()  # positions came after the first request: not asked again
+    await _settle()
+    first = asked()
+    v.position(boot_ms=2_000)  # the new life's first report: a reboot, asked at once
+    await _settle()
+    assert env.hub.state(SysId(13)).reboots == 1 and asked() > first
+    rebooted = asked()
+    await asyncio.sleep(0.3)
+    v.heartbeat()  # no position since: asked again
+    await _settle()
+    assert asked() > rebooted
+    v.close()
+
+
 # ---- the vehicle clock filter (VehicleState, no sockets) -----------------------------------
 
 
