@@ -24,6 +24,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -39,6 +40,20 @@ SCENARIOS = Path(__file__).resolve().parents[2] / "config" / "scenarios"
 GROUND_M = 675.0
 ORIGIN = (40.6597, -3.5969)
 WATCH_S = 30.0  # simulated seconds watched on the ground, before and after the reboot
+
+
+def _fly(path: Path, out_dir: Path, operator: str, duration_s: float) -> dict[str, Any]:
+    """The scenario at ``path`` flown by the built-in vehicles in fast time, headless, for
+    ``duration_s``: its run report."""
+    options = RunOptions(
+        speed=math.inf,
+        headless=True,
+        operator=operator,
+        out_dir=out_dir,
+        figures=False,
+        duration_s=duration_s,
+    )
+    return run_scenario_blocking(path, Settings(), options).to_json()
 
 
 def _free_udp_port() -> int:
@@ -177,15 +192,7 @@ def test_threats_close_when_the_fix_is_back_and_when_the_uas_landed(tmp_path: Pa
     )
     path = tmp_path / "use_case_2_two_jammed.toml"
     path.write_text(text)
-    options = RunOptions(
-        speed=math.inf,
-        headless=True,
-        operator=OperatorMode.AUTO_ACCEPT,
-        out_dir=tmp_path,
-        figures=False,
-        duration_s=150.0,
-    )
-    report = run_scenario_blocking(path, Settings(), options).to_json()
+    report = _fly(path, tmp_path, OperatorMode.AUTO_ACCEPT, 150.0)
     closed = {
         (t["kind"], t["uas"][0]): t["message"] for t in report["threats"] if t["status"] == "closed"
     }
@@ -287,15 +294,7 @@ def test_a_return_home_lands_at_home_and_its_threat_closes_on_the_ground(
     stayed open: return_home was proposed again every 30 s until a LAND command ended it.)"""
     path = tmp_path / "return_home.toml"
     path.write_text(_RETURN_HOME_SCENARIO.format(autopilot=autopilot))
-    options = RunOptions(
-        speed=math.inf,
-        headless=True,
-        operator=OperatorMode.AUTO_ACCEPT,
-        out_dir=tmp_path,
-        figures=False,
-        duration_s=130.0,
-    )
-    report = run_scenario_blocking(path, Settings(), options).to_json()
+    report = _fly(path, tmp_path, OperatorMode.AUTO_ACCEPT, 130.0)
     # return_home flown to the ground: no LAND command needed in the end
     [rec] = report["recommendations"]
     assert (rec["maneuver"], rec["state"]) == ("return_home", "applied"), rec["history"]
@@ -360,15 +359,7 @@ def test_a_loss_of_separation_closes_when_the_other_sitl_uas_lands(tmp_path: Pat
     )
     path = tmp_path / "other_uas_lands.toml"
     path.write_text(_OTHER_LANDS_SCENARIO.format(operations=operations))
-    options = RunOptions(
-        speed=math.inf,
-        headless=True,
-        operator=OperatorMode.NONE,
-        out_dir=tmp_path,
-        figures=False,
-        duration_s=70.0,
-    )
-    report = run_scenario_blocking(path, Settings(), options).to_json()
+    report = _fly(path, tmp_path, OperatorMode.NONE, 70.0)
     los = [t for t in report["threats"] if t["kind"] == "LOSS_OF_SEPARATION"]
     assert los, report["threats"]
     last = los[-1]
