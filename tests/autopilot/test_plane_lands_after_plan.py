@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import math
 import socket
+import subprocess
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -33,7 +34,7 @@ from pymavlink.dialects.v20 import common as mav
 
 from tests.adsb.sbs_lines import sbs_position, sbs_velocity
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess, wait_tcp_listening
-from tests.autopilot.closed_loop import Crossing, _config, _wait_operations, rows, serve_process
+from tests.autopilot.closed_loop import Crossing, _config, rows, serve_process
 from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 from tests.autopilot.test_plane_takeoff import AUTO, _download
 
@@ -181,7 +182,7 @@ def test_arduplane_avoids_an_intruder_and_lands_on_its_own_landing(
                 "sbs_times_are_utc = false\nreconnect_max_s = 1.0\n"
             )
             with serve_process(cfg, db, log_path, SPEED) as serve:
-                _wait_operations(db, 1, 60.0, serve)
+                _wait_filed(pilot, db, serve)
                 pilot.set_mode(AUTO)
                 pilot._arm(60.0)
                 _fly(pilot, ground, airborne)
@@ -208,6 +209,17 @@ def test_arduplane_avoids_an_intruder_and_lands_on_its_own_landing(
     from_home_m = math.hypot(*local_m(lat0, lon0, last.lat_deg, last.lon_deg))
     assert from_landing_m < TOUCHDOWN_M, f"landed {from_landing_m:.0f} m from its landing"
     assert from_home_m > 400.0, f"landed {from_home_m:.0f} m from home"
+
+
+def _wait_filed(pilot: PilotLink, db: Path, serve: subprocess.Popen[bytes]) -> None:
+    """Until serve has filed the plane's operation, reading the pilot's link meanwhile: left
+    unread while serve starts (20 s and more at a load of 20 on 2 cores), its backlog held
+    back the ACK of the pilot's next command beyond its 5 s."""
+    end = time.monotonic() + 120.0
+    while not rows(db, "SELECT id FROM operations"):
+        assert serve.poll() is None, "gcs-utm serve exited early"
+        assert time.monotonic() < end, "no operation filed after 120 s"
+        pilot.poll(0.5)
 
 
 def _fly(pilot: PilotLink, ground_amsl_m: float, airborne: threading.Event) -> None:
