@@ -79,6 +79,15 @@ def _mission(lat0: float, lon0: float) -> list[Any]:
     ]
 
 
+def adsb_config(port: int) -> str:
+    """The ``[adsb]`` table of serve's configuration reading :func:`_sbs_feed` on ``port``
+    (capture time: the receipt, on serve's clock)."""
+    return (
+        f'\n[adsb]\nenabled = true\nhost = "127.0.0.1"\nsbs_port = {port}\n'
+        "sbs_times_are_utc = false\nreconnect_max_s = 1.0\n"
+    )
+
+
 @contextlib.contextmanager
 def _sbs_feed(line: Callable[[], list[str] | None]) -> Iterator[int]:
     """A dump1090-style SBS-1 server on 127.0.0.1 (an ephemeral port, yielded): every client
@@ -176,11 +185,7 @@ def test_arduplane_avoids_an_intruder_and_lands_on_its_own_landing(
         assert [int(it.command) for it in uploaded] == [int(it.command) for it in mission]
         with _sbs_feed(intruder) as port:
             cfg = _config(tmp_path / "serve.toml", crossing, ["tcp:127.0.0.1:5762"])
-            cfg.write_text(
-                cfg.read_text()
-                + f'\n[adsb]\nenabled = true\nhost = "127.0.0.1"\nsbs_port = {port}\n'
-                "sbs_times_are_utc = false\nreconnect_max_s = 1.0\n"
-            )
+            cfg.write_text(cfg.read_text() + adsb_config(port))
             with serve_process(cfg, db, log_path, SPEED) as serve:
                 _wait_filed(pilot, db, serve)
                 pilot.set_mode(AUTO)
