@@ -14,7 +14,8 @@ that flies a mission is an operation, filed from the mission it has, kept in ste
   horizontally), and its home is set to the vehicle's at arming (the floor of its flight).
 - A mission present before the first 3D fix is filed, whole, when the fix comes. A disarmed
   vehicle's plan is its whole mission from where it stands (the current item counts only in
-  the air); it is re-timed from the vehicle's progress when it starts the mission.
+  the air); it is re-timed from the vehicle's progress when it starts the mission. A vehicle
+  found flying (a restarted service) is timed from its first MISSION_CURRENT, not before.
 - A reboot forgets the home: a new pre-flight.
 - Timed from the vehicle's progress, not from the download: the plan starts at the vehicle's
   position, flies to the current item (MISSION_CURRENT) and on at the mission's speeds
@@ -641,7 +642,11 @@ class VehicleOps:
     def _plan(
         self, v: _Vehicle, points: list[NavPoint], op_id: OperationId, version: int, reason: str
     ) -> FlightPlan | None:
-        """The plan of ``points``, timed from the vehicle's current item and position now."""
+        """The plan of ``points``, timed from the vehicle's current item and position now;
+        None for a vehicle found flying before its first MISSION_CURRENT (a restarted service:
+        the whole mission would send it back to its take-off)."""
+        if v.armed and v.seq is None:
+            return None
         try:
             return plan_from_points(
                 points,
@@ -758,6 +763,8 @@ class VehicleOps:
         if v.downloading:
             v.start_pending = v.start_pending or started
             return  # (the arming that started it also downloads the mission: after that)
+        if op is None and v.items:  # found flying: filed at its first current item (_plan)
+            self._file(v, changed=False)
         if op is None or op.conops != CONOPS or v.items is None or not self._ours(op.id):
             return
         points = self._points(v)
@@ -771,15 +778,8 @@ class VehicleOps:
         if not started:
             # the first waypoint of the new plan that the old one has (the position the
             # plan starts from is not one of them): how far off in time the old plan is there
-            gap = next(
-                (
-                    w.t_s - o.t_s
-                    for w in plan.waypoints
-                    for o in op.plan.waypoints
-                    if _same_wp(w, o)
-                ),
-                None,
-            )
+            pairs = ((w, o) for w in plan.waypoints for o in op.plan.waypoints)
+            gap = next((w.t_s - o.t_s for w, o in pairs if _same_wp(w, o)), None)
             if gap is None:
                 return  # no item of it is in the plan: the mission check re-files it
             tolerance_s = op.flight_geometry_m / max(op.cruise_speed_mps, 0.1)
