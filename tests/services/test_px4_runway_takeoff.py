@@ -66,11 +66,15 @@ def _off_m(
 
 
 def test_px4_rolls_on_its_parked_heading_then_turns_back_for_its_takeoff_line() -> None:
-    for flown, within_m in zip(FLIGHTS, (3.0, 12.5), strict=True):
+    """NPFG's convergence on the take-off line, then (at the take-off altitude) its flight for
+    the take-off position while it climbs to the next waypoint's altitude: within 9.5 m across
+    and 5 m up (the full-bank turn straight onto the line, then along it to the take-off
+    position and level to it, was 14.1 m across and 7.7 m up on the second take-off)."""
+    for flown, within_m in zip(FLIGHTS, (3.0, 9.5), strict=True):
         home = flown["home"]
         turned = [_off_m(_plan(flown["heading_deg"], flown), q, home) for q in flown["track"]]
         assert max(h for h, _ in turned) < within_m
-        assert max(abs(v) for _, v in turned[:5]) < 6.0  # the climb
+        assert max(abs(v) for _, v in turned) < 5.0
         straight = [_off_m(_plan(None, flown), q, home) for q in flown["track"]]
         assert max(h for h, _ in straight) > 25.0
 
