@@ -124,6 +124,10 @@ airspeed and the sine of the error to its bearing (``NPFG::lateralAccel``)."""
 ROLL_LAG_S = 0.3
 """The lag of the lateral acceleration behind NPFG's command (roll dynamics), fitted to the
 recorded take-off (``tests/data/flown/px4_plane_second_takeoff_2.json``)."""
+PX4_TAKEOFF_MPS = 13.5
+"""PX4 v1.15.2 SIH's ground speed in its take-off climb (at its take-off airspeed,
+FW_TKO_AIRSPD unset: the minimum airspeed as the setpoint), measured 12.6-14.7 m/s in the
+turn; fitted to the recorded take-offs."""
 PX4_FLOWN_MPS = 14.5
 """The ground speed PX4 v1.15.2 SIH flies at its 15 m/s trim airspeed (no wind), measured."""
 CLIMB_MPS = 5.0
@@ -140,25 +144,27 @@ def px4_takeoff(start: P, heading_deg: float | None, climb: list[P], wp: P, nxt:
     ``nxt`` (the next item with a position): from the ground roll's end (along
     ``heading_deg``, where it stands parked, when that is off the line; else the line's) the
     points up to the take-off altitude (points of the take-off), then those until it heads
-    for the take-off position and that position (points of ``nxt``); ``nxt`` itself follows.
+    for ``nxt`` (points of ``nxt``); ``nxt`` itself follows. The take-off's position is not
+    flown over.
 
     PX4 v1.15 (``FixedwingPositionControl``): once off the ground the runway take-off follows
     the line from its start through the take-off position (NPFG ``navigateLine``); the
     NAV_TAKEOFF completes as soon as the plane is above the item's altitude
     (``MissionBlock::is_mission_item_reached``), wherever it is; the next waypoint is then
-    flown from the take-off's position, and a plane short of that position by more than the
-    switch distance flies straight for it first (``navigateWaypoints``: "we are in front of
-    the start waypoint"), a pursuit. NPFG's bearing to a line: across it while the track
-    error is beyond its bound (``V period damping``, 101 m), along it on it, at the
-    look-ahead angle ``pi/2 (1 - e/bound)^2`` from across between; its lateral acceleration
-    ``gain V sin(error)`` (``gain V`` beyond 90 deg) is capped by the roll limit. Integrated
-    here at 14.5 m/s with the climb's gradient in distance flown. Measured on PX4 v1.15.2 SIH
-    (the soak's second take-off, parked on 152 deg, take-off position 600 m north): it rolled
-    south-east, turned left through north to -43 deg (converging on the line from the east),
-    reached 30 m about 90 m out, turned right and flew for the take-off position, still 10 m
-    east of the line 100 m north of its start: the model within 9 m of it across and 4.4 m up
-    throughout, where the full-bank turn back onto the line was 14 m off. From the completion
-    it climbs towards the next waypoint's altitude (``FW_T_CLMB_MAX``, 5 m/s)."""
+    pursued from there (``control_auto_position``: a previous setpoint of type TAKEOFF is
+    not used, ``navigateWaypoint``). NPFG's bearing to a line: across it while the track
+    error is beyond its bound (``V period damping``), along it on it, at the look-ahead angle
+    ``pi/2 (1 - e/bound)^2`` from across between; its lateral acceleration ``gain V
+    sin(error)`` (``gain V`` beyond 90 deg) is capped by the roll limit. Integrated here at
+    the take-off's ground speed until the climb's run is flown, then at the cruise's, while
+    it climbs to the next waypoint's altitude (``FW_T_CLMB_MAX``). Measured on PX4 v1.15.2 SIH
+    (the soak's second and third take-offs, parked on 152-157 deg, take-off position 600 m
+    north): it rolled south-east, turned left through north to -43 deg (converging on the
+    line from the east), reached the take-off altitude about 90 m out, turned right and flew
+    straight for the next waypoint, 2 m west of the line from there to it 325 m north of its
+    start, where the line to the take-off position was 10 m further west. The model is within
+    3.1 m across and 5.5 m up of the recorded take-offs, where the full-bank turn back onto
+    the line and on to the take-off position was 10.7-14.1 m across."""
     k = math.cos(math.radians(start.lat_deg))
 
     def en(q: Point) -> tuple[float, float]:
@@ -175,7 +181,7 @@ def px4_takeoff(start: P, heading_deg: float | None, climb: list[P], wp: P, nxt:
         roll_m, psi_deg = min(LIFT_OFF_M, roll_m), heading_deg
     run_m = max(math.hypot(*en(climb[1])), roll_m + 1.0)
     base_m, top_m = climb[0].alt_amsl_m, climb[1].alt_amsl_m
-    flight = _Npfg(psi_deg, roll_m, min(max(nxt.speed_mps, 1.0), PX4_FLOWN_MPS))
+    flight = _Npfg(psi_deg, roll_m, PX4_TAKEOFF_MPS)
 
     def at(q: P, alt: float) -> P:
         lat = start.lat_deg + flight.n / _M_PER_DEG_LAT
@@ -187,6 +193,7 @@ def px4_takeoff(start: P, heading_deg: float | None, climb: list[P], wp: P, nxt:
         climbed = (flight.flown_m - roll_m) / (run_m - roll_m)
         out.append(at(wp, base_m + (top_m - base_m) * min(climbed, 1.0)))
     out.append(at(wp, top_m))
+    flight.fly_at(min(max(nxt.speed_mps, 1.0), PX4_FLOWN_MPS))
     top_at_m = flight.flown_m
 
     def towards_next(flown_m: float) -> float:
@@ -194,11 +201,11 @@ def px4_takeoff(start: P, heading_deg: float | None, climb: list[P], wp: P, nxt:
         change_m = (flown_m - top_at_m) * CLIMB_MPS / flight.speed
         return top_m + max(min(nxt.alt_amsl_m - top_m, change_m), -change_m)
 
-    for _ in flight.pursuit((we, wn)):
+    for _ in flight.pursuit(en(nxt)):
         out.append(at(nxt, towards_next(flight.flown_m)))
-    left_m = math.hypot(we - flight.e, wn - flight.n)
-    alt = towards_next(flight.flown_m + left_m)
-    return [*out, nxt.moved(wp.lat_deg, wp.lon_deg, alt).synthetic()]
+    if flight.flown_m > top_at_m + 1.0:  # where the turn ends: then straight for ``nxt``
+        out.append(at(nxt, towards_next(flight.flown_m)))
+    return out
 
 
 class _Npfg:
@@ -208,9 +215,14 @@ class _Npfg:
     def __init__(self, course_deg: float, roll_m: float, speed_mps: float) -> None:
         self.psi = math.radians(course_deg)
         self.e, self.n = math.sin(self.psi) * roll_m, math.cos(self.psi) * roll_m
-        self.flown_m, self.speed, self.accel = roll_m, speed_mps, 0.0
-        self.bound_m = speed_mps * PX4_PERIOD_S * NPFG_DAMPING
+        self.flown_m, self.accel = roll_m, 0.0
         self.limit = 9.81 * math.tan(math.radians(PX4_ROLL_LIMIT_DEG))
+        self.speed = self.bound_m = 0.0
+        self.fly_at(speed_mps)
+
+    def fly_at(self, speed_mps: float) -> None:
+        """Fly at ``speed_mps`` from now on (NPFG's track-error bound scales with it)."""
+        self.speed, self.bound_m = speed_mps, speed_mps * PX4_PERIOD_S * NPFG_DAMPING
 
     def step(self, bearing: float) -> None:
         """One step of flight towards the course ``bearing``."""
