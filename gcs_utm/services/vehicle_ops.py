@@ -428,7 +428,7 @@ class VehicleOps:
         if s.position is not None:
             v.position = s.position
         v.heading_deg = s.heading_deg
-        if not v.armed:  # until it arms: the heading of its take-off run
+        if not v.armed or s.landed is True:  # on the ground: the heading of its take-off run
             v.takeoff_heading_deg = s.heading_deg
         v.total = s.mission_total
         v.mission_id = s.mission_id
