@@ -335,6 +335,7 @@ class _Vehicle:
     home: Position | None = None  # HOME_POSITION, else ArduPilot's item 0
     home_from_status: bool = False
     seq: int | None = None
+    stale_seq: int | None = None  # a stale MISSION_CURRENT after PX4 restarted (mission_order)
     position: Position | None = None
     takeoff_heading_deg: float | None = None  # its heading when it armed (a fixed wing's run)
     heading_deg: float | None = None  # its last (GLOBAL_POSITION_INT hdg)
@@ -428,7 +429,7 @@ class VehicleOps:
         if s.position is not None:
             v.position = s.position
         v.heading_deg = s.heading_deg
-        if not v.armed:  # until it arms: the heading of its take-off run
+        if not v.armed or s.landed is True:  # on the ground: the heading of its take-off run
             v.takeoff_heading_deg = s.heading_deg
         v.total = s.mission_total
         v.mission_id = s.mission_id
@@ -449,10 +450,9 @@ class VehicleOps:
         v.armed = s.armed
         flying = s.armed and s.mode in _FLYING_MODES
         started = flying and not v.flying
-        advanced = s.mission_seq is not None and s.mission_seq != v.seq
-        v.flying = flying
-        if s.mission_seq is not None:
-            v.seq = s.mission_seq
+        seq, v.stale_seq = mission_order.current_seq(s, v.autopilot, v.stale_seq, started)
+        advanced = seq is not None and seq != v.seq
+        v.flying, v.seq = flying, v.seq if seq is None else seq
         if flying and (started or advanced):
             self._retime(v, started=started)
 
