@@ -68,12 +68,16 @@ def test_an_entry_sooner_than_a_plan_can_start_gets_the_hold() -> None:
 
 
 def test_an_entry_a_plan_is_in_time_for_gets_plans() -> None:
-    """The entry 10 s ahead (a plan starts 7 s ahead), or already past (the UAS stopped short
-    of it under the command, the threat keeping its first time): TD's plans are tried."""
+    """The entry 10 s ahead (a plan starts 7 s ahead), already past (the UAS stopped short
+    of it under the command, the threat keeping its first time), or a conflict EM derived
+    from another threat (a fence it creates): TD's plans are tried."""
     em = make_em()
     snap = _towards_fence(60.0)
     far = _threat(snap, 60.0)
     assert fence_command(em.ctx, Case(far, Action.REROUTE, snap.t_s), B, snap, far) is None
+    late = _threat(snap, 30.0)
+    alert = replace(late, kind=ThreatKind.ALERT_WARNING)  # B is blocked by the fence it makes
+    assert fence_command(em.ctx, Case(alert, Action.REROUTE, snap.t_s), B, snap, late) is None
     past = replace(_threat(snap, 30.0), predicted_event_at_s=snap.t_s - 1.0)
     assert late_entry(em.ctx, past, snap.t_s) == ""
     loss = replace(_threat(snap, 30.0), kind=ThreatKind.LOSS_OF_SEPARATION)

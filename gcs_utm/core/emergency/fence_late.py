@@ -51,6 +51,8 @@ def fence_command(
     geofence entry nearer than a new plan's start, or None: not such a conflict, or no
     command that keeps the minima (and, for a fixed wing, enters no fence)."""
     now = snapshot.t_s
+    if threat is not case.threat:  # derived (a UAS a new fence blocks): no entry time
+        return None
     why = late_entry(em, threat, now)
     op = snapshot.operations.get(op_id)
     if not why or op is None:
