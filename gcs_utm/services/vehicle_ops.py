@@ -339,6 +339,7 @@ class _Vehicle:
     position: Position | None = None
     takeoff_heading_deg: float | None = None  # its heading when it armed (a fixed wing's run)
     heading_deg: float | None = None  # its last (GLOBAL_POSITION_INT hdg)
+    landed: bool | None = None  # its last landed state (None: not reported)
     armed: bool = False
     flying: bool = False  # armed in a mission mode
     downloading: bool = False
@@ -428,7 +429,7 @@ class VehicleOps:
             return
         if s.position is not None:
             v.position = s.position
-        v.heading_deg = s.heading_deg
+        v.heading_deg, v.landed = s.heading_deg, s.landed
         if not v.armed or s.landed is True:  # on the ground: the heading of its take-off run
             v.takeoff_heading_deg = s.heading_deg
         v.total = s.mission_total
@@ -642,10 +643,9 @@ class VehicleOps:
     def _plan(
         self, v: _Vehicle, points: list[NavPoint], op_id: OperationId, version: int, reason: str
     ) -> FlightPlan | None:
-        """The plan of ``points``, timed from the vehicle's current item and position now;
-        None for a vehicle found flying before its first MISSION_CURRENT (a restarted service:
-        the whole mission would send it back to its take-off)."""
-        if v.armed and v.seq is None:
+        """The plan of ``points``, timed from the vehicle's current item and position now; None
+        for one found in the air before its first MISSION_CURRENT (a restarted service)."""
+        if v.armed and v.seq is None and v.landed is not True:
             return None
         try:
             return plan_from_points(
