@@ -15,6 +15,7 @@ from gcs_utm.core.emergency.circle_entry import entry_loop, entry_reach_m
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_move_end import F1, F2, _scene, loiter, plan_to_local, sc
+
 from gcs_utm.model import ThreatKind
 
 

@@ -42,7 +42,7 @@ def entry_loop(
     cy = float(end[1]) - radius_m * math.cos(arrive_rad)
     phi0 = math.atan2(float(end[1]) - cy, float(end[0]) - cx)
     half_s = math.pi * radius_m / max(speed_mps, 1e-3)
-    t = np.arange(1, math.ceil(2.0 * half_s / step_s) + 1) * step_s
+    t = np.arange(1, math.ceil(2.0 * half_s / step_s) + 1, dtype=np.float64) * step_s
     t = t[t <= 2.0 * half_s]
     out_t = t[t <= half_s]
     e = cx + radius_m * np.cos(phi0 - out_t * speed_mps / radius_m)
@@ -52,6 +52,6 @@ def entry_loop(
     back_t = t[t > half_s] - half_s
     r = entry_reach_m(radius_m) - (entry_reach_m(radius_m) - radius_m) * back_t / half_s
     ang = far - back_t * speed_mps / (1.5 * radius_m)
-    e = np.concatenate([e, float(end[0]) + r * np.cos(ang)])
-    n = np.concatenate([n, float(end[1]) + r * np.sin(ang)])
-    return e, n, t
+    east: FloatArray = np.concatenate([e, float(end[0]) + r * np.cos(ang)])
+    north: FloatArray = np.concatenate([n, float(end[1]) + r * np.sin(ang)])
+    return east, north, t

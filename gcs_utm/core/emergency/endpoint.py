@@ -14,9 +14,10 @@ When Monitoring predicts a loss between two airborne UAS after both of their pla
 end point (:func:`move_end`): for each UAS of the pair that may move (below the immovable
 priority), the nearest new end point, horizontally on 16 bearings or vertically by the
 vertical minimum within the altitude band, whose loiter or hover clears the end point of
-every other UAS that is traffic, and whose plan (from where the UAS is now straight to the
-new end point, then one loiter circle for a fixed wing) TD verifies against the traffic and
-the geofences. The lowest priority moves (then the shortest move). The plan is proposed like
+every other UAS that is traffic (a fixed wing's by the loop it flies entering its circle,
+:mod:`.circle_entry`), and whose plan (from where the UAS is now straight to the new end
+point, then the loop and one loiter circle for a fixed wing) TD verifies against the traffic
+and the geofences. The lowest priority moves (then the shortest move). The plan is proposed like
 any other (maneuver ``move_end``) with the reason in the audit; when no end point is found,
 EM goes on with its immediate commands.
 """
