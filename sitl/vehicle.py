@@ -15,6 +15,7 @@ peer sends can raise out of a handler (bad input is counted in `counters`).
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import math
 import random
@@ -49,6 +50,16 @@ REBOOT_DOWN_S = 3.0  # simulated s without a word between the reboot and the new
 IGNORED_MESSAGES = frozenset({"SYSTEM_TIME", "COMMAND_ACK", "STATUSTEXT", "PING"})
 
 __all__ = ["PHYSICS_DT_S", "PLANE_MODES", "Vehicle", "mission_items_from_specs", "stream_msg_id"]
+
+
+def _protocol_now_s() -> float:
+    """The time of the mission protocol's timers (re-request, operation timeout): the running
+    loop's, i.e. real seconds on an ordinary loop and simulated seconds on a fast-time loop
+    (wall time there would fire them by how loaded the machine is, not by the simulation)."""
+    try:
+        return asyncio.get_running_loop().time()
+    except RuntimeError:  # no loop running (a synchronous caller): real seconds
+        return time.monotonic()
 
 
 class Vehicle:
@@ -292,7 +303,7 @@ class Vehicle:
         t = m.type
         if t == "HEARTBEAT":
             return
-        if self.mission_server.handle(link, m, time.monotonic()):
+        if self.mission_server.handle(link, m, _protocol_now_s()):
             return
         handler = self._handlers.get(t)
         if handler is not None:
@@ -319,7 +330,7 @@ class Vehicle:
         if self._reboot_at_s is not None and t_s >= self._reboot_at_s:
             self._restart()
             return
-        self.mission_server.tick(time.monotonic())
+        self.mission_server.tick(_protocol_now_s())
         if clock.t_s >= self._next_history_t:
             self._next_history_t = clock.t_s + HISTORY_PERIOD_S
             self.position_history.append(

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import time
 from dataclasses import dataclass
 
 from adapters.mavlink.landing import plan_mission
@@ -51,6 +50,7 @@ from adapters.mavlink.transfer import (
     Transfers,
     UploadFailure,
     UploadResult,
+    _loop_time,
 )
 from adapters.mavlink.vehicle import VehicleState
 from gcs_utm.messages import FlightMode, VehicleKey
@@ -101,7 +101,7 @@ class Uploads:
         last waypoint (a multirotor's NAV_LAND there, in place of the landing sequence of the
         vehicle's mission; a fixed wing's plan is followed by that sequence). Never raises
         for vehicle behaviour: failures are in the result."""
-        t0 = time.monotonic()
+        t0 = _loop_time()
         try:
             st = self.transfers.link.state(sys_id)
         except MavlinkError as exc:
@@ -159,7 +159,7 @@ class Uploads:
         _t0: float | None = None,
     ) -> UploadResult:
         """Upload raw mission items; the item flagged ``current`` is the one to start at."""
-        t0 = time.monotonic() if _t0 is None else _t0
+        t0 = _loop_time() if _t0 is None else _t0
         end = t0 + self.transfers.budget_s(deadline_t_s)
         failure = UploadFailure.NO_VEHICLE
         errors: list[str] = []
@@ -182,7 +182,7 @@ class Uploads:
                     verified=True,
                     attempts=tried.attempts,
                     items=len(items),
-                    duration_s=time.monotonic() - t0,
+                    duration_s=_loop_time() - t0,
                     current_set=True,
                     mode_set=tried.mode_set,
                     tries=tries,
@@ -191,7 +191,7 @@ class Uploads:
             _log.warning("upload to %s, try %d failed (%s): %s", vehicle, tries, failure, error)
             if failure in _NO_RETRY or tries == UPLOAD_TRIES:
                 break
-            await asyncio.sleep(max(0.0, min(RETRY_PAUSE_S, end - time.monotonic() - 1.0)))
+            await asyncio.sleep(max(0.0, min(RETRY_PAUSE_S, end - _loop_time() - 1.0)))
         self.transfers.counters.uploads_failed += 1
         return _failed(len(items), tries, t0, ("; ".join(errors), failure), tried)
 
@@ -265,7 +265,7 @@ class Uploads:
                 raise TransferError(
                     f"mission mode refused: {res.error}", UploadFailure.MODE_NOT_SET
                 )
-        wait_s = max(0.0, min(MODE_CONFIRM_S, end - time.monotonic()))
+        wait_s = max(0.0, min(MODE_CONFIRM_S, end - _loop_time()))
         if not await self.transfers.wait_mode(st, FlightMode.MISSION, wait_s):
             raise TransferError(
                 f"HEARTBEAT still shows {st.mode.value} after the mission mode was accepted",
@@ -282,7 +282,7 @@ def _failed(
         verified=tried.verified,
         attempts=tried.attempts,
         items=n_items,
-        duration_s=time.monotonic() - t0,
+        duration_s=_loop_time() - t0,
         error=error,
         current_set=tried.current_seq is not None,
         mode_set=tried.mode_set,

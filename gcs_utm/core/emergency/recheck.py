@@ -49,7 +49,9 @@ def _intended(
     or None when its newest such recommendation is a HOLD command, with its time."""
     latest: dict[OperationId, tuple[float, FlightPlan | None]] = {}
     cases = [c for c in map(em.case, em.open_threats()) if c is not None]
-    for rid in {r for c in cases for r in c.rec_ids}:
+    # sorted: a set of str iterates in the process's hash order, and of two recommendations
+    # created at one time the later one here wins (a run must not depend on PYTHONHASHSEED)
+    for rid in sorted({r for c in cases for r in c.rec_ids}):
         r = em.recommendation(rid)
         if r is None or r.operation_id == rec.operation_id or r.state not in _LIVE:
             continue
