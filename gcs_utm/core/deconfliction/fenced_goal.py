@@ -16,8 +16,8 @@ it 5 s after the plan's end). The end point then moves away from the fence until
 clears it by ``escape_distance_m``. The circle is entered from its centre on the last leg's
 course and swings out on the turn before it settles (:func:`.end_circle.end_ring`): that
 entry coming inside an obstacle blocks the destination too, and an end point outside the
-fences then moves by the entry's reach instead of the radius. Verified and scored like every other candidate.
-Pure."""
+fences then moves by as much room as the entry needs (up to its reach) instead of the
+radius. Verified and scored like every other candidate. Pure."""
 
 from __future__ import annotations
 
