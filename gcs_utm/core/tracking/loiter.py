@@ -223,7 +223,10 @@ def _entry_after_end(
     elsewhere): from the last waypoint, at the plan's end, on the last leg's course at the
     track's horizontal speed, capturing the circle (:mod:`.loiter_entry`). Altitudes stay
     as predicted."""
-    for r in rows:
+    end_all = plans.end_t_s[plan_row[rows]]
+    last_t = t_state_s[rows] + ahead0_s[rows] + steps_s[-1]  # the window's last point
+    ending = rows[(t_state_s[rows] < end_all) & (end_all < last_t)]
+    for r in ending:
         j = int(plan_row[r])
         end_t = float(plans.end_t_s[j])
         tau = ahead0_s[r] + steps_s  # after the state
