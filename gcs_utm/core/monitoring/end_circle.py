@@ -100,12 +100,11 @@ def end_ring(
     shift_m = max(radius_m - loiter_m, 0.0)
     u_e, u_n = d_e / length_m, d_n / length_m
     course = math.atan2(d_e, d_n)
-    entries = [
-        _entry(end + np.array([u_e * s_m, u_n * s_m, 0.0, 0.0]), end, course, speed, loiter_m)
-        for s_m in ((shift_m, 0.0, -shift_m) if shift_m > 0.0 else (0.0,))
-    ]
-    entry = np.concatenate(entries)
-    last = entries[1 if len(entries) > 1 else 0][-1]
+    shifts = (shift_m, 0.0, -shift_m) if shift_m > 0.0 else (0.0,)
+    starts = end[None, :2] + np.outer(shifts, [u_e, u_n])
+    entries = _entries(starts, end, course, speed, loiter_m)
+    entry = entries.reshape(-1, 4)
+    last = entries[len(shifts) // 2, -1]  # the entry started at the last point
     bearing0 = math.atan2(float(last[0] - end[0]), float(last[1] - end[1]))
     turn = np.linspace(0.0, 2.0 * math.pi, RING_POINTS + 1)
     bearing = bearing0 + turn  # clockwise: bearing increasing
@@ -117,30 +116,33 @@ def end_ring(
     return np.concatenate([entry, ring])
 
 
-def _entry(
-    start: FloatArray, center: FloatArray, course_rad: float, speed_mps: float, loiter_m: float
+def _entries(
+    starts_en: FloatArray, center: FloatArray, course_rad: float, speed_mps: float, loiter_m: float
 ) -> FloatArray:
-    """(J, 4) the capture of the circle of ``loiter_m`` round ``center`` (east, north, alt,
-    t: the last point) from ``start`` on ``course_rad``, over one turn of the circle at
-    ``speed_mps``, at the centre's altitude, timed from the centre's time."""
+    """(S, J, 4) the captures of the circle of ``loiter_m`` round ``center`` (east, north,
+    alt, t: the last point) from each of ``starts_en`` (S, 2) on ``course_rad``, over one
+    turn of the circle at ``speed_mps``, at the centre's altitude, timed from the centre's
+    time."""
+    n = len(starts_en)
     turn_s = 2.0 * math.pi * max(loiter_m, 1.0) / speed_mps
     tau = np.arange(0.0, turn_s + ENTRY_STEP_S, ENTRY_STEP_S)
-    speed = np.array([speed_mps])
+    speed = np.full(n, speed_mps)
     east, north = loiter_entry.capture_points(
-        center_en=center[None, :2],
-        radius_m=np.array([loiter_m]),
+        center_en=np.repeat(center[None, :2], n, axis=0),
+        radius_m=np.full(n, loiter_m),
         turn_radius_m=loiter_entry.capture_turn_radius_m(speed),
-        clockwise=np.ones(1, dtype=bool),
-        pos_en=start[None, :2],
-        course_rad=np.array([course_rad]),
+        clockwise=np.ones(n, dtype=bool),
+        pos_en=starts_en,
+        course_rad=np.full(n, course_rad),
         speed_mps=speed,
-        tau_s=tau[None, :],
+        tau_s=np.repeat(tau[None, :], n, axis=0),
+        step_s=ENTRY_STEP_S / 2.0,
     )
-    out = np.empty((len(tau), 4))
-    out[:, 0] = east[0]
-    out[:, 1] = north[0]
-    out[:, 2] = center[2]
-    out[:, 3] = center[3] + tau
+    out = np.empty((n, len(tau), 4))
+    out[:, :, 0] = east
+    out[:, :, 1] = north
+    out[:, :, 2] = center[2]
+    out[:, :, 3] = center[3] + tau
     return out
 
 

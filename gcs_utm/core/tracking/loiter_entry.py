@@ -71,11 +71,13 @@ def capture_points(
     course_rad: FloatArray,
     speed_mps: FloatArray,
     tau_s: FloatArray,
+    step_s: float = STEP_S,
 ) -> tuple[FloatArray, FloatArray]:
     """East and north (each (N, K)) at times ``tau_s`` (N, K; from the state, >= 0) of N
     aircraft capturing their loiter circle: centre ``center_en`` (N, 2), radius ``radius_m``,
     turning ``clockwise`` (else counter-clockwise) at most at ``speed_mps / turn_radius_m``,
-    from ``pos_en`` (N, 2) on ``course_rad`` at ``speed_mps`` (horizontal, kept)."""
+    from ``pos_en`` (N, 2) on ``course_rad`` at ``speed_mps`` (horizontal, kept), integrated
+    in steps of ``step_s``."""
     n, k = tau_s.shape
     east_out = np.empty((n, k))
     north_out = np.empty((n, k))
@@ -85,8 +87,8 @@ def capture_points(
     speed = np.maximum(speed_mps, 1e-3)
     max_rate = speed / np.maximum(turn_radius_m, 1.0)  # rad/s
     radius = np.maximum(radius_m, 1.0)
-    n_steps = max(1, math.ceil(float(tau_s.max()) / STEP_S))
-    grid_t = np.arange(n_steps + 1) * STEP_S
+    n_steps = max(1, math.ceil(float(tau_s.max()) / step_s))
+    grid_t = np.arange(n_steps + 1) * step_s
     east = np.empty((n, n_steps + 1))
     north = np.empty((n, n_steps + 1))
     e, nn, c = pos_en[:, 0].copy(), pos_en[:, 1].copy(), course_rad.copy()
@@ -99,10 +101,10 @@ def capture_points(
         err = np.clip((dist - radius) / radius, -1.0, 1.0)
         want = radial + side * (math.pi / 2.0 + err * CORRECTION_RAD)
         rate = np.clip(HEADING_GAIN_PER_S * _wrap(want - c), -max_rate, max_rate)
-        mid = c + rate * (STEP_S / 2.0)
-        e = e + speed * STEP_S * np.sin(mid)
-        nn = nn + speed * STEP_S * np.cos(mid)
-        c = c + rate * STEP_S
+        mid = c + rate * (step_s / 2.0)
+        e = e + speed * step_s * np.sin(mid)
+        nn = nn + speed * step_s * np.cos(mid)
+        c = c + rate * step_s
         east[:, i], north[:, i] = e, nn
     for r in range(n):
         east_out[r] = np.interp(tau_s[r], grid_t, east[r])
