@@ -199,6 +199,9 @@ class MavlinkHub:
         self.adsb_relay = AdsbRelay()  # ADSB_VEHICLE relayed by a vehicle -> ADS-B measurement
         self.remote_id = RidVehicles()  # OPEN_DRONE_ID_* and ODID texts (docs/remote-id.md)
         self._handlers = message_handlers(self.adsb_relay, self.remote_id)
+        # messages no handler reads are framed, not decoded (a signed link decodes them all)
+        read = {*self._handlers, *_PROTOCOL_IDS}
+        self._unread = frozenset() if self._keys else wire.unread_ids(read)
 
     # --- lifecycle ------------------------------------------------------------------------
     async def __aenter__(self) -> MavlinkHub:
@@ -602,7 +605,9 @@ class MavlinkHub:
         """The parser of a source address heard for the first time (room made if full)."""
         if len(link.parsers) >= self.config.max_senders:
             self._trim_senders(link)
-        parser = link.parsers[addr] = wire.Parser(link.counters, fast=self.config.fast_decode)
+        parser = link.parsers[addr] = wire.Parser(
+            link.counters, fast=self.config.fast_decode, skip=self._unread
+        )
         return parser
 
     def _trim_senders(self, link: _Link) -> None:

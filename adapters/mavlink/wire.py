@@ -20,7 +20,9 @@ msgid; X.25 CRC-16/MCRF4XX over header+payload then CRC_EXTRA, via fastcrc) and 
 ``struct`` into named tuples with pymavlink's field names, after padding the payload that
 MAVLink 2 trims of trailing zeros. Each type's layout (struct format, field names in wire
 order, payload size, CRC_EXTRA) is taken from pymavlink's message class in the dialect, so it
-is defined once. Anything else -- other messages, signed frames, a bad CRC, garbage, a frame
+is defined once. The ids a parser is told to ``skip`` (those its reader never uses) are
+framed and checked the same way but not unpacked (``msg`` None). Anything else -- other
+messages, signed frames, a bad CRC, garbage, a frame
 cut short -- goes to pymavlink from that byte on (the fallback), so rejects are classified and
 counted as pymavlink classifies them.
 """
@@ -30,7 +32,7 @@ from __future__ import annotations
 import struct
 import time
 from collections import namedtuple
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, NamedTuple
@@ -167,6 +169,13 @@ def mission_current_id(m: MavMsg) -> int | None:
     return value or None
 
 
+def unread_ids(read: Iterable[int]) -> frozenset[int]:
+    """The dialect's message ids outside ``read``: a :class:`Parser` given them as ``skip``
+    frames them without decoding (a PX4 SITL's GCS link streams ATTITUDE_QUATERNION,
+    ATTITUDE_TARGET, LOCAL_POSITION_NED, ... at 50 Hz, each a pymavlink decode otherwise)."""
+    return frozenset(mav.mavlink_map) - frozenset(read)
+
+
 def msg_name(mid: int) -> str:
     cls = mav.mavlink_map.get(mid)
     return str(cls.msgname) if cls is not None else f"MSG_{mid}"
@@ -210,10 +219,17 @@ class Parser:
         *,
         key: bytes | None = None,
         fast: bool = True,
+        skip: frozenset[int] = frozenset(),
     ) -> None:
         self.counters = counters if counters is not None else ParseCounters()
         # signed links go through pymavlink, which checks the signature
         self.fast = fast and key is None
+        # ids the caller never reads: framed and CRC-checked, not decoded (msg None)
+        self._skip = {
+            mid: bytes([mav.mavlink_map[mid].crc_extra])
+            for mid in skip
+            if mid in mav.mavlink_map and mid not in FAST_TYPES
+        }
         self._mav = mav.MAVLink(None)
         self._mav.robust_parsing = True
         if key is not None:
@@ -266,7 +282,8 @@ class Parser:
 
     def feed_frames(self, data: bytes) -> list[Frame]:
         """Decode one datagram: hot telemetry on the fast path (see the module docstring),
-        everything else through pymavlink. Never raises; rejects are counted."""
+        the ids of ``skip`` framed and checked but not decoded (``msg`` None), everything else
+        through pymavlink. Never raises; rejects are counted."""
         if not self.fast:
             return self.frames(data, datagram=True)
         out: list[Frame] = []
@@ -278,7 +295,14 @@ class Parser:
                 break  # garbage or a frame cut short: pymavlink classifies it from here
             end, mid, hdr, plen, sys_id, comp_id, seq = head
             ft = FAST_TYPES.get(mid)
-            if ft is None:  # another message, or a signed frame: pymavlink decodes this one
+            skipped = self._skip.get(mid) if ft is None else None
+            if skipped is not None:  # a message nobody reads: its header only
+                crc = data[end - 2] | (data[end - 1] << 8)
+                if _MCRF4XX(skipped, _MCRF4XX(data[i + 1 : end - 2])) != crc:
+                    break  # pymavlink classifies and resynchronises from here
+                out.append(_new_frame((mid, sys_id, comp_id, seq, None)))
+                self.counters.frames += 1
+            elif ft is None:  # another message, or a signed frame: pymavlink decodes this one
                 out.extend(self.frames(data[i:end], datagram=True))
             else:
                 crc = data[end - 2] | (data[end - 1] << 8)

@@ -55,7 +55,7 @@ from gcs_utm.services.fixed_wing_point import (
     NAV_TAKEOFF,
     Point,
 )
-from gcs_utm.services.fixed_wing_runway import runway_from_heading
+from gcs_utm.services.fixed_wing_runway import px4_takeoff, runway_from_heading
 from gcs_utm.services.fixed_wing_turn import takeoff_turn
 
 TAKEOFF_CLIMB_RATE_MPS = 5.0
@@ -127,8 +127,9 @@ def fixed_wing_points(
             if turn_after_takeoff and takeoff_heading_deg is not None and len(climb) == 2 and nxt:
                 out.extend(takeoff_turn(climb[-1], takeoff_heading_deg, nxt, nxt.speed_mps))
         elif p.command == NAV_TAKEOFF:
-            before = out[-1] if out else None
-            out.extend(_climb_out_to(p, before, home_deg, ground_alt_m, takeoff_heading_deg))
+            nxt = next((q for q in points[i + 1 :] if q.explicit), None)
+            heading = takeoff_heading_deg
+            out.extend(_climb_out_to(p, before, home_deg, ground_alt_m, heading, nxt=nxt))
         elif p.command in LOITER_COMMANDS and out:
             rate = climb_rate_mps if p.alt_amsl_m >= out[-1].alt_amsl_m else descent_rate_mps
             # PX4 leaves a landing's loiter towards the landing point (:func:`_landing_exit`),
@@ -218,11 +219,15 @@ def _climb_out_to(
     home_deg: tuple[float, float] | None,
     ground_alt_m: float | None,
     heading_deg: float | None = None,
+    *,
+    nxt: P | None = None,
 ) -> list[P]:
     """A take-off with a position of its own (PX4: the runway take-off heads for it): the
-    climb-out from where the vehicle stands (the point before, else home) towards it, then
-    level to it; from a parked ``heading_deg`` that is not towards it, the ground roll along
-    that heading and the turn back onto the line (:mod:`.fixed_wing_runway`)."""
+    climb-out from where the vehicle stands (the point before, else home) towards it; from a
+    parked ``heading_deg`` that is not towards it, the ground roll along that heading and the
+    turn back onto the line; then the pursuit of ``nxt`` (the next waypoint) from where the
+    take-off altitude is reached, or without ``nxt`` level to the take-off's position
+    (:func:`.fixed_wing_runway.px4_takeoff`)."""
     start_deg = (before.lat_deg, before.lon_deg) if before is not None else home_deg
     if start_deg is None:
         return [p]
@@ -230,6 +235,8 @@ def _climb_out_to(
     climb = _climb_out(start, before, [p], ground_alt_m)
     if len(climb) < 2:  # no climb to model
         return [p]
+    if nxt is not None:
+        return px4_takeoff(start, heading_deg, climb, p, nxt)
     turned = None if heading_deg is None else runway_from_heading(start, heading_deg, climb, p)
     if turned is not None:
         return turned

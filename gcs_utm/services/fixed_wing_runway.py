@@ -24,6 +24,7 @@ modelled); up, within 5.6 m during the climb."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import TypeVar
 
 from gcs_utm.services.fixed_wing_point import Point
@@ -115,3 +116,152 @@ def runway_from_heading(start: P, heading_deg: float, climb: list[P], wp: P) -> 
         f = rest_m / left_m
         out.append(at(last[0] + (we - last[0]) * f, last[1] + (wn - last[1]) * f, top_m))
     return [*out, wp] if left_m >= 1.0 else out
+
+
+NPFG_GAIN_PER_S = 4.0 * math.pi * NPFG_DAMPING / PX4_PERIOD_S
+"""NPFG's gain ``4 pi damping / period`` (0.88/s): its lateral acceleration is this times the
+airspeed and the sine of the error to its bearing (``NPFG::lateralAccel``)."""
+ROLL_LAG_S = 0.3
+"""The lag of the lateral acceleration behind NPFG's command (roll dynamics), fitted to the
+recorded take-off (``tests/data/flown/px4_plane_second_takeoff_2.json``)."""
+PX4_TAKEOFF_MPS = 13.5
+"""PX4 v1.15.2 SIH's ground speed in its take-off climb (at its take-off airspeed,
+FW_TKO_AIRSPD unset: the minimum airspeed as the setpoint), measured 12.6-14.7 m/s in the
+turn; fitted to the recorded take-offs."""
+PX4_FLOWN_MPS = 14.5
+"""The ground speed PX4 v1.15.2 SIH flies at its 15 m/s trim airspeed (no wind), measured."""
+CLIMB_MPS = 5.0
+"""PX4's FW_T_CLMB_MAX (default): its climb towards the next waypoint's altitude."""
+_STEP_S = 0.1  # integration step
+_POINT_EVERY_DEG = 15.0  # a modelled point every 15 deg of heading
+_DONE_DEG = 5.0  # heading for the take-off position: the rest is the straight line to it
+
+
+def px4_takeoff(start: P, heading_deg: float | None, climb: list[P], wp: P, nxt: P
+                ) -> list[P]:  # fmt: skip
+    """PX4's take-off to ``wp`` (the NAV_TAKEOFF item with its position) from ``start``, given
+    the straight ``climb`` (ground-roll end, climb end, along the line to ``wp``), then on to
+    ``nxt`` (the next item with a position): from the ground roll's end (along
+    ``heading_deg``, where it stands parked, when that is off the line; else the line's) the
+    points up to the take-off altitude (points of the take-off), then those until it heads
+    for ``nxt`` (points of ``nxt``); ``nxt`` itself follows. The take-off's position is not
+    flown over.
+
+    PX4 v1.15 (``FixedwingPositionControl``): once off the ground the runway take-off follows
+    the line from its start through the take-off position (NPFG ``navigateLine``); the
+    NAV_TAKEOFF completes as soon as the plane is above the item's altitude
+    (``MissionBlock::is_mission_item_reached``), wherever it is; the next waypoint is then
+    pursued from there (``control_auto_position``: a previous setpoint of type TAKEOFF is
+    not used, ``navigateWaypoint``). NPFG's bearing to a line: across it while the track
+    error is beyond its bound (``V period damping``), along it on it, at the look-ahead angle
+    ``pi/2 (1 - e/bound)^2`` from across between; its lateral acceleration ``gain V
+    sin(error)`` (``gain V`` beyond 90 deg) is capped by the roll limit. Integrated here at
+    the take-off's ground speed until the climb's run is flown, then at the cruise's, while
+    it climbs to the next waypoint's altitude (``FW_T_CLMB_MAX``). Measured on PX4 v1.15.2 SIH
+    (the soak's second and third take-offs, parked on 152-157 deg, take-off position 600 m
+    north): it rolled south-east, turned left through north to -43 deg (converging on the
+    line from the east), reached the take-off altitude about 90 m out, turned right and flew
+    straight for the next waypoint, 2 m west of the line from there to it 325 m north of its
+    start, where the line to the take-off position was 10 m further west. The model is within
+    3.1 m across and 5.5 m up of the recorded take-offs, where the full-bank turn back onto
+    the line and on to the take-off position was 10.7-14.1 m across."""
+    k = math.cos(math.radians(start.lat_deg))
+
+    def en(q: Point) -> tuple[float, float]:
+        return ((q.lon_deg - start.lon_deg) * _M_PER_DEG_LON * k,
+                (q.lat_deg - start.lat_deg) * _M_PER_DEG_LAT)  # fmt: skip
+
+    we, wn = en(wp)
+    length_m = max(math.hypot(we, wn), 1e-6)
+    line = (we / length_m, wn / length_m)
+    line_deg = math.degrees(math.atan2(*line))
+    roll_m = math.hypot(*en(climb[0]))
+    psi_deg = line_deg
+    if heading_deg is not None and abs(_wrap_deg(heading_deg - line_deg)) >= ALIGNED_DEG:
+        roll_m, psi_deg = min(LIFT_OFF_M, roll_m), heading_deg
+    run_m = max(math.hypot(*en(climb[1])), roll_m + 1.0)
+    base_m, top_m = climb[0].alt_amsl_m, climb[1].alt_amsl_m
+    flight = _Npfg(psi_deg, roll_m, PX4_TAKEOFF_MPS)
+
+    def at(q: P, alt: float) -> P:
+        lat = start.lat_deg + flight.n / _M_PER_DEG_LAT
+        lon = start.lon_deg + flight.e / (_M_PER_DEG_LON * k)
+        return q.moved(lat, lon, alt).synthetic()
+
+    out: list[P] = [at(wp, base_m)]
+    for _ in flight.along(line, run_m - roll_m):
+        climbed = (flight.flown_m - roll_m) / (run_m - roll_m)
+        out.append(at(wp, base_m + (top_m - base_m) * min(climbed, 1.0)))
+    out.append(at(wp, top_m))
+    flight.fly_at(min(max(nxt.speed_mps, 1.0), PX4_FLOWN_MPS))
+    top_at_m = flight.flown_m
+
+    def towards_next(flown_m: float) -> float:
+        """From the take-off's completion PX4 climbs (or descends) to ``nxt``'s altitude."""
+        change_m = (flown_m - top_at_m) * CLIMB_MPS / flight.speed
+        return top_m + max(min(nxt.alt_amsl_m - top_m, change_m), -change_m)
+
+    for _ in flight.pursuit(en(nxt)):
+        out.append(at(nxt, towards_next(flight.flown_m)))
+    if flight.flown_m > top_at_m + 1.0:  # where the turn ends: then straight for ``nxt``
+        out.append(at(nxt, towards_next(flight.flown_m)))
+    return out
+
+
+class _Npfg:
+    """A plane flown by NPFG (:func:`px4_takeoff`): position east/north of the start (m),
+    course (rad, clockwise from north), distance flown and lateral acceleration."""
+
+    def __init__(self, course_deg: float, roll_m: float, speed_mps: float) -> None:
+        self.psi = math.radians(course_deg)
+        self.e, self.n = math.sin(self.psi) * roll_m, math.cos(self.psi) * roll_m
+        self.flown_m, self.accel = roll_m, 0.0
+        self.limit = 9.81 * math.tan(math.radians(PX4_ROLL_LIMIT_DEG))
+        self.speed = self.bound_m = 0.0
+        self.fly_at(speed_mps)
+
+    def fly_at(self, speed_mps: float) -> None:
+        """Fly at ``speed_mps`` from now on (NPFG's track-error bound scales with it)."""
+        self.speed, self.bound_m = speed_mps, speed_mps * PX4_PERIOD_S * NPFG_DAMPING
+
+    def step(self, bearing: float) -> None:
+        """One step of flight towards the course ``bearing``."""
+        err = (bearing - self.psi + math.pi) % (2.0 * math.pi) - math.pi
+        pull = math.copysign(1.0, err) if abs(err) > math.pi / 2.0 else math.sin(err)
+        command = max(-self.limit, min(self.limit, NPFG_GAIN_PER_S * self.speed * pull))
+        self.accel += (command - self.accel) * min(_STEP_S / ROLL_LAG_S, 1.0)
+        self.psi += self.accel / self.speed * _STEP_S
+        self.e += math.sin(self.psi) * self.speed * _STEP_S
+        self.n += math.cos(self.psi) * self.speed * _STEP_S
+        self.flown_m += self.speed * _STEP_S
+
+    def along(self, line: tuple[float, float], distance_m: float) -> Iterator[None]:
+        """Follow the line through the start along ``line`` (a unit vector) for
+        ``distance_m``, yielding every :data:`_POINT_EVERY_DEG` of turn."""
+        ue, un = line
+        last, end_m = self.psi, self.flown_m + distance_m
+        while self.flown_m < end_m:
+            cross = self.e * un - self.n * ue  # to the line's right positive
+            look = math.pi / 2.0 * (min(abs(cross) / self.bound_m, 1.0) - 1.0) ** 2
+            side = -1.0 if cross > 0.0 else 1.0  # across towards the line
+            be = math.cos(look) * side * un + math.sin(look) * ue
+            bn = -math.cos(look) * side * ue + math.sin(look) * un
+            self.step(math.atan2(be, bn))
+            if abs(self.psi - last) >= math.radians(_POINT_EVERY_DEG):
+                last = self.psi
+                yield None
+
+    def pursuit(self, goal: tuple[float, float]) -> Iterator[None]:
+        """Fly for ``goal`` until heading for it (or close), yielding every
+        :data:`_POINT_EVERY_DEG` of turn."""
+        last = self.psi
+        for _ in range(int(40.0 * self.bound_m / (self.speed * _STEP_S))):
+            be, bn = goal[0] - self.e, goal[1] - self.n
+            bearing = math.atan2(be, bn)
+            err = (bearing - self.psi + math.pi) % (2.0 * math.pi) - math.pi
+            if math.hypot(be, bn) < self.bound_m or abs(math.degrees(err)) < _DONE_DEG:
+                return
+            self.step(bearing)
+            if abs(self.psi - last) >= math.radians(_POINT_EVERY_DEG):
+                last = self.psi
+                yield None

@@ -14,7 +14,8 @@ that flies a mission is an operation, filed from the mission it has, kept in ste
   horizontally), and its home is set to the vehicle's at arming (the floor of its flight).
 - A mission present before the first 3D fix is filed, whole, when the fix comes. A disarmed
   vehicle's plan is its whole mission from where it stands (the current item counts only in
-  the air); it is re-timed from the vehicle's progress when it starts the mission.
+  the air); it is re-timed from the vehicle's progress when it starts the mission. A vehicle
+  found flying (a restarted service) is timed from its first MISSION_CURRENT, not before.
 - A reboot forgets the home: a new pre-flight.
 - Timed from the vehicle's progress, not from the download: the plan starts at the vehicle's
   position, flies to the current item (MISSION_CURRENT) and on at the mission's speeds
@@ -334,9 +335,11 @@ class _Vehicle:
     home: Position | None = None  # HOME_POSITION, else ArduPilot's item 0
     home_from_status: bool = False
     seq: int | None = None
+    stale_seq: int | None = None  # a stale MISSION_CURRENT after PX4 restarted (mission_order)
     position: Position | None = None
     takeoff_heading_deg: float | None = None  # its heading when it armed (a fixed wing's run)
     heading_deg: float | None = None  # its last (GLOBAL_POSITION_INT hdg)
+    landed: bool | None = None  # its last landed state (None: not reported)
     armed: bool = False
     flying: bool = False  # armed in a mission mode
     downloading: bool = False
@@ -426,8 +429,8 @@ class VehicleOps:
             return
         if s.position is not None:
             v.position = s.position
-        v.heading_deg = s.heading_deg
-        if not v.armed:  # until it arms: the heading of its take-off run
+        v.heading_deg, v.landed = s.heading_deg, s.landed
+        if not v.armed or s.landed is True:  # on the ground: the heading of its take-off run
             v.takeoff_heading_deg = s.heading_deg
         v.total = s.mission_total
         v.mission_id = s.mission_id
@@ -448,10 +451,9 @@ class VehicleOps:
         v.armed = s.armed
         flying = s.armed and s.mode in _FLYING_MODES
         started = flying and not v.flying
-        advanced = s.mission_seq is not None and s.mission_seq != v.seq
-        v.flying = flying
-        if s.mission_seq is not None:
-            v.seq = s.mission_seq
+        seq, v.stale_seq = mission_order.current_seq(s, v.autopilot, v.stale_seq, started)
+        advanced = seq is not None and seq != v.seq
+        v.flying, v.seq = flying, v.seq if seq is None else seq
         if flying and (started or advanced):
             self._retime(v, started=started)
 
@@ -641,7 +643,10 @@ class VehicleOps:
     def _plan(
         self, v: _Vehicle, points: list[NavPoint], op_id: OperationId, version: int, reason: str
     ) -> FlightPlan | None:
-        """The plan of ``points``, timed from the vehicle's current item and position now."""
+        """The plan of ``points``, timed from the vehicle's current item and position now; None
+        for one found in the air before its first MISSION_CURRENT (a restarted service)."""
+        if v.armed and v.seq is None and v.landed is not True:
+            return None
         try:
             return plan_from_points(
                 points,
@@ -758,6 +763,8 @@ class VehicleOps:
         if v.downloading:
             v.start_pending = v.start_pending or started
             return  # (the arming that started it also downloads the mission: after that)
+        if op is None and v.items:  # found flying: filed at its first current item (_plan)
+            self._file(v, changed=False)
         if op is None or op.conops != CONOPS or v.items is None or not self._ours(op.id):
             return
         points = self._points(v)
@@ -771,15 +778,8 @@ class VehicleOps:
         if not started:
             # the first waypoint of the new plan that the old one has (the position the
             # plan starts from is not one of them): how far off in time the old plan is there
-            gap = next(
-                (
-                    w.t_s - o.t_s
-                    for w in plan.waypoints
-                    for o in op.plan.waypoints
-                    if _same_wp(w, o)
-                ),
-                None,
-            )
+            pairs = ((w, o) for w in plan.waypoints for o in op.plan.waypoints)
+            gap = next((w.t_s - o.t_s for w, o in pairs if _same_wp(w, o)), None)
             if gap is None:
                 return  # no item of it is in the plan: the mission check re-files it
             tolerance_s = op.flight_geometry_m / max(op.cruise_speed_mps, 0.1)

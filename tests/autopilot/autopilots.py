@@ -116,6 +116,46 @@ def px4_bin_dir(root: Path) -> Path:
     return out
 
 
+# PX4's SITL start script boosts seven GCS-link streams to 50 Hz for a local ground station
+# (px4-rc.mavlink: ATTITUDE, ATTITUDE_QUATERNION, ATTITUDE_TARGET, LOCAL_POSITION_NED,
+# POSITION_TARGET_LOCAL_NED, SERVO_OUTPUT_RAW, GLOBAL_POSITION_INT; RC_CHANNELS at 20 Hz):
+# 367 datagrams/s measured at speed 1, times the speed factor (1,850/s a PX4 at 5). gcs-utm
+# reads only GLOBAL_POSITION_INT of them; on a loaded 2-core machine the rest flooded its
+# reader (docs/autopilots.md, "PX4 SITL under load"). The tests' PX4 keeps GLOBAL_POSITION_INT
+# at 50 Hz (the tests compare PX4's own positions 0.05 s apart) and leaves the others at the
+# rates of PX4's normal GCS mode, as a telemetry radio link has them.
+PX4_GCS_STREAMS_KEPT = ("GLOBAL_POSITION_INT",)
+
+
+def px4_etc_dir(root: Path) -> Path:
+    """A private copy of PX4's ``etc/`` under ``root`` (made once per root) whose GCS link
+    streams at 50 Hz only :data:`PX4_GCS_STREAMS_KEPT`."""
+    out = root / "px4-etc"
+    rc = out / "init.d-posix" / "px4-rc.mavlink"
+    if rc.exists():
+        return out
+    shutil.copytree(PX4_DIR / "etc", out, dirs_exist_ok=True)
+    kept = [
+        line
+        for line in rc.read_text().splitlines(keepends=True)
+        if not _dropped_stream(line.strip())
+    ]
+    rc.write_text("".join(kept))
+    return out
+
+
+def _dropped_stream(line: str) -> bool:
+    """A ``mavlink stream`` line of px4-rc.mavlink the tests' PX4 leaves out: the GCS link's
+    boosted streams but :data:`PX4_GCS_STREAMS_KEPT`, and the SIH display link's (200 Hz of
+    HIL_ACTUATOR_CONTROLS to a jMAVSim display nobody runs: CPU PX4 needs under load)."""
+    if not line.startswith("mavlink stream "):
+        return False
+    if "$udp_sihsim_port_local" in line:
+        return True
+    gcs = "-u $udp_gcs_port_local" in line
+    return gcs and not any(f" -s {name} " in line for name in PX4_GCS_STREAMS_KEPT)
+
+
 def launcher(
     kind: str, start: Callable[..., SitlProcess], root: Path, failed: Callable[[], bool]
 ) -> Iterator[Callable[..., SitlProcess]]:
@@ -174,7 +214,8 @@ class SitlProcess:
         return "\n".join(parts)
 
     def stop(self, timeout_s: float = 10.0) -> None:
-        """SIGTERM, then SIGKILL after ``timeout_s``; always reaps the process."""
+        """SIGTERM, then SIGKILL after ``timeout_s``; always reaps the process. With
+        ``GCS_UTM_KEEP_SITL_DIRS`` set, its working directory is copied there once stopped."""
         if self.proc.poll() is None:
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(self.proc.pid, signal.SIGTERM)
@@ -184,6 +225,10 @@ class SitlProcess:
                 with contextlib.suppress(ProcessLookupError):
                     os.killpg(self.proc.pid, signal.SIGKILL)
                 self.proc.wait(timeout=timeout_s)
+        keep = os.environ.get("GCS_UTM_KEEP_SITL_DIRS")  # its console, logs, ULog: kept
+        if keep and self.workdir.exists():
+            name = f"{self.kind}-{self.instance}-{os.getpid()}-{time.time():.0f}"
+            shutil.copytree(self.workdir, Path(keep) / name, dirs_exist_ok=True)
         if self.owned_dir is not None and self.owned_dir.exists():
             self.saved_logs = self.log_tail()
             shutil.rmtree(self.owned_dir, ignore_errors=True)
@@ -221,9 +266,10 @@ def start_px4(
         env["PX4_HOME_LAT"] = str(round(home[0] * 1e7))
         env["PX4_HOME_LON"] = str(round(home[1] * 1e7))
     out, err = wd / "out.log", wd / "err.log"
-    binary = px4_bin_dir(owned or (wd.parent if workdir and private_tmp else root)) / "px4"
+    private = owned or (wd.parent if workdir and private_tmp else root)
+    binary, etc = px4_bin_dir(private) / "px4", px4_etc_dir(private)
     # Real paths: a symlink under /tmp (e.g. ../shared) would dangle under PX4's own /tmp.
-    binary, etc, wd = binary.resolve(), (PX4_DIR / "etc").resolve(), wd.resolve()
+    binary, etc, wd = binary.resolve(), etc.resolve(), wd.resolve()
     argv = [str(binary), "-i", str(instance), "-d", str(etc)]
     if private_tmp:
         argv = private_tmp_argv(argv, keep=(binary.parent, etc, wd), cwd=wd)

@@ -266,6 +266,36 @@ def test_a_fixed_wing_turn_must_fit_its_turn_radius() -> None:
     assert turn_flags(back, old, 0.0) == []  # a multirotor turns on the spot
 
 
+def test_a_fixed_wing_keeps_the_filed_plans_turns_at_a_new_height() -> None:
+    """A go_up raises the pilot's corners: the turn is the filed plan's (the vehicle flies it
+    as it flies that plan), whatever the short legs the deformation puts around it. A PX4
+    plane's 153 deg turn towards its approach dropped every avoidance of an intruder."""
+    from gcs_utm.core.deconfliction.geometry import LocalPlan
+    from gcs_utm.core.deconfliction.safety import turn_flags
+
+    def lp(pts: list[tuple[float, float, float]]) -> LocalPlan:
+        arr = np.array(pts, dtype=np.float64)
+        k = arr.shape[0]
+        return LocalPlan(arr[:, 0], arr[:, 1], arr[:, 2], np.arange(k) * 10.0)
+
+    # north 1700 m, then back south-west to the approach: a 153 deg turn
+    old = lp([(0.0, 0.0, 40.0), (0.0, 1700.0, 40.0), (-400.0, 900.0, 30.0)])
+    up = lp(
+        [(0.0, 0.0, 40.0), (0.0, 1600.0, 90.0), (0.0, 1700.0, 90.0), (-40.0, 1620.0, 90.0),
+         (-400.0, 900.0, 30.0)]
+    )  # fmt: skip
+    assert turn_flags(up, old, 80.0) == []
+    # moved sideways, the corner is generated: judged
+    left = lp(
+        [(0.0, 0.0, 40.0), (0.0, 1600.0, 40.0), (30.0, 1700.0, 40.0), (-40.0, 1620.0, 40.0),
+         (-400.0, 900.0, 30.0)]
+    )  # fmt: skip
+    assert turn_flags(left, old, 80.0)
+    # sharper than the filed turn at the same place: judged
+    sharper = lp([(0.0, 0.0, 40.0), (0.0, 1700.0, 90.0), (-20.0, 1000.0, 90.0)])
+    assert turn_flags(sharper, old, 80.0)
+
+
 def test_the_lead_in_is_verified_against_geofences_too() -> None:
     """The vehicle flies the lead-in (its current path) until the plan starts: a fence on that
     stretch makes the plan unsafe even when the manoeuvre after it is clear."""

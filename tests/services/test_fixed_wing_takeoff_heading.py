@@ -7,6 +7,7 @@ UAS_IN_CV / UAS_OUT_OV 3 s into the take-off. ArduPlane ignores a take-off's pos
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from pathlib import Path
@@ -71,7 +72,8 @@ def test_without_a_heading_it_is_the_heading_to_the_next_waypoint() -> None:
 def test_px4_still_heads_for_a_take_off_position_away_from_it() -> None:
     """PX4's runway take-off heads for the item's position (more than HERE_M away)."""
     pts = _flown(45.0, heads_for_position=True)
-    assert _en(pts[-2]) == pytest.approx((8.8, 8.8), abs=0.5)
+    climb = [p for p in pts if p.command == 22]  # its climb along the line to the position
+    assert _en(climb[-1]) == pytest.approx((8.8, 8.8), abs=0.5)
 
 
 async def test_serve_files_the_run_along_the_heading_the_plane_armed_with() -> None:
@@ -86,6 +88,31 @@ async def test_serve_files_the_run_along_the_heading_the_plane_armed_with() -> N
         mission_total=7, home=home, position=home, gnss_fix_type=3, heading_deg=90.0,
     )  # fmt: skip
     usm.on_status(status)
+    await usm.drain()
+    op = usm.airspace.by_sys_id(SysId(1))
+    assert op is not None
+    climb = op.plan.waypoints[2]  # from where it stands, the roll, the climb's end: east
+    k = math.cos(math.radians(home.lat_deg))
+    assert (climb.lon_deg - home.lon_deg) * 111_320.0 * k == pytest.approx(112.0, abs=1.0)
+    assert (climb.lat_deg - home.lat_deg) * M_LAT == pytest.approx(0.0, abs=1.0)
+
+
+async def test_a_plane_first_heard_armed_on_the_ground_rolls_along_its_heading_then() -> None:
+    """A serve restarted while the plane stood parked first heard it armed, at its take-off
+    (the soak's PX4 plane after a kill -9: no status before the arming); on the ground its
+    heading is still its run's. Filed with none, it climbed out towards its next waypoint
+    from where it stood across its run (UAS_IN_CV 13.3 m as it rolled)."""
+    home = t.HOME
+    usm = Usm(Airspace(), ManualClock(1000.0))
+    usm.attach_vehicles(t._Port(t._mission()))
+    usm.on_vehicle(t._Info(key=t._Key(1)))
+    first = VehicleStatus(
+        sys_id=SysId(1), t_s=1000.0, autopilot=Autopilot.ARDUPILOT, mode=FlightMode.HOLD,
+        armed=True, landed=True, mission_total=7, home=home, position=home, gnss_fix_type=3,
+    )  # fmt: skip
+    usm.on_status(first)  # armed, no heading yet (no GLOBAL_POSITION_INT since the restart)
+    await usm.drain()
+    usm.on_status(dataclasses.replace(first, mode=FlightMode.MISSION, heading_deg=90.0))
     await usm.drain()
     op = usm.airspace.by_sys_id(SysId(1))
     assert op is not None

@@ -13,7 +13,8 @@ A candidate plan of Tactical Deconfliction is dropped (with the reason) when:
 - (a vehicle with a turn radius R) a turn at a generated waypoint does not fit: turning by
   an angle a starts R * tan(a / 2) before the waypoint and ends as far after it, so the two
   legs must be long enough for it and for the turns at their other ends (a turn back, a
-  = 180 degrees, never fits).
+  = 180 degrees, never fits). A turn the filed plan already makes at that horizontal place
+  (as much or more) is the filed plan's, at whatever height.
 """
 
 from __future__ import annotations
@@ -92,7 +93,7 @@ def turn_flags(new: LocalPlan, old: LocalPlan, turn_radius_m: float) -> list[str
     generated = np.ones(at.shape[0], dtype=bool)
     if filed.shape[0]:
         dist = np.linalg.norm(pts[:, None, :] - filed[None, :, :], axis=2).min(axis=1)
-        generated = dist > SAME_POINT_M
+        generated = (dist > SAME_POINT_M) & ~_filed_turns(pts, turn, old)
     used = np.zeros(legs.shape[0])
     used[:-1] += need  # a turn uses the end of the leg before it...
     used[1:] += need  # ...and the start of the leg after it
@@ -107,6 +108,31 @@ def turn_flags(new: LocalPlan, old: LocalPlan, turn_radius_m: float) -> list[str
         f"turn of {np.degrees(turn[k]):.0f} deg at waypoint {int(at[k])} does not fit a "
         f"{turn_radius_m:.0f} m turn radius"
     ]
+
+
+def _filed_turns(pts: np.ndarray, turn: np.ndarray, old: LocalPlan) -> np.ndarray:
+    """Which turns (at ``pts``, by ``turn`` radians) the filed plan ``old`` already makes
+    there: a filed waypoint at the same horizontal place turning as much or more. A plan
+    moved up or down (an intruder's go_up) keeps the pilot's corners at new heights: the
+    vehicle flies them as it flies the filed plan (a PX4 plane's 153 deg turn towards its
+    approach dropped every avoidance of an intruder), as the limits above are widened to what
+    the filed plan asked."""
+    out = np.zeros(pts.shape[0], dtype=bool)
+    if len(old) < 3:
+        return out
+    de, dn = old.e[1:] - old.e[:-1], old.n[1:] - old.n[:-1]
+    legs = np.flatnonzero(np.hypot(de, dn) > SAME_POINT_M)
+    if legs.size < 2:
+        return out
+    heading = np.arctan2(dn[legs], de[legs])
+    old_turn = np.abs((heading[1:] - heading[:-1] + np.pi) % (2.0 * np.pi) - np.pi)
+    corner = legs[1:]  # the filed waypoint of each filed turn
+    dh = np.hypot(
+        pts[:, None, 0] - old.e[corner][None, :], pts[:, None, 1] - old.n[corner][None, :]
+    )
+    same = (dh <= SAME_POINT_M) & (turn[:, None] <= old_turn[None, :] + np.radians(1.0))
+    out[:] = same.any(axis=1)
+    return out
 
 
 FLOOR_START_TOLERANCE_M = 1.0

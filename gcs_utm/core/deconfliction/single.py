@@ -13,6 +13,7 @@ import numpy as np
 
 from gcs_utm.core.deconfliction.astar import VisibilityPlanner
 from gcs_utm.core.deconfliction.context import Context, Dropped, Queued
+from gcs_utm.core.deconfliction.fence_exit import leave_on_receipt
 from gcs_utm.core.deconfliction.fenced_goal import destination_blocked, goal_outside
 from gcs_utm.core.deconfliction.geometry import LocalPlan, merged_obstacles, relevant_fences
 from gcs_utm.core.deconfliction.router import Router
@@ -70,6 +71,11 @@ def single_candidates(
     planner = VisibilityPlanner(
         merged_obstacles(active, ov + cfg.clearance_margin_m, cfg.cylinder_sides)
     )
+    early = leave_on_receipt(ctx, op, snapshot, planner)  # do not fly further in first
+    if early is not ctx:
+        ctx, t0 = early, early.start_t_s
+        lp = ctx.local_plan(op.plan).after(t0)
+        cur = ctx.start_xyz(op, snapshot)
     outsiders = ctx.others(snapshot, {op.id})
     out: list[Alternative] = []
 

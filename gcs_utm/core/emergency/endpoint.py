@@ -14,9 +14,10 @@ When Monitoring predicts a loss between two airborne UAS after both of their pla
 end point (:func:`move_end`): for each UAS of the pair that may move (below the immovable
 priority), the nearest new end point, horizontally on 16 bearings or vertically by the
 vertical minimum within the altitude band, whose loiter or hover clears the end point of
-every other UAS that is traffic, and whose plan (from where the UAS is now straight to the
-new end point, then one loiter circle for a fixed wing) TD verifies against the traffic and
-the geofences. The lowest priority moves (then the shortest move). The plan is proposed like
+every other UAS that is traffic (a fixed wing's by the loop it flies entering its circle,
+:mod:`.circle_entry`), and whose plan (from where the UAS is now straight to the new end
+point, then the loop and one loiter circle for a fixed wing) TD verifies against the traffic
+and the geofences. The lowest priority moves (then the shortest move). The plan is proposed like
 any other (maneuver ``move_end``) with the reason in the audit; when no end point is found,
 EM goes on with its immediate commands.
 """
@@ -30,6 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan, local_to_plan
+from gcs_utm.core.emergency.circle_entry import entry_loop, entry_reach_m
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.tracking.loiter import loiter_radius_m
@@ -67,19 +69,24 @@ def end_xyz(td: TacticalDeconfliction, op: Operation) -> FloatArray:
     return out
 
 
-def ends_clash(
-    td: TacticalDeconfliction, a: Operation, b: Operation, end_a: FloatArray, end_b: FloatArray
+def ends_clash(  # noqa: PLR0917 - the pair, then their end points
+    td: TacticalDeconfliction,
+    a: Operation,
+    b: Operation,
+    end_a: FloatArray,
+    end_b: FloatArray,
+    reach_a_m: float | None = None,
 ) -> bool:
     """Whether ``a`` waiting at ``end_a`` (hovering, or circling it) and ``b`` at ``end_b``
-    can come inside TD's minima for the pair, whatever the phases of their circles."""
+    can come inside TD's minima for the pair, whatever the phases of their circles.
+    ``reach_a_m``: how far ``a`` goes from ``end_a`` (its loiter radius when not given)."""
     h_m, v_m = td.pair_minima(a, b)
     dh = math.hypot(float(end_a[0] - end_b[0]), float(end_a[1] - end_b[1]))
+    reach_a = loiter_radius_m(a) if reach_a_m is None else reach_a_m
     if td.monitoring.spherical:
-        dist = math.hypot(dh - loiter_radius_m(a) - loiter_radius_m(b), float(end_a[2] - end_b[2]))
+        dist = math.hypot(dh - reach_a - loiter_radius_m(b), float(end_a[2] - end_b[2]))
         return dist < h_m
-    return (
-        dh < h_m + loiter_radius_m(a) + loiter_radius_m(b) and abs(float(end_a[2] - end_b[2])) < v_m
-    )
+    return dh < h_m + reach_a + loiter_radius_m(b) and abs(float(end_a[2] - end_b[2])) < v_m
 
 
 def _after_plans(snapshot: AirspaceSnapshot, ops: Sequence[Operation], event_t_s: float) -> bool:
@@ -199,17 +206,21 @@ def _transit(
     plan = local_to_plan(lp, op.plan, td.frame, created_t_s=now, reason="move_end")
     if radius <= 0.0:
         return plan, plan
-    # one clockwise circle round the new end point at cruise speed, for verification
+    # for verification: the loop onto the circle (.circle_entry), then one clockwise circle
+    # round the new end point at cruise speed
     t_end = float(t_arr[-1])
-    lap_s = 2.0 * math.pi * radius / speed
-    times = t_end + np.arange(1, math.ceil(lap_s / CIRCLE_STEP_S) + 1) * CIRCLE_STEP_S
     arrive = math.atan2(float(new_end[1] - xyz[-2, 1]), float(new_end[0] - xyz[-2, 0]))
-    ang = arrive - (times - t_end) * speed / radius
+    le, ln, lt = entry_loop(new_end, arrive, radius, speed, CIRCLE_STEP_S)
+    t_in = t_end + float(lt[-1])
+    lap_s = 2.0 * math.pi * radius / speed
+    times = t_in + np.arange(1, math.ceil(lap_s / CIRCLE_STEP_S) + 1) * CIRCLE_STEP_S
+    on = math.atan2(float(ln[-1] - new_end[1]), float(le[-1] - new_end[0]))
+    ang = on - (times - t_in) * speed / radius
     circle = LocalPlan(
-        np.concatenate([lp.e, new_end[0] + radius * np.cos(ang)]),
-        np.concatenate([lp.n, new_end[1] + radius * np.sin(ang)]),
-        np.concatenate([lp.z, np.full(len(times), new_end[2])]),
-        np.concatenate([lp.t, times]),
+        np.concatenate([lp.e, le, new_end[0] + radius * np.cos(ang)]),
+        np.concatenate([lp.n, ln, new_end[1] + radius * np.sin(ang)]),
+        np.concatenate([lp.z, np.full(len(lt) + len(times), new_end[2])]),
+        np.concatenate([lp.t, t_end + lt, times]),
     )
     return plan, local_to_plan(circle, op.plan, td.frame, created_t_s=now, reason="move_end")
 
@@ -224,9 +235,10 @@ def _best_end(
     ends = [(o, end_xyz(td, snapshot.operations.get(o.id, o))) for o in others]
     end = end_xyz(td, op)
     rise = max((td.pair_minima(op, o)[1] for o, _ in ends), default=0.0)
+    reach = entry_reach_m(loiter_radius_m(op))  # a fixed wing loops out entering it
     verified = 0
     for size, cand in _candidates(td, op, end, rise + VERTICAL_MARGIN_M):
-        if any(ends_clash(td, op, o, cand, e) for o, e in ends):
+        if any(ends_clash(td, op, o, cand, e, reach) for o, e in ends):
             continue
         plans = _transit(em, op, snapshot, cand)
         if plans is None or verified >= MAX_VERIFIED:

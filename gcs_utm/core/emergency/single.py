@@ -9,6 +9,7 @@ from __future__ import annotations
 from gcs_utm.core.emergency.config import Action
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case, Decision, Mode
+from gcs_utm.core.emergency.fence_late import fence_command
 from gcs_utm.core.emergency.fenced_hold import fence_free_hold
 from gcs_utm.core.emergency.immediate import held_by
 from gcs_utm.core.emergency.options import detail, intended
@@ -57,6 +58,9 @@ def single(  # noqa: PLR0917 - the case, its UAS and snapshot, what to offer, th
         return Decision(audit=(em.audit(now, "deferred", case.threat.id, why),))
     snapshot = intended(em, snapshot, case)
     case.operations = dict(snapshot.operations)
+    late = fence_command(em, case, op_id, snapshot, t)  # a fence entered before any plan
+    if late is not None:
+        return late
     case.modes[op_id] = Mode.SINGLE
     case.maneuvers[op_id] = maneuvers
     allowed = maneuvers - case.excluded.get(op_id, set())

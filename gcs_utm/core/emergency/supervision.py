@@ -21,7 +21,9 @@ an upload that failed, each lead to a new decision (paper §4.4: nothing is drop
   audited once; a vehicle that does not comply is Monitoring's business (conformance).
 - **Failed upload or verification.** The first failure for a UAS re-plans once; the next
   escalates and proposes the safe command for the threat kind (:func:`safe_command`): the
-  UAS is never left with a failed plan and no pending decision.
+  UAS is never left with a failed plan and no pending decision. A plan refused before its
+  upload for a newer command of another case for the same UAS is not a failure: the command
+  stands and the case is retried after ``retry_after_s`` (:mod:`.overridden`).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import numpy as np
 
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import ONE_SHOT, Case, Decision, Mode
+from gcs_utm.core.emergency.overridden import overtaken
 from gcs_utm.model import (
     AirspaceSnapshot,
     Command,
@@ -207,6 +210,9 @@ def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answ
     case = em.case(new.threat_id)
     if applied or case is None:
         return d
+    waiting = overtaken(em, case, new, now)  # a newer command of another case stands
+    if waiting is not None:
+        return d.merge(waiting)
     op_id = new.operation_id
     n = case.failures.get(op_id, 0) + 1
     case.failures[op_id] = n
