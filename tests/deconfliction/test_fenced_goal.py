@@ -87,3 +87,31 @@ def test_a_fixed_wing_whose_end_circle_enters_a_fence_gets_an_end_point_clear_of
     # needed (on the side the destination was)
     assert end_m - circle_m >= RADIUS_M + op.operational_volume_m, end_m
     assert end_m - circle_m < RADIUS_M + op.operational_volume_m + 40.0, end_m
+
+
+def test_a_fixed_wing_whose_entry_onto_its_end_circle_enters_a_fence_gets_it_clear() -> None:
+    """The destination is 160 m south of the fence's centre: the 80 m circle round it keeps
+    80 m from the fence (65 m needed), but the aircraft arrives westbound at 22.7 m/s and
+    its entry from the centre swings out about 150 m to its right, north, into the fence
+    (enc_3_0443_endpoint_vertical). The end point moves until the entry clears it, and the
+    plan TD offers is clear of the fence as Monitoring checks it (the same entry)."""
+    fence = sc.cylinder("F", 0.0, 0.0, RADIUS_M)
+    op = sc.make_operation("A", [(1500, -160, 100), (0, -160, 100)], speed_mps=22.7, ov_m=25.0)
+    op = replace(op, vehicle_kind=VehicleKind.FIXED_WING)
+    t = sc.T0_S + 20.0
+    snap = AirspaceSnapshot(t_s=t, operations={op.id: op}, tracks={}, geofences=(fence,))
+    assert plan_vs_geofences(op.plan, op, (fence,), sc.FRAME, MON)  # the filed plan is not
+    threat = sc.threat(ThreatKind.GEOFENCE_CONFLICT, ["A"], t_s=t, geofence_id=GeofenceId("F"))
+    td = TacticalDeconfliction(sc.FRAME, DeconflictionConfig(min_height_above_home_m=0.0), MON)
+    alts = td.resolve_single(threat, OperationId("A"), snap)
+    moved = [
+        a.plan
+        for a in alts
+        if a.maneuver is Maneuver.REROUTE
+        and a.plan is not None
+        and a.detail.startswith("end at the closest point outside")
+    ]
+    assert len(moved) == 1, [(a.maneuver, a.detail) for a in alts]
+    lp = plan_to_local(moved[0], sc.FRAME)
+    assert float(np.hypot(lp.e[-1], lp.n[-1])) > 160.0 + 20.0  # moved away from the fence
+    assert plan_vs_geofences(moved[0], op, (fence,), sc.FRAME, MON) == []

@@ -38,12 +38,6 @@ def test_the_classic_set_runs_without_an_intrusion(summary: EvalSummary) -> None
     assert summary.totals.geofence_intrusions == 0, markdown(summary)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 30 class 1: judged from take-off to landing, enc_7_0001 UAS2-UAS3 fly a "
-    "loss after their filed plans end (46.6 / 37.3 m against 50 / 40 m), created by an "
-    "accepted plan: the fixed wing's circle is not checked before its plan has ended",
-)
 def test_every_predicted_loss_is_avoided_in_closed_loop(summary: EvalSummary) -> None:
     table = markdown(summary)
     s = summary.totals

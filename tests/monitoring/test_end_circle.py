@@ -108,3 +108,25 @@ def test_a_plan_ending_with_a_hold_at_its_last_point_has_its_circle_checked() ->
     )
     (c,) = plan_vs_geofences(held, op, (FENCE,), FRAME, MonitoringConfig())
     assert c.geofence_id == "F" and c.entry_t_s > END_T_S
+
+
+def _entry_op() -> Operation:
+    """Eastbound at 22.7 m/s (a 76 m turn at 35 degrees), ending at (0, 0) at t = 20 s."""
+    op = operation("A", [(-1135.0, 0.0, 100.0, -30.0), (0.0, 0.0, 100.0, END_T_S)], fg=10, ov=10)
+    return dataclasses.replace(op, vehicle_kind=VehicleKind.FIXED_WING, cruise_speed_mps=22.7)
+
+
+# 172 m from the end point, to the right (south) of the eastbound last leg and a little
+# ahead: its edge is 132 m out, clear of the 90 m circle (turn radius plus tracking error),
+# but the entry from the centre swings out to about 150 m on that side
+# (enc_3_0443_endpoint_vertical: a fence 114 m from the end, entered for 3.15 s).
+ENTRY_FENCE = cylinder("E", (85.0, -150.0), 40.0)
+# The same fence on the left, a little behind: the entry never goes there.
+BEHIND_FENCE = cylinder("B", (-85.0, 150.0), 40.0)
+
+
+def test_a_fence_in_the_entry_onto_the_circle_is_not_clear_of_the_plan() -> None:
+    op = _entry_op()
+    cfg = MonitoringConfig()
+    (c,) = plan_vs_geofences(op.plan, op, (ENTRY_FENCE, BEHIND_FENCE), FRAME, cfg)
+    assert c.geofence_id == "E" and END_T_S < c.entry_t_s < END_T_S + 15.0

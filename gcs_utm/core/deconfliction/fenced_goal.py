@@ -13,15 +13,21 @@ A fixed wing's destination is blocked as well when it lies outside every fence b
 circle it flies round it once the plan has ended (its turn radius) comes inside one: every
 route to it ends with that circle (an end point 52 m from a fence, circled at 80 m, entered
 it 5 s after the plan's end). The end point then moves away from the fence until the circle
-clears it by ``escape_distance_m``. Verified and scored like every other candidate. Pure."""
+clears it by ``escape_distance_m``. The circle is entered from its centre on the last leg's
+course and swings out on the turn before it settles (:func:`.end_circle.end_ring`): that
+entry coming inside an obstacle blocks the destination too, and an end point outside the
+fences then moves by as much room as the entry needs (up to its reach) instead of the
+radius. Verified and scored like every other candidate. Pure."""
 
 from __future__ import annotations
 
+import numpy as np
 import shapely
-from shapely.geometry import Point
+from shapely.geometry import LineString, Point
 
 from gcs_utm.core.deconfliction.geometry import NODE_EPS_M, LocalPlan
 from gcs_utm.core.deconfliction.router import Router
+from gcs_utm.core.monitoring import end_circle
 from gcs_utm.model import FloatArray
 
 
@@ -32,9 +38,29 @@ def circle_radius_m(router: Router) -> float:
     return 0.0 if env.can_hover else env.turn_radius_m
 
 
+def _entry_ring(router: Router) -> FloatArray | None:
+    """(M, 4) the entry and circle round the plan's last waypoint (:func:`.end_circle.end_ring`
+    at the turn radius), or None (a vehicle that hovers, a plan that never moves)."""
+    radius_m = circle_radius_m(router)
+    if radius_m <= 0.0:
+        return None
+    lp = router.lp
+    return end_circle.end_ring(np.stack([lp.e, lp.n, lp.z, lp.t], axis=1), radius_m)
+
+
+def room_m(router: Router) -> float:
+    """How far the UAS flies from its last waypoint once its plan has ended: the reach of
+    its entry and circle (the turn radius when the plan never moves), 0 if it hovers."""
+    ring = _entry_ring(router)
+    if ring is None:
+        return circle_radius_m(router)
+    dest = router.lp.xyz()[-1]
+    return max(float(np.hypot(*(ring[:, :2] - dest[:2]).T).max()), circle_radius_m(router))
+
+
 def destination_blocked(router: Router) -> bool:
     """Does the plan's last waypoint lie inside an obstacle (an inflated fence), or, for a
-    fixed wing, the circle it flies round that point come inside one?"""
+    fixed wing, the circle it flies round that point, or its entry, come inside one?"""
     dest = router.lp.xyz()[-1][:2]
     if not router.planner.free(dest):
         return True
@@ -42,7 +68,11 @@ def destination_blocked(router: Router) -> bool:
     obstacles = router.planner.obstacles
     if radius_m <= 0.0 or not obstacles:
         return False
-    return float(shapely.union_all(obstacles).distance(Point(dest[0], dest[1]))) < radius_m
+    union = shapely.union_all(obstacles)
+    if float(union.distance(Point(dest[0], dest[1]))) < radius_m:
+        return True
+    ring = _entry_ring(router)
+    return ring is not None and bool(union.intersects(LineString(ring[:, :2])))
 
 
 def goal_outside(router: Router) -> tuple[LocalPlan, int] | None:
@@ -50,15 +80,14 @@ def goal_outside(router: Router) -> tuple[LocalPlan, int] | None:
     (None when the destination is free, or when no path reaches the new end point)."""
     if not destination_blocked(router):
         return None
-    extra_m = router.escape_m + circle_radius_m(router)
     lp = router.lp
     dest = lp.xyz()[-1]
     if router.planner.free(dest[:2]):
-        out = _circle_clear(router, dest[:2], extra_m)
+        out = _entry_clear(router, dest[:2])
         if out is None:
             return None
     else:
-        out = router.planner.exit_point(dest[:2], extra_m)
+        out = router.planner.exit_point(dest[:2], router.escape_m + circle_radius_m(router))
     e, n = lp.e.copy(), lp.n.copy()
     e[-1], n[-1] = float(out[0]), float(out[1])
     moved = LocalPlan(e, n, lp.z.copy(), lp.t.copy())
@@ -70,6 +99,31 @@ def goal_outside(router: Router) -> tuple[LocalPlan, int] | None:
         lp=moved,
         escape_m=router.escape_m,
     ).reroute()
+
+
+ROOM_STEP_M = 10.0
+"""Step by which the room kept round a moved end point grows, from the circle's radius to
+the entry's reach, until the entry and circle round the new point clear every obstacle."""
+
+
+def _entry_clear(router: Router, p: FloatArray) -> FloatArray | None:
+    """The closest point to ``p`` whose circle, and its entry on the last leg's course, clear
+    every obstacle by ``escape_m`` (:func:`_circle_clear` with the least room that does,
+    from the turn radius up to the entry's reach), or None."""
+    radius_m, reach_m = circle_radius_m(router), room_m(router)
+    lp = router.lp
+    kept = shapely.union_all(router.planner.obstacles).buffer(router.escape_m)
+    room = radius_m
+    while True:
+        out = _circle_clear(router, p, router.escape_m + room)
+        if out is None or room >= reach_m:
+            return out
+        e, n = lp.e.copy(), lp.n.copy()
+        e[-1], n[-1] = float(out[0]), float(out[1])
+        ring = end_circle.end_ring(np.stack([e, n, lp.z, lp.t], axis=1), radius_m)
+        if ring is None or not kept.intersects(LineString(ring[:, :2])):
+            return out
+        room = min(room + ROOM_STEP_M, reach_m)
 
 
 def _circle_clear(router: Router, p: FloatArray, extra_m: float) -> FloatArray | None:

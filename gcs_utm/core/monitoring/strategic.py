@@ -202,7 +202,7 @@ def plan_vs_geofences(
     del config  # the inflation is the operation's own volume; kept for a uniform signature
     pts = plan_local(plan, frame)
     # A fixed wing's circle after the plan, against the fence as Monitoring checks it.
-    ring = end_circle.end_ring(pts, end_circle.circle_radius_m(op))
+    ring = end_circle.end_ring(pts, end_circle.circle_radius_m(op), end_circle.loiter_radius_m(op))
     out: list[PlanGeofenceCrossing] = []
     for g in geofences:
         if not g.applies_to(op.id):

@@ -18,17 +18,23 @@ constant the plan-following prediction uses for its cross-track offset (the auto
 converges onto the circle and the waypoint's altitude), so the prediction starts at the
 track's position.
 
-:func:`overlay` applies both to a prediction (what ``Tracker.predict`` calls).
+:func:`overlay` applies both to a prediction (what ``Tracker.predict`` calls). A fixed wing
+inside its circle (it has just passed the last waypoint, the centre) swings out on its turn
+before it settles on the circle, and one whose plan ends inside the prediction window flies
+the same entry after its end, not a stop at the last waypoint: both are predicted with the
+capture of :mod:`.loiter_entry`.
 
 Units: local frame metres (east, north, alt AMSL), seconds.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
-from gcs_utm.core.tracking import kalman
+from gcs_utm.core.tracking import kalman, loiter_entry
 from gcs_utm.core.tracking.plans import PlanTable
 from gcs_utm.model import Operation
 
@@ -132,6 +138,17 @@ def overlay(
     rows = np.flatnonzero((plan_row >= 0) & (loiter_m > 0.0))
     if not len(rows):
         return
+    _entry_after_end(
+        axes,
+        plans=plans,
+        rows=rows,
+        plan_row=plan_row,
+        loiter_m=loiter_m,
+        t_state_s=t_state_s,
+        x=x,
+        ahead0_s=ahead0_s,
+        steps_s=steps_s,
+    )
     j = plan_row[rows]
     center = plans.wp_pos[plans.wp_offset[j] + plans.n_waypoints[j] - 1]
     pos = x[rows, :, kalman.POS]
@@ -147,13 +164,93 @@ def overlay(
     )
     if not len(at):
         return
+    tau = np.add.outer(ahead0_s[rows[at]], steps_s)
     circle = loiter_points(
         radius_m=radius[at],
         pos=pos[at],
         vel=vel[at],
         center=center[at],
-        tau_s=np.add.outer(ahead0_s[rows[at]], steps_s),
+        tau_s=tau,
         decay_s=decay_s,
     )
+    # Inside the circle (just past the centre): the entry's swing out, on the capture.
+    inside = np.flatnonzero(np.hypot(*(pos[at, :2] - center[at, :2]).T) < radius[at])
+    if len(inside):
+        a = at[inside]
+        speed = np.hypot(vel[a, 0], vel[a, 1])
+        east, north = loiter_entry.capture_points(
+            center_en=center[a, :2],
+            radius_m=radius[a],
+            turn_radius_m=loiter_entry.capture_turn_radius_m(speed),
+            clockwise=np.ones(len(a), dtype=bool),
+            pos_en=pos[a, :2],
+            course_rad=np.arctan2(vel[a, 0], vel[a, 1]),
+            speed_mps=speed,
+            tau_s=tau[inside],
+        )
+        circle[0][inside], circle[1][inside] = east, north
     for axis in range(3):
         axes[axis][rows[at]] = circle[axis]
+
+
+def last_course_rad(wp_pos: FloatArray) -> float | None:
+    """The course (radians clockwise from north) of the last leg with a horizontal length of
+    the waypoints ``wp_pos`` (K, >= 2; a plan may end with a hold at its last point), or
+    None when they never move horizontally."""
+    end = wp_pos[-1]
+    for i in range(len(wp_pos) - 2, -1, -1):
+        d_e, d_n = float(end[0] - wp_pos[i, 0]), float(end[1] - wp_pos[i, 1])
+        if math.hypot(d_e, d_n) > 1e-6:
+            return math.atan2(d_e, d_n)
+    return None
+
+
+def _entry_after_end(
+    axes: list[FloatArray],
+    *,
+    plans: PlanTable,
+    rows: IntArray,
+    plan_row: IntArray,
+    loiter_m: FloatArray,
+    t_state_s: FloatArray,
+    x: FloatArray,
+    ahead0_s: FloatArray,
+    steps_s: FloatArray,
+) -> None:
+    """Overwrite in ``axes`` the points after the plan's end of ``rows`` (fixed wings with a
+    plan) whose plan ends after their state and inside the window, and whose prediction at
+    the end reaches the last waypoint (within :data:`CAPTURE_RADII` loiter radii: not sent
+    elsewhere): from the last waypoint, at the plan's end, on the last leg's course at the
+    track's horizontal speed, capturing the circle (:mod:`.loiter_entry`). Altitudes stay
+    as predicted."""
+    end_all = plans.end_t_s[plan_row[rows]]
+    last_t = t_state_s[rows] + ahead0_s[rows] + steps_s[-1]  # the window's last point
+    ending = rows[(t_state_s[rows] < end_all) & (end_all < last_t)]
+    for r in ending:
+        j = int(plan_row[r])
+        end_t = float(plans.end_t_s[j])
+        tau = ahead0_s[r] + steps_s  # after the state
+        after = np.flatnonzero(t_state_s[r] + tau > end_t)
+        if t_state_s[r] >= end_t or not len(after) or after[0] == 0:
+            continue
+        o, m = int(plans.wp_offset[j]), int(plans.n_waypoints[j])
+        wps = plans.wp_pos[o : o + m]
+        k = int(after[0]) - 1  # the last point up to the end
+        reach_m = math.hypot(axes[0][r, k] - wps[-1, 0], axes[1][r, k] - wps[-1, 1])
+        course = last_course_rad(wps) if m >= 2 else None
+        if course is None or reach_m > CAPTURE_RADII * float(loiter_m[r]):
+            continue
+        speed = np.array([math.hypot(x[r, 0, kalman.VEL], x[r, 1, kalman.VEL])])
+        if speed[0] < MIN_SPEED_MPS:
+            continue
+        east, north = loiter_entry.capture_points(
+            center_en=wps[-1:, :2],
+            radius_m=loiter_m[r : r + 1],
+            turn_radius_m=loiter_entry.capture_turn_radius_m(speed),
+            clockwise=np.ones(1, dtype=bool),
+            pos_en=wps[-1:, :2],
+            course_rad=np.array([course]),
+            speed_mps=speed,
+            tau_s=(t_state_s[r] + tau[after] - end_t)[None, :],
+        )
+        axes[0][r, after], axes[1][r, after] = east[0], north[0]
