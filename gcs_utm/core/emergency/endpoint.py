@@ -235,7 +235,7 @@ def _best_end(
     ends = [(o, end_xyz(td, snapshot.operations.get(o.id, o))) for o in others]
     end = end_xyz(td, op)
     rise = max((td.pair_minima(op, o)[1] for o, _ in ends), default=0.0)
-    reach = entry_reach_m(loiter_radius_m(op))  # a fixed wing loops out entering it
+    reach = entry_reach_m(loiter_radius_m(op), op.cruise_speed_mps)  # it loops out entering
     verified = 0
     for size, cand in _candidates(td, op, end, rise + VERTICAL_MARGIN_M):
         if any(ends_clash(td, op, o, cand, e, reach) for o, e in ends):
