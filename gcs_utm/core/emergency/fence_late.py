@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case, Decision
-from gcs_utm.core.emergency.immediate import choose_commands
+from gcs_utm.core.emergency.immediate import commands_now
 from gcs_utm.core.emergency.supervision import escalate_safe
 from gcs_utm.model import AirspaceSnapshot, OperationId, Threat, ThreatKind
 
@@ -57,15 +57,7 @@ def fence_command(
     op = snapshot.operations.get(op_id)
     if not why or op is None:
         return None
-    choice = choose_commands(
-        em.td,
-        snapshot,
-        [op_id],
-        em.lead.command_at([op_id], now),
-        threat.predicted_event_at_s,
-        {op_id: op.priority},
-        t_early=now + em.lead.answer_s([op_id]),
-    )
+    choice = commands_now(em, snapshot, [op_id], threat.predicted_event_at_s)
     if choice is None or not choice.commands or not choice.clear:
         return None
     if choice.geofences and not op.performance().can_hover:

@@ -15,7 +15,7 @@ the other traffic, that command is proposed instead. Pure.
 from __future__ import annotations
 
 from gcs_utm.core.emergency.context import EmContext
-from gcs_utm.core.emergency.immediate import Immediate, choose_commands
+from gcs_utm.core.emergency.immediate import Immediate, commands_now
 from gcs_utm.model import AirspaceSnapshot, Command, OperationId, Threat
 
 
@@ -36,15 +36,7 @@ def fence_free_hold(
     op = snapshot.operations.get(op_id)
     if op is None or op.performance().can_hover:
         return None
-    now = snapshot.t_s
-    choice = choose_commands(
-        em.td,
-        snapshot,
-        [op_id],
-        em.lead.command_at([op_id], now),
-        threat.predicted_event_at_s,
-        {op_id: op.priority},
-    )
+    choice = commands_now(em, snapshot, [op_id], threat.predicted_event_at_s, early=False)
     if choice is None or not choice.commands or choice.geofences or not choice.clear:
         return None
     if not _hold_fenced(choice.tried, op_id):

@@ -239,7 +239,30 @@ def _ratio(td: TacticalDeconfliction, fa: _Flown, fb: _Flown) -> float:
     return float(r.min())
 
 
-def choose_commands(  # noqa: PLR0917 - one call site
+def commands_now(
+    em: EmContext,
+    snapshot: AirspaceSnapshot,
+    ids: Sequence[OperationId],
+    event_t_s: float | None,
+    *,
+    early: bool = True,
+) -> Choice | None:
+    """:func:`choose_commands` for ``ids`` as EM decides now: from when a command can act
+    (``em.lead``), by priority, and (``early``) ranked from the answer's time too."""
+    now = snapshot.t_s
+    ops = snapshot.operations
+    return choose_commands(
+        em.td,
+        snapshot,
+        ids,
+        em.lead.command_at(ids, now),
+        event_t_s,
+        {k: ops[k].priority for k in ids if k in ops},
+        t_early=now + em.lead.answer_s(ids) if early else None,
+    )
+
+
+def choose_commands(  # noqa: PLR0917 - the long form of commands_now
     td: TacticalDeconfliction,
     snapshot: AirspaceSnapshot,
     candidates: Sequence[OperationId],
@@ -571,21 +594,12 @@ def propose(
     force for the case."""
     now = snapshot.t_s
     t = case.threat
-    ops = snapshot.operations
     if not choose:
         return escalate_safe(em, case, list(candidates), now, why)
     moved = None if too_late(em, t, now) else move_end(em, case, snapshot)
     if moved is not None:  # two UAS waiting after their plans: a new end point, in time
         return moved
-    choice = choose_commands(
-        em.td,
-        snapshot,
-        candidates,
-        em.lead.command_at(candidates, now),
-        t.predicted_event_at_s,
-        {k: ops[k].priority for k in candidates if k in ops},
-        t_early=now + em.lead.answer_s(candidates),
-    )
+    choice = commands_now(em, snapshot, candidates, t.predicted_event_at_s)
     if choice is None:
         return escalate_safe(em, case, list(candidates), now, why)
     if not choice.commands:  # every command separates them less than flying on (.fly_on)
