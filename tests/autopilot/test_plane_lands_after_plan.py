@@ -79,6 +79,24 @@ def _mission(lat0: float, lon0: float) -> list[Any]:
     ]
 
 
+def hovering_intruder(
+    lat_deg: float, lon_deg: float, amsl_m: float, airborne: threading.Event
+) -> Callable[[], list[str] | None]:
+    """The intruder's SBS-1 lines for :func:`_sbs_feed`: a helicopter hovering at the given
+    place and altitude, heard only once ``airborne`` is set (the plane is up)."""
+
+    def lines() -> list[str] | None:
+        if not airborne.is_set():
+            return None
+        alt_ft = amsl_m / 0.3048
+        return [
+            sbs_position(INTRUDER_ICAO, lat_deg, lon_deg, alt_ft),
+            sbs_velocity(INTRUDER_ICAO, 0.0, 0.0, 0.0),
+        ]
+
+    return lines
+
+
 def adsb_config(port: int) -> str:
     """The ``[adsb]`` table of serve's configuration reading :func:`_sbs_feed` on ``port``
     (capture time: the receipt, on serve's clock)."""
@@ -164,14 +182,7 @@ def test_arduplane_avoids_an_intruder_and_lands_on_its_own_landing(
     intruder_amsl_m = ground + CRUISE_ALT_M
     airborne = threading.Event()
 
-    def intruder() -> list[str] | None:  # the helicopter, hovering, once the plane is up
-        if not airborne.is_set():
-            return None
-        alt_ft = intruder_amsl_m / 0.3048
-        return [
-            sbs_position(INTRUDER_ICAO, ilat, ilon, alt_ft),
-            sbs_velocity(INTRUDER_ICAO, 0.0, 0.0, 0.0),
-        ]
+    intruder = hovering_intruder(ilat, ilon, intruder_amsl_m, airborne)
 
     db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
     crossing = Crossing(origin=(lat0, lon0), ground_amsl_m=ground)

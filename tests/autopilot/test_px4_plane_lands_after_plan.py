@@ -32,18 +32,17 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import common as mav
 
-from tests.adsb.sbs_lines import sbs_position, sbs_velocity
 from tests.autopilot.autopilots import PX4_DEFAULT_HOME, PX4_SIH_PLANE_PARAMS, SitlProcess
 from tests.autopilot.closed_loop import Crossing, _config, rows, serve_process
 from tests.autopilot.pilot import PilotLink, local_m, offset_deg
 from tests.autopilot.test_plane_lands_after_plan import (
     INTRUDER_H_M,
-    INTRUDER_ICAO,
     INTRUDER_V_M,
     _same_item,
     _sbs_feed,
     _wait_filed,
     adsb_config,
+    hovering_intruder,
 )
 
 SPEED = 4.0  # PX4_SIM_SPEED_FACTOR; serve --speed matches it
@@ -119,14 +118,7 @@ def test_px4_plane_avoids_an_intruder_and_lands_on_its_own_landing(
     intruder_amsl_m = GROUND_M + CRUISE_AGL_M
     airborne = threading.Event()
 
-    def intruder() -> list[str] | None:  # the helicopter, hovering, once the plane is up
-        if not airborne.is_set():
-            return None
-        alt_ft = intruder_amsl_m / 0.3048
-        return [
-            sbs_position(INTRUDER_ICAO, ilat, ilon, alt_ft),
-            sbs_velocity(INTRUDER_ICAO, 0.0, 0.0, 0.0),
-        ]
+    intruder = hovering_intruder(ilat, ilon, intruder_amsl_m, airborne)
 
     db, log_path = tmp_path / "store.sqlite", tmp_path / "serve.log"
     crossing = Crossing(origin=(LAT0, LON0), ground_amsl_m=GROUND_M)
