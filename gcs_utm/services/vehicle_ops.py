@@ -36,12 +36,9 @@ mission changes after discovery to something other than its plan.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
-import math
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
-from typing import Protocol
 
 from gcs_utm.clock import Clock
 from gcs_utm.messages import FlightMode, VehicleStatus
@@ -57,28 +54,24 @@ from gcs_utm.model import (
     default_envelope,
 )
 from gcs_utm.services import fixed_wing_plan as fw
-from gcs_utm.services import fixed_wing_point as fwp
 from gcs_utm.services import mission_order
 from gcs_utm.services.airspace import Airspace, AirspaceError
-from gcs_utm.services.fixed_wing_rejoin import rejoin_rest
 from gcs_utm.services.flight_state import FlightState
+from gcs_utm.services.mission_points import (
+    ABSOLUTE_FRAMES,
+    MATCH_H_M,
+    NavPoint,
+    dist_m,
+    mission_is_plan,
+    mission_points,
+    plan_from_points,
+)
 
 _log = logging.getLogger(__name__)
 
 CONOPS = "from vehicle mission"
 """``Operation.conops`` of an operation filed from a vehicle's mission."""
 
-_NAV_WAYPOINT = 16
-_NAV_LOITER_TIME = 19
-_NAV_LAND = 21
-_NAV_TAKEOFF = 22
-_DO_CHANGE_SPEED = 178
-_DO_LAND_START = 189
-_NAV_COMMANDS = frozenset({_NAV_WAYPOINT, _NAV_LAND, _NAV_TAKEOFF}) | fwp.LOITER_COMMANDS
-_ABSOLUTE_FRAMES = frozenset({0, 5})  # MAV_FRAME_GLOBAL(_INT): metres AMSL
-_RELATIVE_FRAMES = frozenset({3, 6})  # MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT): metres above home
-_MATCH_H_M = 0.5  # a mission point within this of a plan waypoint is that waypoint (float32 z)
-_MATCH_V_M = 0.5
 _RETRY_FIRST_S = 2.0  # a failed mission download is tried again after this, doubling
 _RETRY_MAX_S = 30.0
 _FAILURES_CAP = 1000
@@ -111,212 +104,10 @@ class VehicleOpsSettings:
     home_tolerance_m: float = 1.0
 
 
-@dataclass(frozen=True, slots=True)
-class NavPoint:
-    """A positional mission item: its mission seq, position (AMSL) and the speed it is flown
-    to at (the last DO_CHANGE_SPEED before it)."""
-
-    seq: int
-    lat_deg: float
-    lon_deg: float
-    alt_amsl_m: float
-    speed_mps: float
-    explicit: bool  # its own lat/lon (not "here": a takeoff or land at 0, 0)
-    command: int = _NAV_WAYPOINT
-    radius_m: float = 0.0  # a loiter's radius (0: the vehicle's default; < 0 anticlockwise)
-    # a loiter's turns (NAV_LOITER_TURNS) or seconds (NAV_LOITER_TIME); a take-off's pitch (deg)
-    amount: float = 0.0
-    landing: bool = False  # in the landing sequence (after a DO_LAND_START)
-    exit_xtrack: bool = False  # a loiter's param4 1: the next leg from where it leaves
-
-    def moved(self, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> NavPoint:
-        return dataclasses.replace(self, lat_deg=lat_deg, lon_deg=lon_deg, alt_amsl_m=alt_amsl_m)
-
-    def synthetic(self) -> NavPoint:
-        """A modelled point (not the item's own position): never compared with a plan."""
-        return dataclasses.replace(self, explicit=False)
-
-
-def mission_points(
-    items: Sequence[object],
-    *,
-    home: Position | None,
-    cruise_speed_mps: float,
-    skip_first: bool = False,
-) -> list[NavPoint] | None:
-    """The positional items of a downloaded mission, AMSL; None when an item is relative to a
-    home that is not known yet. ``skip_first``: ArduPilot's seq 0 is home, not a waypoint.
-    A takeoff or land without a position is where the previous point (else home) is."""
-    speed = cruise_speed_mps
-    out: list[NavPoint] = []
-    landing = False
-    for i, it in mission_order.flown_order(items):
-        if skip_first and i == 0:
-            continue
-        command = int(getattr(it, "command", -1))
-        landing = landing or command == _DO_LAND_START
-        if command == _DO_CHANGE_SPEED:
-            value = float(getattr(it, "param2", 0.0))
-            if value > 0.0:
-                speed = value
-            continue
-        if command not in _NAV_COMMANDS:
-            continue
-        frame = int(getattr(it, "frame", 0))
-        alt = float(getattr(it, "z", 0.0))
-        if frame in _RELATIVE_FRAMES:
-            if home is None:
-                return None
-            alt += home.alt_amsl_m
-        elif frame not in _ABSOLUTE_FRAMES:
-            continue  # terrain or local frames: not resolvable here
-        lat = float(getattr(it, "x", 0)) / 1e7
-        lon = float(getattr(it, "y", 0)) / 1e7
-        explicit = (lat, lon) != (0.0, 0.0)
-        if not explicit:
-            where = out[-1] if out else home
-            if where is None:
-                continue
-            lat, lon = where.lat_deg, where.lon_deg
-        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and math.isfinite(alt)):
-            continue  # a malformed item is skipped, not fatal
-        seq = int(getattr(it, "seq", i))
-        radius, amount = mission_order.item_params(it, command)
-        xtrack = command in fwp.LOITER_COMMANDS and float(getattr(it, "param4", 0.0)) >= 1.0
-        out.append(
-            NavPoint(seq, lat, lon, alt, speed, explicit, command, radius, amount, landing, xtrack)
-        )
-    return out
-
-
-class _Point(Protocol):
-    @property
-    def lat_deg(self) -> float: ...
-    @property
-    def lon_deg(self) -> float: ...
-    @property
-    def alt_amsl_m(self) -> float: ...
-
-
-def _dist_m(a: _Point, b: _Point) -> float:
-    """3D distance (flat earth: mission legs are short)."""
-    k = math.cos(math.radians(a.lat_deg))
-    return math.hypot(
-        (b.lat_deg - a.lat_deg) * 110_540.0,
-        (b.lon_deg - a.lon_deg) * 111_320.0 * k,
-        b.alt_amsl_m - a.alt_amsl_m,
-    )
-
-
-def plan_from_points(
-    points: Sequence[NavPoint],
-    op_id: OperationId,
-    *,
-    t_s: float,
-    current_seq: int | None = None,
-    position: Position | None = None,
-    version: int = 1,
-    reason: str = "from the vehicle's mission",
-    turn_from_m: float = 0.0,
-    course_deg: float | None = None,
-) -> FlightPlan | None:
-    """The 4D plan of a vehicle flying ``points`` from ``position`` at ``t_s``: the items
-    from ``current_seq`` on (MISSION_CURRENT; all when None), each reached at the speed it is
-    flown to. None when there is no point. ``turn_from_m`` (a fixed wing): when the point
-    just reached (the one before ``current_seq``) is within that of ``position``, the plan
-    goes on through it (the autopilot accepted it early: ArduPlane's WP_RADIUS, 50 m); farther,
-    it goes back onto its leg (``course_deg``: PX4's loiter exit; :mod:`.fixed_wing_rejoin`)."""
-    # from the first point at or after the current item (a loop repeats seqs: its first pass)
-    start = next(
-        (k for k, p in enumerate(points) if current_seq is None or p.seq >= current_seq),
-        len(points),
-    )
-    rest = list(points[start:])
-    if not rest and points:
-        rest = [points[-1]]  # mission flown: the last point
-    if not rest:
-        return None
-    done = list(points[:start])
-    if (
-        position is not None
-        and done
-        and done[-1].command not in fwp.LOITER_COMMANDS  # a circle is left, not turned round
-        and _dist_m(position, done[-1]) <= turn_from_m
-    ):
-        rest = [done[-1], *rest]
-    elif position is not None:
-        rest = _from_nearest_modelled(rest, position)
-        if turn_from_m > 0.0 and done:  # a fixed wing converges on the leg it flies
-            rest = rejoin_rest(position.lat_deg, position.lon_deg, course_deg, done[-1], rest)
-    wps: list[Waypoint4D] = []
-    if position is not None:
-        first = rest[0]
-        if _dist_m(position, first) > _MATCH_H_M:
-            wps.append(
-                Waypoint4D(
-                    lat_deg=position.lat_deg,
-                    lon_deg=position.lon_deg,
-                    alt_amsl_m=position.alt_amsl_m,
-                    t_s=t_s,
-                )
-            )
-    for p in rest:
-        t = t_s
-        if wps:
-            a = wps[-1]
-            dist = _dist_m(a, p)
-            t = a.t_s + dist / max(p.speed_mps, 0.1)
-        wps.append(Waypoint4D(lat_deg=p.lat_deg, lon_deg=p.lon_deg, alt_amsl_m=p.alt_amsl_m, t_s=t))
-    return FlightPlan(
-        operation_id=op_id, version=version, waypoints=tuple(wps), created_t_s=t_s, reason=reason
-    )
-
-
-def _from_nearest_modelled(rest: list[NavPoint], position: Position) -> list[NavPoint]:
-    """``rest`` from the modelled point of its first item nearest ``position`` on: a vehicle
-    part-way along an item's modelled path (a PX4 plane round its landing loiter's circle
-    when NAV_LAND becomes current) is not sent back to that path's start."""
-    run = next((k for k, p in enumerate(rest) if p.explicit or p.seq != rest[0].seq), len(rest))
-    if run < 2:
-        return rest
-    nearest = min(range(run), key=lambda k: _dist_m(position, rest[k]))
-    return rest[nearest:]
-
-
-def mission_is_plan(points: Sequence[NavPoint], plan: FlightPlan) -> bool:
-    """True when every waypoint of the mission (with its own position; takeoff and land
-    items are not compared, nor the landing sequence when the plan has none of it: uploads
-    keep a pilot's landing after the UTM's plan; a fixed wing's circles are points of its
-    plan too) is, in order, a waypoint of ``plan`` (within half a metre): the vehicle flies
-    the plan (e.g. the UTM uploaded it, from some waypoint on)."""
-    wps = plan.waypoints
-    compared = [p for p in points if p.explicit and p.command not in (_NAV_TAKEOFF, _NAV_LAND)]
-    landing = [p for p in points if p.landing and p.explicit]  # (its NAV_LAND included)
-    if not any(_same_place(p, w) for p in landing for w in wps):
-        compared = [p for p in compared if not p.landing]
-    k = 0
-    for p in compared:
-        while k < len(wps) and not _same_place(p, wps[k]):
-            k += 1
-        if k == len(wps):
-            return False
-        k += 1
-    return True
-
-
-def _same_place(p: NavPoint, w: Waypoint4D) -> bool:
-    k = math.cos(math.radians(p.lat_deg))
-    return (
-        math.hypot((w.lat_deg - p.lat_deg) * 110_540.0, (w.lon_deg - p.lon_deg) * 111_320.0 * k)
-        <= _MATCH_H_M
-        and abs(w.alt_amsl_m - p.alt_amsl_m) <= _MATCH_V_M
-    )
-
-
 def _moved(a: Position | None, b: Position | None, vertical_m: float = _HOME_MOVE_M) -> bool:
     if a is None or b is None:
         return a is not b
-    horizontal = _dist_m(a, Position(lat_deg=b.lat_deg, lon_deg=b.lon_deg, alt_amsl_m=a.alt_amsl_m))
+    horizontal = dist_m(a, Position(lat_deg=b.lat_deg, lon_deg=b.lon_deg, alt_amsl_m=a.alt_amsl_m))
     return horizontal > _HOME_MOVE_M or abs(a.alt_amsl_m - b.alt_amsl_m) > vertical_m
 
 
@@ -544,7 +335,7 @@ class VehicleOps:
             return
         it = v.items[0]
         lat, lon = float(getattr(it, "x", 0)) / 1e7, float(getattr(it, "y", 0)) / 1e7
-        if (lat, lon) == (0.0, 0.0) or int(getattr(it, "frame", 0)) not in _ABSOLUTE_FRAMES:
+        if (lat, lon) == (0.0, 0.0) or int(getattr(it, "frame", 0)) not in ABSOLUTE_FRAMES:
             return
         home = Position(lat_deg=lat, lon_deg=lon, alt_amsl_m=float(getattr(it, "z", 0.0)))
         if _moved(v.home, home):
@@ -797,4 +588,4 @@ def _flies_plan(v: _Vehicle, points: Sequence[NavPoint], plan: FlightPlan) -> bo
 
 
 def _same_wp(a: Waypoint4D, b: Waypoint4D) -> bool:
-    return _dist_m(a, b) <= _MATCH_H_M
+    return dist_m(a, b) <= MATCH_H_M

@@ -30,7 +30,7 @@ from adapters.mavlink.mission import MAV_CMD_NAV_LAND, MAV_CMD_NAV_WAYPOINT, Mis
 from gcs_utm.clock import ScaledClock
 from gcs_utm.model import FlightPlan, OperationId, Position, SysId, Waypoint4D
 from gcs_utm.services import fixed_wing_plan as fw
-from gcs_utm.services.vehicle_ops import mission_points, plan_from_points
+from gcs_utm.services.mission_points import mission_points, plan_from_points
 from tests.autopilot.autopilots import ARDUPILOT_DEFAULT_HOME, SitlProcess, wait_tcp_listening
 from tests.autopilot.pilot import PilotLink, local_m
 from tests.autopilot.test_plane_takeoff import AUTO, _loiter_mission

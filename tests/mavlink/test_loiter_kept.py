@@ -29,7 +29,7 @@ from adapters.mavlink.upload import Uploads
 from gcs_utm.model import Autopilot, FlightPlan, OperationId, Position, VehicleKind
 from gcs_utm.services import fixed_wing_plan as fw
 from gcs_utm.services.fixed_wing_loiter import STEP_RAD
-from gcs_utm.services.vehicle_ops import mission_is_plan, mission_points, plan_from_points
+from gcs_utm.services.mission_points import mission_is_plan, mission_points, plan_from_points
 
 LAT0, LON0, GROUND_M = 47.397, 8.5456, 488.0
 RADIUS_M = 80.0  # ArduPlane's WP_LOITER_RAD in its SITL defaults

@@ -13,7 +13,7 @@ from gcs_utm.model import OperationId, Position
 from gcs_utm.services import fixed_wing_plan as fw
 from gcs_utm.services import fixed_wing_point as fwp
 from gcs_utm.services.fixed_wing_landing import landing_exit
-from gcs_utm.services.vehicle_ops import NavPoint, plan_from_points
+from gcs_utm.services.mission_points import NavPoint, plan_from_points
 
 LAT0, LON0 = 45.4671160, -73.7578370
 K = math.cos(math.radians(LAT0))

@@ -13,7 +13,7 @@ import pytest
 
 from gcs_utm.model import OperationId, Position
 from gcs_utm.services import fixed_wing_plan as fw
-from gcs_utm.services.vehicle_ops import NavPoint, mission_points, plan_from_points
+from gcs_utm.services.mission_points import NavPoint, mission_points, plan_from_points
 
 HOME = Position(lat_deg=45.4671, lon_deg=-73.7963, alt_amsl_m=32.4)
 M_LAT = 110_540.0

@@ -25,13 +25,13 @@ from gcs_utm.model import (
 )
 from gcs_utm.services import fixed_wing_plan as fw
 from gcs_utm.services.airspace import Airspace
-from gcs_utm.services.usm import Usm
-from gcs_utm.services.vehicle_ops import (
+from gcs_utm.services.mission_points import (
     NavPoint,
     mission_is_plan,
     mission_points,
     plan_from_points,
 )
+from gcs_utm.services.usm import Usm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from usm_fakes import FakeVehicles

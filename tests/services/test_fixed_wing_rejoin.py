@@ -14,7 +14,7 @@ from pathlib import Path
 
 from gcs_utm.model import OperationId, Position
 from gcs_utm.services.fixed_wing_rejoin import rejoin
-from gcs_utm.services.vehicle_ops import NavPoint, plan_from_points
+from gcs_utm.services.mission_points import NavPoint, plan_from_points
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "flown" / "arduplane_landing_rejoin.json"
 FLOWN = json.loads(DATA.read_text())

@@ -19,8 +19,8 @@ from gcs_utm.messages import FlightMode, VehicleStatus
 from gcs_utm.model import Autopilot, Position, SysId
 from gcs_utm.services import fixed_wing_plan as fw
 from gcs_utm.services.airspace import Airspace
+from gcs_utm.services.mission_points import NavPoint
 from gcs_utm.services.usm import Usm
-from gcs_utm.services.vehicle_ops import NavPoint
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import test_fixed_wing_plan as t

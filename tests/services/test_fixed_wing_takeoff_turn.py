@@ -17,7 +17,7 @@ import pytest
 
 from gcs_utm.services import fixed_wing_plan as fw
 from gcs_utm.services import fixed_wing_turn as turn
-from gcs_utm.services.vehicle_ops import NavPoint
+from gcs_utm.services.mission_points import NavPoint
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "flown" / "arduplane_takeoff_turn.json"
 FLOWN = json.loads(DATA.read_text())

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from gcs_utm.model import OperationId, Position
 from gcs_utm.services.mission_order import flown_order
-from gcs_utm.services.vehicle_ops import mission_points, plan_from_points
+from gcs_utm.services.mission_points import mission_points, plan_from_points
 
 HOME = Position(lat_deg=40.0, lon_deg=-3.0, alt_amsl_m=600.0)
 

@@ -19,7 +19,7 @@ from gcs_utm.model import OperationId, Position
 from gcs_utm.services import fixed_wing_loiter as fl
 from gcs_utm.services import fixed_wing_plan as fw
 from gcs_utm.services import fixed_wing_rejoin as fr
-from gcs_utm.services.vehicle_ops import NavPoint, plan_from_points
+from gcs_utm.services.mission_points import NavPoint, plan_from_points
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "flown" / "px4_plane_loiter_exit.json"
 FLOWN = json.loads(DATA.read_text())

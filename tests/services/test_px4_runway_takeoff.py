@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from gcs_utm.services import fixed_wing_plan as fw
-from gcs_utm.services.vehicle_ops import NavPoint
+from gcs_utm.services.mission_points import NavPoint
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "flown"
 FLIGHTS = [

@@ -29,13 +29,9 @@ from gcs_utm.model import (
     VehicleKind,
 )
 from gcs_utm.services.airspace import Airspace
+from gcs_utm.services.mission_points import mission_is_plan, mission_points, plan_from_points
 from gcs_utm.services.usm import Usm
-from gcs_utm.services.vehicle_ops import (
-    CONOPS,
-    mission_is_plan,
-    mission_points,
-    plan_from_points,
-)
+from gcs_utm.services.vehicle_ops import CONOPS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from usm_fakes import FakeVehicles, Result, make_operation
