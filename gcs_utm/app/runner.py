@@ -175,7 +175,8 @@ def vehicle_specs(
                 # one envelope: the vehicle flies the speeds the UTM plans with
                 min_airspeed_mps=envelopes[v.operation_id].min_speed_mps,
                 max_speed_mps=envelopes[v.operation_id].max_speed_mps,
-                climb_rate_mps=v.max_climb_rate_mps,
+                climb_rate_mps=envelopes[v.operation_id].climb_rate_mps,
+                descent_rate_mps=envelopes[v.operation_id].descent_rate_mps,
                 mission=tuple(items),
                 auto_start_at_s=start_at,
                 start_airborne=True,

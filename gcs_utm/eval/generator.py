@@ -38,6 +38,8 @@ import random
 from dataclasses import dataclass
 from pathlib import Path
 
+from gcs_utm.envelope import implied
+
 KINDS = ("crossing", "head_on", "overtaking", "vertical", "near_threshold")
 PROFILES = ("classic", "late", "lag", "endpoint", "fence", "vertical", "merge", "mixed")
 """Generator profiles (docs/evaluation.md); ``all`` cycles through them."""
@@ -60,6 +62,8 @@ FIRST_CLEAR_S = 3.0
 profile's shortest warning (3-15 s). A loss that begins under a second after a UAS appears
 is one no system can act on; it measures the generator, not the UTM."""
 _TRIES = 20
+VERTICAL_RATE_SHARE = 0.8
+"""A climbing or descending plan asks for this share of the vehicle's envelope rate."""
 
 
 Waypoint = tuple[float, float, float, float]
@@ -92,6 +96,16 @@ class _Uas:
     def climb_rate_mps(self) -> float:
         return 5.0 if self.fixed_wing else 2.0
 
+    def vertical_rate_mps(self) -> float:
+        """The rate its plan climbs or descends at: 80 % of its envelope's (the UTM's and the
+        simulated vehicle's, :func:`gcs_utm.envelope.implied`) climb or descent rate, so the
+        filed plan is one the vehicle flies (a fixed wing descends at 3 m/s, not at its 5 m/s
+        climb rate)."""
+        env = implied(self.fixed_wing, self.speed_mps, self.climb_rate_mps)
+        return VERTICAL_RATE_SHARE * (
+            env.climb_rate_mps if self.climb_m > 0.0 else env.descent_rate_mps
+        )
+
     def waypoints(self, lead_in_s: float) -> list[Waypoint]:
         """(east_m, north_m, alt_agl_m, t_s) of the filed plan."""
         h = math.radians(self.heading_deg)
@@ -107,7 +121,7 @@ class _Uas:
 
         if self.climb_m == 0.0:
             return [at(-lead_in_s, self.alt_agl_m), at(AFTER_S, self.alt_agl_m)]
-        half_s = abs(self.climb_m) / self.climb_rate_mps / 2.0 / 0.8  # at 80 % of the rate
+        half_s = abs(self.climb_m) / self.vertical_rate_mps() / 2.0
         lo, hi = self.alt_agl_m - self.climb_m / 2.0, self.alt_agl_m + self.climb_m / 2.0
         if lead_in_s < half_s:  # appears already climbing (late profile)
             u = (half_s - lead_in_s) / (2.0 * half_s)

@@ -22,7 +22,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from gcs_utm.config import ConfigError, load_toml
-from gcs_utm.flyable import plan_speed_problem
+from gcs_utm.flyable import plan_problem
 from gcs_utm.geo import FrameError, LocalFrame
 from gcs_utm.model import (
     Autopilot,
@@ -538,9 +538,9 @@ def _operation(
         endurance_s=perf.endurance_s,
         operator=operator,
     )
-    slow = plan_speed_problem(operation)
-    if slow is not None:  # a fixed wing cannot fly slower than its minimum airspeed
-        raise t.err("waypoints", slow)
+    problem = plan_problem(operation)
+    if problem is not None:  # below a fixed wing's minimum airspeed, or too steep
+        raise t.err("waypoints", problem)
     setup = VehicleSetup(
         operation_id=operation.id,
         sys_id=sys_id,

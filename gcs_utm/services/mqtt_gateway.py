@@ -43,7 +43,7 @@ from adapters.mqtt.codec import (
 )
 from adapters.mqtt.config import MqttConfig
 from gcs_utm.core.monitoring.filing import plan_in_fences
-from gcs_utm.flyable import plan_speed_problem
+from gcs_utm.flyable import plan_problem
 from gcs_utm.geo import LocalFrame
 from gcs_utm.messages import HazardReport, PilotAnswer
 from gcs_utm.model import (
@@ -263,9 +263,9 @@ class MqttGateway:
             default_flight_geometry_m=cfg.default_flight_geometry_m,
             default_operational_volume_m=cfg.default_operational_volume_m,
         )
-        slow = plan_speed_problem(op)
-        if slow is not None:  # a fixed wing cannot fly slower than its minimum airspeed
-            raise ValueError(slow)
+        problem = plan_problem(op)
+        if problem is not None:  # below a fixed wing's minimum airspeed, or too steep
+            raise ValueError(problem)
         if self._frame is not None:
             found = plan_in_fences(op.plan, op, airspace.geofences(), self._frame)
             if found:

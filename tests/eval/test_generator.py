@@ -18,6 +18,7 @@ from gcs_utm.eval.generator import (
     generate,
     write_encounters,
 )
+from gcs_utm.flyable import leg_speeds_mps, leg_vertical_rates_mps, plan_problem
 from gcs_utm.model import VehicleKind
 from gcs_utm.scenario import Scenario, load_any
 
@@ -215,3 +216,51 @@ def test_no_loss_begins_within_3_s_of_a_uas_appearing(tmp_path: Path, index: int
         start = _loss_start_s(s, i, j, max(50.0, v), max(15.0, v))
         appears = max(ops[i].plan.waypoints[0].t_s, ops[j].plan.waypoints[0].t_s)
         assert start is None or start >= appears + 3.0 - 0.2, (ops[i].id, ops[j].id, start)
+
+
+# ---- flyable plans ------------------------------------------------------------------------
+
+
+def _heading_changes_deg(s: Scenario, op_index: int) -> list[float]:
+    wps = s.operations[op_index].plan.waypoints
+    pts = [_local(s, w.lat_deg, w.lon_deg) for w in wps]
+    headings = [
+        math.degrees(math.atan2(b[0] - a[0], b[1] - a[1]))
+        for a, b in itertools.pairwise(pts)
+        if math.dist(a, b) > 1.0
+    ]
+    return [abs((h2 - h1 + 180.0) % 360.0 - 180.0) for h1, h2 in itertools.pairwise(headings)]
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_every_generated_plan_is_one_its_vehicle_flies(tmp_path: Path, profile: str) -> None:
+    """Within the vehicle's envelope (the UTM's and the simulated vehicle's): climbs and
+    descents within its rates (a fixed wing descends at 3 m/s, under its 5 m/s climb),
+    speeds within its range, and (a fixed wing) no turn on the filed path. Loading files the
+    plans: a plan the filing rule refuses fails here."""
+    for enc in generate(10, seed=6, profile=profile):
+        s = _load(tmp_path, enc)
+        for k, op in enumerate(s.operations):
+            assert plan_problem(op) is None, (enc.name, plan_problem(op))
+            env = op.performance()
+            for speed in leg_speeds_mps(op):
+                assert env.min_speed_mps - 0.05 <= speed <= env.max_speed_mps, (enc.name, op.id)
+            for rate in leg_vertical_rates_mps(op):
+                limit = env.climb_rate_mps if rate > 0.0 else env.descent_rate_mps
+                assert abs(rate) <= 0.8 * limit + 0.01, (enc.name, op.id, rate)
+            if op.vehicle_kind is VehicleKind.FIXED_WING:
+                assert all(turn < 1.0 for turn in _heading_changes_deg(s, k)), (enc.name, op.id)
+
+
+def test_a_descending_fixed_wing_is_filed_at_its_descent_rate(tmp_path: Path) -> None:
+    """Seed 6's encounter 63 (mixed, vertical): UAS2, a fixed wing (climb 5 m/s, descent
+    3 m/s), descends 45 m through UAS1's level; it was filed at 4.0 m/s (80 % of its climb
+    rate), reached its waypoint 11 m high and circled down across a geofence."""
+    enc = encounter(63, seed=6, profile="all")
+    assert enc.name == "enc_6_0063_mixed_vertical"
+    s = _load(tmp_path, enc)
+    plane = s.operations[1]
+    assert plane.vehicle_kind is VehicleKind.FIXED_WING
+    rates = leg_vertical_rates_mps(plane)
+    assert min(rates) == pytest.approx(-0.8 * plane.performance().descent_rate_mps, abs=0.01)
+    assert plane.performance().descent_rate_mps == 3.0
