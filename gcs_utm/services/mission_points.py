@@ -139,13 +139,18 @@ def plan_from_points(
     reason: str = "from the vehicle's mission",
     turn_from_m: float = 0.0,
     course_deg: float | None = None,
+    climb_rate_mps: float | None = None,
+    descent_rate_mps: float | None = None,
 ) -> FlightPlan | None:
     """The 4D plan of a vehicle flying ``points`` from ``position`` at ``t_s``: the items
     from ``current_seq`` on (MISSION_CURRENT; all when None), each reached at the speed it is
     flown to. None when there is no point. ``turn_from_m`` (a fixed wing): when the point
     just reached (the one before ``current_seq``) is within that of ``position``, the plan
     goes on through it (the autopilot accepted it early: ArduPlane's WP_RADIUS, 50 m); farther,
-    it goes back onto its leg (``course_deg``: PX4's loiter exit; :mod:`.fixed_wing_rejoin`)."""
+    it goes back onto its leg (``course_deg``: PX4's loiter exit; :mod:`.fixed_wing_rejoin`).
+    ``climb_rate_mps`` / ``descent_rate_mps`` (the vehicle's envelope; None: no limit): a leg
+    that climbs or descends faster at its speed takes as long as that rate needs (a
+    multirotor's take-off, landing or steep leg: its autopilot limits the vertical speed)."""
     # from the first point at or after the current item (a loop repeats seqs: its first pass)
     start = next(
         (k for k, p in enumerate(points) if current_seq is None or p.seq >= current_seq),
@@ -185,11 +190,20 @@ def plan_from_points(
         if wps:
             a = wps[-1]
             dist = dist_m(a, p)
-            t = a.t_s + dist / max(p.speed_mps, 0.1)
+            t = a.t_s + max(
+                dist / max(p.speed_mps, 0.1),
+                _vertical_s(p.alt_amsl_m - a.alt_amsl_m, climb_rate_mps, descent_rate_mps),
+            )
         wps.append(Waypoint4D(lat_deg=p.lat_deg, lon_deg=p.lon_deg, alt_amsl_m=p.alt_amsl_m, t_s=t))
     return FlightPlan(
         operation_id=op_id, version=version, waypoints=tuple(wps), created_t_s=t_s, reason=reason
     )
+
+
+def _vertical_s(dz_m: float, climb_rate_mps: float | None, descent_rate_mps: float | None) -> float:
+    """How long a climb (``dz_m`` > 0) or descent takes at the given rate (0 without one)."""
+    rate = climb_rate_mps if dz_m > 0.0 else descent_rate_mps
+    return abs(dz_m) / rate if rate is not None and rate > 0.0 else 0.0
 
 
 def _from_nearest_modelled(rest: list[NavPoint], position: Position) -> list[NavPoint]:

@@ -438,6 +438,9 @@ class VehicleOps:
         for one found in the air before its first MISSION_CURRENT (a restarted service)."""
         if v.armed and v.seq is None and v.landed is not True:
             return None
+        # a multirotor's autopilot limits its vertical speed: steep legs at the envelope's
+        # rates (a fixed wing's climbs are modelled by fixed_wing_points)
+        rates = self._vertical_rates(v) if v.kind is VehicleKind.MULTIROTOR else (None, None)
         try:
             return plan_from_points(
                 points,
@@ -449,10 +452,23 @@ class VehicleOps:
                 reason=reason,
                 turn_from_m=_TURN_FROM_M if v.kind is VehicleKind.FIXED_WING else 0.0,
                 course_deg=v.heading_deg if v.autopilot is Autopilot.PX4 else None,
+                climb_rate_mps=rates[0],
+                descent_rate_mps=rates[1],
             )
         except ValueError as exc:  # a plan the model refuses (malformed positions)
             self._log_event("vehicle", f"sysid {v.sys_id}: mission not usable: {exc}")
             return None
+
+    def _vertical_rates(self, v: _Vehicle) -> tuple[float, float]:
+        """Climb and descent rates of the vehicle's operation's envelope (before it has one:
+        of the operation it gets)."""
+        op = self.airspace.by_sys_id(v.sys_id)
+        env = (
+            op.performance()
+            if op is not None
+            else default_envelope(v.kind, self._cruise_mps(v), _CLIMB_RATE_MPS)
+        )
+        return env.climb_rate_mps, env.descent_rate_mps
 
     def _file(
         self, v: _Vehicle, *, changed: bool, reason: str = "", new_home: bool = False
