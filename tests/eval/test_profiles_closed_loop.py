@@ -8,11 +8,18 @@ about 26 s of wall time with 2 processes on a quiet machine (24 took 16 s)."""
 
 from __future__ import annotations
 
+import dataclasses
+import json
+from pathlib import Path
+
 import pytest
 
 from gcs_utm.eval.generator import PROFILES, write_encounters
 from gcs_utm.eval.run import EvalOptions, run_eval
 from gcs_utm.eval.summary import EvalSummary, markdown
+from gcs_utm.flyable import plan_rate_problem
+from gcs_utm.model import FlightPlan, Waypoint4D
+from gcs_utm.scenario import load_any
 from gcs_utm.settings import Settings
 
 SEED = 7
@@ -22,10 +29,14 @@ pytestmark = [pytest.mark.slow, pytest.mark.network, pytest.mark.timeout(900)]
 
 
 @pytest.fixture(scope="module")
-def summary(tmp_path_factory: pytest.TempPathFactory) -> EvalSummary:
-    out = tmp_path_factory.mktemp("profiles")
-    paths = write_encounters(out / "scenarios", N, SEED, "all")
-    return run_eval(paths, Settings(), EvalOptions(out_dir=out, jobs=2))
+def out_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("profiles")
+
+
+@pytest.fixture(scope="module")
+def summary(out_dir: Path) -> EvalSummary:
+    paths = write_encounters(out_dir / "scenarios", N, SEED, "all")
+    return run_eval(paths, Settings(), EvalOptions(out_dir=out_dir, jobs=2))
 
 
 def test_every_run_completes_and_the_counts_agree(summary: EvalSummary) -> None:
@@ -68,3 +79,28 @@ def test_no_geofence_intrusion(summary: EvalSummary) -> None:
 
 def test_every_escalation_proposes_a_command(summary: EvalSummary) -> None:
     assert summary.totals.escalations_without_command == 0, markdown(summary)
+
+
+def test_every_plan_the_utm_made_climbs_and_descends_within_the_envelope(
+    summary: EvalSummary, out_dir: Path
+) -> None:
+    """TD's and EM's plans (go_up, go_down, escapes, landings, ...) pass the filing rule's
+    climb and descent limits (``gcs_utm.flyable.plan_rate_problem``), as filed plans do."""
+    made = 0
+    for path in sorted((out_dir / "scenarios").glob("*.toml")):
+        ops = {op.id: op for op in load_any(path, t0_s=0.0).operations}
+        report = json.loads((out_dir / "reports" / f"{path.stem}.json").read_text())
+        for o in report["operations"]:
+            for p in o["plans"]:
+                if p["reason"] == "filed":
+                    continue
+                op = ops[o["id"]]
+                wps = tuple(
+                    Waypoint4D(lat_deg=w[0], lon_deg=w[1], alt_amsl_m=w[2], t_s=w[3])
+                    for w in p["waypoints"]
+                )
+                plan = FlightPlan(operation_id=op.id, version=p["version"], waypoints=wps)
+                problem = plan_rate_problem(dataclasses.replace(op, plan=plan))
+                assert problem is None, (path.stem, p["version"], p["reason"], problem)
+                made += 1
+    assert made >= N, made  # the set does make plans
