@@ -6,6 +6,7 @@ operation, the leg, the speed or rate and the limit."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -14,7 +15,7 @@ from adapters.mqtt.codec import FlightPlanSubmission
 from adapters.mqtt.config import MqttConfig
 from gcs_utm.app import vehicle_specs
 from gcs_utm.clock import ManualClock
-from gcs_utm.flyable import leg_speeds_mps, plan_problem, plan_speed_problem
+from gcs_utm.flyable import leg_speeds_mps, plan_problem, plan_rate_problem, plan_speed_problem
 from gcs_utm.model import FlightPlan, OperationId, VehicleKind, Waypoint4D
 from gcs_utm.scenario import ScenarioError, load_any
 from gcs_utm.services.airspace import Airspace
@@ -154,3 +155,16 @@ async def test_mqtt_filing_refuses_a_descent_faster_than_the_envelope() -> None:
     assert OperationId("steep") not in usm.airspace.operations
     await gateway.on_flight_plan(_submission(15.0))  # 1.5 m/s: its descent rate
     assert OperationId("steep") in usm.airspace.operations
+
+
+def test_a_short_leg_is_rated_over_half_a_second(tmp_path: Path) -> None:
+    """A join of two legs 10 ms long with 2 cm of altitude is rounding; 5 m in it is a jump."""
+    plane = load_any(_write(tmp_path, 13.7, 1370.0), t0_s=0.0).operations[0]
+    a, b, c = plane.plan.waypoints
+    for dz_m, refused in ((0.02, False), (5.0, True)):
+        joined = dataclasses.replace(b, alt_amsl_m=b.alt_amsl_m + dz_m, t_s=b.t_s + 0.01)
+        wps = (a, b, joined, dataclasses.replace(c, alt_amsl_m=c.alt_amsl_m + dz_m))
+        op = dataclasses.replace(plane, plan=dataclasses.replace(plane.plan, waypoints=wps))
+        assert (plan_rate_problem(op) is not None) is refused, dz_m
+        if refused:
+            assert "leg 2 (waypoint 2 to 3) climbs at 10.00 m/s" in str(plan_rate_problem(op))
