@@ -7,7 +7,7 @@ Kinds (cycled, so every kind is in any set of 5 or more):
 - ``head_on``: opposite tracks, laterally offset by less than the minimum;
 - ``overtaking``: same track, the faster UAS catches the slower one;
 - ``vertical``: crossing tracks, one of them climbing or descending through the other's level
-  at the crossing;
+  at the crossing (at 80 % of its envelope's climb or descent rate);
 - ``near_threshold``: crossing tracks whose miss distance is within a few metres of the pair's
   effective minimum, on either side (some are losses, some are not).
 Each encounter mixes multirotors and fixed wings (speeds, volumes and climb rates of their
@@ -24,6 +24,11 @@ Profiles (:data:`PROFILES`, docs/evaluation.md) change what the encounters stres
 or around filed paths and destinations), ``vertical`` (centimetres from the vertical
 minimum), ``merge`` (3-6 UAS converging), ``mixed`` (a multirotor and a fixed wing);
 ``classic`` is the set above, ``all`` cycles through them.
+
+Every filed plan, in every profile, is one its vehicle flies: within its envelope
+(:mod:`gcs_utm.envelope`, which the simulated vehicle flies too) in vertical rates and speed,
+and straight (no turn for a fixed wing's radius); the filing rule (:mod:`gcs_utm.flyable`)
+accepts every generated file.
 
 Units: metres east/north of the airspace origin (ENU), metres above ground, seconds after the
 scenario start. Everything comes from ``random.Random(seed)``: the same seed gives the same files.
