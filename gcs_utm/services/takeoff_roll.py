@@ -1,13 +1,14 @@
 """When a fixed wing's take-off run starts (pure; docs/autopilots.md, "Vehicle state").
 
 A plane armed on its runway in a mission mode is re-timed when its mission starts; but the
-mission and the run need not start then. PX4 v1.15 reports a fixed wing in the air as it arms
-and runs its mission at once when armed in mission mode, while a pilot's MISSION_START can
-come seconds later (at speed 3 on a loaded machine, 9 simulated s after the arming: the
-plane stood on the runway while its plan, timed from the arming, had it rolling and
-climbing: UAS_IN_CV 10.9-12.2 m on its take-off). The run is what the take-off model times,
-so the plan is re-timed once more when the plane has left where it armed by
-:data:`ROLL_START_M` (its run started): from then on it is where the model has it.
+run need not start then. Measured on PX4 v1.15.2 SIH: armed in mission mode it runs its
+mission at once (rolling 0.5 s after the arming; a MISSION_START 6 s later changed nothing),
+armed in Hold it stands until MISSION_START; in the short nuisance soak (speed 3, a loaded
+machine) the plan was timed from the arming while the plane stood 9 simulated s until the
+pilot's MISSION_START, and had it rolling and climbing (UAS_IN_CV 10.9-12.2 m on its
+take-off). The run is what the take-off model times, so the plan is re-timed once more when
+the plane has left where it armed by :data:`ROLL_START_M` (its run started): from then on it
+is where the model has it.
 """
 
 from __future__ import annotations

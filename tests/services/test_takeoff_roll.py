@@ -1,8 +1,7 @@
-"""A fixed wing's plan is timed from its take-off run (issue 31). PX4 v1.15 reports a fixed
-wing in the air as it arms and runs its mission at once when armed in mission mode, while
-the pilot's MISSION_START came 9 simulated s later in the short nuisance soak: its plan,
-timed from the arming, had it rolling and climbing while it stood on the runway (UAS_IN_CV
-10.9-12.2 m on its first take-off). Re-timed when it has left where it armed by 5 m."""
+"""A fixed wing's plan is timed from its take-off run (issue 31). In the short nuisance soak
+the PX4 plane's plan was timed from its arming while it stood 9 simulated s on the runway
+until the pilot's MISSION_START: the plan had it rolling and climbing (UAS_IN_CV 10.9-12.2 m
+on its first take-off). Re-timed when it has left where it armed by 5 m."""
 
 from __future__ import annotations
 
