@@ -224,11 +224,12 @@ class VehicleOps:
             v.position = s.position
         v.heading_deg, v.landed = s.heading_deg, s.landed
         if not v.armed or s.landed is True:  # on the ground: the heading of its take-off run
-            v.takeoff_heading_deg = s.heading_deg
+            v.takeoff_heading_deg = v.roll.parked_heading_deg(s.heading_deg)
         v.total = s.mission_total
         v.mission_id = s.mission_id
         if "rebooted" in changes:
             v.home, v.home_from_status = None, False  # a new pre-flight: a new home
+            v.roll = RollWatch()
         home = s.home
         if flight is not None:
             v.fixed, home = flight.had_fix, flight.home

@@ -5,6 +5,7 @@ on its first take-off). Re-timed when it has left where it armed by 5 m."""
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -13,6 +14,7 @@ from gcs_utm.model import Position, SysId, VehicleKind
 from gcs_utm.services.takeoff_roll import RollWatch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import test_px4_runway_takeoff as rt
 from test_vehicle_ops import HOME, NORTH_100M_E7, _Info, _Key, _relative_mission, _status, _usm
 
 
@@ -55,3 +57,40 @@ def test_a_vehicle_found_armed_is_not_watched() -> None:
     assert not watch.rolled(_north(3.0))
     assert watch.rolled(_north(6.0))
     assert not watch.rolled(_north(20.0))  # once
+
+
+PARKED = json.loads(
+    (Path(__file__).resolve().parents[1] / "data" / "flown" / "px4_plane_parked_yaw_off.json")
+    .read_text()
+)  # fmt: skip
+
+
+def _pos(q: dict[str, float]) -> Position:
+    return Position(lat_deg=q["lat_deg"], lon_deg=q["lon_deg"], alt_amsl_m=q["alt_amsl_m"])
+
+
+def test_a_plane_stands_on_the_course_it_last_rolled_on() -> None:
+    """The soak's PX4 plane reported a yaw 36 deg off as it armed after its landing (114.6,
+    standing on 151 after the roll-out, and rolled along 151): its take-off planned from the
+    course it last rolled on is within 6 m of it, from the reported yaw 16.8 m (UAS_IN_CV
+    22.8 m)."""
+    watch = RollWatch()
+    watch.update(armed=False, was_armed=False, position=_pos(PARKED["landing"][0]))
+    armed = False
+    for q in PARKED["landing"]:  # the landing's roll-out, armed
+        watch.update(armed=True, was_armed=armed, position=_pos(q))
+        armed = True
+    for _ in range(3):  # disarmed where it stopped: its position wanders, it stands
+        watch.update(armed=False, was_armed=armed, position=_pos(PARKED["home"]))
+        armed = False
+    parked = watch.parked_heading_deg(PARKED["heading_deg"])
+    assert parked is not None and abs(parked - 151.0) < 5.0
+    assert RollWatch().parked_heading_deg(PARKED["heading_deg"]) == PARKED["heading_deg"]
+    home = PARKED["home"]
+
+    def worst_m(heading_deg: float) -> float:
+        plan = rt._plan(heading_deg, PARKED)
+        return max(rt._off_m(plan, q, home)[0] for q in PARKED["track"])
+
+    assert worst_m(parked) < 6.0
+    assert worst_m(PARKED["heading_deg"]) > 15.0
