@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from gcs_utm.clock import Clock
 from gcs_utm.messages import FlightMode, VehicleStatus
@@ -66,6 +66,7 @@ from gcs_utm.services.mission_points import (
     mission_points,
     plan_from_points,
 )
+from gcs_utm.services.takeoff_roll import RollWatch
 
 _log = logging.getLogger(__name__)
 
@@ -144,6 +145,7 @@ class _Vehicle:
     retry_at_s: float | None = None  # when a failed download is tried again
     uploading: FlightPlan | None = None  # the plan the USM is uploading (see expect_upload)
     fixed: bool = True  # a 3D fix since its boot (False while a FlightState says none yet)
+    roll: RollWatch = field(default_factory=RollWatch)  # a fixed wing's take-off run
 
 
 class VehicleOps:
@@ -222,11 +224,12 @@ class VehicleOps:
             v.position = s.position
         v.heading_deg, v.landed = s.heading_deg, s.landed
         if not v.armed or s.landed is True:  # on the ground: the heading of its take-off run
-            v.takeoff_heading_deg = s.heading_deg
+            v.takeoff_heading_deg = v.roll.parked_heading_deg(s.heading_deg)
         v.total = s.mission_total
         v.mission_id = s.mission_id
         if "rebooted" in changes:
             v.home, v.home_from_status = None, False  # a new pre-flight: a new home
+            v.roll = RollWatch()
         home = s.home
         if flight is not None:
             v.fixed, home = flight.had_fix, flight.home
@@ -239,14 +242,17 @@ class VehicleOps:
         if arming and v.home is not None:
             self._home_at_arming(v)
         self._maybe_download(v, self._mission_changed(v, s) or (s.armed and not v.armed))
+        v.roll.update(s.armed, v.armed, s.position)
         v.armed = s.armed
         flying = s.armed and s.mode in _FLYING_MODES
         started = flying and not v.flying
         seq, v.stale_seq = mission_order.current_seq(s, v.autopilot, v.stale_seq, started)
         advanced = seq is not None and seq != v.seq
         v.flying, v.seq = flying, v.seq if seq is None else seq
-        if flying and (started or advanced):
-            self._retime(v, started=started)
+        # a fixed wing's plan is timed from its take-off run too (takeoff_roll.py)
+        rolled = flying and v.kind is VehicleKind.FIXED_WING and v.roll.rolled(s.position)
+        if flying and (started or advanced or rolled):
+            self._retime(v, started=started or rolled)
 
     def _maybe_download(self, v: _Vehicle, changed: bool) -> None:
         """Download on a mission change or an arming, and retry a failed download when its
