@@ -35,6 +35,7 @@ import numpy as np
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import ONE_SHOT, Case, Decision, Mode
 from gcs_utm.core.emergency.overridden import overtaken
+from gcs_utm.core.emergency.supervision_due import retry_wait_s
 from gcs_utm.model import (
     AirspaceSnapshot,
     Command,
@@ -107,14 +108,15 @@ def _not_due(
     now: float,
 ) -> bool:
     """Nothing to supervise yet: a one-shot action, nothing in force, a pilot still asked, a
-    plan not settled, or the last attempt less than ``retry_after_s`` ago."""
+    plan not settled, or the last attempt less than ``retry_after_s`` ago (less when the
+    predicted event comes sooner: :mod:`.supervision_due`)."""
     if case.action in ONE_SHOT or not live:
         return True
     if any(r is not None and r.state is RecommendationState.PROPOSED for r in recs):
         return True
     if now < max(settled_at(em, case, r) for r in live):
         return True
-    return bool(case.supervised) and now - case.attempt_t_s < em.config.retry_after_s
+    return bool(case.supervised) and now - case.attempt_t_s < retry_wait_s(em, case, now)
 
 
 def _final_noted(em: EmContext, case: Case, live: list[Recommendation], now: float) -> Decision:
