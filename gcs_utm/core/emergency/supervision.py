@@ -28,7 +28,7 @@ an upload that failed, each lead to a new decision (paper §4.4: nothing is drop
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -189,6 +189,18 @@ def describe(cmd: Command, action: str = "") -> str:
     return f"goto {alt}"
 
 
+def _plain_safe(
+    em: EmContext, case: Case, op_ids: Sequence[OperationId], snapshot: AirspaceSnapshot, why: str
+) -> Decision:
+    return escalate_safe(em, case, list(op_ids), snapshot.t_s, why)
+
+
+SafeAfterFailure = Callable[
+    [EmContext, Case, Sequence[OperationId], AirspaceSnapshot, str], Decision
+]
+"""Escalates a UAS whose plan failed twice with what it proposes (.failed_safe)."""
+
+
 def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answer
     em: EmContext,
     rec_id: RecommendationId,
@@ -196,6 +208,7 @@ def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answ
     applied: bool,
     reason: str,
     snapshot: AirspaceSnapshot,
+    safe: SafeAfterFailure = _plain_safe,
 ) -> Decision:
     """The service reports whether an accepted recommendation was applied (verified) or
     failed: record it; after a failure re-plan once, then escalate with the safe command."""
@@ -226,10 +239,10 @@ def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answ
         audit = em.audit(now, "escalation", case.threat.id, {"reason": msg})
         return d.merge(Decision(escalations=(msg,), audit=(audit,)))
     if n > 1 or case.modes.get(op_id) == Mode.COMMAND:
-        return d.merge(escalate_safe(em, case, [op_id], now, why))
+        return d.merge(safe(em, case, [op_id], snapshot, why))
     again = em.decide(case, snapshot)
     mine = [r for r in again.recommendations if r.operation_id == op_id]
     if not any(r.state in (RecommendationState.PROPOSED, *_IN_FORCE) for r in mine):
-        again = again.merge(escalate_safe(em, case, [op_id], now, why))
+        again = again.merge(safe(em, case, [op_id], snapshot, why))
     audit = em.audit(now, "replan_after_failure", case.threat.id, {"reason": why})
     return d.merge(Decision(audit=(audit,))).merge(again)
