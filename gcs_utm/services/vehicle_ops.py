@@ -54,7 +54,7 @@ from gcs_utm.model import (
     default_envelope,
 )
 from gcs_utm.services import fixed_wing_plan as fw
-from gcs_utm.services import mission_order
+from gcs_utm.services import found_flying, mission_order
 from gcs_utm.services.airspace import Airspace, AirspaceError
 from gcs_utm.services.flight_state import FlightState
 from gcs_utm.services.mission_points import (
@@ -144,6 +144,10 @@ class _Vehicle:
     retry_at_s: float | None = None  # when a failed download is tried again
     uploading: FlightPlan | None = None  # the plan the USM is uploading (see expect_upload)
     fixed: bool = True  # a 3D fix since its boot (False while a FlightState says none yet)
+    # first heard in the air (None: not heard yet), until it is on the ground: its take-off
+    # run was not seen (no take-off heading) and its stored plan was timed by another life
+    found_flying: bool | None = None
+    timed_here: bool = False  # its operation's plan was timed (filed, re-timed) by this life
 
 
 class VehicleOps:
@@ -221,7 +225,12 @@ class VehicleOps:
         if s.position is not None:
             v.position = s.position
         v.heading_deg, v.landed = s.heading_deg, s.landed
-        if not v.armed or s.landed is True:  # on the ground: the heading of its take-off run
+        v.found_flying = (
+            (s.armed and s.landed is not True)
+            if v.found_flying is None
+            else (v.found_flying and s.armed and s.landed is not True)
+        )
+        if (not v.armed and not v.found_flying) or s.landed is True:  # its take-off run's
             v.takeoff_heading_deg = s.heading_deg
         v.total = s.mission_total
         v.mission_id = s.mission_id
@@ -241,6 +250,8 @@ class VehicleOps:
         self._maybe_download(v, self._mission_changed(v, s) or (s.armed and not v.armed))
         v.armed = s.armed
         flying = s.armed and s.mode in _FLYING_MODES
+        if flying and v.found_flying and not v.timed_here:
+            self._retime_stored(v)
         started = flying and not v.flying
         seq, v.stale_seq = mission_order.current_seq(s, v.autopilot, v.stale_seq, started)
         advanced = seq is not None and seq != v.seq
@@ -525,6 +536,7 @@ class VehicleOps:
             self._log_event("vehicle", f"sysid {v.sys_id}: {exc}")
             return
         self.counters["filed"] += 1
+        v.timed_here = True
         self._log_event(
             "operation",
             f"{op.id} filed from sysid {v.sys_id}'s mission ({len(plan.waypoints)} wp)",
@@ -539,6 +551,7 @@ class VehicleOps:
             self._log_event("vehicle", f"sysid {v.sys_id}: plan not installed: {exc}")
             return
         self.counters[counter] += 1
+        v.timed_here = True
         self._log_event(
             "operation",
             f"{op.id} plan v{plan.version} from sysid {v.sys_id}'s mission: {why} "
@@ -551,6 +564,8 @@ class VehicleOps:
         mission, and at a new current item when the plan is more than flight_geometry_m /
         cruise speed off at that item."""
         op = self.airspace.by_sys_id(v.sys_id)
+        # found flying on a plan re-timed here from its position: it did not start here
+        started = started and not (v.found_flying and v.timed_here)
         if v.downloading:
             v.start_pending = v.start_pending or started
             return  # (the arming that started it also downloads the mission: after that)
@@ -578,6 +593,28 @@ class VehicleOps:
                 return
         why = "the vehicle started the mission" if started else "re-timed at a new current item"
         self._replace(v, op, plan, why, counter="retimed")
+
+    def _retime_stored(self, v: _Vehicle) -> None:
+        """A vehicle found flying with a plan this life did not time (the store's, an earlier
+        life's clock): re-timed from its position at once (:mod:`.found_flying`)."""
+        op = self.airspace.by_sys_id(v.sys_id)
+        if op is None or v.position is None:
+            return  # filed from its mission at its first MISSION_CURRENT (_plan)
+        if op.conops != CONOPS or not self._ours(op.id):
+            v.timed_here = True  # not this module's to re-time
+            return
+        plan = found_flying.retimed_at(
+            op.plan,
+            v.position,
+            self.clock.now_s(),
+            version=op.plan.version + 1,
+            reason="re-timed from the vehicle's position (a stored plan, another life's clock)",
+            max_off_m=op.flight_geometry_m,
+        )
+        if plan is None:
+            v.found_flying = False  # off its stored plan: re-planned from its mission
+            return
+        self._replace(v, op, plan, "found flying on a stored plan", counter="retimed")
 
 
 def _flies_plan(v: _Vehicle, points: Sequence[NavPoint], plan: FlightPlan) -> bool:
