@@ -370,6 +370,7 @@ class VehicleState:
             home=self.home,
             mission_id=self.mission_id,
             position=self.last_position,
+            position_t_s=self.position_t_s,
             reboots=self.reboots,
             heading_deg=None if self._heading_cdeg >= _NO_HEADING else self._heading_cdeg / 100.0,
         )

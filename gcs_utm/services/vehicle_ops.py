@@ -128,6 +128,7 @@ class _Vehicle:
     seq: int | None = None
     stale_seq: int | None = None  # a stale MISSION_CURRENT after PX4 restarted (mission_order)
     position: Position | None = None
+    position_t_s: float | None = None  # when it arrived (None: not reported, take it as now)
     takeoff_heading_deg: float | None = None  # its heading when it armed (a fixed wing's run)
     heading_deg: float | None = None  # its last (GLOBAL_POSITION_INT hdg)
     landed: bool | None = None  # its last landed state (None: not reported)
@@ -223,7 +224,7 @@ class VehicleOps:
         if v is None:
             return
         if s.position is not None:
-            v.position = s.position
+            v.position, v.position_t_s = s.position, s.position_t_s
         v.heading_deg, v.landed = s.heading_deg, s.landed
         v.found_flying = (
             (s.armed and s.landed is not True)
@@ -435,6 +436,15 @@ class VehicleOps:
             )
         return points
 
+    def _position_t_s(self, v: _Vehicle) -> float:
+        """The time of the vehicle's last position, which a plan from it starts at: a plan
+        made at the end of a download starts from a position up to a status period old (a
+        plane at 23 m/s found flying by a restarted service, its position 0.5 s old and its
+        plan timed from now: UAS_IN_CV 12.3 m)."""
+        now_s = self.clock.now_s()
+        t_s = v.position_t_s
+        return now_s if t_s is None or v.position is None else min(t_s, now_s)
+
     def _cruise_mps(self, v: _Vehicle) -> float:
         """The speed a mission without speed items is flown at: a fixed wing's cruise
         airspeed, else the multirotor default."""
@@ -453,7 +463,7 @@ class VehicleOps:
             return plan_from_points(
                 points,
                 op_id,
-                t_s=self.clock.now_s(),
+                t_s=self._position_t_s(v),
                 current_seq=v.seq if v.armed else None,  # on the ground: the whole mission
                 position=v.position,
                 version=version,
@@ -606,7 +616,7 @@ class VehicleOps:
         plan = found_flying.retimed_at(
             op.plan,
             v.position,
-            self.clock.now_s(),
+            self._position_t_s(v),
             version=op.plan.version + 1,
             reason="re-timed from the vehicle's position (a stored plan, another life's clock)",
             max_off_m=op.flight_geometry_m,

@@ -128,3 +128,32 @@ async def test_a_plane_found_in_its_take_off_is_not_given_its_turning_heading() 
 
 def _turning(s: VehicleStatus) -> VehicleStatus:
     return dataclasses.replace(s, heading_deg=120.0)  # south-east, half-way round its turn
+
+
+async def test_a_plan_made_when_a_download_ends_starts_at_its_positions_time() -> None:
+    """The ArduPlane found flying its final approach at 23 m/s by a restarted serve: its plan,
+    made when the mission download ended, started from a position 1.3 s old, timed now
+    (UAS_IN_CV 12.3 m). A plan from a position starts at that position's time."""
+    usm, port, clock = _usm()
+    port.mission = _plane_mission()
+    release = asyncio.Event()
+    plain = port.download_mission
+
+    async def slow(sys_id: SysId) -> list[_Item]:
+        await release.wait()
+        return await plain(sys_id)
+
+    port.download_mission = slow  # type: ignore[method-assign]
+    usm.attach_vehicles(port)
+    usm.on_vehicle(_Info(key=_Key(1), vehicle_kind=VehicleKind.FIXED_WING))
+    flying = dict(total=3, home=HOME, armed=True, mode=FlightMode.MISSION, landed=False)
+    status = _status(1000.0, position=_north(450.0), seq=1, **flying)  # type: ignore[arg-type]
+    usm.on_status(dataclasses.replace(status, position_t_s=1000.0))
+    await asyncio.sleep(0)
+    clock.set(1001.3)  # no status since: the download ends 1.3 s after that position
+    release.set()
+    await usm.drain()
+    op = usm.airspace.by_sys_id(SysId(1))
+    assert op is not None
+    first = op.plan.waypoints[0]
+    assert round(_north_m(first)) == 450 and first.t_s == 1000.0
