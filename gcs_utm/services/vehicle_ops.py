@@ -15,10 +15,11 @@ that flies a mission is an operation, filed from the mission it has, kept in ste
 - A mission present before the first 3D fix is filed, whole, when the fix comes. A disarmed
   vehicle's plan is its whole mission from where it stands (the current item counts only in
   the air); it is re-timed from the vehicle's progress when it starts the mission. A vehicle
-  found flying (a restarted service) is timed from its first MISSION_CURRENT, not before.
+  found flying (a restarted service) has its stored plan re-timed from its position at once
+  (:mod:`.found_flying`); without one it is filed at its first MISSION_CURRENT, not before.
 - A reboot forgets the home: a new pre-flight.
 - Timed from the vehicle's progress, not from the download: the plan starts at the vehicle's
-  position, flies to the current item (MISSION_CURRENT) and on at the mission's speeds
+  position (at that position's time), flies to the current item (MISSION_CURRENT) and on at the mission's speeds
   (DO_CHANGE_SPEED, else the cruise speed); it is re-timed when the vehicle starts the mission
   and when, at a new current item, it is more than a flight-geometry's worth of time off.
 - A warning, once per vehicle, when its home is far from the airspace's ground elevation
