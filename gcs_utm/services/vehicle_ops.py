@@ -19,9 +19,10 @@ that flies a mission is an operation, filed from the mission it has, kept in ste
   (:mod:`.found_flying`); without one it is filed at its first MISSION_CURRENT, not before.
 - A reboot forgets the home: a new pre-flight.
 - Timed from the vehicle's progress, not from the download: the plan starts at the vehicle's
-  position (at that position's time), flies to the current item (MISSION_CURRENT) and on at the mission's speeds
-  (DO_CHANGE_SPEED, else the cruise speed); it is re-timed when the vehicle starts the mission
-  and when, at a new current item, it is more than a flight-geometry's worth of time off.
+  position (at that position's time), flies to the current item (MISSION_CURRENT) and on at
+  the mission's speeds (DO_CHANGE_SPEED, else the cruise speed); it is re-timed when the
+  vehicle starts the mission and when, at a new current item, it is more than a
+  flight-geometry's worth of time off.
 - A warning, once per vehicle, when its home is far from the airspace's ground elevation
   (AGL inputs would then be converted with the wrong ground).
 
