@@ -130,7 +130,7 @@ class _Vehicle:
     seq: int | None = None
     stale_seq: int | None = None  # a stale MISSION_CURRENT after PX4 restarted (mission_order)
     position: Position | None = None
-    position_t_s: float | None = None  # when it arrived (None: not reported, take it as now)
+    position_t_s: float | None = None  # when it was taken (None: not reported, take it as now)
     takeoff_heading_deg: float | None = None  # its heading when it armed (a fixed wing's run)
     heading_deg: float | None = None  # its last (GLOBAL_POSITION_INT hdg)
     landed: bool | None = None  # its last landed state (None: not reported)
@@ -439,10 +439,12 @@ class VehicleOps:
         return points
 
     def _position_t_s(self, v: _Vehicle) -> float:
-        """The time of the vehicle's last position, which a plan from it starts at: a plan
-        made at the end of a download starts from a position up to a status period old (a
-        plane at 23 m/s found flying by a restarted service, its position 0.5 s old and its
-        plan timed from now: UAS_IN_CV 12.3 m)."""
+        """The time the vehicle's last position was taken, which a plan from it starts at: a
+        plan made at the end of a download starts from a position up to a status period old
+        (a plane at 23 m/s found flying by a restarted service, its position 1.3 s old and its
+        plan timed from now: UAS_IN_CV 12.3 m), and under load positions are read seconds
+        after they were taken (the PX4 plane's loiter exit re-timed from a position 3 s old
+        by its capture time: UAS_IN_CV 19.4 m)."""
         now_s = self.clock.now_s()
         t_s = v.position_t_s
         return now_s if t_s is None or v.position is None else min(t_s, now_s)
