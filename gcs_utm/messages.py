@@ -71,6 +71,7 @@ class VehicleStatus:
     home: Position | None = None  # HOME_POSITION (AMSL), None until the vehicle sets one
     mission_id: int | None = None  # MISSION_CURRENT's opaque mission id, when it sends one
     position: Position | None = None  # the last reported position (GLOBAL_POSITION_INT)
+    position_t_s: float | None = None  # when the vehicle took it (capture time, service clock)
     reboots: int = 0  # reboots seen (time_boot_ms going back): each starts a new pre-flight
     heading_deg: float | None = None  # GLOBAL_POSITION_INT hdg (yaw, true north), if sent
 

@@ -105,6 +105,10 @@ class VehicleState:
     position_t_s: float | None = None
     """When its last position report (GLOBAL_POSITION_INT) arrived (hub clock, s)."""
 
+    position_capture_t_s: float | None = None
+    """When the vehicle took that position (its time_boot_ms on the hub clock, else the
+    arrival): a backlog read late under load arrives seconds after it was taken."""
+
     mission: list[MissionItem] | None = None
     """The vehicle's mission as last downloaded or read back after an upload (uploads keep
     its landing sequence)."""
@@ -370,6 +374,7 @@ class VehicleState:
             home=self.home,
             mission_id=self.mission_id,
             position=self.last_position,
+            position_t_s=self.position_capture_t_s,
             reboots=self.reboots,
             heading_deg=None if self._heading_cdeg >= _NO_HEADING else self._heading_cdeg / 100.0,
         )
@@ -437,6 +442,7 @@ class VehicleState:
         self._last_fix = (lat, lon, alt)
         self.position_t_s = t_s
         offset = self.offset_s  # capture_t_s(), inline
+        self.position_capture_t_s = t_s if offset is None else offset + boot_ms / 1000.0
         eph = self.eph_m
         epv = self.epv_m
         entry = (

@@ -11,6 +11,7 @@ import os
 import signal
 import socket
 import sys
+import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 
@@ -131,17 +132,30 @@ def _writer_config(settings: Settings, cluster: bool) -> StoreConfig:
 
 def _stored_airspace(
     settings: Settings, db_path: Path, *, cluster: bool
-) -> tuple[str | Path, list[Operation], list[Geofence]]:
+) -> tuple[str | Path, list[Operation], list[Geofence], float | None]:
     """Where the store is ([store] url, a shared PostgreSQL database, replaces the SQLite
-    file when set), and the operations and active geofences it holds. A cluster member's
-    operations come with the regions it gains (gcs_utm.cluster.node)."""
+    file when set), the operations and active geofences it holds, and its latest time. A
+    cluster member's operations come with the regions it gains (gcs_utm.cluster.node)."""
     location: str | Path = settings.store.url or db_path
     if cluster:
         check_cluster(settings, location)
     with open_store(location, busy_timeout_s=settings.store.busy_timeout_s) as reader:
         operations = [] if cluster else reader.load_operations()
         geofences = reader.load_geofences(active_only=True)
-    return location, operations, geofences
+        latest_t_s = reader.latest_t_s()
+    return location, operations, geofences, latest_t_s
+
+
+def _service_clock(speed: float, latest_t_s: float | None) -> Clock:
+    """Wall time at speed 1. At a speed factor the clock runs ``speed`` times faster than the
+    wall clock and, on a store an earlier life wrote, starts where the store's latest time
+    is when that is ahead of the wall clock (it is, after a life at a speed above 1): started
+    from the wall clock, a restarted service's times went back (its plans, threats and
+    track history interleaved with the previous life's)."""
+    if speed == 1.0:
+        return RealClock()
+    now_s = time.time()
+    return ScaledClock(speed, start_utc_s=max(now_s, latest_t_s or now_s))
 
 
 async def _open_links(rt: Runtime) -> None:
@@ -175,13 +189,15 @@ async def serve(
     (docs/scale-out.md); returns 3 when a region is lost (fail-stop)."""
     if record_dir is not None:  # refused before anything starts (RecordError)
         check_folder(record_dir, settings.record)
-    clock: Clock = RealClock() if speed == 1.0 else ScaledClock(speed)
+    location, operations, geofences, latest_t_s = _stored_airspace(
+        settings, db_path, cluster=cluster
+    )
+    clock = _service_clock(speed, latest_t_s)
     frame = LocalFrame(
         settings.airspace.origin_lat_deg,
         settings.airspace.origin_lon_deg,
         settings.airspace.ground_elevation_amsl_m,
     )
-    location, operations, geofences = _stored_airspace(settings, db_path, cluster=cluster)
     # a PostgreSQL outage at stop leaves the writes not yet taken in a local journal
     pending = Path(settings.store.journal) if is_postgres(location) else None
     store = Persistence(StoreWriter(location, _writer_config(settings, cluster), journal=pending))

@@ -15,12 +15,14 @@ that flies a mission is an operation, filed from the mission it has, kept in ste
 - A mission present before the first 3D fix is filed, whole, when the fix comes. A disarmed
   vehicle's plan is its whole mission from where it stands (the current item counts only in
   the air); it is re-timed from the vehicle's progress when it starts the mission. A vehicle
-  found flying (a restarted service) is timed from its first MISSION_CURRENT, not before.
+  found flying (a restarted service) has its stored plan re-timed from its position at once
+  (:mod:`.found_flying`); without one it is filed at its first MISSION_CURRENT, not before.
 - A reboot forgets the home: a new pre-flight.
 - Timed from the vehicle's progress, not from the download: the plan starts at the vehicle's
-  position, flies to the current item (MISSION_CURRENT) and on at the mission's speeds
-  (DO_CHANGE_SPEED, else the cruise speed); it is re-timed when the vehicle starts the mission
-  and when, at a new current item, it is more than a flight-geometry's worth of time off.
+  position (at that position's time), flies to the current item (MISSION_CURRENT) and on at
+  the mission's speeds (DO_CHANGE_SPEED, else the cruise speed); it is re-timed when the
+  vehicle starts the mission and when, at a new current item, it is more than a
+  flight-geometry's worth of time off.
 - A warning, once per vehicle, when its home is far from the airspace's ground elevation
   (AGL inputs would then be converted with the wrong ground).
 
@@ -38,7 +40,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from gcs_utm.clock import Clock
 from gcs_utm.messages import FlightMode, VehicleStatus
@@ -54,7 +56,7 @@ from gcs_utm.model import (
     default_envelope,
 )
 from gcs_utm.services import fixed_wing_plan as fw
-from gcs_utm.services import mission_order
+from gcs_utm.services import found_flying, mission_order
 from gcs_utm.services.airspace import Airspace, AirspaceError
 from gcs_utm.services.flight_state import FlightState
 from gcs_utm.services.mission_points import (
@@ -66,6 +68,7 @@ from gcs_utm.services.mission_points import (
     mission_points,
     plan_from_points,
 )
+from gcs_utm.services.takeoff_roll import RollWatch
 
 _log = logging.getLogger(__name__)
 
@@ -128,6 +131,7 @@ class _Vehicle:
     seq: int | None = None
     stale_seq: int | None = None  # a stale MISSION_CURRENT after PX4 restarted (mission_order)
     position: Position | None = None
+    position_t_s: float | None = None  # when it was taken (None: not reported, take it as now)
     takeoff_heading_deg: float | None = None  # its heading when it armed (a fixed wing's run)
     heading_deg: float | None = None  # its last (GLOBAL_POSITION_INT hdg)
     landed: bool | None = None  # its last landed state (None: not reported)
@@ -144,6 +148,11 @@ class _Vehicle:
     retry_at_s: float | None = None  # when a failed download is tried again
     uploading: FlightPlan | None = None  # the plan the USM is uploading (see expect_upload)
     fixed: bool = True  # a 3D fix since its boot (False while a FlightState says none yet)
+    roll: RollWatch = field(default_factory=RollWatch)  # a fixed wing's take-off run
+    # first heard in the air (None: not heard yet), until it is on the ground: its take-off
+    # run was not seen (no take-off heading) and its stored plan was timed by another life
+    found_flying: bool | None = None
+    timed_here: bool = False  # its operation's plan was timed (filed, re-timed) by this life
 
 
 class VehicleOps:
@@ -219,14 +228,20 @@ class VehicleOps:
         if v is None:
             return
         if s.position is not None:
-            v.position = s.position
+            v.position, v.position_t_s = s.position, s.position_t_s
         v.heading_deg, v.landed = s.heading_deg, s.landed
-        if not v.armed or s.landed is True:  # on the ground: the heading of its take-off run
-            v.takeoff_heading_deg = s.heading_deg
+        v.found_flying = (
+            (s.armed and s.landed is not True)
+            if v.found_flying is None
+            else (v.found_flying and s.armed and s.landed is not True)
+        )
+        if (not v.armed and not v.found_flying) or s.landed is True:  # its take-off run's
+            v.takeoff_heading_deg = v.roll.parked_heading_deg(s.heading_deg)
         v.total = s.mission_total
         v.mission_id = s.mission_id
         if "rebooted" in changes:
             v.home, v.home_from_status = None, False  # a new pre-flight: a new home
+            v.roll = RollWatch()
         home = s.home
         if flight is not None:
             v.fixed, home = flight.had_fix, flight.home
@@ -239,14 +254,19 @@ class VehicleOps:
         if arming and v.home is not None:
             self._home_at_arming(v)
         self._maybe_download(v, self._mission_changed(v, s) or (s.armed and not v.armed))
+        v.roll.update(s.armed, v.armed, s.position)
         v.armed = s.armed
         flying = s.armed and s.mode in _FLYING_MODES
+        if flying and v.found_flying and not v.timed_here:
+            self._retime_stored(v)
         started = flying and not v.flying
         seq, v.stale_seq = mission_order.current_seq(s, v.autopilot, v.stale_seq, started)
         advanced = seq is not None and seq != v.seq
         v.flying, v.seq = flying, v.seq if seq is None else seq
-        if flying and (started or advanced):
-            self._retime(v, started=started)
+        # a fixed wing's plan is timed from its take-off run too (takeoff_roll.py)
+        rolled = flying and v.kind is VehicleKind.FIXED_WING and v.roll.rolled(s.position)
+        if flying and (started or advanced or rolled):
+            self._retime(v, started=started or rolled)
 
     def _maybe_download(self, v: _Vehicle, changed: bool) -> None:
         """Download on a mission change or an arming, and retry a failed download when its
@@ -424,6 +444,17 @@ class VehicleOps:
             )
         return points
 
+    def _position_t_s(self, v: _Vehicle) -> float:
+        """The time the vehicle's last position was taken, which a plan from it starts at: a
+        plan made at the end of a download starts from a position up to a status period old
+        (a plane at 23 m/s found flying by a restarted service, its position 1.3 s old and its
+        plan timed from now: UAS_IN_CV 12.3 m), and under load positions are read seconds
+        after they were taken (the PX4 plane's loiter exit re-timed from a position 3 s old
+        by its capture time: UAS_IN_CV 19.4 m)."""
+        now_s = self.clock.now_s()
+        t_s = v.position_t_s
+        return now_s if t_s is None or v.position is None else min(t_s, now_s)
+
     def _cruise_mps(self, v: _Vehicle) -> float:
         """The speed a mission without speed items is flown at: a fixed wing's cruise
         airspeed, else the multirotor default."""
@@ -445,7 +476,7 @@ class VehicleOps:
             return plan_from_points(
                 points,
                 op_id,
-                t_s=self.clock.now_s(),
+                t_s=self._position_t_s(v),
                 current_seq=v.seq if v.armed else None,  # on the ground: the whole mission
                 position=v.position,
                 version=version,
@@ -541,6 +572,7 @@ class VehicleOps:
             self._log_event("vehicle", f"sysid {v.sys_id}: {exc}")
             return
         self.counters["filed"] += 1
+        v.timed_here = True
         self._log_event(
             "operation",
             f"{op.id} filed from sysid {v.sys_id}'s mission ({len(plan.waypoints)} wp)",
@@ -555,6 +587,7 @@ class VehicleOps:
             self._log_event("vehicle", f"sysid {v.sys_id}: plan not installed: {exc}")
             return
         self.counters[counter] += 1
+        v.timed_here = True
         self._log_event(
             "operation",
             f"{op.id} plan v{plan.version} from sysid {v.sys_id}'s mission: {why} "
@@ -567,6 +600,8 @@ class VehicleOps:
         mission, and at a new current item when the plan is more than flight_geometry_m /
         cruise speed off at that item."""
         op = self.airspace.by_sys_id(v.sys_id)
+        # found flying on a plan re-timed here from its position: it did not start here
+        started = started and not (v.found_flying and v.timed_here)
         if v.downloading:
             v.start_pending = v.start_pending or started
             return  # (the arming that started it also downloads the mission: after that)
@@ -594,6 +629,28 @@ class VehicleOps:
                 return
         why = "the vehicle started the mission" if started else "re-timed at a new current item"
         self._replace(v, op, plan, why, counter="retimed")
+
+    def _retime_stored(self, v: _Vehicle) -> None:
+        """A vehicle found flying with a plan this life did not time (the store's, an earlier
+        life's clock): re-timed from its position at once (:mod:`.found_flying`)."""
+        op = self.airspace.by_sys_id(v.sys_id)
+        if op is None or v.position is None:
+            return  # filed from its mission at its first MISSION_CURRENT (_plan)
+        if op.conops != CONOPS or not self._ours(op.id):
+            v.timed_here = True  # not this module's to re-time
+            return
+        plan = found_flying.retimed_at(
+            op.plan,
+            v.position,
+            self._position_t_s(v),
+            version=op.plan.version + 1,
+            reason="re-timed from the vehicle's position (a stored plan, another life's clock)",
+            max_off_m=op.flight_geometry_m,
+        )
+        if plan is None:
+            v.found_flying = False  # off its stored plan: re-planned from its mission
+            return
+        self._replace(v, op, plan, "found flying on a stored plan", counter="retimed")
 
 
 def _flies_plan(v: _Vehicle, points: Sequence[NavPoint], plan: FlightPlan) -> bool:

@@ -626,6 +626,17 @@ class StoreBase:
             )
             return int(cur.fetchone()[0])
 
+    def latest_t_s(self) -> float | None:
+        """The latest service time the store holds (its audit, plan versions and threats;
+        None when empty): where a restarted service's clock resumes when it runs at a speed
+        factor (gcs_utm.app.serve)."""
+        row = self._conn.execute(
+            "SELECT MAX(t) FROM (SELECT MAX(t_s) AS t FROM audit "
+            "UNION ALL SELECT MAX(created_t_s) FROM flight_plans "
+            "UNION ALL SELECT MAX(detected_at_s) FROM threats) AS times"
+        ).fetchone()
+        return None if row is None or row[0] is None else float(row[0])
+
     def load_audit(self, since_t_s: float = float("-inf")) -> list[AuditEntry]:
         out: list[AuditEntry] = []
         for t, actor, action, subject, detail in self._rows(

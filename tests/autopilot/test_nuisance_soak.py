@@ -11,7 +11,6 @@ Every threat in the store must be the link drop's COMMUNICATION_FAILURE, closed 
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import pytest
@@ -24,13 +23,6 @@ SHORT = SoakConfig(minutes=3.0, speed=3.0, land_at_end=False, reboot=False)
 
 @pytest.mark.timeout(420)
 @pytest.mark.px4  # it starts PX4 itself (not through the fixture): the PX4 lane, tests/check.sh
-@pytest.mark.skipif(
-    not os.environ.get("GCS_UTM_NUISANCE"),
-    reason="set GCS_UTM_NUISANCE=1: it fails about 1 run in 3 (a restarted serve at speed 3 "
-    "keeps the previous life's plan for the PX4 plane, timed on that life's clock; the PX4 "
-    "plane's first take-off on a loaded machine; docs/testing.md 'The nuisance soak'), so its "
-    "~2.5 minutes of four autopilots are left out of the suite's real-autopilot step",
-)
 def test_mixed_fleet_raises_no_false_threat(tmp_path: Path) -> None:
     reason = unavailable_reason("px4") or unavailable_reason("ardupilot")
     if reason:

@@ -24,6 +24,11 @@ from gcs_utm.services.usm import Usm
 
 pytestmark = [pytest.mark.network, pytest.mark.timeout(90)]
 
+SPEED = 2.0
+"""Simulated seconds per wall second. The commands refuse a vehicle not heard for 5 simulated
+s (``OperatorCommands.link_timeout_s``): at 5x that was 1 s of wall time, which a loaded CI
+worker stalled through once ("no link: sysid 1 last heard 5 s ago"); at 2x it takes 2.5 s."""
+
 HOME = (47.397742, 8.545594, 488.0)
 MISSION = tuple(
     sitl.MissionItemSpec(
@@ -47,8 +52,8 @@ class Rig:
 async def _rig(*, fly: bool) -> AsyncIterator[Rig]:
     """A PX4 ``sitl`` multirotor with a mission, connected to a USM through the hub; ``fly``:
     it takes off into its mission at once."""
-    clock = ScaledClock(5.0)
-    sim = sitl.SimTime(5.0, start_utc_s=clock.start_utc_s, start_mono_s=clock.start_mono_s)
+    clock = ScaledClock(SPEED)
+    sim = sitl.SimTime(SPEED, start_utc_s=clock.start_utc_s, start_mono_s=clock.start_mono_s)
     records: list[object] = []
     usm = Usm(Airspace(), clock, record=records.append)
     cfg = MavlinkConfig(links=("udpin:127.0.0.1:0",), heartbeat_period_s=0.2)

@@ -552,3 +552,15 @@ def test_a_stream_with_a_wrap_a_drop_and_state_changes_is_no_reboot(dropped: int
         t += 0.02
     assert st.reboots == 0
     assert st.lost == dropped
+
+
+def test_the_status_gives_its_positions_capture_time_not_its_arrival() -> None:
+    """Under load a backlog of positions is read seconds after the vehicle took them: a plan
+    made from the last one starts at the time it was taken (the PX4 plane's loiter exit
+    re-timed from a position 3 s old by its capture time, timed by its arrival: UAS_IN_CV
+    19.4 m in the nuisance soak)."""
+    st, ev = _clock_state()
+    _fly(st, ev, seconds=1.0, rate=1.0)  # the clock anchored: boot 30 s at 1000 s
+    st.on_global_position((31_100, 473977000, 85456000, 488000, 0, 0, 0, 0, 0), 1004.1, ev)
+    s = st.status(1004.1)
+    assert s.position_t_s is not None and abs(s.position_t_s - 1001.1) < 0.05

@@ -11,8 +11,10 @@ import json
 import math
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 from gcs_utm.services import fixed_wing_plan as fw
+from gcs_utm.services import fixed_wing_runway as fwr
 from gcs_utm.services.mission_points import NavPoint
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "flown"
@@ -85,12 +87,13 @@ def test_px4_rolls_on_its_parked_heading_then_turns_back_for_its_takeoff_line() 
 
 def test_after_the_takeoff_px4_flies_for_the_next_waypoint_not_the_takeoff_position() -> None:
     """The third take-off's last 10 s: 2 m from the line from its completion to the next
-    waypoint, 9-10 m east of the line from there to the take-off position."""
+    waypoint (within 3.5 m of the model, whose course converges on it more slowly), 9-10 m
+    east of the line from there to the take-off position."""
     flown = FLIGHTS[2]
     plan = _plan(flown["heading_deg"], flown)
     tk = _en(flown["takeoff"]["lat_deg"], flown["takeoff"]["lon_deg"], flown["home"])
     assert all(math.hypot(e - tk[0], n - tk[1]) > 20.0 for e, n, _ in plan)  # never over it
-    assert max(_off_m(plan, q, flown["home"])[0] for q in flown["track"][-10:]) < 3.0
+    assert max(_off_m(plan, q, flown["home"])[0] for q in flown["track"][-10:]) < 4.0
 
 
 def test_a_parked_heading_towards_the_takeoff_waypoint_is_the_straight_climb_out() -> None:
@@ -98,3 +101,21 @@ def test_a_parked_heading_towards_the_takeoff_waypoint_is_the_straight_climb_out
     bearing = math.degrees(math.atan2(*_en(tk["lat_deg"], tk["lon_deg"])))
     assert _plan(bearing + 5.0) == _plan(None)
     assert _plan(bearing + 30.0) != _plan(None)
+
+
+SLOW = json.loads((DATA / "px4_plane_takeoff_slow_settle.json").read_text())
+
+
+def test_after_its_turn_px4s_course_converges_slowly_on_the_next_waypoint() -> None:
+    """A re-take-off whose course stayed 2-4 deg left of the bearing to the next waypoint for
+    10 s after its turn: within 6.5 m of the model with that convergence (a lag of the course,
+    4 s), 9 m off the straight line to the waypoint from the turn's end (UAS_IN_CV 10.2 m in
+    the 30-minute soak); the recorded take-offs that converged quickly stay within 4 m (above)."""
+    home = SLOW["home"]
+
+    def worst_m() -> float:
+        return max(_off_m(_plan(SLOW["heading_deg"], SLOW), q, home)[0] for q in SLOW["track"])
+
+    assert worst_m() < 6.5
+    with mock.patch.object(fwr, "SETTLE_S", 0.0):
+        assert worst_m() > 8.5

@@ -58,9 +58,10 @@ async def test_a_vehicle_found_flying_is_timed_from_its_current_item() -> None:
     plans.append(op.plan)
     for plan in plans:  # never sent back south to the waypoints it has flown
         assert min(_north_m(w) for w in plan.waypoints) >= 149.0, plan.waypoints
-    # timed from its position now on the new clock: at its last waypoint 50 m on
+    # timed from its position on the new clock (its first, before any MISSION_CURRENT: the
+    # stored plan re-timed from where it is on it, tests/services/test_found_flying.py)
     assert op.plan.version > stored.plan.version
-    assert op.plan.waypoints[0].t_s == 990.5
+    assert op.plan.waypoints[0].t_s == 990.0
     assert round(_north_m(op.plan.waypoints[-1])) == 200
 
 

@@ -34,8 +34,13 @@ tolerances) from the other UAS of the threat and from all other traffic with the
 commanded UAS, then the lowest priorities, then the largest separation; when none keeps
 them, the one with the largest separation (the mean of acting when expected and on the
 answer: ``t_early``). Either way a combination that takes no UAS into a geofence
-(:mod:`.command_fences`) comes before one that does. The audit lists every combination with
-its separation ratio (and the geofences it enters)."""
+(:mod:`.command_fences`) comes before one that does. Before all that, a combination that
+takes a UAS into the fence itself (grown only by its flight geometry: an intrusion, not a
+clearance kept short) comes after every one that does not, even one that does not keep the
+minima: a turn that kept the minima through a no-fly zone was chosen over a turn away that
+kept 0.90 of them (enc_6_0225_late_crossing, 4.2 s inside; the turn away flew 75.7 m from
+the other UAS against 50 m). The audit lists every combination with its separation ratio
+(and the geofences it enters, ``intrusion`` when it enters the fence itself)."""
 
 from __future__ import annotations
 
@@ -48,7 +53,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan
-from gcs_utm.core.emergency.command_fences import fence_entered
+from gcs_utm.core.emergency.command_fences import fence_entered, fence_itself_entered
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case, Decision
 from gcs_utm.core.emergency.endpoint import move_end
@@ -332,6 +337,12 @@ def _choose(  # noqa: PLR0917 - choose_commands's arguments, resolved
         for m in opts
         if m is not None
     }
+    inside = {
+        k: fence_itself_entered(td, snapshot, m.op_id, m.xyz, m.slack_m, grid, t_cmd)
+        for opts in options
+        for m in opts
+        if m is not None and fenced[k := id(m)]
+    }
     best: tuple[tuple[float, ...], Choice] | None = None
     score = 0.0  # the best's separation as ranked (.fly_on)
     best_combo: Sequence[_Move | None] = ()
@@ -346,7 +357,8 @@ def _choose(  # noqa: PLR0917 - choose_commands's arguments, resolved
         sooner = ratio
         if early is not None:
             sooner = _combo_ratio(td, cands, others, sooner_combo(combo, early), paths)
-        key = _rank(ratio, bool(fences), moves, priority_of, sooner)
+        intrudes = any(inside.get(id(m)) for m in moves)
+        key = _rank(ratio, (bool(fences), intrudes), moves, priority_of, sooner)
         actions = {m.op_id: m.action.value for m in moves}
         record: dict[str, object] = {"commands": {str(k): v for k, v in actions.items()}}
         record["ratio"] = round(ratio, 3)
@@ -354,6 +366,8 @@ def _choose(  # noqa: PLR0917 - choose_commands's arguments, resolved
             record["ratio_if_sooner"] = round(sooner, 3)
         if fences:
             record["geofences"] = fences
+        if intrudes:
+            record["intrusion"] = True
         tried.append(record)
         if best is None or key < best[0]:
             cmds = {m.op_id: m.command for m in moves}
@@ -424,24 +438,28 @@ def _turns(  # noqa: PLR0917 - one call site
 
 def _rank(
     ratio: float,
-    fenced: bool,
+    fenced: tuple[bool, bool],
     moves: list[_Move],
     priority_of: dict[OperationId, int],
     sooner: float,
 ) -> tuple[float, ...]:
-    """Order of combinations: those that keep the minima first, then those that take no UAS
-    into a geofence; among the first, the fewest commanded UAS, the lowest priorities, the
-    fewest turns (a turned fixed wing leaves its plan for good), the largest separation;
-    among the others, the largest separation, then the fewest turns (the smallest separation
-    often comes before any command acts, and then every combination ties: it is the mean of
-    the separations with the commands acting when expected and sooner, on the answer, as they
+    """Order of combinations: those that take no UAS into a fence itself (``fenced``: into a
+    geofence grown by the UAS's volume, into one grown by its flight geometry) first, then
+    those that keep the minima, then those that take no UAS into a grown geofence; among the
+    ones that keep the minima, the fewest commanded UAS, the lowest priorities, the fewest
+    turns (a turned fixed wing leaves its plan for good), the largest separation; among the
+    others, the largest separation, then the fewest turns (the smallest separation often
+    comes before any command acts, and then every combination ties: it is the mean of the
+    separations with the commands acting when expected and sooner, on the answer, as they
     may: the vehicle acts on the command before its acknowledgement is back)."""
     prio = float(sum(priority_of.get(m.op_id, 0) for m in moves))
-    fence = 1.0 if fenced else 0.0
+    fence = 1.0 if fenced[0] else 0.0
+    intrusion = 1.0 if fenced[1] else 0.0
     turned = float(sum(m.action not in _IN_PLACE for m in moves))
     if ratio >= 1.0:
-        return (0.0, fence, float(len(moves)), prio, turned, -ratio, -sooner)
-    return (1.0, fence, -(ratio + sooner) / 2.0, -sooner, turned, float(len(moves)), prio)
+        return (intrusion, 0.0, fence, float(len(moves)), prio, turned, -ratio, -sooner)
+    spread = -(ratio + sooner) / 2.0
+    return (intrusion, 1.0, fence, spread, -sooner, turned, float(len(moves)), prio)
 
 
 def _combo_ratio(

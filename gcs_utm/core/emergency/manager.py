@@ -33,6 +33,7 @@ from gcs_utm.core.emergency.config import Action, EmergencyConfig, ExpiryAction
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import ONE_SHOT, SINGLE_MANEUVERS, Case, Decision, Mode
 from gcs_utm.core.emergency.expiry import expire
+from gcs_utm.core.emergency.failed_safe import after_failure
 from gcs_utm.core.emergency.geofences import area, link_loss, suspend
 from gcs_utm.core.emergency.immediate import keep_all, late_reason, propose
 from gcs_utm.core.emergency.lead import ResponseTimes
@@ -213,7 +214,7 @@ class EmergencyManager:
         snapshot: AirspaceSnapshot,
     ) -> Decision:
         """The upload (or command) of an accepted recommendation was verified or failed."""
-        return on_outcome(self.ctx, rec_id, version, applied, reason, snapshot)
+        return on_outcome(self.ctx, rec_id, version, applied, reason, snapshot, after_failure)
 
     def on_answer(
         self, rec: Recommendation, accepted: bool, snapshot: AirspaceSnapshot

@@ -28,13 +28,14 @@ an upload that failed, each lead to a new decision (paper §4.4: nothing is drop
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import ONE_SHOT, Case, Decision, Mode
 from gcs_utm.core.emergency.overridden import overtaken
+from gcs_utm.core.emergency.supervision_due import retry_wait_s
 from gcs_utm.model import (
     AirspaceSnapshot,
     Command,
@@ -107,14 +108,15 @@ def _not_due(
     now: float,
 ) -> bool:
     """Nothing to supervise yet: a one-shot action, nothing in force, a pilot still asked, a
-    plan not settled, or the last attempt less than ``retry_after_s`` ago."""
+    plan not settled, or the last attempt less than ``retry_after_s`` ago (less when the
+    predicted event comes sooner: :mod:`.supervision_due`)."""
     if case.action in ONE_SHOT or not live:
         return True
     if any(r is not None and r.state is RecommendationState.PROPOSED for r in recs):
         return True
     if now < max(settled_at(em, case, r) for r in live):
         return True
-    return bool(case.supervised) and now - case.attempt_t_s < em.config.retry_after_s
+    return bool(case.supervised) and now - case.attempt_t_s < retry_wait_s(em, case, now)
 
 
 def _final_noted(em: EmContext, case: Case, live: list[Recommendation], now: float) -> Decision:
@@ -187,6 +189,18 @@ def describe(cmd: Command, action: str = "") -> str:
     return f"goto {alt}"
 
 
+def _plain_safe(
+    em: EmContext, case: Case, op_ids: Sequence[OperationId], snapshot: AirspaceSnapshot, why: str
+) -> Decision:
+    return escalate_safe(em, case, list(op_ids), snapshot.t_s, why)
+
+
+SafeAfterFailure = Callable[
+    [EmContext, Case, Sequence[OperationId], AirspaceSnapshot, str], Decision
+]
+"""Escalates a UAS whose plan failed twice with what it proposes (.failed_safe)."""
+
+
 def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answer
     em: EmContext,
     rec_id: RecommendationId,
@@ -194,6 +208,7 @@ def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answ
     applied: bool,
     reason: str,
     snapshot: AirspaceSnapshot,
+    safe: SafeAfterFailure = _plain_safe,
 ) -> Decision:
     """The service reports whether an accepted recommendation was applied (verified) or
     failed: record it; after a failure re-plan once, then escalate with the safe command."""
@@ -224,10 +239,10 @@ def on_outcome(  # noqa: PLR0917 - the service's report, positional like on_answ
         audit = em.audit(now, "escalation", case.threat.id, {"reason": msg})
         return d.merge(Decision(escalations=(msg,), audit=(audit,)))
     if n > 1 or case.modes.get(op_id) == Mode.COMMAND:
-        return d.merge(escalate_safe(em, case, [op_id], now, why))
+        return d.merge(safe(em, case, [op_id], snapshot, why))
     again = em.decide(case, snapshot)
     mine = [r for r in again.recommendations if r.operation_id == op_id]
     if not any(r.state in (RecommendationState.PROPOSED, *_IN_FORCE) for r in mine):
-        again = again.merge(escalate_safe(em, case, [op_id], now, why))
+        again = again.merge(safe(em, case, [op_id], snapshot, why))
     audit = em.audit(now, "replan_after_failure", case.threat.id, {"reason": why})
     return d.merge(Decision(audit=(audit,))).merge(again)
