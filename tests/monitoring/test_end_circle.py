@@ -10,16 +10,19 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 from helpers import FRAME, cylinder, operation
 
 from gcs_utm.core.monitoring import Monitor, MonitoringConfig
-from gcs_utm.core.monitoring.strategic import plan_vs_geofences
+from gcs_utm.core.monitoring.end_circle import EndRings, end_ring
+from gcs_utm.core.monitoring.strategic import plan_local, plan_vs_geofences
 from gcs_utm.envelope import FIXED_WING_TURN_RADIUS_M
 from gcs_utm.model import (
     AirspaceSnapshot,
     Operation,
+    OperationId,
     PredictedTrajectories,
     ThreatKind,
     Track,
@@ -130,3 +133,31 @@ def test_a_fence_in_the_entry_onto_the_circle_is_not_clear_of_the_plan() -> None
     cfg = MonitoringConfig()
     (c,) = plan_vs_geofences(op.plan, op, (ENTRY_FENCE, BEHIND_FENCE), FRAME, cfg)
     assert c.geofence_id == "E" and END_T_S < c.entry_t_s < END_T_S + 15.0
+
+
+def test_the_end_ring_is_kept_while_the_plan_stays_and_redone_when_it_changes() -> None:
+    # Monitoring checks the ring every cycle of the plan's last horizon: it is integrated
+    # once per plan (per points array of the Monitor's projection), never changed in place.
+    pts = plan_local(_entry_op().plan, FRAME)
+    rings = EndRings()
+    first = rings.ring(OperationId("A"), pts, 90.0, 80.0)
+    assert first is not None and np.array_equal(first, end_ring(pts, 90.0, 80.0))
+    assert rings.ring(OperationId("A"), pts, 90.0, 80.0) is first
+    with pytest.raises(ValueError):
+        first[0, 0] = 0.0
+    moved = pts.copy()
+    moved[-1, 1] += 50.0  # a new plan: a new array
+    again = rings.ring(OperationId("A"), moved, 90.0, 80.0)
+    assert again is not first and np.array_equal(again, end_ring(moved, 90.0, 80.0))
+    assert rings.ring(OperationId("A"), moved, 95.0, 80.0) is not again  # other radius
+    rings.prune({OperationId("B")})
+    assert len(rings) == 0
+
+
+def test_a_monitor_flags_the_circle_on_every_cycle_with_its_ring_kept() -> None:
+    mon = Monitor(FRAME, MonitoringConfig(conformance_time_tolerance_s=1000.0))
+    snap = _snapshot(_op(VehicleKind.FIXED_WING))
+    (t1,) = mon.cycle(snap)
+    mon.cycle(snap)
+    (t2,) = mon.active()
+    assert t2.id == t1.id and t2.predicted_event_at_s == t1.predicted_event_at_s

@@ -31,14 +31,14 @@ Units: local frame metres (east, north, alt AMSL), seconds.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 
 import numpy as np
 
 from gcs_utm.core.monitoring.fences import LocalFence
 from gcs_utm.core.monitoring.geometry import FloatArray
 from gcs_utm.core.tracking import loiter_entry
-from gcs_utm.model import Operation
+from gcs_utm.model import Operation, OperationId
 
 RING_POINTS = 36
 """Vertices of the circle's polyline (every 10 degrees: the chord's sagitta is 0.4 % of the
@@ -163,6 +163,39 @@ def ring_entry(ring: FloatArray, fence: LocalFence) -> float | None:
     return float(ring[k, 3] + float(s[k]) * (ring[k + 1, 3] - ring[k, 3]))
 
 
+class EndRings:
+    """Each operation's :func:`end_ring`, kept while its plan stays: the ring depends only on
+    the plan's points and the radii, and Monitoring checks it every cycle of the plan's last
+    horizon (an integration of the entry each time, before). Keyed on the operation, hit
+    only for the same points array (the caller's projection of one plan object: a new plan
+    is a new array) and the same radii; one entry per operation, :meth:`prune` drops the
+    operations gone."""
+
+    def __init__(self) -> None:
+        self._rings: dict[OperationId, tuple[FloatArray, float, float, FloatArray | None]] = {}
+
+    def ring(
+        self, op_id: OperationId, plan_pts: FloatArray, radius_m: float, loiter_radius_m: float
+    ) -> FloatArray | None:
+        """:func:`end_ring` of ``plan_pts`` (kept by the caller, not modified), cached."""
+        hit = self._rings.get(op_id)
+        if hit is not None and hit[0] is plan_pts and hit[1:3] == (radius_m, loiter_radius_m):
+            return hit[3]
+        ring = end_ring(plan_pts, radius_m, loiter_radius_m)
+        if ring is not None:
+            ring.flags.writeable = False  # shared by every cycle: never changed in place
+        self._rings[op_id] = (plan_pts, radius_m, loiter_radius_m, ring)
+        return ring
+
+    def prune(self, current: Collection[OperationId]) -> None:
+        """Drop the rings of operations not in ``current``."""
+        for key in [k for k in self._rings if k not in current]:
+            del self._rings[key]
+
+    def __len__(self) -> int:
+        return len(self._rings)
+
+
 def end_circle_hits(
     *,
     ops: Sequence[Operation],
@@ -170,11 +203,13 @@ def end_circle_hits(
     predicted: FloatArray,
     fences: Sequence[LocalFence],
     t_s: float,
+    rings: EndRings | None = None,
 ) -> list[tuple[int, LocalFence, float]]:
     """(index into ``ops``, fence, entry time) for each operation whose plan ends inside the
     predicted window and whose circle round the end point enters a fence inside it. ``plans`` (each
     (K, 4), local) are the operations' plans, ``predicted`` (N, S, 4) their predicted points
-    (one row per operation, same order), ``t_s`` the cycle's time."""
+    (one row per operation, same order), ``t_s`` the cycle's time; ``rings`` keeps the rings
+    from one call to the next (None: each computed)."""
     out: list[tuple[int, LocalFence, float]] = []
     for i, op in enumerate(ops):
         radius_m = circle_radius_m(op)
@@ -188,7 +223,11 @@ def end_circle_hits(
         k = int(np.searchsorted(row[:, 3], end_t, side="right")) - 1
         if math.hypot(*(row[k, :2] - pts[-1, :2])) > REACH_RADII * radius_m:
             continue  # the prediction does not reach the end point: sent elsewhere
-        ring = end_ring(pts, radius_m, loiter_radius_m(op))
+        loiter_m = loiter_radius_m(op)
+        if rings is None:
+            ring = end_ring(pts, radius_m, loiter_m)
+        else:
+            ring = rings.ring(op.id, pts, radius_m, loiter_m)
         if ring is None:
             continue
         for f in fences:

@@ -43,7 +43,7 @@ from gcs_utm.core.monitoring.checks import (
 )
 from gcs_utm.core.monitoring.closing import clear_reason, closed_message, over_reason
 from gcs_utm.core.monitoring.config import MonitoringConfig
-from gcs_utm.core.monitoring.end_circle import end_circle_hits
+from gcs_utm.core.monitoring.end_circle import EndRings, end_circle_hits
 from gcs_utm.core.monitoring.fences import LocalFence, localise
 from gcs_utm.core.monitoring.fixed_wing_band import band_distance, band_parameters
 from gcs_utm.core.monitoring.geometry import FloatArray, Windows, window_extents
@@ -139,6 +139,7 @@ class Monitor:
         self._seq = 0
         self._fence_cache: dict[GeofenceId, tuple[Geofence, LocalFence]] = {}
         self._plan_cache: dict[OperationId, tuple[FlightPlan, FloatArray]] = {}
+        self._end_rings = EndRings()  # fixed wings' end circles, by plan
         # Operations (frozen objects) of the last conformance table, the table, the anchors.
         self._conf_cache: tuple[list[Operation], PlanTable, FloatArray, _Limits, _Band] | None = (
             None
@@ -167,6 +168,7 @@ class Monitor:
     def cycle(self, snapshot: AirspaceSnapshot) -> list[Threat]:
         ev = self._evaluate(snapshot)
         _prune(self._plan_cache, snapshot.operations)
+        self._end_rings.prune(snapshot.operations)
         _prune(self._fence_cache, {g.id for g in snapshot.geofences})
         return self._update(snapshot, ev)
 
@@ -307,7 +309,12 @@ class Monitor:
         ops = [by_id[op_of[r]] for r in rows]
         plans = [self._plan(o) for o in ops]
         for i, f, t in end_circle_hits(
-            ops=ops, plans=plans, predicted=pts[rows], fences=fences, t_s=t_s
+            ops=ops,
+            plans=plans,
+            predicted=pts[rows],
+            fences=fences,
+            t_s=t_s,
+            rings=self._end_rings,
         ):
             key = ("GEO", ops[i].id, f.id)
             if key not in ev.seen and ops[i].id not in exempt.get(f.id, ()):

@@ -138,8 +138,10 @@ def overlay(
     rows = np.flatnonzero((plan_row >= 0) & (loiter_m > 0.0))
     if not len(rows):
         return
+    captures = _Captures()
     _entry_after_end(
         axes,
+        captures,
         plans=plans,
         rows=rows,
         plan_row=plan_row,
@@ -163,6 +165,7 @@ def overlay(
         center=center,
     )
     if not len(at):
+        captures.run(axes)
         return
     tau = np.add.outer(ahead0_s[rows[at]], steps_s)
     circle = loiter_points(
@@ -175,22 +178,23 @@ def overlay(
     )
     # Inside the circle (just past the centre): the entry's swing out, on the capture.
     inside = np.flatnonzero(np.hypot(*(pos[at, :2] - center[at, :2]).T) < radius[at])
-    if len(inside):
-        a = at[inside]
-        speed = np.hypot(vel[a, 0], vel[a, 1])
-        east, north = loiter_entry.capture_points(
-            center_en=center[a, :2],
-            radius_m=radius[a],
-            turn_radius_m=loiter_entry.capture_turn_radius_m(speed),
-            clockwise=np.ones(len(a), dtype=bool),
-            pos_en=pos[a, :2],
-            course_rad=np.arctan2(vel[a, 0], vel[a, 1]),
-            speed_mps=speed,
-            tau_s=tau[inside],
-        )
-        circle[0][inside], circle[1][inside] = east, north
     for axis in range(3):
         axes[axis][rows[at]] = circle[axis]
+    a = at[inside]
+    speed = np.hypot(vel[a, 0], vel[a, 1])
+    course = np.arctan2(vel[a, 0], vel[a, 1])
+    for i, row in enumerate(inside):
+        captures.add(
+            row=int(rows[a[i]]),
+            cols=np.arange(len(steps_s)),
+            center_en=center[a[i], :2],
+            radius_m=float(radius[a[i]]),
+            pos_en=pos[a[i], :2],
+            course_rad=float(course[i]),
+            speed_mps=float(speed[i]),
+            tau_s=tau[row],
+        )
+    captures.run(axes)
 
 
 def last_course_rad(wp_pos: FloatArray) -> float | None:
@@ -207,6 +211,7 @@ def last_course_rad(wp_pos: FloatArray) -> float | None:
 
 def _entry_after_end(
     axes: list[FloatArray],
+    captures: _Captures,
     *,
     plans: PlanTable,
     rows: IntArray,
@@ -217,12 +222,12 @@ def _entry_after_end(
     ahead0_s: FloatArray,
     steps_s: FloatArray,
 ) -> None:
-    """Overwrite in ``axes`` the points after the plan's end of ``rows`` (fixed wings with a
-    plan) whose plan ends after their state and inside the window, and whose prediction at
-    the end reaches the last waypoint (within :data:`CAPTURE_RADII` loiter radii: not sent
-    elsewhere): from the last waypoint, at the plan's end, on the last leg's course at the
-    track's horizontal speed, capturing the circle (:mod:`.loiter_entry`). Altitudes stay
-    as predicted."""
+    """Add to ``captures`` the points of ``axes`` after the plan's end of ``rows`` (fixed
+    wings with a plan) whose plan ends after their state and inside the window, and whose
+    prediction at the end reaches the last waypoint (within :data:`CAPTURE_RADII` loiter
+    radii: not sent elsewhere): from the last waypoint, at the plan's end, on the last leg's
+    course at the track's horizontal speed, capturing the circle (:mod:`.loiter_entry`).
+    Altitudes stay as predicted."""
     end_all = plans.end_t_s[plan_row[rows]]
     last_t = t_state_s[rows] + ahead0_s[rows] + steps_s[-1]  # the window's last point
     ending = rows[(t_state_s[rows] < end_all) & (end_all < last_t)]
@@ -240,17 +245,70 @@ def _entry_after_end(
         course = last_course_rad(wps) if m >= 2 else None
         if course is None or reach_m > CAPTURE_RADII * float(loiter_m[r]):
             continue
-        speed = np.array([math.hypot(x[r, 0, kalman.VEL], x[r, 1, kalman.VEL])])
-        if speed[0] < MIN_SPEED_MPS:
+        speed = math.hypot(x[r, 0, kalman.VEL], x[r, 1, kalman.VEL])
+        if speed < MIN_SPEED_MPS:
             continue
-        east, north = loiter_entry.capture_points(
-            center_en=wps[-1:, :2],
-            radius_m=loiter_m[r : r + 1],
-            turn_radius_m=loiter_entry.capture_turn_radius_m(speed),
-            clockwise=np.ones(1, dtype=bool),
-            pos_en=wps[-1:, :2],
-            course_rad=np.array([course]),
+        captures.add(
+            row=int(r),
+            cols=after,
+            center_en=wps[-1, :2],
+            radius_m=float(loiter_m[r]),
+            pos_en=wps[-1, :2],
+            course_rad=course,
             speed_mps=speed,
-            tau_s=(t_state_s[r] + tau[after] - end_t)[None, :],
+            tau_s=t_state_s[r] + tau[after] - end_t,
         )
-        axes[0][r, after], axes[1][r, after] = east[0], north[0]
+
+
+class _Captures:
+    """The captures (:func:`.loiter_entry.capture_points`) one prediction needs, collected
+    and then integrated in one call (its cost is per call, not per row): for each, the row
+    and the columns of the axes it overwrites (east and north), its circle, start and times
+    (the row's columns, from its start)."""
+
+    def __init__(self) -> None:
+        self._rows: list[tuple[int, IntArray, FloatArray, float, FloatArray, float, float]] = []
+        self._tau: list[FloatArray] = []
+
+    def add(
+        self,
+        *,
+        row: int,
+        cols: IntArray,
+        center_en: FloatArray,
+        radius_m: float,
+        pos_en: FloatArray,
+        course_rad: float,
+        speed_mps: float,
+        tau_s: FloatArray,
+    ) -> None:
+        """One clockwise capture of the circle of ``radius_m`` round ``center_en`` from
+        ``pos_en`` on ``course_rad`` at ``speed_mps``, at ``tau_s`` (one per column of
+        ``cols``) from its start, written into ``row``."""
+        self._rows.append((row, cols, center_en, radius_m, pos_en, course_rad, speed_mps))
+        self._tau.append(tau_s)
+
+    def run(self, axes: list[FloatArray]) -> None:
+        """Integrate every capture added and write it into ``axes`` (east, north)."""
+        if not self._rows:
+            return
+        n = len(self._rows)
+        # One rectangle of times: shorter rows padded with 0 (their start: no longer
+        # integration), the padding read back nowhere.
+        tau = np.zeros((n, max(len(t) for t in self._tau)))
+        for i, t in enumerate(self._tau):
+            tau[i, : len(t)] = t
+        speed = np.array([c[6] for c in self._rows])
+        east, north = loiter_entry.capture_points(
+            center_en=np.array([c[2] for c in self._rows]),
+            radius_m=np.array([c[3] for c in self._rows]),
+            turn_radius_m=loiter_entry.capture_turn_radius_m(speed),
+            clockwise=np.ones(n, dtype=bool),
+            pos_en=np.array([c[4] for c in self._rows]),
+            course_rad=np.array([c[5] for c in self._rows]),
+            speed_mps=speed,
+            tau_s=tau,
+        )
+        for i, (row, cols, *_) in enumerate(self._rows):
+            m = len(cols)
+            axes[0][row, cols], axes[1][row, cols] = east[i, :m], north[i, :m]

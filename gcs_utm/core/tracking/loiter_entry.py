@@ -56,11 +56,6 @@ def capture_turn_radius_m(speed_mps: FloatArray) -> FloatArray:
     return out
 
 
-def _wrap(a: FloatArray) -> FloatArray:
-    out: FloatArray = (a + math.pi) % (2.0 * math.pi) - math.pi
-    return out
-
-
 def capture_points(
     *,
     center_en: FloatArray,
@@ -77,36 +72,77 @@ def capture_points(
     aircraft capturing their loiter circle: centre ``center_en`` (N, 2), radius ``radius_m``,
     turning ``clockwise`` (else counter-clockwise) at most at ``speed_mps / turn_radius_m``,
     from ``pos_en`` (N, 2) on ``course_rad`` at ``speed_mps`` (horizontal, kept), integrated
-    in steps of ``step_s``."""
+    in steps of ``step_s``.
+
+    The rows do not depend on each other: many rows in one call cost about what one does (the
+    cost is numpy's per call, a few dozen calls per step), and a row's figures are the same
+    whichever rows it is integrated with (a longer integration only adds later points)."""
     n, k = tau_s.shape
     east_out = np.empty((n, k))
     north_out = np.empty((n, k))
     if n == 0 or k == 0:
         return east_out, north_out
-    side = np.where(clockwise, 1.0, -1.0)
     speed = np.maximum(speed_mps, 1e-3)
     max_rate = speed / np.maximum(turn_radius_m, 1.0)  # rad/s
-    radius = np.maximum(radius_m, 1.0)
     n_steps = max(1, math.ceil(float(tau_s.max()) / step_s))
+    path = _integrate(
+        center_en=center_en.astype(np.float64),
+        radius=np.maximum(radius_m, 1.0),
+        max_rate=max_rate,
+        side=None if bool(np.all(clockwise)) else np.where(clockwise, 1.0, -1.0),
+        pos_en=pos_en.astype(np.float64, copy=True),
+        course_rad=course_rad.astype(np.float64, copy=True),
+        step_m=np.repeat(speed * step_s, 2).reshape(n, 2),
+        step_s=step_s,
+        n_steps=n_steps,
+    )
     grid_t = np.arange(n_steps + 1) * step_s
-    east = np.empty((n, n_steps + 1))
-    north = np.empty((n, n_steps + 1))
-    e, nn, c = pos_en[:, 0].copy(), pos_en[:, 1].copy(), course_rad.copy()
-    east[:, 0], north[:, 0] = e, nn
-    for i in range(1, n_steps + 1):
-        de, dn = e - center_en[:, 0], nn - center_en[:, 1]
-        dist = np.hypot(de, dn)
-        # bearing of the aircraft from the centre; at the centre, the way it flies out
-        radial = np.where(dist < 1e-6, c, np.arctan2(de, dn))
-        err = np.clip((dist - radius) / radius, -1.0, 1.0)
-        want = radial + side * (math.pi / 2.0 + err * CORRECTION_RAD)
-        rate = np.clip(HEADING_GAIN_PER_S * _wrap(want - c), -max_rate, max_rate)
-        mid = c + rate * (step_s / 2.0)
-        e = e + speed * step_s * np.sin(mid)
-        nn = nn + speed * step_s * np.cos(mid)
-        c = c + rate * step_s
-        east[:, i], north[:, i] = e, nn
     for r in range(n):
-        east_out[r] = np.interp(tau_s[r], grid_t, east[r])
-        north_out[r] = np.interp(tau_s[r], grid_t, north[r])
+        east_out[r] = np.interp(tau_s[r], grid_t, path[:, r, 0])
+        north_out[r] = np.interp(tau_s[r], grid_t, path[:, r, 1])
     return east_out, north_out
+
+
+def _integrate(
+    *,
+    center_en: FloatArray,
+    radius: FloatArray,
+    max_rate: FloatArray,
+    side: FloatArray | None,
+    pos_en: FloatArray,
+    course_rad: FloatArray,
+    step_m: FloatArray,
+    step_s: float,
+    n_steps: int,
+) -> FloatArray:
+    """(n_steps + 1, N, 2) east and north every ``step_s`` from ``pos_en`` (N, 2; the first
+    point) of :func:`capture_points`: ``side`` +1 clockwise, -1 counter-clockwise (None: all
+    clockwise), ``step_m`` (N, 2) each row's distance per step on both columns. Each step
+    steers towards the circle's tangent, corrected towards the circle for the radial error,
+    at most at ``max_rate``, and moves on the course at the middle of the step (the midpoint
+    rule). Written as few numpy calls per step as possible: their count, not the rows, is
+    the cost."""
+    path = np.empty((n_steps + 1, len(pos_en), 2))
+    p, c = pos_en, course_rad
+    path[0] = p
+    min_rate = -max_rate
+    sin_cos = np.empty_like(pos_en)
+    sin_col, cos_col = sin_cos[:, 0], sin_cos[:, 1]
+    half_s = step_s / 2.0
+    for i in range(1, n_steps + 1):
+        d = p - center_en
+        dist = np.hypot(d[:, 0], d[:, 1])
+        # bearing of the aircraft from the centre; at the centre, the way it flies out
+        radial = np.where(dist < 1e-6, c, np.arctan2(d[:, 0], d[:, 1]))
+        err = np.minimum(np.maximum((dist - radius) / radius, -1.0), 1.0)
+        off = math.pi / 2.0 + err * CORRECTION_RAD  # from the radial, on the turn's side
+        want = radial + (off if side is None else side * off)
+        wrapped = (want - c + math.pi) % (2.0 * math.pi) - math.pi  # course error
+        rate = np.minimum(np.maximum(HEADING_GAIN_PER_S * wrapped, min_rate), max_rate)
+        mid = c + rate * half_s
+        np.sin(mid, sin_col)
+        np.cos(mid, cos_col)
+        p = p + step_m * sin_cos
+        c = c + rate * step_s
+        path[i] = p
+    return path
