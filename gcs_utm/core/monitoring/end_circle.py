@@ -183,7 +183,7 @@ class EndRings:
             return hit[3]
         ring = end_ring(plan_pts, radius_m, loiter_radius_m)
         if ring is not None:
-            ring.flags.writeable = False  # shared by every cycle: never changed in place
+            ring.setflags(write=False)  # shared by every cycle: never changed in place
         self._rings[op_id] = (plan_pts, radius_m, loiter_radius_m, ring)
         return ring
 
