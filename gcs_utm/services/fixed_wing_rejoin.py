@@ -28,7 +28,6 @@ from collections.abc import Sequence
 from typing import TypeVar
 
 from gcs_utm.services.fixed_wing_point import LOITER_COMMANDS, NAV_TAKEOFF, Point
-from gcs_utm.services.fixed_wing_runway import PX4_FLOWN_MPS, npfg_pursuit
 from gcs_utm.services.fixed_wing_turn import (
     L1_DAMPING,
     L1_PERIOD_S,
@@ -120,78 +119,25 @@ def exit_from(lat_deg: float, lon_deg: float, course_deg: float, rest: Sequence[
     run = next((k for k, q in enumerate(rest) if q.explicit), len(rest))
     if run == 0 or run == len(rest):
         return list(rest)
-    onto = _onto_line(lat_deg, lon_deg, course_deg, rest[run - 1], rest[run])
-    return list(rest) if onto is None else [*onto, *rest[run:]]
-
-
-def turn_past(
-    lat_deg: float, lon_deg: float, course_deg: float, reached: Point, rest: Sequence[P]
-) -> list[P]:
-    """A PX4 plane at ``lat_deg, lon_deg`` flying ``course_deg`` that has just accepted
-    ``reached`` (a waypoint, up to its NPFG switch distance before it) for ``rest`` (the
-    plan's points from the next item on): it does not fly on to ``reached`` and round it as
-    ArduPlane does (``WP_RADIUS``), it turns from where it is at its roll limit (NPFG's
-    command saturates) onto the line from ``reached`` to the next item's position (its
-    previous setpoint and current one, ``navigateWaypoints``), or for a next item with
-    modelled points first (a loiter's capture: NPFG heads for the circle) towards the first
-    of them. Measured on PX4 v1.15.2 SIH (the nuisance soak's plane, 14.5 m/s): it accepted
-    its waypoint 34 m before it, heading north, and turned left for the loiter 300 m west
-    within 30 m; the plan on through the waypoint put it 10 m off
-    (``tests/data/flown/px4_plane_waypoint_accepted.json``)."""
-    if not rest:
-        return []
-    first = rest[0]
-    here = first.moved(lat_deg, lon_deg, reached.alt_amsl_m).synthetic()
-    speed = min(max(first.speed_mps, 1.0), PX4_FLOWN_MPS)
-    if not first.explicit:
-        return [*npfg_pursuit(here, course_deg, first, speed), *rest]
-    target = _line_target(lat_deg, lon_deg, reached, first)
-    if target is None:
-        return list(rest)
-    return [*npfg_pursuit(here, course_deg, target, speed), target, *rest]
-
-
-def _onto_line(
-    lat_deg: float, lon_deg: float, course_deg: float, on_line: Point, nxt: P
-) -> list[P] | None:
-    """A PX4 plane at ``lat_deg, lon_deg`` flying ``course_deg`` turning onto the line from
-    ``on_line`` to ``nxt``: the turn at its roll limit towards the line's point one guidance
-    distance past its projection, then that point (modelled points of ``nxt``); [] past the
-    line's end, None when there is no line."""
-    target = _line_target(lat_deg, lon_deg, on_line, nxt)
-    if target is None:
-        return None if _length_m(on_line, nxt) < 1.0 else []
-    speed = min(max(nxt.speed_mps, 1.0), PX4_TRIM_MPS)
-    here = nxt.moved(lat_deg, lon_deg, target.alt_amsl_m).synthetic()
-    turn = takeoff_turn(here, course_deg, target, speed, period_s=PX4_PERIOD_S, roll_in_s=0.0,
-                        roll_limit_deg=PX4_ROLL_LIMIT_DEG, full_bank=True)  # fmt: skip
-    return [*turn, target]
-
-
-def _length_m(a: Point, b: Point) -> float:
-    k = math.cos(math.radians(a.lat_deg))
-    return math.hypot((b.lon_deg - a.lon_deg) * _M_PER_DEG_LON * k,
-                      (b.lat_deg - a.lat_deg) * _M_PER_DEG_LAT)  # fmt: skip
-
-
-def _line_target(lat_deg: float, lon_deg: float, on_line: Point, nxt: P) -> P | None:
-    """The point of the line from ``on_line`` to ``nxt`` one PX4 guidance distance past the
-    projection of ``lat_deg, lon_deg`` (a modelled point of ``nxt``): what PX4 turns for to
-    converge on that line; None past its end or without a line."""
+    on_line, nxt = rest[run - 1], rest[run]
     k = math.cos(math.radians(on_line.lat_deg))
     le = (nxt.lon_deg - on_line.lon_deg) * _M_PER_DEG_LON * k
     ln = (nxt.lat_deg - on_line.lat_deg) * _M_PER_DEG_LAT
     length = math.hypot(le, ln)
     if length < 1.0:
-        return None
+        return list(rest)
     ue, un = le / length, ln / length
     pe = (lon_deg - on_line.lon_deg) * _M_PER_DEG_LON * k
     pn = (lat_deg - on_line.lat_deg) * _M_PER_DEG_LAT
     speed = min(max(nxt.speed_mps, 1.0), PX4_TRIM_MPS)
     s = pe * ue + pn * un + L1_DAMPING * PX4_PERIOD_S * speed / math.pi
     if s >= length - 1.0:
-        return None
+        return list(rest[run:])
     alt = on_line.alt_amsl_m + (nxt.alt_amsl_m - on_line.alt_amsl_m) * max(s, 0.0) / length
     lat = on_line.lat_deg + un * s / _M_PER_DEG_LAT
     lon = on_line.lon_deg + ue * s / (_M_PER_DEG_LON * k)
-    return nxt.moved(lat, lon, alt).synthetic()
+    target = nxt.moved(lat, lon, alt).synthetic()
+    here = nxt.moved(lat_deg, lon_deg, alt).synthetic()
+    turn = takeoff_turn(here, course_deg, target, speed, period_s=PX4_PERIOD_S, roll_in_s=0.0,
+                        roll_limit_deg=PX4_ROLL_LIMIT_DEG, full_bank=True)  # fmt: skip
+    return [*turn, target, *rest[run:]]

@@ -299,34 +299,3 @@ class _Npfg:
             if abs(self.psi - last) >= math.radians(_POINT_EVERY_DEG):
                 last = self.psi
                 yield None
-
-
-def npfg_pursuit(here: Point, course_deg: float, goal: P, speed_mps: float) -> list[P]:
-    """A PX4 plane at ``here`` flying ``course_deg`` at ``speed_mps`` turning for ``goal`` by
-    NPFG's lateral command (``gain V sin(error)``, capped by its roll limit, lagged by the
-    roll): the points of its turn until it heads for ``goal`` (modelled points of ``goal``,
-    at the altitudes of the straight line from ``here``); [] when it already does. Unlike a
-    turn at the roll limit to the end, it eases off as the bearing error closes (measured on
-    PX4 v1.15.2 SIH turning 80 deg at 14.5 m/s for its loiter: about 50 deg/s for the first
-    second, 28 deg/s at 34 deg of error, 19 at 22)."""
-    k = math.cos(math.radians(here.lat_deg))
-    ge = (goal.lon_deg - here.lon_deg) * _M_PER_DEG_LON * k
-    gn = (goal.lat_deg - here.lat_deg) * _M_PER_DEG_LAT
-    total_m = math.hypot(ge, gn)
-    if total_m < 1.0:
-        return []
-    flight = _Npfg(course_deg, 0.0, max(speed_mps, 1.0))
-    out: list[P] = []
-
-    def point() -> P:
-        frac = min(max(1.0 - math.hypot(ge - flight.e, gn - flight.n) / total_m, 0.0), 1.0)
-        lat = here.lat_deg + flight.n / _M_PER_DEG_LAT
-        lon = here.lon_deg + flight.e / (_M_PER_DEG_LON * k)
-        alt = here.alt_amsl_m + (goal.alt_amsl_m - here.alt_amsl_m) * frac
-        return goal.moved(lat, lon, alt).synthetic()
-
-    for _ in flight.pursuit((ge, gn)):
-        out.append(point())
-    if flight.flown_m > 1.0:  # where the turn ends: then straight for ``goal``
-        out.append(point())
-    return out

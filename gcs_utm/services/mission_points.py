@@ -17,7 +17,7 @@ from typing import Protocol
 from gcs_utm.model import FlightPlan, OperationId, Position, Waypoint4D
 from gcs_utm.services import fixed_wing_point as fwp
 from gcs_utm.services import mission_order
-from gcs_utm.services.fixed_wing_rejoin import rejoin_rest, turn_past
+from gcs_utm.services.fixed_wing_rejoin import rejoin_rest
 
 NAV_WAYPOINT = 16
 NAV_LAND = 21
@@ -146,9 +146,9 @@ def plan_from_points(
     from ``current_seq`` on (MISSION_CURRENT; all when None), each reached at the speed it is
     flown to. None when there is no point. ``turn_from_m`` (a fixed wing): when the point
     just reached (the one before ``current_seq``) is within that of ``position``, the plan
-    goes on through it (the autopilot accepted it early: ArduPlane's WP_RADIUS, 50 m), or with
-    ``course_deg`` (PX4, its heading) turns from there for the next item; farther, it goes
-    back onto its leg (``course_deg``: PX4's loiter exit; :mod:`.fixed_wing_rejoin`).
+    goes on through it (the autopilot accepted it early: ArduPlane's WP_RADIUS, 50 m; PX4's
+    NPFG switch distance); farther, it goes back onto its leg (``course_deg``: PX4's loiter
+    exit; :mod:`.fixed_wing_rejoin`).
     ``climb_rate_mps`` / ``descent_rate_mps`` (the vehicle's envelope; None: no limit): a leg
     that climbs or descends faster at its speed takes as long as that rate needs (a
     multirotor's take-off, landing or steep leg: its autopilot limits the vertical speed)."""
@@ -169,11 +169,7 @@ def plan_from_points(
         and done[-1].command not in fwp.LOITER_COMMANDS  # a circle is left, not turned round
         and dist_m(position, done[-1]) <= turn_from_m
     ):
-        if course_deg is None:  # ArduPlane: on round the waypoint it accepted
-            rest = [done[-1], *rest]
-        else:  # PX4: the turn from where it accepted it (NPFG's switch distance)
-            rest = _from_nearest_modelled(rest, position)
-            rest = turn_past(position.lat_deg, position.lon_deg, course_deg, done[-1], rest)
+        rest = [done[-1], *rest]
     elif position is not None:
         rest = _from_nearest_modelled(rest, position)
         if turn_from_m > 0.0 and done:  # a fixed wing converges on the leg it flies
