@@ -4,12 +4,9 @@ plan's end.
 A UAS in the air is traffic from take-off to landing whatever its plan says
 (``AirspaceSnapshot.airborne``, from its own messages): after its plan ends a multirotor
 hovers at the last waypoint (:func:`hover_plan`) and a fixed wing circles it (below). Until
-its circle is seen on its track a fixed wing is taken on its entry onto that circle
-(:func:`entry_plan`): it arrives along its last leg and loops out to about two turn radii
-(150 m at 22 m/s) past the last waypoint before it settles, so a UAS that passes there while
-it arrives is in its way (``enc_8_0299``: a turn verified against the plane hovering at its
-end point passed 76 m from it and met the loop at 6.9 m). An operation ends when its vehicle
-lands or disarms, not when its last waypoint time passes.
+its circle is seen on its track a fixed wing is taken at the last waypoint, its circle's
+centre. An operation ends when its vehicle lands or disarms, not when its last waypoint time
+passes.
 
 A fixed wing cannot stop: when its mission ends the autopilot circles the last waypoint at the
 loiter radius (:mod:`gcs_utm.core.tracking.loiter`), and Tracking predicts it there. Its filed
@@ -40,7 +37,6 @@ import numpy as np
 
 from gcs_utm.core.deconfliction.geometry import LocalPlan, local_to_plan, plan_to_local
 from gcs_utm.core.tracking import loiter
-from gcs_utm.core.tracking.loiter_entry import capture_points, capture_turn_radius_m
 from gcs_utm.geo import LocalFrame
 from gcs_utm.model import (
     AirspaceSnapshot,
@@ -145,7 +141,7 @@ def after_plan(
     if op.id not in snapshot.airborne:
         return op.plan
     circle = loiter_plan(op, snapshot, frame, until_t_s)
-    plan = circle if circle is not None else end_plan(op, op.plan, frame, until_t_s)
+    plan = circle if circle is not None else hover_plan(op.plan, until_t_s)
     tr = _track_of(op, snapshot)
     if tr is not None and plan.start_t_s > max(tr.t_s, snapshot.t_s):
         # waiting in the air for its plan: where it is until it must leave, at its cruise
@@ -162,76 +158,12 @@ def after_plan(
     return plan
 
 
-def entry_plan(
-    op: Operation, plan: FlightPlan, frame: LocalFrame, until_t_s: float
-) -> FlightPlan | None:
-    """``plan`` of a fixed wing ``op`` followed, up to ``until_t_s``, by its entry onto the
-    circle round its last waypoint: it arrives along its last leg and captures the circle on
-    its own turn radius, looping out to about two turn radii before it settles (the
-    tracker's model, :mod:`gcs_utm.core.tracking.loiter_entry`), at the last leg's ground
-    speed. None for a vehicle that hovers, a plan that lasts to ``until_t_s``, or one whose
-    end is not reached along a leg at a fixed wing's speed."""
-    radius_m = loiter.loiter_radius_m(op)
-    end_t_s = plan.end_t_s
-    if radius_m <= 0.0 or len(plan.waypoints) < 2 or end_t_s >= until_t_s:
-        return None
-    lp = plan_to_local(plan, frame)
-    xyz = lp.xyz()
-    course = loiter.last_course_rad(xyz)
-    speed_mps = _last_leg_speed_mps(lp)
-    if course is None or speed_mps < loiter.MIN_SPEED_MPS:
-        return None
-    k = max(1, math.ceil((until_t_s - end_t_s) / CIRCLE_STEP_S))
-    tau_s = np.minimum(np.arange(1, k + 1, dtype=np.float64) * CIRCLE_STEP_S, until_t_s - end_t_s)
-    speed = np.array([speed_mps])
-    east, north = capture_points(
-        center_en=xyz[-1:, :2],
-        radius_m=np.array([radius_m]),
-        turn_radius_m=capture_turn_radius_m(speed),
-        clockwise=np.array([True]),
-        pos_en=xyz[-1:, :2],
-        course_rad=np.array([course]),
-        speed_mps=speed,
-        tau_s=tau_s[None, :],
-    )
-    alt = np.full(k, xyz[-1, 2])
-    loop = local_to_plan(
-        LocalPlan(east[0], north[0], alt, end_t_s + tau_s),
-        plan,
-        frame,
-        created_t_s=plan.created_t_s,
-        reason="loiter entry",
-    )
-    return replace(plan, waypoints=plan.waypoints + loop.waypoints)
-
-
-def _last_leg_speed_mps(lp: LocalPlan) -> float:
-    """The horizontal ground speed of the last leg of ``lp`` that moves horizontally (0 when
-    none does)."""
-    for i in range(len(lp) - 2, -1, -1):
-        dist_m = math.hypot(lp.e[-1] - lp.e[i], lp.n[-1] - lp.n[i])
-        if dist_m > 1e-6:
-            return dist_m / max(float(lp.t[-1] - lp.t[i]), 1e-6)
-    return 0.0
-
-
-def end_plan(op: Operation, plan: FlightPlan, frame: LocalFrame, until_t_s: float) -> FlightPlan:
-    """``plan`` followed by what ``op`` does after its end up to ``until_t_s``: a fixed wing
-    enters its circle (:func:`entry_plan`), anything else hovers at the last waypoint."""
-    entry = entry_plan(op, plan, frame, until_t_s)
-    return entry if entry is not None else hover_plan(plan, until_t_s)
-
-
 def extended(
-    op: Operation,
-    plan: FlightPlan,
-    snapshot: AirspaceSnapshot,
-    until_t_s: float,
-    frame: LocalFrame,
+    op: Operation, plan: FlightPlan, snapshot: AirspaceSnapshot, until_t_s: float
 ) -> FlightPlan:
-    """``plan`` (an alternative of ``op``) with what the UAS does after its end up to
-    ``until_t_s`` when ``op`` is airborne (:func:`end_plan`): where it is when it gets there."""
-    return end_plan(op, plan, frame, until_t_s) if op.id in snapshot.airborne else plan
+    """``plan`` (an alternative of ``op``) with the hover after its end up to ``until_t_s``
+    when ``op`` is airborne: what the UAS does when it gets there."""
+    return hover_plan(plan, until_t_s) if op.id in snapshot.airborne else plan
 
 
 def involved(
@@ -243,7 +175,7 @@ def involved(
     if circling is not None:
         return circling
     if op.id in snapshot.airborne and op.plan.end_t_s <= snapshot.t_s:
-        return replace(op, plan=end_plan(op, op.plan, frame, until_t_s))
+        return replace(op, plan=hover_plan(op.plan, until_t_s))
     return op
 
 
@@ -276,13 +208,11 @@ def traffic(
 
 class Airborne:
     """Which UAS of the snapshot being decided are airborne, and their plans extended past
-    their end with a hover or a fixed wing's circle entry (:func:`extended`) up to the
-    decision's horizon, kept so that one plan is extended (and converted) once per
-    decision."""
+    their end with a hover (:func:`extended`) up to the decision's horizon, kept so that one
+    plan is extended (and converted) once per decision."""
 
-    def __init__(self, horizon_s: float, frame: LocalFrame) -> None:
+    def __init__(self, horizon_s: float) -> None:
         self.horizon_s = horizon_s
-        self.frame = frame
         self._snapshot: AirspaceSnapshot | None = None
         self._plans: dict[int, tuple[FlightPlan, FlightPlan]] = {}
 
@@ -309,6 +239,6 @@ class Airborne:
             return plan
         hit = self._plans.get(id(plan))
         if hit is None or hit[0] is not plan:
-            hit = (plan, extended(op, plan, snap, snap.t_s + self.horizon_s, self.frame))
+            hit = (plan, extended(op, plan, snap, snap.t_s + self.horizon_s))
             self._plans[id(plan)] = hit
         return hit[1]

@@ -78,7 +78,7 @@ class TacticalDeconfliction:
         self.monitoring = monitoring
         self.dropped: list[Dropped] = []
         self._plans = PlanCache(frame)
-        self._air = lt.Airborne(config.horizon_s, frame)  # airborne UAS after their plan
+        self._air = lt.Airborne(config.horizon_s)  # airborne UAS hover after their plan
         self._verifier = Verifier(frame, config, monitoring, self._plans, self._air)
 
     def _context(
