@@ -74,6 +74,7 @@ def test_bench_collects_every_benchmark() -> None:
         "cluster",
         "service_cycle",
         "soak",
+        "eval",
     }
     # each one is also reachable by name
     for name in discover():

@@ -15,7 +15,7 @@ from gcs_utm.bench import deconfliction as sc
 from gcs_utm.core.emergency import Decision
 from gcs_utm.core.emergency.decision import Case
 from gcs_utm.core.emergency.supervision_due import retry_wait_s
-from gcs_utm.model import RecommendationState, ThreatStatus
+from gcs_utm.model import RecommendationState, ThreatKind, ThreatStatus
 from tests.emergency.test_supervision import accept_all, at, make_em
 
 
@@ -67,3 +67,14 @@ def test_a_loss_still_predicted_is_decided_again_before_it_begins() -> None:
     d2 = em.on_threat(soon, at(snap, t_a + 18.5))  # 21.5 s before the loss
     assert any(a.action == "supervision" for a in d2.audit)
     assert d2.recommendations or d2.escalations
+
+
+def test_a_threat_whose_event_no_plan_moves_waits_the_full_retry() -> None:
+    """LACK_OF_BATTERY's predicted event (the reserve) is not moved by a new plan: its case
+    waits ``retry_after_s`` (a return_home was re-uploaded every 14 s and replaced by a LAND
+    before the UAS had landed, tests/e2e/test_ground_rules_sitl.py)."""
+    _snap, threat = sc.scenario_los_2uas()
+    em = make_em()
+    battery = replace(threat, kind=ThreatKind.LACK_OF_BATTERY, predicted_event_at_s=sc.T0_S + 40.0)
+    case = Case(threat=battery, action=em.config.action_for(battery.kind), attempt_t_s=sc.T0_S)
+    assert retry_wait_s(em.ctx, case, sc.T0_S) == pytest.approx(em.config.retry_after_s)

@@ -14,13 +14,21 @@ So the wait ends, at the latest, when a new plan decided then still starts
 ``immediate_margin_s`` plus ``supervision_grace_s`` before the predicted event (a plan
 decided later is the immediate command's business, :mod:`.immediate`), and never sooner than
 ``supervision_grace_s`` after the last attempt (a plan decided at that attempt has not shown
-its effect before that). Pure.
+its effect before that). Only for a separation the plans can still keep (a loss of
+separation, an intruder): the event of another threat (a battery's reserve, a link) is not
+moved by a new plan, and deciding it again sooner only re-plans the same answer (a
+return_home under LACK_OF_BATTERY was re-uploaded every 14 s and replaced by a LAND before it
+had landed). Pure.
 """
 
 from __future__ import annotations
 
 from gcs_utm.core.emergency.context import EmContext
 from gcs_utm.core.emergency.decision import Case
+from gcs_utm.model import ThreatKind
+
+SEPARATION_KINDS = frozenset({ThreatKind.LOSS_OF_SEPARATION, ThreatKind.INTRUDER})
+"""The threats whose predicted event a new plan can still avoid: supervised before it."""
 
 
 def retry_wait_s(em: EmContext, case: Case, now: float) -> float:
@@ -30,7 +38,7 @@ def retry_wait_s(em: EmContext, case: Case, now: float) -> float:
     but at least ``supervision_grace_s``."""
     cfg = em.config
     event = case.threat.predicted_event_at_s
-    if event is None:
+    if event is None or case.threat.kind not in SEPARATION_KINDS:
         return cfg.retry_after_s
     lead_s = em.plan_start(case.threat, now) - now
     latest = event - lead_s - cfg.immediate_margin_s - cfg.supervision_grace_s
