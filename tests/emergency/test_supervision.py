@@ -435,6 +435,7 @@ def test_a_predicted_loss_with_clean_plans_gets_an_immediate_command() -> None:
     assert d0.warnings and "(A off its plan)" in d0.warnings[0]
     (audit,) = (a for a in d0.audit if a.action == "decision")
     assert "not where its plan says" in str(audit.detail["all_kept"])
+    assert "proposed or deferred (its own audit)" in str(audit.detail["all_kept"])
     assert not plans(d0) and not d0.escalations
     (later,) = (a for a in d0.audit if a.action == "immediate")
     assert "deferred to 83.0 s from now" in str(later.detail["reason"])  # 100 - 7 - 10

@@ -69,7 +69,7 @@ from gcs_utm.model import (
 KEPT_REASON = (
     "every plan (re-timed from the vehicles' progress; a finished fixed wing's as its loiter "
     "circle) keeps the buffered minima, while Monitoring predicts the loss from the tracks: "
-    "a UAS is not where its plan says; immediate command proposed"
+    "a UAS is not where its plan says"
 )
 """Why a multi-UAS decision that moves nobody moves nobody (``all_kept`` in its audit)."""
 
@@ -341,7 +341,11 @@ class EmergencyManager:
         info["moved_up_to_priority"] = tiered.moved_up_to_priority
         kept = all(a.maneuver is Maneuver.KEEP_PLAN for a in tiered.selection.chosen.values())
         if kept:
-            info["all_kept"] = KEPT_REASON
+            info["all_kept"] = KEPT_REASON + (
+                "; a plan of this case is in force: nothing is proposed"
+                if self.ctx.in_force(case)
+                else "; the immediate command is proposed or deferred (its own audit)"
+            )
         d = Decision(audit=(self.audit(now, "decision", t.id, info),))
         if late and not kept:
             return d.merge(propose(self.ctx, case, snapshot, late, t.uas_ids))
